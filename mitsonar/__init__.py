@@ -1,0 +1,30 @@
+"""mitsonar: physically based underwater imaging-sonar simulation on Mitsuba 3 / Dr.Jit.
+
+``import mitsonar`` selects the Mitsuba variant (``llvm_ad_mono`` unless ``MITSONAR_VARIANT``
+says otherwise) and registers the plugins ``sonar``, ``acoustic`` and ``sonar_tof`` for it.
+"""
+from __future__ import annotations
+
+from .variant import prepare_llvm_environment
+
+prepare_llvm_environment()
+
+__version__ = "0.1.0"
+
+from .scan import Scan  # noqa: E402
+from .render import (SceneError, init_on_import, load_scene, render_scan, scene_mesh,  # noqa: E402
+                     set_variant, variant)
+from .variant import VariantError  # noqa: E402
+
+init_on_import()
+
+
+def load_scan(path) -> Scan:
+    """Read a scan written by `Scan.save` (``.exr`` or ``.npz``)."""
+    from .io import load_scan as _load
+
+    return _load(path)
+
+
+__all__ = ["Scan", "SceneError", "VariantError", "load_scan", "load_scene", "render_scan", "scene_mesh",
+           "set_variant", "variant", "__version__"]

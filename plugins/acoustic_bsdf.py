@@ -1,0 +1,138 @@
+"""The ``acoustic`` BSDF: Lambertian scatter plus a normalised Phong specular lobe (thesis 2.3.2)."""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from .materials import PRESETS
+
+
+class AcousticBSDF(mi.BSDF):
+    r"""Acoustic reflection of a surface: diffuse scatter plus a Phong lobe about the mirror direction.
+
+    .. math:: f = \frac{d}{\pi} + s \frac{n + 2}{2 \pi} \cos^n \alpha
+
+    with ``alpha`` the angle between the outgoing and the mirror direction. As in Mitsuba, ``eval``
+    returns ``f cos(theta_o)``. One-sided: wrap it in ``twosided`` for thin sheets.
+
+    ============ ========= ==========================================================
+    Parameter    Default   Meaning
+    ============ ========= ==========================================================
+    preset       (none)    a material name from ``mitsonar.plugins.materials.PRESETS``
+                           (concrete qualities of thesis Table 2.2, ``water_calm``,
+                           ``sand``, ``rock``); explicit values below override it
+    diffuse      0.1       fraction of incident energy scattered diffusely (>= 0)
+    specular     0.6       fraction of incident energy in the Phong lobe (>= 0);
+                           ``diffuse + specular <= 1`` (energy conservation)
+    shininess    30        Phong exponent n (>= 0); large is mirror-like
+    ============ ========= ==========================================================
+
+    ``diffuse``, ``specular`` and ``shininess`` are exposed through ``mi.traverse`` and stay opaque,
+    so changing them does not recompile the render kernels.
+    """
+
+    def __init__(self, props: mi.Properties):
+        super().__init__(props)
+        preset = props.get("preset", "")
+        if preset:
+            if preset not in PRESETS:
+                raise ValueError(f"acoustic 'preset': {preset!r} is not one of {', '.join(sorted(PRESETS))}")
+            base = PRESETS[preset]
+        else:
+            base = {"diffuse": 0.1, "specular": 0.6, "shininess": 30.0}
+        self.preset = preset
+        values = {k: float(props.get(k, base[k])) for k in ("diffuse", "specular", "shininess")}
+        check_parameters(**values)
+        self.diffuse = dr.opaque(mi.Float, values["diffuse"])
+        self.specular = dr.opaque(mi.Float, values["specular"])
+        self.shininess = dr.opaque(mi.Float, values["shininess"])
+        self.m_components = [mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide,
+                             mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide]
+        self.m_flags = self.m_components[0] | self.m_components[1]
+
+    # ------------------------------------------------------------------ helpers
+    def _lobe_terms(self, si, wo):
+        cos_i = mi.Frame3f.cos_theta(si.wi)
+        cos_o = mi.Frame3f.cos_theta(wo)
+        mirror = mi.Vector3f(-si.wi.x, -si.wi.y, si.wi.z)
+        cos_a = dr.maximum(dr.dot(wo, mirror), 0.0)
+        phong = dr.select(cos_a > 0, dr.power(cos_a, self.shininess), 0.0)
+        valid = (cos_i > 0) & (cos_o > 0)
+        return cos_o, phong, valid
+
+    def _spec_prob(self):
+        total = self.diffuse + self.specular
+        return dr.select(total > 0, self.specular / total, 0.0)
+
+    def _eval(self, si, wo):
+        cos_o, phong, valid = self._lobe_terms(si, wo)
+        f = self.diffuse * dr.inv_pi + self.specular * (self.shininess + 2) * (0.5 * dr.inv_pi) * phong
+        return dr.select(valid, f * cos_o, 0.0), cos_o, phong, valid
+
+    def _pdf(self, cos_o, phong, valid):
+        p_s = self._spec_prob()
+        pdf = (1 - p_s) * cos_o * dr.inv_pi + p_s * (self.shininess + 1) * (0.5 * dr.inv_pi) * phong
+        return dr.select(valid, pdf, 0.0)
+
+    # ------------------------------------------------------------------ BSDF interface
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        p_s = self._spec_prob()
+        pick_spec = sample1 < p_s
+        # Phong lobe about the mirror direction: cos(alpha) = u^(1/(n+1)).
+        mirror = mi.Vector3f(-si.wi.x, -si.wi.y, si.wi.z)
+        cos_a = dr.power(sample2.x, 1.0 / (self.shininess + 1))
+        sin_a = dr.safe_sqrt(1 - cos_a * cos_a)
+        s, c = dr.sincos(2 * dr.pi * sample2.y)
+        wo_spec = mi.Frame3f(mirror).to_world(mi.Vector3f(sin_a * c, sin_a * s, cos_a))
+        wo_diff = mi.warp.square_to_cosine_hemisphere(sample2)
+        wo = dr.select(pick_spec, wo_spec, wo_diff)
+
+        value, cos_o, phong, valid = self._eval(si, wo)
+        pdf = self._pdf(cos_o, phong, valid)
+        bs = mi.BSDFSample3f()
+        bs.wo = wo
+        bs.pdf = pdf
+        bs.eta = 1.0
+        bs.sampled_type = mi.UInt32(dr.select(pick_spec, mi.UInt32(+mi.BSDFFlags.GlossyReflection),
+                                              mi.UInt32(+mi.BSDFFlags.DiffuseReflection)))
+        bs.sampled_component = dr.select(pick_spec, mi.UInt32(1), mi.UInt32(0))
+        ok = active & valid & (pdf > 0)
+        weight = dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0)
+        return bs, mi.Spectrum(weight)
+
+    def eval(self, ctx, si, wo, active=True):
+        value, _, _, _ = self._eval(si, wo)
+        return mi.Spectrum(dr.select(active, value, 0.0))
+
+    def pdf(self, ctx, si, wo, active=True):
+        _, cos_o, phong, valid = self._eval(si, wo)
+        return dr.select(active, self._pdf(cos_o, phong, valid), 0.0)
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        value, cos_o, phong, valid = self._eval(si, wo)
+        return (mi.Spectrum(dr.select(active, value, 0.0)),
+                dr.select(active, self._pdf(cos_o, phong, valid), 0.0))
+
+    def traverse(self, callback):
+        callback.put("diffuse", self.diffuse, mi.ParamFlags.Differentiable)
+        callback.put("specular", self.specular, mi.ParamFlags.Differentiable)
+        callback.put("shininess", self.shininess, mi.ParamFlags.NonDifferentiable)
+
+    def parameters_changed(self, keys):
+        vals = {k: float(getattr(self, k)[0]) for k in ("diffuse", "specular", "shininess")}
+        check_parameters(**vals)
+        dr.make_opaque(self.diffuse, self.specular, self.shininess)
+
+    def to_string(self):
+        return (f"AcousticBSDF[preset={self.preset!r}, diffuse={self.diffuse[0]:g}, "
+                f"specular={self.specular[0]:g}, shininess={self.shininess[0]:g}]")
+
+
+def check_parameters(diffuse, specular, shininess):
+    """Reject values that are negative, non-finite or not energy conserving."""
+    for name, v in (("diffuse", diffuse), ("specular", specular), ("shininess", shininess)):
+        if not (v == v and abs(v) != float("inf")) or v < 0:
+            raise ValueError(f"acoustic '{name}': {v} is not allowed (must be a finite number >= 0)")
+    if diffuse + specular > 1.0 + 1e-6:
+        raise ValueError(f"acoustic 'diffuse' + 'specular' = {diffuse + specular:g} > 1: "
+                         "a surface cannot reflect more energy than it receives")

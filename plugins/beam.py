@@ -1,0 +1,273 @@
+"""Transducer beam patterns: one-way directivity B(az, el) and its importance sampling.
+
+A direction (x, y, z) in the beam frame has azimuth ``atan2(x, z)`` and elevation ``asin(y)``;
++z is the boresight, +y the scan axis. B is an intensity ratio in [0, 1], 1 on the boresight;
+the two-way gain of a monostatic transducer is ``B(d_tx) * B(d_rx)``.
+
+Patterns
+--------
+``gaussian``  ``2^-((2 az / bw_h)^2 + (2 el / bw_v)^2)``: -3 dB at half the beam width, so the
+              two-way -6 dB full width equals the beam width.
+``sinc``      baffled rectangular piston of apertures ``a_h x a_v`` at ``frequency``:
+              ``[sinc(pi a_h x / lambda) sinc(pi a_v y / lambda)]^2`` with x, y the direction
+              cosines, zero behind the baffle. Apertures default to the ones whose main lobe has
+              the requested -3 dB widths.
+``uniform``   1 inside ``|az| <= bw_h / 2, |el| <= bw_v / 2``, 0 outside (for validation).
+``table``     measured: a CSV with columns ``axis`` (``h`` or ``v``), ``angle_deg``, ``gain_db``
+              (one way, 0 dB on the boresight); ``B = 10^((G_h(az) + G_v(el)) / 10)``, linear in dB
+              between rows, 0 outside the tabulated angles.
+
+Emission samples directions in proportion to ``B(az, el)`` (times the solid-angle Jacobian
+``cos el``) from a piecewise-bilinear table over the pattern's support, so the emission weight
+``B / pdf`` stays close to the beam's solid angle for every sample.
+"""
+from __future__ import annotations
+
+import csv
+import math
+import os
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+PATTERNS = ("gaussian", "sinc", "uniform", "table")
+
+# Solves sinc(t)^2 = 1/2: the -3 dB point of a piston's one-way pattern.
+_SINC_HALF_POWER = 1.3915573
+
+# Gaussian beams are sampled out to where B < 3e-8 (2.5 beam widths from the axis); the
+# energy beyond is below float32 resolution of the total.
+_GAUSS_SUPPORT = 2.5
+
+
+class BeamPatternError(ValueError):
+    pass
+
+
+def _sinc(t):
+    t = np.asarray(t, dtype=np.float64)
+    out = np.ones_like(t)
+    nz = np.abs(t) > 1e-12
+    out[nz] = np.sin(t[nz]) / t[nz]
+    return out
+
+
+def read_beam_table(path: str):
+    """Read a beam table CSV into ``{'h': (angles_deg, gain_db), 'v': (...)}`` with checks."""
+    if not os.path.isfile(path):
+        raise BeamPatternError(f"sonar 'beam_table': file {path!r} does not exist")
+    rows = {"h": [], "v": []}
+    with open(path, newline="") as fh:
+        reader = csv.DictReader(fh)
+        need = {"axis", "angle_deg", "gain_db"}
+        if reader.fieldnames is None or not need.issubset({f.strip() for f in reader.fieldnames}):
+            raise BeamPatternError(
+                f"{path}: beam table needs the columns axis, angle_deg, gain_db; found {reader.fieldnames}")
+        for lineno, row in enumerate(reader, start=2):
+            row = {k.strip(): (v or "").strip() for k, v in row.items() if k is not None}
+            axis = row["axis"].lower()
+            if axis not in rows:
+                raise BeamPatternError(f"{path}, line {lineno}: axis {row['axis']!r} is not one of h, v")
+            try:
+                a, g = float(row["angle_deg"]), float(row["gain_db"])
+            except ValueError:
+                raise BeamPatternError(
+                    f"{path}, line {lineno}: angle_deg and gain_db must be numbers, got "
+                    f"{row['angle_deg']!r}, {row['gain_db']!r}") from None
+            if not (math.isfinite(a) and math.isfinite(g)):
+                raise BeamPatternError(f"{path}, line {lineno}: angle_deg and gain_db must be finite")
+            if g > 0.01:
+                raise BeamPatternError(
+                    f"{path}, line {lineno}: gain_db {g} > 0: gains are one-way and relative to the boresight (0 dB)")
+            rows[axis].append((a, g))
+    out = {}
+    for axis, limit in (("h", 180.0), ("v", 90.0)):
+        pts = sorted(rows[axis])
+        if len(pts) < 2:
+            raise BeamPatternError(f"{path}: axis {axis!r} needs at least 2 rows, found {len(pts)}")
+        ang = np.array([p[0] for p in pts])
+        if np.any(np.diff(ang) <= 0):
+            raise BeamPatternError(f"{path}: axis {axis!r} repeats an angle_deg value")
+        if ang[0] < -limit or ang[-1] > limit:
+            raise BeamPatternError(f"{path}: axis {axis!r} angles must lie in [-{limit:g}, {limit:g}] deg")
+        if not (ang[0] <= 0.0 <= ang[-1]):
+            raise BeamPatternError(f"{path}: axis {axis!r} must cover the boresight (angle 0)")
+        out[axis] = (ang, np.array([p[1] for p in pts]))
+    return out
+
+
+class BeamPattern:
+    """One-way directivity of a transducer and its importance sampler.
+
+    Parameters (angles in degrees, as in the XML)
+
+    ============== =====================================================================
+    kind           ``gaussian``, ``sinc``, ``uniform`` or ``table``
+    beamwidth_h    full -3 dB width across the scan plane (about the beam frame's x)
+    beamwidth_v    full -3 dB width along the scan axis (y)
+    frequency      Hz (``sinc``)
+    aperture_h/_v  m (``sinc``); derived from the beam widths when None
+    sound_speed    m/s (``sinc``: wavelength)
+    table          parsed beam table (``table``)
+    ============== =====================================================================
+    """
+
+    def __init__(self, kind="gaussian", beamwidth_h=3.0, beamwidth_v=35.0, frequency=700e3,
+                 aperture_h=None, aperture_v=None, sound_speed=1500.0, table=None, source="sonar"):
+        if kind not in PATTERNS:
+            raise BeamPatternError(f"{source} 'beam_pattern': {kind!r} is not one of {', '.join(PATTERNS)}")
+        for name, v, hi in (("beamwidth_h", beamwidth_h, 360.0), ("beamwidth_v", beamwidth_v, 180.0)):
+            if not (0.0 < v <= hi):
+                raise BeamPatternError(f"{source} '{name}': {v} deg is outside (0, {hi:g}]")
+        self.kind = kind
+        self.beamwidth_h = float(beamwidth_h)
+        self.beamwidth_v = float(beamwidth_v)
+        self.frequency = float(frequency)
+        self.sound_speed = float(sound_speed)
+        if kind == "sinc":
+            if not frequency > 0:
+                raise BeamPatternError(f"{source} 'frequency': {frequency} Hz must be > 0")
+            lam = self.sound_speed / self.frequency
+            if aperture_h is None:
+                aperture_h = _SINC_HALF_POWER * lam / (math.pi * math.sin(math.radians(beamwidth_h) / 2))
+            if aperture_v is None:
+                aperture_v = _SINC_HALF_POWER * lam / (math.pi * math.sin(math.radians(beamwidth_v) / 2))
+            for name, a in (("aperture_h", aperture_h), ("aperture_v", aperture_v)):
+                if not a > 0:
+                    raise BeamPatternError(f"{source} '{name}': {a} m must be > 0")
+            self.aperture_h, self.aperture_v = float(aperture_h), float(aperture_v)
+        else:
+            self.aperture_h = self.aperture_v = None
+        if kind == "table":
+            if table is None:
+                raise BeamPatternError(f"{source} 'beam_table': a CSV file is required for beam_pattern 'table'")
+            self.table = table
+        else:
+            self.table = None
+        self._build()
+
+    # ---------------------------------------------------------------- support and numpy eval
+    def support(self):
+        """Angular rectangle (radians) holding all of the pattern: az_lo, az_hi, el_lo, el_hi."""
+        bh, bv = math.radians(self.beamwidth_h), math.radians(self.beamwidth_v)
+        if self.kind == "gaussian":
+            ah = min(math.pi, _GAUSS_SUPPORT * bh)
+            av = min(math.pi / 2, _GAUSS_SUPPORT * bv)
+            return -ah, ah, -av, av
+        if self.kind == "uniform":
+            return -bh / 2, bh / 2, -min(bv / 2, math.pi / 2), min(bv / 2, math.pi / 2)
+        if self.kind == "sinc":
+            return -math.pi / 2, math.pi / 2, -math.pi / 2, math.pi / 2
+        h, v = self.table["h"][0], self.table["v"][0]
+        return (math.radians(h[0]), math.radians(h[-1]), math.radians(v[0]), math.radians(v[-1]))
+
+    def eval_np(self, az, el):
+        """B(az, el) in float64 numpy (radians)."""
+        az, el = np.asarray(az, np.float64), np.asarray(el, np.float64)
+        if self.kind == "gaussian":
+            bh, bv = math.radians(self.beamwidth_h), math.radians(self.beamwidth_v)
+            return np.exp2(-((2 * az / bh) ** 2 + (2 * el / bv) ** 2))
+        if self.kind == "uniform":
+            bh, bv = math.radians(self.beamwidth_h), math.radians(self.beamwidth_v)
+            return ((np.abs(az) <= bh / 2) & (np.abs(el) <= bv / 2)).astype(np.float64)
+        if self.kind == "sinc":
+            lam = self.sound_speed / self.frequency
+            x = np.cos(el) * np.sin(az)
+            y = np.sin(el)
+            b = (_sinc(math.pi * self.aperture_h * x / lam) * _sinc(math.pi * self.aperture_v * y / lam)) ** 2
+            return np.where(np.abs(az) <= math.pi / 2, b, 0.0)
+        (ha, hg), (va, vg) = self.table["h"], self.table["v"]
+        deg_az, deg_el = np.degrees(az), np.degrees(el)
+        g = np.interp(deg_az, ha, hg) + np.interp(deg_el, va, vg)
+        inside = (deg_az >= ha[0]) & (deg_az <= ha[-1]) & (deg_el >= va[0]) & (deg_el <= va[-1])
+        return np.where(inside, 10.0 ** (g / 10.0), 0.0)
+
+    def solid_angle(self, n=2048):
+        """Integral of B over the sphere (sr), by quadrature on the sampling grid."""
+        az_lo, az_hi, el_lo, el_hi = self.support()
+        az = np.linspace(az_lo, az_hi, 2 * n + 1)
+        el = np.linspace(el_lo, el_hi, n + 1)
+        A, E = np.meshgrid(az, el)
+        f = self.eval_np(A, E) * np.cos(E)
+        return float(np.trapezoid(np.trapezoid(f, az, axis=1), el))
+
+    # ---------------------------------------------------------------- Dr.Jit side
+    def _build(self):
+        az_lo, az_hi, el_lo, el_hi = self.support()
+        # Resolve the narrow axis with ~40 cells per beam width (enough that bilinear
+        # interpolation of B cos(el) leaves the emission weight within a few percent of constant).
+        n_az = int(np.clip(math.ceil((az_hi - az_lo) / math.radians(self.beamwidth_h) * 40), 64, 4096))
+        n_el = int(np.clip(math.ceil((el_hi - el_lo) / math.radians(self.beamwidth_v) * 40), 64, 2048))
+        az = np.linspace(az_lo, az_hi, n_az)
+        el = np.linspace(el_lo, el_hi, n_el)
+        A, E = np.meshgrid(az, el)
+        grid = self.eval_np(A, E) * np.maximum(np.cos(E), 0.0)
+        if not np.any(grid > 0):
+            raise BeamPatternError("sonar beam pattern is zero everywhere: nothing would be emitted")
+        self._distr = mi.MarginalContinuous2D0(np.ascontiguousarray(grid, dtype=np.float32))
+        self._az_lo, self._el_lo = az_lo, el_lo
+        self._az_span, self._el_span = az_hi - az_lo, el_hi - el_lo
+        # Opaque copies so that a changed beam reuses the compiled kernels.
+        self._p_az = dr.opaque(mi.Float, az_lo)
+        self._p_el = dr.opaque(mi.Float, el_lo)
+        self._p_saz = dr.opaque(mi.Float, self._az_span)
+        self._p_sel = dr.opaque(mi.Float, self._el_span)
+        bh, bv = math.radians(self.beamwidth_h), math.radians(self.beamwidth_v)
+        self._p_bh = dr.opaque(mi.Float, bh)
+        self._p_bv = dr.opaque(mi.Float, bv)
+        if self.kind == "sinc":
+            lam = self.sound_speed / self.frequency
+            self._p_kh = dr.opaque(mi.Float, math.pi * self.aperture_h / lam)
+            self._p_kv = dr.opaque(mi.Float, math.pi * self.aperture_v / lam)
+        if self.kind == "table":
+            # Resample each axis onto a uniform grid (dB) so the kernel interpolates with one gather.
+            self._tab = {}
+            for axis in ("h", "v"):
+                ang, g = self.table[axis]
+                u = np.linspace(ang[0], ang[-1], 2049)
+                self._tab[axis] = (dr.opaque(mi.Float, math.radians(ang[0])),
+                                   dr.opaque(mi.Float, (len(u) - 1) / math.radians(ang[-1] - ang[0])),
+                                   mi.Float(np.interp(u, ang, g).astype(np.float32)), len(u))
+
+    def eval(self, az: mi.Float, el: mi.Float) -> mi.Float:
+        """B(az, el) inside a kernel (radians)."""
+        if self.kind == "gaussian":
+            return dr.exp2(-(dr.square(2 * az / self._p_bh) + dr.square(2 * el / self._p_bv)))
+        if self.kind == "uniform":
+            inside = (dr.abs(az) <= 0.5 * self._p_bh) & (dr.abs(el) <= 0.5 * self._p_bv)
+            return dr.select(inside, 1.0, 0.0)
+        if self.kind == "sinc":
+            x = self._p_kh * dr.cos(el) * dr.sin(az)
+            y = self._p_kv * dr.sin(el)
+            sx = dr.select(dr.abs(x) > 1e-6, dr.sin(x) / x, 1.0)
+            sy = dr.select(dr.abs(y) > 1e-6, dr.sin(y) / y, 1.0)
+            return dr.select(dr.abs(az) <= dr.pi / 2, dr.square(sx * sy), 0.0)
+        g, inside = mi.Float(0.0), mi.Bool(True)
+        for axis, ang in (("h", az), ("v", el)):
+            lo, scale, vals, n = self._tab[axis]
+            t = (ang - lo) * scale
+            inside &= (t >= 0) & (t <= n - 1)
+            i = mi.UInt32(dr.clip(dr.floor(t), 0, n - 2))
+            w = dr.clip(t - mi.Float(i), 0.0, 1.0)
+            g += dr.lerp(dr.gather(mi.Float, vals, i), dr.gather(mi.Float, vals, i + 1), w)
+        return dr.select(inside, dr.exp2(g * (math.log2(10.0) / 10.0)), 0.0)
+
+    def eval_dir(self, d: mi.Vector3f) -> mi.Float:
+        """B of a unit direction in the beam frame."""
+        az = dr.atan2(d.x, d.z)
+        el = dr.safe_asin(d.y)
+        return self.eval(az, el)
+
+    def sample(self, u: mi.Point2f, active=True):
+        """Sample a beam-frame direction in proportion to B. Returns (direction, B / pdf)."""
+        pos, pdf = self._distr.sample(u, active=active)
+        az = self._p_az + pos.x * self._p_saz
+        el = self._p_el + pos.y * self._p_sel
+        cos_el = dr.cos(el)
+        d = mi.Vector3f(cos_el * dr.sin(az), dr.sin(el), cos_el * dr.cos(az))
+        # pdf is per unit square; per solid angle divide by the angular spans and cos(el).
+        pdf_w = pdf / (self._p_saz * self._p_sel * cos_el)
+        b = self.eval(az, el)
+        weight = dr.select((pdf_w > 0) & (b > 0), b / pdf_w, 0.0)
+        return d, weight

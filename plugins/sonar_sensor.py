@@ -1,0 +1,190 @@
+"""The ``sonar`` sensor: a transducer with a beam pattern on a mechanically scanned head."""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .beam import BeamPattern, read_beam_table
+
+KINDS = ("mechanical",)
+
+
+def rotation_y(angle):
+    """4x4 right-handed rotation about +y by ``angle`` radians (broadcasts over an array)."""
+    a = np.asarray(angle, dtype=np.float64)
+    c, s = np.cos(a), np.sin(a)
+    m = np.zeros(a.shape + (4, 4))
+    m[..., 0, 0] = c
+    m[..., 0, 2] = s
+    m[..., 2, 0] = -s
+    m[..., 2, 2] = c
+    m[..., 1, 1] = 1.0
+    m[..., 3, 3] = 1.0
+    return m
+
+
+def check_rigid(matrix, what="sonar 'to_world'"):
+    """A beam frame must be a rotation plus translation: scaling would bend the beam."""
+    m = np.asarray(matrix, dtype=np.float64)
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise ValueError(f"{what}: expected a finite 4x4 matrix, got shape {m.shape}")
+    r = m[:3, :3]
+    if (not np.allclose(r.T @ r, np.eye(3), atol=1e-4) or abs(np.linalg.det(r) - 1) > 1e-4
+            or not np.allclose(m[3], [0, 0, 0, 1], atol=1e-9)):
+        raise ValueError(f"{what}: must be a rigid transform (rotation + translation, no scale, "
+                         "shear or mirror); the beam frame is +z boresight, +y scan axis")
+    return m
+
+
+class SonarSensor(mi.Sensor):
+    """Imaging sonar head: a monostatic transducer with a beam pattern, pinging at a list of bearings.
+
+    The beam frame (``to_world``) has +z on the boresight at bearing 0 and +y on the scan axis;
+    ping ``k`` points at bearing ``bearing_start + k * bearing_step`` (degrees), a right-handed
+    rotation of the beam frame about its +y axis. Range of an echo is half its path length.
+
+    ================ ============ ===============================================================
+    Parameter        Default      Meaning
+    ================ ============ ===============================================================
+    kind             mechanical   ``mechanical`` (mechanically scanned imaging sonar, MSIS)
+    to_world         identity     beam frame in the world (rigid)
+    range_min        0            m, start of the range window
+    range_max        12           m, end of the range window (echoes beyond are dropped)
+    n_bins           500          range bins between ``range_min`` and ``range_max``
+    bearing_start    0            deg, bearing of the first ping
+    bearing_step     1.8          deg between pings (Micron: 200 steps per turn)
+    n_pings          200          pings in a scan
+    beam_pattern     gaussian     ``gaussian``, ``sinc``, ``uniform`` or ``table``
+    beamwidth_h      3            deg, full -3 dB one-way width across the scan plane
+    beamwidth_v      35           deg, full -3 dB one-way width along the scan axis
+    beam_table       (none)       CSV (axis, angle_deg, gain_db) for ``table``
+    sound_speed      1500         m/s
+    absorption       0            dB/m, applied to the whole two-way path
+    frequency        700e3        Hz (``sinc``)
+    aperture_h/_v    derived      m (``sinc``); from the beam widths when absent
+    electronics      see below    the fields of ``mitsonar.electronics.Electronics``
+                                  (``source_level``, ``tvg``, ``gain``, ``ad_low``, ...)
+    ================ ============ ===============================================================
+    """
+
+    def __init__(self, props: mi.Properties):
+        if "film" not in props:
+            # The film is the scan's range-intensity image: one row per ping, one column per bin.
+            n_bins, n_pings = props.get("n_bins", 500), props.get("n_pings", 200)
+            if n_bins >= 1 and n_pings >= 1:
+                props["film"] = mi.load_dict({"type": "hdrfilm", "width": int(n_bins), "height": int(n_pings),
+                                              "pixel_format": "luminance", "rfilter": {"type": "box"}})
+        super().__init__(props)
+        self.kind = props.get("kind", "mechanical")
+        self.range_min = float(props.get("range_min", 0.0))
+        self.range_max = float(props.get("range_max", 12.0))
+        self.n_bins = int(props.get("n_bins", 500))
+        self.bearing_start = float(props.get("bearing_start", 0.0))
+        self.bearing_step = float(props.get("bearing_step", 1.8))
+        self.n_pings = int(props.get("n_pings", 200))
+        self.sound_speed = float(props.get("sound_speed", 1500.0))
+        self.absorption = float(props.get("absorption", 0.0))
+        pattern = props.get("beam_pattern", "gaussian")
+        bw_h = float(props.get("beamwidth_h", 3.0))
+        bw_v = float(props.get("beamwidth_v", 35.0))
+        table_path = props.get("beam_table", "")
+        frequency = float(props.get("frequency", 700e3))
+        ap_h = float(props["aperture_h"]) if "aperture_h" in props else None
+        ap_v = float(props["aperture_v"]) if "aperture_v" in props else None
+
+        from mitsonar.electronics import Electronics
+        elec = {}
+        for f in dataclasses.fields(Electronics):
+            if f.name in props:
+                elec[f.name] = props[f.name]
+        self.electronics = elec
+        self._check()
+        self.electronics_model = Electronics(**elec)  # validates the electronics fields
+
+        table = read_beam_table(table_path) if pattern == "table" and table_path else None
+        if table_path and pattern != "table":
+            raise ValueError(f"sonar 'beam_table' is only used with beam_pattern 'table' (got {pattern!r})")
+        self.beam = BeamPattern(pattern, bw_h, bw_v, frequency, ap_h, ap_v, self.sound_speed, table)
+        self.beam_table = table_path
+        self.to_world_np = check_rigid(np.array(self.world_transform().matrix, dtype=np.float64).reshape(4, 4))
+
+    def _check(self):
+        def bad(name, value, allowed):
+            raise ValueError(f"sonar '{name}': {value!r} is not allowed ({allowed})")
+        if self.kind not in KINDS:
+            bad("kind", self.kind, "one of " + ", ".join(KINDS))
+        if not (math.isfinite(self.range_min) and self.range_min >= 0):
+            bad("range_min", self.range_min, "a range >= 0 m")
+        if not (math.isfinite(self.range_max) and self.range_max > self.range_min):
+            bad("range_max", self.range_max, f"a range > range_min = {self.range_min:g} m")
+        if not 1 <= self.n_bins <= 65536:
+            bad("n_bins", self.n_bins, "1 to 65536")
+        if not 1 <= self.n_pings <= 100000:
+            bad("n_pings", self.n_pings, "1 to 100000")
+        for name in ("bearing_start", "bearing_step"):
+            if not math.isfinite(getattr(self, name)):
+                bad(name, getattr(self, name), "a finite angle in degrees")
+        if not (math.isfinite(self.sound_speed) and 1000.0 <= self.sound_speed <= 2000.0):
+            bad("sound_speed", self.sound_speed, "1000 to 2000 m/s for water")
+        if not (math.isfinite(self.absorption) and self.absorption >= 0):
+            bad("absorption", self.absorption, "a finite attenuation >= 0 dB/m")
+
+    # ------------------------------------------------------------------ geometry
+    @property
+    def bin_width(self) -> float:
+        return (self.range_max - self.range_min) / self.n_bins
+
+    def bin_centres(self) -> np.ndarray:
+        return self.range_min + (np.arange(self.n_bins) + 0.5) * self.bin_width
+
+    def bearings_deg(self) -> np.ndarray:
+        return self.bearing_start + np.arange(self.n_pings) * self.bearing_step
+
+    def ping_poses(self, pose=None) -> np.ndarray:
+        """(n_pings, 4, 4) world transform of each ping's beam frame (float64)."""
+        base = self.to_world_np if pose is None else check_rigid(pose, "render_scan 'pose'")
+        return base @ rotation_y(np.radians(self.bearings_deg()))
+
+    # ------------------------------------------------------------------ Mitsuba interface
+    def sample_ray(self, time, sample1, sample2, sample3, active=True):
+        """A ray of ping ``floor(sample2.y * n_pings)`` with direction drawn from the beam; weight B/pdf."""
+        poses = self.ping_poses()
+        ping = mi.UInt32(dr.clip(mi.UInt32(sample2.y * self.n_pings), 0, self.n_pings - 1))
+        frame = PingFrames(poses)
+        d, w = self.beam.sample(sample3, active)
+        o, dw = frame.origin(ping), frame.to_world(ping, d)
+        return mi.Ray3f(o, dw, time), mi.Spectrum(w)
+
+    def traverse(self, callback):
+        super().traverse(callback)
+
+    def to_string(self):
+        return (f"SonarSensor[kind={self.kind}, n_pings={self.n_pings}, n_bins={self.n_bins}, "
+                f"range=[{self.range_min:g}, {self.range_max:g}) m, beam={self.beam.kind} "
+                f"{self.beam.beamwidth_h:g}x{self.beam.beamwidth_v:g} deg]")
+
+
+class PingFrames:
+    """Per-ping beam frames uploaded once per render (opaque arrays: a new pose never recompiles)."""
+
+    def __init__(self, poses: np.ndarray):
+        poses = np.asarray(poses, dtype=np.float32)
+        self.x = mi.Float(np.ascontiguousarray(poses[:, :3, 0]).ravel())
+        self.y = mi.Float(np.ascontiguousarray(poses[:, :3, 1]).ravel())
+        self.z = mi.Float(np.ascontiguousarray(poses[:, :3, 2]).ravel())
+        self.p = mi.Float(np.ascontiguousarray(poses[:, :3, 3]).ravel())
+
+    def gather(self, ping):
+        return (dr.gather(mi.Vector3f, self.x, ping), dr.gather(mi.Vector3f, self.y, ping),
+                dr.gather(mi.Vector3f, self.z, ping), dr.gather(mi.Point3f, self.p, ping))
+
+    def origin(self, ping):
+        return dr.gather(mi.Point3f, self.p, ping)
+
+    def to_world(self, ping, d):
+        x, y, z, _ = self.gather(ping)
+        return x * d.x + y * d.y + z * d.z
