@@ -83,7 +83,9 @@ class SonarTOFIntegrator(mi.SamplingIntegrator):
         ping = lane // spp_o
         sample = lane - ping * spp_o + dr.opaque(mi.UInt32, start)
         samples = HashSamples(dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF), ping, sample)
-        hist = dr.zeros(mi.Float, n_pings * n_bins)
+        # Float64 bins: sums of many small echoes keep their precision, and the order in which
+        # threads add them no longer shows in the float32 result (same seed, same scan).
+        hist = dr.zeros(mi.Float64, n_pings * n_bins)
         r_min = dr.opaque(mi.Float, sensor.range_min)
         inv_bw = dr.opaque(mi.Float, 1.0 / sensor.bin_width)
         n_bins_o = dr.opaque(mi.UInt32, n_bins)
@@ -92,11 +94,11 @@ class SonarTOFIntegrator(mi.SamplingIntegrator):
             t = (rng - r_min) * inv_bw
             valid &= (t >= 0) & (t < mi.Float(n_bins_o))
             b = mi.UInt32(dr.maximum(t, 0.0))
-            dr.scatter_add(hist, energy, ping * n_bins_o + b, valid)
+            dr.scatter_add(hist, mi.Float64(energy), ping * n_bins_o + b, valid)
 
         trace_echoes(scene, frames, sensor.beam, ping, samples, dr.opaque(mi.UInt32, depth),
                      dr.opaque(mi.Float, sensor.absorption), record)
-        return hist.numpy().astype(np.float64)
+        return hist.numpy()
 
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
         sensor = resolve_sensor(scene, sensor)

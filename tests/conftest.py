@@ -1,0 +1,69 @@
+import os
+import sys
+
+import numpy as np
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCENES = os.path.join(ROOT, "scenes_xml")
+
+
+def frame_matrix(boresight, scan_axis, position=(0.0, 0.0, 0.0)):
+    """4x4 beam frame (columns x, y = scan axis, z = boresight, position) from two directions."""
+    z = np.asarray(boresight, float)
+    z /= np.linalg.norm(z)
+    y = np.asarray(scan_axis, float)
+    y = y - z * (y @ z)
+    y /= np.linalg.norm(y)
+    x = np.cross(y, z)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = x, y, z, position
+    return m
+
+
+def matrix_attr(m):
+    return " ".join(f"{v:.17g}" for v in np.asarray(m, float).ravel())
+
+
+def sonar_xml(to_world=None, **params):
+    """A <sensor type="sonar"> element; ints become <integer>, strings <string>, floats <float>."""
+    items = []
+    if to_world is not None:
+        items.append(f'<transform name="to_world"><matrix value="{matrix_attr(to_world)}"/></transform>')
+    for k, v in params.items():
+        if isinstance(v, str):
+            items.append(f'<string name="{k}" value="{v}"/>')
+        elif isinstance(v, (int, np.integer)) and not isinstance(v, bool):
+            items.append(f'<integer name="{k}" value="{int(v)}"/>')
+        else:
+            items.append(f'<float name="{k}" value="{float(v):.17g}"/>')
+    return '<sensor type="sonar">' + "".join(items) + "</sensor>"
+
+
+def scene_xml(sensor, *shapes, integrator='<integrator type="sonar_tof"/>'):
+    return '<scene version="3.0.0">' + integrator + sensor + "".join(shapes) + "</scene>"
+
+
+def rectangle_xml(to_world, bsdf):
+    return f'<shape type="rectangle"><transform name="to_world"><matrix value="{matrix_attr(to_world)}"/></transform>{bsdf}</shape>'
+
+
+def sphere_xml(center, radius, bsdf):
+    c = center
+    return (f'<shape type="sphere"><point name="center" x="{c[0]}" y="{c[1]}" z="{c[2]}"/>'
+            f'<float name="radius" value="{radius}"/>{bsdf}</shape>')
+
+
+def acoustic_xml(diffuse=0.0, specular=0.0, shininess=30.0):
+    return (f'<bsdf type="acoustic"><float name="diffuse" value="{diffuse}"/>'
+            f'<float name="specular" value="{specular}"/><float name="shininess" value="{shininess}"/></bsdf>')
+
+
+@pytest.fixture(scope="session")
+def mitsonar_mod():
+    import mitsonar
+
+    return mitsonar
+
+
+sys.path.insert(0, os.path.dirname(__file__))
