@@ -205,6 +205,9 @@ class BeamPattern:
         grid = self.eval_np(A, E) * np.maximum(np.cos(E), 0.0)
         if not np.any(grid > 0):
             raise BeamPatternError("sonar beam pattern is zero everywhere: nothing would be emitted")
+        # A floor of 1e-6 of the peak bounds B / pdf in the far tails, where the float32 CDF
+        # inversion can land in cells of vanishing density (one such sample once weighed 1e12).
+        grid = np.maximum(grid, 1e-6 * grid.max())
         self._distr = mi.MarginalContinuous2D0(np.ascontiguousarray(grid, dtype=np.float32))
         self._az_lo, self._el_lo = az_lo, el_lo
         self._az_span, self._el_span = az_hi - az_lo, el_hi - el_lo
