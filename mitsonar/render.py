@@ -249,7 +249,7 @@ def scene_mesh(scene):
 
     verts, faces, offset = [], [], 0
     for shape in scene.shapes():
-        name = type(shape).__name__
+        name = shape.class_name() if hasattr(shape, "class_name") else type(shape).__name__
         if isinstance(shape, mi.Mesh):
             v = np.array(shape.vertex_positions_buffer(), dtype=np.float64).reshape(-1, 3)
             f = np.array(shape.faces_buffer(), dtype=np.int64).reshape(-1, 3)
