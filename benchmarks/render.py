@@ -1,0 +1,148 @@
+"""Render benchmark: time and error of a full box scan versus spp, against the ray-cast ceiling.
+
+Prints one JSON object. Everything is measured in this one run (shared machines are noisy):
+  * for each spp: seconds per full 200-ping scan (median of repeats, kernels compiled),
+    paths/s, segments/s (ray casts: one intersection per bounce plus one visibility ray per
+    echo connection) and the relative L2 error of the whole scan against a render with 32x the
+    largest spp;
+  * the ceiling: a bare loop of `scene.ray_intersect` bounces (cosine-weighted, plus one
+    `ray_test` back to the transducer per bounce, like our path) over the same lanes and depth,
+    in segments/s; `ratio_to_ceiling` = our segments/s / the ceiling's.
+Targets (issue 2): <= 5 % relative L2 error in under 1 s, at >= 0.5 of the ceiling.
+
+Usage: python benchmarks/render.py [--spp 256,512,1024,2048,4096] [--repeats 3] [--ref-factor 32]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+
+import numpy as np
+
+import mitsonar  # noqa: F401  (selects the variant and registers the plugins)
+import drjit as dr  # noqa: E402
+import mitsuba as mi  # noqa: E402
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+BOX = os.path.join(HERE, "..", "scenes_xml", "box.xml")
+
+
+def count_segments(mitsonar, scene, spp, seed=0):
+    """Ray casts of one scan: intersections (one per bounce) + visibility rays (one per echo)."""
+    from mitsonar.plugins import module
+
+    ep = module("echo_path")
+    sensor = scene.sensors()[0]
+    frames = module("sonar_sensor").PingFrames(sensor.ping_poses())
+    n = sensor.n_pings * spp
+    lane = dr.arange(mi.UInt32, n)
+    ping = lane // spp
+    counts = dr.zeros(mi.UInt32, 2)
+
+    def record(depth, rng, energy, valid):
+        dr.scatter_add(counts, mi.UInt32(1), mi.UInt32(0))
+        dr.scatter_add(counts, mi.UInt32(1), mi.UInt32(1), energy > 0)
+
+    with dr.suspend_grad():
+        ep.trace_echoes(scene, frames, sensor.beam, ping, ep.HashSamples(mi.UInt32(seed), ping, lane - ping * spp),
+                        mi.UInt32(scene.integrator().max_depth), mi.Float(0.0), record)
+        c = counts.numpy()
+    return int(c[0]), int(c[1])
+
+
+@dr.syntax
+def _bare_bounces(scene, origin, n_lanes, max_depth, seed):
+    rng = mi.PCG32(n_lanes, dr.arange(mi.UInt64, n_lanes) + seed)
+    d = mi.warp.square_to_uniform_sphere(mi.Point2f(rng.next_float32(), rng.next_float32()))
+    ray = mi.Ray3f(origin, d)
+    active = mi.Bool(True)
+    depth = mi.UInt32(0)
+    segs = mi.UInt32(0)
+    while active:
+        si = scene.ray_intersect(ray, active)
+        active &= si.is_valid()
+        segs += 1
+        scene.ray_test(si.spawn_ray_to(origin), active)
+        segs += dr.select(active, 1, 0)
+        wo = mi.warp.square_to_cosine_hemisphere(mi.Point2f(rng.next_float32(), rng.next_float32()))
+        ray = si.spawn_ray(si.to_world(wo))
+        depth += 1
+        active &= depth < max_depth
+    return dr.sum(segs)
+
+
+def ceiling(scene, n_lanes, max_depth, repeats):
+    """Segments/s of a bare bounce loop: ray_intersect + ray_test per bounce, no BSDF, no bins."""
+    sensor = scene.sensors()[0]
+    origin = mi.Point3f(*[float(v) for v in sensor.to_world_np[:3, 3]])
+    times, segs = [], 0
+    for r in range(repeats + 1):
+        t = time.perf_counter()
+        segs = int(_bare_bounces(scene, origin, n_lanes, dr.opaque(mi.UInt32, max_depth),
+                                 dr.opaque(mi.UInt64, r)).numpy()[0])
+        dt = time.perf_counter() - t
+        if r:
+            times.append(dt)
+    return segs / statistics.median(times), segs, statistics.median(times)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--spp", default="256,512,1024,2048,4096")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--ref-factor", type=int, default=32)
+    args = ap.parse_args(argv)
+    spps = [int(s) for s in args.spp.split(",")]
+
+    scene = mitsonar.load_scene(BOX)
+    integ = scene.integrator()
+    sensor = scene.sensors()[0]
+    t = time.perf_counter()
+    ref_spp = args.ref_factor * max(spps)
+    ref = integ.render_histogram(scene, sensor, seed=12345, spp=ref_spp)
+    t_ref = time.perf_counter() - t
+    results = []
+    for spp in spps:
+        integ.render_histogram(scene, sensor, seed=0, spp=spp)  # compile / warm
+        times, errs = [], []
+        for r in range(args.repeats):
+            t = time.perf_counter()
+            h = integ.render_histogram(scene, sensor, seed=1 + r, spp=spp)
+            times.append(time.perf_counter() - t)
+            errs.append(float(np.linalg.norm(h - ref) / np.linalg.norm(ref)))
+        secs = statistics.median(times)
+        n_int, n_vis = count_segments(mitsonar, scene, spp)
+        results.append({"spp": spp, "seconds": secs, "paths_per_s": sensor.n_pings * spp / secs,
+                        "segments": n_int + n_vis, "segments_per_s": (n_int + n_vis) / secs,
+                        "rel_l2_error": statistics.median(errs)})
+    big = max(spps)
+    ceil_rate, ceil_segs, ceil_secs = ceiling(scene, sensor.n_pings * big, integ.max_depth, args.repeats)
+    for r in results:
+        r["ratio_to_ceiling"] = r["segments_per_s"] / ceil_rate
+    within = [r for r in results if r["rel_l2_error"] <= 0.05]
+    best = min(within, key=lambda r: r["seconds"]) if within else None
+    out = {
+        "benchmark": "render_box_full_scan",
+        "scene": "scenes_xml/box.xml",
+        "n_pings": sensor.n_pings, "n_bins": sensor.n_bins, "max_depth": integ.max_depth,
+        "variant": mitsonar.variant(), "cores": os.cpu_count(), "python": platform.python_version(),
+        "reference_spp": ref_spp, "reference_seconds": t_ref,
+        "results": results,
+        "ceiling": {"lanes": sensor.n_pings * big, "segments": ceil_segs, "seconds": ceil_secs,
+                    "segments_per_s": ceil_rate},
+        "target": {"rel_l2_error": 0.05, "seconds": 1.0, "ratio_to_ceiling": 0.5},
+        "fastest_within_5pct": best,
+        "meets_target": bool(best and best["seconds"] < 1.0 and best["ratio_to_ceiling"] >= 0.5),
+        "micron_seconds_per_scan": 13.0,
+    }
+    json.dump(out, sys.stdout, indent=2)
+    print()
+
+
+if __name__ == "__main__":
+    main()
