@@ -1,0 +1,142 @@
+"""Pictures: files written at the expected size, echoes drawn where the geometry says, no crashes."""
+import math
+import warnings
+
+import matplotlib.colors as mcolors
+import matplotlib.image as mimage
+import numpy as np
+import pytest
+from matplotlib import colormaps
+
+from mitsonar import plots
+from mitsonar.electronics import Electronics
+from mitsonar.scan import Scan
+
+
+def ring_scan(n_pings=36, n_bins=10, step_deg=10.0, rmax=10.0, bright=()):
+    """Head at the origin, scan axis world +z, boresight at bearing 0 along world +x (box.xml)."""
+    bearings = np.radians(step_deg * np.arange(n_pings))
+    poses = np.tile(np.eye(4), (n_pings, 1, 1))
+    for k, b in enumerate(bearings):
+        z = np.array([math.cos(b), math.sin(b), 0.0])
+        y = np.array([0.0, 0.0, 1.0])
+        poses[k, :3, 0], poses[k, :3, 1], poses[k, :3, 2] = np.cross(y, z), y, z
+    inten = np.zeros((n_pings, n_bins), np.float32)
+    data = np.zeros((n_pings, n_bins), np.uint8)
+    for k, j in bright:
+        inten[k, j], data[k, j] = 1e-4, 255
+    return Scan(intensity=inten, data=data, ranges=(np.arange(n_bins) + 0.5) * rmax / n_bins, bearings=bearings,
+                poses=poses, range_min=0.0, range_max=rmax, beamwidth_h=step_deg,
+                electronics=Electronics().to_dict(), meta={"scene": "synthetic", "seed": 0})
+
+
+def pixel(fig, png, x, y):
+    """RGB of the saved PNG at data point (x, y) of the figure's first axes."""
+    img = mimage.imread(png)
+    px, py = fig.axes[0].transData.transform((x, y))
+    return img[int(round(img.shape[0] - py)), int(round(px)), :3]
+
+
+def close(rgb, colour, tol=0.12):
+    return np.abs(np.asarray(rgb) - np.asarray(mcolors.to_rgb(colour))).max() < tol
+
+
+def test_polar_places_a_bright_bin_by_range_and_bearing(tmp_path):
+    # Ping 9 = bearing 90 deg, bin 6 = 6.5 m; ping 0 = bearing 0, bin 3 = 3.5 m.
+    scan = ring_scan(bright=[(9, 6), (0, 3)])
+    png = str(tmp_path / "polar.png")
+    fig = plots.plot_polar(scan, png, figsize=(6, 5), dpi=100, resolution=500)
+    cmap = colormaps[plots.DEFAULT_CMAP]
+    hot, cold = cmap(1.0), cmap(0.0)
+    def at(r, deg):  # 3 deg off the bearing: clear of the grid's spokes
+        a = math.radians(deg - 3.0)
+        return pixel(fig, png, -r * math.sin(a), r * math.cos(a))
+
+    # Bearing 0 is up, positive bearings counter-clockwise: 90 deg is on the left.
+    assert close(at(6.5, 90), hot)
+    assert close(at(3.5, 0), hot)
+    for r, deg in [(6.5, 270), (6.5, 180), (3.5, 90), (6.5, 0), (6.5, 45), (5.5, 90), (7.5, 90)]:
+        assert close(at(r, deg), cold), (r, deg)
+
+
+def test_polar_wedges_overlap_in_ping_order(tmp_path):
+    # 3 deg wedges at 1.8 deg steps: the later ping covers the earlier one's trailing part.
+    scan = ring_scan(n_pings=200, n_bins=20, step_deg=1.8, bright=[(50, 10)])
+    scan.beamwidth_h = 3.0
+    png = str(tmp_path / "overlap.png")
+    fig = plots.plot_polar(scan, png, figsize=(8, 8), dpi=100, resolution=800)
+    r = 5.25
+    cmap = colormaps[plots.DEFAULT_CMAP]
+
+    def at(deg):
+        a = math.radians(deg)
+        return pixel(fig, png, -r * math.sin(a), r * math.cos(a))
+
+    assert close(at(89.4), cmap(1.0))  # ping 50 (90 deg) is visible on [88.5, 90.3)
+    assert close(at(91.0), cmap(0.0))  # ping 51 painted over it
+
+
+def test_cartesian_places_bins_in_world_coordinates_and_cuts_the_mesh(tmp_path):
+    scan = ring_scan(bright=[(9, 6)])  # bearing 90 deg: world +y at 6.5 m
+    # A wall x = 4 from z = -3 to 3, two triangles: cut through z = 0 along x = 4.
+    v = np.array([[4, -5, -3], [4, 5, -3], [4, 5, 3], [4, -5, 3]], float)
+    f = np.array([[0, 1, 2], [0, 2, 3]])
+    png = str(tmp_path / "cart.png")
+    fig = plots.plot_cartesian(scan, mesh=(v, f), path=png, figsize=(6, 5), dpi=100)
+    cmap = colormaps[plots.DEFAULT_CMAP]
+    assert close(pixel(fig, png, 0.0, 6.5), cmap(1.0))
+    assert close(pixel(fig, png, 0.0, -6.5), cmap(0.0))
+    assert close(pixel(fig, png, 4.0, -2.0), "tab:green", tol=0.2)
+    assert fig.axes[0].get_xlabel().startswith("world x")
+
+
+def test_mesh_section():
+    v = np.array([[0, 0, -1], [1, 0, 1], [0, 1, 1], [5, 5, 2], [6, 5, 3], [5, 6, 4]], float)
+    seg = plots.mesh_section(v, [[0, 1, 2], [3, 4, 5]], origin=(0, 0, 0), normal=(0, 0, 2))
+    assert seg.shape == (1, 2, 3)
+    np.testing.assert_allclose(sorted(map(tuple, seg[0])), [(0.0, 0.5, 0.0), (0.5, 0.0, 0.0)], atol=1e-12)
+    assert plots.mesh_section(np.zeros((0, 3)), np.zeros((0, 3), int), (0, 0, 0), (0, 0, 1)).shape == (0, 2, 3)
+
+
+@pytest.mark.parametrize("ext", ["png", "pdf"])
+def test_files_written_with_expected_size(tmp_path, ext):
+    scan = ring_scan(n_pings=100, n_bins=200, step_deg=3.6, rmax=12.0, bright=[(3, 120)])
+    scan.beamwidth_h = 3.0
+    for name, draw in [("polar", lambda p: plots.plot_polar(scan, p, figsize=(5, 4), dpi=80)),
+                       ("cartesian", lambda p: plots.plot_cartesian(scan, path=p, figsize=(5, 4), dpi=80)),
+                       ("ascan", lambda p: plots.plot_ascan(scan, 3, p, figsize=(5, 3), dpi=80))]:
+        path = tmp_path / f"{name}.{ext}"
+        draw(str(path))
+        assert path.stat().st_size > 1000
+        if ext == "png":
+            h, w = mimage.imread(str(path)).shape[:2]
+            assert (w, h) == ((400, 320) if name != "ascan" else (400, 240))
+        else:
+            assert path.read_bytes().startswith(b"%PDF")
+
+
+def test_db_on_zero_intensity_and_all_modes_do_not_crash(tmp_path):
+    scan = ring_scan()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no divide-by-zero or empty-range warnings either
+        for use in ("data", "intensity"):
+            for db in (False, True):
+                plots.plot_polar(scan, None, use=use, db=db, figsize=(3, 3), dpi=50, resolution=100)
+                plots.plot_cartesian(scan, use=use, db=db, figsize=(3, 3), dpi=50)
+        plots.plot_ascan(scan, -1, str(tmp_path / "a.png"), db=True, figsize=(3, 2), dpi=50)
+        plots.plot_ascan(scan, 0, None, db=False, figsize=(3, 2), dpi=50)
+
+
+def test_title_has_key_settings_and_bad_arguments_raise(tmp_path):
+    scan = ring_scan()
+    fig = plots.plot_polar(scan, figsize=(3, 3), dpi=50, resolution=100)
+    title = fig.axes[0].get_title()
+    for word in ("mechanical", "TVG 20log", "gain 28 dB", "8-bit", "synthetic"):
+        assert word in title
+    assert "counter-clockwise" in fig.axes[0].get_xlabel()
+    with pytest.raises(ValueError, match="extension"):
+        plots.plot_polar(scan, str(tmp_path / "x.bmpx"), figsize=(3, 3), dpi=50, resolution=100)
+    with pytest.raises(ValueError, match="use="):
+        plots.plot_polar(scan, use="bytes")
+    with pytest.raises(IndexError):
+        plots.plot_ascan(scan, 36)
