@@ -1,7 +1,6 @@
 """Variant selection, scene loading, `render_scan` and the scene's ground-truth mesh."""
 from __future__ import annotations
 
-import dataclasses
 import os
 import re
 
@@ -164,14 +163,9 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     from .electronics import Electronics
 
     settings = dict(sonar.electronics)
-    if electronics:
-        unknown = set(electronics) - {f.name for f in dataclasses.fields(Electronics)}
-        if unknown:
-            raise SceneError(f"render_scan 'electronics': unknown field(s) {', '.join(sorted(unknown))}; "
-                             f"allowed: {', '.join(f.name for f in dataclasses.fields(Electronics))}")
-        settings.update(electronics)
+    settings.update(electronics or {})
     try:
-        model = Electronics(**settings)
+        model = Electronics.from_dict(settings, source="render_scan electronics" if electronics else "sonar")
     except ValueError as exc:
         raise SceneError(str(exc)) from None
     intensity = hist.astype(np.float32)
@@ -198,7 +192,8 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
                 range_min=sonar.range_min, range_max=sonar.range_max,
                 beam_pattern=sonar.beam.kind, beamwidth_h=sonar.beam.beamwidth_h,
                 beamwidth_v=sonar.beam.beamwidth_v, kind=sonar.kind, sound_speed=sonar.sound_speed,
-                absorption=sonar.absorption, electronics=dataclasses.asdict(model), meta=meta)
+                absorption=sonar.absorption, electronics={**model.to_dict(), "seed": int(eseed)},
+                meta=meta)
 
 
 def _scene_name(scene) -> str:

@@ -62,7 +62,12 @@ class Scan:
 
     def __post_init__(self) -> None:
         self.intensity = np.asarray(self.intensity, dtype=np.float32)
-        self.data = np.asarray(self.data, dtype=np.uint8)
+        data = np.asarray(self.data)
+        if data.dtype != np.uint8 and data.size and (np.nanmin(data) < 0 or np.nanmax(data) > 255
+                                                     or not np.all(np.isfinite(data))):
+            raise ValueError("Scan: data must hold device bytes 0..255 "
+                             f"(got values from {np.nanmin(data)} to {np.nanmax(data)})")
+        self.data = data.astype(np.uint8)
         self.ranges = np.asarray(self.ranges, dtype=np.float64)
         self.bearings = np.asarray(self.bearings, dtype=np.float64)
         self.poses = np.asarray(self.poses, dtype=np.float64)

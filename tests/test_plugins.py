@@ -81,6 +81,8 @@ def test_misspelled_parameter_fails_with_mitsubas_message(mitsonar_mod):
     (dict(absorption=-0.1), r"sonar 'absorption'"),
     (dict(beam_pattern="table"), r"beam_table"),
     (dict(beam_pattern="table", beam_table="/nonexistent/beam.csv"), r"does not exist"),
+    (dict(tvg="35log"), r"sonar 'tvg': '35log' is not one of off, 20log, 30log, 40log"),
+    (dict(bit_depth=6), r"sonar 'bit_depth'"),
 ])
 def test_impossible_sonar_settings_fail_with_our_message(mitsonar_mod, params, message):
     with pytest.raises(mitsonar_mod.SceneError, match=message) as info:
