@@ -121,7 +121,7 @@ def _sonar(scene, sensor):
 
 
 def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integrator=None, sensor=0,
-                max_depth=None, electronics=None, electronics_seed=None) -> Scan:
+                max_depth=None, electronics=None, electronics_seed=None, progress=None) -> Scan:
     """Render one scan of ``scene`` and pass it through the head's electronics.
 
     ============== ==============================================================================
@@ -134,6 +134,7 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     sensor         sensor index or object
     max_depth      override of the integrator's surface bounces
     electronics    dict of electronics fields overriding the sensor's
+    progress       optional callable ``progress(done_spp, spp)`` called after each render pass
     ============== ==============================================================================
 
     The same arguments give the same scan, bit for bit.
@@ -156,7 +157,8 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     if pose is not None:
         pose = np.asarray(pose, dtype=np.float64)
     try:
-        hist = integrator.render_histogram(scene, sonar, seed=seed, spp=spp, pose=pose, max_depth=max_depth)
+        hist = integrator.render_histogram(scene, sonar, seed=seed, spp=spp, pose=pose, max_depth=max_depth,
+                                           progress=progress)
     except ValueError as exc:
         raise SceneError(str(exc)) from None
 
@@ -278,13 +280,23 @@ __all__ = ["SceneError", "VariantError", "load_scene", "render_scan", "scene_mes
 
 
 def init_on_import() -> None:
-    """Activate the default variant if none is set, register the plugins, follow variant changes."""
+    """Activate the default variant if none is set, register the plugins, follow variant changes.
+
+    A missing or too old libLLVM does not make ``import mitsonar`` fail (the command line must
+    still start and explain); it is reported as a `VariantError` by the first `load_scene` or
+    `render_scan`, and as a warning here.
+    """
+    import warnings
+
     import mitsuba as mi
 
-    if mi.variant() is None:
-        set_variant()
-    elif mi.variant() in ("llvm_ad_mono", "cuda_ad_mono"):
-        from mitsonar.plugins import register
+    try:
+        if mi.variant() is None:
+            set_variant()
+        elif mi.variant() in ("llvm_ad_mono", "cuda_ad_mono"):
+            from mitsonar.plugins import register
 
-        register()
+            register()
+    except VariantError as exc:
+        warnings.warn(f"mitsonar: {exc}", RuntimeWarning, stacklevel=3)
     mi.detail.add_variant_callback(_on_variant_change)

@@ -56,8 +56,11 @@ class SonarTOFIntegrator(mi.SamplingIntegrator):
         super().__init__(props)
         self.max_depth = check_max_depth(props.get("max_depth", 5))
 
-    def render_histogram(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None):
-        """Mean echo energy per bin, float64 ``(n_pings, n_bins)``."""
+    def render_histogram(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None, progress=None):
+        """Mean echo energy per bin, float64 ``(n_pings, n_bins)``.
+
+        ``progress(done_spp, spp)`` is called after each pass (long renders run several).
+        """
         sensor = resolve_sensor(scene, sensor)
         spp = int(spp)
         if spp < 1:
@@ -73,6 +76,8 @@ class SonarTOFIntegrator(mi.SamplingIntegrator):
                 count = min(spp_pass, spp - start)
                 total += self._pass(scene, sensor, frames, seed, start, count, depth)
                 start += count
+                if progress is not None:
+                    progress(start, spp)
         return (total / spp).reshape(n_pings, n_bins)
 
     def _pass(self, scene, sensor, frames, seed, start, count, depth):
