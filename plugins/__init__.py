@@ -1,4 +1,4 @@
-"""mitsonar's Mitsuba plugins: sensor ``sonar``, BSDF ``acoustic``, integrator ``sonar_tof``.
+"""mitsonar's Mitsuba plugins: sensor ``sonar``, BSDF ``acoustic``, integrators ``sonar_tof``, ``sonar_mlt``.
 
 The plugin classes derive from the classes of the active Mitsuba variant, so their modules are
 (re)loaded for each variant and the plugins registered again; `register()` does that and is
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import importlib
 
-_MODULES = ("materials", "beam", "acoustic_bsdf", "sonar_sensor", "echo_path", "sonar_tof")
+_MODULES = ("materials", "beam", "acoustic_bsdf", "sonar_sensor", "echo_path", "sonar_tof", "sonar_mlt")
 _current = None
 
 
@@ -31,6 +31,7 @@ def register(force: bool = False) -> None:
     mi.register_bsdf("acoustic", lambda props: mods["acoustic_bsdf"].AcousticBSDF(props))
     mi.register_sensor("sonar", lambda props: mods["sonar_sensor"].SonarSensor(props))
     mi.register_integrator("sonar_tof", lambda props: mods["sonar_tof"].SonarTOFIntegrator(props))
+    mi.register_integrator("sonar_mlt", lambda props: mods["sonar_mlt"].SonarMLTIntegrator(props))
     _current = variant
 
 

@@ -1,0 +1,89 @@
+"""The Metropolis integrator: same expectation as path tracing, parameters, no recompiles."""
+import math
+import os
+
+import drjit as dr
+import numpy as np
+import pytest
+
+from conftest import SCENES
+
+
+def grouped(hist, ping_groups, range_groups):
+    """Sum a (n_pings, n_bins) histogram over blocks: coarse enough for a per-block t test."""
+    p = np.array_split(np.arange(hist.shape[0]), ping_groups)
+    r = np.array_split(np.arange(hist.shape[1]), range_groups)
+    return np.array([[hist[np.ix_(a, b)].sum() for b in r] for a in p]).ravel()
+
+
+def scene_files():
+    return sorted(f for f in os.listdir(SCENES) if f.endswith(".xml"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", scene_files())
+def test_mlt_has_the_expectation_of_path_tracing(mitsonar_mod, name):
+    """Welch t tests on block sums of independent renders, Bonferroni-corrected so that the whole
+    test raises a false alarm with probability 1e-3 when both estimators have the same mean."""
+    import mitsuba as mi
+    from scipy import stats
+
+    scene = mitsonar_mod.load_scene(os.path.join(SCENES, name))
+    sensor = scene.sensors()[0]
+    pt = mi.load_dict({"type": "sonar_tof", "max_depth": 5})
+    mlt = mi.load_dict({"type": "sonar_mlt", "max_depth": 5})
+    runs = 8
+    spp = 1024
+    groups = (min(10, sensor.n_pings), 6)
+    a = np.stack([grouped(pt.render_histogram(scene, sensor, seed=s, spp=spp), *groups) for s in range(runs)])
+    b = np.stack([grouped(mlt.render_histogram(scene, sensor, seed=100 + s, spp=spp), *groups)
+                  for s in range(runs)])
+    keep = (a.mean(0) > 1e-3 * a.mean(0).max()) & (a.std(0) > 0) & (b.std(0) > 0)
+    assert keep.sum() >= 5
+    t, p = stats.ttest_ind(a[:, keep], b[:, keep], equal_var=False)
+    alpha = 1e-3
+    assert np.min(p) > alpha / keep.sum(), f"worst block t = {t[np.argmin(p)]:.2f}, p = {np.min(p):.2e}"
+    # And the totals agree closely (both are consistent estimators of the same scan).
+    assert b.sum(1).mean() == pytest.approx(a.sum(1).mean(), rel=0.02)
+
+
+def test_budget_plan_and_parameters(mitsonar_mod):
+    import mitsuba as mi
+
+    mlt = mi.load_dict({"type": "sonar_mlt"})
+    boot, chains, mutations = mlt.plan(200, 4096)
+    assert boot + chains * mutations <= 4096 * 1.05 and mutations >= 1
+    custom = mi.load_dict({"type": "sonar_mlt", "chains": 64, "mutations": 10, "bootstrap": 512,
+                           "large_step": 0.5, "small_step_min": 0.001, "small_step_max": 0.05})
+    assert custom.plan(10, 4096) == (512, 64, 10)
+    for bad, msg in ((dict(large_step=1.5), "large_step"), (dict(chains=-1), "chains"),
+                     (dict(small_step_min=0.1, small_step_max=0.01), "small_step")):
+        with pytest.raises(Exception, match=msg):
+            mi.load_dict({"type": "sonar_mlt", **bad})
+
+
+def test_mlt_from_xml_through_render_scan_is_deterministic(mitsonar_mod):
+    path = os.path.join(SCENES, "box.xml")
+    text = open(path).read().replace('<integrator type="sonar_tof">', '<integrator type="sonar_mlt">')
+    scene = mitsonar_mod.load_scene(text)
+    a = mitsonar_mod.render_scan(scene, spp=256, seed=4)
+    b = mitsonar_mod.render_scan(scene, spp=256, seed=4)
+    assert a.meta["integrator"] == "SonarMLTIntegrator"
+    np.testing.assert_array_equal(a.intensity, b.intensity)
+    assert a.intensity.sum() > 0
+
+
+def test_mutations_do_not_recompile(mitsonar_mod):
+    import mitsuba as mi
+
+    scene = mitsonar_mod.load_scene(os.path.join(SCENES, "box.xml"))
+    mlt = mi.load_dict({"type": "sonar_mlt", "chains": 32, "mutations": 3})
+    mlt.render_histogram(scene, seed=0, spp=512)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()
+        mlt.render_histogram(scene, seed=5, spp=512, pose=np.eye(4))
+        history = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert history and not [k for k in history if not k.get("cache_hit")]
