@@ -146,11 +146,13 @@ class SonarMLTIntegrator(mi.SamplingIntegrator):
                 step = dr.opaque(mi.UInt32, m)
                 key0, key1 = mi.sample_tea_32(step, mut_seed, 4)
                 large = mi.sample_tea_float32(lane_c + key0, key1 ^ 0x9E3779B9, 6) < p_large
-                u1 = mi.sample_tea_float32(elem + key0, key1, 6)
-                u2 = mi.sample_tea_float32(elem + key0, key1 ^ 0x85EBCA6B, 6)
-                u3 = mi.sample_tea_float32(elem + key0, key1 ^ 0xC2B2AE35, 6)
+                # One TEA call per coordinate gives the step size, its sign and a large-step value:
+                # generating these dominates a mutation's cost on the CPU.
+                v0, v1 = mi.sample_tea_32(elem + key0, key1, 4)
+                u1 = mi.Float(v0 >> 8) * (1.0 / 16777216.0)
+                u3 = mi.Float(v1 >> 8) * (1.0 / 16777216.0)
                 s = s1 * dr.exp(log_ratio * u1)
-                moved = U + dr.select(u2 < 0.5, s, -s)
+                moved = U + dr.select((v1 & 1) == 0, s, -s)
                 moved -= dr.floor(moved)
                 U_new = dr.select(dr.gather(mi.Bool, large, e_lane), u3, moved)
                 f_new, bins_new, vals_new = ctx.evaluate(U_new, ping_c, lane_c, dims)
