@@ -229,3 +229,21 @@ def test_scene_mesh_is_the_box_ground_truth(mitsonar_mod):
     # Every face looks into the water (towards the sonar at the origin).
     centres = tri.mean(1)
     assert np.all(np.einsum("ij,ij->i", normals, -centres) > 0)
+
+
+def test_plugins_follow_a_variant_change():
+    """Registered per variant: after switching away and back the XML plugins still load."""
+    import subprocess
+    import sys
+
+    code = f"""
+import mitsonar, mitsuba as mi
+mi.set_variant('scalar_rgb')
+mi.set_variant('llvm_ad_mono')
+scene = mi.load_file({BOX!r})
+print(type(scene.sensors()[0]).__name__, type(scene.integrator()).__name__)
+print(mitsonar.render_scan(scene, spp=8).intensity.shape)
+"""
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "SonarSensor SonarTOFIntegrator" in proc.stdout and "(200, 500)" in proc.stdout
