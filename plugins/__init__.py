@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import importlib
 
-_MODULES = ("materials", "beam", "acoustic_bsdf", "sonar_sensor", "echo_path", "sonar_tof", "sonar_mlt")
+_MODULES = ("materials", "beam", "acoustic_bsdf", "sonar_sensor", "echo_path", "range_bins", "sonar_tof", "sonar_mlt")
 _current = None
 
 

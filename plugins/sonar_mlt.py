@@ -8,14 +8,15 @@ import mitsuba as mi
 import numpy as np
 
 from .echo_path import ArraySamples, HashSamples, n_dims, trace_echoes
+from .range_bins import RangeBins
 from .sonar_sensor import PingFrames
-from .sonar_tof import check_max_depth, resolve_sensor
+from .sonar_tof import SonarIntegrator, check_max_depth, resolve_sensor
 
 # Salts that keep the random streams of the stages apart for one user seed.
 _SALT_BOOT, _SALT_MUT, _SALT_START = 0x5EED0001, 0x5EED0002, 0x5EED0003
 
 
-class SonarMLTIntegrator(mi.SamplingIntegrator):
+class SonarMLTIntegrator(SonarIntegrator):
     r"""Primary-sample-space Metropolis light transport (Kelemen et al. 2002) for sonar.
 
     The target of a path is the sum of its per-bounce echo energies that land in the range
@@ -97,7 +98,7 @@ class SonarMLTIntegrator(mi.SamplingIntegrator):
         self.last_plan = {"bootstrap": boot, "chains": chains, "mutations": mutations}
         frames = PingFrames(sensor.ping_poses(pose))
         dims = n_dims(depth)
-        ctx = _Context(scene, sensor, frames, depth, n_bins)
+        ctx = _Context(scene, sensor, frames, depth)
         seed = int(seed) & 0xFFFFFFFF
 
         with dr.suspend_grad():
@@ -173,13 +174,6 @@ class SonarMLTIntegrator(mi.SamplingIntegrator):
             out = hist.numpy()
         return out.reshape(n_pings, n_bins)
 
-    def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
-        sensor = resolve_sensor(scene, sensor)
-        if not spp:
-            spp = sensor.sampler().sample_count()
-        hist = self.render_histogram(scene, sensor, seed=seed, spp=spp)
-        return mi.TensorXf(hist.astype(np.float32)[..., None])
-
     def to_string(self):
         return (f"SonarMLTIntegrator[max_depth={self.max_depth}, chains={self.chains or 'auto'}, "
                 f"large_step={self.large_step}]")
@@ -188,28 +182,25 @@ class SonarMLTIntegrator(mi.SamplingIntegrator):
 class _Context:
     """What one render's path evaluations share: scene, frames, bins, per-bounce records."""
 
-    def __init__(self, scene, sensor, frames, depth, n_bins):
+    def __init__(self, scene, sensor, frames, depth):
         self.scene, self.sensor, self.frames = scene, sensor, frames
         self.depth = depth
         self.depth_o = dr.opaque(mi.UInt32, depth)
-        self.r_min = dr.opaque(mi.Float, sensor.range_min)
-        self.inv_bw = dr.opaque(mi.Float, 1.0 / sensor.bin_width)
-        self.n_bins_o = dr.opaque(mi.UInt32, n_bins)
+        self.bins = RangeBins(sensor)
         self.absorption = dr.opaque(mi.Float, sensor.absorption)
         self.rec_lane = None
 
     def trace(self, samples, ping, lane, f, bins, vals):
         """Trace one path per lane; add its in-window echo energy to ``f[lane]`` and, when
         ``bins``/``vals`` are given, record each bounce's bin and energy at ``lane * depth + k``."""
-        r_min, inv_bw, n_bins_o, depth = self.r_min, self.inv_bw, self.n_bins_o, self.depth
+        window, depth = self.bins, self.depth
 
         def record(k, rng, energy, valid):
-            t = (rng - r_min) * inv_bw
-            valid &= (t >= 0) & (t < mi.Float(n_bins_o))
+            b, valid = window.index(rng, valid)
             dr.scatter_add(f, energy, lane, valid)
             if bins is not None:
                 slot = lane * depth + k
-                dr.scatter(bins, mi.UInt32(dr.maximum(t, 0.0)), slot, valid)
+                dr.scatter(bins, b, slot, valid)
                 dr.scatter(vals, energy, slot, valid)
 
         trace_echoes(self.scene, self.frames, self.sensor.beam, ping, samples, self.depth_o,
@@ -229,4 +220,4 @@ class _Context:
         w = dr.gather(mi.Float, weight, self.rec_lane)
         p = dr.gather(mi.UInt32, ping, self.rec_lane)
         ok = (vals > 0) & dr.gather(mi.Bool, active, self.rec_lane)
-        dr.scatter_add(hist, mi.Float64(vals * w), p * self.n_bins_o + bins, ok)
+        dr.scatter_add(hist, mi.Float64(vals * w), self.bins.flat(p, bins), ok)

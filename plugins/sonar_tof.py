@@ -6,6 +6,7 @@ import mitsuba as mi
 import numpy as np
 
 from .echo_path import HashSamples, trace_echoes
+from .range_bins import RangeBins
 from .sonar_sensor import PingFrames, SonarSensor
 
 # Lanes in one kernel launch. Larger launches keep both cores busy; the cap bounds the number
@@ -32,7 +33,18 @@ def resolve_sensor(scene, sensor):
     return sensor
 
 
-class SonarTOFIntegrator(mi.SamplingIntegrator):
+class SonarIntegrator(mi.SamplingIntegrator):
+    """What the sonar integrators share: ``mi.render`` gives the range-intensity image."""
+
+    def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
+        sensor = resolve_sensor(scene, sensor)
+        if not spp:
+            spp = sensor.sampler().sample_count()
+        hist = self.render_histogram(scene, sensor, seed=seed, spp=spp)
+        return mi.TensorXf(hist.astype(np.float32)[..., None])
+
+
+class SonarTOFIntegrator(SonarIntegrator):
     """Time-of-flight sonar integrator (particle tracing with next-event backscatter).
 
     Every ping of the scan is traced in one wavefront (lane -> ping). From the transducer a path
@@ -91,26 +103,15 @@ class SonarTOFIntegrator(mi.SamplingIntegrator):
         # Float64 bins: sums of many small echoes keep their precision, and the order in which
         # threads add them no longer shows in the float32 result (same seed, same scan).
         hist = dr.zeros(mi.Float64, n_pings * n_bins)
-        r_min = dr.opaque(mi.Float, sensor.range_min)
-        inv_bw = dr.opaque(mi.Float, 1.0 / sensor.bin_width)
-        n_bins_o = dr.opaque(mi.UInt32, n_bins)
+        bins = RangeBins(sensor)
 
         def record(depth_k, rng, energy, valid):
-            t = (rng - r_min) * inv_bw
-            valid &= (t >= 0) & (t < mi.Float(n_bins_o))
-            b = mi.UInt32(dr.maximum(t, 0.0))
-            dr.scatter_add(hist, mi.Float64(energy), ping * n_bins_o + b, valid)
+            b, valid = bins.index(rng, valid)
+            dr.scatter_add(hist, mi.Float64(energy), bins.flat(ping, b), valid)
 
         trace_echoes(scene, frames, sensor.beam, ping, samples, dr.opaque(mi.UInt32, depth),
                      dr.opaque(mi.Float, sensor.absorption), record)
         return hist.numpy()
-
-    def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
-        sensor = resolve_sensor(scene, sensor)
-        if not spp:
-            spp = sensor.sampler().sample_count()
-        hist = self.render_histogram(scene, sensor, seed=seed, spp=spp)
-        return mi.TensorXf(hist.astype(np.float32)[..., None])
 
     def to_string(self):
         return f"SonarTOFIntegrator[max_depth={self.max_depth}]"
