@@ -26,5 +26,18 @@ def load_scan(path) -> Scan:
     return _load(path)
 
 
+_LAZY = {"MicronSonar": "micron", "VirtualMicron": "virtual_sonar", "HeadSettings": "seanet",
+         "StreamParser": "seanet", "record": "micron", "replay": "micron"}
+
+
+def __getattr__(name):
+    # Serial devices load on first use: pyserial is not needed to render.
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module 'mitsonar' has no attribute {name!r}")
+
+
 __all__ = ["Scan", "SceneError", "VariantError", "load_scan", "load_scene", "render_scan", "scene_mesh",
-           "set_variant", "variant", "__version__"]
+           "set_variant", "variant", "__version__", *_LAZY]

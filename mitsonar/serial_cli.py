@@ -1,0 +1,200 @@
+"""Command-line subcommands for serial devices: ``virtual-sonar``, ``record``, ``replay``.
+
+The main CLI calls `add_subcommands(subparsers)`; each subcommand sets ``func(args) -> int``.
+Every failure ends in one line on stderr and a non-zero exit code, never a traceback:
+
+====  ===================================================
+0     success (also Ctrl-C on a server or recorder)
+1     the command failed (bad file, port, head, render)
+2     bad arguments (argparse)
+====  ===================================================
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+__all__ = ["add_subcommands", "cmd_virtual_sonar", "cmd_record", "cmd_replay"]
+
+
+def _one_line(e: BaseException) -> str:
+    """The reason of an exception on one line.
+
+    Mitsuba wraps exceptions raised in Python plugins into a RuntimeError whose message holds
+    the whole traceback; the reason is its last line.
+    """
+    text = str(e).strip() or type(e).__name__
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    if "Traceback (most recent call last)" in text and lines:
+        return lines[-1]
+    return lines[0] if lines else type(e).__name__
+
+
+def _guard(name: str, fn, args) -> int:
+    try:
+        return int(fn(args) or 0)
+    except KeyboardInterrupt:
+        return 0
+    except SystemExit as e:                       # argparse-like exits inside helpers
+        return int(e.code or 0) if isinstance(e.code, int) else 1
+    except BaseException as e:                    # noqa: BLE001 - the CLI must not show tracebacks
+        print(f"mitsonar {name}: error: {_one_line(e)}", file=sys.stderr)
+        return 1
+
+
+def _positive(kind):
+    def conv(text):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a positive {kind.__name__}, got {text!r}") from None
+        if v <= 0:
+            raise argparse.ArgumentTypeError(f"expected a positive {kind.__name__}, got {text!r}")
+        return v
+    return conv
+
+
+def _settings(args):
+    from .seanet import HeadSettings
+    kw = {}
+    if getattr(args, "range", None) is not None:
+        kw["range"] = args.range
+    if getattr(args, "n_bins", None) is not None:
+        kw["n_bins"] = args.n_bins
+    if getattr(args, "sound_speed", None) is not None:
+        kw["sound_speed"] = args.sound_speed
+    if getattr(args, "step", None) is not None:
+        kw["step_size"] = args.step
+    if getattr(args, "bit_depth", None) is not None:
+        kw["bit_depth"] = args.bit_depth
+    return HeadSettings(**kw)
+
+
+# ---- virtual-sonar ----
+
+def _virtual_sonar(args) -> int:
+    scene_path = Path(args.scene)
+    if not scene_path.is_file():
+        raise FileNotFoundError(f"scene file not found: {scene_path}")
+    import mitsonar
+    from .virtual_sonar import serve
+    scene = mitsonar.load_scene(str(scene_path))
+    kw = {"seed": args.seed}
+    if args.spp is not None:
+        kw["spp"] = args.spp
+    scan = mitsonar.render_scan(scene, **kw)
+    print(f"rendered {scene_path.name}: {scan.n_pings} pings x {scan.n_bins} bins, "
+          f"{scan.range_min:g}..{scan.range_max:g} m", flush=True)
+    return serve(scan, args.port_url, args.seconds, baudrate=args.baud, realtime=not args.fast,
+                 dst=not args.no_dst)
+
+
+def cmd_virtual_sonar(args) -> int:
+    """``mitsonar virtual-sonar SCENE.xml``: render once, serve the scan as a Micron."""
+    return _guard("virtual-sonar", _virtual_sonar, args)
+
+
+# ---- record ----
+
+def _record(args) -> int:
+    from .micron import record
+    settings = _settings(args)
+    if args.passive:
+        stats = record(args.port, args.output, args.seconds, baudrate=args.baud, settings=settings,
+                       passive=True)
+    else:
+        stats = record(args.port, args.output, args.seconds, scans=args.scans, pings=args.pings,
+                       baudrate=args.baud, settings=settings, reboot=not args.no_reboot)
+    print(f"recorded {stats['bytes_rx']} bytes in, {stats['bytes_tx']} out "
+          f"({stats['pings']} scanlines) to {args.output}")
+    return 0
+
+
+def cmd_record(args) -> int:
+    """``mitsonar record PORT -o log.bin``: drive a head (or listen) and log the raw bytes."""
+    return _guard("record", _record, args)
+
+
+# ---- replay ----
+
+def _replay(args) -> int:
+    from .micron import replay
+    log = Path(args.log)
+    if not log.is_file():
+        raise FileNotFoundError(f"log file not found: {log}")
+    scans = replay(log, sound_speed=args.sound_speed, partial=args.partial)
+    if not scans:
+        raise ValueError(f"{log}: no complete scan in the log")
+    out = Path(args.output)
+    if args.all:
+        for k, scan in enumerate(scans):
+            path = out.with_name(f"{out.stem}_{k:03d}{out.suffix}")
+            scan.save(str(path))
+        print(f"{len(scans)} scans from {log} written as {out.stem}_NNN{out.suffix}")
+        return 0
+    if not -len(scans) <= args.index < len(scans):
+        raise ValueError(f"{log}: --index {args.index} but the log holds {len(scans)} scan(s)")
+    scans[args.index].save(str(out))
+    print(f"scan {args.index % len(scans)} of {len(scans)} from {log} written to {out}")
+    return 0
+
+
+def cmd_replay(args) -> int:
+    """``mitsonar replay log.bin -o scan.exr``: turn a raw log into scans."""
+    return _guard("replay", _replay, args)
+
+
+# ---- registration ----
+
+def add_subcommands(subparsers) -> None:
+    """Add ``virtual-sonar``, ``record`` and ``replay`` to an argparse subparsers object."""
+    p = subparsers.add_parser(
+        "virtual-sonar", help="serve a rendered scene as a Tritech Micron on a pseudo-terminal",
+        description="Render SCENE.xml once and answer the SeaNet protocol with its scan, like a "
+                    "Micron on a serial line. Prints the device path to open (e.g. with "
+                    "`mitsonar record`), then serves until Ctrl-C.")
+    p.add_argument("scene", metavar="SCENE.xml", help="Mitsuba scene with a `sonar` sensor")
+    p.add_argument("--port-url", default=None, metavar="URL",
+                   help="where to serve: a new pseudo-terminal (default), socket://HOST:PORT "
+                        "(listen for pyserial socket:// clients), or a pyserial URL/device to sit on")
+    p.add_argument("--spp", type=_positive(int), default=None, help="paths per ping (render_scan's default)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the render (default 0)")
+    p.add_argument("--baud", type=_positive(int), default=115200, help="baud rate of the timing model")
+    p.add_argument("--fast", action="store_true", help="answer at once (no timing model)")
+    p.add_argument("--no-dst", action="store_true", help="behave as a pre-DST Micron")
+    p.add_argument("--seconds", type=_positive(float), default=None, help="stop after T seconds")
+    p.set_defaults(func=cmd_virtual_sonar)
+
+    p = subparsers.add_parser(
+        "record", help="log the raw byte stream of a Micron (SeaNet) head",
+        description="Start the head on PORT, request scanlines and write every byte in and out "
+                    "with timestamps to a raw log (format: mitsonar.micron). --passive only "
+                    "listens, e.g. on a tap of the head's transmit line.")
+    p.add_argument("port", metavar="PORT", help="serial device or pyserial URL (socket://HOST:PORT, ...)")
+    p.add_argument("-o", "--output", required=True, metavar="LOG", help="raw log to write")
+    p.add_argument("--seconds", type=_positive(float), default=None, help="stop after T seconds")
+    p.add_argument("--scans", type=_positive(int), default=None, help="stop after N complete scans")
+    p.add_argument("--pings", type=_positive(int), default=None, help="stop after N scanlines")
+    p.add_argument("--baud", type=_positive(int), default=115200)
+    p.add_argument("--passive", action="store_true", help="only listen (needs --seconds)")
+    p.add_argument("--no-reboot", action="store_true", help="attach to a running head without mtReBoot")
+    p.add_argument("--range", type=_positive(float), default=None, help="range scale, m (default 12)")
+    p.add_argument("--n-bins", type=_positive(int), default=None, help="bins per scanline (default 500)")
+    p.add_argument("--sound-speed", type=_positive(float), default=None, help="m/s (default 1500)")
+    p.add_argument("--step", type=_positive(int), default=None,
+                   help="motor step in 1/16 gradian (default 32 = 1.8 deg)")
+    p.add_argument("--bit-depth", type=int, choices=(8, 4), default=None)
+    p.set_defaults(func=cmd_record)
+
+    p = subparsers.add_parser(
+        "replay", help="turn a raw SeaNet log into scans",
+        description="Assemble the scans of a raw log (as the driver did while recording) and "
+                    "save one, or all, with Scan.save (.exr or .npz).")
+    p.add_argument("log", metavar="LOG", help="raw log written by `mitsonar record`")
+    p.add_argument("-o", "--output", required=True, metavar="SCAN", help="output file (.exr, .npz)")
+    p.add_argument("--index", type=int, default=0, help="which scan to save (default 0; -1 the last)")
+    p.add_argument("--all", action="store_true", help="save every scan as OUTPUT_NNN.ext")
+    p.add_argument("--sound-speed", type=_positive(float), default=None, help="m/s (default the log's)")
+    p.add_argument("--partial", action="store_true", help="also the unfinished scan at the end")
+    p.set_defaults(func=cmd_replay)

@@ -1,0 +1,341 @@
+"""Micron driver against the virtual Micron through real pseudo-terminals; logs and replay.
+
+Every test runs the virtual head with ``realtime=False`` and short timeouts; every blocking
+call is bounded by a timeout, and the head's thread is joined with a timeout on exit.
+"""
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from mitsonar.micron import (MicronSonar, ScanAssembler, SonarError, SonarTimeout, beam_rotation,
+                             read_log, record, replay)
+from mitsonar.scan import Scan
+from mitsonar.seanet import HdCtrl, HeadData, HeadSettings, bearing_to_radians
+from mitsonar.virtual_sonar import Faults, VirtualMicron
+
+pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
+
+FAST = dict(timeout=5.0, ping_timeout=0.25, boot_timeout=2.0)
+
+
+def synthetic_scan(n_pings=200, n_bins=500, range_max=12.0, start_deg=0.0, step_deg=1.8, seed=1,
+                   pose=None, bit_depth=8):
+    """A Scan as the renderer would return it, with random device bytes (exact test data)."""
+    rng = np.random.default_rng(seed)
+    data = rng.integers(0, 256, (n_pings, n_bins), dtype=np.uint8)
+    if bit_depth == 4:
+        data = (data // 17 * 17).astype(np.uint8)
+    bearings = np.radians(start_deg + np.arange(n_pings) * step_deg)
+    T = np.eye(4) if pose is None else pose
+    return Scan(intensity=rng.random((n_pings, n_bins)).astype(np.float32), data=data,
+                ranges=(np.arange(n_bins) + 0.5) * range_max / n_bins, bearings=bearings,
+                poses=T @ beam_rotation(bearings), range_min=0.0, range_max=range_max,
+                electronics={"bit_depth": bit_depth})
+
+
+MOUNT = np.array([[0.0, 0.0, 1.0, 1.5], [1.0, 0.0, 0.0, -2.0], [0.0, 1.0, 0.0, 0.25], [0, 0, 0, 1]])
+SCAN = synthetic_scan(pose=MOUNT)
+
+
+def assert_same_scan(got: Scan, want: Scan):
+    assert got.n_pings == want.n_pings and got.n_bins == want.n_bins
+    assert np.array_equal(got.data, want.data)                   # byte for byte
+    np.testing.assert_allclose(got.bearings, want.bearings, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got.poses, want.poses, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got.ranges, want.ranges, rtol=1e-12)
+    assert got.range_min == want.range_min and got.range_max == pytest.approx(want.range_max, rel=1e-12)
+    assert got.kind == "mechanical" and (got.beamwidth_h, got.beamwidth_v) == (3.0, 35.0)
+    assert got.intensity.dtype == np.float32 and not got.intensity.any()
+    assert got.meta["missing"] == []
+
+
+def run_scan(scan, faults=None, n=1, vm_kw=None, **kw):
+    settings = kw.pop("settings", None) or HeadSettings.from_scan(scan)
+    with VirtualMicron(scan, realtime=False, faults=faults, **(vm_kw or {})) as vm:
+        with MicronSonar(vm.port, settings=settings, pose=MOUNT, **{**FAST, **kw}) as sonar:
+            scans = [sonar.scan() for _ in range(n)]
+            return scans, sonar, vm
+
+
+def test_full_turn_through_a_pty_is_byte_exact():
+    (got,), sonar, vm = run_scan(SCAN)
+    assert_same_scan(got, SCAN)
+    assert got.meta["wire_bearings"][:3] == [3200, 3168, 3136]        # stepping left from ahead
+    assert got.meta["ad_interval"] == 50 and got.meta["step_size"] == 32
+    assert sonar.dst and sonar.version.serial == vm.serial_number
+    assert sonar.stats["pings"] == 200 and sonar.parser.dropped == 0
+    assert vm.stats["scanlines"] == 200 and vm.stats["boots"] == 2   # power-on, mtReBoot
+
+
+def test_consecutive_turns_and_pings_iterator():
+    scans, sonar, _ = run_scan(SCAN, n=2)
+    for s in scans:
+        assert_same_scan(s, SCAN)
+
+
+def test_pings_carry_wire_fields():
+    with VirtualMicron(SCAN, realtime=False) as vm, \
+            MicronSonar(vm.port, settings=HeadSettings.from_scan(SCAN), **FAST) as sonar:
+        pings = list(sonar.pings(3))
+    assert [p.bearing for p in pings] == [3200, 3168, 3136]
+    assert all(isinstance(p, HeadData) and p.n_bins == 500 and p.ad_interval == 50 for p in pings)
+    assert np.array_equal(pings[1].bins, SCAN.data[1])
+    assert pings[0].bins.dtype == np.uint8
+
+
+@pytest.mark.parametrize("faults,check", [
+    (Faults(drop_pings=(3, 50, 51, 199)), lambda s, vm: s.parser.dropped > 0),
+    (Faults(drop_probability=0.04, garbage_probability=0.05), lambda s, vm: s.parser.dropped > 0),
+    (Faults(stall_at=40, stall_seconds=0.4), lambda s, vm: vm.stats["fault stalls"] == 1),
+    (Faults(reboot_at=120), lambda s, vm: s.stats["recoveries"] >= 1 and vm.stats["boots"] == 3),
+    (Faults(motor_error_at=10), lambda s, vm: s.stats["parameters re-sent"] >= 1),
+], ids=["drop", "random-drop-garbage", "stall", "reboot", "motor-error"])
+def test_driver_survives_faults_and_still_gets_the_exact_scan(faults, check):
+    (got,), sonar, vm = run_scan(SCAN, faults)
+    assert_same_scan(got, SCAN)
+    assert check(sonar, vm), (dict(sonar.stats), dict(vm.stats))
+
+
+def test_without_revisit_lost_pings_are_zero_and_listed():
+    (got,), sonar, _ = run_scan(SCAN, Faults(drop_pings=(5,)), revisit=False)
+    assert got.meta["missing"] == [5]
+    assert not got.data[5].any()
+    keep = np.arange(200) != 5
+    assert np.array_equal(got.data[keep], SCAN.data[keep])
+
+
+@pytest.mark.parametrize("order", ["low_first", "high_first"])
+def test_four_bit_data(order):
+    scan4 = synthetic_scan(bit_depth=4, seed=4)
+    (got,), _, _ = run_scan(scan4, vm_kw={"nibble_order": order}, nibble_order=order)
+    assert got.electronics["bit_depth"] == 4
+    assert np.array_equal(got.data, scan4.data)
+
+
+def test_nibble_order_mismatch_swaps_bin_pairs():
+    scan4 = synthetic_scan(bit_depth=4, seed=4, n_bins=100)
+    (got,), _, _ = run_scan(scan4, vm_kw={"nibble_order": "high_first"}, nibble_order="low_first")
+    swapped = scan4.data.reshape(200, 50, 2)[:, :, ::-1].reshape(200, 100)
+    assert np.array_equal(got.data, swapped)
+
+
+def test_sector_sweeps_alternate_and_share_the_turning_ping():
+    sector = synthetic_scan(n_pings=51, n_bins=200, range_max=10.0, start_deg=-45.0, seed=2, pose=MOUNT)
+    settings = HeadSettings.from_scan(sector)
+    assert not settings.continuous and (settings.left_limit, settings.right_limit) == (2400, 4000)
+    scans, _, _ = run_scan(sector, n=3, settings=settings)
+    for k, s in enumerate(scans):
+        order = slice(None) if k % 2 == 0 else slice(None, None, -1)   # every other sweep goes back
+        assert s.meta["sweep"] == "sector"
+        assert np.array_equal(s.data[order], sector.data)
+        np.testing.assert_allclose(s.bearings[order], sector.bearings, atol=1e-12)
+        np.testing.assert_allclose(s.poses[order], sector.poses, atol=1e-12)
+    # ADInterval rounds 104.17 to 104: the range window the head really used
+    assert scans[0].range_max == pytest.approx(200 * 104 * 640e-9 * 750)
+
+
+def test_scan_right_and_inverted_head():
+    # Bearings decreasing (scan right) on an inverted head: the sign flips twice.
+    want = synthetic_scan(step_deg=-1.8, seed=6)
+    settings = HeadSettings.from_scan(want, invert=True)
+    assert settings.invert and not settings.scan_right
+    (got,), _, vm = run_scan(want, settings=settings)
+    assert_same_scan(got, want.__class__(**{**want.__dict__, "poses": MOUNT @ beam_rotation(want.bearings)}))
+    assert got.meta["hd_ctrl"] & HdCtrl.INVERT
+
+
+def test_callable_scan_source_gets_the_settings():
+    seen = []
+
+    def source(settings):
+        seen.append(settings)
+        return synthetic_scan(n_bins=settings.n_bins, range_max=settings.range_max, seed=9)
+
+    settings = HeadSettings(range=6.0, n_bins=250)
+    with VirtualMicron(source, realtime=False) as vm, \
+            MicronSonar(vm.port, settings=settings, **FAST) as sonar:
+        got = sonar.scan()
+    assert seen and seen[-1].n_bins == 250 and seen[-1].ad_interval == settings.ad_interval
+    assert np.array_equal(got.data, synthetic_scan(n_bins=250, range_max=settings.range_max, seed=9).data)
+
+
+def test_resampling_onto_other_bins_and_uncovered_bearings():
+    # The head asks for half the bins over the same range and the scan covers only 90 deg.
+    # 7.68 m over 200 bins is ADInterval 80 exactly: head bin i is centred on scan bin 2i+1.
+    part = synthetic_scan(n_pings=50, n_bins=400, range_max=7.68, seed=3)
+    settings = HeadSettings(range=7.68, n_bins=200)
+    assert settings.ad_interval_exact == pytest.approx(80)
+    with VirtualMicron(part, realtime=False) as vm, \
+            MicronSonar(vm.port, settings=settings, **FAST) as sonar:
+        got = sonar.scan()
+    assert np.array_equal(got.data[:50], part.data[:, 1::2])     # bin centres fall on odd bins
+    assert not got.data[50:].any()
+
+
+def test_socket_url():
+    with VirtualMicron(SCAN, "socket://127.0.0.1:0", realtime=False) as vm:
+        assert vm.port.startswith("socket://127.0.0.1:") and not vm.port.endswith(":0")
+        with MicronSonar(vm.port, settings=HeadSettings.from_scan(SCAN), pose=MOUNT, **FAST) as sonar:
+            got = sonar.scan()
+    assert_same_scan(got, SCAN)
+
+
+def test_record_then_replay_gives_the_same_scan(tmp_path):
+    log = tmp_path / "log.bin"
+    with VirtualMicron(SCAN, realtime=False, faults=Faults(drop_pings=(7,), reboot_at=150)) as vm:
+        stats = record(vm.port, log, scans=1, settings=HeadSettings.from_scan(SCAN), pose=MOUNT, **FAST)
+    assert stats["pings"] >= 200 and stats["bytes_rx"] > 200 * 545
+    meta, records = read_log(log)
+    assert meta["settings"]["n_bins"] == 500 and meta["sound_speed"] == 1500.0
+    assert {k for _, k, _ in records} == {0, 1}
+    scans = replay(log)
+    assert len(scans) == 1
+    assert_same_scan(scans[0], SCAN)
+    assert replay(log, partial=True)[-1].meta.get("partial") in (True, None)
+
+
+def test_replay_reproduces_the_driver_scans_under_faults(tmp_path):
+    log = tmp_path / "log.bin"
+    faults = Faults(drop_probability=0.03, garbage_probability=0.03, stall_at=260, stall_seconds=0.3)
+    with VirtualMicron(SCAN, realtime=False, faults=faults, seed=11) as vm, \
+            MicronSonar(vm.port, settings=HeadSettings.from_scan(SCAN), pose=MOUNT, log=log, **FAST) as sonar:
+        live = [sonar.scan(), sonar.scan()]
+    replayed = replay(log)
+    assert len(replayed) == 2
+    for a, b in zip(live, replayed):
+        assert np.array_equal(a.data, b.data) and np.array_equal(a.bearings, b.bearings)
+        assert np.array_equal(a.poses, b.poses) and a.meta["wire_bearings"] == b.meta["wire_bearings"]
+
+
+def test_replay_uses_logged_pose_changes(tmp_path):
+    log = tmp_path / "log.bin"
+    moved = MOUNT.copy()
+    moved[:3, 3] += [10.0, 0.0, 0.0]
+    with VirtualMicron(SCAN, realtime=False) as vm, \
+            MicronSonar(vm.port, settings=HeadSettings.from_scan(SCAN), pose=MOUNT, log=log, **FAST) as sonar:
+        first = sonar.scan()
+        sonar.pose = moved
+        second = sonar.scan()
+    a, b = replay(log)
+    np.testing.assert_allclose(a.poses, first.poses)
+    np.testing.assert_allclose(b.poses, second.poses)
+    np.testing.assert_allclose(b.positions, np.broadcast_to(moved[:3, 3], (200, 3)))
+
+
+def test_passive_record_logs_what_the_head_sends(tmp_path):
+    log = tmp_path / "tap.bin"
+    with VirtualMicron(SCAN, realtime=False, alive_interval=0.02) as vm:
+        stats = record(vm.port, log, 0.3, passive=True)
+    meta, records = read_log(log)
+    assert meta["passive"] and stats["bytes_rx"] > 0 and {k for _, k, _ in records} == {0}
+    from mitsonar.seanet import Alive, StreamParser
+    msgs = StreamParser().feed(b"".join(d for _, _, d in records))
+    assert msgs and all(isinstance(m, Alive) for m in msgs)
+    assert replay(log) == []
+
+
+def test_read_log_rejects_other_files(tmp_path):
+    bad = tmp_path / "x.bin"
+    bad.write_bytes(b"not a log")
+    with pytest.raises(ValueError, match="not a mitsonar raw log"):
+        read_log(bad)
+
+
+def test_silent_port_times_out_without_hanging():
+    import pty
+    master, slave = pty.openpty()
+    try:
+        path = os.ttyname(slave)
+        t = time.monotonic()
+        with pytest.raises(SonarTimeout, match="mtAlive"):
+            MicronSonar(path, timeout=0.5, boot_timeout=0.3, ping_timeout=0.1)
+        assert time.monotonic() - t < 3.0
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def test_stalled_for_good_raises_sonar_timeout():
+    with VirtualMicron(SCAN, realtime=False, faults=Faults(stall_at=5, stall_seconds=60)) as vm, \
+            MicronSonar(vm.port, settings=HeadSettings.from_scan(SCAN), timeout=1.0,
+                        ping_timeout=0.1, boot_timeout=2.0) as sonar:
+        t = time.monotonic()
+        with pytest.raises(SonarTimeout):
+            sonar.scan()
+        assert time.monotonic() - t < 6.0
+
+
+def test_bad_port_and_closed_sonar():
+    with pytest.raises(SonarError, match="cannot open"):
+        MicronSonar("/dev/does-not-exist-mitsonar", timeout=0.5)
+    # loop:// echoes our own commands: a URL without a file descriptor, and no head on it
+    with pytest.raises(SonarTimeout):
+        MicronSonar("loop://", timeout=0.5, boot_timeout=0.2, ping_timeout=0.1)
+    with pytest.raises(TypeError, match="HeadSettings"):
+        MicronSonar("loop://", settings={"range": 5})
+    import mitsonar.seanet
+    assert mitsonar.seanet.MicronSonar is MicronSonar
+    with VirtualMicron(SCAN, realtime=False) as vm:
+        sonar = MicronSonar(vm.port, settings=HeadSettings.from_scan(SCAN), **FAST)
+        sonar.close()
+        sonar.close()
+        with pytest.raises(SonarError, match="closed"):
+            sonar.read_ping()
+
+
+def test_realtime_timing_model_is_not_faster_than_the_line():
+    settings = HeadSettings(range=2.0, n_bins=100)
+    scan = synthetic_scan(n_bins=100, range_max=2.0)
+    with VirtualMicron(scan, realtime=True, boot_time=0.02, alive_interval=0.05) as vm, \
+            MicronSonar(vm.port, settings=settings, timeout=5.0, boot_timeout=2.0) as sonar:
+        t = time.monotonic()
+        list(sonar.pings(5))
+        per_ping = (time.monotonic() - t) / 5
+    # request + 2R/c + reply transfer + motor; only a lower bound is safe on a busy machine
+    assert per_ping >= 0.9 * settings.expected_step_time(115200)
+
+
+def test_virtual_sonar_stops_promptly_and_threads_end():
+    vm = VirtualMicron(SCAN, realtime=False)
+    vm.start()
+    vm.stop()
+    vm.stop()
+    assert not any(t.name == "VirtualMicron" and t.is_alive() for t in threading.enumerate())
+
+
+# ---- assembler without a wire ---------------------------------------------------------------
+
+def _ping(b, hd_ctrl=None, **kw):
+    h = HeadSettings().hd_ctrl if hd_ctrl is None else hd_ctrl
+    return HeadData.from_bins(np.full(10, b % 256, np.uint8), bearing=b, ad_interval=50, step_size=32,
+                              hd_ctrl=h, **kw)
+
+
+def test_assembler_direction_and_unwrapped_bearings():
+    asm = ScanAssembler()
+    out = None
+    start = 100
+    for k in range(200):                       # scan right: increasing wire bearing, wraps at 6400
+        out = asm.add(_ping((start + 32 * k) % 6400)) or out
+    assert out is not None and out.n_pings == 200
+    steps = np.diff(out.bearings)
+    np.testing.assert_allclose(steps, -math.radians(1.8))
+    assert out.bearings[0] == pytest.approx(bearing_to_radians(start))
+    assert out.range_max == pytest.approx(10 * 0.024)
+
+
+def test_assembler_skips_motor_error_and_restarts_on_new_settings():
+    asm = ScanAssembler()
+    assert asm.add(_ping(3200, head_status=2)) is None
+    asm.add(_ping(3200))
+    asm.add(_ping(3168))
+    other = HeadData.from_bins(np.zeros(10, np.uint8), bearing=3136, ad_interval=51, step_size=32,
+                               hd_ctrl=HeadSettings().hd_ctrl)
+    asm.add(other)
+    assert asm.discarded == 1

@@ -1,0 +1,124 @@
+"""The serial subcommands: argument wiring, end-to-end record/replay, one-line errors."""
+from __future__ import annotations
+
+import argparse
+import os
+
+import numpy as np
+import pytest
+
+import mitsonar
+from mitsonar import serial_cli
+from mitsonar.micron import beam_rotation
+from mitsonar.scan import Scan
+from mitsonar.seanet import HeadSettings
+from mitsonar.virtual_sonar import VirtualMicron
+
+pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
+
+
+def small_scan(seed=0):
+    rng = np.random.default_rng(seed)
+    n, nb, R = 200, 100, 2.4              # 2.4 m over 100 bins: ADInterval 50 exactly
+    b = np.radians(np.arange(n) * 1.8)
+    return Scan(intensity=np.zeros((n, nb), np.float32), data=rng.integers(0, 256, (n, nb), dtype=np.uint8),
+                ranges=(np.arange(nb) + 0.5) * R / nb, bearings=b, poses=beam_rotation(b),
+                range_min=0.0, range_max=R)
+
+
+def cli(*argv):
+    parser = argparse.ArgumentParser(prog="mitsonar")
+    serial_cli.add_subcommands(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args([str(a) for a in argv])
+    return args.func(args)
+
+
+def one_error_line(capsys, name):
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"mitsonar {name}: error: "), err
+    assert "Traceback" not in err[0]
+    return err[0]
+
+
+def test_subcommands_are_registered():
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers(dest="command")
+    serial_cli.add_subcommands(sub)
+    for argv in (["virtual-sonar", "s.xml", "--spp", "8", "--seed", "3", "--port-url", "socket://localhost:0"],
+                 ["record", "/dev/ttyUSB0", "-o", "log.bin", "--seconds", "2"],
+                 ["replay", "log.bin", "-o", "scan.exr"]):
+        args = parser.parse_args(argv)
+        assert callable(args.func)
+    with pytest.raises(SystemExit):
+        parser.parse_args(["record", "/dev/x", "-o", "l", "--seconds", "-1"])
+
+
+def test_record_then_replay_cli(tmp_path, capsys):
+    scan = small_scan()
+    log = tmp_path / "log.bin"
+    with VirtualMicron(scan, realtime=False) as vm:
+        assert cli("record", vm.port, "-o", log, "--scans", "1", "--range", "2.4", "--n-bins", "100") == 0
+    assert "recorded" in capsys.readouterr().out
+    assert cli("replay", log, "-o", tmp_path / "scan.exr") == 0
+    got = mitsonar.load_scan(str(tmp_path / "scan.exr"))
+    assert np.array_equal(got.data, scan.data)
+    np.testing.assert_allclose(got.bearings, scan.bearings, atol=1e-12)
+
+
+def test_virtual_sonar_cli_renders_the_scene_and_serves(tmp_path, capsys):
+    box = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes_xml", "box.xml")
+    assert cli("virtual-sonar", box, "--spp", "16", "--seed", "5", "--seconds", "0.3", "--fast") == 0
+    out = capsys.readouterr().out
+    assert "virtual Micron on /dev/" in out
+
+
+def test_rendered_box_scan_survives_the_wire(mitsonar_mod):
+    """The whole chain as with hardware: render, serve over a pty, receive with the driver."""
+    from mitsonar.micron import MicronSonar
+    from mitsonar.seanet import HeadSettings
+
+    scan = mitsonar_mod.render_scan(mitsonar_mod.load_scene(
+        os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes_xml", "box.xml")),
+        spp=64, seed=2)
+    with VirtualMicron(scan, realtime=False) as vm, \
+            MicronSonar(vm.port, settings=HeadSettings.from_scan(scan), timeout=30) as sonar:
+        got = sonar.scan()
+    assert np.array_equal(got.data, scan.data)
+    np.testing.assert_allclose(got.bearings, scan.bearings, atol=1e-9)
+    np.testing.assert_allclose(got.ranges, scan.ranges, rtol=1e-6)
+
+
+def test_virtual_sonar_cli_errors_are_one_line(tmp_path, capsys, monkeypatch):
+    assert cli("virtual-sonar", tmp_path / "missing.xml") == 1
+    assert "scene file not found" in one_error_line(capsys, "virtual-sonar")
+    scene = tmp_path / "bad.xml"
+    scene.write_text("<scene/>")
+
+    def boom(path):
+        raise RuntimeError("Traceback (most recent call last):\n  File x, line 1\nValueError: sonar: n_bins must be positive")
+    monkeypatch.setattr(mitsonar, "load_scene", boom, raising=False)
+    assert cli("virtual-sonar", scene) == 1
+    assert one_error_line(capsys, "virtual-sonar").endswith("ValueError: sonar: n_bins must be positive")
+
+
+def test_record_and_replay_errors_are_one_line(tmp_path, capsys):
+    assert cli("record", "/dev/does-not-exist-mitsonar", "-o", tmp_path / "l.bin", "--seconds", "1") == 1
+    assert "cannot open" in one_error_line(capsys, "record")
+    assert cli("record", "/dev/null", "-o", tmp_path / "l.bin", "--passive") == 1
+    assert "needs seconds" in one_error_line(capsys, "record")
+    assert cli("record", "/dev/x", "-o", tmp_path / "l.bin", "--range", "1000") == 1
+    assert "HeadSettings.range" in one_error_line(capsys, "record")
+    junk = tmp_path / "junk.bin"
+    junk.write_bytes(b"hello")
+    assert cli("replay", junk, "-o", tmp_path / "s.exr") == 1
+    assert "not a mitsonar raw log" in one_error_line(capsys, "replay")
+    assert cli("replay", tmp_path / "none.bin", "-o", tmp_path / "s.exr") == 1
+    assert "log file not found" in one_error_line(capsys, "replay")
+
+
+def test_replay_empty_log_and_index(tmp_path, capsys):
+    from mitsonar.micron import RawLogWriter
+    empty = tmp_path / "empty.bin"
+    RawLogWriter(empty, {"settings": HeadSettings().as_dict()}).close()
+    assert cli("replay", empty, "-o", tmp_path / "s.exr") == 1
+    assert "no complete scan" in one_error_line(capsys, "replay")
