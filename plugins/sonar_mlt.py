@@ -23,8 +23,7 @@ class SonarMLTIntegrator(SonarIntegrator):
     window: ``f(U) = sum_k e_k(U)``, with ``U`` the primary-sample vector of the echo path that
     ``sonar_tof`` traces (the same function, `echo_path.trace_echoes`). For every ping:
 
-    1. a bootstrap of uniform paths estimates the normalisation ``b = E[f]`` (refined at the end
-       with the large-step proposals, which are uniform paths too);
+    1. a bootstrap of uniform paths estimates the normalisation ``b = E[f]``;
     2. chains start from bootstrap paths resampled in proportion to ``f``;
     3. each mutation is a large step (a fresh uniform ``U``) with probability ``large_step``, else a
        Kelemen small step (every coordinate moved by ``+-s``, ``s`` log-uniform between
@@ -134,13 +133,12 @@ class SonarMLTIntegrator(SonarIntegrator):
             lane_c = dr.arange(mi.UInt32, n)
             f_cur, bins_cur, vals_cur = ctx.evaluate(U, ping_c, lane_c, dims)
             active_ping = mi.Bool(norm[chain_ping] > 0)
-            # Each accepted/rejected pair of splats carries b / (chains * mutations); b is applied
-            # at the end, once the large steps (uniform samples too) have refined it.
+            # Each accepted/rejected pair of splats carries b / (chains * mutations), with b the
+            # mean f of the very bootstrap the start states were drawn from: that pairing makes the
+            # estimate unbiased at any chain length (Veach 1997, 11.3.3), start-up bias included.
             scale = dr.full(mi.Float, 1.0 / (chains * mutations), n)
             hist = dr.zeros(mi.Float64, n_pings * n_bins)
-            large_sum = dr.zeros(mi.Float64, n_pings)
-            large_count = dr.zeros(mi.UInt32, n_pings)
-            dr.eval(U, f_cur, bins_cur, vals_cur, scale, hist, large_sum, large_count)
+            dr.eval(U, f_cur, bins_cur, vals_cur, scale, hist)
 
             # 3-4. Mutations, one wavefront per step.
             mut_seed = dr.opaque(mi.UInt32, seed ^ _SALT_MUT)
@@ -161,8 +159,6 @@ class SonarMLTIntegrator(SonarIntegrator):
                 moved -= dr.floor(moved)
                 U_new = dr.select(dr.gather(mi.Bool, large, e_lane), u3, moved)
                 f_new, bins_new, vals_new = ctx.evaluate(U_new, ping_c, lane_c, dims)
-                dr.scatter_add(large_sum, mi.Float64(f_new), ping_c, large)
-                dr.scatter_add(large_count, mi.UInt32(1), ping_c, large)
                 accept_p = dr.select(f_cur > 0, dr.minimum(1.0, f_new / dr.select(f_cur > 0, f_cur, 1.0)), 1.0)
                 w_new = dr.select(f_new > 0, accept_p / f_new, 0.0) * scale
                 w_cur = dr.select(f_cur > 0, (1.0 - accept_p) / f_cur, 0.0) * scale
@@ -174,13 +170,9 @@ class SonarMLTIntegrator(SonarIntegrator):
                 bins_cur = dr.select(rec_accept, bins_new, bins_cur)
                 vals_cur = dr.select(rec_accept, vals_new, vals_cur)
                 f_cur = dr.select(accept, f_new, f_cur)
-                dr.eval(U, f_cur, bins_cur, vals_cur, hist, large_sum, large_count)
+                dr.eval(U, f_cur, bins_cur, vals_cur, hist)
                 if progress is not None:
                     progress(boot + (m + 1) * chains, boot + mutations * chains)
-            # Normalisation from every uniform path: the bootstrap and the large-step proposals.
-            count = boot + large_count.numpy().astype(np.float64)
-            norm = (f_boot.sum(axis=1) + large_sum.numpy()) / count
-
             out = hist.numpy().reshape(n_pings, n_bins) * norm[:, None]
         return out
 

@@ -23,8 +23,10 @@ def scene_files():
 @pytest.mark.slow
 @pytest.mark.parametrize("name", scene_files())
 def test_mlt_has_the_expectation_of_path_tracing(mitsonar_mod, name):
-    """Welch t tests on block sums of independent renders, Bonferroni-corrected so that the whole
-    test raises a false alarm with probability 1e-3 when both estimators have the same mean."""
+    """Welch t tests on block sums (and the total) of independent renders, Bonferroni-corrected so
+    that the whole test raises a false alarm with probability 1e-3 when both estimators have the
+    same mean. Glossy connections give both estimators heavy tails, for which a t test needs
+    enough paths per block: about 2^18 paths per render, whatever the number of pings."""
     import mitsuba as mi
     from scipy import stats
 
@@ -33,18 +35,20 @@ def test_mlt_has_the_expectation_of_path_tracing(mitsonar_mod, name):
     pt = mi.load_dict({"type": "sonar_tof", "max_depth": 5})
     mlt = mi.load_dict({"type": "sonar_mlt", "max_depth": 5})
     runs = 8
-    spp = 1024
+    spp = max(1024, (1 << 18) // sensor.n_pings)
     groups = (min(10, sensor.n_pings), 6)
-    a = np.stack([grouped(pt.render_histogram(scene, sensor, seed=s, spp=spp), *groups) for s in range(runs)])
-    b = np.stack([grouped(mlt.render_histogram(scene, sensor, seed=100 + s, spp=spp), *groups)
-                  for s in range(runs)])
+
+    def blocks(integrator, seed):
+        h = integrator.render_histogram(scene, sensor, seed=seed, spp=spp)
+        return np.append(grouped(h, *groups), h.sum())
+
+    a = np.stack([blocks(pt, s) for s in range(runs)])
+    b = np.stack([blocks(mlt, 100 + s) for s in range(runs)])
     keep = (a.mean(0) > 1e-3 * a.mean(0).max()) & (a.std(0) > 0) & (b.std(0) > 0)
-    assert keep.sum() >= 5
+    assert keep.sum() >= 5 and keep[-1]
     t, p = stats.ttest_ind(a[:, keep], b[:, keep], equal_var=False)
     alpha = 1e-3
     assert np.min(p) > alpha / keep.sum(), f"worst block t = {t[np.argmin(p)]:.2f}, p = {np.min(p):.2e}"
-    # And the totals agree closely (both are consistent estimators of the same scan).
-    assert b.sum(1).mean() == pytest.approx(a.sum(1).mean(), rel=0.02)
 
 
 def test_budget_plan_and_parameters(mitsonar_mod):
