@@ -97,12 +97,10 @@ def load_scene(path_or_xml: str, **params):
         if where not in reason:
             reason = f"{where}: {reason}"
         raise SceneError(reason) from None
-    _SOURCES[id(scene)] = (scene, "<xml string>" if is_xml else os.path.basename(text))
+    if not scene.id():
+        # Scans record where they came from; the scene's own id is the one place to keep it.
+        scene.set_id("<xml string>" if is_xml else os.path.basename(text))
     return scene
-
-
-# Scene objects accept no new attributes; remember where each loaded scene came from.
-_SOURCES: dict = {}
 
 
 def _sonar(scene, sensor):
@@ -199,9 +197,6 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
 
 
 def _scene_name(scene) -> str:
-    entry = _SOURCES.get(id(scene))
-    if entry is not None and entry[0] is scene:
-        return entry[1]
     return scene.id() or ""
 
 
