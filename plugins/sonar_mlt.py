@@ -136,7 +136,7 @@ class SonarMLTIntegrator(SonarIntegrator):
             # Each accepted/rejected pair of splats carries b / (chains * mutations), with b the
             # mean f of the very bootstrap the start states were drawn from: that pairing makes the
             # estimate unbiased at any chain length (Veach 1997, 11.3.3), start-up bias included.
-            scale = dr.full(mi.Float, 1.0 / (chains * mutations), n)
+            scale = dr.opaque(mi.Float, 1.0 / (chains * mutations))
             hist = dr.zeros(mi.Float64, n_pings * n_bins)
             dr.eval(U, f_cur, bins_cur, vals_cur, scale, hist)
 

@@ -1,0 +1,265 @@
+"""The integrator comparison (`mitsonar.compare`, ``mitsonar compare``) and the slot-chamber scene.
+
+The comparisons run on a small scene written to tmp (a wall and a floor, 4 pings, 100 bins) with
+budgets of 10 and 100 ms, and compare sonar_tof with itself: the machinery does not depend on
+which integrators it times.
+"""
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import ROOT, SCENES, acoustic_xml, frame_matrix, rectangle_xml, scene_xml, sonar_xml
+
+SLOT = os.path.join(SCENES, "slot_chamber.xml")
+REF_SPP = 1 << 19
+BUDGETS = (0.01, 0.1)
+
+
+def small_scene_xml():
+    """Sonar at the origin looking along +x at a wall 4 m away, a floor 2 m below."""
+    sensor = sonar_xml(frame_matrix((1, 0, 0), (0, 0, 1)), n_pings=4, bearing_start=-2.7, n_bins=100,
+                       range_max=8.0)
+    wall = np.eye(4)
+    wall[:3, :3] = [[0, 0, -1], [0, 4, 0], [4, 0, 0]]  # normal -x, 8 x 8 m
+    wall[:3, 3] = [4, 0, 0]
+    floor = np.diag([6.0, 4.0, 1.0, 1.0])
+    floor[:3, 3] = [2, 0, -2]
+    bsdf = acoustic_xml(diffuse=0.3, specular=0.5, shininess=20)
+    return scene_xml(sensor, rectangle_xml(wall, bsdf), rectangle_xml(floor, bsdf),
+                     integrator='<integrator type="sonar_tof"><integer name="max_depth" value="3"/></integrator>')
+
+
+@pytest.fixture(scope="module")
+def small_scene(tmp_path_factory):
+    path = tmp_path_factory.mktemp("scene") / "small.xml"
+    path.write_text(small_scene_xml())
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def first_run(small_scene, tmp_path_factory, mitsonar_mod):
+    from mitsonar.compare import compare
+
+    out = tmp_path_factory.mktemp("cmp")
+    result = compare(small_scene, "sonar_tof,sonar_tof", BUDGETS, str(out), reference_spp=REF_SPP, seed=3,
+                     repeats=2, regions={"far": (3.0, 8.0)}, calibration_seconds=0.02)
+    return result, out
+
+
+def test_json_has_the_documented_fields(first_run):
+    result, out = first_run
+    on_disk = json.loads((out / "compare.json").read_text())
+    assert on_disk["settings"]["integrators"] == ["sonar_tof", "sonar_tof#2"]
+    assert on_disk["settings"]["budgets_s"] == list(BUDGETS)
+    for key in ("settings", "scene", "environment", "reference", "integrators", "runs", "equal_time", "files",
+                "warnings"):
+        assert key in on_disk, key
+    s = on_disk["settings"]
+    assert s["repeats"] == 2 and s["seed"] == 3 and s["max_depth"] == 3 and s["reference_spp"] == REF_SPP
+    assert on_disk["scene"]["n_pings"] == 4 and on_disk["scene"]["n_bins"] == 100
+    ref = on_disk["reference"]
+    assert ref["integrator"] == "sonar_tof" and ref["spp"] == REF_SPP and len(ref["seeds"]) == 2
+    assert 0 < ref["self_rel_l2"] < 0.05 and "far" in ref["regions"]
+    for lab, info in on_disk["integrators"].items():
+        cal = info["calibration"]
+        assert info["type"] == "sonar_tof" and "max_depth" in info["description"]
+        assert len(cal["points"]) >= 2 and all(spp > 0 and sec > 0 for spp, sec in cal["points"])
+    assert len(on_disk["runs"]) == 2 * len(BUDGETS)
+    for run in on_disk["runs"]:
+        for key in ("integrator", "budget_s", "spp", "seeds", "seconds", "seconds_mean", "rel_l2", "rel_l1",
+                    "rel_l2_debiased", "rel_l2_each", "rel_l1_each", "per_ping_rel_l2", "per_ping_rel_l1",
+                    "regions", "attempts", "compiled_kernels", "compile_seconds"):
+            assert key in run, key
+        assert len(run["seconds"]) == len(run["seeds"]) == len(run["rel_l2_each"]) == 2
+        assert 1 <= len(run["attempts"]) <= 4 and run["attempts"][-1] == [run["spp"], run["seconds"][0]]
+        assert run["compiled_kernels"] == [0, 0]  # sonar_tof compiles once, in the calibration
+        assert len(run["per_ping_rel_l2"]) == len(run["per_ping_rel_l1"]) == 4
+        assert all(v is None or v >= 0 for v in run["per_ping_rel_l2"])
+        assert run["rel_l2"] == pytest.approx(np.sqrt(np.mean(np.square(run["rel_l2_each"]))))
+        assert 0 <= run["rel_l2_debiased"] <= run["rel_l2"]  # 0 when below the reference noise
+        assert set(run["regions"]) == {"far"}
+        assert not set(run["seeds"]) & set(ref["seeds"])
+    all_seeds = [s for r in on_disk["runs"] for s in r["seeds"]]
+    assert len(set(all_seeds)) == len(all_seeds) == 2 * 2 * len(BUDGETS)  # every render has its own seed
+    for lab in ("sonar_tof", "sonar_tof#2"):
+        spps = [r["spp"] for r in on_disk["runs"] if r["integrator"] == lab]
+        assert spps == sorted(spps) and spps[0] < spps[-1]
+    et = on_disk["equal_time"]
+    assert [e["budget_s"] for e in et] == list(BUDGETS)
+    assert all(e["baseline"] == "sonar_tof" and "sonar_tof#2" in e["ratios"] for e in et)
+    assert all(e["ratios"]["sonar_tof#2"]["ratio_time_adjusted"] > 0 for e in et)
+    assert set(on_disk["files"]) == {"json", "renders", "convergence", "polar"}
+    for name in ("convergence.png", "polar.png"):
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with np.load(out / "renders.npz") as z:
+        assert z["reference"].shape == (4, 100) and z["sonar_tof#2@0.1s"].shape == (4, 100)
+
+
+def test_errors_decrease_with_budget(first_run):
+    result, _ = first_run
+    by = {(r["integrator"], r["budget_s"]): r for r in result["runs"]}
+    ratios = [by[(lab, BUDGETS[1])]["rel_l2"] / by[(lab, BUDGETS[0])]["rel_l2"] for lab in ("sonar_tof", "sonar_tof#2")]
+    # 10x the time gives about 1/sqrt(10) = 0.32 of the error; 0.8 leaves room for a busy machine.
+    assert np.mean(ratios) < 0.8, ratios
+
+
+def test_reference_is_cached_and_reused(first_run, small_scene, monkeypatch):
+    from mitsonar import compare as cmp
+
+    result, out = first_run
+    path = result["reference"]["file"]
+    stamp = os.stat(path).st_mtime_ns
+    assert result["reference"]["from_cache"] is False
+
+    def must_not_render(*args, **kwargs):
+        raise AssertionError("the reference was rendered again")
+
+    monkeypatch.setattr(cmp, "render_reference", must_not_render)
+    again = cmp.compare(small_scene, "sonar_tof", (0.01,), str(out), reference_spp=REF_SPP, seed=3, repeats=1,
+                        calibration_seconds=0.01, plots=False)
+    assert again["reference"]["from_cache"] is True and again["reference"]["file"] == path
+    assert os.stat(path).st_mtime_ns == stamp
+    # Automatic reference spp: any cached reference at least as large as needed is reused.
+    auto = cmp.compare(small_scene, "sonar_tof", (0.01,), str(out), seed=3, repeats=1, reference_factor=0.5,
+                       calibration_seconds=0.01, plots=False)
+    assert auto["reference"]["from_cache"] is True and auto["reference"]["spp"] == REF_SPP
+    # Another seed is another reference.
+    with pytest.raises(AssertionError, match="rendered again"):
+        cmp.compare(small_scene, "sonar_tof", (0.01,), str(out), reference_spp=REF_SPP, seed=4, repeats=1,
+                    calibration_seconds=0.01, plots=False)
+
+
+def test_error_metrics_closed_form():
+    from mitsonar.compare import error_metrics
+
+    ref = np.array([[1.0, 2.0, 2.0], [0.0, 0.0, 0.0], [3.0, 0.0, 4.0]])
+    est = ref * 1.1
+    m = error_metrics(est, ref)
+    assert m["rel_l2"] == pytest.approx(0.1) and m["rel_l1"] == pytest.approx(0.1)
+    assert m["per_ping_rel_l2"][0] == pytest.approx(0.1) and np.isnan(m["per_ping_rel_l2"][1])
+    est2 = ref.copy()
+    est2[2, 0] += 1.0  # |d| = 1 against ||ref|| = sqrt(34), sum|ref| = 12
+    m = error_metrics(est2, ref, reference_self_l2=0.1)
+    assert m["rel_l2"] == pytest.approx(1 / np.sqrt(34)) and m["rel_l1"] == pytest.approx(1 / 12)
+    assert m["rel_l2_debiased"] == pytest.approx(np.sqrt(1 / 34 - 0.01))
+    assert m["per_ping_rel_l2"][2] == pytest.approx(0.2) and m["per_ping_rel_l2"][0] == 0
+
+
+def test_spp_planning_from_timings():
+    from mitsonar.compare import plan_spp
+
+    assert plan_spp([[100, 0.01]], 0.1) == 1000
+    assert plan_spp([[1000, 0.01], [10000, 0.1]], 0.05) == pytest.approx(5000, rel=1e-6)
+    # Between two timings a power law is followed; the median of repeated timings is used.
+    expected = 1000 * 1.4 ** (np.log(4) / np.log(3))  # seconds ~ spp^beta, beta = log 3 / log 4
+    assert plan_spp([[1000, 0.01], [4000, 0.03], [4000, 0.5], [4000, 0.03]], 0.014) == pytest.approx(expected, rel=1e-3)
+    # A flat stretch (launch-bound renders) is not extrapolated as free: the exponent is clamped.
+    flat = plan_spp([[1000, 0.1], [2000, 0.1]], 1.0)
+    assert 20000 < flat < 60000
+    assert plan_spp([[1000, 0.1]], 1e-9) == 1
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda p: p.parse_budgets("2,x"), "'x' is not a positive number of seconds"),
+    (lambda p: p.parse_budgets("0,1"), "'0' is not a positive number"),
+    (lambda p: p.parse_budgets("nan"), "not a positive number"),
+    (lambda p: p.parse_integrators("sonar_tof,,sonar_mlt"), "comma-separated plugin names"),
+    (lambda p: p.parse_integrators("sonar tof"), "not an integrator plugin name"),
+    (lambda p: p.parse_regions(["far=5:3"]), "LO < HI"),
+    (lambda p: p.parse_params(["chains=3"]), "INTEGRATOR.NAME=VALUE"),
+    (lambda p: p.load_integrator("sonar_foo"), "integrator 'sonar_foo' is not available"),
+    (lambda p: p.load_integrator("path"), "not a sonar integrator"),
+])
+def test_bad_input_raises_one_line(mitsonar_mod, call, message):
+    from mitsonar import compare as cmp
+
+    with pytest.raises(cmp.CompareError) as err:
+        call(cmp)
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_parsers_accept_good_input():
+    from mitsonar.compare import labels_for, parse_budgets, parse_params, parse_regions
+
+    assert parse_budgets("4, 2,8,2") == [2.0, 4.0, 8.0]
+    assert labels_for(["sonar_tof", "sonar_mlt", "sonar_tof"]) == ["sonar_tof", "sonar_mlt", "sonar_tof#2"]
+    assert parse_params(["sonar_mlt.chains=64", "sonar_mlt.large_step=0.25", "sonar_tof#2.x=a"]) == {
+        "sonar_mlt": {"chains": 64, "large_step": 0.25}, "sonar_tof#2": {"x": "a"}}
+    assert parse_regions(["chamber=3.6:12"]) == {"chamber": (3.6, 12.0)}
+
+
+def run_cli(*args):
+    env = dict(os.environ)
+    env.pop("MITSONAR_DEBUG", None)
+    return subprocess.run([sys.executable, "-m", "mitsonar.cli", *args], capture_output=True, text=True, cwd=ROOT,
+                          env=env, timeout=600)
+
+
+def test_cli_end_to_end(small_scene, tmp_path):
+    out = tmp_path / "cmp"
+    proc = run_cli("compare", small_scene, "--integrators", "sonar_tof,sonar_tof", "--budget", "0.01,0.03",
+                   "--reference-spp", "65536", "--repeats", "1", "--calibration-seconds", "0.01", "-o", str(out),
+                   "--region", "far=3:8", "--param", "sonar_tof#2.max_depth=3")
+    assert proc.returncode == 0, proc.stderr
+    for name in ("compare.json", "convergence.png", "polar.png", "renders.npz"):
+        assert (out / name).is_file(), name
+    assert "rel L2" in proc.stdout and "sonar_tof#2" in proc.stdout and "compare.json" in proc.stdout
+    result = json.loads((out / "compare.json").read_text())
+    assert result["integrators"]["sonar_tof#2"]["params"] == {"max_depth": 3}
+    assert len(result["runs"]) == 4
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--integrators", "sonar_tof,sonar_foo"], "integrator 'sonar_foo' is not available"),
+    (["--budget", "2,x"], "--budget '2,x': 'x' is not a positive number of seconds"),
+    (["--budget", "-1"], "is not a positive number of seconds"),
+    (["--repeats", "0"], "--repeats 0"),
+    (["--region", "far"], "--region 'far'"),
+    (["--param", "sonar_mlt.chains=8", "--integrators", "sonar_tof"], "--param for 'sonar_mlt'"),
+])
+def test_cli_bad_input_gives_one_clear_line(small_scene, tmp_path, capsys, args, message):
+    from mitsonar.cli import main
+
+    assert main(["compare", small_scene, "-o", str(tmp_path / "cmp"), *args]) != 0
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("mitsonar: error:") and message in lines[0], lines
+
+
+def test_cli_missing_scene_in_a_subprocess(tmp_path):
+    proc = run_cli("compare", str(tmp_path / "nope.xml"), "-o", str(tmp_path / "cmp"))
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "nope.xml" in lines[0] and "does not exist" in lines[0], proc.stderr
+
+
+def test_slot_chamber_has_echoes_from_behind_the_wall(mitsonar_mod):
+    scene = mitsonar_mod.load_scene(SLOT)
+    sensor = scene.sensors()[0]
+    assert sensor.n_pings == 21 and scene.integrator().max_depth == 5
+    np.testing.assert_allclose(sensor.bearings_deg()[10], 0.0, atol=1e-9)  # the middle ping on the boresight
+    hist = scene.integrator().render_histogram(scene, sensor, seed=1, spp=2048)
+    r = sensor.bin_centres()
+    mid = hist[10]
+    # Through the slot: the chamber's floor, the block (5.2 m) and the back wall (7 m) echo, and
+    # multi-bounce echoes from inside the chamber come back from beyond the back wall.
+    assert mid[r > 3.6].sum() > 0.5 * mid.sum()
+    assert mid[(r > 5.1) & (r < 5.3)].sum() > 0 and mid[(r > 6.9) & (r < 7.1)].sum() > 0
+    assert mid[r > 7.2].sum() > 0
+    # A ping 9 deg off the boresight sees the wall at 3 m and hardly anything behind it.
+    side = hist[5]
+    first = r[np.nonzero(side > 1e-3 * side.max())[0][0]]
+    assert 2.95 < first < 3.1
+    assert side[r > 3.6].sum() < 0.01 * side.sum()
+
+
+def test_glossy_corridor_loads_and_echoes(mitsonar_mod):
+    scene = mitsonar_mod.load_scene(os.path.join(SCENES, "glossy_corridor.xml"))
+    sensor = scene.sensors()[0]
+    hist = scene.integrator().render_histogram(scene, sensor, seed=1, spp=1024)
+    r = sensor.bin_centres()
+    # The end wall faces the sonar 10 m down the corridor.
+    assert hist[10][(r > 9.9) & (r < 10.2)].sum() > 0.3 * hist[10].sum()
