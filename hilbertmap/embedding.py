@@ -1,0 +1,266 @@
+"""The sonar embedding of thesis 4.2.1: a scan becomes labelled samples in world space.
+
+For every ping (beam) of a scan:
+
+- bins are classified empty / full (:mod:`hilbertmap.classify`), bins inside the blanking range
+  (transducer ring-down) are neither;
+- **free samples**: points in the beam's spherical frustum between the blanking range and the
+  start of the first full bin (less ``free_margin`` metres), labelled free. A ping without any
+  full bin is free up to ``range_max``;
+- **occupied groups**: each full bin of the first echo (``occupied_bins``) gives a group of
+  ``occupied_samples`` points in that bin's frustum; the model averages their features (kernel
+  mean embedding, thesis eq. 4.6) and labels the mean occupied;
+- nothing behind the first echo (acoustic shadow).
+
+Directions follow the beam: ``beam_sampling='pattern'`` draws them in proportion to the two-way
+beam pattern (gaussian with the scan's -3 dB widths; ``uniform`` patterns inside the widths),
+``'uniform'`` draws them uniformly in the nominal frustum (the thesis). Ranges are drawn uniformly
+in volume (density proportional to r^2). Every ping uses its own pose ``scan.poses[k]``: beam frame
++z boresight, +y scan axis; a direction of azimuth ``az`` and elevation ``el`` is
+``(cos el sin az, sin el, cos el cos az)`` in the beam frame.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .classify import classify, scan_values
+
+FOUR_SQRT_LN2 = 4.0 * math.sqrt(math.log(2.0))
+
+
+@dataclass
+class Samples:
+    """Labelled samples of one or more scans (world coordinates, float64).
+
+    ``free``: (F, 3) points labelled free. ``occupied``: (G, m, 3) groups of m points, each
+    group one full bin. ``origins``: (P, 3) transducer positions of the pings used; ``frames``:
+    (P, 4, 4) their beam frames and ``beams``: (P, 3) their full -3 dB widths (degrees, h and v)
+    and ``range_max`` (the nominal frustum of each ping); ``spans``: (P, 3) the ranges where its
+    free part starts, where its first echo starts and where that echo's full bins end (the last
+    two are nan for a ping without echo); ``occupied_ping``: (G,) the ping of each group.
+    ``info``: counts.
+    """
+
+    free: np.ndarray
+    occupied: np.ndarray
+    origins: np.ndarray
+    info: dict
+    frames: np.ndarray = None
+    beams: np.ndarray = None
+    spans: np.ndarray = None
+    occupied_ping: np.ndarray = None
+
+    @staticmethod
+    def concatenate(parts: list["Samples"]) -> "Samples":
+        m = max((p.occupied.shape[1] for p in parts), default=1)
+        occ = [p.occupied for p in parts if len(p.occupied)]
+        info: dict = {}
+        for p in parts:
+            for k, v in p.info.items():
+                if isinstance(v, (int, float)) and not isinstance(v, bool):
+                    info[k] = info.get(k, 0) + v
+        return Samples(
+            free=np.concatenate([p.free for p in parts]) if parts else np.zeros((0, 3)),
+            occupied=np.concatenate(occ) if occ else np.zeros((0, m, 3)),
+            origins=np.concatenate([p.origins for p in parts]) if parts else np.zeros((0, 3)),
+            info=info,
+            frames=np.concatenate([p.frames for p in parts]) if parts else np.zeros((0, 4, 4)),
+            beams=np.concatenate([p.beams for p in parts]) if parts else np.zeros((0, 3)),
+            spans=np.concatenate([p.spans for p in parts]) if parts else np.zeros((0, 3)),
+            occupied_ping=_offset_concat([p.occupied_ping for p in parts], [len(p.frames) for p in parts]),
+        )
+
+
+def _offset_concat(arrays, sizes):
+    out, base = [], 0
+    for a, n in zip(arrays, sizes):
+        out.append(np.asarray(a, dtype=np.int64) + base)
+        base += n
+    return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
+
+
+def _beam_directions(rng, n, scan, beam_sampling, extent=1.0):
+    """(n, 3) unit directions in the beam frame, within ``extent`` times the -3 dB half widths."""
+    bw_h = math.radians(float(scan.beamwidth_h))
+    bw_v = math.radians(float(scan.beamwidth_v))
+    pattern = str(getattr(scan, "beam_pattern", "gaussian"))
+    if beam_sampling == "uniform" or pattern == "uniform":
+        az = rng.uniform(-0.5 * bw_h * extent, 0.5 * bw_h * extent, n)
+        # uniform in solid angle: sin(el) uniform
+        s = math.sin(min(0.5 * bw_v * extent, 0.5 * math.pi))
+        el = np.arcsin(rng.uniform(-s, s, n))
+    elif beam_sampling == "pattern":
+        # two-way gaussian pattern 2^-(2 (2a/bw)^2) = exp(-a^2 / (2 sigma^2)), sigma = bw / (4 sqrt(ln 2));
+        # sinc and table patterns are approximated by the gaussian of the same -3 dB widths.
+        # Truncated at ``extent`` times the -3 dB half width (two-way -6 dB at extent 1).
+        az = _truncnorm(rng, n, bw_h / FOUR_SQRT_LN2, 0.5 * bw_h * extent)
+        el = _truncnorm(rng, n, bw_v / FOUR_SQRT_LN2, min(0.5 * bw_v * extent, 0.5 * math.pi))
+    else:
+        raise ValueError(f"HilbertMap: beam_sampling must be 'pattern' or 'uniform', not {beam_sampling!r}")
+    ce = np.cos(el)
+    return np.stack([ce * np.sin(az), np.sin(el), ce * np.cos(az)], axis=-1)
+
+
+def _truncnorm(rng, n, sigma, limit):
+    x = rng.normal(0.0, sigma, n)
+    bad = np.abs(x) > limit
+    while np.any(bad):
+        x[bad] = rng.normal(0.0, sigma, int(bad.sum()))
+        bad = np.abs(x) > limit
+    return x
+
+
+def _volume_ranges(rng, r0, r1):
+    """Ranges uniform in volume between r0 and r1 (arrays of equal shape)."""
+    u = rng.random(np.shape(r0))
+    a, b = np.asarray(r0) ** 3, np.asarray(r1) ** 3
+    return np.cbrt(a + u * (b - a))
+
+
+def blanking_range(values: np.ndarray, ranges: np.ndarray, range_min: float, bin_width: float,
+                   fade: float = 0.1, margin_bins: int = 8) -> float:
+    """Automatic blanking: where the transducer ring-down has faded.
+
+    Ring-down makes the first bins bright in every ping, which no real echo does over a whole
+    scan. Per bin, take the 90th percentile over pings (speckle makes the tail of the ring-down
+    flicker well past where its median fades), and blank up to the first bin where it has fallen
+    to within ``fade`` of the way from its start down to the scan's background (the median of the
+    far half), plus ``margin_bins``. A scan whose first bins are not brighter than its background
+    is not blanked.
+    """
+    q = np.percentile(values, 90, axis=0)
+    floor = float(np.median(q[len(q) // 2:]))
+    top = float(q[: max(1, len(q) // 50)].max())
+    span = float(np.max(q) - floor)
+    if span <= 0 or top - floor < 0.25 * span:
+        return float(range_min)
+    below = np.nonzero(q <= floor + fade * (top - floor))[0]
+    k = int(below[0]) if len(below) else len(q) - 1
+    k = min(k + margin_bins, len(q) - 1)
+    return float(ranges[k] - 0.5 * bin_width)
+
+
+def embed_scan(scan, rng: np.random.Generator, *, source="auto", bin_rule="otsu+cfar", threshold=None,
+               min_level=None, cfar_train=16, cfar_guard=2, cfar_offset=None, blanking="auto",
+               free_density=40.0, max_free_per_ping=400, free_margin=0.0, occupied_samples=16,
+               occupied_bins="first_run", max_run=0.3, beam_sampling="pattern", beam_extent=1.0, ping_stride=1,
+               min_echo_bins=2,
+               ping_offset=0) -> Samples:
+    """Samples of one scan (see the module docstring). Only the scan's attributes are read."""
+    values, src = scan_values(scan, source)
+    n_pings, n_bins = values.shape
+    ranges = np.asarray(scan.ranges, dtype=np.float64)
+    range_min, range_max = float(scan.range_min), float(scan.range_max)
+    bw = (range_max - range_min) / n_bins
+    poses = np.asarray(scan.poses, dtype=np.float64)
+
+    if cfar_offset is None:
+        cfar_offset = 40.0 if src == "data" else 10.0
+    if min_level is None and src == "data":
+        min_level = 64.0  # a quarter of the A/D span: isolated speckle of open water stays below
+    if min_level is None and src == "intensity":
+        min_level = -95.0  # dB of linear echo energy: drops the beam pattern's far tails
+    if blanking == "auto":
+        r_blank = blanking_range(values, ranges, range_min, bw)
+    else:
+        r_blank = max(float(blanking), range_min)
+    valid = ranges - 0.5 * bw >= r_blank - 1e-9
+    full, level = classify(values, bin_rule, threshold=threshold, valid=valid, min_level=min_level,
+                           cfar_train=cfar_train, cfar_guard=cfar_guard, cfar_offset=cfar_offset)
+    if min_echo_bins > 1:
+        # an echo spans the pulse length: drop runs of full bins shorter than min_echo_bins
+        # (isolated speckle spikes of open water and of the ring-down tail)
+        full = _drop_short_runs(full, int(min_echo_bins))
+
+    stride = float(ping_stride)
+    if not stride >= 1.0:
+        raise ValueError(f"HilbertMap: beam_stride must be >= 1, not {ping_stride!r}")
+    # every stride-th ping (a fractional stride keeps 1/stride of them, evenly spread)
+    pings = np.unique(np.floor(np.arange(float(ping_offset) % stride, n_pings, stride)).astype(np.int64))
+    full = full[pings]
+    poses = poses[pings]
+    has = full.any(axis=1)
+    first = np.where(has, np.argmax(full, axis=1), n_bins)
+    # the first echo: the first full bin and the full bins contiguous with it (the pulse and the
+    # beam footprint spread one surface over several bins), at most max_run metres
+    if occupied_bins == "first":
+        run_len = has.astype(np.int64)
+    elif occupied_bins in ("first_run", "all"):
+        idx = np.arange(n_bins)
+        after = idx[None, :] >= first[:, None]
+        if occupied_bins == "first_run":
+            gap = after & ~full
+            end = np.where(gap.any(axis=1), np.argmax(gap, axis=1), n_bins)
+            run_len = np.where(has, end - first, 0)
+            run_len = np.minimum(run_len, max(1, int(round(max_run / bw))))
+        else:
+            run_len = np.where(has, (full & after).sum(axis=1), 0)
+    else:
+        raise ValueError(f"HilbertMap: occupied_bins must be 'first', 'first_run' or 'all', not {occupied_bins!r}")
+
+    # --- free samples --------------------------------------------------------------------
+    r0 = np.full(len(pings), max(r_blank, range_min))
+    r_first = range_min + first * bw  # start of the first full bin (range_max if none)
+    r1 = np.minimum(r_first - free_margin, range_max)
+    length = np.maximum(r1 - r0, 0.0)
+    # samples in proportion to the frustum's volume, capped per ping
+    solid = _solid_angle(scan)
+    vol = solid * (np.maximum(r1, 0) ** 3 - r0 ** 3) / 3.0
+    n_free = np.minimum(np.round(free_density * vol).astype(np.int64), int(max_free_per_ping))
+    n_free = np.where(length > 0, np.maximum(n_free, np.minimum(1, n_free + 1)), 0)
+    owner = np.repeat(np.arange(len(pings)), n_free)
+    rr = _volume_ranges(rng, r0[owner], r1[owner])
+    d = _beam_directions(rng, len(owner), scan, beam_sampling, beam_extent)
+    free = _to_world(poses[owner], d * rr[:, None])
+
+    # --- occupied groups -------------------------------------------------------------------
+    m = int(occupied_samples)
+    if occupied_bins == "all":
+        sel = full & (np.arange(n_bins)[None, :] >= first[:, None])
+        gp, gb = np.nonzero(sel)
+    else:
+        gp = np.repeat(np.arange(len(pings)), run_len)
+        offs = np.arange(len(gp)) - np.repeat(np.cumsum(run_len) - run_len, run_len)
+        gb = first[gp] + offs
+    G = len(gp)
+    lo = range_min + gb * bw
+    lo = np.repeat(lo, m)
+    rr = _volume_ranges(rng, lo, lo + bw)
+    d = _beam_directions(rng, G * m, scan, beam_sampling, beam_extent)
+    occ = _to_world(np.repeat(poses[gp], m, axis=0), d * rr[:, None]).reshape(G, m, 3)
+
+    info = dict(n_pings=int(len(pings)), n_pings_with_echo=int(has.sum()), n_free=int(len(free)),
+                n_groups=int(G), blanking=float(r_blank), level=float(level) if np.isfinite(level) else float("nan"),
+                source=src)
+    beams = np.tile([float(scan.beamwidth_h), float(scan.beamwidth_v), range_max], (len(pings), 1))
+    spans = np.stack([r0, np.where(has, r_first, np.nan), np.where(has, r_first + run_len * bw, np.nan)], axis=1)
+    return Samples(free=free, occupied=occ, origins=poses[:, :3, 3].copy(), info=info, frames=poses.copy(),
+                   beams=beams, spans=spans, occupied_ping=gp.astype(np.int64))
+
+
+def _drop_short_runs(full: np.ndarray, k: int) -> np.ndarray:
+    """Keep only the full bins that belong to a run of at least k contiguous full bins."""
+    n = full.shape[1]
+    c = np.concatenate([np.zeros((full.shape[0], 1), dtype=np.int64), np.cumsum(full, axis=1)], axis=1)
+    keep = np.zeros_like(full)
+    for start in range(k):  # a bin is kept when some window of k bins containing it is all full
+        lo = np.arange(n) - start
+        ok = (lo >= 0) & (lo + k <= n)
+        lo_c = np.clip(lo, 0, n - k)
+        win = (c[:, lo_c + k] - c[:, lo_c]) == k
+        keep |= win & ok[None, :]
+    return full & keep
+
+
+def _solid_angle(scan) -> float:
+    """Solid angle of the nominal frustum (sr)."""
+    bw_h = math.radians(float(scan.beamwidth_h))
+    bw_v = math.radians(float(scan.beamwidth_v))
+    return bw_h * 2.0 * math.sin(0.5 * bw_v)
+
+
+def _to_world(poses: np.ndarray, local: np.ndarray) -> np.ndarray:
+    return np.einsum("nij,nj->ni", poses[:, :3, :3], local) + poses[:, :3, 3]

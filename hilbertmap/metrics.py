@@ -1,0 +1,216 @@
+"""Compare a Hilbert map with known geometry given as triangles (vertices, faces).
+
+Everything is measured inside the region the sonar saw (``HilbertMap.insonified``), ping by ping
+in its nominal beam (-3 dB widths): true-surface points count where they lie within 0.1 m of the
+ranges of a ping's first echo (the surfaces that answered); free test points where they lie before
+a ping's first echo and in its line of sight (so the inside of walls, acoustic shadows and surfaces
+that never returned an echo do not count).
+
+:func:`evaluate` returns a flat-ish dict (JSON-ready):
+
+``auc``                AUC of p: points on the true surfaces against free points >= 0.1 m away
+``auc_band_<a>_<b>``   the same against free points a..b metres from a surface (0.1-0.3 is the band
+                       that tells good maps from poor ones)
+``surface_p_mean``     mean probability on the true surfaces (``surface_p_median``, ``surface_p_gt_half``)
+``<method>_*``         for each extracted surface (``ridge`` and ``level``, the 0.5 isosurface):
+                       ``_acc_mean/_p95/_max`` distance from it to the truth, ``_comp_mean/_p95/_max``
+                       from the truth to it (completeness), ``_fscore@0.1`` and ``_fscore@0.2``
+``slice_*``            in the plane through the sonar (``slice_axis``, default z): distance from the
+                       0.5 contour to the truth (``slice_level_max``, ``_mean``) and back
+                       (``slice_level_comp_max``), the same for the ridge, mean p on the truth lines
+``params``             the map's hyper-parameters and learnt sizes that produced the result
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import geometry as geo
+
+
+def auc(pos: np.ndarray, neg: np.ndarray) -> float:
+    """Area under the ROC curve (Mann-Whitney U, ties counted half)."""
+    pos = np.asarray(pos, dtype=np.float64).ravel()
+    neg = np.asarray(neg, dtype=np.float64).ravel()
+    if len(pos) == 0 or len(neg) == 0:
+        return float("nan")
+    allv = np.concatenate([pos, neg])
+    order = np.argsort(allv, kind="mergesort")
+    ranks = np.empty(len(allv))
+    sv = allv[order]
+    # average ranks of ties
+    first = np.r_[True, sv[1:] != sv[:-1]]
+    grp = np.cumsum(first) - 1
+    starts = np.nonzero(first)[0]
+    ends = np.r_[starts[1:], len(sv)]
+    avg = 0.5 * (starts + ends - 1) + 1.0
+    ranks[order] = avg[grp]
+    r_pos = ranks[: len(pos)].sum()
+    return float((r_pos - len(pos) * (len(pos) + 1) / 2.0) / (len(pos) * len(neg)))
+
+
+def fscore(d_pred_to_true: np.ndarray, d_true_to_pred: np.ndarray, tau: float) -> float:
+    if len(d_pred_to_true) == 0 or len(d_true_to_pred) == 0:
+        return 0.0
+    p = float(np.mean(d_pred_to_true < tau))
+    r = float(np.mean(d_true_to_pred < tau))
+    return 0.0 if p + r == 0 else 2 * p * r / (p + r)
+
+
+def _stats(prefix: str, d: np.ndarray) -> dict:
+    if len(d) == 0:
+        return {f"{prefix}_mean": float("nan"), f"{prefix}_p95": float("nan"), f"{prefix}_max": float("nan")}
+    return {f"{prefix}_mean": float(np.mean(d)), f"{prefix}_p95": float(np.percentile(d, 95)),
+            f"{prefix}_max": float(np.max(d))}
+
+
+def surface_distances(pred_v, pred_f, true_v, true_f, true_points, rng, n: int = 20000):
+    """(distances from points on the predicted mesh to the truth, from ``true_points`` to it)."""
+    if len(pred_f) == 0:
+        return np.zeros(0), np.full(len(true_points), np.inf)
+    pp = geo.sample_triangles(pred_v, pred_f, n, rng)
+    d_acc = geo.point_mesh_distance(pp, true_v, true_f)
+    d_comp = geo.point_mesh_distance(true_points, pred_v, pred_f)
+    return d_acc, d_comp
+
+
+def evaluate(hm, vertices, faces, *, surfaces=("ridge", "level"), n_surface: int = 20000, n_free: int = 200000,
+             bands=((0.1, 0.3), (0.3, 1.0), (1.0, math.inf)), taus=(0.1, 0.2), slice_axis="z",
+             slice_value=None, slice_resolution: float = 0.02, resolution=None, random_state=0,
+             surface_bounds=None) -> dict:
+    """Metrics of a fitted :class:`~hilbertmap.HilbertMap` against the true mesh (see module doc)."""
+    rng = np.random.default_rng(random_state)
+    V = np.asarray(vertices, dtype=np.float64)
+    F = np.asarray(faces, dtype=np.int64)
+    out: dict = {}
+
+    # --- probabilities on the true surfaces and in free space --------------------------------
+    surf = geo.sample_triangles(V, F, n_surface * 4, rng)
+    surf = surf[hm.insonified(surf, part="echo")][:n_surface]
+    lo, hi = hm.coverage_.bounds()
+    free = rng.uniform(lo, hi, (n_free, 3))
+    free = free[hm.seen(free, dilate=0)]
+    free = free[hm.insonified(free, V, F, part="free")]
+    d_free = geo.point_mesh_distance(free, V, F)
+    p_surf = hm.predict_proba(surf)
+    p_free = hm.predict_proba(free)
+    out.update(point_metrics(p_surf, p_free, d_free, bands))
+
+    # --- extracted surfaces ----------------------------------------------------------------
+    meshes = {}
+    for method in surfaces:
+        kw = dict(resolution=resolution, bounds=surface_bounds)
+        mv, mf = hm.surface("ridge" if method == "ridge" else "level", **kw)
+        meshes[method] = (mv, mf)
+        d_acc, d_comp = surface_distances(mv, mf, V, F, surf, rng)
+        out.update(_stats(f"{method}_acc", d_acc))
+        out.update(_stats(f"{method}_comp", d_comp))
+        for tau in taus:
+            out[f"{method}_fscore@{tau:g}"] = fscore(d_acc, d_comp, tau)
+        out[f"{method}_n_faces"] = int(len(mf))
+
+    # --- the cross-section through the sonar -------------------------------------------------
+    out.update(slice_metrics(hm, V, F, axis=slice_axis, value=slice_value, resolution=slice_resolution))
+    out["params"] = dict(hm.get_params(), lengthscale_=float(hm.lengthscale_),
+                         n_components_=int(getattr(hm, "n_components_", -1)),
+                         n_samples_seen_=int(hm.n_samples_seen_))
+    out["_meshes"] = meshes
+    out["_points"] = dict(surface=surf, free=free, d_free=d_free)
+    return out
+
+
+def point_metrics(p_surf, p_free, d_free, bands=((0.1, 0.3), (0.3, 1.0), (1.0, math.inf))) -> dict:
+    """AUCs and mean probabilities from probabilities on true-surface and free test points."""
+    p_surf, p_free, d_free = (np.asarray(a, dtype=np.float64) for a in (p_surf, p_free, d_free))
+    out = {"n_surface_points": int(len(p_surf)), "n_free_points": int(len(p_free))}
+    out["surface_p_mean"] = float(np.mean(p_surf)) if len(p_surf) else float("nan")
+    out["surface_p_median"] = float(np.median(p_surf)) if len(p_surf) else float("nan")
+    out["surface_p_gt_half"] = float(np.mean(p_surf > 0.5)) if len(p_surf) else float("nan")
+    out["auc"] = auc(p_surf, p_free[d_free >= bands[0][0]])
+    for a, b in bands:
+        m = (d_free >= a) & (d_free < b)
+        key = f"auc_band_{a:g}_{b:g}" if math.isfinite(b) else f"auc_band_{a:g}_inf"
+        out[key] = auc(p_surf, p_free[m])
+        out[key.replace("auc_", "free_p_mean_")] = float(np.mean(p_free[m])) if m.any() else float("nan")
+    return out
+
+
+def point_set_surface_metrics(pred_points, true_points, vertices, faces, taus=(0.1, 0.2), prefix="points") -> dict:
+    """Accuracy / completeness / F-score of a surface given as points (e.g. occupied voxel centres)."""
+    from scipy.spatial import cKDTree
+
+    pred = np.asarray(pred_points, dtype=np.float64).reshape(-1, 3)
+    d_acc = geo.point_mesh_distance(pred, vertices, faces) if len(pred) else np.zeros(0)
+    d_comp = cKDTree(pred).query(true_points)[0] if len(pred) else np.full(len(true_points), np.inf)
+    out = {}
+    out.update(_stats(f"{prefix}_acc", d_acc))
+    out.update(_stats(f"{prefix}_comp", d_comp))
+    for tau in taus:
+        out[f"{prefix}_fscore@{tau:g}"] = fscore(d_acc, d_comp, tau)
+    return out
+
+
+def slice_metrics(hm, vertices, faces, axis="z", value=None, resolution: float = 0.02) -> dict:
+    """Errors of the 0.5 contour and of the ridge in one plane (thesis Fig. 5.2)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import contour as _contour  # noqa: F401  (ensures the backend is loaded)
+    import matplotlib.pyplot as plt
+
+    a = "xyz".index(axis) if isinstance(axis, str) else int(axis)
+    if value is None:
+        value = float(np.median(hm.sensor_positions_[:, a])) if len(hm.sensor_positions_) else 0.0
+    segs = geo.plane_section(vertices, faces, a, value)
+    truth = geo.sample_segments(segs, resolution / 2)
+    truth = truth[hm.insonified(truth, part="echo")]
+    res = {"slice_axis": "xyz"[a], "slice_value": float(value)}
+    if len(truth) == 0:
+        return res
+    others = [i for i in range(3) if i != a]
+    lo, hi = truth.min(axis=0) - 0.5, truth.max(axis=0) + 0.5
+    sl = hm.slice(a, value, extent=((lo[others[0]], hi[others[0]]), (lo[others[1]], hi[others[1]])),
+                  resolution=resolution)
+    fig = plt.figure()
+    cs = plt.contour(sl.u, sl.v, sl.prob, levels=[0.5])
+    paths = [p for p in cs.allsegs[0] if len(p) > 1]
+    plt.close(fig)
+    P2 = np.concatenate(paths) if paths else np.zeros((0, 2))
+    P = np.zeros((len(P2), 3))
+    P[:, others[0]], P[:, others[1]] = P2[:, 0], P2[:, 1]
+    P[:, a] = value
+    P = P[hm.seen(P, dilate=0)]
+    d_lvl = geo.point_mesh_distance(P, vertices, faces) if len(P) else np.zeros(0)
+    res.update(_stats("slice_level", d_lvl))
+    from scipy.spatial import cKDTree
+
+    res["slice_level_comp_max"] = float(cKDTree(P).query(truth)[0].max()) if len(P) else float("inf")
+    res["slice_truth_p_mean"] = float(np.mean(hm.predict_proba(truth)))
+    # ridge in the plane: from the contour, climb along the in-plane gradient to the maximum
+    if len(P):
+        R = _climb(hm, P, a)
+        d_r = geo.point_mesh_distance(R, vertices, faces)
+        res.update(_stats("slice_ridge", d_r))
+        res["slice_ridge_comp_max"] = float(cKDTree(R).query(truth)[0].max())
+    else:  # no 0.5 contour in the plane at all
+        res.update(_stats("slice_ridge", np.zeros(0)))
+        res["slice_ridge_comp_max"] = float("inf")
+    return res
+
+
+def _climb(hm, P, fixed_axis, max_shift=None, n=31):
+    h = 0.25 * min(hm.lengthscale_, 0.2)
+    grad = np.zeros_like(P)
+    for i in range(3):
+        if i == fixed_axis:
+            continue
+        o = np.zeros(3)
+        o[i] = h
+        grad[:, i] = (hm.decision_function(P + o) - hm.decision_function(P - o)) / (2 * h)
+    nrm = grad / np.maximum(np.linalg.norm(grad, axis=1, keepdims=True), 1e-12)
+    step = max_shift if max_shift is not None else 1.5 * hm.lengthscale_
+    ts = np.linspace(0, step, n)
+    pts = P[:, None, :] + ts[None, :, None] * nrm[:, None, :]
+    f = hm.decision_function(pts.reshape(-1, 3)).reshape(len(P), n)
+    return P + ts[np.argmax(f, axis=1)][:, None] * nrm

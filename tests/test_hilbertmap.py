@@ -1,0 +1,310 @@
+"""hilbertmap: embedding, Dr.Jit kernels, Nystroem identity, SGD, surfaces, metrics, persistence.
+
+Small synthetic box scans (hilbertmap.testing, numpy ray caster); no renderer needed.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hilbertmap import HilbertMap, read_mesh, write_mesh
+from hilbertmap import geometry as geo
+from hilbertmap import metrics, schedules
+from hilbertmap.classify import cfar, classify, otsu_threshold
+from hilbertmap.embedding import blanking_range, embed_scan
+from hilbertmap.mesh import marching_tetrahedra
+from hilbertmap.testing import box_distance, box_mesh, box_scan, frame, orthogonal_frames
+
+SMALL = dict(n_inducing=400, n_passes=4, random_state=0, free_density=20.0, occupied_samples=8)
+
+
+@pytest.fixture(scope="module")
+def scans():
+    """One position, three orthogonal orientations, 60 pings of 6 degrees each."""
+    return [box_scan(T, n_pings=60, bearing_step=6.0, seed=i, rays=200) for i, T in enumerate(orthogonal_frames())]
+
+
+@pytest.fixture(scope="module")
+def fitted(scans):
+    return HilbertMap(**SMALL).fit(scans)
+
+
+# ----------------------------------------------------------------------------- classification
+def test_otsu_splits_two_populations():
+    rng = np.random.default_rng(0)
+    v = np.concatenate([rng.normal(20, 5, 1000), rng.normal(200, 10, 100)])
+    t = otsu_threshold(v)
+    assert 40 < t < 180
+
+
+def test_cfar_finds_echo_leading_edge_not_plateau():
+    v = np.zeros((1, 100))
+    v[0, 50:60] = 200.0
+    v[0, :10] = 255.0  # a plateau from bin 0 (ring-down): no quieter cells before it
+    det = cfar(v, train=8, guard=1, offset=40)
+    assert det[0, 50]
+    assert not det[0, 20:48].any()
+
+
+def test_threshold_rule_and_blanking():
+    s = box_scan(orthogonal_frames()[0], n_pings=20, bearing_step=18, seed=1, rays=100)
+    full, level = classify(s.data.astype(float), "threshold", threshold=200)
+    assert level == 200 and full.shape == s.data.shape
+    r = blanking_range(s.data.astype(float), s.ranges, 0.0, s.ranges[1] - s.ranges[0])
+    assert 1.0 < r < 2.0  # the synthetic ring-down fades at 1.3 m
+    with pytest.raises(ValueError):
+        classify(s.data.astype(float), "nonsense")
+
+
+# ----------------------------------------------------------------------------- embedding
+def test_embedding_free_in_water_and_echoes_on_walls(scans):
+    rng = np.random.default_rng(0)
+    for s in scans:
+        smp = embed_scan(s, rng)
+        # free samples lie in the water (nothing behind the first echo), none in the blanked zone
+        d_free = box_distance(smp.free)
+        assert np.mean(d_free > -0.05) > 0.999
+        assert np.min(np.linalg.norm(smp.free - s.poses[0, :3, 3], axis=1)) > 1.2
+        # occupied bins sit on the walls (the group centres within a few tens of cm)
+        cen = smp.occupied.mean(axis=1)
+        assert len(cen) > 0
+        assert np.median(np.abs(box_distance(cen))) < 0.15
+
+
+def test_embedding_respects_pose_and_beam_widths():
+    T = frame((0, 1, 0), (0, 0, 1), (0.5, -1.0, 0.2))
+    s = box_scan(T, n_pings=12, bearing_step=30, seed=3, rays=200, noise=False)
+    smp = embed_scan(s, np.random.default_rng(1), beam_sampling="uniform")
+    # every free sample within the nominal frustum of the ping that made it: check against all pings
+    ok = np.zeros(len(smp.free), dtype=bool)
+    for P in s.poses:
+        loc = (smp.free - P[:3, 3]) @ P[:3, :3]
+        r = np.linalg.norm(loc, axis=1)
+        az = np.degrees(np.arctan2(loc[:, 0], loc[:, 2]))
+        el = np.degrees(np.arcsin(loc[:, 1] / r))
+        ok |= (np.abs(az) <= 1.5 + 1e-6) & (np.abs(el) <= 17.5 + 1e-6)
+    assert ok.all()
+    # stride keeps every k-th ping
+    half = embed_scan(s, np.random.default_rng(1), ping_stride=2)
+    assert half.info["n_pings"] == 6
+
+
+# ----------------------------------------------------------------------------- kernels
+def test_drjit_kernels_match_dense_numpy():
+    from hilbertmap._backend import KernelGrid
+
+    import drjit as dr
+
+    rng = np.random.default_rng(0)
+    nu = rng.uniform(-2, 2, (300, 3))
+    ell, cut = 0.5, 1e-5
+    g = KernelGrid(nu, ell, cut)
+    nu_g = nu[g.order]
+    coef = rng.normal(size=300)
+    x = rng.uniform(-2.5, 2.5, (500, 3))
+    d2 = ((x[:, None, :] - nu_g[None]) ** 2).sum(-1)
+    K = np.exp(-d2 / (2 * ell ** 2))
+    K[K < cut] = 0
+    f = g.kernel_sum(*g.to_lanes(x), g.Float(coef.astype(np.float32))).numpy()
+    np.testing.assert_allclose(f, K @ coef, atol=2e-4)
+    gl = rng.normal(size=500)
+    out = dr.zeros(g.Float, 300)
+    g.kernel_scatter(*g.to_lanes(x), g.Float(gl.astype(np.float32)), out)
+    np.testing.assert_allclose(out.numpy(), K.T @ gl, atol=2e-4)
+
+
+def test_nystroem_identity_and_probabilities(fitted):
+    """w . phi(x) with phi = Lambda^-1/2 Q^T k(x) (eq. 4.2) equals the map's logit minus b."""
+    hm = fitted
+    rng = np.random.default_rng(5)
+    x = rng.uniform([-4, -3, -2], [4, 3, 2], (200, 3))
+    nu = hm.inducing_points_
+    d2 = ((x[:, None, :] - nu[None]) ** 2).sum(-1)
+    K = np.exp(-d2 * hm.gamma_)
+    K[K < hm.kernel_cut] = 0
+    phi = K @ hm._M.astype(np.float64).T
+    np.testing.assert_allclose(hm.decision_function(x) - hm.intercept_, phi @ hm.weights_, atol=1e-3)
+    p = hm.predict_proba(x)
+    assert p.shape == (200,) and np.all((p >= 0) & (p <= 1))
+    with pytest.raises(ValueError):
+        hm.predict_proba(np.zeros((3, 2)))
+
+
+def test_schedules():
+    assert schedules.step_size("thesis", 0, 100, 2.0, k1=1.0) == pytest.approx(2.0)
+    assert schedules.step_size("classic", 100, 100, 2.0) == pytest.approx(1.0)
+    ts = [schedules.step_size("thesis", t, 1000, 1.0) for t in (0, 500, 1000, 5000, 50000)]
+    assert all(a > b for a, b in zip(ts, ts[1:]))
+    # eq. 4.12 at t = n: eta0/2 (1 / (2 log_n(2n)) + k1/e)
+    n = 1000.0
+    assert schedules.step_size("thesis", n, n, 1.0, k1=1.0) == pytest.approx(
+        0.5 * (1 / (2 * math.log(2 * n) / math.log(n)) + math.exp(-1)))
+    assert schedules.step_size("ramos_ott", 0, 10, 0.5, alpha=1e-3, l1_ratio=0.0) == pytest.approx(0.5)
+    with pytest.raises(ValueError):
+        schedules.step_size("nope", 0, 1, 1)
+
+
+# ----------------------------------------------------------------------------- the map
+def test_fit_learns_box(fitted):
+    hm = fitted
+    assert hm.loss_curve_[-1] < hm.loss_curve_[0]
+    rng = np.random.default_rng(2)
+    inside = rng.uniform([-3.5, -2.5, -1.5], [3.5, 2.5, 1.0], (2000, 3))
+    walls = np.concatenate([np.c_[np.full(200, 5.0), rng.uniform(-2, 2, 200), rng.uniform(-1, 1, 200)],
+                            np.c_[rng.uniform(-2, 2, 200), np.full(200, -4.0), rng.uniform(-1, 1, 200)]])
+    p_in, p_wall = hm.predict_proba(inside), hm.predict_proba(walls)
+    assert p_in.mean() < 0.25
+    assert p_wall.mean() > 0.5
+    assert metrics.auc(p_wall, p_in) > 0.95
+
+
+def test_random_state_makes_fit_deterministic(scans):
+    a = HilbertMap(**dict(SMALL, n_passes=1)).fit(scans[:1])
+    b = HilbertMap(**dict(SMALL, n_passes=1)).fit(scans[:1])
+    np.testing.assert_array_equal(a.inducing_points_, b.inducing_points_)
+    # float32 atomics add in thread order: equal up to rounding, not bit for bit
+    np.testing.assert_allclose(a.dual_coef_, b.dual_coef_, rtol=1e-3, atol=1e-4 * np.abs(a.dual_coef_).max())
+
+
+@pytest.mark.parametrize("inducing,schedule,pooling", [("grid", "classic", "mean"), ("random", "ramos_ott", "lse")])
+def test_other_inducing_schedules_and_pooling(scans, inducing, schedule, pooling):
+    hm = HilbertMap(**dict(SMALL, n_passes=2, inducing=inducing, schedule=schedule, occupied_pooling=pooling,
+                           eta0=50.0)).fit(scans[:1])
+    assert len(hm.inducing_points_) == pytest.approx(400, rel=0.1)
+    assert np.all(np.isfinite(hm.dual_coef_))
+
+
+def test_partial_fit_is_online(scans):
+    hm = HilbertMap(**SMALL)
+    hm.partial_fit(scans[0])
+    seen1 = hm.n_samples_seen_
+    c1 = hm.dual_coef_.copy()
+    hm.partial_fit(scans[1])
+    assert hm.n_samples_seen_ > seen1
+    assert not np.allclose(hm.dual_coef_, c1)
+    assert len(hm.ping_frames_) == scans[0].n_pings + scans[1].n_pings
+
+
+def test_save_load_roundtrip(fitted, tmp_path):
+    path = tmp_path / "map.npz"
+    fitted.save(path)
+    hm = HilbertMap.load(path)
+    x = np.random.default_rng(0).uniform(-4, 4, (300, 3))
+    np.testing.assert_allclose(hm.predict_proba(x), fitted.predict_proba(x), atol=1e-6)
+    assert hm.get_params() == fitted.get_params()
+    hm.partial_fit(box_scan(orthogonal_frames((1.0, 0, 0))[0], n_pings=30, bearing_step=12, seed=7, rays=100))
+    with pytest.raises(ValueError):
+        np.savez(tmp_path / "other.npz", a=1)
+        HilbertMap.load(tmp_path / "other.npz")
+
+
+def test_unfitted_and_bad_params():
+    with pytest.raises(RuntimeError):
+        HilbertMap().predict_proba(np.zeros((1, 3)))
+    with pytest.raises(TypeError):
+        HilbertMap(bogus=1)
+
+
+# ----------------------------------------------------------------------------- surfaces
+def test_marching_tetrahedra_sphere_and_files(tmp_path):
+    ax = [np.linspace(-1.5, 1.5, 31)] * 3
+    X, Y, Z = np.meshgrid(*ax, indexing="ij")
+    field = 1.0 - np.sqrt(X ** 2 + Y ** 2 + Z ** 2)  # above 0 inside the unit sphere
+    V, F = marching_tetrahedra(field, ax, 0.0)
+    r = np.linalg.norm(V, axis=1)
+    assert np.abs(r - 1).max() < 0.02
+    # normals point outwards (towards lower values)
+    p = V[F]
+    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    assert np.mean(np.einsum("ij,ij->i", n, p.mean(axis=1)) > 0) > 0.99
+    area = geo.triangle_areas(V, F).sum()
+    assert area == pytest.approx(4 * math.pi, rel=0.03)
+    for ext in ("ply", "obj"):
+        write_mesh(tmp_path / f"s.{ext}", V, F)
+        V2, F2 = read_mesh(tmp_path / f"s.{ext}")
+        np.testing.assert_allclose(V2, V, atol=1e-5)
+        np.testing.assert_array_equal(F2, F)
+
+
+def test_isosurface_and_ridge_near_walls(fitted):
+    V, F = fitted.isosurface(0.5, resolution=0.15)
+    assert len(F) > 100
+    Vr, Fr = fitted.ridge_surface(resolution=0.15)
+    tv, tf = box_mesh()
+    d_lvl = geo.point_mesh_distance(V, tv, tf)
+    d_rdg = geo.point_mesh_distance(Vr, tv, tf)
+    assert np.median(d_rdg) < np.median(d_lvl)
+    assert np.median(d_rdg) < 0.25
+
+
+# ----------------------------------------------------------------------------- metrics
+def test_auc_and_fscore_basics():
+    assert metrics.auc([1, 2, 3], [0, -1]) == 1.0
+    assert metrics.auc([0, 0], [0, 0]) == 0.5
+    assert metrics.fscore(np.zeros(10), np.zeros(10), 0.1) == 1.0
+    assert metrics.fscore(np.ones(10), np.zeros(10), 0.1) == 0.0
+
+
+def test_geometry_distances_and_visibility():
+    V, F = box_mesh()
+    pts = np.array([[0.0, 0.0, 0.0], [4.5, 0.0, 0.0], [0.0, 0.0, -2.0], [6.0, 0.0, 0.0]])
+    np.testing.assert_allclose(geo.point_mesh_distance(pts, V, F), [3.0, 0.5, 1.0, 1.0], atol=1e-9)
+    vis = geo.visible_from(pts, [[0.0, 0.0, 0.0]], V, F)
+    assert vis.tolist() == [True, True, True, False]
+    segs = geo.plane_section(V, F, 2, 0.0)
+    assert len(segs) == 8  # two triangles per wall
+    rng = np.random.default_rng(0)
+    s = geo.sample_triangles(V, F, 500, rng)
+    assert geo.point_mesh_distance(s, V, F).max() < 1e-9
+
+
+def test_evaluate_reports_metrics_and_params(fitted):
+    V, F = box_mesh()
+    r = metrics.evaluate(fitted, V, F, n_surface=3000, n_free=20000, resolution=0.15)
+    for k in ("auc", "auc_band_0.1_0.3", "surface_p_mean", "ridge_fscore@0.1", "level_fscore@0.2",
+              "ridge_acc_p95", "ridge_comp_max", "slice_level_max", "params"):
+        assert k in r
+    assert r["params"]["n_inducing"] == 400 and r["params"]["lengthscale_"] > 0
+    assert r["auc"] > 0.85
+    assert r["ridge_acc_mean"] < r["level_acc_mean"]
+
+
+def test_plots_write_files(fitted, tmp_path):
+    from hilbertmap.plots import plot_half_region, plot_slices
+
+    truth = box_mesh()
+    plot_slices(fitted, truth=truth, path=tmp_path / "s.png", resolution=0.1)
+    plot_half_region(fitted, "z", 0.0, truth=truth, path=tmp_path / "h.png", resolution=0.1)
+    assert (tmp_path / "s.png").stat().st_size > 1000 and (tmp_path / "h.png").stat().st_size > 1000
+
+
+def test_hilbertmap_does_not_import_mitsonar_or_mitsuba():
+    import subprocess
+    import sys
+
+    code = ("import sys, numpy as np\n"
+            "from hilbertmap import HilbertMap\n"
+            "from hilbertmap.testing import box_scan, orthogonal_frames\n"
+            "s = box_scan(orthogonal_frames()[0], n_pings=20, bearing_step=18, rays=50)\n"
+            "HilbertMap(n_inducing=100, n_passes=1, random_state=0).fit([s]).predict_proba(np.zeros((2, 3)))\n"
+            "bad = [m for m in sys.modules if m.split('.')[0] in ('mitsonar', 'mitsuba')]\n"
+            "assert not bad, bad\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_short_runs_dropped_and_thinning_caps_voxels(scans):
+    from hilbertmap.embedding import _drop_short_runs
+
+    f = np.array([[1, 0, 1, 1, 0, 1, 1, 1, 0, 1]], dtype=bool)
+    assert _drop_short_runs(f, 2).astype(int).tolist() == [[0, 0, 1, 1, 0, 1, 1, 1, 0, 0]]
+    hm = HilbertMap(**dict(SMALL, max_free_per_voxel=1, max_groups_per_voxel=1))
+    smp = hm.embed_all(scans)
+    thin = hm._thin(smp)
+    assert 0 < len(thin.free) < len(smp.free) and 0 < len(thin.occupied) <= len(smp.occupied)
+    keys = np.floor(thin.free / hm.coverage_voxel).astype(np.int64)
+    _, counts = np.unique(keys, axis=0, return_counts=True)
+    assert counts.max() == 1
+    assert len(thin.occupied_ping) == len(thin.occupied)

@@ -1,0 +1,101 @@
+"""`mitsonar map`: the command line of the mapper, run as a user would (subprocesses)."""
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import ROOT
+
+
+def run(*args, cwd=None):
+    env = dict(os.environ)
+    env.pop("MITSONAR_DEBUG", None)
+    return subprocess.run([sys.executable, "-m", "mitsonar.cli", *args], capture_output=True, text=True,
+                          cwd=cwd or ROOT, env=env, timeout=600)
+
+
+def one_error_line(proc):
+    assert proc.returncode != 0
+    assert "Traceback" not in proc.stderr
+    lines = [ln for ln in proc.stderr.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1, proc.stderr
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def scan_files(tmp_path_factory):
+    from mitsonar import Scan
+
+    from hilbertmap.testing import box_scan, orthogonal_frames
+
+    folder = tmp_path_factory.mktemp("scans")
+    paths = []
+    for i, T in enumerate(orthogonal_frames()):
+        s = box_scan(T, n_pings=40, bearing_step=9.0, seed=i, rays=100)
+        scan = Scan(intensity=s.intensity, data=s.data, ranges=s.ranges, bearings=s.bearings, poses=s.poses,
+                    range_min=s.range_min, range_max=s.range_max, beamwidth_h=s.beamwidth_h,
+                    beamwidth_v=s.beamwidth_v)
+        p = folder / f"scan{i}.npz"
+        scan.save(str(p))
+        paths.append(str(p))
+    return paths
+
+
+def test_map_help():
+    proc = run("map", "--help")
+    assert proc.returncode == 0 and "--inducing" in proc.stdout and "--mesh" in proc.stdout
+
+
+def test_map_writes_map_mesh_and_plot(scan_files, tmp_path):
+    out, mesh, plot = tmp_path / "map.npz", tmp_path / "map.ply", tmp_path / "slices.png"
+    proc = run("map", *scan_files, "-o", str(out), "--inducing", "300", "--passes", "2",
+               "--mesh", str(mesh), "--plot", str(plot), "--resolution", "0.2")
+    assert proc.returncode == 0, proc.stderr
+    assert out.exists() and mesh.exists() and plot.exists()
+    from hilbertmap import HilbertMap, read_mesh
+
+    hm = HilbertMap.load(out)
+    assert len(hm.inducing_points_) == 300
+    p = hm.predict_proba(np.array([[0.0, 0.0, -1.0], [5.0, 0.0, 0.0]]))
+    assert p[0] < p[1]
+    V, F = read_mesh(mesh)
+    assert len(F) > 0
+
+
+@pytest.mark.parametrize("args,expect", [
+    (["missing.exr", "-o", "m.npz"], "no such file"),
+    (["{scan}", "-o", "m.txt"], ".npz"),
+    (["{scan}", "-o", "m.npz", "--inducing", "0"], "--inducing"),
+    (["{scan}", "-o", "m.npz", "--mesh", "m.stl"], ".ply or .obj"),
+    (["{bad}", "-o", "m.npz"], "cannot read the scan"),
+])
+def test_map_bad_input_one_line(scan_files, tmp_path, args, expect):
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a scan")
+    args = [a.format(scan=scan_files[0], bad=str(bad)) for a in args]
+    proc = run("map", *args, cwd=str(tmp_path))
+    line = one_error_line(proc)
+    assert expect in line, line
+
+
+def test_map_accepts_a_raw_seanet_log(tmp_path):
+    """A log recorded from a (virtual) Micron maps like scan files do."""
+    import subprocess
+    import sys
+
+    import mitsonar
+    from mitsonar.micron import record
+    from mitsonar.seanet import HeadSettings
+    from mitsonar.virtual_sonar import VirtualMicron
+
+    box = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes_xml", "box.xml")
+    scan = mitsonar.render_scan(mitsonar.load_scene(box), spp=256, seed=1)
+    log = tmp_path / "micron.bin"
+    with VirtualMicron(scan, realtime=False) as vm:
+        record(vm.port, str(log), scans=1, settings=HeadSettings.from_scan(scan), timeout=30)
+    proc = subprocess.run([sys.executable, "-m", "mitsonar.cli", "map", str(log), "-o", str(tmp_path / "map.npz"),
+                           "--inducing", "300"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "1 scan(s)" in proc.stdout and (tmp_path / "map.npz").stat().st_size > 0
