@@ -817,7 +817,11 @@ def equal_time_ratios(runs, labels, budgets, region_names=(), metric="rel_l2_deb
         entry = {"budget_s": float(budget), "baseline": base, "metric": metric, "ratios": {}}
         for lab in labels[1:]:
             o = by[(lab, float(budget))]
-            item = _ratio(b[metric], o[metric], b["seconds_mean"], o["seconds_mean"])
+            # A debiased error of 0 (below the reference's own noise) gives no ratio: fall back
+            # to the raw error for that pair and say so.
+            m = metric if (b[metric] > 0 and o[metric] > 0) else metric.replace("_debiased", "")
+            item = _ratio(b[m], o[m], b["seconds_mean"], o["seconds_mean"])
+            item["metric"] = m
             item["regions"] = {rn: _ratio(b["regions"][rn][metric], o["regions"][rn][metric],
                                           b["seconds_mean"], o["seconds_mean"]) for rn in region_names}
             entry["ratios"][lab] = item
