@@ -90,7 +90,10 @@ def load_scene(path_or_xml: str, **params):
     if not is_xml and not os.path.isfile(text):
         raise SceneError(f"scene file {text!r} does not exist")
     try:
-        scene = mi.load_string(text, **params) if is_xml else mi.load_file(text, **params)
+        # Serial loading: Mitsuba 3.9's parallel instantiation of Python plugins now and then
+        # fails with std::bad_alloc or a garbled string (about 1 in 150 first loads here).
+        load = mi.load_string if is_xml else mi.load_file
+        scene = load(text, parallel=False, **params)
     except Exception as exc:  # Mitsuba raises RuntimeError with a traceback inside the message
         where = "XML string" if is_xml else text
         reason = _first_reason(str(exc))
