@@ -109,16 +109,10 @@ def load_scene(path_or_xml: str, **params):
 def _sonar(scene, sensor):
     from mitsonar.plugins import module
 
-    SonarSensor = module("sonar_sensor").SonarSensor
-    sensors = scene.sensors()
-    if isinstance(sensor, int):
-        if not 0 <= sensor < len(sensors):
-            raise SceneError(f"the scene has {len(sensors)} sensor(s); sensor index {sensor} does not exist")
-        sensor = sensors[sensor]
-    if not isinstance(sensor, SonarSensor):
-        raise SceneError(f"render_scan needs a <sensor type=\"sonar\">; the scene's sensor is "
-                         f"{type(sensor).__name__}")
-    return sensor
+    try:
+        return module("sonar_tof").resolve_sensor(scene, sensor)
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
 
 
 def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integrator=None, sensor=0,
