@@ -101,6 +101,10 @@ def save_scan(scan: Scan, path) -> None:
             _write_exr(scan, text, tmp)
         else:
             _write_npz(scan, text, tmp)
+        # mkstemp makes the file private (0600); a scan file gets the usual permissions.
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

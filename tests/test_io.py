@@ -251,3 +251,15 @@ def test_unstorable_metadata_is_refused_before_writing(tmp_path):
     with pytest.raises(ScanFileError, match="not a string"):
         save_scan(scan, tmp_path / "scan.npz")
     assert os.listdir(tmp_path) == []
+
+
+def test_saved_files_get_the_usual_permissions(tmp_path):
+    import stat
+
+    umask = os.umask(0o022)
+    try:
+        for name in ("a.exr", "a.npz"):
+            save_scan(make_scan(), tmp_path / name)
+            assert stat.S_IMODE(os.stat(tmp_path / name).st_mode) == 0o644
+    finally:
+        os.umask(umask)
