@@ -257,7 +257,10 @@ def plot_cartesian(scan, mesh=None, path=None, ax=None, db: bool = False, cmap: 
             seg2 = np.stack([segments @ e1, segments @ e2], -1)
             ax.add_collection(LineCollection(seg2, colors="tab:green", linewidths=1.0, label="ground truth"))
     ax.set_aspect("equal")
-    ax.autoscale_view()
+    # Frame what the sonar covered; ground truth beyond its range would only shrink the scan.
+    pad = 1.05 * scan.range_max
+    ax.set_xlim(pos2[:, 0].min() - pad, pos2[:, 0].max() + pad)
+    ax.set_ylim(pos2[:, 1].min() - pad, pos2[:, 1].max() + pad)
     ax.set_facecolor("0.85")
     ax.set_xlabel(f"world {names[0]} (m)")
     ax.set_ylabel(f"world {names[1]} (m)")
