@@ -47,7 +47,7 @@ from typing import Iterator
 
 import numpy as np
 
-from .scan import Scan
+from .scan import Scan, bearing_rotation
 from .seanet import (DEFAULT_NIBBLE_ORDER, FULL_TURN, Alive, BBUserData, HdCtrl, HeadCommand,
                      HeadData, HeadSettings, ReBoot, SendBBUser, SendData, SendVersion,
                      StreamParser, VersionData, bearing_to_radians, encode, ping_problem)
@@ -70,18 +70,8 @@ class SonarTimeout(SonarError, TimeoutError):
     """The head did not answer in time."""
 
 
-def beam_rotation(bearing) -> np.ndarray:
-    """4x4 rotation(s) about +y by ``bearing`` rad (right-handed: +z turns towards +x)."""
-    b = np.asarray(bearing, dtype=np.float64)
-    c, s = np.cos(b), np.sin(b)
-    R = np.zeros(b.shape + (4, 4))
-    R[..., 0, 0] = c
-    R[..., 0, 2] = s
-    R[..., 1, 1] = 1.0
-    R[..., 2, 0] = -s
-    R[..., 2, 2] = c
-    R[..., 3, 3] = 1.0
-    return R
+# The bearing convention lives with the Scan; kept under this name for the driver's users.
+beam_rotation = bearing_rotation
 
 
 def _check_pose(pose) -> np.ndarray:

@@ -11,6 +11,25 @@ from typing import Any
 import numpy as np
 
 
+def bearing_rotation(bearing) -> np.ndarray:
+    """4x4 rotation(s) of the beam frame for bearing(s) in radians: right-handed about the frame's
+    +y (scan) axis, so +z (the boresight) turns towards +x. Ping k's pose is ``T @ R(b_k)``.
+
+    The one definition of the bearing convention: the renderer, the SeaNet driver and the virtual
+    sonar all build poses with it.
+    """
+    b = np.asarray(bearing, dtype=np.float64)
+    c, s = np.cos(b), np.sin(b)
+    m = np.zeros(b.shape + (4, 4))
+    m[..., 0, 0] = c
+    m[..., 0, 2] = s
+    m[..., 2, 0] = -s
+    m[..., 2, 2] = c
+    m[..., 1, 1] = 1.0
+    m[..., 3, 3] = 1.0
+    return m
+
+
 @dataclass
 class Scan:
     """One scan: ``n_pings`` pings of ``n_bins`` range bins.

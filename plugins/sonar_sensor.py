@@ -8,23 +8,11 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mitsonar.scan import bearing_rotation
+
 from .beam import BeamPattern, read_beam_table
 
 KINDS = ("mechanical",)
-
-
-def rotation_y(angle):
-    """4x4 right-handed rotation about +y by ``angle`` radians (broadcasts over an array)."""
-    a = np.asarray(angle, dtype=np.float64)
-    c, s = np.cos(a), np.sin(a)
-    m = np.zeros(a.shape + (4, 4))
-    m[..., 0, 0] = c
-    m[..., 0, 2] = s
-    m[..., 2, 0] = -s
-    m[..., 2, 2] = c
-    m[..., 1, 1] = 1.0
-    m[..., 3, 3] = 1.0
-    return m
 
 
 def check_rigid(matrix, what="sonar 'to_world'"):
@@ -147,7 +135,7 @@ class SonarSensor(mi.Sensor):
     def ping_poses(self, pose=None) -> np.ndarray:
         """(n_pings, 4, 4) world transform of each ping's beam frame (float64)."""
         base = self.to_world_np if pose is None else check_rigid(pose, "render_scan 'pose'")
-        return base @ rotation_y(np.radians(self.bearings_deg()))
+        return base @ bearing_rotation(np.radians(self.bearings_deg()))
 
     # ------------------------------------------------------------------ Mitsuba interface
     def sample_ray(self, time, sample1, sample2, sample3, active=True):
