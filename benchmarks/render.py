@@ -34,7 +34,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 BOX = os.path.join(HERE, "..", "scenes_xml", "box.xml")
 
 
-def count_segments(mitsonar, scene, spp, seed=0, per_lane=False):
+def count_segments(scene, spp, seed=0, per_lane=False):
     """Ray casts of one scan: intersections (one per bounce) + visibility rays (one per echo:
     the path skips the visibility ray of a bounce whose echo is zero, e.g. far outside the beam);
     with ``per_lane`` also, per path, its number of bounces and a bit mask of the bounces that
@@ -138,12 +138,12 @@ def main(argv=None):
             times.append(time.perf_counter() - t)
             errs.append(float(np.linalg.norm(h - ref) / np.linalg.norm(ref)))
         secs = statistics.median(times)
-        n_int, n_vis = count_segments(mitsonar, scene, spp)
+        n_int, n_vis = count_segments(scene, spp)
         results.append({"spp": spp, "seconds": secs, "paths_per_s": sensor.n_pings * spp / secs,
                         "segments": n_int + n_vis, "segments_per_s": (n_int + n_vis) / secs,
                         "rel_l2_error": statistics.median(errs)})
     big = max(spps)
-    _, _, per_lane = count_segments(mitsonar, scene, big, seed=1, per_lane=True)
+    _, _, per_lane = count_segments(scene, big, seed=1, per_lane=True)
     ceil_rate, ceil_segs, ceil_secs = ceiling(scene, big, per_lane, args.repeats)
     for r in results:
         r["ratio_to_ceiling"] = r["segments_per_s"] / ceil_rate

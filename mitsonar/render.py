@@ -69,7 +69,6 @@ def _first_reason(message: str) -> str:
     head = re.sub(r"^\[[^\]]*\]\s*", "", head)  # drop "[parser.cpp:444]"
     head = head.split(": Traceback")[0]
     if reason:
-        where = re.match(r"^(While loading \S+|At \S+|While loading string)?.*?(\(line \d+, col \d+\))?", head)
         prefix = head.split("failed to instantiate")[0].rstrip(": ") if "failed to instantiate" in head else ""
         return f"{prefix}: {reason}" if prefix else reason
     return " ".join(lines[:3]) if len(lines) > 1 else head

@@ -98,7 +98,7 @@ class SonarMLTIntegrator(SonarIntegrator):
         self.last_plan = {"bootstrap": boot, "chains": chains, "mutations": mutations}
         frames = PingFrames(sensor.ping_poses(pose))
         dims = n_dims(depth)
-        ctx = _Context(scene, sensor, frames, depth)
+        ctx = _Context(scene, sensor, frames, depth, n_pings * chains)
         seed = int(seed) & 0xFFFFFFFF
 
         with dr.suspend_grad():
@@ -184,13 +184,14 @@ class SonarMLTIntegrator(SonarIntegrator):
 class _Context:
     """What one render's path evaluations share: scene, frames, bins, per-bounce records."""
 
-    def __init__(self, scene, sensor, frames, depth):
+    def __init__(self, scene, sensor, frames, depth, n_chains):
         self.scene, self.sensor, self.frames = scene, sensor, frames
         self.depth = depth
         self.depth_o = dr.opaque(mi.UInt32, depth)
         self.bins = RangeBins(sensor)
         self.absorption = dr.opaque(mi.Float, sensor.absorption)
-        self.rec_lane = None
+        # Chain of each per-bounce record slot (lane * depth + k).
+        self.rec_lane = dr.arange(mi.UInt32, n_chains * depth) // self.depth_o
 
     def trace(self, samples, ping, lane, f, bins, vals):
         """Trace one path per lane; add its in-window echo energy to ``f[lane]`` and, when
@@ -214,8 +215,6 @@ class _Context:
         bins = dr.zeros(mi.UInt32, n * self.depth)
         vals = dr.zeros(mi.Float, n * self.depth)
         self.trace(ArraySamples(U, lane, dims), ping, lane, f, bins, vals)
-        if self.rec_lane is None:
-            self.rec_lane = dr.arange(mi.UInt32, n * self.depth) // dr.opaque(mi.UInt32, self.depth)
         return f, bins, vals
 
     def splat(self, hist, bins, vals, weight, ping, lane, active):
