@@ -4,7 +4,8 @@ A path is a deterministic function of a primary-sample vector U in [0, 1)^D:
 dims 0-1 draw the emitted direction from the beam pattern, and bounce ``k`` (0-based) uses dim
 ``2 + 3k`` to pick a BSDF lobe and dims ``3 + 3k``, ``4 + 3k`` for the outgoing direction.
 Path tracing draws U from a counter-based hash (`HashSamples`); the Metropolis integrator
-stores U per chain and mutates it (`ArraySamples`). At every bounce the path connects back to
+stores U per chain and hands the path a sampler that computes the mutated U on the fly
+(`sonar_mlt._Mutation`). At every bounce the path connects back to
 the transducer (visibility tested) and reports that echo to a callback with its range (half
 the total path length, summed from hit points) and its energy:
 
@@ -47,25 +48,12 @@ class HashSamples:
         return mi.Point2f(self.get(dim), self.get(mi.UInt32(dim) + 1))
 
 
-class ArraySamples:
-    """Primary samples stored per lane in a flat array (``lane * dims + dim``)."""
-
-    def __init__(self, buffer: mi.Float, lane: mi.UInt32, dims: int):
-        self.buffer, self.base = buffer, lane * dims
-
-    def get(self, dim):
-        return dr.gather(mi.Float, self.buffer, self.base + mi.UInt32(dim))
-
-    def get2(self, dim):
-        return mi.Point2f(self.get(dim), self.get(mi.UInt32(dim) + 1))
-
-
 @dr.syntax
 def trace_echoes(scene, frames, beam, ping, samples, max_depth, absorption, record, active=True):
     """Trace one echo path per lane and call ``record(depth, range, energy, valid)`` per bounce.
 
     ``frames`` are the per-ping beam frames, ``beam`` the `BeamPattern`, ``ping`` the ping of
-    each lane, ``samples`` a `HashSamples` or `ArraySamples`, ``max_depth`` (opaque UInt32) the
+    each lane, ``samples`` anything with ``get(dim)`` and ``get2(dim)`` (e.g. `HashSamples`), ``max_depth`` (opaque UInt32) the
     number of surface bounces, ``absorption`` (opaque Float) in dB/m.
     """
     x_ax, y_ax, z_ax, origin = frames.gather(ping)
