@@ -1,8 +1,8 @@
 """Metropolis versus path tracing at equal time, on an easy scene and a hard one.
 
 Runs `mitsonar.compare.compare` (the engine of ``mitsonar compare``) on scenes_xml/box.xml (easy:
-open walls, every echo is found by path tracing) and scenes_xml/slot_chamber.xml (hard: a chamber
-seen through a slot), with path tracing (``sonar_tof``, the baseline) and ``sonar_mlt`` at the same
+open walls, every echo is found by path tracing), scenes_xml/slot_chamber.xml (hard: a chamber
+seen through a slot) and scenes_xml/glossy_corridor.xml (hard: glossy multipath), with path tracing (``sonar_tof``, the baseline) and ``sonar_mlt`` at the same
 time budgets, and prints one JSON object.
 
 The headline figure per scene is the equal-time error ratio ``rel_l2(sonar_tof) / rel_l2(sonar_mlt)``
@@ -22,7 +22,7 @@ run only renders the comparisons. The default run (4 budgets up to 2 s, 2 repeat
 3 to 4 minutes on 2 cores with cold caches.
 
 Usage: python benchmarks/mlt.py [--budget 0.25,0.5,1,2] [--repeats 2] [--integrators sonar_tof,sonar_mlt]
-                                [--scenes box,slot_chamber] [-o out/benchmark_mlt] [--reference-factor 16]
+                                [--scenes box,slot_chamber,glossy_corridor] [-o out/benchmark_mlt] [--reference-factor 16]
 """
 from __future__ import annotations
 
@@ -60,8 +60,8 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--integrators", default="sonar_tof,sonar_mlt",
                     help="baseline,contender (default sonar_tof,sonar_mlt; sonar_tof,sonar_tof tests the machinery)")
-    ap.add_argument("--scenes", default="box,slot_chamber",
-                    help="scene names in scenes_xml/ (default box,slot_chamber)")
+    ap.add_argument("--scenes", default="box,slot_chamber,glossy_corridor",
+                    help="scene names in scenes_xml/ (default box,slot_chamber,glossy_corridor)")
     ap.add_argument("-o", "--output", default=os.path.join("out", "benchmark_mlt"))
     ap.add_argument("--reference-factor", type=float, default=16.0)
     ap.add_argument("--seed", type=int, default=0)

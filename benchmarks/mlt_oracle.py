@@ -1,0 +1,89 @@
+#!/usr/bin/env python
+"""How much could any Metropolis sampler gain over path tracing on a scene? (issue 5, analysis)
+
+Traces ``--paths`` uniform echo paths per ping (the path function both integrators share) and
+compares, per path evaluation, the variance of the bins of
+
+* path tracing: each path adds its echoes ``e_k`` to their bins;
+* an ideal Metropolis sampler: independent paths drawn exactly in proportion to ``f = sum_k e_k``
+  with the exact per-ping normalisation ``b``, each adding ``b e_k / f`` (no chain correlation,
+  no cost for b) - the best ``sonar_mlt`` could ever do per path;
+* the normalisation alone: ``b`` from uniform paths has the relative variance CV^2 of ``f``, and
+  its error scales every bin of a ping, so ``PT variance / (CV^2 b^2)`` bounds the gain of any
+  estimator whose per-ping total comes from uniform samples, however good its chains.
+
+Prints one JSON object per scene: ``ideal_variance_ratio`` (PT / ideal Metropolis; the square
+root is the best equal-sample error ratio), ``normalisation_bound`` (PT / b-only variance), the
+median CV^2 of f and the share of paths with f = 0.
+
+    python benchmarks/mlt_oracle.py [--scenes box,slot_chamber,glossy_corridor] [--paths 4096]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def analyse(name, paths, seed=7):
+    import drjit as dr
+    import mitsuba as mi
+
+    import mitsonar
+    from mitsonar.plugins.echo_path import HashSamples
+    from mitsonar.plugins.sonar_mlt import _Context
+    from mitsonar.plugins.sonar_sensor import PingFrames
+    from mitsonar.plugins.sonar_tof import resolve_sensor
+
+    scene = mitsonar.load_scene(os.path.join(HERE, "..", "scenes_xml", f"{name}.xml"))
+    sensor = resolve_sensor(scene, 0)
+    P, B, depth = sensor.n_pings, sensor.n_bins, 5
+    ctx = _Context(scene, sensor, PingFrames(sensor.ping_poses(None)), depth, 1)
+    lane = dr.arange(mi.UInt32, P * paths)
+    ping = lane // paths
+    f, bins, vals = ctx.records(P * paths)
+    ctx.trace(HashSamples(mi.UInt32(seed), ping, lane - ping * paths), ping, lane, f, bins, vals)
+    f = f.numpy().astype(np.float64).reshape(P, paths)
+    bins = bins.numpy().reshape(P, paths, depth)
+    vals = vals.numpy().astype(np.float64).reshape(P, paths, depth)
+    var_pt = var_ideal = var_b = norm2 = 0.0
+    cv2 = []
+    for p in range(P):
+        per_bin = np.zeros((paths, B))
+        for k in range(depth):
+            np.add.at(per_bin, (np.arange(paths), bins[p, :, k]), vals[p, :, k])
+        mean = per_bin.mean(0)
+        norm2 += (mean ** 2).sum()
+        var_pt += ((per_bin ** 2).mean(0) - mean ** 2).sum()
+        b = f[p].mean()
+        if b <= 0:
+            continue
+        share = np.divide(per_bin, f[p][:, None], out=np.zeros_like(per_bin), where=f[p][:, None] > 0)
+        w = f[p] / f[p].sum()
+        var_ideal += b ** 2 * ((w[:, None] * share ** 2).sum(0) - (w[:, None] * share).sum(0) ** 2).sum()
+        c = (f[p] ** 2).mean() / b ** 2 - 1.0
+        cv2.append(c)
+        var_b += c * (mean ** 2).sum()
+    return {"scene": name, "paths_per_ping": paths,
+            "pt_rel_error_per_path": float(np.sqrt(var_pt / norm2)),
+            "ideal_variance_ratio": float(var_pt / var_ideal),
+            "ideal_error_ratio": float(np.sqrt(var_pt / var_ideal)),
+            "normalisation_bound_error_ratio": float(np.sqrt(var_pt / var_b)),
+            "median_cv2_of_f": float(np.median(cv2)),
+            "zero_f_share": float(np.mean(f == 0))}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", default="box,slot_chamber,glossy_corridor")
+    ap.add_argument("--paths", type=int, default=4096)
+    args = ap.parse_args(argv)
+    print(json.dumps([analyse(s, args.paths) for s in args.scenes.split(",")], indent=1))
+
+
+if __name__ == "__main__":
+    main()
