@@ -52,6 +52,7 @@ class Samples:
     beams: np.ndarray = None
     spans: np.ndarray = None
     occupied_ping: np.ndarray = None
+    free_gap: np.ndarray = None
 
     @staticmethod
     def concatenate(parts: list["Samples"]) -> "Samples":
@@ -71,7 +72,12 @@ class Samples:
             beams=np.concatenate([p.beams for p in parts]) if parts else np.zeros((0, 3)),
             spans=np.concatenate([p.spans for p in parts]) if parts else np.zeros((0, 3)),
             occupied_ping=_offset_concat([p.occupied_ping for p in parts], [len(p.frames) for p in parts]),
+            free_gap=np.concatenate([_gap(p) for p in parts]) if parts else np.zeros(0),
         )
+
+
+def _gap(p: "Samples") -> np.ndarray:
+    return p.free_gap if p.free_gap is not None else np.full(len(p.free), np.inf)
 
 
 def _offset_concat(arrays, sizes):
@@ -145,7 +151,8 @@ def blanking_range(values: np.ndarray, ranges: np.ndarray, range_min: float, bin
 
 def embed_scan(scan, rng: np.random.Generator, *, source="auto", bin_rule="otsu+cfar", threshold=None,
                min_level=None, cfar_train=16, cfar_guard=2, cfar_offset=None, blanking="auto",
-               free_density=40.0, max_free_per_ping=400, free_margin=0.0, occupied_samples=16,
+               free_density=40.0, max_free_per_ping=400, free_margin=0.0, near_free=0, near_depth=0.5,
+               occupied_samples=16,
                occupied_bins="first_run", max_run=0.3, beam_sampling="pattern", beam_extent=1.0, ping_stride=1,
                min_echo_bins=2,
                ping_offset=0) -> Samples:
@@ -214,6 +221,18 @@ def embed_scan(scan, rng: np.random.Generator, *, source="auto", bin_rule="otsu+
     owner = np.repeat(np.arange(len(pings)), n_free)
     rr = _volume_ranges(rng, r0[owner], r1[owner])
     d = _beam_directions(rng, len(owner), scan, beam_sampling, beam_extent)
+    gap = np.where(has[owner], r1[owner] - rr, np.inf)
+    if near_free > 0:
+        # the shell just before the first echo decides how thin a wall comes out, and volume
+        # sampling leaves it nearly empty: add samples uniform in range over its last near_depth
+        near = has & (length > 0)
+        own2 = np.repeat(np.nonzero(near)[0], int(near_free))
+        a = np.maximum(r1[own2] - float(near_depth), r0[own2])
+        r2 = a + rng.random(len(own2)) * (r1[own2] - a)
+        owner = np.concatenate([owner, own2])
+        rr = np.concatenate([rr, r2])
+        gap = np.concatenate([gap, r1[own2] - r2])
+        d = np.concatenate([d, _beam_directions(rng, len(own2), scan, beam_sampling, beam_extent)])
     free = _to_world(poses[owner], d * rr[:, None])
 
     # --- occupied groups -------------------------------------------------------------------
@@ -238,7 +257,7 @@ def embed_scan(scan, rng: np.random.Generator, *, source="auto", bin_rule="otsu+
     beams = np.tile([float(scan.beamwidth_h), float(scan.beamwidth_v), range_max], (len(pings), 1))
     spans = np.stack([r0, np.where(has, r_first, np.nan), np.where(has, r_first + run_len * bw, np.nan)], axis=1)
     return Samples(free=free, occupied=occ, origins=poses[:, :3, 3].copy(), info=info, frames=poses.copy(),
-                   beams=beams, spans=spans, occupied_ping=gp.astype(np.int64))
+                   beams=beams, spans=spans, occupied_ping=gp.astype(np.int64), free_gap=gap)
 
 
 def _drop_short_runs(full: np.ndarray, k: int) -> np.ndarray:

@@ -60,7 +60,7 @@ class Coverage:
 
 def choose_inducing(method: str, n: int, free: np.ndarray, occupied: np.ndarray, coverage: Coverage,
                     rng: np.random.Generator, occupied_share: float = 0.5, kmeans_iter: int = 10,
-                    kmeans_points: int = 60000) -> np.ndarray:
+                    kmeans_points: int = 60000, dedup: float = 0.0) -> np.ndarray:
     """(n, 3) inducing points.
 
     ``kmeans``  Lloyd's k-means centres of a subsample of the training points, ``occupied_share`` of
@@ -88,6 +88,8 @@ def choose_inducing(method: str, n: int, free: np.ndarray, occupied: np.ndarray,
         return pts[rng.choice(len(pts), n, replace=False)]
     # k-means
     occ = occupied.reshape(-1, 3)
+    if dedup:
+        occ, free = _one_per_voxel(occ, dedup, rng), _one_per_voxel(free, dedup, rng)
     n_occ = int(round(kmeans_points * occupied_share)) if len(occ) else 0
     n_occ = min(n_occ, len(occ))
     n_free = min(kmeans_points - n_occ, len(free))
@@ -148,3 +150,14 @@ def spacing(points: np.ndarray) -> float:
         return 1.0
     d, _ = cKDTree(points).query(points, k=2)
     return float(np.median(d[:, 1]))
+
+
+def _one_per_voxel(pts: np.ndarray, voxel: float, rng: np.random.Generator) -> np.ndarray:
+    """One random point of each occupied voxel: k-means then follows the area seen, not the
+    number of pings that saw it."""
+    if len(pts) == 0:
+        return pts
+    perm = rng.permutation(len(pts))
+    idx = np.floor(pts[perm] / voxel).astype(np.int64)
+    _, first = np.unique(idx, axis=0, return_index=True)
+    return pts[perm[np.sort(first)]]

@@ -6,6 +6,14 @@ ranges of a ping's first echo (the surfaces that answered); free test points whe
 a ping's first echo and in its line of sight (so the inside of walls, acoustic shadows and surfaces
 that never returned an echo do not count).
 
+Comparing maps: ``evaluate`` returns the test points it drew (``_points``), and another map (the
+OctoMap anchor of ``benchmarks/thesis_mapping.py``) is scored on exactly those points, its unknown
+cells counting as p = 0.5. The insonified tests depend only on the pings, the same for both maps,
+but the free points are also kept only inside ``hm.seen`` (0.25 m voxels holding one of this map's
+training samples after thinning): water that a ping crossed without leaving a sample there is not
+scored. That leans slightly our way (OctoMap's rays do cover it); the surface points are not
+filtered by it. The extracted surfaces are scored on the same true-surface points for both.
+
 :func:`evaluate` returns a flat-ish dict (JSON-ready):
 
 ``auc``                AUC of p: points on the true surfaces against free points >= 0.1 m away
@@ -213,4 +221,7 @@ def _climb(hm, P, fixed_axis, max_shift=None, n=31):
     ts = np.linspace(0, step, n)
     pts = P[:, None, :] + ts[None, :, None] * nrm[:, None, :]
     f = hm.decision_function(pts.reshape(-1, 3)).reshape(len(P), n)
-    return P + ts[np.argmax(f, axis=1)][:, None] * nrm
+    from .model import plateau_step
+
+    # the same rule as HilbertMap.ridge_surface: the wall's face, not the maximum in its shadow
+    return P + plateau_step(f, ts, 0.1)[:, None] * nrm

@@ -28,9 +28,10 @@ from .inducing import Coverage, choose_inducing, spacing
 _PARAMS = dict(
     n_inducing=3000,
     inducing="kmeans",
-    inducing_occupied_share=0.5,
+    inducing_occupied_share=0.85,
+    inducing_voxel=0.1,
     lengthscale="auto",
-    lengthscale_factor=0.6,
+    lengthscale_factor=1.0,
     kernel_cut=1e-5,
     eig_floor=1e-6,
     source="auto",
@@ -45,16 +46,18 @@ _PARAMS = dict(
     free_density=40.0,
     max_free_per_ping=400,
     free_margin=0.0,
+    near_free=32,
+    near_depth=0.3,
     occupied_samples=16,
     occupied_bins="first_run",
     max_run=0.3,
-    occupied_weight="balanced",
+    occupied_weight=5.0,
     occupied_pooling="mean",
     pooling_temperature=1.0,
     beam_sampling="pattern",
     beam_extent=1.0,
     beam_stride=1,
-    alpha=1e-4,
+    alpha=1e-6,
     l1_ratio=0.15,
     schedule="thesis",
     eta0="auto",
@@ -85,7 +88,12 @@ class HilbertMap:
     n_inducing : int            Nystroem inducing points (3000 in the thesis).
     inducing : str              ``kmeans`` (centres of the samples, as the original Hilbert-maps
                                 code), ``grid`` (lattice over the region seen) or ``random``.
-    inducing_occupied_share : float   share of occupied samples among the k-means input points.
+    inducing_occupied_share : float   share of occupied samples among the k-means input points: open
+                                water needs few centres (the intercept keeps it free), the surfaces
+                                need them dense to come out thin and unbroken.
+    inducing_voxel : float      k-means input thinned to one point per voxel of this side (0: off), so
+                                the centres spread over the area seen instead of following how many
+                                pings saw it (walls seen by few pings otherwise break into beads).
     lengthscale : float | "auto"      RBF length l (metres); ``auto`` = ``lengthscale_factor`` times
                                 the median nearest-neighbour spacing of the inducing points.
     kernel_cut : float          kernel values below this are zero (locality; no denormals).
@@ -102,11 +110,18 @@ class HilbertMap:
     free_density : float        free samples per cubic metre of empty beam volume ...
     max_free_per_ping : int     ... at most this many per ping.
     free_margin : float         metres of the empty beam left unsampled before the first echo.
+    near_free, near_depth       extra free samples per ping with an echo, uniform in range over the
+                                last ``near_depth`` metres before it. Volume sampling puts few there,
+                                yet that shell is what tells the wall from the water just in front of
+                                it (the 0.1-0.3 m band); they are thinned on their own per-voxel budget.
     occupied_samples : int      points per full bin (averaged in feature space, eq. 4.6).
     occupied_bins : str         ``first`` (first full bin), ``first_run`` (the full bins contiguous
                                 with it, at most ``max_run`` metres) or ``all`` full bins.
     occupied_weight : "balanced" | float   weight of an occupied bin's embedding relative to a free
-                                sample; ``balanced`` makes both classes weigh the same in total.
+                                sample; ``balanced`` makes both classes weigh the same in total. A
+                                bin's points spread over the beam's 35 deg fan, much of it in front of
+                                the wall: weighed as heavily as all free samples (``balanced``, about
+                                15-30 on the box) they push the wall's face 0.2 m into the water.
     occupied_pooling : str      how a full bin's points make one logit: ``mean`` (kernel mean
                                 embedding, eq. 4.6: the mean of w . phi) or ``lse`` (a soft maximum,
                                 ``tau log mean exp(f / tau)``: an echo needs only one reflector in
@@ -118,7 +133,8 @@ class HilbertMap:
                                 (1: the nominal frustum, where the two-way gain is >= -6 dB).
     beam_stride : float         use every ``beam_stride``-th ping (Algorithm 3's partition; 10/3 keeps
                                 30 % of the beams, evenly spread).
-    alpha, l1_ratio : float     elastic-net strength and l1 share.
+    alpha, l1_ratio : float     elastic-net strength and l1 share (a strong penalty, 1e-4, caps the
+                                logits and leaves walls half a metre thick).
     schedule : str              ``thesis`` (eq. 4.12), ``classic`` (4.11), ``ramos_ott``, ``constant``.
     eta0 : "auto" | float      initial step; ``auto`` = 1 / L with L the largest curvature of the
                                 mean loss at w = 0 (a quarter of the top eigenvalue of the weighted
@@ -177,6 +193,7 @@ class HilbertMap:
             min_level=self.min_level, cfar_train=self.cfar_train, cfar_guard=self.cfar_guard,
             cfar_offset=self.cfar_offset, blanking=self.blanking, free_density=self.free_density,
             max_free_per_ping=self.max_free_per_ping, free_margin=self.free_margin,
+            near_free=self.near_free, near_depth=self.near_depth,
             occupied_samples=self.occupied_samples, occupied_bins=self.occupied_bins, max_run=self.max_run,
             beam_sampling=self.beam_sampling, beam_extent=self.beam_extent, ping_stride=self.beam_stride,
             min_echo_bins=self.min_echo_bins,
@@ -241,6 +258,7 @@ class HilbertMap:
             self.coverage_.add(samples.free)
             self.coverage_.add(samples.occupied.reshape(-1, 3))
             self.echo_coverage_.add(samples.occupied.reshape(-1, 3))
+            self.free_coverage_.add(samples.free)
             self.ping_frames_ = np.concatenate([self.ping_frames_, samples.frames.astype(np.float32)])
             self.ping_beams_ = np.concatenate([self.ping_beams_, samples.beams.astype(np.float32)])
             self.ping_spans_ = np.concatenate([self.ping_spans_, samples.spans.astype(np.float32)])
@@ -270,10 +288,15 @@ class HilbertMap:
             rank = np.arange(len(k)) - np.repeat(start, np.diff(np.r_[start, len(k)]))
             return np.sort(order[rank < int(cap)])
 
-        kf = keep(samples.free, self.max_free_per_voxel)
+        gap = samples.free_gap if samples.free_gap is not None else np.full(len(samples.free), np.inf)
+        near = gap < float(self.near_depth) if self.near_free else np.zeros(len(gap), dtype=bool)
+        # the shell before the echoes is thinned on its own budget, not crowded out by open water
+        i_far, i_near = np.nonzero(~near)[0], np.nonzero(near)[0]
+        kf = np.sort(np.concatenate([i_far[keep(samples.free[i_far], self.max_free_per_voxel)],
+                                     i_near[keep(samples.free[i_near], self.max_free_per_voxel)]]))
         kg = keep(samples.occupied.mean(axis=1) if len(samples.occupied) else np.zeros((0, 3)),
                   self.max_groups_per_voxel)
-        return dataclasses.replace(samples, free=samples.free[kf], occupied=samples.occupied[kg],
+        return dataclasses.replace(samples, free=samples.free[kf], occupied=samples.occupied[kg], free_gap=gap[kf],
                                    occupied_ping=samples.occupied_ping[kg] if samples.occupied_ping is not None else None)
 
     def _set_weights(self, samples: Samples) -> None:
@@ -327,6 +350,8 @@ class HilbertMap:
         self.coverage_.add(samples.occupied.reshape(-1, 3))
         self.echo_coverage_ = Coverage(self.coverage_voxel)
         self.echo_coverage_.add(samples.occupied.reshape(-1, 3))
+        self.free_coverage_ = Coverage(self.coverage_voxel)
+        self.free_coverage_.add(samples.free)
         self.ping_frames_ = samples.frames.astype(np.float32)
         self.ping_beams_ = samples.beams.astype(np.float32)
         self.ping_spans_ = samples.spans.astype(np.float32)
@@ -338,7 +363,7 @@ class HilbertMap:
             axes = [np.arange(lo[a], hi[a], self.coverage_voxel) + 0.5 * self.coverage_voxel for a in range(3)]
             cov.add(np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3))
         nu = choose_inducing(self.inducing, self.n_inducing, samples.free, samples.occupied, cov, self._rng,
-                             occupied_share=self.inducing_occupied_share)
+                             occupied_share=self.inducing_occupied_share, dedup=float(self.inducing_voxel or 0.0))
         if self.lengthscale == "auto":
             ell = float(self.lengthscale_factor) * spacing(nu)
         else:
@@ -610,14 +635,24 @@ class HilbertMap:
             V, Fc = _compact(V, Fc[keep])
         return V, Fc
 
+    def _free_coverage(self) -> Coverage:
+        # maps saved before the free-sample record existed fall back to everything seen
+        return getattr(self, "free_coverage_", None) or self.coverage_
+
     def ridge_surface(self, resolution: float | None = None, bounds=None, level: float = 0.5,
-                      max_shift: float | None = None, only_seen: bool = True):
-        """Triangle mesh on the probability ridge (where p peaks across a surface).
+                      max_shift: float | None = None, only_seen: bool = True, plateau: float | None = 0.1,
+                      front_only: bool = True):
+        """Triangle mesh on the probability ridge: the wall as seen from the free side.
 
         The ``level`` isosurface is extracted, then every vertex moves along the gradient of p
-        (uphill) to the maximum of p on that line within ``max_shift`` (default 1.5 length-scales).
-        A wall's evidence is one-sided (free space in front, shadow behind), so its 0.5 level sits
-        in front of it while the ridge lies on it.
+        (uphill), at most ``max_shift`` (default 1.5 length-scales). A wall's evidence is one-sided:
+        free space in front, and behind it the acoustic shadow, where nothing pulls p down. So p
+        rises across the wall's face and then stays on a plateau that reaches into the shadow, and
+        its maximum drifts behind the wall, the further the sharper the free side is learnt. A
+        vertex therefore stops where p first comes within ``plateau`` of the largest p on its line
+        (``None``: at the maximum itself, the classical ridge). With ``front_only`` the faces on
+        the shadow side of the plateau are dropped: those whose low side (0.1 m downhill) holds no
+        free sample, i.e. was never seen empty.
         """
         self._check_fitted()
         V, Fc = self.isosurface(level=level, resolution=resolution, bounds=bounds, only_seen=only_seen)
@@ -625,22 +660,31 @@ class HilbertMap:
             return V, Fc
         step = max_shift if max_shift is not None else 1.5 * self.lengthscale_
         h = 0.25 * min(self.lengthscale_, 0.2)
-        # gradient by central differences
         offs = np.eye(3) * h
         grad = np.stack([(self.decision_function(V + o) - self.decision_function(V - o)) / (2 * h) for o in offs], axis=1)
         n = grad / np.maximum(np.linalg.norm(grad, axis=1, keepdims=True), 1e-12)
-        ts = np.linspace(0.0, step, 17)
+        ts = np.linspace(0.0, step, 25)
         pts = V[:, None, :] + ts[None, :, None] * n[:, None, :]
         f = self.decision_function(pts.reshape(-1, 3)).reshape(len(V), len(ts))
+        rows = np.arange(len(V))
         k = np.argmax(f, axis=1)
-        # parabolic refinement around the discrete maximum
-        k0 = np.clip(k, 1, len(ts) - 2)
-        fm, f0, fp = f[np.arange(len(V)), k0 - 1], f[np.arange(len(V)), k0], f[np.arange(len(V)), k0 + 1]
-        den = fm - 2 * f0 + fp
-        delta = np.where((den < 0) & (k == k0), 0.5 * (fm - fp) / np.where(den < 0, den, -1), 0.0)
-        t = ts[k0] + np.clip(delta, -1, 1) * (ts[1] - ts[0])
-        t = np.where(k == k0, t, ts[k])
-        return V + t[:, None] * n, Fc
+        if plateau is None:
+            # parabolic refinement around the discrete maximum
+            k0 = np.clip(k, 1, len(ts) - 2)
+            fm, f0, fp = f[rows, k0 - 1], f[rows, k0], f[rows, k0 + 1]
+            den = fm - 2 * f0 + fp
+            delta = np.where((den < 0) & (k == k0), 0.5 * (fm - fp) / np.where(den < 0, den, -1), 0.0)
+            t = ts[k0] + np.clip(delta, -1, 1) * (ts[1] - ts[0])
+            t = np.where(k == k0, t, ts[k])
+        else:
+            t = plateau_step(f, ts, plateau)
+        R = V + t[:, None] * n
+        if front_only:
+            front = self._free_coverage().contains(V - 0.1 * n)
+            keep = front[Fc].all(axis=1)
+            if keep.any():
+                R, Fc = _compact(R, Fc[keep])
+        return R, Fc
 
     def surface(self, method: str = "ridge", **kw):
         """``method='ridge'`` (default) or ``'level'`` (the ``level`` isosurface)."""
@@ -681,6 +725,7 @@ class HilbertMap:
                 fh, params=np.array(json.dumps(params)), state=np.array(json.dumps(state)),
                 inducing_points=self.inducing_points_, weights=self.weights_, dual_coef=self.dual_coef_,
                 coverage_keys=self.coverage_.keys, echo_coverage_keys=self.echo_coverage_.keys,
+                free_coverage_keys=self._free_coverage().keys,
                 sensor_positions=self.sensor_positions_, ping_frames=self.ping_frames_, ping_beams=self.ping_beams_,
                 ping_spans=self.ping_spans_,
             )
@@ -698,6 +743,8 @@ class HilbertMap:
             hm.dual_coef_ = z["dual_coef"]
             hm.coverage_ = Coverage(state["coverage_voxel"], z["coverage_keys"])
             hm.echo_coverage_ = Coverage(state["coverage_voxel"], z["echo_coverage_keys"])
+            if "free_coverage_keys" in z.files:
+                hm.free_coverage_ = Coverage(state["coverage_voxel"], z["free_coverage_keys"])
             hm.sensor_positions_ = z["sensor_positions"]
             hm.ping_frames_ = z["ping_frames"]
             hm.ping_beams_ = z["ping_beams"]
@@ -732,6 +779,19 @@ class MapSlice:
 
     def __iter__(self):  # prob, extent = hm.slice(...)
         return iter((self.prob, self.extent))
+
+
+def plateau_step(f: np.ndarray, ts: np.ndarray, plateau: float) -> np.ndarray:
+    """Per row of logits ``f`` sampled at steps ``ts``: the step where p first comes within
+    ``plateau`` of the row's largest p (linearly interpolated)."""
+    p = _sigmoid(f)
+    rows = np.arange(len(f))
+    target = p.max(axis=1) - float(plateau)
+    k1 = np.argmax(p >= target[:, None], axis=1)
+    km = np.maximum(k1 - 1, 0)
+    lo_p, hi_p = p[rows, km], p[rows, k1]
+    frac = np.where(hi_p > lo_p, np.clip((target - lo_p) / np.maximum(hi_p - lo_p, 1e-12), 0, 1), 1.0)
+    return np.where(k1 > 0, ts[km] + frac * (ts[k1] - ts[km]), ts[0])
 
 
 def _axis_index(axis) -> int:

@@ -304,7 +304,43 @@ def test_short_runs_dropped_and_thinning_caps_voxels(scans):
     smp = hm.embed_all(scans)
     thin = hm._thin(smp)
     assert 0 < len(thin.free) < len(smp.free) and 0 < len(thin.occupied) <= len(smp.occupied)
-    keys = np.floor(thin.free / hm.coverage_voxel).astype(np.int64)
-    _, counts = np.unique(keys, axis=0, return_counts=True)
-    assert counts.max() == 1
-    assert len(thin.occupied_ping) == len(thin.occupied)
+    near = thin.free_gap < hm.near_depth
+    assert near.any() and (~near).any()
+    for part in (near, ~near):  # the shell before the echoes is capped on its own budget
+        keys = np.floor(thin.free[part] / hm.coverage_voxel).astype(np.int64)
+        _, counts = np.unique(keys, axis=0, return_counts=True)
+        assert counts.max() == 1
+    assert len(thin.occupied_ping) == len(thin.occupied) and len(thin.free_gap) == len(thin.free)
+
+
+def test_near_free_samples_fill_the_shell_before_the_echo():
+    s = box_scan(orthogonal_frames()[0], n_pings=30, bearing_step=12, seed=3, rays=200)
+    smp = HilbertMap(random_state=0, near_free=32, near_depth=0.3).embed(s)
+    plain = HilbertMap(random_state=0, near_free=0).embed(s)
+    d = box_distance(smp.free)
+    d0 = box_distance(plain.free)
+    shell = lambda dd: int(np.sum((dd > 0.0) & (dd < 0.3)))
+    assert shell(d) > 4 * max(shell(d0), 1)  # volume sampling leaves the shell nearly empty
+    assert np.all(smp.free_gap[np.isfinite(smp.free_gap)] >= 0)
+    # labelled free only in front of the echo: (almost) nothing behind the walls
+    assert np.mean(d < -0.05) < 0.01
+
+
+def test_wall_is_thin_with_free_space_in_front(scans):
+    hm = HilbertMap(**dict(SMALL, n_passes=6)).fit(scans)
+    # across the wall x = +5 seen by the horizontal scan: wall high, 0.2-0.3 m in front low
+    rng = np.random.default_rng(0)
+    yz = np.stack([rng.uniform(-1.5, 1.5, 500), rng.uniform(-0.5, 0.5, 500)], axis=1)
+    at = lambda x: hm.predict_proba(np.column_stack([np.full(500, x), yz]))
+    assert np.mean(at(5.0)) > 0.6
+    assert np.mean(at(4.75)) < min(0.5, np.mean(at(5.0)) - 0.15)
+    assert np.mean(at(4.0)) < 0.2
+    # the surface is extracted on the wall's face, not on the maximum that drifts into the shadow
+    def offset(**kw):
+        V, _ = hm.surface("ridge", **kw)
+        near = V[np.abs(V[:, 0] - 5.0) < 0.5]
+        assert len(near) > 0
+        return np.median(np.abs(near[:, 0] - 5.0))
+
+    face, classic = offset(), offset(plateau=None, front_only=False)
+    assert face < 0.25 * hm.lengthscale_ and face < 0.6 * classic
