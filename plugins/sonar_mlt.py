@@ -114,7 +114,7 @@ class SonarMLTIntegrator(SonarIntegrator):
         boot, chains, mutations = self.plan(n_pings, spp)
         frames = PingFrames(sensor.ping_poses(pose))
         dims = n_dims(depth)
-        ctx = _Context(scene, sensor, frames, depth, n_pings * chains)
+        ctx = _Context(scene, sensor, frames, depth)
         seed = int(seed) & 0xFFFFFFFF
         n = n_pings * chains
         n_m = chains * mutations                          # Metropolis samples per ping
@@ -138,19 +138,21 @@ class SonarMLTIntegrator(SonarIntegrator):
             # 2. Start states resampled in proportion to f (pings without echoes get none).
             start = _resample(f_np, chains, np.random.default_rng([seed, _SALT_START]))
             chain_ping = np.repeat(np.arange(n_pings, dtype=np.uint32), chains)
-            elem = dr.arange(mi.UInt32, n * dims)
-            dims_o = dr.opaque(mi.UInt32, dims)
-            e_lane = elem // dims_o
             ping_c = mi.UInt32(chain_ping)
-            hs = HashSamples(dr.opaque(mi.UInt32, seed ^ _SALT_BOOT), dr.gather(mi.UInt32, ping_c, e_lane),
-                             dr.gather(mi.UInt32, mi.UInt32(start.ravel()), e_lane))
-            U = hs.get(elem - e_lane * dims_o)
             lane_c = dr.arange(mi.UInt32, n)
-            # A start state is a bootstrap path: take its total and records instead of tracing it again.
+            # A start state is a bootstrap path: its samples are regenerated from the hash, its total
+            # and records gathered instead of traced again.
             src = mi.UInt32(chain_ping * np.uint32(boot) + start.ravel())
+            boot_seed, start_c = dr.opaque(mi.UInt32, seed ^ _SALT_BOOT), mi.UInt32(start.ravel())
+
+            def start_samples(lane, dim):
+                return HashSamples(boot_seed, dr.gather(mi.UInt32, ping_c, lane),
+                                   dr.gather(mi.UInt32, start_c, lane)).get(dim)
+
+            mutate = _Mutation(start_samples, lane_c, dims, dr.opaque(mi.UInt32, seed ^ _SALT_MUT), self)
             f_cur = dr.gather(mi.Float, f_boot, src)
-            rec_src = dr.gather(mi.UInt32, src, ctx.rec_lane) * ctx.depth_o + (
-                dr.arange(mi.UInt32, n * depth) - ctx.rec_lane * ctx.depth_o)
+            rec_lane, rec_k = ctx.owner(n * depth)
+            rec_src = dr.gather(mi.UInt32, src, rec_lane) * ctx.depth_o + rec_k
             bins_cur = dr.gather(mi.UInt32, bins_boot, rec_src)
             vals_cur = dr.gather(mi.Float, vals_boot, rec_src)
             active = mi.Bool(live[chain_ping])
@@ -159,19 +161,18 @@ class SonarMLTIntegrator(SonarIntegrator):
             # the chain states samples of f / b; the balance heuristic over the two gives every
             # sample the weight 1 / (f + p_uni b) (per Metropolis sample, times b / n_m below).
             # Expected values: a proposal adds a (+1 if a large step), the current state 1 - a.
-            pu_b = dr.opaque(mi.Float, p_uni) * mi.Float(norm[chain_ping].astype(np.float32))
+            pu_norm = mi.Float((p_uni * norm).astype(np.float32))   # p_uni b per ping
+            pu_b = dr.gather(mi.Float, pu_norm, ping_c)
             hist = dr.zeros(mi.Float64, n_pings * n_bins)
-            d_b = f_boot + dr.gather(mi.Float, mi.Float((p_uni * norm).astype(np.float32)), ping)
+            d_b = f_boot + dr.gather(mi.Float, pu_norm, ping)
             ctx.splat(hist, bins_boot, vals_boot, dr.select(d_b > 0, 1.0 / d_b, 0.0), ping,
-                      dr.gather(mi.Bool, mi.Bool(live), ping),
-                      rec_lane=dr.arange(mi.UInt32, lanes * depth) // ctx.depth_o)
+                      dr.gather(mi.Bool, mi.Bool(live), ping))
             # The weight the current state has gathered, not yet splatted (opaque: a literal zero
             # would give the first mutation a kernel of its own).
             w_cur = dr.opaque(mi.Float, 0.0, n)
-            dr.eval(U, f_cur, bins_cur, vals_cur, hist, w_cur)
+            dr.eval(mutate.U, f_cur, bins_cur, vals_cur, hist, w_cur)
 
             # 3-4. Mutations, one wavefront per step.
-            mutate = _Mutation(U, lane_c, dims, dr.opaque(mi.UInt32, seed ^ _SALT_MUT), self)
             for m in range(mutations):
                 large = mutate.step(m)
                 f_new, bins_new, vals_new = ctx.evaluate(mutate, ping_c, lane_c)
@@ -181,7 +182,7 @@ class SonarMLTIntegrator(SonarIntegrator):
                 w_new = dr.select(d_new > 0, (a + dr.select(large, 1.0, 0.0)) / d_new, 0.0)
                 w_cur += dr.select(d_cur > 0, (1.0 - a) / d_cur, 0.0)
                 accept = mutate.accept(a)
-                rec_accept = dr.gather(mi.Bool, accept, ctx.rec_lane)
+                rec_accept = dr.gather(mi.Bool, accept, rec_lane)
                 # Lazy splatting: a state's weight is written once, when the chain leaves it (or
                 # at the end); a rejected proposal's at once.
                 ctx.splat(hist, dr.select(rec_accept, bins_cur, bins_new), dr.select(rec_accept, vals_cur, vals_new),
@@ -240,14 +241,16 @@ class _Mutation:
     writing and reading a second ``U`` every step.
     """
 
-    def __init__(self, U, lane, dims, seed, params):
-        self.U, self.lane, self.dims = U, lane, dims
+    def __init__(self, start, lane, dims, seed, params):
+        """``start(lane, dim)``: coordinate ``dim`` of chain ``lane``'s start state."""
+        self.lane, self.dims = lane, dims
         self.seed = seed
         self.p_large = dr.opaque(mi.Float, params.large_step)
         self.s1 = dr.opaque(mi.Float, params.small_step_min)
         self.log_ratio = dr.opaque(mi.Float, math.log(params.small_step_max / params.small_step_min))
-        self.elem = dr.arange(mi.UInt32, dr.width(U))
+        self.elem = dr.arange(mi.UInt32, dr.width(lane) * dims)
         self.e_lane = self.elem // dr.opaque(mi.UInt32, dims)
+        self.U = start(self.e_lane, self.elem - self.e_lane * dr.opaque(mi.UInt32, dims))
 
     def step(self, m):
         """Start mutation ``m``: decide each chain's large steps (returned)."""
@@ -284,14 +287,12 @@ class _Mutation:
 class _Context:
     """What one render's path evaluations share: scene, frames, bins, per-bounce records."""
 
-    def __init__(self, scene, sensor, frames, depth, n_chains):
+    def __init__(self, scene, sensor, frames, depth):
         self.scene, self.sensor, self.frames = scene, sensor, frames
         self.depth = depth
         self.depth_o = dr.opaque(mi.UInt32, depth)
         self.bins = RangeBins(sensor)
         self.absorption = dr.opaque(mi.Float, sensor.absorption)
-        # Chain of each per-bounce record slot (lane * depth + k).
-        self.rec_lane = dr.arange(mi.UInt32, n_chains * depth) // self.depth_o
 
     def trace(self, samples, ping, lane, f, bins, vals):
         """Trace one path per lane; add its in-window echo energy to ``f[lane]`` and, when
@@ -319,8 +320,13 @@ class _Context:
         self.trace(samples, ping, lane, f, bins, vals)
         return f, bins, vals
 
-    def splat(self, hist, bins, vals, weight, ping, active, rec_lane=None):
-        rec_lane = self.rec_lane if rec_lane is None else rec_lane
+    def owner(self, n_records):
+        """Lane and bounce of each record slot ``lane * depth + k`` of ``n_records``."""
+        lane = dr.arange(mi.UInt32, n_records) // self.depth_o
+        return lane, dr.arange(mi.UInt32, n_records) - lane * self.depth_o
+
+    def splat(self, hist, bins, vals, weight, ping, active):
+        rec_lane, _ = self.owner(dr.width(bins))
         w = dr.gather(mi.Float, weight, rec_lane)
         p = dr.gather(mi.UInt32, ping, rec_lane)
         ok = (vals > 0) & dr.gather(mi.Bool, active, rec_lane)
