@@ -54,6 +54,10 @@ class Samples:
     occupied_ping: np.ndarray = None
     free_gap: np.ndarray = None
 
+    def gaps(self) -> np.ndarray:
+        """Metres from each free sample to its ping's first echo (inf: no echo, or not recorded)."""
+        return self.free_gap if self.free_gap is not None else np.full(len(self.free), np.inf)
+
     @staticmethod
     def concatenate(parts: list["Samples"]) -> "Samples":
         m = max((p.occupied.shape[1] for p in parts), default=1)
@@ -72,12 +76,8 @@ class Samples:
             beams=np.concatenate([p.beams for p in parts]) if parts else np.zeros((0, 3)),
             spans=np.concatenate([p.spans for p in parts]) if parts else np.zeros((0, 3)),
             occupied_ping=_offset_concat([p.occupied_ping for p in parts], [len(p.frames) for p in parts]),
-            free_gap=np.concatenate([_gap(p) for p in parts]) if parts else np.zeros(0),
+            free_gap=np.concatenate([p.gaps() for p in parts]) if parts else np.zeros(0),
         )
-
-
-def _gap(p: "Samples") -> np.ndarray:
-    return p.free_gap if p.free_gap is not None else np.full(len(p.free), np.inf)
 
 
 def _offset_concat(arrays, sizes):

@@ -288,7 +288,7 @@ class HilbertMap:
             rank = np.arange(len(k)) - np.repeat(start, np.diff(np.r_[start, len(k)]))
             return np.sort(order[rank < int(cap)])
 
-        gap = samples.free_gap if samples.free_gap is not None else np.full(len(samples.free), np.inf)
+        gap = samples.gaps()
         near = gap < float(self.near_depth) if self.near_free else np.zeros(len(gap), dtype=bool)
         # the shell before the echoes is thinned on its own budget, not crowded out by open water
         i_far, i_near = np.nonzero(~near)[0], np.nonzero(near)[0]
