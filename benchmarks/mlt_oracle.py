@@ -10,11 +10,16 @@ compares, per path evaluation, the variance of the bins of
   no cost for b) - the best ``sonar_mlt`` could ever do per path;
 * the normalisation alone: ``b`` from uniform paths has the relative variance CV^2 of ``f``, and
   its error scales every bin of a ping, so ``PT variance / (CV^2 b^2)`` bounds the gain of any
-  estimator whose per-ping total comes from uniform samples, however good its chains.
+  estimator whose per-ping total comes from uniform samples, however good its chains;
+* the same two for one target over the whole scan (``sonar_mlt``'s ``normalisation="scan"``:
+  the ping a primary coordinate, paths spread over the pings in proportion to their echoes, one
+  ``B`` estimated from all uniform paths).
 
 Prints one JSON object per scene: ``ideal_variance_ratio`` (PT / ideal Metropolis; the square
-root is the best equal-sample error ratio), ``normalisation_bound`` (PT / b-only variance), the
-median CV^2 of f and the share of paths with f = 0.
+root is the best equal-sample error ratio, ``ideal_error_ratio``), ``normalisation_bound_error_ratio``
+(PT / b-only), ``global_ideal_error_ratio`` and ``global_normalisation_bound_error_ratio`` (one
+target over the scan), the spread of the per-ping totals (``ping_total_cv2``), the median CV^2 of
+f and the share of paths with f = 0.
 
     python benchmarks/mlt_oracle.py [--scenes box,slot_chamber,glossy_corridor] [--paths 4096]
 """
@@ -51,7 +56,8 @@ def analyse(name, paths, seed=7):
     bins = bins.numpy().reshape(P, paths, depth)
     vals = vals.numpy().astype(np.float64).reshape(P, paths, depth)
     var_pt = var_ideal = var_b = norm2 = 0.0
-    cv2 = []
+    cv2, g2f, mean2 = [], [], []
+    B_all = f.mean()
     for p in range(P):
         per_bin = np.zeros((paths, B))
         for k in range(depth):
@@ -65,10 +71,23 @@ def analyse(name, paths, seed=7):
         share = np.divide(per_bin, f[p][:, None], out=np.zeros_like(per_bin), where=f[p][:, None] > 0)
         w = f[p] / f[p].sum()
         var_ideal += b ** 2 * ((w[:, None] * share ** 2).sum(0) - (w[:, None] * share).sum(0) ** 2).sum()
+        # one target over all pings: E_p[g^2 / f] summed over the ping's bins, and its norm
+        g2f.append((np.divide(per_bin ** 2, f[p][:, None], out=np.zeros_like(per_bin),
+                              where=f[p][:, None] > 0)).sum(1).mean())
+        mean2.append((mean ** 2).sum())
         c = (f[p] ** 2).mean() / b ** 2 - 1.0
         cv2.append(c)
         var_b += c * (mean ** 2).sum()
+    # Global target (the ping a primary coordinate, one normalisation B over all pings): an ideal
+    # sampler spends P * paths samples in proportion to f over (ping, U); bin (p, j) gets variance
+    # (B E_p[g^2/f] - I^2 / P) / paths, and B from all P * paths uniform paths scales every bin.
+    var_glob = float(np.sum(B_all * np.asarray(g2f) - np.asarray(mean2) / P))
+    cv2_all = (f ** 2).mean() / B_all ** 2 - 1.0
+    var_B = cv2_all / P * norm2
     return {"scene": name, "paths_per_ping": paths,
+            "global_ideal_error_ratio": float(np.sqrt(var_pt / var_glob)),
+            "global_normalisation_bound_error_ratio": float(np.sqrt(var_pt / var_B)),
+            "ping_total_cv2": float(np.var(f.mean(1)) / np.mean(f.mean(1)) ** 2),
             "pt_rel_error_per_path": float(np.sqrt(var_pt / norm2)),
             "ideal_variance_ratio": float(var_pt / var_ideal),
             "ideal_error_ratio": float(np.sqrt(var_pt / var_ideal)),

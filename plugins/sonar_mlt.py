@@ -21,21 +21,26 @@ class SonarMLTIntegrator(SonarIntegrator):
 
     The target of a path is the sum of its per-bounce echo energies that land in the range
     window: ``f(U) = sum_k e_k(U)``, with ``U`` the primary-sample vector of the echo path that
-    ``sonar_tof`` traces (the same function, `echo_path.trace_echoes`). For every ping:
+    ``sonar_tof`` traces (the same function, `echo_path.trace_echoes`). With
+    ``normalisation="scan"`` (the default) the ping is one more primary coordinate: the chains
+    sample ``f`` over (ping, ``U``) of the whole scan and go to the pings where the echoes are;
+    with ``"ping"`` every ping is a target of its own. Then:
 
-    1. a bootstrap of uniform paths estimates the normalisation ``b = E[f]``;
+    1. a bootstrap of uniform paths (``bootstrap`` per ping) estimates the normalisation
+       ``b = E[f]``, over the scan or per ping;
     2. chains start from bootstrap paths resampled in proportion to ``f`` (their totals and echo
        records are reused, not traced again);
-    3. each mutation is a large step (a fresh uniform ``U``) with probability ``large_step``, else a
-       Kelemen small step (every coordinate moved by ``+-s``, ``s`` log-uniform between
-       ``small_step_min`` and ``small_step_max``, wrapped into [0, 1));
+    3. each mutation is a large step (a fresh uniform ``U``, and ping) with probability
+       ``large_step``, else a Kelemen small step (every coordinate moved by ``+-s``, ``s``
+       log-uniform between ``small_step_min`` and ``small_step_max``, wrapped into [0, 1); the
+       ping coordinate by ``ping_step`` times that);
     4. expected-value splatting combined with the uniform samples (Kelemen's combination, the
        balance heuristic between the chain density ``f / b`` and the ``p_uni`` uniform samples per
        chain sample: the bootstrap and the large steps): a sample adds its echoes ``e_k``, each to
        its own range bin, with weight ``w / (f + p_uni b)``, ``w`` = ``a`` (+1 for a large step)
        for the proposal, ``1 - a`` for the current state, 1 for a bootstrap path; the histogram is
-       scaled by ``b / (chains mutations)``. Where ``f`` is small against ``p_uni b`` the uniform
-       samples carry the estimate, where it is large the chains do.
+       scaled by ``b / (chains mutations)`` (chains and mutations per ping). Where ``f`` is small
+       against ``p_uni b`` the uniform samples carry the estimate, where it is large the chains do.
 
     All chains of all pings run in one wavefront; every quantity that changes between
     mutations or renders is opaque, so a render compiles its kernels once. A proposal is computed
@@ -48,21 +53,29 @@ class SonarMLTIntegrator(SonarIntegrator):
     Parameter        Default  Meaning
     ================ ======== =================================================================
     max_depth        5        surface bounces per path (1 = single bounce)
-    chains           0        chains per ping; 0 chooses about 2^16 chains in all (at least 32
-                              and at most spp/16 per ping)
+    normalisation    scan     ``scan``: one target over all pings (the ping a primary
+                              coordinate, one ``b``); ``ping``: one target and ``b`` per ping
+    chains           0        chains per ping (``scan``: the total is chains x pings); 0 chooses
+                              about 2^13 chains in all for ``scan`` (at most spp/16 per ping),
+                              about 2^16 for ``ping`` (32 to spp/16 per ping)
     mutations        0        mutations per chain; 0 spends the ``spp`` budget
-    large_step       0.7      probability of a large step
+    large_step       0.1      probability of a large step
     small_step_min   1/128    smallest small-step size (Kelemen's s1)
     small_step_max   1/4      largest small-step size (Kelemen's s2)
+    ping_step        1        small steps of the ping coordinate, as a fraction of the others'
+                              (``scan`` only; 0 changes pings by large steps alone)
     bootstrap        0        bootstrap paths per ping; 0 takes half of ``spp`` (at least 4x chains)
     ================ ======== =================================================================
 
-    The defaults come from `benchmarks/mlt.py`-style measurements on the scenes of
-    ``scenes_xml/`` (box, slot chamber, glossy corridor): larger small steps than Kelemen's
-    (1/1024 to 1/64), more large steps (0.7 rather than 0.3) and half the budget in the bootstrap
-    (rather than 10 %: its paths are samples of the combination too, and b's error scales every
-    bin of a ping) lowered the error at equal time on all three, i.e. on these scenes the chains'
-    local exploration pays less than fresh samples.
+    Why these defaults (measured on ``scenes_xml/``, relative L2 error against a 1M-spp reference
+    at equal spp): with a target per ping, ``b`` of every ping comes from that ping's uniform paths
+    and its error (the CV^2 of ``f``) scales all bins of the ping, which bounds any gain over path
+    tracing to 1.4-1.8x on these scenes (`benchmarks/mlt_oracle.py`); the best per-ping settings
+    were the ones closest to path tracing (large_step 0.7, 2^16 short chains). One target over the
+    scan shares ``b`` (its error falls by the number of pings), so the chains can pay off: on the
+    glossy corridor at 16384 spp the error is 0.015 against path tracing's 0.034, where the per-ping
+    mode lost. It needs long chains (few, 2^13, so that they forget the bootstrap's spread of starts
+    over pings) and mostly small steps (0.1 large): 2^16 chains or large_step 0.3-0.5 lost again.
 
     ``spp`` counts path evaluations per ping (bootstrap plus chains x mutations), so equal
     ``spp`` means about equal work for ``sonar_tof`` and ``sonar_mlt``.
@@ -73,10 +86,12 @@ class SonarMLTIntegrator(SonarIntegrator):
         self.max_depth = check_max_depth(props.get("max_depth", 5), "sonar_mlt")
         self.chains = int(props.get("chains", 0))
         self.mutations = int(props.get("mutations", 0))
-        self.large_step = float(props.get("large_step", 0.7))
+        self.large_step = float(props.get("large_step", 0.1))
         self.small_step_min = float(props.get("small_step_min", 1.0 / 128.0))
         self.small_step_max = float(props.get("small_step_max", 1.0 / 4.0))
         self.bootstrap = int(props.get("bootstrap", 0))
+        self.normalisation = str(props.get("normalisation", "scan"))
+        self.ping_step = float(props.get("ping_step", 1.0))
         self._check()
 
     def _check(self):
@@ -88,6 +103,10 @@ class SonarMLTIntegrator(SonarIntegrator):
             bad("mutations", self.mutations, "0 to spend spp, or a positive number per chain")
         if self.bootstrap < 0:
             bad("bootstrap", self.bootstrap, "0 for automatic, or a positive number of paths per ping")
+        if self.normalisation not in ("scan", "ping"):
+            bad("normalisation", self.normalisation, "'scan' (one target over all pings) or 'ping'")
+        if not 0.0 <= self.ping_step <= 1.0:
+            bad("ping_step", self.ping_step, "a fraction in [0, 1] of the small step applied to the ping")
         if not 0.0 <= self.large_step <= 1.0:
             bad("large_step", self.large_step, "a probability in [0, 1]")
         if not 0.0 < self.small_step_min <= self.small_step_max < 0.5:
@@ -100,7 +119,12 @@ class SonarMLTIntegrator(SonarIntegrator):
         spp = int(spp)
         if spp < 1:
             raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
-        chains = self.chains or int(np.clip((1 << 16) // n_pings, 32, max(32, spp // 16)))
+        if self.normalisation == "scan":
+            # about 8k chains in all: the chains share one target, so fewer, longer chains forget
+            # their (resampled) starts, whose spread over the pings is the bootstrap's noise
+            chains = self.chains or int(np.clip((1 << 13) // n_pings, 1, max(1, spp // 16)))
+        else:
+            chains = self.chains or int(np.clip((1 << 16) // n_pings, 32, max(32, spp // 16)))
         boot = self.bootstrap or max(4 * chains, spp // 2)
         mutations = self.mutations or max(1, (spp - boot) // chains)
         return boot, chains, mutations
@@ -131,25 +155,41 @@ class SonarMLTIntegrator(SonarIntegrator):
                       ping, lane, f_boot, bins_boot, vals_boot)
             dr.eval(f_boot, bins_boot, vals_boot)
             f_np = f_boot.numpy().astype(np.float64).reshape(n_pings, boot)
-            norm = f_np.mean(axis=1)
-            live = norm > 0
+            per_ping = self.normalisation == "ping"
+            if per_ping:
+                norm = f_np.mean(axis=1)
+                live = norm > 0
+            else:
+                # One target over (ping, U): the ping is a primary coordinate, so b is the mean over
+                # all bootstrap paths and the chains spend their time where the scan's echoes are.
+                norm = np.full(n_pings, f_np.mean())
+                live = np.full(n_pings, f_np.mean() > 0)
             self.last_plan = {"bootstrap": boot, "chains": chains, "mutations": mutations}
 
-            # 2. Start states resampled in proportion to f (pings without echoes get none).
-            start = _resample(f_np, chains, np.random.default_rng([seed, _SALT_START]))
-            chain_ping = np.repeat(np.arange(n_pings, dtype=np.uint32), chains)
+            # 2. Start states resampled in proportion to f (per ping, or over the whole scan).
+            rng = np.random.default_rng([seed, _SALT_START])
+            if per_ping:
+                start = _resample(f_np, chains, rng).ravel()
+                chain_ping = np.repeat(np.arange(n_pings, dtype=np.uint32), chains)
+            else:
+                pooled = _resample(f_np.reshape(1, -1), n, rng).ravel()
+                chain_ping, start = (pooled // boot).astype(np.uint32), (pooled % boot).astype(np.uint32)
             ping_c = mi.UInt32(chain_ping)
             lane_c = dr.arange(mi.UInt32, n)
             # A start state is a bootstrap path: its samples are regenerated from the hash, its total
             # and records gathered instead of traced again.
-            src = mi.UInt32(chain_ping * np.uint32(boot) + start.ravel())
-            boot_seed, start_c = dr.opaque(mi.UInt32, seed ^ _SALT_BOOT), mi.UInt32(start.ravel())
+            src = mi.UInt32(chain_ping * np.uint32(boot) + start)
+            boot_seed, start_c = dr.opaque(mi.UInt32, seed ^ _SALT_BOOT), mi.UInt32(start)
+            n_pings_o = dr.opaque(mi.UInt32, n_pings)
 
             def start_samples(lane, dim):
-                return HashSamples(boot_seed, dr.gather(mi.UInt32, ping_c, lane),
-                                   dr.gather(mi.UInt32, start_c, lane)).get(dim)
+                p = dr.gather(mi.UInt32, ping_c, lane)
+                u = HashSamples(boot_seed, p, dr.gather(mi.UInt32, start_c, lane)).get(dim)
+                # the ping coordinate: uniform inside the start ping's cell
+                return dr.select(dim == dims, (mi.Float(p) + u) / mi.Float(n_pings_o), u)
 
-            mutate = _Mutation(start_samples, lane_c, dims, dr.opaque(mi.UInt32, seed ^ _SALT_MUT), self)
+            mutate = _Mutation(start_samples, lane_c, dims + (0 if per_ping else 1),
+                               dr.opaque(mi.UInt32, seed ^ _SALT_MUT), self, ping_dim=None if per_ping else dims)
             f_cur = dr.gather(mi.Float, f_boot, src)
             rec_lane, rec_k = ctx.owner(n * depth)
             rec_src = dr.gather(mi.UInt32, src, rec_lane) * ctx.depth_o + rec_k
@@ -175,7 +215,9 @@ class SonarMLTIntegrator(SonarIntegrator):
             # 3-4. Mutations, one wavefront per step.
             for m in range(mutations):
                 large = mutate.step(m)
-                f_new, bins_new, vals_new = ctx.evaluate(mutate, ping_c, lane_c)
+                ping_new = ping_c if per_ping else dr.minimum(
+                    mi.UInt32(mutate.get(dims) * mi.Float(n_pings_o)), n_pings_o - 1)
+                f_new, bins_new, vals_new = ctx.evaluate(mutate, ping_new, lane_c)
                 a = dr.select(f_cur > 0, dr.minimum(1.0, f_new / dr.select(f_cur > 0, f_cur, 1.0)), 1.0)
                 d_new = f_new + pu_b
                 d_cur = f_cur + pu_b
@@ -186,12 +228,14 @@ class SonarMLTIntegrator(SonarIntegrator):
                 # Lazy splatting: a state's weight is written once, when the chain leaves it (or
                 # at the end); a rejected proposal's at once.
                 ctx.splat(hist, dr.select(rec_accept, bins_cur, bins_new), dr.select(rec_accept, vals_cur, vals_new),
-                          dr.select(accept, w_cur, w_new), ping_c, active)
+                          dr.select(accept, w_cur, w_new), dr.select(accept, ping_c, ping_new), active)
                 w_cur = dr.select(accept, w_new, w_cur)
+                if not per_ping:
+                    ping_c = dr.select(accept, ping_new, ping_c)
                 bins_cur = dr.select(rec_accept, bins_new, bins_cur)
                 vals_cur = dr.select(rec_accept, vals_new, vals_cur)
                 f_cur = dr.select(accept, f_new, f_cur)
-                dr.eval(mutate.U, f_cur, bins_cur, vals_cur, hist, w_cur)
+                dr.eval(mutate.U, f_cur, bins_cur, vals_cur, hist, w_cur, ping_c)
                 if progress is not None:
                     progress(boot + (m + 1) * chains, boot + mutations * chains)
             ctx.splat(hist, bins_cur, vals_cur, w_cur, ping_c, active)
@@ -241,10 +285,13 @@ class _Mutation:
     writing and reading a second ``U`` every step.
     """
 
-    def __init__(self, start, lane, dims, seed, params):
-        """``start(lane, dim)``: coordinate ``dim`` of chain ``lane``'s start state."""
+    def __init__(self, start, lane, dims, seed, params, ping_dim=None):
+        """``start(lane, dim)``: coordinate ``dim`` of chain ``lane``'s start state; coordinate
+        ``ping_dim`` (if any) is the ping, whose small steps are ``params.ping_step`` times the others'."""
         self.lane, self.dims = lane, dims
         self.seed = seed
+        self.ping_dim = ping_dim
+        self.ping_step = dr.opaque(mi.Float, params.ping_step)
         self.p_large = dr.opaque(mi.Float, params.large_step)
         self.s1 = dr.opaque(mi.Float, params.small_step_min)
         self.log_ratio = dr.opaque(mi.Float, math.log(params.small_step_max / params.small_step_min))
@@ -258,19 +305,21 @@ class _Mutation:
         self.large = mi.sample_tea_float32(self.lane + self.key0, self.key1 ^ 0x9E3779B9, 8) < self.p_large
         return self.large
 
-    def _proposal(self, index, u, large):
+    def _proposal(self, index, u, large, dim):
         # Per coordinate: the small step's size and sign and a large-step value, from one cheap
         # hash of (coordinate, step key); TEA is kept for the per-chain decisions.
         v0 = _mix32(_mix32(index ^ self.key0) + self.key1)
         v1 = _mix32(v0 ^ 0x9E3779B9)
         s = self.s1 * dr.exp(self.log_ratio * _unit(v0))
+        if self.ping_dim is not None:
+            s = dr.select(dim == self.ping_dim, s * self.ping_step, s)
         moved = u + dr.select((v0 & 1) == 0, s, -s)
         moved -= dr.floor(moved)
         return dr.select(large, _unit(v1), moved)
 
     def get(self, dim):
         index = self.lane * self.dims + mi.UInt32(dim)
-        return self._proposal(index, dr.gather(mi.Float, self.U, index), self.large)
+        return self._proposal(index, dr.gather(mi.Float, self.U, index), self.large, dim)
 
     def get2(self, dim):
         return mi.Point2f(self.get(dim), self.get(mi.UInt32(dim) + 1))
@@ -279,7 +328,8 @@ class _Mutation:
         """Draw each chain's acceptance with probability ``a``; move the accepted chains' ``U``."""
         accept = mi.sample_tea_float32(self.lane + self.key0, self.key1 ^ 0x27D4EB2F, 8) < a
         moving = dr.gather(mi.Bool, accept, self.e_lane)
-        self.U = dr.select(moving, self._proposal(self.elem, self.U, dr.gather(mi.Bool, self.large, self.e_lane)),
+        dim = self.elem - self.e_lane * dr.opaque(mi.UInt32, self.dims)
+        self.U = dr.select(moving, self._proposal(self.elem, self.U, dr.gather(mi.Bool, self.large, self.e_lane), dim),
                            self.U)
         return accept
 

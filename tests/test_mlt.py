@@ -24,8 +24,13 @@ def scene_files():
 @pytest.mark.parametrize("name, params", [(f, {}) for f in scene_files()] + [
     # Mostly small steps with Kelemen's own step sizes: the chains, not the uniform samples of
     # the combination, carry the estimate.
-    ("box.xml", {"large_step": 0.05, "small_step_min": 1 / 1024, "small_step_max": 1 / 64}),
-    ("glossy_corridor.xml", {"large_step": 0.05})])
+    ("box.xml", {"large_step": 0.01, "small_step_min": 1 / 1024, "small_step_max": 1 / 64}),
+    ("glossy_corridor.xml", {"large_step": 0.01}),
+    # One target per ping (the chains never change ping), with the settings that suit it.
+    ("box.xml", {"normalisation": "ping", "large_step": 0.7}),
+    ("slot_chamber.xml", {"normalisation": "ping", "large_step": 0.05}),
+    # The ping coordinate changes by large steps only.
+    ("glossy_corridor.xml", {"ping_step": 0.0})])
 def test_mlt_has_the_expectation_of_path_tracing(mitsonar_mod, name, params):
     """Welch t tests on block sums (and the total) of independent renders, Bonferroni-corrected so
     that the whole test raises a false alarm with probability 1e-3 when both estimators have the
@@ -64,8 +69,16 @@ def test_budget_plan_and_parameters(mitsonar_mod):
     custom = mi.load_dict({"type": "sonar_mlt", "chains": 64, "mutations": 10, "bootstrap": 512,
                            "large_step": 0.5, "small_step_min": 0.001, "small_step_max": 0.05})
     assert custom.plan(10, 4096) == (512, 64, 10)
+    # one target over the scan: about 2^13 chains in all, whatever the number of pings
+    for pings in (1, 200, 8192):
+        boot, chains, mutations = mlt.plan(pings, 1 << 16)
+        assert 0.5 * (1 << 13) <= chains * pings <= 1 << 13 and boot + chains * mutations <= 1 << 16
+    per_ping = mi.load_dict({"type": "sonar_mlt", "normalisation": "ping"})
+    assert per_ping.plan(200, 4096)[1] * 200 > 1 << 14
     for bad, msg in ((dict(large_step=1.5), "large_step"), (dict(chains=-1), "chains"),
-                     (dict(small_step_min=0.1, small_step_max=0.01), "small_step")):
+                     (dict(small_step_min=0.1, small_step_max=0.01), "small_step"),
+                     (dict(normalisation="pixel"), "normalisation.*'scan'.*'ping'"),
+                     (dict(ping_step=2.0), "ping_step")):
         with pytest.raises(Exception, match=msg):
             mi.load_dict({"type": "sonar_mlt", **bad})
 
