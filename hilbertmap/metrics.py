@@ -25,7 +25,10 @@ filtered by it. The extracted surfaces are scored on the same true-surface point
                        from the truth to it (completeness), ``_fscore@0.1`` and ``_fscore@0.2``
 ``slice_*``            in the plane through the sonar (``slice_axis``, default z): distance from the
                        0.5 contour to the truth (``slice_level_max``, ``_mean``) and back
-                       (``slice_level_comp_max``), the same for the ridge, mean p on the truth lines
+                       (``slice_level_comp_max``), the same for the ridge, mean p on the truth lines;
+                       ``slice_water_*``: the part of the 0.5 contour that bounds the water the
+                       sonar is in (the thesis's half-probability region, Fig. 5.2), leaving out
+                       the contour that closes the p > 0.5 band behind the walls, in their shadow
 ``params``             the map's hyper-parameters and learnt sizes that produced the result
 """
 from __future__ import annotations
@@ -188,12 +191,20 @@ def slice_metrics(hm, vertices, faces, axis="z", value=None, resolution: float =
     P = np.zeros((len(P2), 3))
     P[:, others[0]], P[:, others[1]] = P2[:, 0], P2[:, 1]
     P[:, a] = value
-    P = P[hm.seen(P, dilate=0)]
+    keep = hm.seen(P, dilate=0)
+    # The thesis's half-probability region (Fig. 5.2): the water the sonar is in, bounded by the
+    # 0.5 contour. Its boundary is the part of the contour the pings looked at; the rest of the
+    # contour closes the p > 0.5 band behind the walls, in their acoustic shadow.
+    water = _water_boundary(sl, P2, hm.sensor_positions_[:, others])[keep]
+    P = P[keep]
     d_lvl = geo.point_mesh_distance(P, vertices, faces) if len(P) else np.zeros(0)
     res.update(_stats("slice_level", d_lvl))
     from scipy.spatial import cKDTree
 
     res["slice_level_comp_max"] = float(cKDTree(P).query(truth)[0].max()) if len(P) else float("inf")
+    d_w = d_lvl[water] if len(P) else np.zeros(0)
+    res.update(_stats("slice_water", d_w))
+    res["slice_water_comp_max"] = float(cKDTree(P[water]).query(truth)[0].max()) if water.any() else float("inf")
     res["slice_truth_p_mean"] = float(np.mean(hm.predict_proba(truth)))
     # ridge in the plane: from the contour, climb along the in-plane gradient to the maximum
     if len(P):
@@ -205,6 +216,37 @@ def slice_metrics(hm, vertices, faces, axis="z", value=None, resolution: float =
         res.update(_stats("slice_ridge", np.zeros(0)))
         res["slice_ridge_comp_max"] = float("inf")
     return res
+
+
+def _water_boundary(sl, contour, sensors) -> np.ndarray:
+    """Which ``contour`` points (plane coordinates) border the p < 0.5 region holding a sensor.
+
+    The p < 0.5 pixels of the slice are split into connected regions; the regions under the
+    sensors (projected on the plane) are the water; a contour point borders it when one of the
+    four pixels around it belongs to it.
+    """
+    from scipy import ndimage
+
+    if len(contour) == 0:
+        return np.zeros(0, dtype=bool)
+    labels, _ = ndimage.label(sl.prob < 0.5)
+    u0, v0 = sl.u[0], sl.v[0]
+    du = sl.u[1] - sl.u[0] if len(sl.u) > 1 else 1.0
+    dv = sl.v[1] - sl.v[0] if len(sl.v) > 1 else 1.0
+    nv, nu = labels.shape
+
+    def pixel(points, fu, fv):
+        iu = np.clip(fu((points[:, 0] - u0) / du).astype(np.int64), 0, nu - 1)
+        iv = np.clip(fv((points[:, 1] - v0) / dv).astype(np.int64), 0, nv - 1)
+        return labels[iv, iu]
+
+    water = np.unique(pixel(np.asarray(sensors, dtype=np.float64).reshape(-1, 2), np.rint, np.rint))
+    water = water[water > 0]
+    near = np.zeros(len(contour), dtype=bool)
+    for fu in (np.floor, np.ceil):
+        for fv in (np.floor, np.ceil):
+            near |= np.isin(pixel(contour, fu, fv), water)
+    return near
 
 
 def _climb(hm, P, fixed_axis, max_shift=None, n=31):
