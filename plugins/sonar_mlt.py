@@ -155,30 +155,24 @@ class SonarMLTIntegrator(SonarIntegrator):
                       ping, lane, f_boot, bins_boot, vals_boot)
             dr.eval(f_boot, bins_boot, vals_boot)
             f_np = f_boot.numpy().astype(np.float64).reshape(n_pings, boot)
+            # One target per ping, or one over (ping, U) for the whole scan: then the ping is a
+            # primary coordinate, b the mean over all bootstrap paths, and the chains spend their
+            # time where the scan's echoes are. Both are "targets = groups of bootstrap rows".
             per_ping = self.normalisation == "ping"
-            if per_ping:
-                norm = f_np.mean(axis=1)
-                live = norm > 0
-            else:
-                # One target over (ping, U): the ping is a primary coordinate, so b is the mean over
-                # all bootstrap paths and the chains spend their time where the scan's echoes are.
-                norm = np.full(n_pings, f_np.mean())
-                live = np.full(n_pings, f_np.mean() > 0)
+            groups = f_np.reshape(n_pings if per_ping else 1, -1)
+            norm = np.repeat(groups.mean(axis=1), n_pings // len(groups))
+            live = norm > 0
             self.last_plan = {"bootstrap": boot, "chains": chains, "mutations": mutations}
 
-            # 2. Start states resampled in proportion to f (per ping, or over the whole scan).
-            rng = np.random.default_rng([seed, _SALT_START])
-            if per_ping:
-                start = _resample(f_np, chains, rng).ravel()
-                chain_ping = np.repeat(np.arange(n_pings, dtype=np.uint32), chains)
-            else:
-                pooled = _resample(f_np.reshape(1, -1), n, rng).ravel()
-                chain_ping, start = (pooled // boot).astype(np.uint32), (pooled % boot).astype(np.uint32)
+            # 2. Start states resampled in proportion to f within each target.
+            pick = _resample(groups, n // len(groups), np.random.default_rng([seed, _SALT_START]))
+            pick = (pick + np.arange(len(groups))[:, None] * groups.shape[1]).ravel()
+            chain_ping, start = (pick // boot).astype(np.uint32), (pick % boot).astype(np.uint32)
             ping_c = mi.UInt32(chain_ping)
             lane_c = dr.arange(mi.UInt32, n)
             # A start state is a bootstrap path: its samples are regenerated from the hash, its total
             # and records gathered instead of traced again.
-            src = mi.UInt32(chain_ping * np.uint32(boot) + start)
+            src = mi.UInt32(pick.astype(np.uint32))
             boot_seed, start_c = dr.opaque(mi.UInt32, seed ^ _SALT_BOOT), mi.UInt32(start)
             n_pings_o = dr.opaque(mi.UInt32, n_pings)
 
@@ -202,7 +196,8 @@ class SonarMLTIntegrator(SonarIntegrator):
             # sample the weight 1 / (f + p_uni b) (per Metropolis sample, times b / n_m below).
             # Expected values: a proposal adds a (+1 if a large step), the current state 1 - a.
             pu_norm = mi.Float((p_uni * norm).astype(np.float32))   # p_uni b per ping
-            pu_b = dr.gather(mi.Float, pu_norm, ping_c)
+            pu_b = dr.gather(mi.Float, pu_norm, ping_c)    # scan: the same for every ping, so it
+                                                            # need not follow a chain's ping
             hist = dr.zeros(mi.Float64, n_pings * n_bins)
             d_b = f_boot + dr.gather(mi.Float, pu_norm, ping)
             ctx.splat(hist, bins_boot, vals_boot, dr.select(d_b > 0, 1.0 / d_b, 0.0), ping,
@@ -297,7 +292,8 @@ class _Mutation:
         self.log_ratio = dr.opaque(mi.Float, math.log(params.small_step_max / params.small_step_min))
         self.elem = dr.arange(mi.UInt32, dr.width(lane) * dims)
         self.e_lane = self.elem // dr.opaque(mi.UInt32, dims)
-        self.U = start(self.e_lane, self.elem - self.e_lane * dr.opaque(mi.UInt32, dims))
+        self.e_dim = self.elem - self.e_lane * dr.opaque(mi.UInt32, dims)
+        self.U = start(self.e_lane, self.e_dim)
 
     def step(self, m):
         """Start mutation ``m``: decide each chain's large steps (returned)."""
@@ -328,9 +324,8 @@ class _Mutation:
         """Draw each chain's acceptance with probability ``a``; move the accepted chains' ``U``."""
         accept = mi.sample_tea_float32(self.lane + self.key0, self.key1 ^ 0x27D4EB2F, 8) < a
         moving = dr.gather(mi.Bool, accept, self.e_lane)
-        dim = self.elem - self.e_lane * dr.opaque(mi.UInt32, self.dims)
-        self.U = dr.select(moving, self._proposal(self.elem, self.U, dr.gather(mi.Bool, self.large, self.e_lane), dim),
-                           self.U)
+        self.U = dr.select(moving, self._proposal(self.elem, self.U, dr.gather(mi.Bool, self.large, self.e_lane),
+                                                  self.e_dim), self.U)
         return accept
 
 
