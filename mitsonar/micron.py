@@ -322,7 +322,7 @@ class ScanAssembler:
                     ranges=(np.arange(nb) + 0.5) * width, bearings=bearings, poses=poses,
                     range_min=0.0, range_max=float(range_max), beamwidth_h=3.0, beamwidth_v=35.0,
                     kind="mechanical", sound_speed=c,
-                    electronics={"bit_depth": 8 if ref.adc8on else 4}, meta=meta)
+                    electronics=_wire_electronics(ref), meta=meta)
 
     def finish(self) -> Scan | None:
         """The scan in progress, zero-filled, or None if there is none (end of a replay)."""
@@ -994,3 +994,13 @@ def replay(path, *, sound_speed: float | None = None, pose=None, nibble_order: s
             s.meta["partial"] = True
             scans.append(s)
     return scans
+
+
+def _wire_electronics(ref) -> dict:
+    """What a reply's header says of the receiver, in `Electronics`' names and units (dB), so that
+    ``HeadSettings.from_scan`` of a received scan asks the head for the same gain and A/D window."""
+    out = {"bit_depth": 8 if ref.adc8on else 4, "gain": int(ref.gain) * 80.0 / 210.0,
+           "ad_low": int(ref.ad_low) * 80.0 / 255.0}
+    if int(ref.ad_span) > 0:  # a zero span is no window: leave the default
+        out["ad_span"] = int(ref.ad_span) * 80.0 / 255.0
+    return out

@@ -1305,8 +1305,10 @@ class HeadSettings:
 
         Range and bins come from the scan's range window (the head's bins always start at
         0 m), the step size and direction from its bearings, a sector from its first and
-        last bearing when it does not cover a full turn, the bit depth from
-        ``scan.electronics['bit_depth']``. Keyword arguments override any field.
+        last bearing when it does not cover a full turn, the bit depth, receiver gain and A/D
+        window (``bit_depth``, ``gain``, ``ad_low``, ``ad_span``) from ``scan.electronics`` where it
+        records them (a rendered scan's `Electronics`, a received scan's reply headers). Keyword
+        arguments override any field.
         """
         bw = float(scan.range_max - scan.range_min) / scan.n_bins
         n_bins = int(round(scan.range_max / bw))
@@ -1320,6 +1322,9 @@ class HeadSettings:
         kw: dict[str, Any] = dict(range=n_bins * bw, n_bins=n_bins, sound_speed=float(scan.sound_speed),
                                   step_size=step, scan_right=scan_right, continuous=full,
                                   bit_depth=int(scan.electronics.get("bit_depth", 8)) if scan.electronics else 8)
+        for name in ("gain", "ad_low", "ad_span"):
+            if scan.electronics and scan.electronics.get(name) is not None:
+                kw[name] = float(scan.electronics[name])
         if not full:
             first, last = radians_to_bearing(bear[0], invert), radians_to_bearing(bear[-1], invert)
             kw["left_limit"], kw["right_limit"] = (first, last) if scan_right else (last, first)

@@ -73,6 +73,24 @@ def test_full_turn_through_a_pty_is_byte_exact():
     assert vm.stats["scanlines"] == 200 and vm.stats["boots"] == 2   # power-on, mtReBoot
 
 
+def test_gain_and_ad_window_round_trip_through_the_wire():
+    # A received scan records the receiver settings of its reply headers, so asking the head for
+    # "the settings of this scan" asks for the same bytes again.
+    sent = HeadSettings.from_scan(SCAN, gain=20.0, ad_low=10.0, ad_span=30.0)
+    assert (sent.igain, sent.ad_low_byte, sent.ad_span_byte) == (53, 32, 96)
+    (got,), _, _ = run_scan(SCAN, settings=sent)
+    assert got.electronics["gain"] == pytest.approx(53 * 80 / 210)
+    again = HeadSettings.from_scan(got)
+    assert (again.igain, again.ad_low_byte, again.ad_span_byte, again.bit_depth) == (53, 32, 96, 8)
+    # a rendered scan's Electronics gain is what the head is asked for; out of the head's range is an error
+    rendered = synthetic_scan()
+    rendered.electronics.update(gain=28.0, ad_low=12.5, ad_span=24.0)
+    assert (HeadSettings.from_scan(rendered).igain, HeadSettings.from_scan(rendered).ad_span_byte) == (74, 77)
+    rendered.electronics["gain"] = 95.0
+    with pytest.raises(ValueError, match="gain"):
+        HeadSettings.from_scan(rendered)
+
+
 def test_consecutive_turns_and_pings_iterator():
     scans, sonar, _ = run_scan(SCAN, n=2)
     for s in scans:
