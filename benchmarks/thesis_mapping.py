@@ -69,7 +69,7 @@ def headline(r: dict) -> dict:
             "ridge_acc_mean", "ridge_acc_p95", "ridge_acc_max", "ridge_comp_mean", "ridge_comp_p95",
             "level_acc_mean", "level_acc_p95", "level_acc_max",
             "slice_truth_p_mean", "slice_level_max", "slice_level_mean", "slice_level_comp_max",
-            "slice_water_max", "slice_water_mean", "slice_water_comp_max",
+            "slice_water_max", "slice_water_mean", "slice_water_comp_max", "slice_unobserved_depth",
             "slice_ridge_max", "slice_ridge_mean", "slice_ridge_comp_max"]
     return {k: (round(float(r[k]), 4) if r.get(k) is not None and math.isfinite(float(r[k])) else None)
             for k in keys if k in r}

@@ -28,7 +28,10 @@ filtered by it. The extracted surfaces are scored on the same true-surface point
                        (``slice_level_comp_max``), the same for the ridge, mean p on the truth lines;
                        ``slice_water_*``: the part of the 0.5 contour that bounds the water the
                        sonar is in (the thesis's half-probability region, Fig. 5.2), leaving out
-                       the contour that closes the p > 0.5 band behind the walls, in their shadow
+                       the contour that closes the p > 0.5 band behind the walls, in their shadow;
+                       ``slice_unobserved_depth``: how far from the truth the water next to the walls
+                       goes without any ping seeing it empty (see :func:`unobserved_depth`), the
+                       error a 0.5 level has when it follows the data and no further
 ``params``             the map's hyper-parameters and learnt sizes that produced the result
 """
 from __future__ import annotations
@@ -206,6 +209,7 @@ def slice_metrics(hm, vertices, faces, axis="z", value=None, resolution: float =
     res.update(_stats("slice_water", d_w))
     res["slice_water_comp_max"] = float(cKDTree(P[water]).query(truth)[0].max()) if water.any() else float("inf")
     res["slice_truth_p_mean"] = float(np.mean(hm.predict_proba(truth)))
+    res["slice_unobserved_depth"] = unobserved_depth(hm, vertices, faces, sl, a, value, truth, step=resolution)
     # ridge in the plane: from the contour, climb along the in-plane gradient to the maximum
     if len(P):
         R = _climb(hm, P, a)
@@ -216,6 +220,46 @@ def slice_metrics(hm, vertices, faces, axis="z", value=None, resolution: float =
         res.update(_stats("slice_ridge", np.zeros(0)))
         res["slice_ridge_comp_max"] = float("inf")
     return res
+
+
+def unobserved_depth(hm, vertices, faces, sl, axis, value, truth, step: float = 0.02) -> float:
+    """How far from the true surfaces the slice's water goes unobserved: the data's limit on a 0.5 level.
+
+    Water (in line of sight of a sensor, inside the map's seen voxels) that no ping's nominal free
+    frustum covers, in the pockets that touch the true lines (``truth``): where an echo came from the
+    beam's skirt (concave corners, oblique walls), no ping saw the last stretch before the wall as
+    empty. A 0.5 level that calls exactly the observed-free water free lies up to this far from the
+    truth; the map can only do better there by guessing, and worse by smoothing over free evidence.
+    Sampled on a grid of ``step`` metres; 0 when every pocket is shallower than one step.
+    """
+    from scipy import ndimage
+
+    others = [i for i in range(3) if i != axis]
+    u = np.arange(sl.u[0], sl.u[-1] + 1e-9, step)
+    v = np.arange(sl.v[0], sl.v[-1] + 1e-9, step)
+    U, W = np.meshgrid(u, v)
+    P = np.zeros((U.size, 3))
+    P[:, others[0]], P[:, others[1]], P[:, axis] = U.ravel(), W.ravel(), value
+    cand = hm.seen(P, dilate=0)
+    idx = np.nonzero(cand)[0]
+    idx = idx[geo.visible_from(P[idx], hm.sensor_positions_, vertices, faces)]
+    idx = idx[~hm.insonified(P[idx], part="free")]
+    if len(idx) == 0:
+        return 0.0
+    hole = np.zeros(U.size, dtype=bool)
+    hole[idx] = True
+    labels, _ = ndimage.label(hole.reshape(U.shape))
+    # pockets that reach the walls: a pixel within one step of a true line
+    iu = np.clip(np.rint((truth[:, others[0]] - u[0]) / step).astype(np.int64), 0, len(u) - 1)
+    iv = np.clip(np.rint((truth[:, others[1]] - v[0]) / step).astype(np.int64), 0, len(v) - 1)
+    near = np.zeros(U.shape, dtype=bool)
+    near[iv, iu] = True
+    near = ndimage.binary_dilation(near)
+    touching = np.unique(labels[near & (labels > 0)])
+    pocket = np.isin(labels.ravel(), touching) & hole
+    if not pocket.any():
+        return 0.0
+    return float(geo.point_mesh_distance(P[pocket], vertices, faces).max())
 
 
 def _water_boundary(sl, contour, sensors) -> np.ndarray:

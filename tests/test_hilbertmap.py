@@ -15,7 +15,7 @@ from hilbertmap import metrics, schedules
 from hilbertmap.classify import cfar, classify, otsu_threshold
 from hilbertmap.embedding import blanking_range, embed_scan
 from hilbertmap.mesh import marching_tetrahedra
-from hilbertmap.testing import box_distance, box_mesh, box_scan, frame, orthogonal_frames
+from hilbertmap.testing import BOX, box_distance, box_mesh, box_scan, frame, orthogonal_frames
 
 # A miniature map (180 pings, 400 inducing points ~1 m apart) keeps the settings the defaults had
 # before they were re-tuned on the thesis benchmark with 3000 points: kernel length = spacing
@@ -294,6 +294,40 @@ def test_water_boundary_keeps_the_side_of_the_band_facing_the_sonar():
     assert not metrics._water_boundary(sl, P2, np.array([[2.2, 0.0]])).any()
 
 
+class _PocketMap:
+    """A stand-in map for `metrics.unobserved_depth`: everything seen, one sensor at the origin, and
+    pings that saw the water empty up to 0.1 m from the walls, except a corner pocket 0.4 m deep and
+    an island at the centre that no ping covered (it touches no wall, so it must not count)."""
+
+    def __init__(self, corner=True):
+        self.corner = corner
+        self.sensor_positions_ = np.zeros((1, 3))
+
+    def seen(self, P, dilate=0):
+        return np.ones(len(P), dtype=bool)
+
+    def insonified(self, P, vertices=None, faces=None, part="any"):
+        X, Y = BOX["x"], BOX["y"]
+        depth = np.minimum(X - np.abs(P[:, 0]), Y - np.abs(P[:, 1]))
+        limit = np.where(self.corner & (P[:, 0] > X - 1.0) & (P[:, 1] > Y - 1.0), 0.4, 0.1)
+        island = np.hypot(P[:, 0] - 0.7, P[:, 1] + 0.3) < 0.3
+        return (depth > limit) & ~island
+
+
+@pytest.mark.parametrize("corner, expected", [(True, 0.4), (False, 0.1)])
+def test_unobserved_depth_measures_pockets_that_touch_the_walls(corner, expected):
+    V, F = box_mesh()
+    segs = geo.plane_section(V, F, 2, 0.0)
+    truth = geo.sample_segments(segs, 0.01)
+    step = 0.02
+    lo, hi = truth.min(axis=0) - 0.2, truth.max(axis=0) + 0.2
+    sl = type("Slice", (), {"u": np.arange(lo[0], hi[0], step), "v": np.arange(lo[1], hi[1], step)})
+    d = metrics.unobserved_depth(_PocketMap(corner), V, F, sl, 2, 0.0, truth, step=step)
+    # the deepest never-free point of the pocket, within one grid step; the island (0.3 m radius,
+    # up to ~1.5 m from any wall) is not a pocket by a wall and does not count
+    assert expected - step <= d <= expected + 1e-9
+
+
 def test_evaluate_reports_metrics_and_params(fitted):
     V, F = box_mesh()
     r = metrics.evaluate(fitted, V, F, n_surface=3000, n_free=20000, resolution=0.15)
@@ -302,6 +336,7 @@ def test_evaluate_reports_metrics_and_params(fitted):
         assert k in r
     # the water's boundary is part of the whole 0.5 contour
     assert r["slice_water_max"] <= r["slice_level_max"] and r["slice_water_mean"] <= r["slice_level_max"]
+    assert 0.0 <= r["slice_unobserved_depth"] < 2.0
     assert r["params"]["n_inducing"] == 400 and r["params"]["lengthscale_"] > 0
     assert r["auc"] > 0.85
     assert r["ridge_acc_mean"] < r["level_acc_mean"]
