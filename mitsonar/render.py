@@ -183,6 +183,9 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
         "bearing_step": sonar.bearing_step,
         "electronics_seed": int(eseed),
     }
+    if getattr(sonar, "transmit", None) is not None:  # multibeam: the transmit fan beside the receive beams
+        meta.update(tx_pattern=sonar.transmit.kind, tx_beamwidth_h=sonar.transmit.beamwidth_h,
+                    tx_beamwidth_v=sonar.transmit.beamwidth_v)
     return Scan(intensity=intensity, data=data, ranges=ranges,
                 bearings=np.radians(sonar.bearings_deg()), poses=poses,
                 range_min=sonar.range_min, range_max=sonar.range_max,

@@ -1310,6 +1310,9 @@ class HeadSettings:
         records them (a rendered scan's `Electronics`, a received scan's reply headers). Keyword
         arguments override any field.
         """
+        if getattr(scan, "kind", "mechanical") != "mechanical":
+            raise ValueError(f"HeadSettings.from_scan: a SeaNet head is mechanically scanned; a {scan.kind!r} "
+                             "scan (kind must be 'mechanical') has no head settings")
         bw = float(scan.range_max - scan.range_min) / scan.n_bins
         n_bins = int(round(scan.range_max / bw))
         bear = np.asarray(scan.bearings, dtype=np.float64)

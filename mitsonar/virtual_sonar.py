@@ -265,6 +265,9 @@ class VirtualMicron:
                  nibble_order: str = DEFAULT_NIBBLE_ORDER, serial_number: int = 0x4D53):
         if not (isinstance(scan_source, Scan) or callable(scan_source)):
             raise TypeError("scan_source must be a Scan or a callable settings -> Scan")
+        if isinstance(scan_source, Scan) and scan_source.kind != "mechanical":
+            raise ValueError(f"VirtualMicron: a Micron is a mechanically scanned head; a {scan_source.kind!r} scan "
+                             "(kind must be 'mechanical') has no SeaNet scanlines to serve")
         self._source = scan_source
         self.port_url = port_url
         self.baudrate = int(baudrate)

@@ -49,14 +49,21 @@ class HashSamples:
 
 
 @dr.syntax
-def trace_echoes(scene, frames, beam, ping, samples, max_depth, absorption, record, active=True):
+def trace_echoes(scene, frames, beam, ping, samples, max_depth, absorption, record, active=True, connect=None):
     """Trace one echo path per lane and call ``record(depth, range, energy, valid)`` per bounce.
 
     ``frames`` are the per-ping beam frames, ``beam`` the `BeamPattern`, ``ping`` the ping of
     each lane, ``samples`` anything with ``get(dim)`` and ``get2(dim)`` (e.g. `HashSamples`), ``max_depth`` (opaque UInt32) the
-    number of surface bounces, ``absorption`` (opaque Float) in dB/m.
+    number of surface bounces, ``absorption`` (opaque Float) in dB/m. ``connect``: ``(frames,
+    pattern)`` that weight the connection back to the transducer (a multibeam head's transmit
+    fan, see ``SonarSensor.connection``); None: ``beam`` in the ping's frame (monostatic).
     """
     x_ax, y_ax, z_ax, origin = frames.gather(ping)
+    if connect is None:
+        cx, cy, cz, c_beam = x_ax, y_ax, z_ax, beam
+    else:
+        cx, cy, cz, _ = connect[0].gather(ping)
+        c_beam = connect[1]
     d_local, weight = beam.sample(samples.get2(0), active)
     ray = mi.Ray3f(origin, x_ax * d_local.x + y_ax * d_local.y + z_ax * d_local.z)
     throughput = mi.Float(weight)
@@ -80,7 +87,7 @@ def trace_echoes(scene, frames, beam, ping, samples, max_depth, absorption, reco
         bsdf = si.bsdf(ray)
         f = bsdf.eval(ctx, si, si.to_local(back), active).x
         rx = -back
-        gain = beam.eval_dir(mi.Vector3f(dr.dot(rx, x_ax), dr.dot(rx, y_ax), dr.dot(rx, z_ax)))
+        gain = c_beam.eval_dir(mi.Vector3f(dr.dot(rx, cx), dr.dot(rx, cy), dr.dot(rx, cz)))
         total = path_length + dist
         energy = throughput * f * gain / dr.square(dist) * dr.exp2(-atten * total)
         echo = active & (energy > 0)

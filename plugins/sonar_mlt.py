@@ -138,7 +138,7 @@ class SonarMLTIntegrator(SonarIntegrator):
         boot, chains, mutations = self.plan(n_pings, spp)
         frames = PingFrames(sensor.ping_poses(pose))
         dims = n_dims(depth)
-        ctx = _Context(scene, sensor, frames, depth)
+        ctx = _Context(scene, sensor, frames, depth, sensor.connection(pose))
         seed = int(seed) & 0xFFFFFFFF
         n = n_pings * chains
         n_m = chains * mutations                          # Metropolis samples per ping
@@ -332,8 +332,9 @@ class _Mutation:
 class _Context:
     """What one render's path evaluations share: scene, frames, bins, per-bounce records."""
 
-    def __init__(self, scene, sensor, frames, depth):
+    def __init__(self, scene, sensor, frames, depth, connect=None):
         self.scene, self.sensor, self.frames = scene, sensor, frames
+        self.connect = connect
         self.depth = depth
         self.depth_o = dr.opaque(mi.UInt32, depth)
         self.bins = RangeBins(sensor)
@@ -353,7 +354,7 @@ class _Context:
                 dr.scatter(vals, energy, slot, valid)
 
         trace_echoes(self.scene, self.frames, self.sensor.beam, ping, samples, self.depth_o,
-                     self.absorption, record)
+                     self.absorption, record, connect=self.connect)
 
     def records(self, n):
         """Zeroed path totals and per-bounce (bin, energy) records for ``n`` lanes."""

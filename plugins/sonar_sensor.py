@@ -1,4 +1,5 @@
-"""The ``sonar`` sensor: a transducer with a beam pattern on a mechanically scanned head."""
+"""The ``sonar`` sensor: a transducer with a beam pattern on a mechanically scanned head, or a
+multibeam (forward-looking) head whose rows are receive beams formed across one transmit fan."""
 from __future__ import annotations
 
 import dataclasses
@@ -12,7 +13,8 @@ from mitsonar.scan import bearing_rotation
 
 from .beam import BeamPattern, read_beam_table
 
-KINDS = ("mechanical",)
+KINDS = ("mechanical", "multibeam")
+TX_PATTERNS = ("gaussian", "sinc", "uniform")
 
 
 def check_rigid(matrix, what="sonar 'to_world'"):
@@ -29,16 +31,23 @@ def check_rigid(matrix, what="sonar 'to_world'"):
 
 
 class SonarSensor(mi.Sensor):
-    """Imaging sonar head: a monostatic transducer with a beam pattern, pinging at a list of bearings.
+    """Imaging sonar head: a transducer with a beam pattern, pinging at a list of bearings.
 
     The beam frame (``to_world``) has +z on the boresight at bearing 0 and +y on the scan axis;
     ping ``k`` points at bearing ``bearing_start + k * bearing_step`` (degrees), a right-handed
     rotation of the beam frame about its +y axis. Range of an echo is half its path length.
 
+    ``kind='mechanical'`` (MSIS, e.g. Tritech Micron): one monostatic beam, rotated ping by ping;
+    the two-way gain of a direction is ``B(d)^2`` in that ping's frame. ``kind='multibeam'``
+    (forward-looking sonar): one transmit fan fixed in the beam frame (``tx_*``) and one receive
+    beam per row (``beam_pattern`` and ``beamwidth_*``, steered to the row's bearing); the two-way
+    gain of row k is ``B_tx(d) B_rx(d in row k's frame)``. All rows share one pose.
+
     ================ ============ ===============================================================
     Parameter        Default      Meaning
     ================ ============ ===============================================================
-    kind             mechanical   ``mechanical`` (mechanically scanned imaging sonar, MSIS)
+    kind             mechanical   ``mechanical`` (mechanically scanned imaging sonar, MSIS) or
+                                  ``multibeam`` (rows = receive beams across one transmit fan)
     to_world         identity     beam frame in the world (rigid)
     range_min        0            m, start of the range window
     range_max        12           m, end of the range window (echoes beyond are dropped)
@@ -53,6 +62,10 @@ class SonarSensor(mi.Sensor):
     sound_speed      1500         m/s
     absorption       0            dB/m, applied to the whole two-way path
     frequency        700e3        Hz (``sinc``)
+    tx_pattern       gaussian     multibeam transmit fan: ``gaussian``, ``sinc`` or ``uniform``
+    tx_beamwidth_h   swath        deg, full -3 dB width of the fan across the swath; default the
+                                  swath, ``|bearing_step| (n_pings - 1) + beamwidth_h``
+    tx_beamwidth_v   beamwidth_v  deg, full -3 dB width of the fan along the scan axis
     aperture_h/_v    derived      m (``sinc``); from the beam widths when absent
     electronics      see below    the fields of ``mitsonar.electronics.Electronics``
                                   (``source_level``, ``tvg``, ``gain``, ``ad_low``, ...)
@@ -83,6 +96,7 @@ class SonarSensor(mi.Sensor):
         frequency = float(props.get("frequency", 700e3))
         ap_h = float(props["aperture_h"]) if "aperture_h" in props else None
         ap_v = float(props["aperture_v"]) if "aperture_v" in props else None
+        tx = {k: props[k] for k in ("tx_pattern", "tx_beamwidth_h", "tx_beamwidth_v") if k in props}
 
         from mitsonar.electronics import Electronics
         elec = {}
@@ -97,6 +111,7 @@ class SonarSensor(mi.Sensor):
         if table_path and pattern != "table":
             raise ValueError(f"sonar 'beam_table' is only used with beam_pattern 'table' (got {pattern!r})")
         self.beam = BeamPattern(pattern, bw_h, bw_v, frequency, ap_h, ap_v, self.sound_speed, table)
+        self.transmit = self._transmit(tx, bw_h, bw_v, frequency)
         self.beam_table = table_path
         self.to_world_np = check_rigid(np.array(self.world_transform().matrix, dtype=np.float64).reshape(4, 4))
 
@@ -121,6 +136,23 @@ class SonarSensor(mi.Sensor):
         if not (math.isfinite(self.absorption) and self.absorption >= 0):
             bad("absorption", self.absorption, "a finite attenuation >= 0 dB/m")
 
+    def _transmit(self, tx, bw_h, bw_v, frequency):
+        """The multibeam transmit fan (None for a mechanical head, whose beam transmits itself)."""
+        if self.kind != "multibeam":
+            if tx:
+                raise ValueError(f"sonar '{sorted(tx)[0]}': only used with kind 'multibeam' (kind is {self.kind!r})")
+            return None
+        kind = tx.get("tx_pattern", "gaussian")
+        if kind not in TX_PATTERNS:
+            raise ValueError(f"sonar 'tx_pattern': {kind!r} is not allowed (one of {', '.join(TX_PATTERNS)})")
+        swath = abs(self.bearing_step) * (self.n_pings - 1) + bw_h
+        h = float(tx.get("tx_beamwidth_h", min(swath, 360.0)))
+        v = float(tx.get("tx_beamwidth_v", bw_v))
+        for name, value, hi in (("tx_beamwidth_h", h, 360.0), ("tx_beamwidth_v", v, 180.0)):
+            if not (math.isfinite(value) and 0.0 < value <= hi):
+                raise ValueError(f"sonar '{name}': {value!r} is not allowed (a width in (0, {hi:g}] deg)")
+        return BeamPattern(kind, h, v, frequency, None, None, self.sound_speed, source="sonar tx")
+
     # ------------------------------------------------------------------ geometry
     @property
     def bin_width(self) -> float:
@@ -137,6 +169,20 @@ class SonarSensor(mi.Sensor):
         base = self.to_world_np if pose is None else check_rigid(pose, "render_scan 'pose'")
         return base @ bearing_rotation(np.radians(self.bearings_deg()))
 
+    def connection(self, pose=None):
+        """What weights an echo's connection back to the transducer, for `trace_echoes`.
+
+        None for a mechanical head (its own beam, in the ping's frame). For a multibeam head, the
+        transmit fan in the head's frame, one copy per row: paths start from the row's receive beam
+        and connect back through the fan, which gives the same two-way gain and path lengths as
+        transmitting through the fan and receiving in the row (reciprocity; the acoustic BSDF is
+        symmetric), with importance sampling from the narrow beam.
+        """
+        if self.transmit is None:
+            return None
+        base = self.to_world_np if pose is None else check_rigid(pose, "render_scan 'pose'")
+        return PingFrames(np.repeat(base[None], self.n_pings, axis=0)), self.transmit
+
     # ------------------------------------------------------------------ Mitsuba interface
     def sample_ray(self, time, sample1, sample2, sample3, active=True):
         """A ray of ping ``floor(sample2.y * n_pings)`` with direction drawn from the beam; weight B/pdf."""
@@ -151,9 +197,11 @@ class SonarSensor(mi.Sensor):
         super().traverse(callback)
 
     def to_string(self):
+        tx = "" if self.transmit is None else (f", tx={self.transmit.kind} "
+                                               f"{self.transmit.beamwidth_h:g}x{self.transmit.beamwidth_v:g} deg")
         return (f"SonarSensor[kind={self.kind}, n_pings={self.n_pings}, n_bins={self.n_bins}, "
                 f"range=[{self.range_min:g}, {self.range_max:g}) m, beam={self.beam.kind} "
-                f"{self.beam.beamwidth_h:g}x{self.beam.beamwidth_v:g} deg]")
+                f"{self.beam.beamwidth_h:g}x{self.beam.beamwidth_v:g} deg{tx}]")
 
 
 class PingFrames:

@@ -80,19 +80,20 @@ class SonarTOFIntegrator(SonarIntegrator):
         depth = check_max_depth(self.max_depth if max_depth is None else int(max_depth))
         n_pings, n_bins = sensor.n_pings, sensor.n_bins
         frames = PingFrames(sensor.ping_poses(pose))
+        connect = sensor.connection(pose)
         spp_pass = max(1, min(spp, MAX_SPP_PER_PASS, MAX_LANES_PER_PASS // n_pings))
         total = np.zeros(n_pings * n_bins, dtype=np.float64)
         start = 0
         with dr.suspend_grad():
             while start < spp:
                 count = min(spp_pass, spp - start)
-                total += self._pass(scene, sensor, frames, seed, start, count, depth)
+                total += self._pass(scene, sensor, frames, seed, start, count, depth, connect)
                 start += count
                 if progress is not None:
                     progress(start, spp)
         return (total / spp).reshape(n_pings, n_bins)
 
-    def _pass(self, scene, sensor, frames, seed, start, count, depth):
+    def _pass(self, scene, sensor, frames, seed, start, count, depth, connect):
         n_pings, n_bins = sensor.n_pings, sensor.n_bins
         # Everything that varies between renders is opaque so the kernel compiles once.
         spp_o = dr.opaque(mi.UInt32, count)
@@ -110,7 +111,7 @@ class SonarTOFIntegrator(SonarIntegrator):
             dr.scatter_add(hist, mi.Float64(energy), bins.flat(ping, b), valid)
 
         trace_echoes(scene, frames, sensor.beam, ping, samples, dr.opaque(mi.UInt32, depth),
-                     dr.opaque(mi.Float, sensor.absorption), record)
+                     dr.opaque(mi.Float, sensor.absorption), record, connect=connect)
         return hist.numpy()
 
     def to_string(self):

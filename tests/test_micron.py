@@ -91,6 +91,15 @@ def test_gain_and_ad_window_round_trip_through_the_wire():
         HeadSettings.from_scan(rendered)
 
 
+def test_a_multibeam_scan_is_not_served_as_a_micron():
+    fan = synthetic_scan(n_pings=64, start_deg=-30.0, step_deg=60 / 63)
+    fan.kind = "multibeam"
+    with pytest.raises(ValueError, match="kind must be 'mechanical'"):
+        HeadSettings.from_scan(fan)
+    with pytest.raises(ValueError, match="VirtualMicron.*kind must be 'mechanical'"):
+        VirtualMicron(fan, realtime=False)
+
+
 def test_consecutive_turns_and_pings_iterator():
     scans, sonar, _ = run_scan(SCAN, n=2)
     for s in scans:

@@ -112,11 +112,13 @@ def test_first_echo_of_every_ping_is_where_the_geometry_says(mitsonar_mod):
 
 
 # ----------------------------------------------------------------------------- ladder 3
-def sphere_echo_reference(beam, R, a, rho, bearings, n=1201):
+def sphere_echo_reference(beam, R, a, rho, bearings, n=1201, transmit=None):
     """Expected echo energy of a Lambertian sphere (radius a, albedo rho, centre at range R on
     the boresight of bearing 0) for each bearing: the integral over the directions that hit it
     of B(az - b, el)^2 (rho/pi) cos(theta) / r^2 d(omega), by quadrature (d(omega) already
-    holds the incidence cosine, so only the cosine towards the receiver remains)."""
+    holds the incidence cosine, so only the cosine towards the receiver remains). With a
+    ``transmit`` pattern (a multibeam head's fan, fixed at bearing 0) the two-way gain is
+    B_tx(az, el) B(az - b, el) instead."""
     ang = math.asin(a / R)
     u = np.linspace(-ang, ang, n)
     step = u[1] - u[0]
@@ -130,6 +132,9 @@ def sphere_echo_reference(beam, R, a, rho, bearings, n=1201):
     nrm = (p - np.array([0, 0, R])) / a
     cos_t = np.clip(-(nrm * d).sum(-1), 0, None)
     w = np.where(hit, cos_t / np.where(hit, t, 1) ** 2, 0) * rho / math.pi * np.cos(EL) * step * step
+    if transmit is not None:
+        w = w * transmit.eval_np(AZ, EL)
+        return np.array([np.sum(w * beam.eval_np(AZ - b, EL)) for b in bearings])
     return np.array([np.sum(w * beam.eval_np(AZ - b, EL) ** 2) for b in bearings])
 
 
@@ -163,6 +168,40 @@ def test_small_target_follows_two_way_beam_pattern(mitsonar_mod):
     # And the sweep is the product of transmit and receive patterns, not one of them alone.
     one_way = beam.eval_np(bearings, 0.0)
     assert np.max(np.abs(meas - one_way)) > 0.2
+
+
+@pytest.mark.slow
+def test_multibeam_rows_follow_receive_beam_times_transmit_fan(mitsonar_mod):
+    # A forward-looking head: one gaussian transmit fan 30 deg wide, 49 receive rows of 6 deg at
+    # 0.25 deg steps. A small sphere on the fan's axis answers in each row with the receive
+    # pattern one way (the fan is nearly flat over it), not the two-way pattern of a rotating
+    # head - in absolute units, against the quadrature of B_tx B_rx over the sphere.
+    from mitsonar.plugins import module
+
+    bw, tx_h, R, a, rho = 6.0, 30.0, 6.0, 0.1, 0.9
+    to_world = frame_matrix((1, 0, 0), (0, 0, 1))
+    sensor = sonar_xml(to_world, kind="multibeam", beam_pattern="gaussian", beamwidth_h=bw, beamwidth_v=bw,
+                       tx_beamwidth_h=tx_h, range_min=5.0, range_max=7.0, n_bins=20, n_pings=49,
+                       bearing_start=-6.0, bearing_step=0.25)
+    scene = mitsonar_mod.load_scene(scene_xml(sensor, sphere_xml((R, 0, 0), a, acoustic_xml(rho)),
+                                              integrator='<integrator type="sonar_tof"><integer name="max_depth" value="1"/></integrator>'))
+    mean, sem = render_mean_and_sem(mitsonar_mod, scene, range(10), 1 << 14)
+    e, s = mean.sum(1), np.sqrt((sem ** 2).sum(1))
+    rx = module("beam").BeamPattern("gaussian", bw, bw)
+    tx = module("beam").BeamPattern("gaussian", tx_h, bw)
+    bearings = np.radians(-6.0 + 0.25 * np.arange(49))
+    ref = sphere_echo_reference(rx, R, a, rho, -bearings, transmit=tx)
+    z = (e - ref) / np.maximum(s, 0.015 * ref)
+    assert np.max(np.abs(z)) < 4.0, f"max |z| = {np.max(np.abs(z)):.2f}"
+    # the rows' -3 dB full width is the receive beam width (one way), not the -6 dB of a rotating head
+    meas = e / e[24]
+    w3 = np.interp(-0.5, -meas[24:], bearings[24:])
+    assert abs(math.degrees(2 * w3) - bw) < 0.4
+    mech = sphere_echo_reference(rx, R, a, rho, -bearings)
+    assert np.max(np.abs(meas - mech / mech[24])) > 0.2
+    scan = mitsonar_mod.render_scan(scene, spp=64)
+    assert scan.kind == "multibeam" and scan.meta["tx_beamwidth_h"] == tx_h
+    np.testing.assert_allclose(scan.poses[:, :3, 3], np.zeros((49, 3)), atol=1e-12)  # one head, one pose
 
 
 # ----------------------------------------------------------------------------- ladder 4

@@ -74,7 +74,10 @@ def test_misspelled_parameter_fails_with_mitsubas_message(mitsonar_mod):
 @pytest.mark.parametrize("params, message", [
     (dict(n_bins=0), r"sonar 'n_bins': 0 is not allowed \(1 to 65536\)"),
     (dict(range_min=5.0, range_max=2.0), r"sonar 'range_max'.*range_min"),
-    (dict(kind="sidescan"), r"sonar 'kind': 'sidescan'.*mechanical"),
+    (dict(kind="sidescan"), r"sonar 'kind': 'sidescan'.*mechanical, multibeam"),
+    (dict(tx_beamwidth_h=20.0), r"sonar 'tx_beamwidth_h': only used with kind 'multibeam'"),
+    (dict(kind="multibeam", tx_pattern="table"), r"sonar 'tx_pattern': 'table'.*gaussian, sinc, uniform"),
+    (dict(kind="multibeam", tx_beamwidth_v=0.0), r"sonar 'tx_beamwidth_v': 0.0 is not allowed"),
     (dict(beam_pattern="cone"), r"sonar 'beam_pattern': 'cone' is not one of gaussian, sinc, uniform, table"),
     (dict(beamwidth_h=-3.0), r"sonar 'beamwidth_h'"),
     (dict(sound_speed=340.0), r"sonar 'sound_speed'.*1000 to 2000"),
@@ -185,10 +188,11 @@ def test_range_window_drops_echoes_outside_it(mitsonar_mod):
     assert full.intensity[0][:40].sum() > 0 and full.intensity[0][50:].sum() > 0
 
 
-def test_second_render_with_new_pose_seed_spp_and_material_does_not_recompile(mitsonar_mod):
+@pytest.mark.parametrize("scene_file", ["box.xml", "box_fls.xml"])
+def test_second_render_with_new_pose_seed_spp_and_material_does_not_recompile(mitsonar_mod, scene_file):
     import mitsuba as mi
 
-    scene = mitsonar_mod.load_scene(BOX)
+    scene = mitsonar_mod.load_scene(os.path.join(SCENES, scene_file))
     mitsonar_mod.render_scan(scene, spp=64, seed=0)
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
