@@ -133,12 +133,15 @@ def blanking_range(values: np.ndarray, ranges: np.ndarray, range_min: float, bin
     Ring-down makes the first bins bright in every ping, which no real echo does over a whole
     scan. Per bin, take the 90th percentile over pings (speckle makes the tail of the ring-down
     flicker well past where its median fades), and blank up to the first bin where it has fallen
-    to within ``fade`` of the way from its start down to the scan's background (the median of the
-    far half), plus ``margin_bins``. A scan whose first bins are not brighter than its background
-    is not blanked.
+    to within ``fade`` of the way from its start down to the scan's background, plus
+    ``margin_bins``. The background is the lower quartile of that profile past the first bins:
+    the open water somewhere between the ring-down and the echoes. (The far half is no background
+    for a forward-looking frame, whose rows all see walls or the floor there: its median put the
+    blanking inside the ring-down's speckle tail.) A scan whose first bins are not brighter than
+    its background is not blanked.
     """
     q = np.percentile(values, 90, axis=0)
-    floor = float(np.median(q[len(q) // 2:]))
+    floor = float(np.percentile(q[max(1, len(q) // 50):], 25)) if len(q) > 1 else float(q[0])
     top = float(q[: max(1, len(q) // 50)].max())
     span = float(np.max(q) - floor)
     if span <= 0 or top - floor < 0.25 * span:

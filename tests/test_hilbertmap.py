@@ -60,6 +60,18 @@ def test_threshold_rule_and_blanking():
     assert level == 200 and full.shape == s.data.shape
     r = blanking_range(s.data.astype(float), s.ranges, 0.0, s.ranges[1] - s.ranges[0])
     assert 1.0 < r < 2.0  # the synthetic ring-down fades at 1.3 m
+    # A forward-looking frame: every row echoes somewhere in the far half (walls, floor). The
+    # background is still the open water after the ring-down, so the blanking ends after it.
+    rng = np.random.default_rng(2)
+    rows, bins = 128, 500
+    ranges = (np.arange(bins) + 0.5) * 12.0 / bins
+    ring = np.clip(200.0 * (1.0 - ranges / 1.3), 0, None)[None, :] * rng.exponential(1.0, (rows, bins))
+    data = np.clip(ring + 20.0 * rng.exponential(1.0, (rows, bins)), 0, 255)
+    for k in range(rows):  # an echo 0.5 m long per row, between 6 and 11 m
+        lo = int(rng.integers(250, 440))
+        data[k, lo:lo + 20] = 120.0 + 100.0 * rng.random(20)
+    r = blanking_range(data, ranges, 0.0, 12.0 / bins)
+    assert 1.3 < r < 2.0
     with pytest.raises(ValueError):
         classify(s.data.astype(float), "nonsense")
 
