@@ -172,7 +172,7 @@ def cmd_demo(args):
 
     os.makedirs(args.output, exist_ok=True)
     scenes = _scenes_dir()
-    for name in ("box", "intake"):
+    for name in ("box", "intake", "box_fls"):
         path = os.path.join(scenes, f"{name}.xml")
         scene, scan = _render(path, args.spp, args.seed, quiet=args.quiet)
         exr = os.path.join(args.output, f"{name}.exr")
@@ -182,7 +182,7 @@ def cmd_demo(args):
         ascan = os.path.join(args.output, f"{name}_ascan.png")
         _plot(scan, polar, "polar")
         _plot(scan, cart, "cartesian", mesh=mitsonar.scene_mesh(scene))
-        _plot(scan, ascan, "ascan", ping=0)
+        _plot(scan, ascan, "ascan", ping=scan.n_pings // 2 if scan.kind == "multibeam" else 0)  # the fan's centre row
         print(f"{name}: wrote {exr}, {polar}, {cart}, {ascan}")
     return 0
 

@@ -95,7 +95,7 @@ def test_bad_scene_parameter_names_file_and_field(tmp_path):
 def test_demo_writes_exr_and_pictures(tmp_path):
     proc = run("demo", "-o", str(tmp_path / "out"), "--spp", "256", "-q")
     assert proc.returncode == 0, proc.stderr
-    for name in ("box", "intake"):
+    for name in ("box", "intake", "box_fls"):
         assert (tmp_path / "out" / f"{name}.exr").stat().st_size > 10000
         for kind in ("polar", "cartesian", "ascan"):
             png_size(tmp_path / "out" / f"{name}_{kind}.png")
