@@ -64,7 +64,8 @@ def _clean(d):
 
 
 def headline(r: dict) -> dict:
-    keys = ["auc", "auc_band_0.1_0.3", "auc_band_0.3_1", "surface_p_mean", "surface_p_gt_half",
+    keys = ["auc", "auc_band_0.1_0.3", "auc_band_0.3_1", "all_auc", "all_auc_band_0.1_0.3", "free_seen_share",
+            "surface_p_mean", "surface_p_gt_half",
             "ridge_fscore@0.1", "ridge_fscore@0.2", "level_fscore@0.1", "level_fscore@0.2",
             "ridge_acc_mean", "ridge_acc_p95", "ridge_acc_max", "ridge_comp_mean", "ridge_comp_p95",
             "level_acc_mean", "level_acc_p95", "level_acc_max",
@@ -164,7 +165,11 @@ def octomap_anchor(samples, points, truth, resolution: float, true_surface_point
                 out[i] = 0.5
         return out
 
-    res = point_metrics(prob(points["surface"]), prob(points["free"]), points["d_free"], bands)
+    p_surf = prob(points["surface"])
+    res = point_metrics(p_surf, prob(points["free"]), points["d_free"], bands)
+    if "free_all" in points:  # also where our map drew no sample (see hilbertmap.metrics)
+        res.update({f"all_{k}": v for k, v in point_metrics(p_surf, prob(points["free_all"]),
+                                                            points["d_free_all"], bands).items()})
     occ, _ = tree.extractPointCloud()
     V, F = truth
     res.update(point_set_surface_metrics(occ, true_surface_points, V, F, prefix="voxels"))

@@ -11,8 +11,10 @@ OctoMap anchor of ``benchmarks/thesis_mapping.py``) is scored on exactly those p
 cells counting as p = 0.5. The insonified tests depend only on the pings, the same for both maps,
 but the free points are also kept only inside ``hm.seen`` (0.25 m voxels holding one of this map's
 training samples after thinning): water that a ping crossed without leaving a sample there is not
-scored. That leans slightly our way (OctoMap's rays do cover it); the surface points are not
-filtered by it. The extracted surfaces are scored on the same true-surface points for both.
+scored. That leans our way (OctoMap's rays do cover it), so every point metric is also reported on
+all insonified free points (``all_*``), with ``free_seen_share``, the share of them the filter
+keeps; the surface points are not filtered by it. The extracted surfaces are scored on the same
+true-surface points for both.
 
 :func:`evaluate` returns a flat-ish dict (JSON-ready):
 
@@ -20,6 +22,8 @@ filtered by it. The extracted surfaces are scored on the same true-surface point
 ``auc_band_<a>_<b>``   the same against free points a..b metres from a surface (0.1-0.3 is the band
                        that tells good maps from poor ones)
 ``surface_p_mean``     mean probability on the true surfaces (``surface_p_median``, ``surface_p_gt_half``)
+``all_<metric>``       the point metrics above with every insonified free point, seen or not
+                       (``free_seen_share``: the share inside ``hm.seen``)
 ``<method>_*``         for each extracted surface (``ridge`` and ``level``, the 0.5 isosurface):
                        ``_acc_mean/_p95/_max`` distance from it to the truth, ``_comp_mean/_p95/_max``
                        from the truth to it (completeness), ``_fscore@0.1`` and ``_fscore@0.2``
@@ -103,13 +107,17 @@ def evaluate(hm, vertices, faces, *, surfaces=("ridge", "level"), n_surface: int
     surf = geo.sample_triangles(V, F, n_surface * 4, rng)
     surf = surf[hm.insonified(surf, part="echo")][:n_surface]
     lo, hi = hm.coverage_.bounds()
-    free = rng.uniform(lo, hi, (n_free, 3))
-    free = free[hm.seen(free, dilate=0)]
-    free = free[hm.insonified(free, V, F, part="free")]
-    d_free = geo.point_mesh_distance(free, V, F)
+    free_all = rng.uniform(lo, hi, (n_free, 3))
+    free_all = free_all[hm.insonified(free_all, V, F, part="free")]
+    seen = hm.seen(free_all, dilate=0)
+    d_free_all = geo.point_mesh_distance(free_all, V, F)
+    free, d_free = free_all[seen], d_free_all[seen]
     p_surf = hm.predict_proba(surf)
-    p_free = hm.predict_proba(free)
-    out.update(point_metrics(p_surf, p_free, d_free, bands))
+    p_free_all = hm.predict_proba(free_all)
+    out.update(point_metrics(p_surf, p_free_all[seen], d_free, bands))
+    # the same on every insonified free point, also where this map drew no training sample
+    out.update({f"all_{k}": v for k, v in point_metrics(p_surf, p_free_all, d_free_all, bands).items()})
+    out["free_seen_share"] = float(seen.mean()) if len(seen) else float("nan")
 
     # --- extracted surfaces ----------------------------------------------------------------
     meshes = {}
@@ -130,7 +138,7 @@ def evaluate(hm, vertices, faces, *, surfaces=("ridge", "level"), n_surface: int
                          n_components_=int(getattr(hm, "n_components_", -1)),
                          n_samples_seen_=int(hm.n_samples_seen_))
     out["_meshes"] = meshes
-    out["_points"] = dict(surface=surf, free=free, d_free=d_free)
+    out["_points"] = dict(surface=surf, free=free, d_free=d_free, free_all=free_all, d_free_all=d_free_all)
     return out
 
 
