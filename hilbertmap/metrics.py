@@ -11,10 +11,10 @@ OctoMap anchor of ``benchmarks/thesis_mapping.py``) is scored on exactly those p
 cells counting as p = 0.5. The insonified tests depend only on the pings, the same for both maps,
 but the free points are also kept only inside ``hm.seen`` (0.25 m voxels holding one of this map's
 training samples after thinning): water that a ping crossed without leaving a sample there is not
-scored. That could lean our way (OctoMap's rays do cover it), so every point metric is also reported on
-all insonified free points (``all_*``), with ``free_seen_share``, the share of them the filter
-keeps; the surface points are not filtered by it. The extracted surfaces are scored on the same
-true-surface points for both.
+scored. That could lean our way (OctoMap's rays do cover it), so every point metric is also
+reported on all insonified free points (``all_*``), with ``free_seen_share``, the share of them
+the filter keeps; the surface points are not filtered by it. The extracted surfaces are scored on
+the same true-surface points for both.
 
 :func:`evaluate` returns a flat-ish dict (JSON-ready):
 
