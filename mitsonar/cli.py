@@ -105,7 +105,7 @@ def cmd_render(args):
     scene, scan = _render(args.scene, args.spp, args.seed, args.max_depth, _parse_settings(args.set),
                           args.quiet)
     scan.save(args.output)
-    print(f"wrote {args.output} ({scan.n_pings} {_rows(scan)} x {scan.n_bins} bins)")
+    print(f"wrote {args.output} ({scan.n_pings} {scan.row_name} x {scan.n_bins} bins)")
     if args.plot:
         import mitsonar
 
@@ -141,7 +141,7 @@ def cmd_info(args):
 
     scan = mitsonar.load_scan(args.scan)
     rows = [
-        ("file", args.scan), ("kind", scan.kind), (_rows(scan), scan.n_pings), ("bins", scan.n_bins),
+        ("file", args.scan), ("kind", scan.kind), (scan.row_name, scan.n_pings), ("bins", scan.n_bins),
         ("range [m]", f"{scan.range_min:g} .. {scan.range_max:g} (bin {scan.bin_width:.6g} m)"),
         ("bearings [deg]", f"{np.degrees(scan.bearings[0]):.6g} .. {np.degrees(scan.bearings[-1]):.6g}"
                            + (f" step {np.degrees(scan.bearings[1] - scan.bearings[0]):.6g}" if scan.n_pings > 1 else "")),
@@ -165,11 +165,6 @@ def _scenes_dir():
         if os.path.isdir(cand):
             return os.path.abspath(cand)
     raise CLIError("cannot find the scenes_xml folder (run the demo from the repository root)")
-
-
-def _rows(scan) -> str:
-    """What a scan's rows are: the pings of a rotating head, the receive beams of a multibeam one."""
-    return "beams" if scan.kind == "multibeam" else "pings"
 
 
 def cmd_demo(args):

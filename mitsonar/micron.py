@@ -50,7 +50,7 @@ import numpy as np
 from .scan import Scan, bearing_rotation
 from .seanet import (DEFAULT_NIBBLE_ORDER, FULL_TURN, Alive, BBUserData, HdCtrl, HeadCommand,
                      HeadData, HeadSettings, ReBoot, SendBBUser, SendData, SendVersion,
-                     StreamParser, VersionData, bearing_to_radians, encode, ping_problem)
+                     StreamParser, VersionData, ad_db, bearing_to_radians, encode, gain_db, ping_problem)
 
 __all__ = ["SonarError", "SonarTimeout", "MicronSonar", "ScanAssembler", "beam_rotation",
            "RawLogWriter", "read_log", "record", "replay", "LOG_MAGIC",
@@ -999,8 +999,7 @@ def replay(path, *, sound_speed: float | None = None, pose=None, nibble_order: s
 def _wire_electronics(ref) -> dict:
     """What a reply's header says of the receiver, in `Electronics`' names and units (dB), so that
     ``HeadSettings.from_scan`` of a received scan asks the head for the same gain and A/D window."""
-    out = {"bit_depth": 8 if ref.adc8on else 4, "gain": int(ref.gain) * 80.0 / 210.0,
-           "ad_low": int(ref.ad_low) * 80.0 / 255.0}
+    out = {"bit_depth": 8 if ref.adc8on else 4, "gain": gain_db(ref.gain), "ad_low": ad_db(ref.ad_low)}
     if int(ref.ad_span) > 0:  # a zero span is no window: leave the default
-        out["ad_span"] = int(ref.ad_span) * 80.0 / 255.0
+        out["ad_span"] = ad_db(ref.ad_span)
     return out

@@ -77,8 +77,7 @@ def _electronics(scan) -> dict[str, Any]:
 
 def _settings_line(scan) -> str:
     """Key settings for a title: geometry, beam, electronics, provenance."""
-    rows = "beams" if scan.kind == "multibeam" else "pings"
-    parts = [f"{scan.kind}, {scan.n_pings} {rows} x {scan.n_bins} bins, {scan.range_min:g}-{scan.range_max:g} m",
+    parts = [f"{scan.kind}, {scan.n_pings} {scan.row_name} x {scan.n_bins} bins, {scan.range_min:g}-{scan.range_max:g} m",
              f"{scan.beam_pattern} {scan.beamwidth_h:g}x{scan.beamwidth_v:g} deg"]
     line2 = []
     if scan.electronics:

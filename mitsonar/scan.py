@@ -105,6 +105,11 @@ class Scan:
         return int(self.intensity.shape[0])
 
     @property
+    def row_name(self) -> str:
+        """What the rows are: the pings of a rotating head, the receive beams of a multibeam one."""
+        return "beams" if self.kind == "multibeam" else "pings"
+
+    @property
     def n_bins(self) -> int:
         return int(self.intensity.shape[1])
 

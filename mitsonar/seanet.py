@@ -1067,6 +1067,28 @@ def _round(x: float) -> int:
     return int(math.floor(x + 0.5))
 
 
+# The receiver's scales on the wire: IGain 0..210 and ADLow/ADSpan 0..255 both span 0..80 dB.
+DB_FULL_SCALE, GAIN_FULL_SCALE, AD_FULL_SCALE = 80.0, 210, 255
+
+
+def gain_db(byte: int) -> float:
+    """An IGain byte in dB."""
+    return int(byte) * DB_FULL_SCALE / GAIN_FULL_SCALE
+
+
+def ad_db(byte: int) -> float:
+    """An ADLow or ADSpan byte in dB."""
+    return int(byte) * DB_FULL_SCALE / AD_FULL_SCALE
+
+
+def require_mechanical(scan, who: str, lacks: str) -> None:
+    """SeaNet speaks for mechanically scanned heads only: refuse other scan kinds in one sentence."""
+    kind = getattr(scan, "kind", "mechanical")
+    if kind != "mechanical":
+        raise ValueError(f"{who}: a SeaNet head is mechanically scanned; a {kind!r} scan (kind must be "
+                         f"'mechanical') has {lacks}")
+
+
 @dataclass
 class HeadSettings:
     """Scanning parameters of a Micron-class head, in engineering units.
@@ -1153,7 +1175,7 @@ class HeadSettings:
           self.sound_speed, "1300..1800 m/s")
         n(num(self.gain) and 0.0 <= self.gain <= 80.0, "gain", self.gain, "0..80 dB")
         n(num(self.ad_low) and 0.0 <= self.ad_low <= 80.0, "ad_low", self.ad_low, "0..80 dB")
-        n(num(self.ad_span) and 0.0 < self.ad_span <= 80.0 and _round(255 * self.ad_span / 80) >= 1,
+        n(num(self.ad_span) and 0.0 < self.ad_span <= 80.0 and self.ad_span_byte >= 1,
           "ad_span", self.ad_span, "0.16..80 dB (ADSpan 1..255)")
         n(integer(self.step_size) and self.step_size in STEP_SIZES, "step_size", self.step_size,
           "a divisor of 6400 in 1..200, 1/16 gradian (4, 8, 16, 32 = 0.225, 0.45, 0.9, 1.8 deg)")
@@ -1215,15 +1237,15 @@ class HeadSettings:
 
     @property
     def igain(self) -> int:
-        return min(210, _round(210.0 * self.gain / 80.0))
+        return min(GAIN_FULL_SCALE, _round(GAIN_FULL_SCALE * self.gain / DB_FULL_SCALE))
 
     @property
     def ad_low_byte(self) -> int:
-        return min(255, _round(255.0 * self.ad_low / 80.0))
+        return min(AD_FULL_SCALE, _round(AD_FULL_SCALE * self.ad_low / DB_FULL_SCALE))
 
     @property
     def ad_span_byte(self) -> int:
-        return min(255, _round(255.0 * self.ad_span / 80.0))
+        return min(AD_FULL_SCALE, _round(AD_FULL_SCALE * self.ad_span / DB_FULL_SCALE))
 
     @property
     def range_scale(self) -> int:
@@ -1289,8 +1311,8 @@ class HeadSettings:
         slope = cmd.slope_ch2 if h & HdCtrl.CHAN2 else cmd.slope_ch1
         return cls(
             range=cmd.n_bins * cmd.ad_interval * 640e-9 * sound_speed / 2.0, n_bins=cmd.n_bins,
-            sound_speed=sound_speed, gain=(cmd.igain_ch2 if h & HdCtrl.CHAN2 else cmd.igain_ch1) * 80.0 / 210.0,
-            ad_low=cmd.ad_low * 80.0 / 255.0, ad_span=max(cmd.ad_span, 1) * 80.0 / 255.0,
+            sound_speed=sound_speed, gain=gain_db(cmd.igain_ch2 if h & HdCtrl.CHAN2 else cmd.igain_ch1),
+            ad_low=ad_db(cmd.ad_low), ad_span=ad_db(max(cmd.ad_span, 1)),
             step_size=cmd.step_size, continuous=bool(h & HdCtrl.CONT), left_limit=cmd.left_lim,
             right_limit=cmd.right_lim, scan_right=bool(h & HdCtrl.SCANRIGHT),
             bit_depth=8 if h & HdCtrl.ADC8ON else 4, invert=bool(h & HdCtrl.INVERT),
@@ -1310,9 +1332,7 @@ class HeadSettings:
         records them (a rendered scan's `Electronics`, a received scan's reply headers). Keyword
         arguments override any field.
         """
-        if getattr(scan, "kind", "mechanical") != "mechanical":
-            raise ValueError(f"HeadSettings.from_scan: a SeaNet head is mechanically scanned; a {scan.kind!r} "
-                             "scan (kind must be 'mechanical') has no head settings")
+        require_mechanical(scan, "HeadSettings.from_scan", "no head settings")
         bw = float(scan.range_max - scan.range_min) / scan.n_bins
         n_bins = int(round(scan.range_max / bw))
         bear = np.asarray(scan.bearings, dtype=np.float64)

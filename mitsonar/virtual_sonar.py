@@ -45,7 +45,7 @@ from .scan import Scan
 from .seanet import (DEFAULT_NIBBLE_ORDER, FULL_TURN, Alive, BBUserData, FpgaCalibrationData,
                      FpgaVersionData, GainCommand, HeadCommand, HeadData, HeadInf, HeadSettings,
                      HeadStatus, HdCtrl, ReBoot, ScanReverse, SendBBUser, SendData, SendVersion,
-                     StopAlives, StreamParser, VersionData, bearing_to_radians, encode)
+                     StopAlives, StreamParser, VersionData, bearing_to_radians, encode, require_mechanical)
 
 __all__ = ["Faults", "VirtualMicron", "serve"]
 
@@ -265,9 +265,8 @@ class VirtualMicron:
                  nibble_order: str = DEFAULT_NIBBLE_ORDER, serial_number: int = 0x4D53):
         if not (isinstance(scan_source, Scan) or callable(scan_source)):
             raise TypeError("scan_source must be a Scan or a callable settings -> Scan")
-        if isinstance(scan_source, Scan) and scan_source.kind != "mechanical":
-            raise ValueError(f"VirtualMicron: a Micron is a mechanically scanned head; a {scan_source.kind!r} scan "
-                             "(kind must be 'mechanical') has no SeaNet scanlines to serve")
+        if isinstance(scan_source, Scan):
+            require_mechanical(scan_source, "VirtualMicron", "no SeaNet scanlines to serve")
         self._source = scan_source
         self.port_url = port_url
         self.baudrate = int(baudrate)

@@ -164,10 +164,13 @@ class SonarSensor(mi.Sensor):
     def bearings_deg(self) -> np.ndarray:
         return self.bearing_start + np.arange(self.n_pings) * self.bearing_step
 
+    def head_pose(self, pose=None) -> np.ndarray:
+        """The head's beam frame at bearing 0: ``to_world``, or a render's ``pose`` (checked rigid)."""
+        return self.to_world_np if pose is None else check_rigid(pose, "render_scan 'pose'")
+
     def ping_poses(self, pose=None) -> np.ndarray:
         """(n_pings, 4, 4) world transform of each ping's beam frame (float64)."""
-        base = self.to_world_np if pose is None else check_rigid(pose, "render_scan 'pose'")
-        return base @ bearing_rotation(np.radians(self.bearings_deg()))
+        return self.head_pose(pose) @ bearing_rotation(np.radians(self.bearings_deg()))
 
     def connection(self, pose=None):
         """What weights an echo's connection back to the transducer, for `trace_echoes`.
@@ -180,8 +183,7 @@ class SonarSensor(mi.Sensor):
         """
         if self.transmit is None:
             return None
-        base = self.to_world_np if pose is None else check_rigid(pose, "render_scan 'pose'")
-        return PingFrames(np.repeat(base[None], self.n_pings, axis=0)), self.transmit
+        return PingFrames(np.repeat(self.head_pose(pose)[None], self.n_pings, axis=0)), self.transmit
 
     # ------------------------------------------------------------------ Mitsuba interface
     def sample_ray(self, time, sample1, sample2, sample3, active=True):
