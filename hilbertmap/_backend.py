@@ -31,6 +31,23 @@ def _variant(name: str):
     return mod
 
 
+def upload(jit_type, values, dtype=np.float32):
+    """``jit_type`` holding ``values`` (flat), in memory aligned to 256 bytes.
+
+    Dr.Jit maps a NumPy array instead of copying it and compiles the kernels that read it for the
+    pointer's alignment (a whole vector or none), which NumPy leaves to chance: every batch of a
+    fit could then meet a kernel compiled anew. (mitsonar's plugins do the same; this package
+    does not import mitsonar.)"""
+    a = np.asarray(values, dtype=dtype).ravel()
+    buf = np.empty(a.nbytes + 256, dtype=np.uint8)
+    start = -buf.ctypes.data % 256
+    out = buf[start:start + a.nbytes].view(dtype)
+    out[:] = a
+    arr = jit_type(out)
+    dr.make_opaque(arr)  # one element would otherwise be baked into the kernel as a literal
+    return arr
+
+
 def cut_radius(lengthscale: float, kernel_cut: float) -> float:
     """Distance at which ``exp(-d^2 / (2 l^2))`` falls to ``kernel_cut``."""
     return float(lengthscale * math.sqrt(2.0 * math.log(1.0 / kernel_cut)))
@@ -62,9 +79,8 @@ class KernelGrid:
         lin = lin[self.order]
         start = np.searchsorted(lin, np.arange(int(np.prod(self.dims)) + 1)).astype(np.uint32)
         sp = pts[self.order].astype(np.float32)
-        F = self.Float
-        self.px, self.py, self.pz = F(sp[:, 0]), F(sp[:, 1]), F(sp[:, 2])
-        self.cell_start = self.UInt32(start)
+        self.px, self.py, self.pz = (self.upload(sp[:, c]) for c in range(3))
+        self.cell_start = upload(self.UInt32, start, np.uint32)
         self._gamma = 1.0 / (2.0 * self.lengthscale ** 2)
         self.inv_order = np.empty_like(self.order)
         self.inv_order[self.order] = np.arange(self.n)
@@ -76,9 +92,13 @@ class KernelGrid:
         c = np.clip(c, 0, self.dims - 1)
         return (c[:, 0] * self.dims[1] + c[:, 1]) * self.dims[2] + c[:, 2]
 
+    def upload(self, values) -> "Float":
+        """A float32 Dr.Jit array of this grid's variant (see `upload`)."""
+        return upload(self.Float, values, np.float32)
+
     def to_lanes(self, pts: np.ndarray):
-        p = np.ascontiguousarray(np.asarray(pts, dtype=np.float32))
-        return self.Float(p[:, 0]), self.Float(p[:, 1]), self.Float(p[:, 2])
+        p = np.asarray(pts, dtype=np.float32)
+        return self.upload(p[:, 0]), self.upload(p[:, 1]), self.upload(p[:, 2])
 
     def _loop(self, x, y, z, coef=None, g=None, out=None):
         Float, UInt32, Int32 = self.Float, self.UInt32, self.Int32

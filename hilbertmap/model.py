@@ -336,13 +336,13 @@ class HilbertMap:
         lam = 1.0
         for _ in range(iters):
             v = v / np.linalg.norm(v)
-            coef = grid.Float((self._MT @ v.astype(np.float32)).astype(np.float32))
+            coef = grid.upload(self._MT @ v.astype(np.float32))
             f = grid.kernel_sum(x, y, z, coef).numpy().astype(np.float64)  # Phi v per lane
             f_item = np.concatenate([f[:nf], f[nf:].reshape(ng, m).mean(axis=1)]) if ng else f[:nf]
             u = c * f_item
             u_lane = np.concatenate([u[:nf], np.repeat(u[nf:] / m, m)]).astype(np.float32)
             out = dr.zeros(grid.Float, grid.n)
-            grid.kernel_scatter(x, y, z, grid.Float(u_lane), out)
+            grid.kernel_scatter(x, y, z, grid.upload(u_lane), out)
             w = self._M @ out.numpy()
             lam = float(np.linalg.norm(w))
             v = w
@@ -439,7 +439,7 @@ class HilbertMap:
         Float = grid.Float
         import drjit as dr
 
-        alpha_dr = Float(self.dual_coef_.astype(np.float32))
+        alpha_dr = grid.upload(self.dual_coef_)
         c_occ = self.occupied_weight_
         lam = float(self.alpha)
         rho = float(self.l1_ratio)
@@ -480,7 +480,7 @@ class HilbertMap:
             g_item = c_item * (p - y_item) / csum
             g_lane = np.concatenate([g_item[:bf], (g_item[bf:, None] * share).ravel()]).astype(np.float32)
             out = dr.zeros(Float, grid.n)
-            grid.kernel_scatter(x, y, z, Float(g_lane), out)
+            grid.kernel_scatter(x, y, z, grid.upload(g_lane), out)
             svec = out.numpy()
             eta = _sched.step_size(self.schedule, self.t_, self.n_schedule_, float(self.eta0_), float(self.k1),
                                    self.t0, lam, rho)
@@ -493,7 +493,7 @@ class HilbertMap:
             self.weights_ = w
             self.dual_coef_ = (self._MT @ w.astype(np.float32)).astype(np.float64)
             self._version = getattr(self, "_version", 0) + 1
-            alpha_dr = Float(self.dual_coef_.astype(np.float32))
+            alpha_dr = grid.upload(self.dual_coef_)
             if self.fit_intercept:
                 # the bias sees the whole batch's curvature (<= 1/4): its step is capped for stability
                 self.intercept_ -= min(eta, 2.0) * float(g_item.sum())
@@ -517,7 +517,7 @@ class HilbertMap:
             self._grid.order = np.arange(len(self.inducing_points_))
             self._grid.inv_order = self._grid.order
         grid = self._grid
-        coef = grid.Float(self.dual_coef_.astype(np.float32))
+        coef = grid.upload(self.dual_coef_)
         out = np.empty(len(pts), dtype=np.float64)
         for a in range(0, len(pts), chunk):
             p = pts[a:a + chunk]

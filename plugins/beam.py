@@ -31,6 +31,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .jit_arrays import upload
+
 PATTERNS = ("gaussian", "sinc", "uniform", "table")
 
 # Solves sinc(t)^2 = 1/2: the -3 dB point of a piston's one-way pattern.
@@ -231,7 +233,7 @@ class BeamPattern:
                 u = np.linspace(ang[0], ang[-1], 2049)
                 self._tab[axis] = (dr.opaque(mi.Float, math.radians(ang[0])),
                                    dr.opaque(mi.Float, (len(u) - 1) / math.radians(ang[-1] - ang[0])),
-                                   mi.Float(np.interp(u, ang, g).astype(np.float32)), len(u))
+                                   upload(mi.Float, np.interp(u, ang, g), np.float32), len(u))
 
     def eval(self, az: mi.Float, el: mi.Float) -> mi.Float:
         """B(az, el) inside a kernel (radians)."""

@@ -8,6 +8,7 @@ import mitsuba as mi
 import numpy as np
 
 from .echo_path import HashSamples, n_dims, trace_echoes
+from .jit_arrays import upload
 from .range_bins import RangeBins
 from .sonar_sensor import PingFrames
 from .sonar_tof import SonarIntegrator, check_max_depth, resolve_sensor
@@ -168,12 +169,12 @@ class SonarMLTIntegrator(SonarIntegrator):
             pick = _resample(groups, n // len(groups), np.random.default_rng([seed, _SALT_START]))
             pick = (pick + np.arange(len(groups))[:, None] * groups.shape[1]).ravel()
             chain_ping, start = (pick // boot).astype(np.uint32), (pick % boot).astype(np.uint32)
-            ping_c = mi.UInt32(chain_ping)
+            ping_c = upload(mi.UInt32, chain_ping, np.uint32)
             lane_c = dr.arange(mi.UInt32, n)
             # A start state is a bootstrap path: its samples are regenerated from the hash, its total
             # and records gathered instead of traced again.
-            src = mi.UInt32(pick.astype(np.uint32))
-            boot_seed, start_c = dr.opaque(mi.UInt32, seed ^ _SALT_BOOT), mi.UInt32(start)
+            src = upload(mi.UInt32, pick, np.uint32)
+            boot_seed, start_c = dr.opaque(mi.UInt32, seed ^ _SALT_BOOT), upload(mi.UInt32, start, np.uint32)
             n_pings_o = dr.opaque(mi.UInt32, n_pings)
 
             def start_samples(lane, dim):
@@ -189,19 +190,19 @@ class SonarMLTIntegrator(SonarIntegrator):
             rec_src = dr.gather(mi.UInt32, src, rec_lane) * ctx.depth_o + rec_k
             bins_cur = dr.gather(mi.UInt32, bins_boot, rec_src)
             vals_cur = dr.gather(mi.Float, vals_boot, rec_src)
-            active = mi.Bool(live[chain_ping])
+            active = upload(mi.Bool, live[chain_ping], np.bool_)
 
             # Kelemen's combination: the bootstrap paths and the large steps are uniform samples,
             # the chain states samples of f / b; the balance heuristic over the two gives every
             # sample the weight 1 / (f + p_uni b) (per Metropolis sample, times b / n_m below).
             # Expected values: a proposal adds a (+1 if a large step), the current state 1 - a.
-            pu_norm = mi.Float((p_uni * norm).astype(np.float32))   # p_uni b per ping
+            pu_norm = upload(mi.Float, p_uni * norm, np.float32)   # p_uni b per ping
             pu_b = dr.gather(mi.Float, pu_norm, ping_c)    # scan: the same for every ping, so it
                                                             # need not follow a chain's ping
             hist = dr.zeros(mi.Float64, n_pings * n_bins)
             d_b = f_boot + dr.gather(mi.Float, pu_norm, ping)
             ctx.splat(hist, bins_boot, vals_boot, dr.select(d_b > 0, 1.0 / d_b, 0.0), ping,
-                      dr.gather(mi.Bool, mi.Bool(live), ping))
+                      dr.gather(mi.Bool, upload(mi.Bool, live, np.bool_), ping))
             # The weight the current state has gathered, not yet splatted (opaque: a literal zero
             # would give the first mutation a kernel of its own).
             w_cur = dr.opaque(mi.Float, 0.0, n)

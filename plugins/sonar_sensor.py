@@ -12,6 +12,7 @@ import numpy as np
 from mitsonar.scan import bearing_rotation
 
 from .beam import BeamPattern, read_beam_table
+from .jit_arrays import upload
 
 KINDS = ("mechanical", "multibeam")
 TX_PATTERNS = ("gaussian", "sinc", "uniform")
@@ -210,11 +211,8 @@ class PingFrames:
     """Per-ping beam frames uploaded once per render (opaque arrays: a new pose never recompiles)."""
 
     def __init__(self, poses: np.ndarray):
-        poses = np.asarray(poses, dtype=np.float32)
-        self.x = mi.Float(np.ascontiguousarray(poses[:, :3, 0]).ravel())
-        self.y = mi.Float(np.ascontiguousarray(poses[:, :3, 1]).ravel())
-        self.z = mi.Float(np.ascontiguousarray(poses[:, :3, 2]).ravel())
-        self.p = mi.Float(np.ascontiguousarray(poses[:, :3, 3]).ravel())
+        poses = np.asarray(poses)
+        self.x, self.y, self.z, self.p = (upload(mi.Float, poses[:, :3, c], np.float32) for c in range(4))
 
     def gather(self, ping):
         return (dr.gather(mi.Vector3f, self.x, ping), dr.gather(mi.Vector3f, self.y, ping),

@@ -59,6 +59,23 @@ def acoustic_xml(diffuse=0.0, specular=0.0, shininess=30.0):
             f'<float name="specular" value="{specular}"/><float name="shininess" value="{shininess}"/></bsdf>')
 
 
+def jit_kernels(fn, *args, **kwargs):
+    """Run ``fn`` and return the Dr.Jit kernels it launched: (hashes, hashes compiled anew).
+
+    Comparing hashes between two calls does not depend on what an earlier run left in the kernel
+    cache (~/.drjit): a value or an array size written into a kernel gives it a new hash."""
+    import drjit as dr
+
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()  # clear
+        fn(*args, **kwargs)
+        history = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    return [k["hash"] for k in history], [k["hash"] for k in history if not k.get("cache_hit")]
+
+
 @pytest.fixture(scope="session")
 def mitsonar_mod():
     import mitsonar
