@@ -348,7 +348,10 @@ class _Context:
 
         def record(k, rng, energy, valid):
             b, valid = window.index(rng, valid)
-            dr.scatter_add(f, energy, lane, valid)
+            # Each lane adds only to its own total: no conflicts. Left to Auto, Dr.Jit would
+            # expand f into one copy per thread with its size written into the kernel, which
+            # recompiles the bootstrap at every new spp and adds a reduction pass.
+            dr.scatter_add(f, energy, lane, valid, mode=dr.ReduceMode.NoConflicts)
             if bins is not None:
                 slot = lane * depth + k
                 dr.scatter(bins, b, slot, valid)
