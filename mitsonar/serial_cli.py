@@ -79,7 +79,11 @@ def _virtual_sonar(args) -> int:
         raise FileNotFoundError(f"scene file not found: {scene_path}")
     import mitsonar
     from .virtual_sonar import serve
+    from .plugins.sonar_tof import resolve_sensor
+    from .seanet import require_mechanical
     scene = mitsonar.load_scene(str(scene_path))
+    # Refuse before the render, not after it: a multibeam scene can take a while to render.
+    require_mechanical(resolve_sensor(scene, 0), f"virtual-sonar {scene_path.name}", "no SeaNet scanlines to serve")
     kw = {"seed": args.seed}
     if args.spp is not None:
         kw["spp"] = args.spp

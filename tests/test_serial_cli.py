@@ -101,6 +101,17 @@ def test_virtual_sonar_cli_errors_are_one_line(tmp_path, capsys, monkeypatch):
     assert one_error_line(capsys, "virtual-sonar").endswith("ValueError: sonar: n_bins must be positive")
 
 
+def test_virtual_sonar_cli_refuses_a_multibeam_scene_before_rendering(capsys, monkeypatch):
+    fls = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes_xml", "box_fls.xml")
+
+    def render(*a, **k):
+        raise AssertionError("rendered a scene it cannot serve")
+    monkeypatch.setattr(mitsonar, "render_scan", render)
+    assert cli("virtual-sonar", fls, "--seconds", "0.1", "--fast") == 1
+    line = one_error_line(capsys, "virtual-sonar")
+    assert "box_fls.xml" in line and "'multibeam'" in line and "kind must be 'mechanical'" in line
+
+
 def test_record_and_replay_errors_are_one_line(tmp_path, capsys):
     assert cli("record", "/dev/does-not-exist-mitsonar", "-o", tmp_path / "l.bin", "--seconds", "1") == 1
     assert "cannot open" in one_error_line(capsys, "record")
