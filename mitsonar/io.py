@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import base64
 import contextlib
+import dataclasses
 import json
 import os
 import sys
@@ -50,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from .scan import Scan
+from .scan import Scan, ScanFieldError
 
 FORMAT = "mitsonar-scan"
 FORMAT_VERSION = 1
@@ -83,18 +84,33 @@ def save_scan(scan: Scan, path) -> None:
     Raises
     ------
     ScanFileError
-        Unknown extension, an empty scan, or metadata that JSON cannot hold exactly
-        (non-string dict keys, objects other than numbers, strings, bools, None, lists, tuples,
-        dicts, numpy arrays and scalars).
+        Unknown extension, a path that is a directory or in a missing folder, an empty scan, a
+        field that `Scan` does not allow (assigned after construction), or metadata that JSON
+        cannot hold exactly (non-string dict keys, objects other than numbers, strings, bools,
+        None, lists, tuples, dicts, numpy arrays and scalars).
     """
     path = os.fspath(path)
     ext = _extension(path)
+    try:
+        # Fields may have been assigned since construction: check them again, so that nothing is
+        # written that load_scan would refuse.
+        scan = dataclasses.replace(scan)
+    except ScanFieldError as exc:
+        raise ScanFileError(f"{path}: not saved: {exc}") from None
     if scan.n_pings == 0 or scan.n_bins == 0:
         raise ScanFileError(f"{path}: cannot save an empty scan ({scan.n_pings} pings x {scan.n_bins} bins)")
     header = _header(scan, with_arrays=(ext == ".exr"), path=path)
     text = json.dumps(header, allow_nan=True, separators=(",", ":"))
     folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=ext, dir=folder)
+    # Checked here so that the message names the user's path, not the temporary file's.
+    if os.path.isdir(path):
+        raise ScanFileError(f"{path}: is a directory; give a file name ending in {ext}")
+    if not os.path.isdir(folder):
+        raise ScanFileError(f"{path}: folder {folder} does not exist")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=ext, dir=folder)
+    except OSError as exc:
+        raise ScanFileError(f"{path}: cannot be written ({exc.strerror or exc})") from None
     os.close(fd)
     try:
         if ext == ".exr":
@@ -106,9 +122,11 @@ def save_scan(scan: Scan, path) -> None:
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         if os.path.exists(tmp):
             os.remove(tmp)
+        if isinstance(exc, OSError):  # its text names the temporary file
+            raise ScanFileError(f"{path}: cannot be written ({exc.strerror or exc})") from None
         raise
 
 
@@ -127,10 +145,13 @@ def load_scan(path) -> Scan:
     Raises
     ------
     ScanFileError
-        Missing, truncated, corrupt or foreign file, or an unknown extension.
+        Missing, truncated, corrupt or foreign file, an unknown extension, or content that
+        `Scan` does not allow (the message names the header field, channel or array).
     """
     path = os.fspath(path)
     ext = _extension(path)
+    if os.path.isdir(path):
+        raise ScanFileError(f"{path}: is a directory, not a scan file")
     if not os.path.isfile(path):
         raise ScanFileError(f"{path}: no such file")
     try:
@@ -263,15 +284,20 @@ def _parse_header(path: str, text, crc) -> dict[str, Any]:
     return head
 
 
-def _build(path: str, head: dict[str, Any], intensity, data, arrays: dict[str, Any]) -> Scan:
+def _build(path: str, head: dict[str, Any], intensity, data, arrays: dict[str, Any], stored_as: str) -> Scan:
+    """The Scan of a file's parts; `stored_as` is where the file keeps intensity and data
+    ('channel' in EXR) and, in NPZ ('array'), also ranges, bearings and poses."""
     try:
-        n_pings, n_bins = int(head["n_pings"]), int(head["n_bins"])
+        n_pings, n_bins = head["n_pings"], head["n_bins"]
         scalars = {name: _decode(head[name]) for name in _SCALARS}
         electronics = _decode(head["electronics"])
         meta = _decode(head["meta"])
         checks = head["checksums"]
     except (KeyError, TypeError, ValueError) as exc:
         raise ScanFileError(f"{path}: the header lacks or garbles {exc}") from None
+    for name, value in (("n_pings", n_pings), ("n_bins", n_bins)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ScanFileError(f"{path}: header '{name}': {value!r} is not allowed (a count >= 1)")
     if intensity.shape != (n_pings, n_bins) or data.shape != (n_pings, n_bins):
         raise ScanFileError(f"{path}: channels are {intensity.shape} and {data.shape}, the header says "
                             f"{n_pings} pings x {n_bins} bins")
@@ -284,8 +310,10 @@ def _build(path: str, head: dict[str, Any], intensity, data, arrays: dict[str, A
         raise ScanFileError(f"{path}: pixel data do not match their checksums (corrupt file)")
     try:
         return Scan(intensity=intensity, data=data, electronics=electronics, meta=meta, **arrays, **scalars)
-    except (TypeError, ValueError) as exc:
-        raise ScanFileError(f"{path}: inconsistent scan ({exc})") from None
+    except ScanFieldError as exc:
+        where = stored_as if exc.field in ("intensity", "data") or (stored_as == "array" and exc.field in arrays) \
+            else "header"
+        raise ScanFileError(f"{path}: {where} '{exc.field}': {exc.reason}") from None
 
 
 # ----------------------------------------------------------------------------------------------
@@ -326,12 +354,10 @@ def _read_exr(path: str) -> Scan:
         if name not in channels:
             raise ScanFileError(f"{path}: channel '{name}' is missing (channels: {', '.join(sorted(channels)) or 'none'})")
     try:
-        arrays = {"ranges": np.array(head["ranges"], dtype=np.float64),
-                  "bearings": np.array(head["bearings"], dtype=np.float64),
-                  "poses": np.array(head["poses"], dtype=np.float64)}
-    except (KeyError, TypeError, ValueError) as exc:
+        arrays = {name: head[name] for name in _ARRAYS}  # Scan checks that they hold numbers
+    except KeyError as exc:
         raise ScanFileError(f"{path}: the header lacks or garbles {exc}") from None
-    return _build(path, head, channels["intensity"], channels["data"], arrays)
+    return _build(path, head, channels["intensity"], channels["data"], arrays, "channel")
 
 
 @contextlib.contextmanager
@@ -403,4 +429,4 @@ def _read_npz(path: str) -> Scan:
     intensity, data = arrays.pop("intensity"), arrays.pop("data")
     if data.dtype != np.uint8:
         raise ScanFileError(f"{path}: array 'data' is {data.dtype}, expected uint8")
-    return _build(path, head, intensity, data, arrays)
+    return _build(path, head, intensity, data, arrays, "array")

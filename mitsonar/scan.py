@@ -5,10 +5,25 @@ what `hilbertmap` learns from (through the documented attributes only).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+KINDS = ("mechanical", "multibeam")
+_RIGID = "only rigid transforms: rotation + translation, no scale, shear or mirror"
+
+
+class ScanFieldError(ValueError):
+    """A `Scan` field with a value that is not allowed; `field` names it, `reason` says why."""
+
+    def __init__(self, field: str, reason: str):
+        super().__init__(f"Scan '{field}': {reason}")
+        self.field, self.reason = field, reason
+
+    def __reduce__(self):  # pickles (multiprocessing) with both arguments
+        return type(self), (self.field, self.reason)
 
 
 def bearing_rotation(bearing) -> np.ndarray:
@@ -28,6 +43,70 @@ def bearing_rotation(bearing) -> np.ndarray:
     m[..., 1, 1] = 1.0
     m[..., 3, 3] = 1.0
     return m
+
+
+def _not_rigid(m: np.ndarray) -> np.ndarray:
+    """Which of the finite (..., 4, 4) matrices are not rigid: rotation + translation, with the
+    tolerances of ``np.allclose`` (a float32 rotation passes, a scale of 1.001 does not)."""
+    r = m[..., :3, :3]
+    gram = np.swapaxes(r, -1, -2) @ r
+    eye = np.eye(3)
+    return ((np.abs(gram - eye) > 1e-4 + 1e-5 * eye).any(axis=(-2, -1))
+            | (np.abs(np.linalg.det(r) - 1) > 1e-4)
+            | (np.abs(m[..., 3, :] - [0, 0, 0, 1]) > 1e-9 + 1e-5 * np.array([0, 0, 0, 1])).any(axis=-1))
+
+
+def check_rigid(matrix, what="sonar 'to_world'"):
+    """A beam frame must be a rotation plus translation: scaling would bend the beam.
+
+    Lives with the Scan, not the sensor plugin, so that checking a scan's poses needs no Mitsuba
+    variant (scans from a serial head or a file are checked on machines that cannot render)."""
+    m = np.asarray(matrix, dtype=np.float64)
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise ValueError(f"{what}: expected a finite 4x4 matrix, got shape {m.shape}")
+    if _not_rigid(m):
+        raise ValueError(f"{what}: must be a rigid transform (rotation + translation, no scale, "
+                         "shear or mirror); the beam frame is +z boresight, +y scan axis")
+    return m
+
+
+def _show(value) -> str:
+    return repr(value.item() if isinstance(value, np.generic) else value)
+
+
+def _first(mask: np.ndarray) -> str:
+    """Index of the first True of mask, as ``3`` or ``(3, 4)``."""
+    idx = tuple(int(i) for i in np.argwhere(mask)[0])
+    return str(idx[0]) if len(idx) == 1 else str(idx)
+
+
+def _array(name: str, value, dtype) -> np.ndarray:
+    try:
+        a = np.asarray(value)
+    except (TypeError, ValueError):  # ragged nested lists
+        raise ScanFieldError(name, "not an array of numbers (ragged nesting)") from None
+    if a.dtype.kind not in "iuf":  # strings, objects, bools, complex
+        raise ScanFieldError(name, f"an array of {a.dtype} is not allowed (numbers only)")
+    return a if dtype is None else a.astype(dtype, copy=False)
+
+
+def _device_bytes(value) -> np.ndarray:
+    a = _array("data", value, None)
+    if a.dtype != np.uint8:
+        # Casting would wrap 256 to 0 or cut 3.7 to 3: only exact bytes convert.
+        bad = ~(np.isfinite(a) & (a >= 0) & (a <= 255) & (a == np.round(a)))
+        if bad.any():
+            raise ScanFieldError("data", f"{_show(a[bad][0])} at index {_first(bad)} is not allowed "
+                                         "(device bytes: integers 0 to 255)")
+        a = a.astype(np.uint8)
+    return a
+
+
+def _number(name: str, value, ok, allowed: str) -> None:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ScanFieldError(name, f"{_show(value)} is not a number")
+    if not (math.isfinite(value) and ok(value)):
+        raise ScanFieldError(name, f"{_show(value)} is not allowed ({allowed})")
 
 
 @dataclass
@@ -80,25 +159,50 @@ class Scan:
     meta: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        self.intensity = np.asarray(self.intensity, dtype=np.float32)
-        data = np.asarray(self.data)
-        if data.dtype != np.uint8 and data.size and (np.nanmin(data) < 0 or np.nanmax(data) > 255
-                                                     or not np.all(np.isfinite(data))):
-            raise ValueError("Scan: data must hold device bytes 0..255 "
-                             f"(got values from {np.nanmin(data)} to {np.nanmax(data)})")
-        self.data = data.astype(np.uint8)
-        self.ranges = np.asarray(self.ranges, dtype=np.float64)
-        self.bearings = np.asarray(self.bearings, dtype=np.float64)
-        self.poses = np.asarray(self.poses, dtype=np.float64)
+        # The one place a Scan's fields are checked: the renderer, the SeaNet driver, load_scan
+        # and users all build scans here, so a bad value stops before it reaches a file or a map.
+        _number("range_min", self.range_min, lambda v: v >= 0, "a range >= 0 m")
+        _number("range_max", self.range_max, lambda v: v > self.range_min,
+                f"a range > range_min = {self.range_min:g} m")
+        _number("beamwidth_h", self.beamwidth_h, lambda v: 0 < v <= 360, "a width in (0, 360] deg")
+        _number("beamwidth_v", self.beamwidth_v, lambda v: 0 < v <= 180, "a width in (0, 180] deg")
+        _number("sound_speed", self.sound_speed, lambda v: v > 0, "a speed > 0 m/s")
+        _number("absorption", self.absorption, lambda v: v >= 0, "an attenuation >= 0 dB/m")
+        if not isinstance(self.kind, str) or self.kind not in KINDS:
+            raise ScanFieldError("kind", f"{self.kind!r} is not allowed (one of {', '.join(KINDS)})")
+        if not isinstance(self.beam_pattern, str) or not self.beam_pattern:
+            raise ScanFieldError("beam_pattern", f"{self.beam_pattern!r} is not a pattern name")
+        for name in ("electronics", "meta"):
+            if not isinstance(getattr(self, name), dict):
+                raise ScanFieldError(name, f"a {type(getattr(self, name)).__name__} is not a dict")
+        self.intensity = _array("intensity", self.intensity, np.float32)
+        if self.intensity.ndim != 2:
+            raise ScanFieldError("intensity", f"shape {self.intensity.shape} is not (n_pings, n_bins)")
         n_pings, n_bins = self.intensity.shape
-        if self.data.shape != (n_pings, n_bins):
-            raise ValueError(f"Scan: data has shape {self.data.shape}, intensity {self.intensity.shape}; they must match")
-        if self.ranges.shape != (n_bins,):
-            raise ValueError(f"Scan: ranges has shape {self.ranges.shape}, expected ({n_bins},)")
-        if self.bearings.shape != (n_pings,):
-            raise ValueError(f"Scan: bearings has shape {self.bearings.shape}, expected ({n_pings},)")
-        if self.poses.shape != (n_pings, 4, 4):
-            raise ValueError(f"Scan: poses has shape {self.poses.shape}, expected ({n_pings}, 4, 4)")
+        self.data = _device_bytes(self.data)
+        self.ranges = _array("ranges", self.ranges, np.float64)
+        self.bearings = _array("bearings", self.bearings, np.float64)
+        self.poses = _array("poses", self.poses, np.float64)
+        for name, shape, what in (("data", (n_pings, n_bins), "(n_pings, n_bins) like intensity"),
+                                  ("ranges", (n_bins,), "(n_bins,)"), ("bearings", (n_pings,), "(n_pings,)"),
+                                  ("poses", (n_pings, 4, 4), "(n_pings, 4, 4)")):
+            if getattr(self, name).shape != shape:
+                raise ScanFieldError(name, f"shape {getattr(self, name).shape} is not {what} = {shape}")
+        for name in ("intensity", "ranges", "bearings", "poses"):
+            bad = ~np.isfinite(getattr(self, name))
+            if bad.any():
+                raise ScanFieldError(name, f"{_show(getattr(self, name)[bad][0])} at index {_first(bad)} "
+                                           "is not allowed (finite values only)")
+        if (self.intensity < 0).any():
+            raise ScanFieldError("intensity", f"{_show(self.intensity[self.intensity < 0][0])} at index "
+                                              f"{_first(self.intensity < 0)} is not allowed (echo energy >= 0)")
+        not_rigid = _not_rigid(self.poses)
+        if not_rigid.any():
+            raise ScanFieldError("poses", f"pose {_first(not_rigid)} is not allowed ({_RIGID})")
+        outside = (self.ranges < self.range_min) | (self.ranges > self.range_max)
+        if outside.any():
+            raise ScanFieldError("ranges", f"{_show(self.ranges[outside][0])} at index {_first(outside)} is not "
+                                           f"allowed (inside the window [{self.range_min:g}, {self.range_max:g}] m)")
 
     @property
     def n_pings(self) -> int:

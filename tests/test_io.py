@@ -263,3 +263,138 @@ def test_saved_files_get_the_usual_permissions(tmp_path):
             assert stat.S_IMODE(os.stat(tmp_path / name).st_mode) == 0o644
     finally:
         os.umask(umask)
+
+
+# ------------------------------------------------------------------------------------------------
+# field values: checked by Scan, and so by load_scan and save_scan
+
+def _scan_fields(**change):
+    scan = make_scan()
+    fields = {f.name: getattr(scan, f.name) for f in dataclasses.fields(Scan)}
+    return {**fields, **change}
+
+
+def _with(array, index, value):
+    array = np.array(array)
+    array[index] = value
+    return array
+
+
+BAD_FIELDS = {  # field: (value, words the message must hold)
+    "sound_speed": ("fast", ["'fast' is not a number"]),
+    "absorption": (-0.1, ["-0.1 is not allowed", ">= 0 dB/m"]),
+    "beamwidth_h": (math.nan, ["nan is not allowed", "(0, 360] deg"]),
+    "range_min": (50.0, ["'range_max'", "range_min = 50"]),
+    "kind": ("sidescan", ["'sidescan' is not allowed", "one of mechanical, multibeam"]),
+    "beam_pattern": (3, ["not a pattern name"]),
+    "bearings": (lambda s: _with(s.bearings, 2, math.nan), ["nan at index 2", "finite values only"]),
+    "poses": (lambda s: _with(s.poses, (4, 0, 0), 5.0), ["pose 4 is not allowed", "rigid"]),
+    "ranges": (lambda s: _with(s.ranges, 0, 0.05), ["0.05 at index 0", "window [0.1, 12] m"]),
+    "intensity": (lambda s: _with(s.intensity, (1, 2), math.nan), ["nan at index (1, 2)", "finite"]),
+    "data": (lambda s: _with(s.data.astype(float), 0, 3.5), ["3.5", "integers 0 to 255"]),
+}
+
+
+@pytest.mark.parametrize("name", sorted(BAD_FIELDS))
+def test_scan_refuses_a_bad_field(name):
+    value, words = BAD_FIELDS[name]
+    if callable(value):
+        value = value(make_scan())
+    with pytest.raises(ValueError) as err:
+        Scan(**_scan_fields(**{name: value}))
+    msg = str(err.value)
+    assert msg.startswith("Scan '") and all(w in msg for w in words), msg
+
+
+def test_scan_refuses_negative_intensity_and_wrong_shapes():
+    scan = make_scan()
+    with pytest.raises(ValueError, match=r"Scan 'intensity': -1.0 at index \(0, 0\) is not allowed \(echo energy >= 0\)"):
+        Scan(**_scan_fields(intensity=_with(scan.intensity, (0, 0), -1.0)))
+    with pytest.raises(ValueError, match=r"Scan 'ranges': shape \(32,\) is not \(n_bins,\) = \(33,\)"):
+        Scan(**_scan_fields(ranges=scan.ranges[:-1]))
+    with pytest.raises(ValueError, match=r"Scan 'bearings': an array of <U1 is not allowed \(numbers only\)"):
+        Scan(**_scan_fields(bearings=["a"] * scan.n_pings))
+
+
+def test_scans_from_devices_and_float32_poses_are_accepted():
+    scan = make_scan()
+    # Bytes given as ints, poses rounded to float32 (as a navigation log may hold them).
+    back = Scan(**_scan_fields(data=scan.data.astype(np.int64), poses=scan.poses.astype(np.float32),
+                               range_min=0, kind="multibeam"))
+    assert back.data.dtype == np.uint8 and np.array_equal(back.data, scan.data)
+
+
+def _forge(src, dst, head_change=None, array_change=None):
+    """Rewrite a saved scan with other content but valid checksums, as a foreign writer could."""
+    if src.endswith(".exr"):
+        with OpenEXR.File(src, separate_channels=True) as f:
+            head = json.loads(f.header()["mitsonar"])
+            arrays = {k: np.array(v.pixels) for k, v in f.channels().items()}
+    else:
+        with np.load(src) as z:
+            arrays = {k: z[k] for k in z.files if k not in ("header", "header_crc32")}
+            head = json.loads(str(z["header"]))
+    head.update(head_change or {})
+    for name, fn in (array_change or {}).items():
+        arrays[name] = fn(arrays[name])
+    head["checksums"] = {"intensity": zlib.crc32(arrays["intensity"].astype("<f4").tobytes()),
+                         "data": zlib.crc32(arrays["data"].astype(np.uint8).tobytes())}
+    text = json.dumps(head)
+    if dst.endswith(".exr"):
+        with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage, "mitsonar": text,
+                           "mitsonar_crc32": f"{zlib.crc32(text.encode()):08x}"}, arrays) as f:
+            f.write(dst)
+    else:
+        np.savez(dst, **arrays, header=np.array(text), header_crc32=np.array(zlib.crc32(text.encode()), np.uint32))
+
+
+def _scaled_pose(poses):
+    poses = np.array(poses)
+    poses[3, :3, :3] *= 2.0
+    return poses
+
+
+@pytest.mark.parametrize("ext", [".exr", ".npz"])
+def test_file_with_bad_content_names_file_and_field(saved, tmp_path, ext):
+    stored = "channel" if ext == ".exr" else "array"
+    cases = [({"sound_speed": "fast"}, None, "header 'sound_speed': 'fast' is not a number"),
+             ({"kind": "sidescan"}, None, "header 'kind': 'sidescan' is not allowed (one of mechanical, multibeam)"),
+             ({"range_min": 50}, None, "header 'range_max': 12.0 is not allowed (a range > range_min = 50 m)"),
+             ({"n_bins": -3}, None, "header 'n_bins': -3 is not allowed (a count >= 1)"),
+             ({"n_pings": 7.0}, None, "header 'n_pings': 7.0 is not allowed (a count >= 1)"),
+             (None, {"intensity": lambda a: _with(a, (0, 5), np.nan)},
+              f"{stored} 'intensity': nan at index (0, 5) is not allowed (finite values only)")]
+    if ext == ".exr":  # ranges, bearings and poses live in the header
+        cases += [({"bearings": [math.nan] + [0.0] * 6}, None, "header 'bearings': nan at index 0"),
+                  ({"poses": _scaled_pose(json.loads(json.dumps(load_scan(saved[ext]).poses.tolist()))).tolist()},
+                   None, "header 'poses': pose 3 is not allowed (only rigid transforms"),
+                  ({"ranges": [["x"]]}, None, "header 'ranges': an array of <U1 is not allowed (numbers only)")]
+    else:
+        cases += [(None, {"bearings": lambda a: _with(a, 0, np.nan)}, "array 'bearings': nan at index 0"),
+                  (None, {"poses": _scaled_pose}, "array 'poses': pose 3 is not allowed (only rigid transforms")]
+    for i, (head_change, array_change, words) in enumerate(cases):
+        dst = str(tmp_path / f"bad{i}{ext}")
+        _forge(saved[ext], dst, head_change, array_change)
+        msg = _expect_error(dst, words)
+        assert msg == f"{dst}: {words}" or msg.startswith(f"{dst}: {words}"), msg
+
+
+def test_save_checks_fields_assigned_after_construction(tmp_path):
+    scan = make_scan()
+    scan.sound_speed = "fast"
+    with pytest.raises(ScanFileError, match=r"scan\.exr: not saved: Scan 'sound_speed': 'fast' is not a number"):
+        save_scan(scan, tmp_path / "scan.exr")
+    assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("ext", [".exr", ".npz"])
+def test_directories_are_named_not_temporary_files(tmp_path, ext):
+    folder = tmp_path / f"dir{ext}"
+    folder.mkdir()
+    _expect_error(folder, "is a directory")
+    for target, words in ((folder, "is a directory"), (tmp_path / "missing" / f"scan{ext}", "does not exist")):
+        with pytest.raises(ScanFileError) as err:
+            save_scan(make_scan(), target)
+        msg = str(err.value)
+        assert msg.startswith(f"{target}: ") and words in msg and ".tmp-" not in msg, msg
+    assert sorted(os.listdir(tmp_path)) == [f"dir{ext}"] and os.listdir(folder) == []
