@@ -89,12 +89,27 @@ def _plot(scan, path, kind="polar", ping=0, db=False, use="data", mesh=None):
 
 
 def _check_output(path, exts):
+    """Before any work: an output that cannot be written costs a sentence, not a render."""
     ext = os.path.splitext(path)[1].lower()
     if ext not in exts:
         raise CLIError(f"output {path!r}: the extension must be one of {', '.join(exts)}")
+    if os.path.isdir(path):
+        raise CLIError(f"output {path!r} is a directory")
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise CLIError(f"output {path!r}: folder {folder!r} does not exist")
+    if not os.access(folder, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
+        raise CLIError(f"output {path!r} is not writable")
+
+
+def make_output_folder(path, option="-o"):
+    """Create an output folder (and parents), or say in one sentence why it cannot be."""
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as exc:
+        raise CLIError(f"{option} {path!r}: cannot create the output folder ({exc.strerror})") from None
+    if not os.access(path, os.W_OK):
+        raise CLIError(f"{option} {path!r}: the output folder is not writable")
 
 
 # ----------------------------------------------------------------------------- commands
@@ -102,8 +117,15 @@ def cmd_render(args):
     _check_output(args.output, (".exr", ".npz"))
     if args.plot:
         _check_output(args.plot, (".png", ".pdf", ".svg"))
-    scene, scan = _render(args.scene, args.spp, args.seed, args.max_depth, _parse_settings(args.set),
-                          args.quiet)
+    settings = _parse_settings(args.set)
+    if settings:  # name the option in the message, and before the render
+        from .electronics import Electronics
+
+        try:
+            Electronics.from_dict(settings, source="--set")
+        except ValueError as exc:
+            raise CLIError(str(exc)) from None
+    scene, scan = _render(args.scene, args.spp, args.seed, args.max_depth, settings, args.quiet)
     scan.save(args.output)
     print(f"wrote {args.output} ({scan.n_pings} {scan.row_name} x {scan.n_bins} bins)")
     if args.plot:
@@ -147,8 +169,8 @@ def cmd_info(args):
                            + (f" step {np.degrees(scan.bearings[1] - scan.bearings[0]):.6g}" if scan.n_pings > 1 else "")),
         ("beam", f"{scan.beam_pattern} {scan.beamwidth_h:g} x {scan.beamwidth_v:g} deg"),
         ("sound speed [m/s]", scan.sound_speed), ("absorption [dB/m]", scan.absorption),
-        ("position (ping 0)", " ".join(f"{v:.6g}" for v in scan.positions[0])),
-        ("boresight (ping 0)", " ".join(f"{v:.6g}" for v in scan.boresights[0])),
+        (f"position ({scan.row_name[:-1]} 0)", " ".join(f"{v:.6g}" for v in scan.positions[0])),
+        (f"boresight ({scan.row_name[:-1]} 0)", " ".join(f"{v:.6g}" for v in scan.boresights[0])),
         ("intensity", f"sum {float(scan.intensity.sum()):.6g}, max {float(scan.intensity.max()):.6g}"),
         ("data", f"mean {float(scan.data.mean()):.4g}, max {int(scan.data.max())}"),
     ]
@@ -170,7 +192,7 @@ def _scenes_dir():
 def cmd_demo(args):
     import mitsonar
 
-    os.makedirs(args.output, exist_ok=True)
+    make_output_folder(args.output)
     scenes = _scenes_dir()
     for name in ("box", "intake", "box_fls"):
         path = os.path.join(scenes, f"{name}.xml")
@@ -223,9 +245,10 @@ def build_parser():
     i.add_argument("scan", help="scan file (.exr or .npz)")
     i.set_defaults(func=cmd_info)
 
-    d = sub.add_parser("demo", help="render the box and intake scenes to EXR and pictures",
-                       description="Render scenes_xml/box.xml and intake.xml: EXR + polar, "
-                                   "cartesian and A-scan pictures.")
+    d = sub.add_parser("demo", help="render the demo scenes (box, intake, box_fls) to EXR and pictures",
+                       description="Render scenes_xml/box.xml, intake.xml (mechanical scans) and "
+                                   "box_fls.xml (a multibeam frame): EXR + polar, cartesian and "
+                                   "A-scan pictures.")
     d.add_argument("-o", "--output", default="out", help="output folder (default out/)")
     d.add_argument("--spp", type=int, default=4096)
     d.add_argument("--seed", type=int, default=0)
@@ -242,7 +265,14 @@ def build_parser():
     return p
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None):
+    print(f"mitsonar: warning: {message}", file=sys.stderr)
+
+
 def main(argv=None):
+    import warnings
+
+    warnings.showwarning = _one_line_warning  # a sentence, not a source line
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.variant:
@@ -255,6 +285,11 @@ def main(argv=None):
     except KeyboardInterrupt:
         print("mitsonar: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # `mitsonar info x.exr | head`: the reader has gone; stop quietly (and keep Python from
+        # complaining again when it flushes stdout at exit).
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_ERROR
     except Exception as exc:  # one line for the user, the traceback only on request
         if os.environ.get("MITSONAR_DEBUG"):
             raise

@@ -293,7 +293,9 @@ def plot_ascan(scan, ping: int, path=None, ax=None, db: bool = False, *,
     matplotlib.figure.Figure
     """
     if not -scan.n_pings <= ping < scan.n_pings:
-        raise IndexError(f"plot_ascan: ping {ping} is out of range for a scan of {scan.n_pings} pings")
+        raise IndexError(f"plot_ascan: {scan.row_name[:-1]} {ping} is out of range for a scan of "
+                         f"{scan.n_pings} {scan.row_name}")
+    own_figure = ax is None
     fig, ax = _new_figure(ax, figsize, dpi)
     inten = scan.intensity[ping].astype(np.float64)
     if db:
@@ -315,8 +317,10 @@ def plot_ascan(scan, ping: int, path=None, ax=None, db: bool = False, *,
     ax2.set_ylim(0, 260)
     ax2.set_ylabel("device output (0..255)", color="tab:orange")
     bearing = math.degrees(scan.bearings[ping])
-    ax.set_title((f"ping {ping % scan.n_pings}, bearing {bearing:g} deg\n" + _settings_line(scan))
+    ax.set_title((f"{scan.row_name[:-1]} {ping % scan.n_pings}, bearing {bearing:g} deg\n" + _settings_line(scan))
                  if title is None else title, fontsize=7)
+    if own_figure:
+        fig.tight_layout()  # a long settings line wraps the title to three lines: keep it on the page
     _save(fig, path)
     return fig
 

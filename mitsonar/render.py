@@ -1,8 +1,11 @@
 """Variant selection, scene loading, `render_scan` and the scene's ground-truth mesh."""
 from __future__ import annotations
 
+import difflib
+import math
 import os
 import re
+import warnings
 
 import numpy as np
 
@@ -55,9 +58,68 @@ def _ensure_variant():
     register()
 
 
+_PLUGIN_CLASSES = {"sonar": ("sonar_sensor", "SonarSensor"), "acoustic": ("acoustic_bsdf", "AcousticBSDF"),
+                   "sonar_tof": ("sonar_tof", "SonarTOFIntegrator"), "sonar_mlt": ("sonar_mlt", "SonarMLTIntegrator")}
+
+
+def plugin_parameters(plugin_type: str) -> list:
+    """The XML parameter names of one of our plugins, read from its docstring's parameter table
+    (the table is the documentation, so the two cannot disagree)."""
+    if plugin_type not in _PLUGIN_CLASSES:
+        return []
+    from mitsonar.plugins import module
+
+    mod, cls = _PLUGIN_CLASSES[plugin_type]
+    doc = getattr(module(mod), cls).__doc__ or ""
+    names, rules = [], 0
+    for line in doc.splitlines():
+        text = line.strip()
+        if text.startswith("===="):
+            rules += 1
+            continue
+        if rules == 2 and text and not line.startswith(" " * 12):  # body rows, not continuation lines
+            first = text.split()[0]
+            stem, _, alt = first.partition("/")
+            names.append(stem)
+            if alt.startswith("_"):  # "aperture_h/_v"
+                names.append(stem.rsplit("_", 1)[0] + alt)
+    if plugin_type == "sonar":
+        import dataclasses
+
+        from .electronics import Electronics
+
+        names = [n for n in names if n != "electronics"] + [f.name for f in dataclasses.fields(Electronics)]
+    return names
+
+
+def _unreferenced(head: str, lines: list) -> str | None:
+    """Mitsuba's 'Found N unreferenced property in <kind> plugin of type "t": - float "x": 5' as a
+    sentence that names the parameter and the nearest known one."""
+    m = re.search(r'unreferenced propert(?:y|ies) in (\w+) plugin of type "([^"]+)"', head)
+    if not m:
+        return None
+    where = head.split(": Found")[0]
+    if "dictionary node" in where:  # mi.load_dict: no file to name
+        where = ""
+    kind = {"sonar": "sensor", "acoustic": "BSDF", "sonar_tof": "integrator",
+            "sonar_mlt": "integrator"}.get(m.group(2), m.group(1))
+    known = plugin_parameters(m.group(2))
+    parts = []
+    for ln in lines[1:]:
+        p = re.match(r'^-\s*(\w+)\s+"([^"]+)"(?::\s*(.*))?$', ln)
+        if not p:
+            continue
+        name = p.group(2)
+        hint = difflib.get_close_matches(name, known, n=1)
+        parts.append(f'"{name}"' + (f' (did you mean "{hint[0]}"?)' if hint else ""))
+    allowed = f"; its parameters: {', '.join(known)}" if known else ""
+    text = f'the {kind} "{m.group(2)}" has no parameter {", ".join(parts)}{allowed}'
+    return f"{where}: {text}" if where else text
+
+
 def _first_reason(message: str) -> str:
     """Mitsuba wraps a failing Python constructor's traceback; keep the reason and the place."""
-    lines = [ln.strip() for ln in str(message).splitlines() if ln.strip()]
+    lines = [re.sub(r"^\[[\w.]+:\d+\]\s*", "", ln.strip()) for ln in str(message).splitlines() if ln.strip()]
     reason = None
     for ln in reversed(lines):
         m = re.match(r"^(?:\w+\.)*(?:ValueError|BeamPatternError|TypeError|RuntimeError|VariantError)"
@@ -66,11 +128,13 @@ def _first_reason(message: str) -> str:
             reason = m.group(1)
             break
     head = lines[0] if lines else str(message)
-    head = re.sub(r"^\[[^\]]*\]\s*", "", head)  # drop "[parser.cpp:444]"
     head = head.split(": Traceback")[0]
     if reason:
         prefix = head.split("failed to instantiate")[0].rstrip(": ") if "failed to instantiate" in head else ""
         return f"{prefix}: {reason}" if prefix else reason
+    unref = _unreferenced(head, lines)
+    if unref:
+        return unref
     return " ".join(lines[:3]) if len(lines) > 1 else head
 
 
@@ -108,10 +172,79 @@ def load_scene(path_or_xml: str, **params):
 def _sonar(scene, sensor):
     from mitsonar.plugins import module
 
+    tof = module("sonar_tof")
+    name = _scene_name(scene) or "the scene"
+    sonars = [s for s in scene.sensors() if isinstance(s, tof.SonarSensor)]
+    if not sonars:
+        kinds = ", ".join(type(s).__name__ for s in scene.sensors()) or "none"
+        raise SceneError(f'{name}: needs a <sensor type="sonar"> (sensors found: {kinds})')
     try:
-        return module("sonar_tof").resolve_sensor(scene, sensor)
+        chosen = tof.resolve_sensor(scene, sensor)
     except ValueError as exc:
-        raise SceneError(str(exc)) from None
+        raise SceneError(f"{name}: {exc}") from None
+    if isinstance(sensor, int) and len(sonars) > 1:
+        warnings.warn(f"{name} has {len(sonars)} sonar sensors; rendering sensor {sensor} "
+                      "(choose with render_scan(sensor=...))", stacklevel=3)
+    return chosen
+
+
+def _whole(name, value, lo, hi, what):
+    """A count or seed argument: a whole number in [lo, hi] (4096.0 counts; 1.5, True, "8" do not)."""
+    ok = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+    if (not ok and isinstance(value, (float, np.floating)) and math.isfinite(value)
+            and float(value).is_integer()):
+        ok = True
+    if not ok or not lo <= value <= hi:
+        raise SceneError(f"render_scan '{name}': {value!r} is not allowed ({what})")
+    return int(value)
+
+
+def _check_pose(pose):
+    """Shape and finiteness here, in one sentence; the sensor checks that it is rigid."""
+    try:
+        m = np.asarray(pose, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SceneError(f"render_scan 'pose': expected a 4x4 rigid transform (array-like), got "
+                         f"{type(pose).__name__} {pose!r:.40}") from None
+    if m.shape != (4, 4):
+        raise SceneError(f"render_scan 'pose': expected a 4x4 matrix, got shape {m.shape}")
+    if not np.all(np.isfinite(m)):
+        r, c = np.argwhere(~np.isfinite(m))[0]
+        raise SceneError(f"render_scan 'pose': entry [{r}, {c}] is {m[r, c]} (a pose must be finite)")
+    return m
+
+
+SONAR_INTEGRATORS = ("sonar_tof", "sonar_mlt")
+SEED_MAX = 2 ** 32 - 1   # the path seed is a 32-bit integer: larger seeds would repeat smaller ones
+
+
+def _integrator(scene, integrator):
+    import mitsuba as mi
+
+    if integrator is None:
+        integrator = scene.integrator()
+        if not hasattr(integrator, "render_histogram"):
+            if integrator is not None:  # None: the XML names no integrator, sonar_tof is the default
+                name = integrator.class_name() if hasattr(integrator, "class_name") else type(integrator).__name__
+                warnings.warn(f"{_scene_name(scene) or 'the scene'}: its integrator {name} is not a sonar "
+                              "integrator; rendering with sonar_tof", stacklevel=3)
+            return mi.load_dict({"type": "sonar_tof"})
+        return integrator
+    if isinstance(integrator, str):
+        integrator = {"type": integrator}
+    if isinstance(integrator, dict):
+        kind = integrator.get("type")
+        if kind not in SONAR_INTEGRATORS:
+            raise SceneError(f"render_scan 'integrator': {kind!r} is not a sonar integrator "
+                             f"(one of {', '.join(SONAR_INTEGRATORS)})")
+        try:
+            return mi.load_dict(integrator)
+        except Exception as exc:
+            raise SceneError(f"render_scan 'integrator': {_first_reason(str(exc))}") from None
+    if not hasattr(integrator, "render_histogram"):
+        raise SceneError(f"render_scan 'integrator': {type(integrator).__name__} is not a sonar integrator "
+                         f"(one of {', '.join(SONAR_INTEGRATORS)})")
+    return integrator
 
 
 def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integrator=None, sensor=0,
@@ -135,26 +268,22 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     """
     _ensure_variant()
     import mitsuba as mi
-    from mitsonar.plugins import module
 
-    sonar = _sonar(scene, sensor)
-    if integrator is None:
-        integrator = scene.integrator()
-        if not hasattr(integrator, "render_histogram"):
-            integrator = mi.load_dict({"type": "sonar_tof"})
-    elif isinstance(integrator, dict):
-        integrator = mi.load_dict(integrator)
-    elif isinstance(integrator, str):
-        integrator = mi.load_dict({"type": integrator})
-    if not hasattr(integrator, "render_histogram"):
-        raise SceneError(f"integrator {type(integrator).__name__} is not a sonar integrator (sonar_tof)")
+    # Every argument is checked before the render: a mistake costs a sentence, not a render.
+    spp = _whole("spp", spp, 1, 2 ** 31 - 1, "a whole number of paths per ping, 1 or more")
+    seed = _whole("seed", seed, 0, SEED_MAX, f"a whole number from 0 to {SEED_MAX}")
+    if electronics_seed is not None:
+        electronics_seed = _whole("electronics_seed", electronics_seed, 0, SEED_MAX,
+                                  f"a whole number from 0 to {SEED_MAX}, or None for seed")
+    if max_depth is not None:
+        max_depth = _whole("max_depth", max_depth, 1, 64, "a whole number of surface bounces from 1 to 64")
     if pose is not None:
-        pose = np.asarray(pose, dtype=np.float64)
-    try:
-        hist = integrator.render_histogram(scene, sonar, seed=seed, spp=spp, pose=pose, max_depth=max_depth,
-                                           progress=progress)
-    except ValueError as exc:
-        raise SceneError(str(exc)) from None
+        pose = _check_pose(pose)
+    if electronics is not None and not isinstance(electronics, dict):
+        raise SceneError(f"render_scan 'electronics': expected a dict of electronics fields, got "
+                         f"{type(electronics).__name__}")
+    sonar = _sonar(scene, sensor)
+    integrator = _integrator(scene, integrator)
 
     from .electronics import Electronics
 
@@ -164,6 +293,13 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
         model = Electronics.from_dict(settings, source="render_scan electronics" if electronics else "sonar")
     except ValueError as exc:
         raise SceneError(str(exc)) from None
+    try:
+        sonar.head_pose(pose)
+        hist = integrator.render_histogram(scene, sonar, seed=seed, spp=spp, pose=pose, max_depth=max_depth,
+                                           progress=progress)
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
+
     intensity = hist.astype(np.float32)
     ranges = sonar.bin_centres()
     eseed = seed if electronics_seed is None else electronics_seed
@@ -280,8 +416,6 @@ def init_on_import() -> None:
     still start and explain); it is reported as a `VariantError` by the first `load_scene` or
     `render_scan`, and as a warning here.
     """
-    import warnings
-
     import mitsuba as mi
 
     try:
@@ -292,5 +426,11 @@ def init_on_import() -> None:
 
             register()
     except VariantError as exc:
-        warnings.warn(f"mitsonar: {exc}", RuntimeWarning, stacklevel=3)
+        # The command line reports the same error as its one line; a warning would repeat it.
+        import sys
+
+        # (The console script's argv[0] is "mitsonar"; under `python -m mitsonar.cli` it is
+        # still "-m" while the package imports.)
+        if os.path.basename(sys.argv[0] if sys.argv else "") not in ("mitsonar", "-m"):
+            warnings.warn(f"mitsonar: {exc}", RuntimeWarning, stacklevel=3)
     mi.detail.add_variant_callback(_on_variant_change)

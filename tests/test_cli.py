@@ -74,13 +74,21 @@ def test_render_plot_info_round_trip(tmp_path, mitsonar_mod):
     (["info", "{tmp}/missing.exr"], "missing.exr"),
     (["plot", "{tmp}/garbage.exr", "-o", "{tmp}/a.png"], "garbage.exr"),
     (["plot", "{tmp}/scan.npz", "-o", "{tmp}/a.png", "--kind", "ascan", "--ping", "999"], "--ping 999"),
+    # Checked before the render: outputs, options, seeds.
+    (["render", BOX, "-o", "{tmp}/dir.exr"], "output '{tmp}/dir.exr' is a directory"),
+    (["render", BOX, "-o", "{tmp}/a.exr", "--seed", "4294967296"], "'seed': 4294967296 is not allowed (a whole number from 0 to 4294967295)"),
+    (["render", BOX, "-o", "{tmp}/a.exr", "--set", "gian=3"], "--set 'gian' is not an electronics setting (known: source_level"),
+    (["demo", "-o", "{tmp}/garbage.exr/out"], "cannot create the output folder"),
+    (["compare", BOX, "-o", "{tmp}/garbage.exr/cmp"], "cannot create the output folder"),
 ])
 def test_bad_input_gives_one_clear_line(tmp_path, mitsonar_mod, args, message):
     (tmp_path / "garbage.exr").write_bytes(b"\x76\x2f\x31\x01 definitely not an EXR")
+    (tmp_path / "dir.exr").mkdir()
     scan = mitsonar_mod.render_scan(mitsonar_mod.load_scene(BOX), spp=4)
     scan.save(str(tmp_path / "scan.npz"))
     proc = run(*[a.replace("{tmp}", str(tmp_path)) for a in args])
-    assert_one_line_error(proc, message)
+    assert_one_line_error(proc, message.replace("{tmp}", str(tmp_path)))
+    assert not (tmp_path / "a.exr").exists()
 
 
 def test_bad_scene_parameter_names_file_and_field(tmp_path):
@@ -89,6 +97,58 @@ def test_bad_scene_parameter_names_file_and_field(tmp_path):
     proc = run("render", str(bad), "-o", str(tmp_path / "a.exr"))
     assert_one_line_error(proc, "n_bins")
     assert "bad.xml" in proc.stderr
+
+
+def test_misspelled_parameter_gets_the_nearest_name_and_the_list(tmp_path):
+    bad = tmp_path / "typo.xml"
+    bad.write_text(open(BOX).read().replace('name="beamwidth_h"', 'name="beamwidht_h"'))
+    proc = run("render", str(bad), "-o", str(tmp_path / "a.exr"))
+    assert_one_line_error(proc, 'typo.xml')
+    line = proc.stderr.strip().splitlines()[-1]
+    assert 'the sensor "sonar" has no parameter "beamwidht_h" (did you mean "beamwidth_h"?)' in line
+    assert "its parameters: kind, to_world, range_min" in line and "[parser.cpp" not in line
+
+
+def test_scene_without_a_sonar_names_the_file(tmp_path):
+    bad = tmp_path / "nosonar.xml"
+    bad.write_text('<scene version="3.0.0"><shape type="sphere"/></scene>')
+    assert_one_line_error(run("render", str(bad), "-o", str(tmp_path / "a.exr")),
+                          'nosonar.xml: needs a <sensor type="sonar"> (sensors found: none)')
+
+
+def test_unknown_variant_from_the_environment_is_one_line(tmp_path):
+    env = dict(os.environ, MITSONAR_VARIANT="bogus")
+    env.pop("MITSONAR_DEBUG", None)
+    proc = subprocess.run([sys.executable, "-m", "mitsonar.cli", "render", BOX, "-o", str(tmp_path / "a.exr")],
+                          capture_output=True, text=True, cwd=ROOT, env=env, timeout=600)
+    assert proc.returncode == 1
+    assert proc.stderr.strip().splitlines() == [
+        "mitsonar: error: variant 'bogus' is not supported (MITSONAR_VARIANT / --variant): use one of "
+        "llvm_ad_mono, cuda_ad_mono or auto; sonar intensity is monochrome and needs a JIT variant"]
+
+
+def test_a_scene_the_render_overrides_gets_a_one_line_warning(tmp_path):
+    text = open(BOX).read()
+    start, end = text.index("<integrator"), text.index("</integrator>") + len("</integrator>")
+    scene = tmp_path / "pathint.xml"
+    scene.write_text(text[:start] + '<integrator type="path"/>' + text[end:])
+    proc = run("render", str(scene), "-o", str(tmp_path / "a.exr"), "--spp", "4", "-q")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr.strip().splitlines() == [
+        "mitsonar: warning: pathint.xml: its integrator PathIntegrator is not a sonar integrator; "
+        "rendering with sonar_tof"]
+
+
+def test_info_into_a_closed_pipe_ends_quietly(tmp_path, mitsonar_mod):
+    mitsonar_mod.render_scan(mitsonar_mod.load_scene(BOX), spp=4).save(str(tmp_path / "s.npz"))
+    env = dict(os.environ)
+    env.pop("MITSONAR_DEBUG", None)
+    proc = subprocess.Popen([sys.executable, "-m", "mitsonar.cli", "info", str(tmp_path / "s.npz")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT, env=env)
+    proc.stdout.close()  # like `| head -0`: nobody reads
+    err = proc.stderr.read().decode()
+    proc.wait(timeout=600)
+    assert err == "", err
 
 
 @pytest.mark.slow
