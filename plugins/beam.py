@@ -24,6 +24,7 @@ Emission samples directions in proportion to ``B(az, el)`` (times the solid-angl
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 
@@ -55,34 +56,61 @@ def _sinc(t):
     return out
 
 
+def resolve_path(path: str) -> tuple[str | None, list[str]]:
+    """Find a file the way Mitsuba's own plugins do: a relative path is looked up in the file
+    resolver's folders (while a scene loads the first is the scene file's folder), then in the
+    working directory. Returns (the path found or None, the absolute paths tried)."""
+    if os.path.isabs(path):
+        return (path if os.path.exists(path) else None), [path]
+    tried = []
+    for folder in [str(d) for d in mi.file_resolver()] + [os.getcwd()]:
+        candidate = os.path.abspath(os.path.join(folder, path))
+        if candidate not in tried:
+            tried.append(candidate)
+    return next((c for c in tried if os.path.exists(c)), None), tried
+
+
+_TABLE_FORMAT = "expected CSV with columns axis,angle_deg,gain_db"
+_TABLE_MAX_BYTES = 16 << 20  # a measured pattern is a few hundred rows
+
+
 def read_beam_table(path: str):
-    """Read a beam table CSV into ``{'h': (angles_deg, gain_db), 'v': (...)}`` with checks."""
-    if not os.path.isfile(path):
-        raise BeamPatternError(f"sonar 'beam_table': file {path!r} does not exist")
+    """Read a beam table CSV into ``{'h': (angles_deg, gain_db), 'v': (...)}`` with checks.
+
+    A relative ``path`` is resolved against the scene file's folder first (see `resolve_path`)."""
+    found, tried = resolve_path(path)
+    if found is None:
+        raise BeamPatternError(f"sonar 'beam_table': file {path!r} does not exist (tried {', '.join(tried)})")
+    if os.path.isdir(found):
+        raise BeamPatternError(f"sonar 'beam_table': {found} is a directory, not a CSV file")
+    path = found
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(_TABLE_MAX_BYTES + 1)
+    except OSError as exc:
+        raise BeamPatternError(f"{path}: cannot read the beam table ({exc.strerror or exc})") from None
+    if len(data) > _TABLE_MAX_BYTES:
+        raise BeamPatternError(f"{path}: beam table is larger than {_TABLE_MAX_BYTES >> 20} MiB ({_TABLE_FORMAT})")
+    try:
+        # utf-8-sig: a spreadsheet's byte-order mark must not become part of the first column's name
+        content = data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        content = None
+    if content is None or "\x00" in content:  # NUL decodes, but no text file holds it
+        raise BeamPatternError(f"{path}: beam table is not UTF-8 text ({_TABLE_FORMAT})")
     rows = {"h": [], "v": []}
-    with open(path, newline="") as fh:
-        reader = csv.DictReader(fh)
-        need = {"axis", "angle_deg", "gain_db"}
-        if reader.fieldnames is None or not need.issubset({f.strip() for f in reader.fieldnames}):
+    reader = csv.DictReader(io.StringIO(content, newline=""))
+    need = {"axis", "angle_deg", "gain_db"}
+    try:
+        if reader.fieldnames is None:
+            raise BeamPatternError(f"{path}: beam table is empty ({_TABLE_FORMAT})")
+        if not need.issubset({f.strip() for f in reader.fieldnames}):
             raise BeamPatternError(
                 f"{path}: beam table needs the columns axis, angle_deg, gain_db; found {reader.fieldnames}")
         for lineno, row in enumerate(reader, start=2):
-            row = {k.strip(): (v or "").strip() for k, v in row.items() if k is not None}
-            axis = row["axis"].lower()
-            if axis not in rows:
-                raise BeamPatternError(f"{path}, line {lineno}: axis {row['axis']!r} is not one of h, v")
-            try:
-                a, g = float(row["angle_deg"]), float(row["gain_db"])
-            except ValueError:
-                raise BeamPatternError(
-                    f"{path}, line {lineno}: angle_deg and gain_db must be numbers, got "
-                    f"{row['angle_deg']!r}, {row['gain_db']!r}") from None
-            if not (math.isfinite(a) and math.isfinite(g)):
-                raise BeamPatternError(f"{path}, line {lineno}: angle_deg and gain_db must be finite")
-            if g > 0.01:
-                raise BeamPatternError(
-                    f"{path}, line {lineno}: gain_db {g} > 0: gains are one-way and relative to the boresight (0 dB)")
-            rows[axis].append((a, g))
+            _table_row(path, lineno, row, rows)
+    except csv.Error as exc:
+        raise BeamPatternError(f"{path}, line {reader.reader.line_num}: not CSV ({exc}; {_TABLE_FORMAT})") from None
     out = {}
     for axis, limit in (("h", 180.0), ("v", 90.0)):
         pts = sorted(rows[axis])
@@ -97,6 +125,26 @@ def read_beam_table(path: str):
             raise BeamPatternError(f"{path}: axis {axis!r} must cover the boresight (angle 0)")
         out[axis] = (ang, np.array([p[1] for p in pts]))
     return out
+
+
+def _table_row(path, lineno, row, rows):
+    """Check one CSV row of a beam table and add it to ``rows[axis]``."""
+    row = {k.strip(): (v or "").strip() for k, v in row.items() if k is not None}
+    axis = row["axis"].lower()
+    if axis not in rows:
+        raise BeamPatternError(f"{path}, line {lineno}: axis {row['axis']!r} is not one of h, v")
+    try:
+        a, g = float(row["angle_deg"]), float(row["gain_db"])
+    except ValueError:
+        raise BeamPatternError(
+            f"{path}, line {lineno}: angle_deg and gain_db must be numbers, got "
+            f"{row['angle_deg']!r}, {row['gain_db']!r}") from None
+    if not (math.isfinite(a) and math.isfinite(g)):
+        raise BeamPatternError(f"{path}, line {lineno}: angle_deg and gain_db must be finite")
+    if g > 0.01:
+        raise BeamPatternError(
+            f"{path}, line {lineno}: gain_db {g} > 0: gains are one-way and relative to the boresight (0 dB)")
+    rows[axis].append((a, g))
 
 
 class BeamPattern:
@@ -122,14 +170,20 @@ class BeamPattern:
         for name, v, hi in (("beamwidth_h", beamwidth_h, 360.0), ("beamwidth_v", beamwidth_v, 180.0)):
             if not (0.0 < v <= hi):
                 raise BeamPatternError(f"{source} '{name}': {v} deg is outside (0, {hi:g}]")
+        # Impossible values are refused whatever the pattern, and apertures where no pattern uses them.
+        if not (math.isfinite(frequency) and frequency > 0):
+            raise BeamPatternError(f"{source} 'frequency': {frequency} Hz must be > 0")
+        for name, a in (("aperture_h", aperture_h), ("aperture_v", aperture_v)):
+            if a is not None and not (math.isfinite(a) and a > 0):
+                raise BeamPatternError(f"{source} '{name}': {a} m must be > 0")
+            if a is not None and kind != "sinc":
+                raise BeamPatternError(f"{source} '{name}' is only used with beam_pattern 'sinc' (got {kind!r})")
         self.kind = kind
         self.beamwidth_h = float(beamwidth_h)
         self.beamwidth_v = float(beamwidth_v)
         self.frequency = float(frequency)
         self.sound_speed = float(sound_speed)
         if kind == "sinc":
-            if not frequency > 0:
-                raise BeamPatternError(f"{source} 'frequency': {frequency} Hz must be > 0")
             lam = self.sound_speed / self.frequency
             if aperture_h is None:
                 aperture_h = _SINC_HALF_POWER * lam / (math.pi * math.sin(math.radians(beamwidth_h) / 2))

@@ -1,5 +1,6 @@
 """Beam patterns: definitions, importance sampling, measured tables."""
 import math
+import os
 
 import drjit as dr
 import numpy as np
@@ -119,3 +120,86 @@ def test_table_pattern_from_xml(mitsonar_mod, tmp_path):
     path.write_text("axis,angle_deg,gain_db\nh,-5,-20\nh,0,0\nh,5,-20\nv,-30,-20\nv,0,0\nv,30,-20\n")
     scene = mitsonar_mod.load_scene(scene_xml(sonar_xml(beam_pattern="table", beam_table=str(path))))
     assert scene.sensors()[0].beam.kind == "table"
+
+
+@pytest.mark.parametrize("content, message", [
+    (b"\x00\xff", "beam table is not UTF-8 text (expected CSV with columns axis,angle_deg,gain_db)"),
+    (b"\x00\x00\x00\n", "beam table is not UTF-8 text"),
+    (b"axis,angle_deg,gain_db\nh,0," + b"0" * 200000 + b"\n", "line 2: not CSV (field larger than field limit"),
+    (b"", "beam table is empty (expected CSV with columns axis,angle_deg,gain_db)"),
+])
+def test_unreadable_beam_tables_name_the_file(beam_mod, tmp_path, content, message):
+    path = tmp_path / "b.csv"
+    path.write_bytes(content)
+    with pytest.raises(beam_mod.BeamPatternError) as info:
+        beam_mod.read_beam_table(str(path))
+    assert str(info.value).startswith(f"{path}") and message in str(info.value)
+
+
+def test_beam_table_that_is_a_directory_or_cannot_be_opened(beam_mod, tmp_path, monkeypatch):
+    with pytest.raises(beam_mod.BeamPatternError, match=f"'beam_table': {tmp_path} is a directory"):
+        beam_mod.read_beam_table(str(tmp_path))
+    path = tmp_path / "beam.csv"
+    path.write_text("axis,angle_deg,gain_db\n")
+
+    def denied(file, *args, **kwargs):  # as root, chmod 000 would not stop the read
+        raise PermissionError(13, "Permission denied", file)
+    monkeypatch.setattr(beam_mod, "open", denied, raising=False)
+    with pytest.raises(beam_mod.BeamPatternError, match="cannot read the beam table \\(Permission denied\\)") as info:
+        beam_mod.read_beam_table(str(path))
+    assert str(info.value).startswith(f"{path}: ")
+
+
+def test_beam_table_with_a_byte_order_mark(beam_mod, tmp_path):
+    path = tmp_path / "beam.csv"
+    path.write_text("axis,angle_deg,gain_db\nh,-5,-20\nh,0,0\nh,5,-20\nv,-30,-20\nv,0,0\nv,30,-20\n",
+                    encoding="utf-8-sig")
+    assert set(beam_mod.read_beam_table(str(path))) == {"h", "v"}
+
+
+def test_relative_beam_table_is_found_next_to_the_scene(mitsonar_mod, tmp_path, monkeypatch):
+    """Like Mitsuba's own file names: relative to the scene file, wherever the program runs."""
+    from conftest import scene_xml, sonar_xml
+
+    (tmp_path / "scene").mkdir()
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "scene" / "beam.csv").write_text(
+        "axis,angle_deg,gain_db\nh,-5,-20\nh,0,0\nh,5,-20\nv,-30,-20\nv,0,0\nv,30,-20\n")
+    for name, table in (("good.xml", "beam.csv"), ("missing.xml", "nope.csv"), ("dir.xml", ".")):
+        (tmp_path / "scene" / name).write_text(scene_xml(sonar_xml(beam_pattern="table", beam_table=table)))
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    scene = mitsonar_mod.load_scene(str(tmp_path / "scene" / "good.xml"))
+    assert scene.sensors()[0].beam.kind == "table"
+    scene = mitsonar_mod.load_scene(os.path.join("..", "scene", "good.xml"))  # a relative scene path too
+    assert scene.sensors()[0].beam.kind == "table"
+    # Not found: the absolute paths tried, the scene's folder first.
+    with pytest.raises(mitsonar_mod.SceneError, match="file 'nope.csv' does not exist") as info:
+        mitsonar_mod.load_scene(str(tmp_path / "scene" / "missing.xml"))
+    tried = str(info.value).split("(tried ")[1]
+    assert tried.startswith(str(tmp_path / "scene" / "nope.csv"))
+    assert str(tmp_path / "elsewhere" / "nope.csv") in tried
+    with pytest.raises(mitsonar_mod.SceneError, match=f"'beam_table': {tmp_path / 'scene'} is a directory"):
+        mitsonar_mod.load_scene(str(tmp_path / "scene" / "dir.xml"))
+
+
+def test_binary_beam_table_from_xml_is_one_sentence(mitsonar_mod, tmp_path):
+    from conftest import scene_xml, sonar_xml
+
+    (tmp_path / "b.csv").write_bytes(b"\x00\xff")
+    with pytest.raises(mitsonar_mod.SceneError) as info:
+        mitsonar_mod.load_scene(scene_xml(sonar_xml(beam_pattern="table", beam_table=str(tmp_path / "b.csv"))))
+    message = str(info.value)
+    assert message.endswith(f"{tmp_path / 'b.csv'}: beam table is not UTF-8 text "
+                            "(expected CSV with columns axis,angle_deg,gain_db)")
+    assert "\n" not in message and "Traceback" not in message
+
+
+@pytest.mark.parametrize("params, message", [
+    (dict(frequency=-5.0), "'frequency': -5.0 Hz must be > 0"),
+    (dict(frequency=float("nan")), "'frequency': nan Hz must be > 0"),
+    (dict(aperture_h=-1.0), "'aperture_h': -1.0 m must be > 0"),
+    (dict(aperture_v=0.05), "'aperture_v' is only used with beam_pattern 'sinc' \\(got 'gaussian'\\)"),
+])
+def test_impossible_or_unused_beam_parameters(beam_mod, params, message):
+    with pytest.raises(beam_mod.BeamPatternError, match=message):
+        beam_mod.BeamPattern("gaussian", 3.0, 35.0, **params)
