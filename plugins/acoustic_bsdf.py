@@ -5,6 +5,10 @@ import drjit as dr
 import mitsuba as mi
 
 from .materials import PRESETS
+from .props import number, text
+
+# What each parameter takes, for the message on a wrong XML type (an <rgb>, a <texture>).
+_EXPECTED = {"diffuse": "a <float> in [0, 1]", "specular": "a <float> in [0, 1]", "shininess": "a <float> >= 0"}
 
 
 class AcousticBSDF(mi.BSDF):
@@ -33,7 +37,7 @@ class AcousticBSDF(mi.BSDF):
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
-        preset = props.get("preset", "")
+        preset = text(props, "preset", "", "acoustic")
         if preset:
             if preset not in PRESETS:
                 raise ValueError(f"acoustic 'preset': {preset!r} is not one of {', '.join(sorted(PRESETS))}")
@@ -41,7 +45,7 @@ class AcousticBSDF(mi.BSDF):
         else:
             base = {"diffuse": 0.1, "specular": 0.6, "shininess": 30.0}
         self.preset = preset
-        values = {k: float(props.get(k, base[k])) for k in ("diffuse", "specular", "shininess")}
+        values = {k: number(props, k, base[k], "acoustic", _EXPECTED[k]) for k in ("diffuse", "specular", "shininess")}
         check_parameters(**values)
         self.diffuse = dr.opaque(mi.Float, values["diffuse"])
         self.specular = dr.opaque(mi.Float, values["specular"])

@@ -13,9 +13,12 @@ from mitsonar.scan import bearing_rotation
 
 from .beam import BeamPattern, read_beam_table
 from .jit_arrays import upload
+from .props import count, number, text
 
 KINDS = ("mechanical", "multibeam")
 TX_PATTERNS = ("gaussian", "sinc", "uniform")
+MAX_BINS, MAX_PINGS = 65536, 100000
+DEFAULT_FREQUENCY = 700e3
 
 
 def check_rigid(matrix, what="sonar 'to_world'"):
@@ -74,36 +77,40 @@ class SonarSensor(mi.Sensor):
     """
 
     def __init__(self, props: mi.Properties):
+        num = lambda name, default: number(props, name, default, "sonar")  # noqa: E731
+        self.n_bins = count(props, "n_bins", 500, "sonar")
+        self.n_pings = count(props, "n_pings", 200, "sonar")
         if "film" not in props:
             # The film is the scan's range-intensity image: one row per ping, one column per bin.
-            n_bins, n_pings = props.get("n_bins", 500), props.get("n_pings", 200)
-            if n_bins >= 1 and n_pings >= 1:
-                props["film"] = mi.load_dict({"type": "hdrfilm", "width": int(n_bins), "height": int(n_pings),
+            if 1 <= self.n_bins <= MAX_BINS and 1 <= self.n_pings <= MAX_PINGS:
+                props["film"] = mi.load_dict({"type": "hdrfilm", "width": self.n_bins, "height": self.n_pings,
                                               "pixel_format": "luminance", "rfilter": {"type": "box"}})
         super().__init__(props)
-        self.kind = props.get("kind", "mechanical")
-        self.range_min = float(props.get("range_min", 0.0))
-        self.range_max = float(props.get("range_max", 12.0))
-        self.n_bins = int(props.get("n_bins", 500))
-        self.bearing_start = float(props.get("bearing_start", 0.0))
-        self.bearing_step = float(props.get("bearing_step", 1.8))
-        self.n_pings = int(props.get("n_pings", 200))
-        self.sound_speed = float(props.get("sound_speed", 1500.0))
-        self.absorption = float(props.get("absorption", 0.0))
-        pattern = props.get("beam_pattern", "gaussian")
-        bw_h = float(props.get("beamwidth_h", 3.0))
-        bw_v = float(props.get("beamwidth_v", 35.0))
-        table_path = props.get("beam_table", "")
-        frequency = float(props.get("frequency", 700e3))
-        ap_h = float(props["aperture_h"]) if "aperture_h" in props else None
-        ap_v = float(props["aperture_v"]) if "aperture_v" in props else None
-        tx = {k: props[k] for k in ("tx_pattern", "tx_beamwidth_h", "tx_beamwidth_v") if k in props}
+        self.kind = text(props, "kind", "mechanical", "sonar")
+        self.range_min = num("range_min", 0.0)
+        self.range_max = num("range_max", 12.0)
+        self.bearing_start = num("bearing_start", 0.0)
+        self.bearing_step = num("bearing_step", 1.8)
+        self.sound_speed = num("sound_speed", 1500.0)
+        self.absorption = num("absorption", 0.0)
+        pattern = text(props, "beam_pattern", "gaussian", "sonar")
+        bw_h = num("beamwidth_h", 3.0)
+        bw_v = num("beamwidth_v", 35.0)
+        table_path = text(props, "beam_table", "", "sonar")
+        frequency = num("frequency", None)
+        ap_h = num("aperture_h", None)
+        ap_v = num("aperture_v", None)
+        tx = {k: num(k, None) for k in ("tx_beamwidth_h", "tx_beamwidth_v") if k in props}
+        if "tx_pattern" in props:
+            tx["tx_pattern"] = text(props, "tx_pattern", None, "sonar")
 
         from mitsonar.electronics import Electronics
+        read = {"float": number, "int": count, "str": text}
         elec = {}
         for f in dataclasses.fields(Electronics):
             if f.name in props:
-                elec[f.name] = props[f.name]
+                kind = f.type if isinstance(f.type, str) else f.type.__name__
+                elec[f.name] = read[kind](props, f.name, None, "sonar")
         self.electronics = elec
         self._check()
         self.electronics_model = Electronics(**elec)  # validates the electronics fields
@@ -111,8 +118,14 @@ class SonarSensor(mi.Sensor):
         table = read_beam_table(table_path) if pattern == "table" and table_path else None
         if table_path and pattern != "table":
             raise ValueError(f"sonar 'beam_table' is only used with beam_pattern 'table' (got {pattern!r})")
-        self.beam = BeamPattern(pattern, bw_h, bw_v, frequency, ap_h, ap_v, self.sound_speed, table)
-        self.transmit = self._transmit(tx, bw_h, bw_v, frequency)
+        self.beam = BeamPattern(pattern, bw_h, bw_v, DEFAULT_FREQUENCY if frequency is None else frequency,
+                                ap_h, ap_v, self.sound_speed, table)
+        self.transmit = self._transmit(tx, bw_h, bw_v, self.beam.frequency)
+        if frequency is not None and "sinc" not in (pattern, getattr(self.transmit, "kind", None)):
+            if self.transmit is None:
+                raise ValueError(f"sonar 'frequency' is only used with beam_pattern 'sinc' (got {pattern!r})")
+            raise ValueError(f"sonar 'frequency' is only used with beam_pattern or tx_pattern 'sinc' "
+                             f"(got {pattern!r} and {self.transmit.kind!r})")
         self.beam_table = table_path
         self.to_world_np = check_rigid(np.array(self.world_transform().matrix, dtype=np.float64).reshape(4, 4))
 
@@ -125,13 +138,18 @@ class SonarSensor(mi.Sensor):
             bad("range_min", self.range_min, "a range >= 0 m")
         if not (math.isfinite(self.range_max) and self.range_max > self.range_min):
             bad("range_max", self.range_max, f"a range > range_min = {self.range_min:g} m")
-        if not 1 <= self.n_bins <= 65536:
-            bad("n_bins", self.n_bins, "1 to 65536")
-        if not 1 <= self.n_pings <= 100000:
-            bad("n_pings", self.n_pings, "1 to 100000")
+        if not 1 <= self.n_bins <= MAX_BINS:
+            bad("n_bins", self.n_bins, f"1 to {MAX_BINS}")
+        if not 1 <= self.n_pings <= MAX_PINGS:
+            bad("n_pings", self.n_pings, f"1 to {MAX_PINGS}")
+        # Bearings are angles: beyond a turn they only lose precision (1e30 + k * 1.8 is one bearing).
         for name in ("bearing_start", "bearing_step"):
-            if not math.isfinite(getattr(self, name)):
-                bad(name, getattr(self, name), "a finite angle in degrees")
+            if not (math.isfinite(getattr(self, name)) and abs(getattr(self, name)) <= 360.0):
+                bad(name, getattr(self, name), "an angle in [-360, 360] deg")
+        swath = abs(self.bearing_step) * (self.n_pings - 1)
+        if self.kind == "multibeam" and swath > 360.0:
+            bad("bearing_step", self.bearing_step, f"for kind 'multibeam' the receive beams span |bearing_step| "
+                f"x (n_pings - 1) <= 360 deg, here {swath:g} deg")
         if not (math.isfinite(self.sound_speed) and 1000.0 <= self.sound_speed <= 2000.0):
             bad("sound_speed", self.sound_speed, "1000 to 2000 m/s for water")
         if not (math.isfinite(self.absorption) and self.absorption >= 0):

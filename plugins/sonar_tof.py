@@ -6,6 +6,7 @@ import mitsuba as mi
 import numpy as np
 
 from .echo_path import HashSamples, trace_echoes
+from .props import count
 from .range_bins import RangeBins
 from .sonar_sensor import PingFrames, SonarSensor
 
@@ -66,7 +67,7 @@ class SonarTOFIntegrator(SonarIntegrator):
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
-        self.max_depth = check_max_depth(props.get("max_depth", 5))
+        self.max_depth = check_max_depth(count(props, "max_depth", 5, "sonar_tof"))
 
     def render_histogram(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None, progress=None):
         """Mean echo energy per bin, float64 ``(n_pings, n_bins)``.

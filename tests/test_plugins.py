@@ -86,12 +86,56 @@ def test_misspelled_parameter_fails_with_mitsubas_message(mitsonar_mod):
     (dict(beam_pattern="table", beam_table="/nonexistent/beam.csv"), r"does not exist"),
     (dict(tvg="35log"), r"sonar 'tvg': '35log' is not one of off, 20log, 30log, 40log"),
     (dict(bit_depth=6), r"sonar 'bit_depth'"),
+    # Counts are <integer>: a fraction is refused, not truncated (8.7 pings once rendered 8).
+    (dict(n_pings=8.7), r"sonar 'n_pings': 8.7 is not a whole number \(counts are <integer>\)"),
+    (dict(n_bins=0.5), r"sonar 'n_bins': 0.5 is not a whole number"),
+    (dict(bit_depth=8.5), r"sonar 'bit_depth': 8.5 is not a whole number"),
+    # Wrong XML types name the field and the expected tag, for every numeric field.
+    (dict(range_max="twelve"), r"sonar 'range_max': 'twelve' is not a number \(expected <float>\)"),
+    (dict(n_bins="50"), r"sonar 'n_bins': expected <integer>, got <string> '50'"),
+    (dict(beamwidth_v="35"), r"sonar 'beamwidth_v': expected <float>, got <string> '35'"),
+    (dict(kind="multibeam", tx_beamwidth_v="wide"), r"sonar 'tx_beamwidth_v': 'wide' is not a number"),
+    (dict(gain="loud"), r"sonar 'gain': 'loud' is not a number \(expected <float>\)"),
+    (dict(beam_pattern="table", beam_table=7.0), r"sonar 'beam_table': expected <string>, got <float> 7.0"),
+    # Impossible beam values whatever the pattern; parameters the pattern does not use.
+    (dict(frequency=-5.0), r"sonar 'frequency': -5.0 Hz must be > 0"),
+    (dict(beam_pattern="sinc", frequency=0.0), r"sonar 'frequency': 0.0 Hz must be > 0"),
+    (dict(aperture_v=-1.0), r"sonar 'aperture_v': -1.0 m must be > 0"),
+    (dict(beam_pattern="sinc", aperture_h=float("inf")), r"sonar 'aperture_h': inf m must be > 0"),
+    (dict(aperture_h=0.05), r"sonar 'aperture_h' is only used with beam_pattern 'sinc' \(got 'gaussian'\)"),
+    (dict(frequency=400e3), r"sonar 'frequency' is only used with beam_pattern 'sinc' \(got 'gaussian'\)"),
+    (dict(kind="multibeam", aperture_h=0.05), r"sonar 'aperture_h' is only used with beam_pattern 'sinc'"),
+    (dict(kind="multibeam", frequency=400e3),
+     r"sonar 'frequency' is only used with beam_pattern or tx_pattern 'sinc' \(got 'gaussian' and 'gaussian'\)"),
+    (dict(kind="multibeam", tx_beamwidth_h=400.0), r"sonar 'tx_beamwidth_h': 400.0 is not allowed"),
+    # Bearings are angles.
+    (dict(bearing_step=1e30), r"sonar 'bearing_step': 1e\+30 is not allowed \(an angle in \[-360, 360\] deg\)"),
+    (dict(bearing_start=-720.0), r"sonar 'bearing_start': -720.0 is not allowed"),
+    (dict(kind="multibeam", n_pings=256, bearing_step=2.0),
+     r"sonar 'bearing_step': 2.0 is not allowed \(for kind 'multibeam'.*<= 360 deg, here 510 deg\)"),
 ])
 def test_impossible_sonar_settings_fail_with_our_message(mitsonar_mod, params, message):
     with pytest.raises(mitsonar_mod.SceneError, match=message) as info:
         mitsonar_mod.load_scene(scene_xml(sonar_xml(**params)))
     assert "Traceback" not in str(info.value)
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("params", [
+    dict(n_pings=8.0, n_bins=50.0),                             # whole floats are counts
+    dict(beam_pattern="sinc", frequency=400e3, aperture_h=0.05, aperture_v=0.005),
+    dict(kind="multibeam", tx_pattern="sinc", frequency=400e3),  # the transmit fan uses it
+    dict(kind="multibeam", n_pings=256, bearing_step=130 / 255),
+    dict(bearing_start=-360.0, bearing_step=-360.0, n_pings=3),
+])
+def test_possible_sonar_settings_load(mitsonar_mod, params):
+    sensor = mitsonar_mod.load_scene(scene_xml(sonar_xml(**params))).sensors()[0]
+    for name in ("n_pings", "n_bins", "bearing_step"):
+        if name in params:
+            assert getattr(sensor, name) == params[name]
+    if "frequency" in params:
+        assert "sinc" in (sensor.beam.kind, sensor.transmit and sensor.transmit.kind)
+        assert params["frequency"] in (sensor.beam.frequency, sensor.transmit and sensor.transmit.frequency)
 
 
 def test_non_rigid_to_world_is_rejected(mitsonar_mod):
@@ -107,10 +151,20 @@ def test_non_rigid_to_world_is_rejected(mitsonar_mod):
     (acoustic_xml(-0.1, 0.2), r"acoustic 'diffuse': -0.1"),
     (acoustic_xml(0.1, 0.2, -3.0), r"acoustic 'shininess'"),
     ('<bsdf type="acoustic"><string name="preset" value="granite"/></bsdf>', r"'preset': 'granite' is not one of"),
+    # A colour or a texture is not a reflection coefficient.
+    ('<bsdf type="acoustic"><rgb name="diffuse" value="0.1,0.2,0.3"/></bsdf>',
+     r"acoustic 'diffuse': expected a <float> in \[0, 1\], got <rgb>"),
+    ('<bsdf type="acoustic"><texture type="checkerboard" name="specular"/></bsdf>',
+     r"acoustic 'specular': expected a <float> in \[0, 1\], got <texture>"),
+    ('<bsdf type="acoustic"><string name="shininess" value="thirty"/></bsdf>',
+     r"acoustic 'shininess': 'thirty' is not a number \(expected a <float> >= 0\)"),
+    ('<bsdf type="acoustic"><float name="preset" value="1"/></bsdf>',
+     r"acoustic 'preset': expected <string>, got <float> 1.0"),
 ])
 def test_invalid_materials_fail_with_our_message(mitsonar_mod, bsdf, message):
-    with pytest.raises(mitsonar_mod.SceneError, match=message):
+    with pytest.raises(mitsonar_mod.SceneError, match=message) as info:
         plane_scene(mitsonar_mod, bsdf)
+    assert "Traceback" not in str(info.value) and "\n" not in str(info.value)
 
 
 def test_invalid_max_depth_and_spp(mitsonar_mod):
@@ -119,6 +173,16 @@ def test_invalid_max_depth_and_spp(mitsonar_mod):
     scene = plane_scene(mitsonar_mod)
     with pytest.raises(mitsonar_mod.SceneError, match="spp"):
         mitsonar_mod.render_scan(scene, spp=0)
+    # max_depth is a count: a fraction is refused, not truncated; a whole float is taken.
+    for prop, message in (('<float name="max_depth" value="2.5"/>',
+                           r"sonar_tof 'max_depth': 2.5 is not a whole number \(counts are <integer>\)"),
+                          ('<string name="max_depth" value="five"/>',
+                           r"sonar_tof 'max_depth': 'five' is not a number \(expected <integer>\)")):
+        integrator = f'<integrator type="sonar_tof">{prop}</integrator>'
+        with pytest.raises(mitsonar_mod.SceneError, match=message):
+            mitsonar_mod.load_scene(scene_xml(sonar_xml(), integrator=integrator))
+    whole = '<integrator type="sonar_tof"><float name="max_depth" value="3.0"/></integrator>'
+    assert mitsonar_mod.load_scene(scene_xml(sonar_xml(), integrator=whole)).integrator().max_depth == 3
 
 
 def test_presets_by_name(mitsonar_mod):
