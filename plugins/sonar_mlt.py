@@ -9,6 +9,7 @@ import numpy as np
 
 from .echo_path import HashSamples, n_dims, trace_echoes
 from .jit_arrays import upload
+from .props import count, number, text
 from .range_bins import RangeBins
 from .sonar_sensor import PingFrames
 from .sonar_tof import SonarIntegrator, check_max_depth, resolve_sensor
@@ -84,15 +85,15 @@ class SonarMLTIntegrator(SonarIntegrator):
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
-        self.max_depth = check_max_depth(props.get("max_depth", 5), "sonar_mlt")
-        self.chains = int(props.get("chains", 0))
-        self.mutations = int(props.get("mutations", 0))
-        self.large_step = float(props.get("large_step", 0.1))
-        self.small_step_min = float(props.get("small_step_min", 1.0 / 128.0))
-        self.small_step_max = float(props.get("small_step_max", 1.0 / 4.0))
-        self.bootstrap = int(props.get("bootstrap", 0))
-        self.normalisation = str(props.get("normalisation", "scan"))
-        self.ping_step = float(props.get("ping_step", 1.0))
+        self.max_depth = check_max_depth(count(props, "max_depth", 5, "sonar_mlt"), "sonar_mlt")
+        self.chains = count(props, "chains", 0, "sonar_mlt")
+        self.mutations = count(props, "mutations", 0, "sonar_mlt")
+        self.large_step = number(props, "large_step", 0.1, "sonar_mlt")
+        self.small_step_min = number(props, "small_step_min", 1.0 / 128.0, "sonar_mlt")
+        self.small_step_max = number(props, "small_step_max", 1.0 / 4.0, "sonar_mlt")
+        self.bootstrap = count(props, "bootstrap", 0, "sonar_mlt")
+        self.normalisation = text(props, "normalisation", "scan", "sonar_mlt")
+        self.ping_step = number(props, "ping_step", 1.0, "sonar_mlt")
         self._check()
 
     def _check(self):
@@ -128,6 +129,13 @@ class SonarMLTIntegrator(SonarIntegrator):
             chains = self.chains or int(np.clip((1 << 16) // n_pings, 32, max(32, spp // 16)))
         boot = self.bootstrap or max(4 * chains, spp // 2)
         mutations = self.mutations or max(1, (spp - boot) // chains)
+        total = boot + chains * mutations
+        # spp is the work a scan records and the compare tool equalises: explicit settings may not
+        # exceed it (200000 mutations at spp 64 once ran minutes for a scan labelled 64 spp).
+        if (self.chains or self.mutations or self.bootstrap) and total > spp:
+            raise ValueError(f"sonar_mlt: bootstrap {boot} + chains {chains} x mutations {mutations} = {total} "
+                             f"path evaluations per ping exceed spp = {spp}; raise spp, or lower chains, mutations "
+                             "or bootstrap (0 fits them to spp)")
         return boot, chains, mutations
 
     # ------------------------------------------------------------------ rendering

@@ -108,3 +108,48 @@ def test_mutations_do_not_recompile(mitsonar_mod):
         later, compiled = jit_kernels(mlt.render_histogram, scene, seed=seed, spp=spp, pose=np.eye(4))
         assert later and not compiled, compiled
         assert set(later) == set(first), f"spp {spp}: {len(set(later) - set(first))} new kernel(s)"
+
+
+def test_counts_and_numbers_are_typed(mitsonar_mod):
+    """Counts are <integer>: 2.5 chains is refused, not truncated to 2; strings name the field."""
+    import mitsuba as mi
+
+    assert mi.load_dict({"type": "sonar_mlt", "chains": 64.0, "mutations": 10}).plan(10, 4096)[1:] == (64, 10)
+    for bad, msg in ((dict(chains=2.5), r"sonar_mlt 'chains': 2.5 is not a whole number \(counts are <integer>\)"),
+                     (dict(mutations=0.5), r"sonar_mlt 'mutations': 0.5 is not a whole number"),
+                     (dict(bootstrap=1e3 + 0.5), r"sonar_mlt 'bootstrap': 1000.5 is not a whole number"),
+                     (dict(max_depth=2.5), r"sonar_mlt 'max_depth': 2.5 is not a whole number"),
+                     (dict(chains="64"), r"sonar_mlt 'chains': expected <integer>, got <string> '64'"),
+                     (dict(large_step="high"), r"sonar_mlt 'large_step': 'high' is not a number \(expected <float>\)"),
+                     (dict(ping_step=True), r"sonar_mlt 'ping_step': expected <float>, got <boolean> true"),
+                     (dict(normalisation=1), r"sonar_mlt 'normalisation': expected <string>, got <integer> 1")):
+        with pytest.raises(Exception, match=msg):
+            mi.load_dict({"type": "sonar_mlt", **bad})
+
+
+def test_explicit_settings_must_fit_the_spp_budget(mitsonar_mod):
+    """spp is the path evaluations per ping a scan records: explicit chains, mutations or bootstrap
+    that need more are refused (200000 mutations at spp 64 once ran minutes), automatic ones fit."""
+    import mitsuba as mi
+
+    mlt = mi.load_dict({"type": "sonar_mlt", "mutations": 200000})
+    with pytest.raises(ValueError, match=r"sonar_mlt: bootstrap 32 \+ chains 4 x mutations 200000 = 800032 path "
+                                         r"evaluations per ping exceed spp = 64; raise spp, or lower chains, "
+                                         r"mutations or bootstrap \(0 fits them to spp\)"):
+        mlt.plan(8, 64)
+    boot, chains, mutations = mi.load_dict({"type": "sonar_mlt", "mutations": 10}).plan(200, 4096)
+    assert mutations == 10 and boot + chains * mutations <= 4096              # fits: taken as given
+    # An explicit value with automatic others: 64 chains want 4 x 64 bootstrap paths.
+    with pytest.raises(ValueError, match=r"bootstrap 256 \+ chains 64 x mutations 1 = 320 .* exceed spp = 64"):
+        mi.load_dict({"type": "sonar_mlt", "chains": 64}).plan(1, 64)
+    with pytest.raises(ValueError, match=r"bootstrap 4096 \+ chains \d+ x mutations 1 = \d+ .* exceed spp = 4096"):
+        mi.load_dict({"type": "sonar_mlt", "bootstrap": 4096}).plan(200, 4096)
+    # The automatic plan is unchanged, even where a tiny spp cannot hold its minimum.
+    auto = mi.load_dict({"type": "sonar_mlt"})
+    assert auto.plan(8, 1) == (4, 1, 1)
+    # Through render_scan it is one sentence, before anything is traced.
+    text = open(os.path.join(SCENES, "box.xml")).read().replace(
+        '<integrator type="sonar_tof">', '<integrator type="sonar_mlt"><integer name="mutations" value="200000"/>')
+    scene = mitsonar_mod.load_scene(text)
+    with pytest.raises(mitsonar_mod.SceneError, match="exceed spp = 64; raise spp"):
+        mitsonar_mod.render_scan(scene, spp=64)
