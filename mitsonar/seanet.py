@@ -867,20 +867,44 @@ def _decode_frame(frame: bytes, nibble_order: str) -> Message:
 def decode(packet: bytes, nibble_order: str = DEFAULT_NIBBLE_ORDER, check_count: bool = True) -> Message:
     """The message of exactly one complete packet; raises `SeaNetError` if it is not valid."""
     _check_nibble_order(nibble_order)
-    b = bytes(packet)
+    # bytes(str) asks for an encoding and bytes(int) makes zeros: neither is a packet.
+    if isinstance(packet, (str, int, np.integer)):
+        raise TypeError(f"packet must be bytes, got {type(packet).__name__}")
+    try:
+        b = bytes(packet)
+    except TypeError:
+        raise TypeError(f"packet must be bytes, got {type(packet).__name__}") from None
     if len(b) < MIN_PACKET:
         raise SeaNetError(f"packet of {len(b)} bytes is shorter than 14")
-    state, n = _header_state(b, 0, MAX_PACKET)
-    if state != "yes":
-        raise SeaNetError("bad header: '@', hex length and binary length disagree")
+    problem = _header_problem(b)
+    if problem:
+        raise SeaNetError(problem)
+    n = int(b[1:5], 16) + 6
     if n != len(b):
         raise SeaNetError(f"length field says {n} bytes, packet has {len(b)}")
     problem = _length_problem(b, n, check_count)
     if problem:
         raise SeaNetError(problem)
     if b[-1] != TERMINATOR:
-        raise SeaNetError("no LF terminator")
+        raise SeaNetError(f"byte {len(b) - 1} is {b[-1]:#04x}, expected the LF terminator (0x0a)")
     return _decode_frame(b, nibble_order)
+
+
+def _header_problem(b: bytes) -> str | None:
+    """The first wrong framing byte of ``b`` (offset, value, what was expected), or None."""
+    if b[0] != HEADER:
+        return f"byte 0 is {b[0]:#04x}, expected '@' (0x40)"
+    for k in range(1, 5):
+        if b[k] not in _HEX:
+            return f"byte {k} is {b[k]:#04x}, expected an ASCII hex digit (length field, bytes 1..4)"
+    value = int(b[1:5], 16)
+    if value + 6 < MIN_PACKET:
+        return f"length field (bytes 1..4) is {value:#06x}, expected at least 0x0008 (a 14-byte packet)"
+    for k, want in ((5, value & 0xFF), (6, value >> 8)):
+        if b[k] != want:
+            return (f"byte {k} is {b[k]:#04x}, expected {want:#04x} (binary copy of the length "
+                    f"field {b[1:5].decode('ascii')})")
+    return None
 
 
 def _header_state(buf, j: int, max_len: int) -> tuple[str, int]:
@@ -1071,6 +1095,19 @@ def _round(x: float) -> int:
 DB_FULL_SCALE, GAIN_FULL_SCALE, AD_FULL_SCALE = 80.0, 210, 255
 
 
+# Sound speeds a head can be set to (m/s), and how messages word the bound: HeadSettings, the
+# replay of a log and the CLI's --sound-speed all use these.
+SOUND_SPEED_RANGE = (1300.0, 1800.0)
+SOUND_SPEED_ALLOWED = "1300..1800 m/s"
+
+
+def sound_speed_ok(value) -> bool:
+    """Is ``value`` a finite number in `SOUND_SPEED_RANGE`?"""
+    lo, hi = SOUND_SPEED_RANGE
+    return (isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+            and math.isfinite(value) and lo <= value <= hi)
+
+
 def gain_db(byte: int) -> float:
     """An IGain byte in dB."""
     return int(byte) * DB_FULL_SCALE / GAIN_FULL_SCALE
@@ -1171,8 +1208,7 @@ class HeadSettings:
 
         n(num(self.range) and 0.3 <= self.range <= 300.0, "range", self.range, "0.3..300 m")
         n(integer(self.n_bins) and 2 <= self.n_bins <= 1500, "n_bins", self.n_bins, "2..1500")
-        n(num(self.sound_speed) and 1300.0 <= self.sound_speed <= 1800.0, "sound_speed",
-          self.sound_speed, "1300..1800 m/s")
+        n(sound_speed_ok(self.sound_speed), "sound_speed", self.sound_speed, SOUND_SPEED_ALLOWED)
         n(num(self.gain) and 0.0 <= self.gain <= 80.0, "gain", self.gain, "0..80 dB")
         n(num(self.ad_low) and 0.0 <= self.ad_low <= 80.0, "ad_low", self.ad_low, "0..80 dB")
         n(num(self.ad_span) and 0.0 < self.ad_span <= 80.0 and self.ad_span_byte >= 1,

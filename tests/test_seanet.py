@@ -284,6 +284,40 @@ def test_parser_waits_for_split_packets():
     assert len(p.feed(b[-1:])) == 1 and p.dropped == 0
 
 
+@pytest.mark.parametrize("damage,message", [
+    (lambda b: b"#" + b[1:], r"^byte 0 is 0x23, expected '@' \(0x40\)$"),
+    (lambda b: b[:3] + b"Z" + b[4:], r"^byte 3 is 0x5a, expected an ASCII hex digit \(length field, bytes 1\.\.4\)$"),
+    (lambda b: b"@0002" + b[5:], r"^length field \(bytes 1\.\.4\) is 0x0002, expected at least 0x0008"),
+    (lambda b: b[:5] + bytes([b[5] + 1]) + b[6:], r"^byte 5 is 0x11, expected 0x10 \(binary copy of the length field 0010\)$"),
+    (lambda b: b[:6] + b"\x01" + b[7:], r"^byte 6 is 0x01, expected 0x00 \(binary copy"),
+    (lambda b: b[:-1] + b"X", r"^byte 21 is 0x58, expected the LF terminator \(0x0a\)$"),
+], ids=["at", "hex-digit", "short-length", "binary-low", "binary-high", "terminator"])
+def test_decode_names_the_first_wrong_header_byte(damage, message):
+    # Each framing field on its own, in order: offset, value found, value expected.
+    with pytest.raises(sn.SeaNetError, match=message):
+        decode(damage(ALIVE))
+    # '#' and a bad hex digit together: the first one is reported.
+    with pytest.raises(sn.SeaNetError, match="^byte 0 is 0x23"):
+        decode(b"#" + ALIVE[1:3] + b"Z" + ALIVE[4:])
+
+
+@pytest.mark.parametrize("packet,name", [(ALIVE.decode("latin-1"), "str"), (22, "int"), (None, "NoneType")],
+                         ids=["str", "int", "None"])
+def test_decode_wants_bytes(packet, name):
+    with pytest.raises(TypeError, match=f"^packet must be bytes, got {name}$"):
+        decode(packet)
+    assert decode(bytearray(ALIVE)) == decode(memoryview(ALIVE)) == decode(ALIVE)
+
+
+def test_sound_speed_bound_lives_in_one_place():
+    assert sn.SOUND_SPEED_RANGE == (1300.0, 1800.0) and sn.SOUND_SPEED_ALLOWED == "1300..1800 m/s"
+    assert sn.sound_speed_ok(1300) and sn.sound_speed_ok(np.float32(1500)) and sn.sound_speed_ok(1800.0)
+    for v in (1299.9, 1e9, 100, float("nan"), float("inf"), True, "1500", None):
+        assert not sn.sound_speed_ok(v), v
+    with pytest.raises(ValueError, match=r"^HeadSettings.sound_speed = 1000000000.0 is out of range: allowed 1300\.\.1800 m/s$"):
+        HeadSettings(sound_speed=1e9)
+
+
 # ---- stream parser: property-based fuzzing --------------------------------------------------
 
 def _message_strategy():
