@@ -585,10 +585,13 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
     def render(obj, spp, seed_value):
         return obj.render_histogram(scene, sensor, seed=seed_value, spp=int(spp), max_depth=max_depth)
 
+    # Explicit chain counts and the like set a floor under an integrator's spp (sonar_mlt.min_spp).
+    min_spp = {lab: int(getattr(objs[lab], "min_spp", lambda n: 1)(sensor.n_pings)) for lab in labels}
     calibrations = {}
     for lab in labels:
         say(f"{lab}: calibrating (longest timed render {cal_target:.3g} s)")
-        calibrations[lab] = calibrate(lambda spp, o=objs[lab]: render(o, spp, warm_seed), cal_target, warm_each=warm)
+        calibrations[lab] = calibrate(lambda spp, o=objs[lab]: render(o, spp, warm_seed), cal_target,
+                                      start_spp=max(CALIBRATION_START_SPP, min_spp[lab]), warm_each=warm)
 
     # --- timed renders (scored once the reference is known, so that an automatic reference can be
     # sized by the spp path tracing actually reached)
@@ -615,10 +618,10 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
             tried = set()
             # Search for the spp that fills the budget; the accepted render is the first repeat.
             while True:
-                spp = plan_spp(timings, budget)
+                spp = max(plan_spp(timings, budget), min_spp[lab])
                 if attempts and spp == attempts[-1][0]:
                     # The timings around the budget did not move the plan: step from the last try.
-                    spp = int(min(max(spp * budget / max(attempts[-1][1], 1e-6), 1), MAX_SPP))
+                    spp = int(min(max(spp * budget / max(attempts[-1][1], 1e-6), min_spp[lab]), MAX_SPP))
                 if warm and spp not in tried:
                     # Some integrators compile more kernels on a second call than on the first.
                     for _ in range(3):
@@ -635,7 +638,8 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
                     timings.append([spp, dt])
                 attempts.append([spp, dt])
                 ok = BUDGET_TOLERANCE[0] <= dt / budget <= BUDGET_TOLERANCE[1]
-                if ok or len(attempts) >= MAX_ATTEMPTS:
+                at_floor = spp <= min_spp[lab] and dt > budget  # cannot go lower: the budget is too short
+                if ok or at_floor or len(attempts) >= MAX_ATTEMPTS:
                     break
             seeds.append(s)
             secs.append(dt)
@@ -719,7 +723,8 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
     for r in runs:
         if r["seconds_mean"] > 1.5 * r["budget_s"] + 0.05:
             warnings.append(f"{r['integrator']} at {r['budget_s']:g} s took {r['seconds_mean']:.3g} s on average "
-                            "(a busy machine, a compilation, or a render time that is not linear in spp)")
+                            "(a busy machine, a compilation, a render time that is not linear in spp, or an spp floor "
+                            "set by the integrator's explicit settings)")
 
     import drjit as dr
 

@@ -121,6 +121,17 @@ class SonarMLTIntegrator(SonarIntegrator):
         spp = int(spp)
         if spp < 1:
             raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
+        boot, chains, mutations = self._counts(n_pings, spp)
+        total = boot + chains * mutations
+        # spp is the work a scan records and the compare tool equalises: explicit settings may not
+        # exceed it (200000 mutations at spp 64 once ran minutes for a scan labelled 64 spp).
+        if total > spp and (self.chains or self.mutations or self.bootstrap):
+            raise ValueError(f"sonar_mlt: bootstrap {boot} + chains {chains} x mutations {mutations} = {total} "
+                             f"path evaluations per ping exceed spp = {spp}; raise spp to at least "
+                             f"{self.min_spp(n_pings)}, or lower chains, mutations or bootstrap (0 fits them to spp)")
+        return boot, chains, mutations
+
+    def _counts(self, n_pings, spp):
         if self.normalisation == "scan":
             # about 8k chains in all: the chains share one target, so fewer, longer chains forget
             # their (resampled) starts, whose spread over the pings is the bootstrap's noise
@@ -129,14 +140,22 @@ class SonarMLTIntegrator(SonarIntegrator):
             chains = self.chains or int(np.clip((1 << 16) // n_pings, 32, max(32, spp // 16)))
         boot = self.bootstrap or max(4 * chains, spp // 2)
         mutations = self.mutations or max(1, (spp - boot) // chains)
-        total = boot + chains * mutations
-        # spp is the work a scan records and the compare tool equalises: explicit settings may not
-        # exceed it (200000 mutations at spp 64 once ran minutes for a scan labelled 64 spp).
-        if (self.chains or self.mutations or self.bootstrap) and total > spp:
-            raise ValueError(f"sonar_mlt: bootstrap {boot} + chains {chains} x mutations {mutations} = {total} "
-                             f"path evaluations per ping exceed spp = {spp}; raise spp, or lower chains, mutations "
-                             "or bootstrap (0 fits them to spp)")
         return boot, chains, mutations
+
+    def min_spp(self, n_pings):
+        """The smallest spp that the explicit chains/mutations/bootstrap fit (1 when none is set;
+        the compare tool starts its timings there)."""
+        def fits(spp):
+            boot, chains, mutations = self._counts(n_pings, spp)
+            return boot + chains * mutations <= spp or not (self.chains or self.mutations or self.bootstrap)
+
+        lo, hi = 1, 1
+        while not fits(hi):  # from some spp on the plan fits: the chains saturate, spp // 2 covers the rest
+            lo, hi = hi + 1, hi * 2
+        while lo < hi:
+            mid = (lo + hi) // 2
+            lo, hi = (lo, mid) if fits(mid) else (mid + 1, hi)
+        return lo
 
     # ------------------------------------------------------------------ rendering
     def render_histogram(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None, progress=None):

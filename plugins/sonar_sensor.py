@@ -9,29 +9,15 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mitsonar.scan import bearing_rotation
+from mitsonar.scan import KINDS, bearing_rotation, check_rigid
 
 from .beam import BeamPattern, read_beam_table
 from .jit_arrays import upload
 from .props import count, number, text
 
-KINDS = ("mechanical", "multibeam")
 TX_PATTERNS = ("gaussian", "sinc", "uniform")
 MAX_BINS, MAX_PINGS = 65536, 100000
 DEFAULT_FREQUENCY = 700e3
-
-
-def check_rigid(matrix, what="sonar 'to_world'"):
-    """A beam frame must be a rotation plus translation: scaling would bend the beam."""
-    m = np.asarray(matrix, dtype=np.float64)
-    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-        raise ValueError(f"{what}: expected a finite 4x4 matrix, got shape {m.shape}")
-    r = m[:3, :3]
-    if (not np.allclose(r.T @ r, np.eye(3), atol=1e-4) or abs(np.linalg.det(r) - 1) > 1e-4
-            or not np.allclose(m[3], [0, 0, 0, 1], atol=1e-9)):
-        raise ValueError(f"{what}: must be a rigid transform (rotation + translation, no scale, "
-                         "shear or mirror); the beam frame is +z boresight, +y scan axis")
-    return m
 
 
 class SonarSensor(mi.Sensor):

@@ -263,3 +263,22 @@ def test_glossy_corridor_loads_and_echoes(mitsonar_mod):
     r = sensor.bin_centres()
     # The end wall faces the sonar 10 m down the corridor.
     assert hist[10][(r > 9.9) & (r < 10.2)].sum() > 0.3 * hist[10].sum()
+
+
+def test_explicit_mlt_settings_set_the_spp_floor(first_run, small_scene, mitsonar_mod):
+    """sonar_mlt refuses an spp its explicit chains do not fit; compare times it from there on."""
+    import mitsuba as mi
+
+    from mitsonar.compare import compare
+
+    result, out = first_run
+    mlt = mi.load_dict({"type": "sonar_mlt", "chains": 64})
+    floor = mlt.min_spp(4)
+    assert floor > 256  # above the calibration's usual start: without the floor it would fail
+    with pytest.raises(ValueError, match=f"raise spp to at least {floor}"):
+        mlt.plan(4, floor - 1)
+    mlt.plan(4, floor)
+    run = compare(small_scene, "sonar_mlt", (0.01,), str(out), reference_spp=REF_SPP, seed=3, repeats=1,
+                  calibration_seconds=0.01, plots=False, integrator_params={"sonar_mlt": {"chains": 64}})
+    assert run["runs"][0]["spp"] >= floor
+    assert all(p[0] >= floor for p in run["integrators"]["sonar_mlt"]["calibration"]["points"])

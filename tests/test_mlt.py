@@ -134,9 +134,12 @@ def test_explicit_settings_must_fit_the_spp_budget(mitsonar_mod):
 
     mlt = mi.load_dict({"type": "sonar_mlt", "mutations": 200000})
     with pytest.raises(ValueError, match=r"sonar_mlt: bootstrap 32 \+ chains 4 x mutations 200000 = 800032 path "
-                                         r"evaluations per ping exceed spp = 64; raise spp, or lower chains, "
-                                         r"mutations or bootstrap \(0 fits them to spp\)"):
+                                         r"evaluations per ping exceed spp = 64; raise spp to at least 409599999, or "
+                                         r"lower chains, mutations or bootstrap \(0 fits them to spp\)"):
         mlt.plan(8, 64)
+    # (automatic chains grow with spp up to 8192 in all, so 200000 mutations each fit from 4e8 on)
+    assert mlt.min_spp(8) == 409599999
+    mlt.plan(8, 409599999)
     boot, chains, mutations = mi.load_dict({"type": "sonar_mlt", "mutations": 10}).plan(200, 4096)
     assert mutations == 10 and boot + chains * mutations <= 4096              # fits: taken as given
     # An explicit value with automatic others: 64 chains want 4 x 64 bootstrap paths.

@@ -65,9 +65,10 @@ def test_scan_shapes_and_conventions(mitsonar_mod):
     assert scan.meta["seed"] == 0 and scan.meta["spp"] == 16 and scan.meta["scene"] == "box.xml"
 
 
-def test_misspelled_parameter_fails_with_mitsubas_message(mitsonar_mod):
+def test_misspelled_parameter_names_the_nearest_parameter(mitsonar_mod):
     bad = scene_xml(sonar_xml(n_binz=10))
-    with pytest.raises(mitsonar_mod.SceneError, match=r'unreferenced property.*n_binz'):
+    with pytest.raises(mitsonar_mod.SceneError,
+                       match=r'the sensor "sonar" has no parameter "n_binz" \(did you mean "n_bins"\?\)'):
         mitsonar_mod.load_scene(bad)
 
 
