@@ -366,3 +366,179 @@ def test_assembler_skips_motor_error_and_restarts_on_new_settings():
                                hd_ctrl=HeadSettings().hd_ctrl)
     asm.add(other)
     assert asm.discarded == 1
+
+
+# ---- damaged and truncated logs ------------------------------------------------------------
+
+SMALL = synthetic_scan(n_bins=100, range_max=2.4, seed=4)
+
+
+@pytest.fixture(scope="module")
+def two_scan_log(tmp_path_factory):
+    """A clean log of two full turns, the scans the driver returned, and the byte span of
+    every record in the file."""
+    import struct
+    log = tmp_path_factory.mktemp("log") / "log.bin"
+    with VirtualMicron(SMALL, realtime=False) as vm, \
+            MicronSonar(vm.port, settings=HeadSettings.from_scan(SMALL), pose=MOUNT, log=log, **FAST) as sonar:
+        live = [sonar.scan(), sonar.scan()]
+    raw = log.read_bytes()
+    pos = 24 + struct.unpack_from("<I", raw, 20)[0]
+    spans = []
+    while pos < len(raw):
+        m = struct.unpack_from("<I", raw, pos + 9)[0]
+        spans.append((pos, pos + 13 + m))
+        pos += 13 + m
+    return log, live, spans
+
+
+def _damaged(tmp_path, log, data):
+    out = tmp_path / "damaged.bin"
+    out.write_bytes(data)
+    return out
+
+
+def test_clean_log_reads_without_warnings(two_scan_log):
+    import warnings
+    log, live, spans = two_scan_log
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        meta, records = read_log(log)
+        scans = replay(log)
+    assert "skipped" not in meta and len(records) == len(spans)
+    assert [r[2] for r in records] == [log.read_bytes()[a + 13:b] for a, b in spans]
+    assert len(scans) == 2 and all(np.array_equal(a.data, b.data) for a, b in zip(live, scans))
+
+
+def test_read_log_resyncs_after_zeroed_bytes_and_keeps_the_rest(two_scan_log, tmp_path):
+    from mitsonar.micron import LogDamageWarning
+    log, live, spans = two_scan_log
+    raw = log.read_bytes()
+    a, b = 5000, 5000 + (len(raw) - 5000) // 2 - 3000      # most of the first turn, as in the audit
+    bad = _damaged(tmp_path, log, raw[:a] + bytes(b - a) + raw[b:])
+    with pytest.warns(LogDamageWarning, match=r"damaged\.bin: skipped \d+ damaged bytes at \d+\.\.\d+") as rec:
+        meta, records = read_log(bad)
+    _, clean = read_log(log)
+    (start, n, why), = meta["skipped"]
+    # From the record the damage begins in (its end, if its header is intact) to the first
+    # record after it (or the tail of its header, if only the front was zeroed).
+    assert why == "damaged" and f"{start}..{start + n}" in str(rec[0].message)
+    assert start in next((s, e) for s, e in spans if s <= a < e)
+    assert b - 13 < start + n <= next(s for s, e in spans if s >= b)
+    # Every record wholly after the damage is there, byte for byte and in order.
+    after = [clean[i] for i, (s, e) in enumerate(spans) if s >= b]
+    assert records[-len(after):] == after
+    # ... and so is every record wholly before it.
+    before = [clean[i] for i, (s, e) in enumerate(spans) if e <= a]
+    assert records[:len(before)] == before
+    with pytest.warns(LogDamageWarning):
+        scans = replay(bad)
+    assert len(scans) == 1 and np.array_equal(scans[0].data, live[1].data)   # the intact second turn
+
+
+def _synthetic_log(path, n_pings=300):
+    """A log as the driver writes it, with fixed times: the same bytes on every run."""
+    import json
+    import struct
+    from mitsonar.seanet import HeadData, SendData, encode
+    settings = HeadSettings.from_scan(SMALL)
+    rng = np.random.default_rng(7)
+    packets = [(1, encode(settings.head_command()))]
+    for k in range(n_pings):
+        packets.append((1, encode(SendData())))
+        bins = rng.integers(0, 256, 100, dtype=np.uint8)
+        packets.append((0, encode(HeadData.from_bins(bins, bearing=(3200 - 32 * k) % 6400, ad_interval=50,
+                                                     step_size=32, hd_ctrl=int(settings.hd_ctrl)))))
+    blob = json.dumps({"settings": settings.as_dict()}).encode()
+    out = bytearray(struct.pack("<8sHHdI", b"MSNRLOG1", 1, 0, 0.0, len(blob)) + blob)
+    spans = []
+    for k, (kind, data) in enumerate(packets):
+        spans.append((len(out), len(out) + 13 + len(data)))
+        out += struct.pack("<dBI", 0.01 + 0.002 * k, kind, len(data)) + data
+    path.write_bytes(bytes(out))
+    return bytes(out), spans
+
+
+@pytest.mark.parametrize("mode", ["zeros", "random", "deleted", "inserted"])
+def test_read_log_loses_only_the_damaged_records(tmp_path, mode):
+    import struct
+    import warnings
+    raw, spans = _synthetic_log(tmp_path / "clean.bin")
+    _, clean = read_log(tmp_path / "clean.bin")
+    assert len(clean) == len(spans)
+    rng = np.random.default_rng(["zeros", "random", "deleted", "inserted"].index(mode))
+    for _ in range(40):
+        a = int(rng.integers(spans[0][0], len(raw) - 10))
+        b = min(len(raw), a + int(rng.integers(1, 3000)))
+        junk = rng.integers(0, 256, b - a, dtype=np.uint8).tobytes()
+        data = {"zeros": raw[:a] + bytes(b - a) + raw[b:], "random": raw[:a] + junk + raw[b:],
+                "deleted": raw[:a] + raw[b:], "inserted": raw[:a] + junk + raw[a:]}[mode]
+        resume = a if mode == "inserted" else b
+        if mode == "deleted":
+            # Beyond what the format can tell: the cut record's length (as it now reads)
+            # lands exactly on a later record, which reads as a clean log.
+            s, e = next(sp for sp in spans if sp[0] <= a < sp[1])
+            shifted = {x - (b - a) for x, _ in spans if x >= b}
+            if s + 13 <= len(data) and s + 13 + struct.unpack_from("<I", data, s + 9)[0] in shifted:
+                continue
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            meta, records = read_log(_damaged(tmp_path, None, data))
+        want = [clean[i] for i, (s, e) in enumerate(spans) if e <= a or s >= resume]
+        got = set(records)
+        assert [r for r in want if r not in got] == [], (a, b, meta.get("skipped"))
+        # At most the records the damage cut into come out changed (damage inside a payload
+        # is for the SeaNet parser to find).
+        assert len([r for r in records if r not in set(clean)]) <= 2
+
+
+def test_read_log_reports_a_record_cut_short_at_the_end(two_scan_log, tmp_path):
+    from mitsonar.micron import LogDamageWarning
+    log, live, spans = two_scan_log
+    raw = log.read_bytes()
+    k = next(k for k in range(len(spans) // 2, len(spans)) if spans[k][1] - spans[k][0] > 120)
+    cut = spans[k][0] + 100                             # 87 bytes into a record's payload
+    with pytest.warns(LogDamageWarning, match=rf"record cut short at the end: 100 bytes at {cut - 100}\.\.{cut} not read"):
+        meta, records = read_log(_damaged(tmp_path, log, raw[:cut]))
+    assert meta["skipped"] == [[cut - 100, 100, "record cut short at the end"]]
+    assert len(records) == k
+
+
+def test_read_log_header_only_and_empty_files(tmp_path):
+    magic = tmp_path / "magic.bin"
+    magic.write_bytes(b"MSNRLOG1")
+    with pytest.raises(ValueError, match=r"magic\.bin: truncated log: 8 bytes, less than the 24-byte file header; no records"):
+        read_log(magic)
+    empty = tmp_path / "empty.bin"
+    empty.write_bytes(b"")
+    with pytest.raises(ValueError, match=r"empty\.bin: empty file, not a mitsonar raw log"):
+        read_log(empty)
+
+
+def test_raw_log_writer_only_writes_kinds_the_reader_knows(tmp_path):
+    from mitsonar.micron import RawLogWriter
+    with RawLogWriter(tmp_path / "x.bin") as w:
+        with pytest.raises(ValueError, match=r"kind must be RX \(0\), TX \(1\) or POSE \(2\), got 7"):
+            w.write(7, b"abc")
+
+
+def test_replay_sound_speed_has_the_head_bounds(two_scan_log, tmp_path):
+    log, live, spans = two_scan_log
+    for c in (1e9, 100.0, float("nan")):
+        with pytest.raises(ValueError, match=r"replay: sound_speed = .* is out of range: allowed 1300\.\.1800 m/s"):
+            replay(log, sound_speed=c)
+    assert replay(log, sound_speed=1300.0)[0].range_max == pytest.approx(2.4 * 1300 / 1500)
+
+
+def test_replay_reports_bytes_that_form_no_packet(two_scan_log, tmp_path):
+    from mitsonar.micron import LogDamageWarning, RawLogWriter
+    log, live, spans = two_scan_log
+    meta, records = read_log(log)
+    meta.pop("start_time")
+    out = tmp_path / "garbled.bin"
+    hit = next(k for k in range(len(records) // 2, len(records)) if records[k][1] == 0)
+    with RawLogWriter(out, meta) as w:
+        for k, (t, kind, data) in enumerate(records):
+            w.write(kind, data[:9] + b"junk" + data[9:] if k == hit else data)
+    with pytest.warns(LogDamageWarning, match=r"garbled\.bin: dropped \d+ bytes from the head that form no whole SeaNet packet \(.+: \d+"):
+        replay(out)
