@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from pathlib import Path
 
 __all__ = ["add_subcommands", "cmd_virtual_sonar", "cmd_record", "cmd_replay"]
@@ -55,6 +56,18 @@ def _positive(kind):
     return conv
 
 
+def _sound_speed(text):
+    """--sound-speed of record and replay: the bound a head accepts (seanet.HeadSettings)."""
+    from .seanet import SOUND_SPEED_ALLOWED, sound_speed_ok
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number in {SOUND_SPEED_ALLOWED}, got {text!r}") from None
+    if not sound_speed_ok(v):
+        raise argparse.ArgumentTypeError(f"{text!r} is out of range: allowed {SOUND_SPEED_ALLOWED}")
+    return v
+
+
 def _settings(args):
     from .seanet import HeadSettings
     kw = {}
@@ -78,9 +91,11 @@ def _virtual_sonar(args) -> int:
     if not scene_path.is_file():
         raise FileNotFoundError(f"scene file not found: {scene_path}")
     import mitsonar
-    from .virtual_sonar import serve
+    from .virtual_sonar import check_port, serve
     from .plugins.sonar_tof import resolve_sensor
     from .seanet import require_mechanical
+    # A port that cannot be opened fails now, not after the render.
+    check_port(args.port_url, args.baud)
     scene = mitsonar.load_scene(str(scene_path))
     # Refuse before the render, not after it: a multibeam scene can take a while to render.
     require_mechanical(resolve_sensor(scene, 0), f"virtual-sonar {scene_path.name}", "no SeaNet scanlines to serve")
@@ -110,8 +125,10 @@ def _record(args) -> int:
     else:
         stats = record(args.port, args.output, args.seconds, scans=args.scans, pings=args.pings,
                        baudrate=args.baud, settings=settings, reboot=not args.no_reboot)
+    dropped = stats.get("bytes_dropped", 0)
+    note = f"; {dropped} bytes in formed no whole packet (the log keeps them)" if dropped else ""
     print(f"recorded {stats['bytes_rx']} bytes in, {stats['bytes_tx']} out "
-          f"({stats['pings']} scanlines) to {args.output}")
+          f"({stats['pings']} scanlines{note}) to {args.output}")
     return 0
 
 
@@ -123,11 +140,21 @@ def cmd_record(args) -> int:
 # ---- replay ----
 
 def _replay(args) -> int:
-    from .micron import replay
+    from .micron import LogDamageWarning, replay
     log = Path(args.log)
     if not log.is_file():
         raise FileNotFoundError(f"log file not found: {log}")
-    scans = replay(log, sound_speed=args.sound_speed, partial=args.partial)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", LogDamageWarning)
+        try:
+            scans = replay(log, sound_speed=args.sound_speed, partial=args.partial)
+        finally:
+            # What was skipped, one line each, before the result or the error it explains.
+            for w in caught:
+                if issubclass(w.category, LogDamageWarning):
+                    print(f"mitsonar replay: warning: {w.message}", file=sys.stderr)
+                else:
+                    warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     if not scans:
         raise ValueError(f"{log}: no complete scan in the log")
     out = Path(args.output)
@@ -185,7 +212,7 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--no-reboot", action="store_true", help="attach to a running head without mtReBoot")
     p.add_argument("--range", type=_positive(float), default=None, help="range scale, m (default 12)")
     p.add_argument("--n-bins", type=_positive(int), default=None, help="bins per scanline (default 500)")
-    p.add_argument("--sound-speed", type=_positive(float), default=None, help="m/s (default 1500)")
+    p.add_argument("--sound-speed", type=_sound_speed, default=None, help="m/s, 1300..1800 (default 1500)")
     p.add_argument("--step", type=_positive(int), default=None,
                    help="motor step in 1/16 gradian (default 32 = 1.8 deg)")
     p.add_argument("--bit-depth", type=int, choices=(8, 4), default=None)
@@ -199,6 +226,7 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("-o", "--output", required=True, metavar="SCAN", help="output file (.exr, .npz)")
     p.add_argument("--index", type=int, default=0, help="which scan to save (default 0; -1 the last)")
     p.add_argument("--all", action="store_true", help="save every scan as OUTPUT_NNN.ext")
-    p.add_argument("--sound-speed", type=_positive(float), default=None, help="m/s (default the log's)")
+    p.add_argument("--sound-speed", type=_sound_speed, default=None,
+                   help="m/s, 1300..1800 (default the log's)")
     p.add_argument("--partial", action="store_true", help="also the unfinished scan at the end")
     p.set_defaults(func=cmd_replay)

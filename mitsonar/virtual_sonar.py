@@ -47,7 +47,7 @@ from .seanet import (DEFAULT_NIBBLE_ORDER, FULL_TURN, Alive, BBUserData, FpgaCal
                      HeadStatus, HdCtrl, ReBoot, ScanReverse, SendBBUser, SendData, SendVersion,
                      StopAlives, StreamParser, VersionData, bearing_to_radians, encode, require_mechanical)
 
-__all__ = ["Faults", "VirtualMicron", "serve"]
+__all__ = ["Faults", "VirtualMicron", "serve", "check_port"]
 
 
 @dataclass
@@ -130,9 +130,13 @@ class _TcpServerTransport:
 
     def __init__(self, host: str, port: int):
         self.server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        self.server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        self.server.bind((host, port))
-        self.server.listen(1)
+        try:
+            self.server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            self.server.bind((host, port))
+            self.server.listen(1)
+        except BaseException:
+            self.server.close()
+            raise
         self.server.setblocking(False)
         h, p = self.server.getsockname()[:2]
         self.port = f"socket://{host or h}:{p}"
@@ -215,12 +219,30 @@ class _SerialTransport:
 def _open_transport(port_url: str | None, baudrate: int):
     if port_url is None or port_url in ("pty", "pty://"):
         return _PtyTransport()
-    if port_url.startswith("socket://"):
-        u = urlparse(port_url)
-        if u.port is None:
-            raise ValueError(f"virtual sonar: {port_url!r} needs a port (socket://HOST:PORT, 0 for any)")
-        return _TcpServerTransport(u.hostname or "localhost", u.port)
-    return _SerialTransport(port_url, baudrate)
+    # The reason alone ("Name or service not known") does not say which port failed.
+    try:
+        if port_url.startswith("socket://"):
+            u = urlparse(port_url)
+            if u.port is None:
+                raise ValueError("needs a port (socket://HOST:PORT, 0 for any)")
+            return _TcpServerTransport(u.hostname or "localhost", u.port)
+        return _SerialTransport(port_url, baudrate)
+    except OSError as e:     # also serial.SerialException and socket.gaierror
+        # pyserial wraps the OS's reason in its own sentence, which names the port again.
+        inner = e.__context__ if isinstance(e.__context__, OSError) and e.__context__.strerror else e
+        raise OSError(f"cannot open port {port_url}: {inner.strerror or inner}") from None
+    except ValueError as e:  # URL syntax: unknown scheme, port out of range, no port
+        raise ValueError(f"cannot open port {port_url}: {e}") from None
+
+
+def check_port(port_url: str | None, baudrate: int = 115200) -> None:
+    """Open and close the port `serve` would use, so that a bad URL fails before a long render.
+
+    Raises OSError or ValueError naming the port. A new pseudo-terminal (None) needs no check.
+    """
+    if port_url is None or port_url in ("pty", "pty://"):
+        return
+    _open_transport(port_url, baudrate).close()
 
 
 # --------------------------------------------------------------------------------------------

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 
 import numpy as np
 import pytest
@@ -133,3 +134,83 @@ def test_replay_empty_log_and_index(tmp_path, capsys):
     RawLogWriter(empty, {"settings": HeadSettings().as_dict()}).close()
     assert cli("replay", empty, "-o", tmp_path / "s.exr") == 1
     assert "no complete scan" in one_error_line(capsys, "replay")
+
+
+def _two_turn_log(tmp_path, capsys):
+    scan = small_scan()
+    log = tmp_path / "log.bin"
+    with VirtualMicron(scan, realtime=False) as vm:
+        assert cli("record", vm.port, "-o", log, "--scans", "2", "--range", "2.4", "--n-bins", "100") == 0
+    capsys.readouterr()
+    return scan, log
+
+
+def test_replay_cli_skips_damage_says_where_and_keeps_the_intact_scan(tmp_path, capsys):
+    scan, log = _two_turn_log(tmp_path, capsys)
+    raw = log.read_bytes()
+    a, b = 2000, len(raw) // 2 - 2000                 # most of the first turn, as in the audit
+    zero = tmp_path / "zero.bin"
+    zero.write_bytes(raw[:a] + bytes(b - a) + raw[b:])
+    assert cli("replay", zero, "-o", tmp_path / "s.exr") == 0
+    out, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert lines[0].startswith("mitsonar replay: warning: zero.bin: skipped ") and "damaged bytes at " in lines[0]
+    assert all(ln.startswith("mitsonar replay: warning: zero.bin: ") for ln in lines), lines
+    assert "scan 0 of 1 from" in out
+    assert np.array_equal(mitsonar.load_scan(str(tmp_path / "s.exr")).data, scan.data)
+
+
+def test_sound_speed_has_the_same_bound_and_message_in_record_and_replay(tmp_path, capsys):
+    parser = argparse.ArgumentParser(prog="mitsonar")
+    serial_cli.add_subcommands(parser.add_subparsers(dest="command", required=True))
+    messages = []
+    for argv in (["record", "/dev/x", "-o", "l.bin", "--sound-speed", "1e9"],
+                 ["replay", "l.bin", "-o", "s.exr", "--sound-speed", "1e9"]):
+        with pytest.raises(SystemExit) as e:
+            parser.parse_args(argv)
+        assert e.value.code == 2
+        err = capsys.readouterr().err.strip().splitlines()[-1]
+        assert err.startswith(f"mitsonar {argv[0]}: error: argument --sound-speed: ")
+        messages.append(err.split("--sound-speed: ")[1])
+    assert messages == ["'1e9' is out of range: allowed 1300..1800 m/s"] * 2
+    for bad in ("100", "nan", "fast"):
+        with pytest.raises(SystemExit):
+            parser.parse_args(["replay", "l.bin", "-o", "s.exr", "--sound-speed", bad])
+        assert "1300..1800 m/s" in capsys.readouterr().err
+    assert parser.parse_args(["replay", "l.bin", "-o", "s.exr", "--sound-speed", "1450"]).sound_speed == 1450.0
+
+
+def test_replay_cli_header_only_log(tmp_path, capsys):
+    magic = tmp_path / "magic.bin"
+    magic.write_bytes(b"MSNRLOG1")
+    assert cli("replay", magic, "-o", tmp_path / "s.exr") == 1
+    line = one_error_line(capsys, "replay")
+    assert "magic.bin: truncated log: 8 bytes" in line and "missing" not in line
+
+
+@pytest.mark.parametrize("url,reason", [("socket://127.0.0.1:99999", "Port out of range"),
+                                        ("/dev/does-not-exist-mitsonar", "No such file or directory"),
+                                        ("nosuchscheme://x", "protocol 'nosuchscheme' not known")])
+def test_virtual_sonar_cli_checks_the_port_before_rendering(monkeypatch, capsys, url, reason):
+    box = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes_xml", "box.xml")
+
+    def render(*a, **k):
+        raise AssertionError("rendered before opening the port")
+    monkeypatch.setattr(mitsonar, "render_scan", render)
+    assert cli("virtual-sonar", box, "--port-url", url, "--seconds", "0.1", "--fast") == 1
+    line = one_error_line(capsys, "virtual-sonar")
+    assert line == f"mitsonar virtual-sonar: error: cannot open port {url}: " + line.split(f"{url}: ", 1)[1]
+    assert reason in line
+    vm = VirtualMicron(small_scan(), url)        # the API names the port the same way
+    with pytest.raises((OSError, ValueError), match=f"^cannot open port {re.escape(url)}: .*{reason}"):
+        vm.start()
+    vm.stop()
+
+
+def test_record_cli_says_how_many_bytes_formed_no_packet(tmp_path, capsys):
+    from mitsonar.virtual_sonar import Faults
+    with VirtualMicron(small_scan(), realtime=False, faults=Faults(garbage_probability=0.1), seed=3) as vm:
+        assert cli("record", vm.port, "-o", tmp_path / "l.bin", "--scans", "1", "--range", "2.4",
+                   "--n-bins", "100") == 0
+    out = capsys.readouterr().out
+    assert "bytes in formed no whole packet (the log keeps them)" in out
