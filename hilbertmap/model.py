@@ -76,16 +76,128 @@ _PARAMS = dict(
 )
 
 
+# Most grid points a slice or a surface may be sampled on: the surface's grid costs about 100
+# bytes a point (coordinates, probabilities, the tetrahedra's masks), so 2e8 points is ~20 GB. The
+# default resolution (at most 10 cm, at least 2 cm) stays well below it for rooms and tanks.
+MAX_GRID_POINTS = 200_000_000
+
+
 def _sigmoid(z):
     return 0.5 * (1.0 + np.tanh(0.5 * z))
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
+
+
+def _is_number(v) -> bool:
+    return (isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+            and math.isfinite(v))
+
+
+def _choices(names) -> str:
+    q = [repr(n) for n in names]
+    return ", ".join(q[:-1]) + " or " + q[-1]
+
+
+def _need(name: str, value, ok: bool, allowed: str) -> None:
+    if not ok:
+        raise ValueError(f"HilbertMap: {name} must be {allowed}, not {value!r}")
+
+
+def _int_param(name, v, lo, none=False):
+    _need(name, v, (none and v is None) or (_is_int(v) and v >= lo),
+          ("None or " if none else "") + f"an integer >= {lo}")
+
+
+def _num_param(name, v, lo=None, hi=None, lo_open=False, hi_open=False, special=()):
+    ok = any(v is s or (isinstance(v, str) and v == s) for s in special)
+    if not ok and _is_number(v):
+        ok = ((lo is None or (v > lo if lo_open else v >= lo))
+              and (hi is None or (v < hi if hi_open else v <= hi)))
+    if lo is not None and hi is not None:
+        rng = f"a number in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+    elif lo is not None:
+        rng = f"a number {'>' if lo_open else '>='} {lo:g}"
+    else:
+        rng = "a finite number"
+    _need(name, v, ok, " or ".join([repr(s) for s in special] + [rng]))
+
+
+def _check_bounds(name, bounds, none=True):
+    """``(lo, hi)``, each 3 finite numbers with lo < hi; returns them as arrays."""
+    if bounds is None and none:
+        return None
+    allowed = ("None or " if none else "") + "a pair (lo, hi) of 3 numbers each, with lo < hi"
+    try:
+        lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+    except (TypeError, ValueError):
+        lo = hi = None
+    _need(name, bounds, lo is not None and lo.shape == (3,) and hi.shape == (3,)
+          and bool(np.isfinite(lo).all() and np.isfinite(hi).all() and (lo < hi).all()), allowed)
+    return lo, hi
+
+
+def _check_params(hm) -> None:
+    """Every hyper-parameter's type and range (at fit, as scikit-learn does: set_params may
+    change them after construction)."""
+    from .classify import RULES
+    from .inducing import METHODS
+
+    choices = dict(inducing=METHODS, source=("auto", "data", "intensity"), bin_rule=RULES,
+                   occupied_bins=("first", "first_run", "all"), occupied_pooling=("mean", "lse"),
+                   beam_sampling=("pattern", "uniform"), schedule=_sched.SCHEDULES, variant=("llvm", "cuda"))
+    for name, names in choices.items():
+        v = getattr(hm, name)
+        _need(name, v, isinstance(v, str) and v in names, ("one of " if len(names) > 2 else "") + _choices(names))
+    _int_param("n_inducing", hm.n_inducing, 1)
+    _num_param("inducing_occupied_share", hm.inducing_occupied_share, 0, 1)
+    _num_param("inducing_voxel", hm.inducing_voxel, 0, special=(None,))
+    _num_param("lengthscale", hm.lengthscale, 0, lo_open=True, special=("auto",))
+    _num_param("lengthscale_factor", hm.lengthscale_factor, 0, lo_open=True)
+    _num_param("kernel_cut", hm.kernel_cut, 0, 1, lo_open=True, hi_open=True)
+    _num_param("eig_floor", hm.eig_floor, 0, 1, hi_open=True)
+    for name in ("threshold", "min_level", "cfar_offset"):
+        _num_param(name, getattr(hm, name), special=(None,))
+    _int_param("cfar_train", hm.cfar_train, 1)
+    _int_param("cfar_guard", hm.cfar_guard, 0)
+    _num_param("blanking", hm.blanking, 0, special=("auto",))
+    _int_param("min_echo_bins", hm.min_echo_bins, 0)
+    _num_param("free_density", hm.free_density, 0)
+    _int_param("max_free_per_ping", hm.max_free_per_ping, 0)
+    _num_param("free_margin", hm.free_margin, 0)
+    _int_param("near_free", hm.near_free, 0)
+    _num_param("near_depth", hm.near_depth, 0)
+    _int_param("occupied_samples", hm.occupied_samples, 1)
+    _num_param("max_run", hm.max_run, 0, lo_open=True)
+    _num_param("occupied_weight", hm.occupied_weight, 0, lo_open=True, special=("balanced",))
+    _num_param("pooling_temperature", hm.pooling_temperature, 0, lo_open=True)
+    _num_param("beam_extent", hm.beam_extent, 0, lo_open=True)
+    _num_param("beam_stride", hm.beam_stride, 1)
+    _num_param("alpha", hm.alpha, 0)
+    _num_param("l1_ratio", hm.l1_ratio, 0, 1)
+    _num_param("eta0", hm.eta0, 0, lo_open=True, special=("auto",))
+    _num_param("k1", hm.k1, 0)
+    _num_param("t0", hm.t0, 0, lo_open=True, special=(None,))
+    _int_param("batch_size", hm.batch_size, 1)
+    _int_param("n_passes", hm.n_passes, 1)
+    _int_param("partial_passes", hm.partial_passes, 1)
+    _need("fit_intercept", hm.fit_intercept, isinstance(hm.fit_intercept, (bool, np.bool_)), "True or False")
+    _check_bounds("bounds", hm.bounds)
+    _num_param("coverage_voxel", hm.coverage_voxel, 0, lo_open=True)
+    _int_param("max_free_per_voxel", hm.max_free_per_voxel, 1, none=True)
+    _int_param("max_groups_per_voxel", hm.max_groups_per_voxel, 1, none=True)
+    _int_param("random_state", hm.random_state, 0, none=True)
 
 
 class HilbertMap:
     """Hilbert map of 3-D occupancy from sonar scans (scikit-learn estimator conventions).
 
-    Parameters (hyper-parameters only; learnt state lives in attributes ending with ``_``)
+    Parameters (hyper-parameters only; learnt state lives in attributes ending with ``_``; each is
+    checked at ``fit``, ``partial_fit`` and ``embed``, and a bad one raises a ValueError naming it)
     ----------------------------------------------------------------------------------------
-    n_inducing : int            Nystroem inducing points (3000 in the thesis).
+    n_inducing : int            Nystroem inducing points (3000 in the thesis); at most the number of
+                                training samples the scans give (free samples plus occupied bins).
     inducing : str              ``kmeans`` (centres of the samples, as the original Hilbert-maps
                                 code), ``grid`` (lattice over the region seen) or ``random``.
     inducing_occupied_share : float   share of occupied samples among the k-means input points: open
@@ -192,6 +304,7 @@ class HilbertMap:
     # -- embedding --------------------------------------------------------------------------
     def embed(self, scan, rng: np.random.Generator | None = None) -> Samples:
         """Labelled samples of one scan with this map's embedding settings."""
+        _check_params(self)
         rng = rng if rng is not None else np.random.default_rng(self.random_state)
         return embed_scan(
             scan, rng, source=self.source, bin_rule=self.bin_rule, threshold=self.threshold,
@@ -218,6 +331,7 @@ class HilbertMap:
         eigen-decomposition, step-size estimate) and in SGD.
         """
         t_start = time.perf_counter()
+        _check_params(self)
         self._rng = np.random.default_rng(self.random_state)
         if samples is None:
             samples = self.embed_all(scans, self._rng)
@@ -225,6 +339,7 @@ class HilbertMap:
         t_embed = time.perf_counter()
         if len(samples.free) + len(samples.occupied) == 0:
             raise ValueError("HilbertMap: the scans gave no samples (no pings, or all bins blanked)")
+        self._check_n_inducing(samples, "these scans")
         self._initialise(samples)
         self._set_weights(samples)
         self.n_schedule_ = len(samples.free) + len(samples.occupied)
@@ -245,6 +360,7 @@ class HilbertMap:
         this first scan saw (later scans that look elsewhere are only learnt where that region
         reaches). Later calls go on from the current weights and step count.
         """
+        _check_params(self)
         if not hasattr(self, "_rng"):
             self._rng = np.random.default_rng(self.random_state)
         if samples is None:
@@ -253,6 +369,7 @@ class HilbertMap:
         if not hasattr(self, "dual_coef_"):
             if len(samples.free) + len(samples.occupied) == 0:
                 raise ValueError("HilbertMap: the first scan gave no samples")
+            self._check_n_inducing(samples, "the first scan")
             self._initialise(samples)
             self.n_schedule_ = len(samples.free) + len(samples.occupied)
             self._set_weights(samples)
@@ -272,6 +389,15 @@ class HilbertMap:
         for _ in range(int(self.partial_passes)):
             self.loss_curve_.append(self._sgd_pass(samples))
         return self
+
+    def _check_n_inducing(self, samples: Samples, source: str) -> None:
+        # More inducing points than samples leaves the kernel no data to span (the length-scale
+        # shrinks to the sample spacing and the map to beads), and the n x n Gram matrix grows
+        # with n^2: 100000 points would need 75 GiB. Checked before anything that large is made.
+        n = len(samples.free) + len(samples.occupied)
+        if self.n_inducing > n:
+            raise ValueError(f"HilbertMap: n_inducing must be at most the number of training samples "
+                             f"({n} from {source}), not {self.n_inducing}")
 
     def _thin(self, samples: Samples) -> Samples:
         """Cap the free samples and occupied groups per voxel (``max_*_per_voxel``)."""
@@ -509,9 +635,7 @@ class HilbertMap:
     def decision_function(self, points, chunk: int = 1 << 21) -> np.ndarray:
         """Logit ``w . phi(x) + b`` at (N, 3) world points."""
         self._check_fitted()
-        pts = np.asarray(points, dtype=np.float64)
-        if pts.ndim != 2 or pts.shape[1] != 3:
-            raise ValueError(f"HilbertMap: points must have shape (N, 3), got {pts.shape}")
+        pts = _as_points(points)
         if not hasattr(self, "_grid"):
             self._grid = KernelGrid(self.inducing_points_, self.lengthscale_, self.kernel_cut, self.variant)
             self._grid.order = np.arange(len(self.inducing_points_))
@@ -589,17 +713,26 @@ class HilbertMap:
         """Probability on the plane ``axis = value``.
 
         ``extent``: ((u_min, u_max), (v_min, v_max)) over the two other axes in x, y, z order
-        (default: the region seen); ``resolution`` in metres. Returns a :class:`MapSlice`.
+        (default: the region seen); ``resolution`` in metres, at most ``MAX_GRID_POINTS`` points in
+        all. Returns a :class:`MapSlice`.
         """
         self._check_fitted()
         a = _axis_index(axis)
         others = [i for i in range(3) if i != a]
+        _num_param("value", value)
+        _num_param("resolution", resolution, 0, lo_open=True)
         if extent is None:
             lo, hi = self.coverage_.bounds()
             extent = ((lo[others[0]], hi[others[0]]), (lo[others[1]], hi[others[1]]))
-        (u0, u1), (v0, v1) = extent
-        u = np.arange(u0, u1 + 0.5 * resolution, resolution)
-        v = np.arange(v0, v1 + 0.5 * resolution, resolution)
+        try:
+            ext = np.asarray(extent, dtype=np.float64)
+        except (TypeError, ValueError):
+            ext = None
+        uv = "xyz"[others[0]] + ", " + "xyz"[others[1]]
+        _need("extent", extent, ext is not None and ext.shape == (2, 2) and bool(np.isfinite(ext).all())
+              and bool((ext[:, 0] <= ext[:, 1]).all()),
+              f"((u_min, u_max), (v_min, v_max)) in metres over {uv}, each min <= max")
+        u, v = _grid_axes("resolution", resolution, ext[:, 0], ext[:, 1], f"the slice's extent ({uv})")
         U, V = np.meshgrid(u, v, indexing="xy")
         pts = np.zeros((U.size, 3))
         pts[:, others[0]] = U.ravel()
@@ -613,11 +746,14 @@ class HilbertMap:
     def _surface_grid(self, resolution, bounds):
         if bounds is None:
             lo, hi = self.coverage_.bounds()
+            where = "the region seen"
         else:
-            lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+            lo, hi = _check_bounds("bounds", bounds, none=False)
+            where = "the bounds"
+        _num_param("resolution", resolution, 0, lo_open=True, special=(None,))
         if resolution is None:
             resolution = max(min(self.lengthscale_ / 4.0, 0.1), 0.02)
-        axes = [np.arange(lo[i], hi[i] + 0.5 * resolution, resolution) for i in range(3)]
+        axes = _grid_axes("resolution", resolution, lo, hi, where)
         return axes, resolution
 
     def isosurface(self, level: float = 0.5, resolution: float | None = None, bounds=None,
@@ -625,12 +761,15 @@ class HilbertMap:
         """Triangle mesh (vertices (V,3), faces (F,3)) of the ``p = level`` surface.
 
         Sampled on a grid of ``resolution`` metres (default a quarter of the length-scale, at
-        most 10 cm) over ``bounds`` (default the region seen); with ``only_seen`` faces outside
+        most 10 cm; at most ``MAX_GRID_POINTS`` grid points in all) over ``bounds`` (default the
+        region seen); ``level`` lies in (0, 1). With ``only_seen`` faces outside
         the region seen are dropped (behind walls the map has no data and sits at its prior).
         """
         from .mesh import marching_tetrahedra
 
         self._check_fitted()
+        # p lies in (0, 1): any other level has no surface, and an empty mesh would hide the slip
+        _num_param("level", level, 0, 1, lo_open=True, hi_open=True)
         axes, res = self._surface_grid(resolution, bounds)
         P = self._grid_proba(axes)
         V, Fc = marching_tetrahedra(P, axes, level)
@@ -737,35 +876,120 @@ class HilbertMap:
 
     @classmethod
     def load(cls, path) -> "HilbertMap":
-        with np.load(path, allow_pickle=False) as z:
-            if "state" not in z.files or "params" not in z.files:
-                raise ValueError(f"HilbertMap: {path} is not a saved Hilbert map")
-            params = json.loads(str(z["params"]))
-            state = json.loads(str(z["state"]))
+        """Read a map written by :meth:`save`. A file that is not one, or whose arrays do not agree
+        with each other, is refused with a ValueError naming the file and what is wrong."""
+        import zipfile
+        import zlib
+
+        def bad(why):
+            return ValueError(f"HilbertMap: {path}: {why}")
+
+        unreadable = (ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error)
+        try:
+            z = np.load(path, allow_pickle=False)
+        except unreadable as exc:
+            # numpy takes what is neither zip nor .npy for a pickle, and says so
+            why = "" if "pickle" in str(exc) else ": the file is empty" if isinstance(exc, EOFError) else \
+                f": {_first_line(exc)}"
+            raise bad(f"not a Hilbert map file (not an .npz archive{why})") from None
+        if not isinstance(z, np.lib.npyio.NpzFile):
+            raise bad("not a Hilbert map file (a single .npy array, not an .npz archive)")
+        with z:
+            names = ("params", "state", "inducing_points", "weights", "dual_coef", "coverage_keys",
+                     "echo_coverage_keys", "sensor_positions", "ping_frames", "ping_beams", "ping_spans")
+            for name in names:
+                if name not in z.files:
+                    raise bad(f"not a Hilbert map file (missing {name!r})")
+            arr = {}
+            for name in names + (("free_coverage_keys",) if "free_coverage_keys" in z.files else ()):
+                try:
+                    arr[name] = z[name]
+                except unreadable as exc:  # a damaged or truncated member
+                    raise bad(f"{name!r} cannot be read ({_first_line(exc)})") from None
+        try:
+            params = json.loads(str(arr.pop("params")))
+            state = json.loads(str(arr.pop("state")))
+        except ValueError:
+            raise bad("not a Hilbert map file ('params' or 'state' is not JSON)") from None
+        if not isinstance(params, dict) or not isinstance(state, dict):
+            raise bad("not a Hilbert map file ('params' and 'state' must be JSON objects)")
+        if state.get("format", "hilbertmap/1") != "hilbertmap/1":
+            raise bad(f"format {state['format']!r} is not hilbertmap/1")
+        try:
             hm = cls(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in params.items()})
-            hm.inducing_points_ = z["inducing_points"]
-            hm.weights_ = z["weights"]
-            hm.dual_coef_ = z["dual_coef"]
-            hm.coverage_ = Coverage(state["coverage_voxel"], z["coverage_keys"])
-            hm.echo_coverage_ = Coverage(state["coverage_voxel"], z["echo_coverage_keys"])
-            if "free_coverage_keys" in z.files:
-                hm.free_coverage_ = Coverage(state["coverage_voxel"], z["free_coverage_keys"])
-            hm.sensor_positions_ = z["sensor_positions"]
-            hm.ping_frames_ = z["ping_frames"]
-            hm.ping_beams_ = z["ping_beams"]
-            hm.ping_spans_ = z["ping_spans"]
-        hm.lengthscale_ = float(state["lengthscale_"])
+            _check_params(hm)
+        except (TypeError, ValueError) as exc:
+            raise bad(f"'params': {str(exc).replace('HilbertMap: ', '')}") from None
+        try:
+            st = {k: float(state[k]) for k in ("lengthscale_", "intercept_", "t_", "n_samples_seen_",
+                                                "n_schedule_", "occupied_weight_", "eta0_", "n_components_",
+                                                "coverage_voxel")}
+            loss_curve = [float(x) for x in state["loss_curve_"]]
+        except KeyError as exc:
+            raise bad(f"'state' lacks {exc.args[0]!r}") from None
+        except (TypeError, ValueError):
+            raise bad("'state' holds a value that is not a number") from None
+        for k in ("lengthscale_", "coverage_voxel"):
+            if not (math.isfinite(st[k]) and st[k] > 0):
+                raise bad(f"'state' {k} must be a number > 0, not {st[k]!r}")
+        _check_map_arrays(arr, int(st["n_components_"]), bad)
+
+        hm.inducing_points_ = arr["inducing_points"]
+        hm.weights_ = arr["weights"]
+        hm.dual_coef_ = arr["dual_coef"]
+        hm.coverage_ = Coverage(st["coverage_voxel"], arr["coverage_keys"])
+        hm.echo_coverage_ = Coverage(st["coverage_voxel"], arr["echo_coverage_keys"])
+        if "free_coverage_keys" in arr:
+            hm.free_coverage_ = Coverage(st["coverage_voxel"], arr["free_coverage_keys"])
+        hm.sensor_positions_ = arr["sensor_positions"]
+        hm.ping_frames_ = arr["ping_frames"]
+        hm.ping_beams_ = arr["ping_beams"]
+        hm.ping_spans_ = arr["ping_spans"]
+        hm.lengthscale_ = st["lengthscale_"]
+        hm.intercept_ = st["intercept_"]
+        hm.t_ = st["t_"]
+        hm.n_samples_seen_ = int(st["n_samples_seen_"])
+        hm.n_schedule_ = st["n_schedule_"]
+        hm.occupied_weight_ = st["occupied_weight_"]
+        hm.eta0_ = st["eta0_"]
+        hm.n_components_ = int(st["n_components_"])
         hm.gamma_ = 1.0 / (2.0 * hm.lengthscale_ ** 2)
-        hm.intercept_ = float(state["intercept_"])
-        hm.t_ = float(state["t_"])
-        hm.n_samples_seen_ = int(state["n_samples_seen_"])
-        hm.n_schedule_ = float(state["n_schedule_"])
-        hm.occupied_weight_ = float(state["occupied_weight_"])
-        hm.eta0_ = float(state["eta0_"])
-        hm.n_components_ = int(state["n_components_"])
-        hm.gamma_ = 1.0 / (2.0 * hm.lengthscale_ ** 2)
-        hm.loss_curve_ = list(state["loss_curve_"])
+        hm.loss_curve_ = loss_curve
         return hm
+
+
+def _check_map_arrays(arr: dict, k: int, bad) -> None:
+    """The shapes a saved map's arrays must have, and agree on (n inducing points, k components,
+    P pings); ``bad(why)`` makes the error."""
+    def need(name, ok, expected):
+        if not ok:
+            raise bad(f"{name!r} has shape {arr[name].shape}, expected {expected}")
+
+    nu = arr["inducing_points"]
+    need("inducing_points", nu.ndim == 2 and nu.shape[1] == 3 and len(nu) >= 1, "(n, 3) with n >= 1")
+    n = len(nu)
+    if not 1 <= k <= n:
+        raise bad(f"'state' n_components_ is {k}, expected 1 to {n} (the number of inducing points)")
+    for name, length, what in (("weights", k, "n_components_"), ("dual_coef", n, "one per inducing point")):
+        a = arr[name]
+        if a.ndim != 1 or len(a) != length:
+            raise bad(f"{name!r} has {a.size} entries, expected {length} ({what})")
+    for name in ("inducing_points", "weights", "dual_coef"):
+        if arr[name].dtype.kind not in "fiu" or not np.isfinite(arr[name]).all():
+            raise bad(f"{name!r} holds values that are not finite numbers")
+    for name in ("coverage_keys", "echo_coverage_keys", "free_coverage_keys"):
+        if name in arr:
+            need(name, arr[name].ndim == 1 and arr[name].dtype.kind in "iu", "1-D integer voxel keys")
+    need("sensor_positions", arr["sensor_positions"].ndim == 2 and arr["sensor_positions"].shape[1] == 3, "(S, 3)")
+    need("ping_frames", arr["ping_frames"].ndim == 3 and arr["ping_frames"].shape[1:] == (4, 4), "(P, 4, 4)")
+    p = len(arr["ping_frames"])
+    need("ping_beams", arr["ping_beams"].shape == (p, 3), f"({p}, 3), one row per ping of 'ping_frames'")
+    need("ping_spans", arr["ping_spans"].shape == (p, 3), f"({p}, 3), one row per ping of 'ping_frames'")
+
+
+def _first_line(exc) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
 
 
 class MapSlice:
@@ -807,9 +1031,48 @@ def _axis_index(axis) -> int:
     raise ValueError(f"HilbertMap: axis must be 'x', 'y', 'z' or 0-2, not {axis!r}")
 
 
+def _as_points(points, name: str = "points") -> np.ndarray:
+    """(N, 3) finite float64 points, or a ValueError naming the first bad row."""
+    try:
+        pts = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"HilbertMap: {name} must be an (N, 3) array of numbers ({exc})") from None
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"HilbertMap: {name} must have shape (N, 3), got {pts.shape}")
+    bad = np.nonzero(~np.isfinite(pts).all(axis=1))[0]
+    if len(bad):
+        # a NaN would land in no kernel cell and come out as the bare intercept, a plausible p
+        raise ValueError(f"HilbertMap: {name}: row {bad[0]} is not finite ({len(bad)} of {len(pts)} rows are not)")
+    return pts
+
+
+def _grid_axes(name_res: str, res: float, lo, hi, names: str) -> list:
+    """Sample axes from lo to hi every ``res``; refused when they would hold more than
+    MAX_GRID_POINTS points, with the finest resolution that fits."""
+    ext = [max(float(b) - float(a), 0.0) for a, b in zip(lo, hi)]
+
+    def counts(r):
+        return [int(math.ceil(e / r + 0.5)) for e in ext]
+
+    n = counts(res)
+    if math.prod(n) > MAX_GRID_POINTS:
+        r = res
+        while math.prod(counts(r)) > MAX_GRID_POINTS:
+            r *= 1.05
+        e10 = 10.0 ** (math.floor(math.log10(r)) - 1)
+        r = math.ceil(r / e10) * e10  # two significant digits, rounded up
+        raise ValueError(
+            f"HilbertMap: {name_res} {res:g} m needs a grid of {' x '.join(map(str, n))} = {math.prod(n):.3g} "
+            f"points over {names} (at most {MAX_GRID_POINTS:.0e}); use {name_res} {r:.2g} or coarser")
+    return [np.arange(float(a), float(b) + 0.5 * res, res) for a, b in zip(lo, hi)]
+
+
 def _as_scan_list(scans):
     if hasattr(scans, "poses"):
         return [scans]
+    if isinstance(scans, (str, bytes)) or not hasattr(scans, "__iter__"):
+        raise TypeError(f"HilbertMap: fit() needs a scan or a list of scans, not {type(scans).__name__} "
+                        "(load scan files with mitsonar.load_scan)")
     scans = list(scans)
     if not scans:
         raise ValueError("HilbertMap: fit() needs at least one scan")

@@ -432,3 +432,176 @@ def test_wall_is_thin_with_free_space_in_front(scans):
 
     face, classic = offset(), offset(plateau=None, front_only=False)
     assert face < 0.25 * hm.lengthscale_ and face < 0.6 * classic
+
+
+# ----------------------------------------------------------------------------- bad input
+@pytest.mark.parametrize("param,value,allowed", [
+    ("n_inducing", 2.5, "an integer >= 1"),            # refused, not truncated to 2
+    ("n_inducing", "x", "an integer >= 1"),
+    ("n_inducing", True, "an integer >= 1"),
+    ("lengthscale", "big", "'auto' or a number > 0"),
+    ("lengthscale", float("nan"), "'auto' or a number > 0"),
+    ("eta0", -1.0, "'auto' or a number > 0"),
+    ("alpha", -1.0, "a number >= 0"),
+    ("batch_size", 0, "an integer >= 1"),
+    ("batch_size", 512.0, "an integer >= 1"),
+    ("n_passes", 0, "an integer >= 1"),
+    ("partial_passes", 0, "an integer >= 1"),
+    ("l1_ratio", 1.5, "a number in [0, 1]"),
+    ("kernel_cut", 0.0, "a number in (0, 1)"),
+    ("eig_floor", 1.0, "a number in [0, 1)"),
+    ("inducing_occupied_share", -0.1, "a number in [0, 1]"),
+    ("threshold", "high", "None or a finite number"),
+    ("cfar_train", 0, "an integer >= 1"),
+    ("blanking", -1.0, "'auto' or a number >= 0"),
+    ("free_density", float("inf"), "a number >= 0"),
+    ("occupied_samples", 0, "an integer >= 1"),
+    ("occupied_weight", "heavy", "'balanced' or a number > 0"),
+    ("beam_stride", 0.5, "a number >= 1"),
+    ("t0", 0.0, "None or a number > 0"),
+    ("fit_intercept", "yes", "True or False"),
+    ("bounds", ((0, 0, 0), (1, 1)), "None or a pair (lo, hi) of 3 numbers each, with lo < hi"),
+    ("coverage_voxel", 0.0, "a number > 0"),
+    ("max_free_per_voxel", 0, "None or an integer >= 1"),
+    ("random_state", -1, "None or an integer >= 0"),
+    ("schedule", "adam", "one of 'thesis', 'classic', 'ramos_ott' or 'constant'"),
+    ("occupied_pooling", "max", "'mean' or 'lse'"),
+    ("variant", "metal", "'llvm' or 'cuda'"),
+])
+def test_bad_hyper_parameters_are_refused_at_fit(scans, param, value, allowed):
+    hm = HilbertMap(**dict(SMALL, **{param: value}))
+    for call in (lambda: hm.fit(scans[:1]), lambda: hm.partial_fit(scans[0]), lambda: hm.embed(scans[0])):
+        with pytest.raises(ValueError) as err:
+            call()
+        assert f"{param} must be {allowed}, not {value!r}" in str(err.value)
+    assert not hasattr(hm, "dual_coef_")
+
+
+def test_valid_hyper_parameters_pass_the_checks(scans):
+    ok = dict(n_inducing=np.int64(300), lengthscale=0.5, eta0=10.0, t0=5.0, threshold=100, blanking=0.2,
+              occupied_weight="balanced", beam_stride=10 / 3, bounds=((-1, -1, -1), (1, 1, 1)), inducing_voxel=None,
+              max_free_per_voxel=None, fit_intercept=np.bool_(False), random_state=np.int32(3))
+    assert len(HilbertMap(**ok).embed(scans[0]).free) > 0
+
+
+def test_n_inducing_at_most_the_training_samples(scans):
+    """More inducing points than samples degenerates the map, and 1e5 of them would need a 75 GiB
+    Gram matrix: refused before anything is allocated, with the count the scans gave."""
+    for call in (lambda hm: hm.fit(scans[:1]), lambda hm: hm.partial_fit(scans[0])):
+        hm = HilbertMap(**dict(SMALL, n_inducing=100_000_000))
+        with pytest.raises(ValueError, match=r"n_inducing must be at most the number of training samples "
+                                             r"\(\d+ from [a-z ]+\), not 100000000"):
+            call(hm)
+    n = len(HilbertMap(**SMALL).embed_all(scans[:1]).free)
+    assert n < 100_000_000
+
+
+def test_fit_names_what_it_needs():
+    for bad in (None, "scan.exr", 3):
+        with pytest.raises(TypeError, match="fit\\(\\) needs a scan or a list of scans"):
+            HilbertMap(**SMALL).fit(bad)
+
+
+def test_queries_refuse_bad_points(fitted):
+    with pytest.raises(ValueError, match=r"points: row 1 is not finite \(2 of 3 rows are not\)"):
+        fitted.predict_proba([[0.0, 0.0, 0.0], [np.nan, 0.0, 0.0], [0.0, np.inf, 0.0]])
+    with pytest.raises(ValueError, match=r"points: row 0 is not finite"):
+        fitted.decision_function(np.array([[-np.inf, 0.0, 0.0]]))
+    with pytest.raises(ValueError, match=r"points must be an \(N, 3\) array of numbers"):
+        fitted.predict_proba([["a", "b", "c"]])
+
+
+@pytest.mark.parametrize("kw,message", [
+    (dict(resolution=0), "resolution must be a number > 0, not 0"),
+    (dict(resolution=-0.1), "resolution must be a number > 0, not -0.1"),
+    (dict(value=float("nan")), "value must be a finite number, not nan"),
+    (dict(extent=(1, 2)), "extent must be ((u_min, u_max), (v_min, v_max)) in metres over x, y, each min <= max"),
+    (dict(extent=((0, 1), (1, 0))), "extent must be"),
+    (dict(resolution=1e-5), "resolution 1e-05 m needs a grid of"),
+])
+def test_slice_refuses_bad_arguments(fitted, kw, message):
+    with pytest.raises(ValueError) as err:
+        fitted.slice("z", **kw)
+    assert message in str(err.value)
+
+
+def test_surfaces_refuse_bad_level_and_grids(fitted):
+    for level in (2.0, 0.0, 1.0, float("nan")):
+        with pytest.raises(ValueError, match=r"level must be a number in \(0, 1\)"):
+            fitted.isosurface(level=level)
+    with pytest.raises(ValueError, match="level must be a number in"):
+        fitted.surface("ridge", level=-0.5)
+    with pytest.raises(ValueError, match="resolution must be None or a number > 0, not 0"):
+        fitted.isosurface(resolution=0)
+    with pytest.raises(ValueError, match=r"bounds must be a pair \(lo, hi\)"):
+        fitted.isosurface(bounds=((1, 1, 1), (0, 0, 0)))
+    # a grid too fine is refused before it is allocated, with a resolution that fits
+    with pytest.raises(ValueError) as err:
+        fitted.isosurface(resolution=0.0005)
+    msg = str(err.value)
+    assert "resolution 0.0005 m needs a grid of" in msg and "points over the region seen (at most 2e+08)" in msg
+    finer = float(msg.rsplit("use resolution ", 1)[1].split()[0])
+    lo, hi = fitted.coverage_.bounds()
+    assert np.prod(np.ceil((hi - lo) / finer + 0.5)) <= 2e8
+    assert np.prod(np.ceil((hi - lo) / (0.5 * finer) + 0.5)) > 2e8 / 10  # not needlessly coarse
+
+
+def _damaged_maps(good, tmp_path):
+    """(file, expected message part) for ways a map file can be broken."""
+    import json
+
+    raw = good.read_bytes()
+    z = dict(np.load(good))
+
+    def npz(name, **change):
+        d = {k: v for k, v in z.items() if k not in change or change[k] is not None}
+        d.update({k: v for k, v in change.items() if v is not None})
+        np.savez(tmp_path / name, **d)
+        cases.append(tmp_path / name)
+
+    (tmp_path / "corrupt.npz").write_bytes(b"PK\x03\x04garbage" * 10)
+    (tmp_path / "trunc.npz").write_bytes(raw[: len(raw) // 2])
+    (tmp_path / "text.npz").write_text("not a map\n")
+    (tmp_path / "empty.npz").write_bytes(b"")
+    flip = bytearray(raw)
+    for k in range(len(raw) // 3, len(raw) // 3 + 200):
+        flip[k] ^= 0x55
+    (tmp_path / "flip.npz").write_bytes(bytes(flip))
+    cases = [tmp_path / n for n in ("corrupt.npz", "trunc.npz", "text.npz", "empty.npz", "flip.npz")]
+    npz("noweights.npz", weights=None)
+    npz("shortw.npz", weights=z["weights"][:10])
+    npz("shortdual.npz", dual_coef=z["dual_coef"][:10])
+    npz("beams.npz", ping_beams=z["ping_beams"][:3])
+    npz("points2d.npz", inducing_points=z["inducing_points"][:, :2])
+    npz("nanw.npz", weights=z["weights"] * np.nan)
+    params = json.loads(str(z["params"]))
+    npz("params.npz", params=np.array(json.dumps(dict(params, n_passes=0))))
+    state = json.loads(str(z["state"]))
+    del state["lengthscale_"]
+    npz("state.npz", state=np.array(json.dumps(state)))
+    k, n = len(z["weights"]), len(z["dual_coef"])
+    expect = ["not a Hilbert map file (not an .npz archive: File is not a zip file)",
+              "not a Hilbert map file (not an .npz archive: File is not a zip file)",
+              "not a Hilbert map file (not an .npz archive)",
+              "not a Hilbert map file (not an .npz archive: the file is empty)",
+              "cannot be read (Bad CRC-32",
+              "not a Hilbert map file (missing 'weights')",
+              f"'weights' has 10 entries, expected {k} (n_components_)",
+              f"'dual_coef' has 10 entries, expected {n} (one per inducing point)",
+              f"'ping_beams' has shape (3, 3), expected ({len(z['ping_frames'])}, 3)",
+              "'inducing_points' has shape",
+              "'weights' holds values that are not finite numbers",
+              "'params': n_passes must be an integer >= 1, not 0",
+              "'state' lacks 'lengthscale_'"]
+    return list(zip(cases, expect))
+
+
+def test_load_refuses_damaged_files_naming_them(fitted, tmp_path):
+    good = tmp_path / "good.npz"
+    fitted.save(good)
+    HilbertMap.load(good)
+    for path, expect in _damaged_maps(good, tmp_path):
+        with pytest.raises(ValueError) as err:
+            HilbertMap.load(path)
+        msg = str(err.value)
+        assert msg.startswith(f"HilbertMap: {path}: ") and expect in msg, (path.name, msg)
