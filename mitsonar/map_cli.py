@@ -40,6 +40,17 @@ def _fail(msg: str, code: int = EXIT_ERROR) -> int:
     return code
 
 
+# The map's own messages name its parameters; on the command line they are these options.
+_OPTIONS = (("n_inducing", "--inducing"), ("n_passes", "--passes"), ("resolution", "--resolution"))
+
+
+def _map_error(exc: Exception) -> str:
+    msg = str(exc).replace("HilbertMap: ", "")
+    for name, option in _OPTIONS:
+        msg = msg.replace(name, option)
+    return msg
+
+
 def cmd_map(args) -> int:
     if args.inducing is None or args.inducing < 1:
         return _fail("--inducing must be a positive integer", EXIT_USAGE)
@@ -70,7 +81,11 @@ def cmd_map(args) -> int:
                 is_log = fh.read(len(LOG_MAGIC)) == LOG_MAGIC
             # A device log holds whole turns of a real (or virtual) head: each becomes a scan.
             if is_log:
-                scans.extend(replay(path))
+                got = replay(path)
+                if not got:
+                    return _fail(f"{path}: no complete scan in the log (the recording ends before the head "
+                                 "finished its first sweep)")
+                scans.extend(got)
             else:
                 scans.append(load_scan(path))
         except Exception as exc:  # one line: which file, and why
@@ -86,14 +101,17 @@ def cmd_map(args) -> int:
     try:
         hm.fit(scans)
     except ValueError as exc:
-        return _fail(str(exc).replace("HilbertMap: ", ""))
+        return _fail(_map_error(exc))
     try:
         hm.save(args.output)
     except OSError as exc:
         return _fail(f"{args.output}: {exc.strerror or exc}")
     written = [args.output]
     if args.mesh:
-        V, F = hm.surface(args.surface, resolution=args.resolution)
+        try:
+            V, F = hm.surface(args.surface, resolution=args.resolution)
+        except ValueError as exc:  # a grid too fine for the region
+            return _fail(_map_error(exc))
         try:
             write_mesh(args.mesh, V, F)
         except OSError as exc:
@@ -111,6 +129,7 @@ def cmd_map(args) -> int:
         written.append(args.plot)
     if not args.quiet:
         t = hm.timings_
-        print(f"map: {len(scans)} scan(s), {hm.n_samples_seen_} samples, {len(hm.inducing_points_)} inducing points "
+        print(f"map: {len(scans)} scan(s), {hm.n_schedule_} training samples, "
+              f"{len(hm.inducing_points_)} inducing points "
               f"(length-scale {hm.lengthscale_:.3f} m), fit {t['total_s']:.1f} s; wrote {', '.join(written)}")
     return 0

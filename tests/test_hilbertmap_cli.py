@@ -99,3 +99,40 @@ def test_map_accepts_a_raw_seanet_log(tmp_path):
                            "--inducing", "300"], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "1 scan(s)" in proc.stdout and (tmp_path / "map.npz").stat().st_size > 0
+
+
+@pytest.mark.parametrize("args,expect", [
+    # refused before the Gram matrix (75 GiB for 1e5 points) is allocated, or the map degenerates
+    (["--inducing", "100000000"], r"--inducing must be at most the number of training samples \(\d+ from these "
+                                  r"scans\), not 100000000"),
+    # a grid of 1e10 points would need terabytes: refused with a resolution that fits
+    (["--inducing", "100", "--mesh", "m.ply", "--resolution", "0.0005"],
+     r"--resolution 0\.0005 m needs a grid of \d+ x \d+ x \d+ = [\d.e+]+ points over the region seen "
+     r"\(at most 2e\+08\); use --resolution [\d.]+ or coarser"),
+])
+def test_map_refuses_sizes_it_cannot_fit(scan_files, tmp_path, args, expect):
+    import re
+
+    proc = run("map", scan_files[0], "-o", "m.npz", *args, cwd=str(tmp_path))
+    line = one_error_line(proc)
+    assert re.search(expect, line), line
+    assert "allocate" not in line
+
+
+def test_map_names_a_log_without_a_complete_scan(tmp_path):
+    """A log that stops before the head finished one sweep: the file is named, not `fit()`."""
+    from mitsonar import Scan
+    from mitsonar.micron import record
+    from mitsonar.seanet import HeadSettings
+    from mitsonar.virtual_sonar import VirtualMicron
+
+    from hilbertmap.testing import box_scan, orthogonal_frames
+
+    s = box_scan(orthogonal_frames()[0], n_pings=40, bearing_step=9.0, seed=0, rays=100)
+    scan = Scan(intensity=s.intensity, data=s.data, ranges=s.ranges, bearings=s.bearings, poses=s.poses,
+                range_min=s.range_min, range_max=s.range_max, beamwidth_h=s.beamwidth_h, beamwidth_v=s.beamwidth_v)
+    log = tmp_path / "half.bin"
+    with VirtualMicron(scan, realtime=False) as vm:
+        record(vm.port, str(log), pings=5, settings=HeadSettings.from_scan(scan), timeout=30)
+    line = one_error_line(run("map", str(log), "-o", str(tmp_path / "m.npz")))
+    assert f"{log}: no complete scan in the log" in line, line
