@@ -25,6 +25,16 @@ def _got(kind: str, value) -> str:
     return _TAGS.get(kind) or f"<{type(value).__name__.lower()}>"
 
 
+def _wrong_type(name: str, kind: str, value, source: str, expected: str) -> ValueError:
+    """The error for a property written with another XML tag than ``expected``."""
+    if kind == "String":
+        try:
+            float(value)
+        except ValueError:
+            return ValueError(f"{source} '{name}': {value!r} is not a number (expected {expected})")
+    return ValueError(f"{source} '{name}': expected {expected}, got {_got(kind, value)}")
+
+
 def number(props, name: str, default, source: str, expected: str = "<float>"):
     """A ``<float>`` property (an ``<integer>`` counts as its value); ``default`` when absent."""
     if name not in props:
@@ -32,12 +42,7 @@ def number(props, name: str, default, source: str, expected: str = "<float>"):
     kind, value = props.type(name).name, props.get(name)
     if kind in ("Float", "Integer"):
         return float(value)
-    if kind == "String":
-        try:
-            float(value)
-        except ValueError:
-            raise ValueError(f"{source} '{name}': {value!r} is not a number (expected {expected})") from None
-    raise ValueError(f"{source} '{name}': expected {expected}, got {_got(kind, value)}")
+    raise _wrong_type(name, kind, value, source, expected)
 
 
 def count(props, name: str, default, source: str):
@@ -51,12 +56,7 @@ def count(props, name: str, default, source: str):
         if not (math.isfinite(value) and float(value).is_integer()):
             raise ValueError(f"{source} '{name}': {value!r} is not a whole number (counts are <integer>)")
         return int(value)
-    if kind == "String":
-        try:
-            float(value)
-        except ValueError:
-            raise ValueError(f"{source} '{name}': {value!r} is not a number (expected <integer>)") from None
-    raise ValueError(f"{source} '{name}': expected <integer>, got {_got(kind, value)}")
+    raise _wrong_type(name, kind, value, source, "<integer>")
 
 
 def text(props, name: str, default, source: str):
