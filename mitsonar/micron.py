@@ -51,7 +51,7 @@ from typing import Iterator
 
 import numpy as np
 
-from .scan import Scan, bearing_rotation
+from .scan import Scan, bearing_rotation, check_rigid
 from .seanet import (DEFAULT_NIBBLE_ORDER, FULL_TURN, Alive, BBUserData, HdCtrl, HeadCommand,
                      HeadData, HeadSettings, ReBoot, SendBBUser, SendData, SendVersion,
                      SOUND_SPEED_ALLOWED, StreamParser, VersionData, ad_db, bearing_to_radians, encode,
@@ -84,10 +84,8 @@ beam_rotation = bearing_rotation
 
 
 def _check_pose(pose) -> np.ndarray:
-    T = np.eye(4) if pose is None else np.array(pose, dtype=np.float64)
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-        raise ValueError(f"pose must be a finite 4x4 matrix, got shape {T.shape}")
-    return T
+    # Rigid here, where a navigation pose comes in, not only when its scan is put together.
+    return np.eye(4) if pose is None else check_rigid(np.array(pose, dtype=np.float64), "pose")
 
 
 # --------------------------------------------------------------------------------------------

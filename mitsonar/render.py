@@ -200,18 +200,18 @@ def _whole(name, value, lo, hi, what):
 
 
 def _check_pose(pose):
-    """Shape and finiteness here, in one sentence; the sensor checks that it is rigid."""
+    """A render's pose in one sentence: array-like, 4x4, finite, rigid."""
+    from .scan import check_rigid
+
     try:
         m = np.asarray(pose, dtype=np.float64)
     except (TypeError, ValueError):
         raise SceneError(f"render_scan 'pose': expected a 4x4 rigid transform (array-like), got "
                          f"{type(pose).__name__} {pose!r:.40}") from None
-    if m.shape != (4, 4):
-        raise SceneError(f"render_scan 'pose': expected a 4x4 matrix, got shape {m.shape}")
-    if not np.all(np.isfinite(m)):
-        r, c = np.argwhere(~np.isfinite(m))[0]
-        raise SceneError(f"render_scan 'pose': entry [{r}, {c}] is {m[r, c]} (a pose must be finite)")
-    return m
+    try:
+        return check_rigid(m, "render_scan 'pose'")
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
 
 
 SONAR_INTEGRATORS = ("sonar_tof", "sonar_mlt")

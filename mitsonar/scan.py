@@ -62,8 +62,11 @@ def check_rigid(matrix, what="sonar 'to_world'"):
     Lives with the Scan, not the sensor plugin, so that checking a scan's poses needs no Mitsuba
     variant (scans from a serial head or a file are checked on machines that cannot render)."""
     m = np.asarray(matrix, dtype=np.float64)
-    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-        raise ValueError(f"{what}: expected a finite 4x4 matrix, got shape {m.shape}")
+    if m.shape != (4, 4):
+        raise ValueError(f"{what}: expected a 4x4 matrix, got shape {m.shape}")
+    if not np.all(np.isfinite(m)):
+        r, c = np.argwhere(~np.isfinite(m))[0]
+        raise ValueError(f"{what}: entry [{r}, {c}] is {m[r, c]} (a pose must be finite)")
     if _not_rigid(m):
         raise ValueError(f"{what}: must be a rigid transform (rotation + translation, no scale, "
                          "shear or mirror); the beam frame is +z boresight, +y scan axis")

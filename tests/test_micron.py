@@ -369,6 +369,15 @@ def test_assembler_direction_and_unwrapped_bearings():
     assert out.range_max == pytest.approx(10 * 0.024)
 
 
+def test_assembler_refuses_a_pose_that_is_not_rigid_where_it_comes_in():
+    asm = ScanAssembler()
+    with pytest.raises(ValueError, match=r"pose: must be a rigid transform"):
+        asm.add(_ping(100), pose=np.diag([2.0, 1.0, 1.0, 1.0]))
+    with pytest.raises(ValueError, match=r"pose: entry \[0, 3\] is nan \(a pose must be finite\)"):
+        asm.add(_ping(100), pose=np.array([[1, 0, 0, np.nan], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]]))
+    assert asm.add(_ping(100), pose=np.eye(4)) is None  # a good one is taken
+
+
 def test_assembler_skips_motor_error_and_restarts_on_new_settings():
     asm = ScanAssembler()
     assert asm.add(_ping(3200, head_status=2)) is None
