@@ -66,11 +66,15 @@ class SonarSensor(mi.Sensor):
         num = lambda name, default: number(props, name, default, "sonar")  # noqa: E731
         self.n_bins = count(props, "n_bins", 500, "sonar")
         self.n_pings = count(props, "n_pings", 200, "sonar")
+        # Checked before the film is made: without one, Mitsuba makes its default RGB film and
+        # prints a warning above our error.
+        for name, value, top in (("n_bins", self.n_bins, MAX_BINS), ("n_pings", self.n_pings, MAX_PINGS)):
+            if not 1 <= value <= top:
+                raise ValueError(f"sonar '{name}': {value!r} is not allowed (1 to {top})")
         if "film" not in props:
             # The film is the scan's range-intensity image: one row per ping, one column per bin.
-            if 1 <= self.n_bins <= MAX_BINS and 1 <= self.n_pings <= MAX_PINGS:
-                props["film"] = mi.load_dict({"type": "hdrfilm", "width": self.n_bins, "height": self.n_pings,
-                                              "pixel_format": "luminance", "rfilter": {"type": "box"}})
+            props["film"] = mi.load_dict({"type": "hdrfilm", "width": self.n_bins, "height": self.n_pings,
+                                          "pixel_format": "luminance", "rfilter": {"type": "box"}})
         super().__init__(props)
         self.kind = text(props, "kind", "mechanical", "sonar")
         self.range_min = num("range_min", 0.0)
@@ -124,10 +128,6 @@ class SonarSensor(mi.Sensor):
             bad("range_min", self.range_min, "a range >= 0 m")
         if not (math.isfinite(self.range_max) and self.range_max > self.range_min):
             bad("range_max", self.range_max, f"a range > range_min = {self.range_min:g} m")
-        if not 1 <= self.n_bins <= MAX_BINS:
-            bad("n_bins", self.n_bins, f"1 to {MAX_BINS}")
-        if not 1 <= self.n_pings <= MAX_PINGS:
-            bad("n_pings", self.n_pings, f"1 to {MAX_PINGS}")
         # Bearings are angles: beyond a turn they only lose precision (1e30 + k * 1.8 is one bearing).
         for name in ("bearing_start", "bearing_step"):
             if not (math.isfinite(getattr(self, name)) and abs(getattr(self, name)) <= 360.0):

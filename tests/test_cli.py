@@ -97,6 +97,8 @@ def test_bad_scene_parameter_names_file_and_field(tmp_path):
     proc = run("render", str(bad), "-o", str(tmp_path / "a.exr"))
     assert_one_line_error(proc, "n_bins")
     assert "bad.xml" in proc.stderr
+    # Only that line: no Mitsuba warning about a default film above it (Mitsuba logs to stdout).
+    assert len(proc.stderr.strip().splitlines()) == 1 and "HDRFilm" not in proc.stdout, proc.stdout
 
 
 def test_misspelled_parameter_gets_the_nearest_name_and_the_list(tmp_path):
