@@ -102,16 +102,17 @@ def cmd_map(args) -> int:
         hm.fit(scans)
     except ValueError as exc:
         return _fail(_map_error(exc))
+    if args.mesh:  # before anything is written: a grid too fine for the region fails here
+        try:
+            V, F = hm.surface(args.surface, resolution=args.resolution)
+        except ValueError as exc:
+            return _fail(_map_error(exc))
     try:
         hm.save(args.output)
     except OSError as exc:
         return _fail(f"{args.output}: {exc.strerror or exc}")
     written = [args.output]
     if args.mesh:
-        try:
-            V, F = hm.surface(args.surface, resolution=args.resolution)
-        except ValueError as exc:  # a grid too fine for the region
-            return _fail(_map_error(exc))
         try:
             write_mesh(args.mesh, V, F)
         except OSError as exc:

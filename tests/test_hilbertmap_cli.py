@@ -117,6 +117,7 @@ def test_map_refuses_sizes_it_cannot_fit(scan_files, tmp_path, args, expect):
     line = one_error_line(proc)
     assert re.search(expect, line), line
     assert "allocate" not in line
+    assert not (tmp_path / "m.npz").exists()  # a failed run writes nothing
 
 
 def test_map_names_a_log_without_a_complete_scan(tmp_path):
