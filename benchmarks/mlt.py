@@ -18,10 +18,12 @@ are compiled again for every spp is timed at its steady-state speed (the compila
 are counted in ``kernels_compiled``; ``--cold`` times wall-clock renders instead).
 
 The references are cached in the output folder (default out/benchmark_mlt/<scene>/), so a second
-run only renders the comparisons. The default run (4 budgets up to 2 s, 2 repeats) takes about
-3 to 4 minutes on 2 cores with cold caches.
+run only renders the comparisons. The default run (4 budgets up to 2 s, 6 repeats) takes about
+3 minutes on 2 cores with cached references, 6 with cold ones. Six repeats, because the errors are
+heavy-tailed (rare glossy paths): with 2, the glossy corridor's ratio went from 0.96 to 1.34
+between two runs of the same code; with 6, two runs gave 0.78 and 0.88.
 
-Usage: python benchmarks/mlt.py [--budget 0.25,0.5,1,2] [--repeats 2] [--integrators sonar_tof,sonar_mlt]
+Usage: python benchmarks/mlt.py [--budget 0.25,0.5,1,2] [--repeats 6] [--integrators sonar_tof,sonar_mlt]
                                 [--scenes box,slot_chamber,glossy_corridor] [-o out/benchmark_mlt] [--reference-factor 16]
 """
 from __future__ import annotations
@@ -57,7 +59,7 @@ def _geomean(values):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--budget", default="0.25,0.5,1,2", help="seconds per render (default 0.25,0.5,1,2)")
-    ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--repeats", type=int, default=6)
     ap.add_argument("--integrators", default="sonar_tof,sonar_mlt",
                     help="baseline,contender (default sonar_tof,sonar_mlt; sonar_tof,sonar_tof tests the machinery)")
     ap.add_argument("--scenes", default="box,slot_chamber,glossy_corridor",
