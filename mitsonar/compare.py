@@ -566,7 +566,10 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
     output_dir = os.fspath(output_dir)
     if os.path.exists(output_dir) and not os.path.isdir(output_dir):
         raise CompareError(f"output folder {output_dir!r} exists and is not a folder")
-    os.makedirs(output_dir, exist_ok=True)
+    try:
+        os.makedirs(output_dir, exist_ok=True)
+    except OSError as exc:
+        raise CompareError(f"-o {output_dir!r}: cannot create the output folder ({exc.strerror})") from None
     say = log or (lambda line: None)
 
     with open(scene_path, "rb") as fh:

@@ -49,9 +49,6 @@ def cmd_compare(args):
     budgets = parse_budgets(args.budget)
     params = parse_params(args.param)
     regions = parse_regions(args.region)
-    from .cli import make_output_folder
-
-    make_output_folder(args.output)
 
     def log(line):
         print(line, file=sys.stderr, flush=True)

@@ -127,7 +127,7 @@ class SonarMLTIntegrator(SonarIntegrator):
         total = boot + chains * mutations
         # spp is the work a scan records and the compare tool equalises: explicit settings may not
         # exceed it (200000 mutations at spp 64 once ran minutes for a scan labelled 64 spp).
-        if total > spp and (self.chains or self.mutations or self.bootstrap):
+        if not self._fits(n_pings, spp):
             raise ValueError(f"sonar_mlt: bootstrap {boot} + chains {chains} x mutations {mutations} = {total} "
                              f"path evaluations per ping exceed spp = {spp}; raise spp to at least "
                              f"{self.min_spp(n_pings)}, or lower chains, mutations or bootstrap (0 fits them to spp)")
@@ -144,19 +144,20 @@ class SonarMLTIntegrator(SonarIntegrator):
         mutations = self.mutations or max(1, (spp - boot) // chains)
         return boot, chains, mutations
 
+    def _fits(self, n_pings, spp):
+        """Automatic counts always fit spp; explicit ones must."""
+        boot, chains, mutations = self._counts(n_pings, spp)
+        return boot + chains * mutations <= spp or not (self.chains or self.mutations or self.bootstrap)
+
     def min_spp(self, n_pings):
         """The smallest spp that the explicit chains/mutations/bootstrap fit (1 when none is set;
         the compare tool starts its timings there)."""
-        def fits(spp):
-            boot, chains, mutations = self._counts(n_pings, spp)
-            return boot + chains * mutations <= spp or not (self.chains or self.mutations or self.bootstrap)
-
         lo, hi = 1, 1
-        while not fits(hi):  # from some spp on the plan fits: the chains saturate, spp // 2 covers the rest
+        while not self._fits(n_pings, hi):  # from some spp on it fits: the chains saturate, spp // 2 covers the rest
             lo, hi = hi + 1, hi * 2
         while lo < hi:
             mid = (lo + hi) // 2
-            lo, hi = (lo, mid) if fits(mid) else (mid + 1, hi)
+            lo, hi = (lo, mid) if self._fits(n_pings, mid) else (mid + 1, hi)
         return lo
 
     # ------------------------------------------------------------------ rendering
