@@ -11,11 +11,15 @@ from conftest import ROOT, SCENES
 BOX = os.path.join(SCENES, "box.xml")
 
 
-def run(*args, cwd=None):
-    env = dict(os.environ)
+def cli_env(**extra):
+    env = dict(os.environ, **extra)
     env.pop("MITSONAR_DEBUG", None)
+    return env
+
+
+def run(*args, cwd=None, **env):
     return subprocess.run([sys.executable, "-m", "mitsonar.cli", *args], capture_output=True, text=True,
-                          cwd=cwd or ROOT, env=env, timeout=600)
+                          cwd=cwd or ROOT, env=cli_env(**env), timeout=600)
 
 
 def assert_one_line_error(proc, pattern):
@@ -119,10 +123,7 @@ def test_scene_without_a_sonar_names_the_file(tmp_path):
 
 
 def test_unknown_variant_from_the_environment_is_one_line(tmp_path):
-    env = dict(os.environ, MITSONAR_VARIANT="bogus")
-    env.pop("MITSONAR_DEBUG", None)
-    proc = subprocess.run([sys.executable, "-m", "mitsonar.cli", "render", BOX, "-o", str(tmp_path / "a.exr")],
-                          capture_output=True, text=True, cwd=ROOT, env=env, timeout=600)
+    proc = run("render", BOX, "-o", str(tmp_path / "a.exr"), MITSONAR_VARIANT="bogus")
     assert proc.returncode == 1
     assert proc.stderr.strip().splitlines() == [
         "mitsonar: error: variant 'bogus' is not supported (MITSONAR_VARIANT / --variant): use one of "
@@ -143,10 +144,8 @@ def test_a_scene_the_render_overrides_gets_a_one_line_warning(tmp_path):
 
 def test_info_into_a_closed_pipe_ends_quietly(tmp_path, mitsonar_mod):
     mitsonar_mod.render_scan(mitsonar_mod.load_scene(BOX), spp=4).save(str(tmp_path / "s.npz"))
-    env = dict(os.environ)
-    env.pop("MITSONAR_DEBUG", None)
     proc = subprocess.Popen([sys.executable, "-m", "mitsonar.cli", "info", str(tmp_path / "s.npz")],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT, env=env)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT, env=cli_env())
     proc.stdout.close()  # like `| head -0`: nobody reads
     err = proc.stderr.read().decode()
     proc.wait(timeout=600)
