@@ -53,8 +53,8 @@ def trace_echoes(scene, frames, beam, ping, samples, max_depth, absorption, reco
     """Trace one echo path per lane and call ``record(depth, range, energy, valid)`` per bounce.
 
     ``frames`` are the per-ping beam frames, ``beam`` the `BeamPattern`, ``ping`` the ping of
-    each lane, ``samples`` anything with ``get(dim)`` and ``get2(dim)`` (e.g. `HashSamples`), ``max_depth`` (opaque UInt32) the
-    number of surface bounces, ``absorption`` (opaque Float) in dB/m. ``connect``: ``(frames,
+    each lane, ``samples`` anything with ``get(dim)`` and ``get2(dim)`` (e.g. `HashSamples`),
+    ``max_depth`` (opaque UInt32) the number of surface bounces, ``absorption`` (opaque Float) in dB/m. ``connect``: ``(frames,
     pattern)`` that weight the connection back to the transducer (a multibeam head's transmit
     fan, see ``SonarSensor.connection``); None: ``beam`` in the ping's frame (monostatic).
     """
