@@ -265,6 +265,33 @@ def test_glossy_corridor_loads_and_echoes(mitsonar_mod):
     assert hist[10][(r > 9.9) & (r < 10.2)].sum() > 0.3 * hist[10].sum()
 
 
+def test_hidden_target_echoes_only_by_its_mirror_image(mitsonar_mod):
+    """The boulder out of the beam answers only by sonar - plate - boulder - plate - sonar: from the
+    sonar's image in the plate, (4, -4, 0), 7 m from its centre, so at 6.5 m and with 3 bounces."""
+    import mitsuba as mi
+
+    scene = mitsonar_mod.load_scene(os.path.join(SCENES, "hidden_target.xml"))
+    sensor = scene.sensors()[0]
+    r, width = sensor.bin_centres(), sensor.range_max / sensor.n_bins
+
+    def render(depth):
+        return mi.load_dict({"type": "sonar_tof", "max_depth": depth}).render_histogram(
+            scene, sensor, seed=1, spp=1 << 14)
+
+    two, three = render(2), render(3)
+    # The plate's own echo (no point of it is nearer than 3.12 m); the boulder's direct range,
+    # 4.5 m, adds nothing, and without the third bounce nothing comes from beyond the plate.
+    assert r[np.nonzero(two.sum(0))[0][0]] > 3.12 - width
+    assert two[:, r > 5.5].sum() == 0
+    far = three[:, r > 5.5]
+    assert far.sum() > 0.05 * three.sum()
+    assert abs(r[r > 5.5][np.nonzero(far.sum(0))[0][0]] - 6.5) <= width
+    # on the pings whose boresight the plate turns towards the boulder (around bearing 0)
+    per_ping = far.sum(1)
+    assert per_ping[5:16].sum() > 0.95 * per_ping.sum()
+    assert per_ping[:3].sum() + per_ping[-3:].sum() < 1e-6 * per_ping.sum()
+
+
 def test_explicit_mlt_settings_set_the_spp_floor(first_run, small_scene, mitsonar_mod):
     """sonar_mlt refuses an spp its explicit chains do not fit; compare times it from there on."""
     import mitsuba as mi
