@@ -21,7 +21,10 @@ root is the best equal-sample error ratio, ``ideal_error_ratio``), ``normalisati
 target over the scan), the spread of the per-ping totals (``ping_total_cv2``), the median CV^2 of
 f and the share of paths with f = 0.
 
-    python benchmarks/mlt_oracle.py [--scenes box,slot_chamber,glossy_corridor] [--paths 4096]
+    python benchmarks/mlt_oracle.py [--scenes box,slot_chamber,glossy_corridor,hidden_target] [--paths 4096]
+
+The ratios are estimates from the paths traced: on hidden_target, whose echo comes from about one
+path in a thousand, 4096 paths per ping give an ideal ratio of 24 and 65536 give 18.
 """
 from __future__ import annotations
 
@@ -98,7 +101,7 @@ def analyse(name, paths, seed=7):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenes", default="box,slot_chamber,glossy_corridor")
+    ap.add_argument("--scenes", default="box,slot_chamber,glossy_corridor,hidden_target")
     ap.add_argument("--paths", type=int, default=4096)
     args = ap.parse_args(argv)
     print(json.dumps([analyse(s, args.paths) for s in args.scenes.split(",")], indent=1))
