@@ -67,8 +67,8 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=6)
     ap.add_argument("--integrators", default="sonar_tof,sonar_mlt",
                     help="baseline,contender (default sonar_tof,sonar_mlt; sonar_tof,sonar_tof tests the machinery)")
-    ap.add_argument("--scenes", default="box,slot_chamber,glossy_corridor,hidden_target",
-                    help="scene names in scenes_xml/ (default box,slot_chamber,glossy_corridor,hidden_target)")
+    ap.add_argument("--scenes", default=",".join(TARGETS),
+                    help=f"scene names in scenes_xml/ (default {','.join(TARGETS)})")
     ap.add_argument("-o", "--output", default=os.path.join("out", "benchmark_mlt"))
     ap.add_argument("--reference-factor", type=float, default=16.0)
     ap.add_argument("--seed", type=int, default=0)

@@ -23,8 +23,8 @@ f and the share of paths with f = 0.
 
     python benchmarks/mlt_oracle.py [--scenes box,slot_chamber,glossy_corridor,hidden_target] [--paths 4096]
 
-The ratios are estimates from the paths traced: on hidden_target, whose echo comes from about one
-path in a thousand, 4096 paths per ping give an ideal ratio of 24 and 65536 give 18.
+The ratios are estimates from the paths traced: on hidden_target, where 2 paths in 1000 carry nearly
+all of the boulder's echo, 4096 paths per ping give an ideal ratio of 24 and 65536 give 18.
 """
 from __future__ import annotations
 

@@ -272,7 +272,8 @@ def test_hidden_target_echoes_only_by_its_mirror_image(mitsonar_mod):
 
     scene = mitsonar_mod.load_scene(os.path.join(SCENES, "hidden_target.xml"))
     sensor = scene.sensors()[0]
-    r, width = sensor.bin_centres(), sensor.range_max / sensor.n_bins
+    r = sensor.bin_centres()
+    width = r[1] - r[0]
 
     def render(depth):
         return mi.load_dict({"type": "sonar_tof", "max_depth": depth}).render_histogram(
