@@ -9,7 +9,7 @@ from .variant import prepare_llvm_environment
 
 prepare_llvm_environment()
 
-__version__ = "0.1.0"
+from ._version import __version__  # noqa: E402
 
 from .scan import Scan  # noqa: E402
 from .render import (SceneError, init_on_import, load_scene, render_scan, scene_mesh,  # noqa: E402

@@ -327,7 +327,7 @@ def reference_key(scene_bytes: bytes, seed: int, max_depth: int) -> str:
     """
     import mitsuba as mi
 
-    from . import __version__
+    from ._version import __version__
 
     h = hashlib.sha256()
     h.update(scene_bytes)
@@ -731,7 +731,7 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
 
     import drjit as dr
 
-    from . import __version__
+    from ._version import __version__
 
     result = {
         "tool": "mitsonar compare",

@@ -179,7 +179,7 @@ def _extension(path: str) -> str:
 
 
 def _header(scan: Scan, with_arrays: bool, path: str) -> dict[str, Any]:
-    from . import __version__
+    from ._version import __version__
 
     head: dict[str, Any] = {"format": FORMAT, "version": FORMAT_VERSION, "mitsonar_version": __version__,
                             "n_pings": scan.n_pings, "n_bins": scan.n_bins}

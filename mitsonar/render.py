@@ -304,7 +304,7 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     ranges = sonar.bin_centres()
     eseed = seed if electronics_seed is None else electronics_seed
     data = model.apply(intensity, ranges, absorption=sonar.absorption, sound_speed=sonar.sound_speed, seed=eseed)
-    from . import __version__
+    from ._version import __version__
 
     poses = sonar.ping_poses(pose)
     meta = {
