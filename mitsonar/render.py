@@ -172,14 +172,14 @@ def load_scene(path_or_xml: str, **params):
 def _sonar(scene, sensor):
     from mitsonar.plugins import module
 
-    tof = module("sonar_tof")
+    common = module("common")
     name = _scene_name(scene) or "the scene"
-    sonars = [s for s in scene.sensors() if isinstance(s, tof.SonarSensor)]
+    sonars = [s for s in scene.sensors() if isinstance(s, common.SonarSensor)]
     if not sonars:
         kinds = ", ".join(type(s).__name__ for s in scene.sensors()) or "none"
         raise SceneError(f'{name}: needs a <sensor type="sonar"> (sensors found: {kinds})')
     try:
-        chosen = tof.resolve_sensor(scene, sensor)
+        chosen = common.resolve_sensor(scene, sensor)
     except ValueError as exc:
         raise SceneError(f"{name}: {exc}") from None
     if isinstance(sensor, int) and len(sonars) > 1:
@@ -221,9 +221,12 @@ SEED_MAX = 2 ** 32 - 1   # the path seed is a 32-bit integer: larger seeds would
 def _integrator(scene, integrator):
     import mitsuba as mi
 
+    from mitsonar.plugins import module
+
+    base = module("common").SonarIntegrator
     if integrator is None:
         integrator = scene.integrator()
-        if not hasattr(integrator, "render_histogram"):
+        if not isinstance(integrator, base):
             if integrator is not None:  # None: the XML names no integrator, sonar_tof is the default
                 name = integrator.class_name() if hasattr(integrator, "class_name") else type(integrator).__name__
                 warnings.warn(f"{_scene_name(scene) or 'the scene'}: its integrator {name} is not a sonar "
@@ -241,7 +244,7 @@ def _integrator(scene, integrator):
             return mi.load_dict(integrator)
         except Exception as exc:
             raise SceneError(f"render_scan 'integrator': {_first_reason(str(exc))}") from None
-    if not hasattr(integrator, "render_histogram"):
+    if not isinstance(integrator, base):
         raise SceneError(f"render_scan 'integrator': {type(integrator).__name__} is not a sonar integrator "
                          f"(one of {', '.join(SONAR_INTEGRATORS)})")
     return integrator

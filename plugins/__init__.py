@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import importlib
 
-_MODULES = ("materials", "beam", "acoustic_bsdf", "sonar_sensor", "echo_path", "range_bins", "sonar_tof", "sonar_mlt")
+_MODULES = ("materials", "beam", "acoustic_bsdf", "sonar_sensor", "range_bins", "samples", "common", "sonar_tof",
+            "sonar_mlt")
 _current = None
 
 

@@ -7,12 +7,12 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .echo_path import HashSamples, n_dims, trace_echoes
+from mitsonar._checks import require
+
+from .common import PathSetup, SonarIntegrator
 from .jit_arrays import upload
 from .props import count, number, text
-from .range_bins import RangeBins
-from .sonar_sensor import PingFrames
-from .sonar_tof import SonarIntegrator, check_max_depth, resolve_sensor
+from .samples import HashSamples, n_dims
 
 # Salts that keep the random streams of the stages apart for one user seed.
 _SALT_BOOT, _SALT_MUT, _SALT_START = 0x5EED0001, 0x5EED0002, 0x5EED0003
@@ -23,7 +23,7 @@ class SonarMLTIntegrator(SonarIntegrator):
 
     The target of a path is the sum of its per-bounce echo energies that land in the range
     window: ``f(U) = sum_k e_k(U)``, with ``U`` the primary-sample vector of the echo path that
-    ``sonar_tof`` traces (the same function, `echo_path.trace_echoes`). With
+    ``sonar_tof`` traces (the same function, `SonarIntegrator.sample`). With
     ``normalisation="scan"`` (the default) the ping is one more primary coordinate: the chains
     sample ``f`` over (ping, ``U``) of the whole scan and go to the pings where the echoes are;
     with ``"ping"`` every ping is a target of its own. Then:
@@ -85,9 +85,10 @@ class SonarMLTIntegrator(SonarIntegrator):
     ``spp`` means about equal work for ``sonar_tof`` and ``sonar_mlt``.
     """
 
+    name = "sonar_mlt"
+
     def __init__(self, props: mi.Properties):
         super().__init__(props)
-        self.max_depth = check_max_depth(count(props, "max_depth", 5, "sonar_mlt"), "sonar_mlt")
         self.chains = count(props, "chains", 0, "sonar_mlt")
         self.mutations = count(props, "mutations", 0, "sonar_mlt")
         self.large_step = number(props, "large_step", 0.1, "sonar_mlt")
@@ -99,23 +100,18 @@ class SonarMLTIntegrator(SonarIntegrator):
         self._check()
 
     def _check(self):
-        def bad(name, value, allowed):
-            raise ValueError(f"sonar_mlt '{name}': {value!r} is not allowed ({allowed})")
-        if self.chains < 0:
-            bad("chains", self.chains, "0 for automatic, or a positive number of chains per ping")
-        if self.mutations < 0:
-            bad("mutations", self.mutations, "0 to spend spp, or a positive number per chain")
-        if self.bootstrap < 0:
-            bad("bootstrap", self.bootstrap, "0 for automatic, or a positive number of paths per ping")
-        if self.normalisation not in ("scan", "ping"):
-            bad("normalisation", self.normalisation, "'scan' (one target over all pings) or 'ping'")
-        if not 0.0 <= self.ping_step <= 1.0:
-            bad("ping_step", self.ping_step, "a fraction in [0, 1] of the small step applied to the ping")
-        if not 0.0 <= self.large_step <= 1.0:
-            bad("large_step", self.large_step, "a probability in [0, 1]")
-        if not 0.0 < self.small_step_min <= self.small_step_max < 0.5:
-            bad("small_step_min/small_step_max", (self.small_step_min, self.small_step_max),
-                "0 < small_step_min <= small_step_max < 0.5")
+        def need(ok, name, value, allowed):
+            require(ok, "sonar_mlt", name, value, allowed)
+        need(self.chains >= 0, "chains", self.chains, "0 for automatic, or a positive number of chains per ping")
+        need(self.mutations >= 0, "mutations", self.mutations, "0 to spend spp, or a positive number per chain")
+        need(self.bootstrap >= 0, "bootstrap", self.bootstrap, "0 for automatic, or a positive number of paths per ping")
+        need(self.normalisation in ("scan", "ping"), "normalisation", self.normalisation,
+             "'scan' (one target over all pings) or 'ping'")
+        need(0.0 <= self.ping_step <= 1.0, "ping_step", self.ping_step,
+             "a fraction in [0, 1] of the small step applied to the ping")
+        need(0.0 <= self.large_step <= 1.0, "large_step", self.large_step, "a probability in [0, 1]")
+        need(0.0 < self.small_step_min <= self.small_step_max < 0.5, "small_step_min/small_step_max",
+             (self.small_step_min, self.small_step_max), "0 < small_step_min <= small_step_max < 0.5")
 
     # ------------------------------------------------------------------ budget
     def plan(self, n_pings, spp):
@@ -163,13 +159,11 @@ class SonarMLTIntegrator(SonarIntegrator):
     # ------------------------------------------------------------------ rendering
     def render_histogram(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None, progress=None):
         """Mean echo energy per bin, float64 ``(n_pings, n_bins)`` (same units as ``sonar_tof``)."""
-        sensor = resolve_sensor(scene, sensor)
-        depth = check_max_depth(self.max_depth if max_depth is None else int(max_depth), "sonar_mlt")
+        ctx = _Context(self, self.setup(scene, sensor, pose, max_depth))
+        sensor, depth = ctx.sensor, ctx.depth
         n_pings, n_bins = sensor.n_pings, sensor.n_bins
         boot, chains, mutations = self.plan(n_pings, spp)
-        frames = PingFrames(sensor.ping_poses(pose))
         dims = n_dims(depth)
-        ctx = _Context(scene, sensor, frames, depth, sensor.connection(pose))
         seed = int(seed) & 0xFFFFFFFF
         n = n_pings * chains
         n_m = chains * mutations                          # Metropolis samples per ping
@@ -361,15 +355,11 @@ class _Mutation:
 
 
 class _Context:
-    """What one render's path evaluations share: scene, frames, bins, per-bounce records."""
+    """One render's `PathSetup` and the per-bounce records of its path evaluations."""
 
-    def __init__(self, scene, sensor, frames, depth, connect=None):
-        self.scene, self.sensor, self.frames = scene, sensor, frames
-        self.connect = connect
-        self.depth = depth
-        self.depth_o = dr.opaque(mi.UInt32, depth)
-        self.bins = RangeBins(sensor)
-        self.absorption = dr.opaque(mi.Float, sensor.absorption)
+    def __init__(self, integrator, setup: PathSetup):
+        self.integrator, self.setup = integrator, setup
+        self.sensor, self.depth, self.depth_o, self.bins = setup.sensor, setup.depth, setup.depth_o, setup.bins
 
     def trace(self, samples, ping, lane, f, bins, vals):
         """Trace one path per lane; add its in-window echo energy to ``f[lane]`` and, when
@@ -387,8 +377,7 @@ class _Context:
                 dr.scatter(bins, b, slot, valid)
                 dr.scatter(vals, energy, slot, valid)
 
-        trace_echoes(self.scene, self.frames, self.sensor.beam, ping, samples, self.depth_o,
-                     self.absorption, record, connect=self.connect)
+        self.integrator.sample(self.setup, ping, samples, record)
 
     def records(self, n):
         """Zeroed path totals and per-bounce (bin, energy) records for ``n`` lanes."""

@@ -5,44 +5,28 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .echo_path import HashSamples, trace_echoes
-from .props import count
-from .range_bins import RangeBins
-from .sonar_sensor import PingFrames, SonarSensor
+from .common import SonarIntegrator
+from .samples import HashSamples
 
 # Lanes in one kernel launch. Larger launches keep both cores busy; the cap bounds the number
 # of float32 atomic adds a bin receives before its pass is summed in float64.
 MAX_LANES_PER_PASS = 1 << 22
 MAX_SPP_PER_PASS = 1 << 16
 
-
-def check_max_depth(value, source="sonar_tof"):
-    if not (isinstance(value, int) and 1 <= value <= 64):
-        raise ValueError(f"{source} 'max_depth': {value!r} is not allowed (an integer number of "
-                         "surface bounces from 1 to 64; 1 = single bounce)")
-    return value
+# Names that moved to mitsonar.plugins.common; importable from here for one release.
+_MOVED = ("SonarIntegrator", "check_max_depth", "resolve_sensor")
 
 
-def resolve_sensor(scene, sensor):
-    if isinstance(sensor, int):
-        sensors = scene.sensors()
-        if not 0 <= sensor < len(sensors):
-            raise ValueError(f"the scene has {len(sensors)} sensor(s); index {sensor} does not exist")
-        sensor = sensors[sensor]
-    if not isinstance(sensor, SonarSensor):
-        raise ValueError(f"sonar integrators need a <sensor type=\"sonar\">, got {type(sensor).__name__}")
-    return sensor
+def __getattr__(name):
+    if name in _MOVED:
+        import warnings
 
+        from . import common
 
-class SonarIntegrator(mi.SamplingIntegrator):
-    """What the sonar integrators share: ``mi.render`` gives the range-intensity image."""
-
-    def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
-        sensor = resolve_sensor(scene, sensor)
-        if not spp:
-            spp = sensor.sampler().sample_count()
-        hist = self.render_histogram(scene, sensor, seed=seed, spp=spp)
-        return mi.TensorXf(hist.astype(np.float32)[..., None])
+        warnings.warn(f"mitsonar.plugins.sonar_tof.{name} is deprecated: import it from mitsonar.plugins.common",
+                      DeprecationWarning, stacklevel=2)
+        return getattr(common, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 class SonarTOFIntegrator(SonarIntegrator):
@@ -65,37 +49,32 @@ class SonarTOFIntegrator(SonarIntegrator):
     ``render_histogram`` returns it as a float64 numpy array and accepts a ``pose``.
     """
 
-    def __init__(self, props: mi.Properties):
-        super().__init__(props)
-        self.max_depth = check_max_depth(count(props, "max_depth", 5, "sonar_tof"))
+    name = "sonar_tof"
 
     def render_histogram(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None, progress=None):
         """Mean echo energy per bin, float64 ``(n_pings, n_bins)``.
 
         ``progress(done_spp, spp)`` is called after each pass (long renders run several).
         """
-        sensor = resolve_sensor(scene, sensor)
+        setup = self.setup(scene, sensor, pose, max_depth)
         spp = int(spp)
         if spp < 1:
             raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
-        depth = check_max_depth(self.max_depth if max_depth is None else int(max_depth))
-        n_pings, n_bins = sensor.n_pings, sensor.n_bins
-        frames = PingFrames(sensor.ping_poses(pose))
-        connect = sensor.connection(pose)
+        n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
         spp_pass = max(1, min(spp, MAX_SPP_PER_PASS, MAX_LANES_PER_PASS // n_pings))
         total = np.zeros(n_pings * n_bins, dtype=np.float64)
         start = 0
         with dr.suspend_grad():
             while start < spp:
                 count = min(spp_pass, spp - start)
-                total += self._pass(scene, sensor, frames, seed, start, count, depth, connect)
+                total += self._pass(setup, seed, start, count)
                 start += count
                 if progress is not None:
                     progress(start, spp)
         return (total / spp).reshape(n_pings, n_bins)
 
-    def _pass(self, scene, sensor, frames, seed, start, count, depth, connect):
-        n_pings, n_bins = sensor.n_pings, sensor.n_bins
+    def _pass(self, setup, seed, start, count):
+        n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
         # Everything that varies between renders is opaque so the kernel compiles once.
         spp_o = dr.opaque(mi.UInt32, count)
         lane = dr.arange(mi.UInt32, n_pings * count)
@@ -105,14 +84,13 @@ class SonarTOFIntegrator(SonarIntegrator):
         # Float64 bins: sums of many small echoes keep their precision, and the order in which
         # threads add them no longer shows in the float32 result (same seed, same scan).
         hist = dr.zeros(mi.Float64, n_pings * n_bins)
-        bins = RangeBins(sensor)
+        bins = setup.bins
 
         def record(depth_k, rng, energy, valid):
             b, valid = bins.index(rng, valid)
             dr.scatter_add(hist, mi.Float64(energy), bins.flat(ping, b), valid)
 
-        trace_echoes(scene, frames, sensor.beam, ping, samples, dr.opaque(mi.UInt32, depth),
-                     dr.opaque(mi.Float, sensor.absorption), record, connect=connect)
+        self.sample(setup, ping, samples, record)
         return hist.numpy()
 
     def to_string(self):
