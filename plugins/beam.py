@@ -320,7 +320,14 @@ class BeamPattern:
 
     def sample(self, u: mi.Point2f, active=True):
         """Sample a beam-frame direction in proportion to B. Returns (direction, B / pdf)."""
-        pos, pdf = self._distr.sample(u, active=active)
+        pos, _ = self._distr.sample(u, active=active)
+        # The pdf is evaluated at the position the inversion returned, not taken from the
+        # inversion: in float32 the cumulative sums of the far tail cells round to the same value
+        # near 1, and there the inversion returns a position and a pdf that disagree (u = 0.99999964
+        # gave pdf 7e-12 where the density at the returned position is 2e-5, a weight 2e6 times the
+        # beam's solid angle). Evaluated here, B / pdf stays within the interpolation error of the
+        # table's; what the inversion cannot resolve is the tail's mass (< 1e-6 of the beam's).
+        pdf = self._distr.eval(pos, active=active)
         az = self._p_az + pos.x * self._p_saz
         el = self._p_el + pos.y * self._p_sel
         cos_el = dr.cos(el)
