@@ -21,9 +21,7 @@ init_on_import()
 
 def load_scan(path) -> Scan:
     """Read a scan written by `Scan.save` (``.exr`` or ``.npz``)."""
-    from .io import load_scan as _load
-
-    return _load(path)
+    return Scan.load(path)
 
 
 _LAZY = {"MicronSonar": "micron", "VirtualMicron": "virtual_sonar", "HeadSettings": "seanet",

@@ -5,11 +5,15 @@ what `hilbertmap` learns from (through the documented attributes only).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
+import os
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+from . import scanfile
 
 KINDS = ("mechanical", "multibeam")
 _RIGID = "only rigid transforms: rotation + translation, no scale, shear or mirror"
@@ -235,10 +239,36 @@ class Scan:
         return self.poses[:, :3, 3]
 
     def save(self, path) -> None:
-        """Write the scan to ``.exr`` (range-intensity image, lossless header) or ``.npz``."""
-        from .io import save_scan
+        """Write the scan losslessly to ``.exr`` (range-intensity image, lossless header) or ``.npz``
+        (chosen by the extension), atomically; the format is described in `mitsonar.scanfile`.
 
-        save_scan(self, path)
+        Raises `ScanFileError` (a ValueError naming the file) for an unknown extension, a path
+        that is a directory or in a missing folder, an empty scan, a field that `Scan` does not
+        allow (assigned after construction), or metadata that JSON cannot hold exactly.
+        """
+        path = os.fspath(path)
+        scanfile.extension(path)
+        try:
+            # Fields may have been assigned since construction: check them again, so that nothing
+            # is written that `load` would refuse.
+            checked = dataclasses.replace(self)
+        except ScanFieldError as exc:
+            raise scanfile.ScanFileError(f"{path}: not saved: {exc}") from None
+        scanfile.write(checked, path)
+
+    @classmethod
+    def load(cls, path) -> "Scan":
+        """Read a scan written by `save` (``.exr`` or ``.npz``): bit-identical arrays, equal scalars
+        and dicts. A missing, truncated, corrupt or foreign file, or content that `Scan` does not
+        allow, raises `ScanFileError` naming the file and the header field, channel or array."""
+        path = os.fspath(path)
+        fields, stored_as = scanfile.read(path)
+        try:
+            return cls(**fields)
+        except ScanFieldError as exc:
+            arrays = ("ranges", "bearings", "poses") if stored_as == "array" else ()
+            where = stored_as if exc.field in ("intensity", "data", *arrays) else "header"
+            raise scanfile.ScanFileError(f"{path}: {where} '{exc.field}': {exc.reason}") from None
 
     def __repr__(self) -> str:
         return (f"Scan(kind={self.kind!r}, n_pings={self.n_pings}, n_bins={self.n_bins}, "
