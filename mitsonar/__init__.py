@@ -12,9 +12,10 @@ prepare_llvm_environment()
 from ._version import __version__  # noqa: E402
 
 from .scan import Scan  # noqa: E402
-from .render import (SceneError, init_on_import, load_scene, render_scan, scene_mesh,  # noqa: E402
-                     set_variant, variant)
-from .variant import VariantError  # noqa: E402
+from .groundtruth import scene_mesh  # noqa: E402
+from .render import render_scan  # noqa: E402
+from .scene import SceneError, load_scene  # noqa: E402
+from .variant import VariantError, init_on_import, set_variant, variant  # noqa: E402
 
 init_on_import()
 

@@ -1,4 +1,4 @@
-"""Choosing the Mitsuba variant and making sure Dr.Jit finds a libLLVM that works.
+"""Choosing and activating the Mitsuba variant, and making sure Dr.Jit finds a libLLVM that works.
 
 Dr.Jit's ``llvm`` variants JIT-compile through a shared libLLVM found at run time. Debian 12's
 default LLVM 15 crashes (``Cannot select ... fminimum``); version 16 or newer works. Before
@@ -76,3 +76,75 @@ def check_backend(name: str) -> None:
     elif name.startswith("cuda") and not dr.has_backend(dr.JitBackend.CUDA):
         raise VariantError(f"variant {name!r} needs an NVIDIA GPU with a CUDA driver; none was found "
                            "(use llvm_ad_mono)")
+
+
+# ---------------------------------------------------------------------------- activation
+def _on_variant_change(old, new):
+    if new in SUPPORTED:
+        from mitsonar.plugins import register
+
+        register()
+
+
+def set_variant(name=None) -> str:
+    """Activate a Mitsuba variant (default ``llvm_ad_mono`` or ``$MITSONAR_VARIANT``) and register
+    the plugins for it. Returns the variant's name."""
+    import mitsuba as mi
+
+    name = requested_variant(name)
+    check_backend(name)
+    if mi.variant() != name:
+        mi.set_variant(name)
+    from mitsonar.plugins import register
+
+    register()
+    return name
+
+
+def variant():
+    """The active Mitsuba variant (None before any is set)."""
+    import mitsuba as mi
+
+    return mi.variant()
+
+
+def ensure_variant() -> None:
+    """Make a supported variant active (the requested one when ``MITSONAR_VARIANT`` is set) and
+    the plugins registered for it."""
+    import mitsuba as mi
+
+    if mi.variant() not in SUPPORTED or os.environ.get("MITSONAR_VARIANT"):
+        if mi.variant() != requested_variant():
+            set_variant()
+    from mitsonar.plugins import register
+
+    register()
+
+
+def init_on_import() -> None:
+    """Activate the default variant if none is set, register the plugins, follow variant changes.
+
+    A missing or too old libLLVM does not make ``import mitsonar`` fail (the command line must
+    still start and explain); it is reported as a `VariantError` by the first `load_scene` or
+    `render_scan`, and as a warning here.
+    """
+    import warnings
+
+    import mitsuba as mi
+
+    try:
+        if mi.variant() is None:
+            set_variant()
+        elif mi.variant() in SUPPORTED:
+            from mitsonar.plugins import register
+
+            register()
+    except VariantError as exc:
+        # The command line reports the same error as its one line; a warning would repeat it.
+        import sys
+
+        # (The console script's argv[0] is "mitsonar"; under `python -m mitsonar.cli` it is
+        # still "-m" while the package imports.)
+        if os.path.basename(sys.argv[0] if sys.argv else "") not in ("mitsonar", "-m"):
+            warnings.warn(f"mitsonar: {exc}", RuntimeWarning, stacklevel=3)
+    mi.detail.add_variant_callback(_on_variant_change)

@@ -12,6 +12,46 @@ _MODULES = ("materials", "beam", "acoustic_bsdf", "sonar_sensor", "range_bins", 
             "sonar_mlt")
 _current = None
 
+# (kind, XML plugin name, module, class) of every plugin registered with Mitsuba
+PLUGINS = (("BSDF", "acoustic", "acoustic_bsdf", "AcousticBSDF"),
+           ("sensor", "sonar", "sonar_sensor", "SonarSensor"),
+           ("integrator", "sonar_tof", "sonar_tof", "SonarTOFIntegrator"),
+           ("integrator", "sonar_mlt", "sonar_mlt", "SonarMLTIntegrator"))
+
+# Exceptions raised by our plugins' constructors, newest last. Mitsuba turns one into a
+# RuntimeError holding its traceback as text; `take_failure` hands the original back to whoever
+# reports the error (mitsonar.scene), so no message has to be recovered from that text.
+_failures: list = []
+
+
+def take_failure():
+    """The last exception a plugin constructor raised since the previous call (or None)."""
+    failure = _failures[-1] if _failures else None
+    _failures.clear()
+    return failure
+
+
+def parameters(cls) -> list:
+    """The XML parameter names of a plugin class (its ``parameters()``, or its docstring table)."""
+    from .props import table_parameters
+
+    return cls.parameters() if hasattr(cls, "parameters") else table_parameters(cls.__doc__)
+
+
+def _constructor(kind, name, mod, cls_name):
+    from .props import check_all_read
+
+    def construct(props):
+        try:
+            cls = getattr(mod, cls_name)
+            obj = cls(props)
+            check_all_read(props, kind, name, parameters(cls))
+            return obj
+        except Exception as exc:
+            _failures.append(exc)
+            raise
+    return construct
+
 
 def register(force: bool = False) -> None:
     """Register the plugins for the active variant (no-op if already done for it)."""
@@ -29,10 +69,9 @@ def register(force: bool = False) -> None:
         # Module-level classes were built against the variant active at import time.
         mods[name] = importlib.reload(mod) if getattr(mod, "_variant", variant) != variant else mod
         mods[name]._variant = variant
-    mi.register_bsdf("acoustic", lambda props: mods["acoustic_bsdf"].AcousticBSDF(props))
-    mi.register_sensor("sonar", lambda props: mods["sonar_sensor"].SonarSensor(props))
-    mi.register_integrator("sonar_tof", lambda props: mods["sonar_tof"].SonarTOFIntegrator(props))
-    mi.register_integrator("sonar_mlt", lambda props: mods["sonar_mlt"].SonarMLTIntegrator(props))
+    for kind, name, module_name, cls_name in PLUGINS:
+        register_kind = {"sensor": mi.register_sensor, "BSDF": mi.register_bsdf, "integrator": mi.register_integrator}
+        register_kind[kind](name, _constructor(kind, name, mods[module_name], cls_name))
     _current = variant
 
 

@@ -67,3 +67,37 @@ def text(props, name: str, default, source: str):
     if kind != "String":
         raise ValueError(f"{source} '{name}': expected <string>, got {_got(kind, value)}")
     return value
+
+
+def table_parameters(doc: str | None) -> list:
+    """The XML parameter names of a plugin, read from its docstring's parameter table (the first
+    column of the rows between the second and third ``====`` rules): the table is the
+    documentation, so the two cannot disagree. ``aperture_h/_v`` names two parameters."""
+    names, rules = [], 0
+    for line in (doc or "").splitlines():
+        row = line.strip()
+        if row.startswith("===="):
+            rules += 1
+            continue
+        if rules == 2 and row and not line.startswith(" " * 12):  # body rows, not continuation lines
+            stem, _, alt = row.split()[0].partition("/")
+            names.append(stem)
+            if alt.startswith("_"):
+                names.append(stem.rsplit("_", 1)[0] + alt)
+    return names
+
+
+def check_all_read(props, kind: str, plugin: str, known) -> None:
+    """Refuse the properties a plugin did not read (a misspelled parameter), naming the nearest
+    known parameter and listing them all, before Mitsuba's own, less helpful, check does."""
+    import difflib
+
+    unread = [name for name in props.unqueried()]
+    if not unread:
+        return
+    parts = []
+    for name in unread:
+        hint = difflib.get_close_matches(name, known, n=1)
+        parts.append(f'"{name}"' + (f' (did you mean "{hint[0]}"?)' if hint else ""))
+    raise ValueError(f'the {kind} "{plugin}" has no parameter {", ".join(parts)}; '
+                     f'its parameters: {", ".join(known)}')

@@ -62,6 +62,16 @@ class SonarSensor(mi.Sensor):
     ================ ============ ===============================================================
     """
 
+    @classmethod
+    def parameters(cls) -> list:
+        """The XML parameter names: the table above, with the electronics' fields by name."""
+        from mitsonar.electronics import Electronics
+
+        from .props import table_parameters
+
+        return ([n for n in table_parameters(cls.__doc__) if n != "electronics"]
+                + [f.name for f in dataclasses.fields(Electronics)])
+
     def __init__(self, props: mi.Properties):
         num = lambda name, default: number(props, name, default, "sonar")  # noqa: E731
         self.n_bins = count(props, "n_bins", 500, "sonar")
