@@ -58,7 +58,7 @@ def _positive(kind):
 
 def _sound_speed(text):
     """--sound-speed of record and replay: the bound a head accepts (seanet.HeadSettings)."""
-    from .seanet import SOUND_SPEED_ALLOWED, sound_speed_ok
+    from .seanet.settings import SOUND_SPEED_ALLOWED, sound_speed_ok
     try:
         v = float(text)
     except ValueError:
@@ -69,7 +69,7 @@ def _sound_speed(text):
 
 
 def _settings(args):
-    from .seanet import HeadSettings
+    from .seanet.settings import HeadSettings
     kw = {}
     if getattr(args, "range", None) is not None:
         kw["range"] = args.range
@@ -91,9 +91,10 @@ def _virtual_sonar(args) -> int:
     if not scene_path.is_file():
         raise FileNotFoundError(f"scene file not found: {scene_path}")
     import mitsonar
-    from .virtual_sonar import check_port, serve
+    from .transports import check_port
+    from .virtual_sonar import serve
     from .plugins.sonar_tof import resolve_sensor
-    from .seanet import require_mechanical
+    from .seanet.settings import require_mechanical
     # A port that cannot be opened fails now, not after the render.
     check_port(args.port_url, args.baud)
     scene = mitsonar.load_scene(str(scene_path))
@@ -140,7 +141,8 @@ def cmd_record(args) -> int:
 # ---- replay ----
 
 def _replay(args) -> int:
-    from .micron import LogDamageWarning, replay
+    from .rawlog import LogDamageWarning
+    from .recording import replay
     log = Path(args.log)
     if not log.is_file():
         raise FileNotFoundError(f"log file not found: {log}")
@@ -200,7 +202,7 @@ def add_subcommands(subparsers) -> None:
     p = subparsers.add_parser(
         "record", help="log the raw byte stream of a Micron (SeaNet) head",
         description="Start the head on PORT, request scanlines and write every byte in and out "
-                    "with timestamps to a raw log (format: mitsonar.micron). --passive only "
+                    "with timestamps to a raw log (format: mitsonar.rawlog). --passive only "
                     "listens, e.g. on a tap of the head's transmit line.")
     p.add_argument("port", metavar="PORT", help="serial device or pyserial URL (socket://HOST:PORT, ...)")
     p.add_argument("-o", "--output", required=True, metavar="LOG", help="raw log to write")

@@ -10,7 +10,7 @@ import pytest
 
 import mitsonar
 from mitsonar import serial_cli
-from mitsonar.micron import beam_rotation
+from mitsonar.assembler import beam_rotation
 from mitsonar.scan import Scan
 from mitsonar.seanet import HeadSettings
 from mitsonar.virtual_sonar import VirtualMicron
@@ -129,7 +129,7 @@ def test_record_and_replay_errors_are_one_line(tmp_path, capsys):
 
 
 def test_replay_empty_log_and_index(tmp_path, capsys):
-    from mitsonar.micron import RawLogWriter
+    from mitsonar.rawlog import RawLogWriter
     empty = tmp_path / "empty.bin"
     RawLogWriter(empty, {"settings": HeadSettings().as_dict()}).close()
     assert cli("replay", empty, "-o", tmp_path / "s.exr") == 1
