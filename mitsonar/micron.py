@@ -27,7 +27,7 @@ import numpy as np
 
 from .assembler import ScanAssembler as _ScanAssembler, check_pose
 from .rawlog import RawLogWriter as _RawLogWriter
-from .recording import record_passive
+from .recording import finish_recording, record_passive
 from .scan import Scan
 from .seanet.constants import DEFAULT_NIBBLE_ORDER
 from .seanet.messages import (Alive, BBUserData, HeadCommand, HeadData, ReBoot, SendBBUser, SendData,
@@ -431,8 +431,14 @@ def record(port, path, seconds: float | None = None, *, scans: int | None = None
     pose      head mounting stored in the log
     ========  =================================================================
 
-    Extra keyword arguments go to `MicronSonar`. Returns counts (bytes in/out, pings, scans;
-    driven: ``bytes_dropped``, received bytes that formed no whole packet).
+    Extra keyword arguments go to `MicronSonar` (``timeout`` and ``boot_timeout`` bound how
+    long a silent head is waited for). Returns counts (bytes in/out, pings, scans; driven:
+    ``bytes_dropped``, received bytes that formed no whole packet).
+
+    The log is written under a temporary name in the same folder and renamed to ``path`` at the
+    end, also after Ctrl-C or an error once the head has sent a packet (the error then names the
+    log). A recording without any packet from the head leaves no file and raises `SonarTimeout`
+    "no bytes from the head on PORT in N s" (`mitsonar.recording.finish_recording`).
     """
     if passive and seconds is None:
         raise ValueError("record: passive recording needs seconds")
@@ -443,36 +449,36 @@ def record(port, path, seconds: float | None = None, *, scans: int | None = None
     out = {"bytes_rx": 0, "bytes_tx": 0, "pings": 0, "scans": 0}
     if passive:
         return record_passive(port, path, seconds, baudrate=baudrate, settings=settings, pose=pose)
-    end = None if seconds is None else time.monotonic() + seconds
-    log = None
     reboot = sonar_kwargs.pop("reboot", True)
-    try:
-        with MicronSonar(port, baudrate, settings, pose, start=False, **sonar_kwargs) as sonar:
-            log = _RawLogWriter(path, sonar._log_meta())
-            sonar._log = log
-            try:
-                sonar.start(reboot=reboot)
-                while end is None or time.monotonic() < end:
-                    if scans is not None:
-                        sonar.scan()
-                        out["scans"] += 1
-                        if out["scans"] >= scans:
-                            break
-                    else:
-                        sonar.read_ping()
-                        out["pings"] += 1
-                        if pings is not None and out["pings"] >= pings:
-                            break
-            except KeyboardInterrupt:
-                pass
-            out["pings"] = int(sonar.stats["pings"])
-            out["bytes_dropped"] = int(sonar.parser.dropped)
-    finally:
-        if log is not None:
-            log.close()
-            out["bytes_rx"], out["bytes_tx"] = log.bytes_rx, log.bytes_tx
+    with MicronSonar(port, baudrate, settings, pose, start=False, **sonar_kwargs) as sonar:
+        # Written under a temporary name: renamed at the end, removed if no packet came.
+        log = _RawLogWriter(path, sonar._log_meta(), temporary=True)
+        sonar._log = log
+        started = time.monotonic()
+        end = None if seconds is None else started + seconds
+        error = None
+        try:
+            sonar.start(reboot=reboot)
+            while end is None or time.monotonic() < end:
+                if scans is not None:
+                    sonar.scan()
+                    out["scans"] += 1
+                    if out["scans"] >= scans:
+                        break
+                else:
+                    sonar.read_ping()
+                    out["pings"] += 1
+                    if pings is not None and out["pings"] >= pings:
+                        break
+        except KeyboardInterrupt:
+            pass
+        except BaseException as e:      # noqa: BLE001 - finish_recording re-raises it
+            error = e
+        out["pings"] = int(sonar.stats["pings"])
+        out["bytes_dropped"] = int(sonar.parser.dropped)
+        out["bytes_rx"], out["bytes_tx"] = log.bytes_rx, log.bytes_tx
+        finish_recording(log, sonar.port, started, sonar.parser.packets, error)
     return out
-
 
 
 # Names that lived here before the driver was split from the log format, the scan assembly

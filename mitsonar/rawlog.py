@@ -73,7 +73,10 @@ class RawLogWriter:
         self._t0 = time.time()
         self._m0 = time.monotonic()
         blob = json.dumps(meta or {}, sort_keys=True).encode("utf-8")
-        self._f = open(self._file_path, "wb")
+        try:
+            self._f = open(self._file_path, "wb")
+        except OSError as e:       # its text would name the temporary file
+            raise type(e)(f"{self.path}: cannot be written ({e.strerror or e})") from None
         self._f.write(_LOG_HEADER.pack(LOG_MAGIC, 1, 0, self._t0, len(blob)) + blob)
         self.bytes_rx = 0
         self.bytes_tx = 0

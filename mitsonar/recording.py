@@ -21,9 +21,43 @@ from .seanet.constants import DEFAULT_NIBBLE_ORDER
 from .seanet.messages import HeadCommand, HeadData
 from .seanet.settings import SOUND_SPEED_ALLOWED, HeadSettings, ping_problem, sound_speed_ok
 from .seanet.stream import StreamParser
-from .transports import SonarError, open_serial
+from .transports import SonarError, SonarTimeout, open_serial
 
-__all__ = ["replay", "record_passive"]
+__all__ = ["replay", "record_passive", "finish_recording"]
+
+
+def finish_recording(log: RawLogWriter, port, started: float, packets: int,
+                     error: BaseException | None = None) -> None:
+    """End a recording: rename its log into place, or remove it when no packet came from the head.
+
+    ``log`` was opened with ``temporary=True``; ``started`` is the `time.monotonic` of the start,
+    ``packets`` the number of SeaNet packets received, ``error`` what stopped the recording (None
+    for a normal end or Ctrl-C). A log holding a packet is kept whatever happened (a head that
+    goes quiet after data arrived loses nothing); the `SonarError` that stopped it then says
+    where the log is. A log without any packet is removed and the error says so in one line:
+    ``no bytes from the head on PORT in N s`` (or that the bytes formed no packet).
+    """
+    elapsed = time.monotonic() - started
+    if packets > 0:
+        log.close()
+        if isinstance(error, SonarError):
+            raise type(error)(f"{error}; the log keeps the {log.bytes_rx} bytes received before: "
+                              f"{log.path}") from None
+    else:
+        log.discard()
+        if error is None or isinstance(error, SonarError):
+            if log.bytes_rx:
+                what = (f"no SeaNet packet from the head on {port} in {elapsed:.1f} s ({log.bytes_rx} "
+                        f"bytes that form none: wrong baud rate?)")
+            else:
+                what = f"no bytes from the head on {port} in {elapsed:.1f} s"
+            if error is not None:
+                why = str(error)
+                what += "; " + (why[len(f"{port}: "):] if why.startswith(f"{port}: ") else why)
+            raise (SonarError if error is not None and not isinstance(error, SonarTimeout)
+                   else SonarTimeout)(what) from None
+    if error is not None:
+        raise error
 
 
 def record_passive(port, path, seconds: float, *, baudrate: int = 115200,
@@ -31,8 +65,9 @@ def record_passive(port, path, seconds: float, *, baudrate: int = 115200,
     """Listen on ``port`` for ``seconds`` (or until Ctrl-C) and log every byte received.
 
     For a tap on the head's transmit line: nothing is sent. ``settings`` and ``pose`` are
-    stored in the log's header for `replay`. Returns ``{"bytes_rx", "bytes_tx", "pings",
-    "scans"}`` (only ``bytes_rx`` counts here).
+    stored in the log's header for `replay`. The log is written under a temporary name and
+    renamed at the end (`finish_recording`: removed if no packet arrived). Returns
+    ``{"bytes_rx", "bytes_tx", "pings", "scans"}`` (only ``bytes_rx`` counts here).
     """
     settings = settings or HeadSettings()
     out = {"bytes_rx": 0, "bytes_tx": 0, "pings": 0, "scans": 0}
@@ -40,20 +75,32 @@ def record_passive(port, path, seconds: float, *, baudrate: int = 115200,
             "sound_speed": settings.sound_speed, "nibble_order": DEFAULT_NIBBLE_ORDER,
             "settings": settings.as_dict(), "pose": check_pose(pose).tolist(), "passive": True}
     ser = open_serial(port, baudrate, timeout=0.1)
-    with RawLogWriter(path, meta) as log:
-        end = time.monotonic() + seconds
-        try:
-            while time.monotonic() < end:
-                try:
-                    data = ser.read(max(1, ser.in_waiting))
-                except Exception as e:
-                    raise SonarError(f"{port}: read failed: {e}") from None
-                log.rx(data)
-        except KeyboardInterrupt:
-            pass
-        finally:
-            ser.close()
-        out["bytes_rx"] = log.bytes_rx
+    parser = StreamParser()      # only counts packets: the log keeps the bytes as they came
+    error = None
+    try:
+        log = RawLogWriter(path, meta, temporary=True)
+    except BaseException:
+        ser.close()
+        raise
+    started = time.monotonic()
+    end = started + seconds
+    try:
+        while time.monotonic() < end:
+            try:
+                data = ser.read(max(1, ser.in_waiting))
+            except Exception as e:
+                raise SonarError(f"{port}: read failed: {e}") from None
+            log.rx(data)
+            parser.feed(data)
+    except KeyboardInterrupt:
+        pass
+    except BaseException as e:      # noqa: BLE001 - finish_recording re-raises it
+        error = e
+    finally:
+        ser.close()
+    parser.flush()
+    out["bytes_rx"] = log.bytes_rx
+    finish_recording(log, port, started, parser.packets, error)
     return out
 
 
