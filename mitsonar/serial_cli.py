@@ -8,6 +8,11 @@ Every failure ends in one line on stderr and a non-zero exit code, never a trace
 1     the command failed (bad file, port, head, render)
 2     bad arguments (argparse)
 ====  ===================================================
+
+Outputs (``record``'s log, ``replay``'s scans) are checked within a second of launch, before
+any port is opened or log read (folder exists and is writable, the path is no folder), and
+written under temporary names renamed at the end, so a failure leaves no partial file.
+``virtual-sonar`` writes no file.
 """
 from __future__ import annotations
 

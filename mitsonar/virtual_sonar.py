@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._checks import in_range
 from .scan import Scan
 from .transports import check_port, open_transport
 from .seanet import (DEFAULT_NIBBLE_ORDER, FULL_TURN, Alive, BBUserData, FpgaCalibrationData,
@@ -76,7 +77,7 @@ class Faults:
     def __post_init__(self):
         for name in ("drop_probability", "garbage_probability"):
             v = getattr(self, name)
-            if not 0.0 <= v <= 1.0:
+            if not in_range(v, 0.0, 1.0):
                 raise ValueError(f"Faults.{name} = {v!r} is outside 0..1")
         if self.stall_seconds < 0:
             raise ValueError(f"Faults.stall_seconds = {self.stall_seconds!r} must be >= 0")
