@@ -25,8 +25,8 @@ def load_scan(path) -> Scan:
     return Scan.load(path)
 
 
-_LAZY = {"MicronSonar": "micron", "VirtualMicron": "virtual_sonar", "HeadSettings": "seanet",
-         "StreamParser": "seanet", "record": "micron", "replay": "micron"}
+_LAZY = {"MicronSonar": "micron", "VirtualMicron": "virtual_sonar", "HeadSettings": "seanet.settings",
+         "StreamParser": "seanet.stream", "record": "micron", "replay": "recording"}
 
 
 def __getattr__(name):

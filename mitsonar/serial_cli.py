@@ -8,10 +8,16 @@ Every failure ends in one line on stderr and a non-zero exit code, never a trace
 1     the command failed (bad file, port, head, render)
 2     bad arguments (argparse)
 ====  ===================================================
+
+Outputs (``record``'s log, ``replay``'s scans) are checked within a second of launch, before
+any port is opened or log read (folder exists and is writable, the path is no folder), and
+written under temporary names renamed at the end, so a failure leaves no partial file.
+``virtual-sonar`` writes no file.
 """
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -58,7 +64,7 @@ def _positive(kind):
 
 def _sound_speed(text):
     """--sound-speed of record and replay: the bound a head accepts (seanet.HeadSettings)."""
-    from .seanet import SOUND_SPEED_ALLOWED, sound_speed_ok
+    from .seanet.settings import SOUND_SPEED_ALLOWED, sound_speed_ok
     try:
         v = float(text)
     except ValueError:
@@ -68,8 +74,28 @@ def _sound_speed(text):
     return v
 
 
+def _check_output(path, suffixes: tuple = ()) -> Path:
+    """Refuse an output file that cannot be written, before any slow work, in one line naming it.
+
+    The folder must exist and be writable, the path must not be a folder, and its extension
+    must be one of ``suffixes`` when given. Outputs are then written under a temporary name and
+    renamed, so this is the only place a bad path shows up.
+    """
+    out = Path(path)
+    if out.is_dir():
+        raise IsADirectoryError(f"{out}: is a directory; give a file name")
+    if suffixes and out.suffix.lower() not in suffixes:
+        raise ValueError(f"{out}: unknown extension {out.suffix or '(none)'!r}; use {' or '.join(suffixes)}")
+    folder = out.absolute().parent
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{out}: folder {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise PermissionError(f"{out}: folder {folder} is not writable")
+    return out
+
+
 def _settings(args):
-    from .seanet import HeadSettings
+    from .seanet.settings import HeadSettings
     kw = {}
     if getattr(args, "range", None) is not None:
         kw["range"] = args.range
@@ -91,9 +117,10 @@ def _virtual_sonar(args) -> int:
     if not scene_path.is_file():
         raise FileNotFoundError(f"scene file not found: {scene_path}")
     import mitsonar
-    from .virtual_sonar import check_port, serve
+    from .transports import check_port
+    from .virtual_sonar import serve
     from .plugins.sonar_tof import resolve_sensor
-    from .seanet import require_mechanical
+    from .seanet.settings import require_mechanical
     # A port that cannot be opened fails now, not after the render.
     check_port(args.port_url, args.baud)
     scene = mitsonar.load_scene(str(scene_path))
@@ -117,6 +144,7 @@ def cmd_virtual_sonar(args) -> int:
 # ---- record ----
 
 def _record(args) -> int:
+    _check_output(args.output)
     from .micron import record
     settings = _settings(args)
     if args.passive:
@@ -124,7 +152,8 @@ def _record(args) -> int:
                        passive=True)
     else:
         stats = record(args.port, args.output, args.seconds, scans=args.scans, pings=args.pings,
-                       baudrate=args.baud, settings=settings, reboot=not args.no_reboot)
+                       baudrate=args.baud, settings=settings, reboot=not args.no_reboot,
+                       timeout=args.timeout, boot_timeout=args.timeout)
     dropped = stats.get("bytes_dropped", 0)
     note = f"; {dropped} bytes in formed no whole packet (the log keeps them)" if dropped else ""
     print(f"recorded {stats['bytes_rx']} bytes in, {stats['bytes_tx']} out "
@@ -140,7 +169,10 @@ def cmd_record(args) -> int:
 # ---- replay ----
 
 def _replay(args) -> int:
-    from .micron import LogDamageWarning, replay
+    from .io import EXTENSIONS
+    from .rawlog import LogDamageWarning, part_name
+    from .recording import replay
+    out = _check_output(args.output, EXTENSIONS)
     log = Path(args.log)
     if not log.is_file():
         raise FileNotFoundError(f"log file not found: {log}")
@@ -157,16 +189,24 @@ def _replay(args) -> int:
                     warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     if not scans:
         raise ValueError(f"{log}: no complete scan in the log")
-    out = Path(args.output)
     if args.all:
-        for k, scan in enumerate(scans):
-            path = out.with_name(f"{out.stem}_{k:03d}{out.suffix}")
-            scan.save(str(path))
+        # All or nothing: every scan under a temporary name first, renamed once all are written.
+        paths = [out.with_name(f"{out.stem}_{k:03d}{out.suffix}") for k in range(len(scans))]
+        parts = [part_name(p) for p in paths]
+        try:
+            for scan, part in zip(scans, parts):
+                scan.save(str(part))
+            for part, path in zip(parts, paths):
+                os.replace(part, path)
+        finally:
+            for part in parts:
+                if part.exists():
+                    part.unlink()
         print(f"{len(scans)} scans from {log} written as {out.stem}_NNN{out.suffix}")
         return 0
     if not -len(scans) <= args.index < len(scans):
         raise ValueError(f"{log}: --index {args.index} but the log holds {len(scans)} scan(s)")
-    scans[args.index].save(str(out))
+    scans[args.index].save(str(out))       # Scan.save writes a temporary file and renames it
     print(f"scan {args.index % len(scans)} of {len(scans)} from {log} written to {out}")
     return 0
 
@@ -200,8 +240,10 @@ def add_subcommands(subparsers) -> None:
     p = subparsers.add_parser(
         "record", help="log the raw byte stream of a Micron (SeaNet) head",
         description="Start the head on PORT, request scanlines and write every byte in and out "
-                    "with timestamps to a raw log (format: mitsonar.micron). --passive only "
-                    "listens, e.g. on a tap of the head's transmit line.")
+                    "with timestamps to a raw log (format: mitsonar.rawlog). --passive only "
+                    "listens, e.g. on a tap of the head's transmit line. The log is written "
+                    "under a temporary name in its folder and renamed at the end (also on "
+                    "Ctrl-C); a recording without any packet from the head leaves no file.")
     p.add_argument("port", metavar="PORT", help="serial device or pyserial URL (socket://HOST:PORT, ...)")
     p.add_argument("-o", "--output", required=True, metavar="LOG", help="raw log to write")
     p.add_argument("--seconds", type=_positive(float), default=None, help="stop after T seconds")
@@ -210,6 +252,10 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--baud", type=_positive(int), default=115200)
     p.add_argument("--passive", action="store_true", help="only listen (needs --seconds)")
     p.add_argument("--no-reboot", action="store_true", help="attach to a running head without mtReBoot")
+    p.add_argument("--timeout", type=_positive(float), default=30.0, metavar="S",
+                   help="give up when the head sends nothing usable for S seconds: each start-up "
+                        "step and each scanline (default 30). A log that got no packet is removed; "
+                        "one that did is kept")
     p.add_argument("--range", type=_positive(float), default=None, help="range scale, m (default 12)")
     p.add_argument("--n-bins", type=_positive(int), default=None, help="bins per scanline (default 500)")
     p.add_argument("--sound-speed", type=_sound_speed, default=None, help="m/s, 1300..1800 (default 1500)")

@@ -14,9 +14,10 @@ send zeros. Together with `mitsonar.micron.MicronSonar`, which maps the other wa
 survives the wire unchanged when the driver uses ``HeadSettings.from_scan(scan)``.
 
 Timing model (``realtime=True``): each scanline takes ``18*10/baud`` (the request) +
-``2R/c`` (listening; R = n_bins x bin width) + ``motor_time`` (6.5 ms default: the measured
-42.9 ms per line at 10 m, 200 bins, 115200 Bd less the other terms), and its ``(45 + Dbytes)
-* 10 / baud`` transfer delays the next output, as on a real line. ``realtime=False`` sends
+``2R/c`` (listening; R = n_bins x bin width) + ``motor_time`` (6.5 ms default: what the timing
+of a real head in ``reference/seanet.md``, 42.9 ms per line at 10 m, 200 bins, 115200 Bd,
+leaves after the other terms), and its ``(45 + Dbytes) * 10 / baud`` transfer delays the next
+output, as on a real line. ``realtime=False`` sends
 everything at once and shortens boot and alive periods, for tests.
 
 Faults for tests (`Faults`): drop a byte from chosen or random scanlines, inject garbage,
@@ -27,21 +28,18 @@ from __future__ import annotations
 import heapq
 import itertools
 import math
-import os
 import queue
-import select
-import socket
 import sys
 import threading
 import time
-import tty
 from collections import Counter
 from dataclasses import dataclass
-from urllib.parse import urlparse
 
 import numpy as np
 
+from ._checks import in_range
 from .scan import Scan
+from .transports import check_port, open_transport
 from .seanet import (DEFAULT_NIBBLE_ORDER, FULL_TURN, Alive, BBUserData, FpgaCalibrationData,
                      FpgaVersionData, GainCommand, HeadCommand, HeadData, HeadInf, HeadSettings,
                      HeadStatus, HdCtrl, ReBoot, ScanReverse, SendBBUser, SendData, SendVersion,
@@ -79,170 +77,12 @@ class Faults:
     def __post_init__(self):
         for name in ("drop_probability", "garbage_probability"):
             v = getattr(self, name)
-            if not 0.0 <= v <= 1.0:
+            if not in_range(v, 0.0, 1.0):
                 raise ValueError(f"Faults.{name} = {v!r} is outside 0..1")
         if self.stall_seconds < 0:
             raise ValueError(f"Faults.stall_seconds = {self.stall_seconds!r} must be >= 0")
         self.drop_pings = tuple(int(i) for i in self.drop_pings)
 
-
-# --------------------------------------------------------------------------------------------
-# Transports
-# --------------------------------------------------------------------------------------------
-
-class _PtyTransport:
-    def __init__(self):
-        self.master, self.slave = os.openpty()
-        # Raw mode before anyone opens the slave: no echo, no CR/LF translation of binary data.
-        tty.setraw(self.slave)
-        tty.setraw(self.master)
-        os.set_blocking(self.master, False)
-        self.port = os.ttyname(self.slave)
-
-    def read(self, timeout: float) -> bytes:
-        r, _, _ = select.select([self.master], [], [], max(0.0, timeout))
-        if not r:
-            return b""
-        try:
-            return os.read(self.master, 65536)
-        except (BlockingIOError, InterruptedError):
-            return b""
-        except OSError:          # EIO: nobody holds the slave open (we do, so rarely)
-            time.sleep(min(timeout, 0.01))
-            return b""
-
-    def write(self, data: bytes) -> int:
-        try:
-            return os.write(self.master, data)
-        except (BlockingIOError, InterruptedError):
-            return 0
-
-    def close(self) -> None:
-        for fd in (self.master, self.slave):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-
-
-class _TcpServerTransport:
-    """Listens on host:port; one client at a time (``socket://host:port`` in pyserial)."""
-
-    def __init__(self, host: str, port: int):
-        self.server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        try:
-            self.server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            self.server.bind((host, port))
-            self.server.listen(1)
-        except BaseException:
-            self.server.close()
-            raise
-        self.server.setblocking(False)
-        h, p = self.server.getsockname()[:2]
-        self.port = f"socket://{host or h}:{p}"
-        self.client = None
-
-    def read(self, timeout: float) -> bytes:
-        socks = [self.server] + ([self.client] if self.client else [])
-        r, _, _ = select.select(socks, [], [], max(0.0, timeout))
-        if self.server in r:
-            try:
-                c, _ = self.server.accept()
-                c.setblocking(False)
-                c.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                if self.client is not None:
-                    self.client.close()
-                self.client = c
-            except OSError:
-                pass
-        if self.client is not None and self.client in r:
-            try:
-                data = self.client.recv(65536)
-            except (BlockingIOError, InterruptedError):
-                return b""
-            except OSError:
-                data = b""
-            if not data:
-                self.client.close()
-                self.client = None
-            return data
-        return b""
-
-    def write(self, data: bytes) -> int:
-        if self.client is None:
-            return len(data)      # nobody on the line: the bytes are lost, as on a wire
-        try:
-            return self.client.send(data)
-        except (BlockingIOError, InterruptedError):
-            return 0
-        except OSError:
-            self.client.close()
-            self.client = None
-            return len(data)
-
-    def close(self) -> None:
-        if self.client is not None:
-            self.client.close()
-        self.server.close()
-
-
-class _SerialTransport:
-    def __init__(self, url: str, baudrate: int):
-        import serial
-        self.ser = serial.serial_for_url(url, baudrate=baudrate, timeout=0, write_timeout=0)
-        self.port = url
-        try:
-            self.fd = self.ser.fileno()
-        except Exception:       # URL handlers without a descriptor: poll instead
-            self.fd = None
-
-    def read(self, timeout: float) -> bytes:
-        if self.fd is not None:
-            r, _, _ = select.select([self.fd], [], [], max(0.0, timeout))
-            return self.ser.read(max(1, self.ser.in_waiting)) if r else b""
-        n = self.ser.in_waiting
-        if n:
-            return self.ser.read(n)
-        time.sleep(min(max(0.0, timeout), 0.005))
-        return b""
-
-    def write(self, data: bytes) -> int:
-        try:
-            return self.ser.write(data) or 0
-        except Exception:      # write timeout: line busy, try again later
-            return 0
-
-    def close(self) -> None:
-        self.ser.close()
-
-
-def _open_transport(port_url: str | None, baudrate: int):
-    if port_url is None or port_url in ("pty", "pty://"):
-        return _PtyTransport()
-    # The reason alone ("Name or service not known") does not say which port failed.
-    try:
-        if port_url.startswith("socket://"):
-            u = urlparse(port_url)
-            if u.port is None:
-                raise ValueError("needs a port (socket://HOST:PORT, 0 for any)")
-            return _TcpServerTransport(u.hostname or "localhost", u.port)
-        return _SerialTransport(port_url, baudrate)
-    except OSError as e:     # also serial.SerialException and socket.gaierror
-        # pyserial wraps the OS's reason in its own sentence, which names the port again.
-        inner = e.__context__ if isinstance(e.__context__, OSError) and e.__context__.strerror else e
-        raise OSError(f"cannot open port {port_url}: {inner.strerror or inner}") from None
-    except ValueError as e:  # URL syntax: unknown scheme, port out of range, no port
-        raise ValueError(f"cannot open port {port_url}: {e}") from None
-
-
-def check_port(port_url: str | None, baudrate: int = 115200) -> None:
-    """Open and close the port `serve` would use, so that a bad URL fails before a long render.
-
-    Raises OSError or ValueError naming the port. A new pseudo-terminal (None) needs no check.
-    """
-    if port_url is None or port_url in ("pty", "pty://"):
-        return
-    _open_transport(port_url, baudrate).close()
 
 
 # --------------------------------------------------------------------------------------------
@@ -334,7 +174,7 @@ class VirtualMicron:
         """Open the port, power the head on; returns the port a driver should open."""
         if self._thread is not None:
             return self.port
-        self._transport = _open_transport(self.port_url, self.baudrate)
+        self._transport = open_transport(self.port_url, self.baudrate)
         self._stop.clear()
         now = time.monotonic()
         self._reset_state(now)

@@ -10,7 +10,7 @@ import pytest
 
 import mitsonar
 from mitsonar import serial_cli
-from mitsonar.micron import beam_rotation
+from mitsonar.assembler import beam_rotation
 from mitsonar.scan import Scan
 from mitsonar.seanet import HeadSettings
 from mitsonar.virtual_sonar import VirtualMicron
@@ -129,7 +129,7 @@ def test_record_and_replay_errors_are_one_line(tmp_path, capsys):
 
 
 def test_replay_empty_log_and_index(tmp_path, capsys):
-    from mitsonar.micron import RawLogWriter
+    from mitsonar.rawlog import RawLogWriter
     empty = tmp_path / "empty.bin"
     RawLogWriter(empty, {"settings": HeadSettings().as_dict()}).close()
     assert cli("replay", empty, "-o", tmp_path / "s.exr") == 1
@@ -214,3 +214,140 @@ def test_record_cli_says_how_many_bytes_formed_no_packet(tmp_path, capsys):
                    "--n-bins", "100") == 0
     out = capsys.readouterr().out
     assert "bytes in formed no whole packet (the log keeps them)" in out
+
+
+def files_in(folder):
+    """Every file left in ``folder``, temporary ones (hidden) included."""
+    return sorted(p.name for p in folder.iterdir())
+
+
+def silent_pty():
+    """A pseudo-terminal whose other end never writes: (device path, master fd, slave fd)."""
+    import tty
+    master, slave = os.openpty()
+    tty.setraw(master)
+    tty.setraw(slave)
+    return os.ttyname(slave), master, slave
+
+
+@pytest.mark.parametrize("hang_up", [False, True])
+def test_record_from_a_silent_port_says_so_and_leaves_no_file(tmp_path, capsys, hang_up):
+    """A head that never answers; or the other end goes away (reads then fail with EIO)."""
+    import threading
+    import time
+    port, master, slave = silent_pty()
+    closer = threading.Timer(0.2, os.close, (master,)) if hang_up else None
+    try:
+        if closer:
+            closer.start()
+        t = time.monotonic()
+        assert cli("record", port, "-o", tmp_path / "l.bin", "--timeout", "0.5") == 1
+        assert time.monotonic() - t < 10
+    finally:
+        if closer:
+            closer.join()
+        else:
+            os.close(master)
+        os.close(slave)
+    line = one_error_line(capsys, "record")
+    assert re.match(rf"mitsonar record: error: no bytes from the head on {re.escape(port)} in \d+\.\d s; ", line), line
+    assert ("Input/output error" in line) == hang_up
+    assert files_in(tmp_path) == []
+
+
+def test_record_passive_from_a_silent_port_leaves_no_file(tmp_path, capsys):
+    port, master, slave = silent_pty()
+    try:
+        assert cli("record", port, "-o", tmp_path / "l.bin", "--passive", "--seconds", "0.3") == 1
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert re.match(rf"mitsonar record: error: no bytes from the head on {re.escape(port)} in 0\.\d s$",
+                    one_error_line(capsys, "record"))
+    assert files_in(tmp_path) == []
+
+
+def test_record_keeps_what_arrived_when_the_head_goes_quiet(tmp_path, capsys):
+    from mitsonar.rawlog import read_log
+    from mitsonar.virtual_sonar import Faults
+    log = tmp_path / "l.bin"
+    with VirtualMicron(small_scan(), realtime=False, faults=Faults(stall_at=20, stall_seconds=30)) as vm:
+        assert cli("record", vm.port, "-o", log, "--scans", "1", "--range", "2.4", "--n-bins", "100",
+                   "--timeout", "0.5") == 1
+    line = one_error_line(capsys, "record")
+    assert "the log keeps the" in line and line.endswith(str(log)), line
+    assert files_in(tmp_path) == ["l.bin"]
+    meta, records = read_log(log)
+    assert sum(len(d) for _, kind, d in records if kind == 0) > 20 * 100
+
+
+def test_record_keeps_the_log_on_ctrl_c(tmp_path, capsys, monkeypatch):
+    from mitsonar.micron import MicronSonar
+    calls = []
+
+    def interrupted(self):
+        calls.append(1)
+        if len(calls) > 5:
+            raise KeyboardInterrupt
+        return real(self)
+    real = MicronSonar.read_ping
+    monkeypatch.setattr(MicronSonar, "read_ping", interrupted)
+    with VirtualMicron(small_scan(), realtime=False) as vm:
+        assert cli("record", vm.port, "-o", tmp_path / "l.bin", "--range", "2.4", "--n-bins", "100") == 0
+    assert "(5 scanlines)" in capsys.readouterr().out
+    assert files_in(tmp_path) == ["l.bin"]
+
+
+@pytest.mark.parametrize("command", ["record", "replay"])
+def test_output_paths_are_checked_first_in_one_line(tmp_path, capsys, monkeypatch, command):
+    import time
+
+    from mitsonar import micron, recording
+    from mitsonar import transports
+
+    def never(*a, **k):
+        raise AssertionError("opened a port or read a log before checking the output")
+    monkeypatch.setattr(transports, "open_serial", never)
+    monkeypatch.setattr(micron, "open_serial", never)
+    monkeypatch.setattr(recording, "read_log", never)
+    log = tmp_path / "log.bin"
+    log.write_bytes(b"MSNRLOG1")
+    first = ["/dev/does-not-exist-mitsonar"] if command == "record" else [log]
+    suffix = ".bin" if command == "record" else ".exr"
+    (tmp_path / f"dir{suffix}").mkdir()
+    cases = [(tmp_path / "missing" / f"out{suffix}", "folder .*missing does not exist"),
+             (tmp_path / f"dir{suffix}", "is a directory")]
+    if command == "replay":
+        cases.append((tmp_path / "out.txt", "unknown extension '.txt'; use .exr or .npz"))
+    ro = tmp_path / "ro"
+    ro.mkdir(mode=0o500)
+    cases.append((ro / f"out{suffix}", "folder .*ro is not writable"))
+    if os.geteuid() == 0:            # root writes anywhere: let the check see what a user would
+        real_access = os.access
+        monkeypatch.setattr(serial_cli.os, "access",
+                            lambda p, mode: False if str(p) == str(ro) else real_access(p, mode))
+    before = files_in(tmp_path)
+    for out, reason in cases:
+        t = time.monotonic()
+        assert cli(command, *first, "-o", out) == 1
+        assert time.monotonic() - t < 1.0
+        line = one_error_line(capsys, command)
+        assert line.startswith(f"mitsonar {command}: error: {out}: ") and re.search(reason, line), line
+    assert files_in(tmp_path) == before
+
+
+def test_replay_all_leaves_nothing_when_a_save_fails(tmp_path, capsys, monkeypatch):
+    scan, log = _two_turn_log(tmp_path, capsys)
+    saved = []
+
+    def save(self, path):
+        if saved:
+            raise OSError("disk full")
+        saved.append(path)
+        real(self, path)
+    real = Scan.save
+    monkeypatch.setattr(Scan, "save", save)
+    before = files_in(tmp_path)
+    assert cli("replay", log, "-o", tmp_path / "s.exr", "--all") == 1
+    assert "disk full" in one_error_line(capsys, "replay")
+    assert files_in(tmp_path) == before

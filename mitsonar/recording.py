@@ -1,0 +1,185 @@
+"""Recording and replaying a head's raw byte stream: `replay`, and the passive part of recording.
+
+`mitsonar.micron.record` drives a head and logs every byte (`mitsonar.rawlog` format); a
+passive recording (`record_passive`: a tap on the head's transmit line) needs no driver and
+lives here. `replay` turns a log back into the scans the driver returned while recording,
+with the same `ScanAssembler` and the same rule for usable scanlines (`ping_problem`).
+This module does not import the driver.
+"""
+from __future__ import annotations
+
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from .assembler import ScanAssembler, check_pose
+from .rawlog import POSE, RX, TX, LogDamageWarning, RawLogWriter, read_log
+from .scan import Scan
+from .seanet.constants import DEFAULT_NIBBLE_ORDER
+from .seanet.messages import HeadCommand, HeadData
+from .seanet.settings import SOUND_SPEED_ALLOWED, HeadSettings, ping_problem, sound_speed_ok
+from .seanet.stream import StreamParser
+from .transports import SonarError, SonarTimeout, open_serial
+
+__all__ = ["replay", "record_passive", "finish_recording"]
+
+
+def finish_recording(log: RawLogWriter, port, started: float, packets: int,
+                     error: BaseException | None = None) -> None:
+    """End a recording: rename its log into place, or remove it when no packet came from the head.
+
+    ``log`` was opened with ``temporary=True``; ``started`` is the `time.monotonic` of the start,
+    ``packets`` the number of SeaNet packets received, ``error`` what stopped the recording (None
+    for a normal end or Ctrl-C). A log holding a packet is kept whatever happened (a head that
+    goes quiet after data arrived loses nothing); the `SonarError` that stopped it then says
+    where the log is. A log without any packet is removed and the error says so in one line:
+    ``no bytes from the head on PORT in N s`` (or that the bytes formed no packet).
+    """
+    elapsed = time.monotonic() - started
+    if packets > 0:
+        log.close()
+        if isinstance(error, SonarError):
+            raise type(error)(f"{error}; the log keeps the {log.bytes_rx} bytes received before: "
+                              f"{log.path}") from None
+    else:
+        log.discard()
+        if error is None or isinstance(error, SonarError):
+            if log.bytes_rx:
+                what = (f"no SeaNet packet from the head on {port} in {elapsed:.1f} s ({log.bytes_rx} "
+                        f"bytes that form none: wrong baud rate?)")
+            else:
+                what = f"no bytes from the head on {port} in {elapsed:.1f} s"
+            if error is not None:
+                why = str(error)
+                what += "; " + (why[len(f"{port}: "):] if why.startswith(f"{port}: ") else why)
+            raise (SonarError if error is not None and not isinstance(error, SonarTimeout)
+                   else SonarTimeout)(what) from None
+    if error is not None:
+        raise error
+
+
+def record_passive(port, path, seconds: float, *, baudrate: int = 115200,
+                   settings: HeadSettings | None = None, pose=None) -> dict:
+    """Listen on ``port`` for ``seconds`` (or until Ctrl-C) and log every byte received.
+
+    For a tap on the head's transmit line: nothing is sent. ``settings`` and ``pose`` are
+    stored in the log's header for `replay`. The log is written under a temporary name and
+    renamed at the end (`finish_recording`: removed if no packet arrived). Returns
+    ``{"bytes_rx", "bytes_tx", "pings", "scans"}`` (only ``bytes_rx`` counts here).
+    """
+    settings = settings or HeadSettings()
+    out = {"bytes_rx": 0, "bytes_tx": 0, "pings": 0, "scans": 0}
+    meta = {"format": "mitsonar seanet raw log", "port": str(port), "baudrate": baudrate,
+            "sound_speed": settings.sound_speed, "nibble_order": DEFAULT_NIBBLE_ORDER,
+            "settings": settings.as_dict(), "pose": check_pose(pose).tolist(), "passive": True}
+    ser = open_serial(port, baudrate, timeout=0.1)
+    parser = StreamParser()      # only counts packets: the log keeps the bytes as they came
+    error = None
+    try:
+        log = RawLogWriter(path, meta, temporary=True)
+    except BaseException:
+        ser.close()
+        raise
+    started = time.monotonic()
+    end = started + seconds
+    try:
+        while time.monotonic() < end:
+            try:
+                data = ser.read(max(1, ser.in_waiting))
+            except Exception as e:
+                raise SonarError(f"{port}: read failed: {e}") from None
+            log.rx(data)
+            parser.feed(data)
+    except KeyboardInterrupt:
+        pass
+    except BaseException as e:      # noqa: BLE001 - finish_recording re-raises it
+        error = e
+    finally:
+        ser.close()
+    parser.flush()
+    out["bytes_rx"] = log.bytes_rx
+    finish_recording(log, port, started, parser.packets, error)
+    return out
+
+
+def replay(path, *, sound_speed: float | None = None, pose=None, nibble_order: str | None = None,
+           revisit: bool | None = None, max_turns: int | None = None, partial: bool = False) -> list[Scan]:
+    """Scans of a raw log, assembled exactly as `MicronSonar.scan` did while recording.
+
+    Parameters
+    ----------
+    ============  ================================================================
+    path          raw log (``record``)
+    sound_speed   m/s; default the log's (settings), else 1500
+    pose          4x4 head mounting; default the log's pose records / header
+    nibble_order  default the log's
+    revisit       default the log's (True)
+    max_turns     default the log's (3)
+    partial       also return the unfinished scan at the end of the log, zero-filled
+    ============  ================================================================
+
+    Scanlines count once an mtHeadCommand was sent and when they match the last one sent (as
+    the driver does), so a log recorded with ``record(..., scans=k)`` replays into the same
+    scans the driver returned.
+    """
+    if sound_speed is not None and not sound_speed_ok(sound_speed):
+        raise ValueError(f"replay: sound_speed = {sound_speed!r} is out of range: allowed {SOUND_SPEED_ALLOWED}")
+    meta, records = read_log(path)
+    c = sound_speed or meta.get("sound_speed") or 1500.0
+    if not sound_speed_ok(c):
+        raise ValueError(f"{path}: the log's sound_speed = {c!r} is out of range: allowed "
+                         f"{SOUND_SPEED_ALLOWED} (pass sound_speed)")
+    c = float(c)
+    nib = nibble_order or meta.get("nibble_order") or DEFAULT_NIBBLE_ORDER
+    fixed_pose = pose is not None
+    T = check_pose(pose if fixed_pose else meta.get("pose"))
+    settings = None
+    if isinstance(meta.get("settings"), dict):
+        try:
+            settings = HeadSettings(**meta["settings"])
+        except (TypeError, ValueError):
+            settings = None
+    if settings is not None and sound_speed is not None:
+        settings = None    # a different sound speed changes the range window: no snapping
+    asm = ScanAssembler(c, revisit=meta.get("revisit", True) if revisit is None else revisit,
+                        max_turns=int(meta.get("max_turns", 3) if max_turns is None else max_turns),
+                        settings=settings)
+    rx, tx = StreamParser(nibble_order=nib), StreamParser(nibble_order=nib)
+    command = None
+    scans = []
+    t0 = float(meta.get("start_time", 0.0))
+
+    def take(msgs, t):
+        for m in msgs:
+            if isinstance(m, HeadData) and command is not None and ping_problem(m, command) is None:
+                s = asm.add(m, T, t0 + t)
+                if s is not None:
+                    s.meta["log"] = str(path)
+                    scans.append(s)
+
+    for t, kind, data in records:
+        if kind == TX:
+            for m in tx.feed(data):
+                if isinstance(m, HeadCommand):
+                    command = m
+        elif kind == POSE and not fixed_pose and len(data) == 128:
+            T = np.frombuffer(data, dtype="<f8").reshape(4, 4).copy()
+        elif kind == RX:
+            take(rx.feed(data), t)
+    take(rx.flush(), records[-1][0] if records else 0.0)
+    tx.flush()
+    for parser, way in ((rx, "from"), (tx, "to")):
+        if parser.dropped:
+            reasons = ", ".join(f"{r}: {n}" for r, n in parser.drop_reasons.most_common(3))
+            warnings.warn(LogDamageWarning(
+                f"{Path(path).name}: dropped {parser.dropped} bytes {way} "
+                f"the head that form no whole SeaNet packet ({reasons})"), stacklevel=2)
+    if partial:
+        s = asm.finish()
+        if s is not None:
+            s.meta["log"] = str(path)
+            s.meta["partial"] = True
+            scans.append(s)
+    return scans

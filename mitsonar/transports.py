@@ -1,0 +1,243 @@
+"""Byte transports of the serial devices: the driver's side of a port and the virtual head's.
+
+The driver (`mitsonar.micron.MicronSonar`) and the passive recorder open a port with
+`open_serial` (``serial.serial_for_url``: a device path, ``socket://host:port``, ``rfc2217://``,
+``loop://`` ...) and read it with `read_available`. The virtual head (`mitsonar.virtual_sonar`)
+serves on `open_transport`: a new pseudo-terminal, a TCP port that pyserial ``socket://``
+clients connect to, or any pyserial URL. Nothing here knows SeaNet.
+"""
+from __future__ import annotations
+
+import os
+import select
+import socket
+import time
+import tty
+from urllib.parse import urlparse
+
+__all__ = ["SonarError", "SonarTimeout", "open_serial", "serial_fileno", "read_available",
+           "open_transport", "check_port"]
+
+
+class SonarError(RuntimeError):
+    """The head or the port misbehaved beyond what the driver can recover from."""
+
+
+class SonarTimeout(SonarError, TimeoutError):
+    """The head did not answer in time."""
+
+
+# --------------------------------------------------------------------------------------------
+# The host's side: pyserial
+# --------------------------------------------------------------------------------------------
+
+def open_serial(port_or_url, baudrate: int, timeout: float, write_timeout: float | None = None):
+    """``serial.serial_for_url`` of ``port_or_url``; `SonarError` "cannot open PORT: reason"."""
+    import serial
+    try:
+        return serial.serial_for_url(os.fspath(port_or_url), baudrate=baudrate, timeout=timeout,
+                                     write_timeout=write_timeout)
+    except (serial.SerialException, OSError, ValueError) as e:
+        raise SonarError(f"cannot open {port_or_url}: {e}") from None
+
+
+def serial_fileno(ser):
+    """A file descriptor ``select`` can wait on, or None (sockets, ``loop://``, ``rfc2217://``)."""
+    if getattr(ser, "_socket", None) is not None:
+        return None
+    try:
+        fd = ser.fileno()
+        select.select([fd], [], [], 0)
+        return fd
+    except Exception:        # loop://, rfc2217:// and friends have no file descriptor
+        return None
+
+
+def read_available(ser, fd, wait: float, port) -> bytes:
+    """What ``ser`` has within ``wait`` seconds (b"" if nothing); `SonarError` naming ``port``.
+
+    ``fd`` is `serial_fileno` (ser). Waits in ``select`` where it can, so the port's own timeout
+    is left alone (setting it costs a tcsetattr on every poll).
+    """
+    wait = max(0.0, wait)
+    try:
+        sock = getattr(ser, "_socket", None)
+        if sock is not None:
+            # pyserial's socket:// reports in_waiting as 0 or 1, which would mean one
+            # read call per byte: wait on the socket and take all it has.
+            r, _, _ = select.select([sock], [], [], wait)
+            data = sock.recv(65536) if r else b""
+            if r and not data:
+                raise SonarError(f"{port}: connection closed by the other end")
+        elif fd is not None:
+            r, _, _ = select.select([fd], [], [], wait)
+            data = ser.read(max(1, ser.in_waiting)) if r else b""
+        else:
+            if ser.timeout != wait:
+                ser.timeout = wait
+            n = ser.in_waiting
+            data = ser.read(n if n > 0 else 1)
+    except SonarError:
+        raise
+    except Exception as e:
+        raise SonarError(f"{port}: read failed: {e}") from None
+    return data
+
+
+# --------------------------------------------------------------------------------------------
+# The virtual head's side
+# --------------------------------------------------------------------------------------------
+
+class _PtyTransport:
+    def __init__(self):
+        self.master, self.slave = os.openpty()
+        # Raw mode before anyone opens the slave: no echo, no CR/LF translation of binary data.
+        tty.setraw(self.slave)
+        tty.setraw(self.master)
+        os.set_blocking(self.master, False)
+        self.port = os.ttyname(self.slave)
+
+    def read(self, timeout: float) -> bytes:
+        r, _, _ = select.select([self.master], [], [], max(0.0, timeout))
+        if not r:
+            return b""
+        try:
+            return os.read(self.master, 65536)
+        except (BlockingIOError, InterruptedError):
+            return b""
+        except OSError:          # EIO: nobody holds the slave open (we do, so rarely)
+            time.sleep(min(timeout, 0.01))
+            return b""
+
+    def write(self, data: bytes) -> int:
+        try:
+            return os.write(self.master, data)
+        except (BlockingIOError, InterruptedError):
+            return 0
+
+    def close(self) -> None:
+        for fd in (self.master, self.slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+class _TcpServerTransport:
+    """Listens on host:port; one client at a time (``socket://host:port`` in pyserial)."""
+
+    def __init__(self, host: str, port: int):
+        self.server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        try:
+            self.server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            self.server.bind((host, port))
+            self.server.listen(1)
+        except BaseException:
+            self.server.close()
+            raise
+        self.server.setblocking(False)
+        h, p = self.server.getsockname()[:2]
+        self.port = f"socket://{host or h}:{p}"
+        self.client = None
+
+    def read(self, timeout: float) -> bytes:
+        socks = [self.server] + ([self.client] if self.client else [])
+        r, _, _ = select.select(socks, [], [], max(0.0, timeout))
+        if self.server in r:
+            try:
+                c, _ = self.server.accept()
+                c.setblocking(False)
+                c.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                if self.client is not None:
+                    self.client.close()
+                self.client = c
+            except OSError:
+                pass
+        if self.client is not None and self.client in r:
+            try:
+                data = self.client.recv(65536)
+            except (BlockingIOError, InterruptedError):
+                return b""
+            except OSError:
+                data = b""
+            if not data:
+                self.client.close()
+                self.client = None
+            return data
+        return b""
+
+    def write(self, data: bytes) -> int:
+        if self.client is None:
+            return len(data)      # nobody on the line: the bytes are lost, as on a wire
+        try:
+            return self.client.send(data)
+        except (BlockingIOError, InterruptedError):
+            return 0
+        except OSError:
+            self.client.close()
+            self.client = None
+            return len(data)
+
+    def close(self) -> None:
+        if self.client is not None:
+            self.client.close()
+        self.server.close()
+
+
+class _SerialTransport:
+    def __init__(self, url: str, baudrate: int):
+        import serial
+        self.ser = serial.serial_for_url(url, baudrate=baudrate, timeout=0, write_timeout=0)
+        self.port = url
+        try:
+            self.fd = self.ser.fileno()
+        except Exception:       # URL handlers without a descriptor: poll instead
+            self.fd = None
+
+    def read(self, timeout: float) -> bytes:
+        if self.fd is not None:
+            r, _, _ = select.select([self.fd], [], [], max(0.0, timeout))
+            return self.ser.read(max(1, self.ser.in_waiting)) if r else b""
+        n = self.ser.in_waiting
+        if n:
+            return self.ser.read(n)
+        time.sleep(min(max(0.0, timeout), 0.005))
+        return b""
+
+    def write(self, data: bytes) -> int:
+        try:
+            return self.ser.write(data) or 0
+        except Exception:      # write timeout: line busy, try again later
+            return 0
+
+    def close(self) -> None:
+        self.ser.close()
+
+
+def open_transport(port_url: str | None, baudrate: int):
+    if port_url is None or port_url in ("pty", "pty://"):
+        return _PtyTransport()
+    # The reason alone ("Name or service not known") does not say which port failed.
+    try:
+        if port_url.startswith("socket://"):
+            u = urlparse(port_url)
+            if u.port is None:
+                raise ValueError("needs a port (socket://HOST:PORT, 0 for any)")
+            return _TcpServerTransport(u.hostname or "localhost", u.port)
+        return _SerialTransport(port_url, baudrate)
+    except OSError as e:     # also serial.SerialException and socket.gaierror
+        # pyserial wraps the OS's reason in its own sentence, which names the port again.
+        inner = e.__context__ if isinstance(e.__context__, OSError) and e.__context__.strerror else e
+        raise OSError(f"cannot open port {port_url}: {inner.strerror or inner}") from None
+    except ValueError as e:  # URL syntax: unknown scheme, port out of range, no port
+        raise ValueError(f"cannot open port {port_url}: {e}") from None
+
+
+def check_port(port_url: str | None, baudrate: int = 115200) -> None:
+    """Open and close the port `serve` would use, so that a bad URL fails before a long render.
+
+    Raises OSError or ValueError naming the port. A new pseudo-terminal (None) needs no check.
+    """
+    if port_url is None or port_url in ("pty", "pty://"):
+        return
+    open_transport(port_url, baudrate).close()
