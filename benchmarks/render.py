@@ -41,9 +41,9 @@ def count_segments(scene, spp, seed=0, per_lane=False):
     cast a visibility ray (two UInt32 arrays)."""
     from mitsonar.plugins import module
 
-    ep = module("echo_path")
-    sensor = scene.sensors()[0]
-    frames = module("sonar_sensor").PingFrames(sensor.ping_poses())
+    integrator = scene.integrator()
+    setup = integrator.setup(scene, 0)
+    sensor = setup.sensor
     n = sensor.n_pings * spp
     lane = dr.arange(mi.UInt32, n)
     ping = lane // spp
@@ -58,8 +58,7 @@ def count_segments(scene, spp, seed=0, per_lane=False):
         dr.scatter_add(shadows, mi.UInt32(1) << depth, lane, energy > 0)
 
     with dr.suspend_grad():
-        ep.trace_echoes(scene, frames, sensor.beam, ping, ep.HashSamples(mi.UInt32(seed), ping, lane - ping * spp),
-                        mi.UInt32(scene.integrator().max_depth), mi.Float(0.0), record)
+        integrator.sample(setup, ping, module("samples").HashSamples(mi.UInt32(seed), ping, lane - ping * spp), record)
         c = counts.numpy()
         dr.eval(bounces, shadows)
     if per_lane:

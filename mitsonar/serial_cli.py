@@ -119,7 +119,7 @@ def _virtual_sonar(args) -> int:
     import mitsonar
     from .transports import check_port
     from .virtual_sonar import serve
-    from .plugins.sonar_tof import resolve_sensor
+    from .plugins.common import resolve_sensor
     from .seanet.settings import require_mechanical
     # A port that cannot be opened fails now, not after the render.
     check_port(args.port_url, args.baud)
