@@ -52,9 +52,18 @@ from typing import Any
 
 import numpy as np
 
+from ._checks import is_number, not_a, not_allowed
+
 TVG_LAWS = {"off": 0, "20log": 20, "30log": 30, "40log": 40}
 SPECKLE_MODELS = ("off", "rayleigh", "weibull")
 BIT_DEPTHS = (8, 4)
+
+#: What a real head accepts for the settings a user gives it: the Micron's gain and A/D window on
+#: its 0..80 dB scale, ADSpan at least one byte (80 / 255 dB, rounded). A sonar's XML electronics
+#: fields, the command line's ``--set`` and `render_scan`'s ``electronics`` overrides are held to
+#: these (`check_head_settings`); the `Electronics` class itself takes the wider simulator ranges
+#: of `Electronics.validate` (a negative ``ad_low`` or a 255 dB span, for studies and tests).
+HEAD_LIMITS = {"gain": (0.0, 80.0), "ad_low": (0.0, 80.0), "ad_span": (0.5 * 80.0 / 255, 80.0)}
 
 #: Ranges below this are clamped in the TVG so that a bin centre at r = 0 stays finite.
 MIN_TVG_RANGE = 1e-3
@@ -91,7 +100,9 @@ class Electronics:
                                must exceed ``ad_low`` when ``ringdown > 0``
     ================ ========= ====================================================================
 
-    Invalid settings raise ``ValueError`` naming the field, the value and what is allowed.
+    Invalid settings raise ``ValueError`` naming the field, the value and what is allowed. These are
+    the simulator's ranges; what a user gives a head (XML, ``--set``, `render_scan` overrides) is
+    also held to the head's own (`HEAD_LIMITS`: gain and A/D window within 0..80 dB).
     """
 
     source_level: float = 52.0
@@ -129,7 +140,7 @@ class Electronics:
             ``"<source> '<field>': <value> is not ..."`` for the first bad field.
         """
         def bad(name, value, allowed):
-            raise ValueError(f"{source} '{name}': {value!r} is not {allowed}")
+            raise not_a(source, name, value, allowed)
 
         types = {"float": float, "int": int, "str": str}
         for f in dataclasses.fields(self):
@@ -519,3 +530,12 @@ def _box_gauss_cdf(x: float, length: float, sigma: float) -> float:
         return u * 0.5 * (1.0 + math.erf(t / math.sqrt(2.0))) + sigma * math.exp(-0.5 * t * t) / math.sqrt(2.0 * math.pi)
 
     return (g(x) - g(x - length)) / length
+
+
+def check_head_settings(settings: dict, source: str) -> None:
+    """Refuse a head setting outside what the real head accepts (`HEAD_LIMITS`), naming ``source``
+    and the field. Only the fields present are checked; their types are `Electronics.validate`'s."""
+    for name, (lo, hi) in HEAD_LIMITS.items():
+        value = settings.get(name)
+        if is_number(value) and not lo <= float(value) <= hi:
+            raise not_allowed(source, name, value, f"{lo:.2g}..{hi:g} dB, the range of the head's {name}")

@@ -76,16 +76,30 @@ def _electronics(scan) -> dict[str, Any]:
 
 
 def _settings_line(scan) -> str:
-    """Key settings for a title: geometry, beam, electronics, provenance."""
+    """Key settings for a title: geometry, beam, electronics, provenance. Only the electronics
+    settings the scan records are named (a real head's scan records its gain, A/D window and bit
+    depth, not the simulator's TVG law or speckle model)."""
     parts = [f"{scan.kind}, {scan.n_pings} {scan.row_name} x {scan.n_bins} bins, {scan.range_min:g}-{scan.range_max:g} m",
              f"{scan.beam_pattern} {scan.beamwidth_h:g}x{scan.beamwidth_v:g} deg"]
     line2 = []
-    if scan.electronics:
-        e = _electronics(scan)
-        line2.append(f"TVG {e['tvg']}, gain {e['gain']:g} dB, AD {e['ad_low']:g}+{e['ad_span']:g} dB, "
-                     f"{e['bit_depth']}-bit, speckle {e['speckle']}")
+    e = scan.electronics or {}
+    elec = []
+    if "tvg" in e:
+        elec.append(f"TVG {e['tvg']}")
+    if "gain" in e:
+        elec.append(f"gain {e['gain']:g} dB")
+    if "ad_low" in e:
+        elec.append(f"AD {e['ad_low']:g}" + (f"+{e['ad_span']:g} dB" if "ad_span" in e else " dB"))
+    if "bit_depth" in e:
+        elec.append(f"{e['bit_depth']}-bit")
+    if "speckle" in e:
+        elec.append(f"speckle {e['speckle']}")
+    if elec:
+        line2.append(", ".join(elec))
     meta = scan.meta or {}
     prov = [f"{k} {meta[k]}" for k in ("scene", "spp", "seed") if k in meta]
+    if meta.get("source") == "seanet":
+        prov.insert(0, "SeaNet head" + (f" log {os.path.basename(str(meta['log']))}" if "log" in meta else ""))
     if prov:
         line2.append(", ".join(prov))
     return ", ".join(parts) + ("\n" + "; ".join(line2) if line2 else "")
@@ -107,7 +121,10 @@ def _save(fig: Figure, path) -> None:
     if ext not in supported:
         raise ValueError(f"plot: cannot write {path!r}: the extension must be one of "
                          + ", ".join("." + e for e in ("png", "pdf", "svg")))
-    fig.savefig(path, dpi=fig.dpi)
+    from ._files import replacing
+
+    with replacing(path) as tmp:  # a failed plot leaves no half-written file
+        fig.savefig(tmp, dpi=fig.dpi, format=ext)
 
 
 # ----------------------------------------------------------------------------------------------

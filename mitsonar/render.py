@@ -106,7 +106,8 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
                    integrator, else ``sonar_tof``
     sensor         sensor index or object
     max_depth      override of the integrator's surface bounces
-    electronics    dict of electronics fields overriding the sensor's
+    electronics    dict of electronics fields overriding the sensor's (the gain and the A/D window
+                   within the head's 0..80 dB: `mitsonar.electronics.HEAD_LIMITS`)
     progress       optional callable ``progress(done_spp, spp)`` called after each render pass
     ============== ==============================================================================
 
@@ -131,11 +132,12 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     sonar = sonar_of(scene, sensor)
     integrator = _integrator(scene, integrator)
 
-    from .electronics import Electronics
+    from .electronics import Electronics, check_head_settings
 
     settings = dict(sonar.electronics)
     settings.update(electronics or {})
     try:
+        check_head_settings(electronics or {}, "render_scan electronics")
         model = Electronics.from_dict(settings, source="render_scan electronics" if electronics else "sonar")
     except ValueError as exc:
         raise SceneError(str(exc)) from None

@@ -104,7 +104,7 @@ class SonarSensor(mi.Sensor):
         if "tx_pattern" in props:
             tx["tx_pattern"] = text(props, "tx_pattern", None, "sonar")
 
-        from mitsonar.electronics import Electronics
+        from mitsonar.electronics import Electronics, check_head_settings
         read = {"float": number, "int": count, "str": text}
         elec = {}
         for f in dataclasses.fields(Electronics):
@@ -113,7 +113,8 @@ class SonarSensor(mi.Sensor):
                 elec[f.name] = read[kind](props, f.name, None, "sonar")
         self.electronics = elec
         self._check()
-        self.electronics_model = Electronics(**elec)  # validates the electronics fields
+        check_head_settings(elec, "sonar")             # the head's ranges, then the model's checks
+        self.electronics_model = Electronics(**elec)
 
         table = read_beam_table(table_path) if pattern == "table" and table_path else None
         if table_path and pattern != "table":
