@@ -4,6 +4,8 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from mitsonar._checks import not_allowed
+
 from .materials import PRESETS
 from .props import number, text
 
@@ -136,7 +138,7 @@ def check_parameters(diffuse, specular, shininess):
     """Reject values that are negative, non-finite or not energy conserving."""
     for name, v in (("diffuse", diffuse), ("specular", specular), ("shininess", shininess)):
         if not (v == v and abs(v) != float("inf")) or v < 0:
-            raise ValueError(f"acoustic '{name}': {v} is not allowed (must be a finite number >= 0)")
+            raise not_allowed("acoustic", name, v, "must be a finite number >= 0")
     if diffuse + specular > 1.0 + 1e-6:
         raise ValueError(f"acoustic 'diffuse' + 'specular' = {diffuse + specular:g} > 1: "
                          "a surface cannot reflect more energy than it receives")

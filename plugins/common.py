@@ -23,6 +23,8 @@ import math
 import drjit as dr
 import mitsuba as mi
 
+from mitsonar._checks import not_allowed
+
 from .props import count
 from .range_bins import RangeBins
 from .samples import DIMS_EMIT, DIMS_PER_BOUNCE
@@ -34,8 +36,8 @@ MAX_DEPTH = 64
 def check_max_depth(value, source="sonar_tof"):
     """``value`` if it is a whole number of surface bounces in 1..64, else a ValueError naming ``source``."""
     if not (isinstance(value, int) and 1 <= value <= MAX_DEPTH):
-        raise ValueError(f"{source} 'max_depth': {value!r} is not allowed (an integer number of "
-                         f"surface bounces from 1 to {MAX_DEPTH}; 1 = single bounce)")
+        raise not_allowed(source, "max_depth", value, f"an integer number of surface bounces from 1 to "
+                          f"{MAX_DEPTH}; 1 = single bounce")
     return value
 
 

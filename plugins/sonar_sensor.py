@@ -9,6 +9,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mitsonar._checks import not_allowed, require
 from mitsonar.scan import KINDS, bearing_rotation, check_rigid
 
 from .beam import BeamPattern, read_beam_table
@@ -79,8 +80,7 @@ class SonarSensor(mi.Sensor):
         # Checked before the film is made: without one, Mitsuba makes its default RGB film and
         # prints a warning above our error.
         for name, value, top in (("n_bins", self.n_bins, MAX_BINS), ("n_pings", self.n_pings, MAX_PINGS)):
-            if not 1 <= value <= top:
-                raise ValueError(f"sonar '{name}': {value!r} is not allowed (1 to {top})")
+            require(1 <= value <= top, "sonar", name, value, f"1 to {top}")
         if "film" not in props:
             # The film is the scan's range-intensity image: one row per ping, one column per bin.
             props["film"] = mi.load_dict({"type": "hdrfilm", "width": self.n_bins, "height": self.n_pings,
@@ -132,7 +132,7 @@ class SonarSensor(mi.Sensor):
 
     def _check(self):
         def bad(name, value, allowed):
-            raise ValueError(f"sonar '{name}': {value!r} is not allowed ({allowed})")
+            raise not_allowed("sonar", name, value, allowed)
         if self.kind not in KINDS:
             bad("kind", self.kind, "one of " + ", ".join(KINDS))
         if not (math.isfinite(self.range_min) and self.range_min >= 0):
@@ -160,13 +160,13 @@ class SonarSensor(mi.Sensor):
             return None
         kind = tx.get("tx_pattern", "gaussian")
         if kind not in TX_PATTERNS:
-            raise ValueError(f"sonar 'tx_pattern': {kind!r} is not allowed (one of {', '.join(TX_PATTERNS)})")
+            raise not_allowed("sonar", "tx_pattern", kind, f"one of {', '.join(TX_PATTERNS)}")
         swath = abs(self.bearing_step) * (self.n_pings - 1) + bw_h
         h = float(tx.get("tx_beamwidth_h", min(swath, 360.0)))
         v = float(tx.get("tx_beamwidth_v", bw_v))
         for name, value, hi in (("tx_beamwidth_h", h, 360.0), ("tx_beamwidth_v", v, 180.0)):
             if not (math.isfinite(value) and 0.0 < value <= hi):
-                raise ValueError(f"sonar '{name}': {value!r} is not allowed (a width in (0, {hi:g}] deg)")
+                raise not_allowed("sonar", name, value, f"a width in (0, {hi:g}] deg")
         return BeamPattern(kind, h, v, frequency, None, None, self.sound_speed, source="sonar tx")
 
     # ------------------------------------------------------------------ geometry
