@@ -69,17 +69,9 @@ class SonarMLTIntegrator(SonarIntegrator):
     bootstrap        0        bootstrap paths per ping; 0 takes half of ``spp`` (at least 4x chains)
     ================ ======== =================================================================
 
-    Why these defaults (measured on ``scenes_xml/``, relative L2 error against a 1M-spp reference
-    at equal spp): with a target per ping, ``b`` of every ping comes from that ping's uniform paths
-    and its error (the CV^2 of ``f``) scales all bins of the ping, which bounds any gain over path
-    tracing to 1.4-1.8x on these scenes (`benchmarks/mlt_oracle.py`); the best per-ping settings
-    were the ones closest to path tracing (large_step 0.7, 2^16 short chains). One target over the
-    scan shares ``b`` (its error falls by the number of pings): on the glossy corridor at 16384 spp
-    the per-ping mode lost to path tracing at every setting, the scan mode is level with it (RMS
-    relative L2 over 8 seeds 0.026 against 0.027; single renders range 0.013-0.043, so an earlier
-    3-seed figure of 0.015 against 0.034 was luck). It needs long chains (few, 2^13, so that they
-    forget the bootstrap's spread of starts over pings) and mostly small steps (0.1 large): 2^16
-    chains or large_step 0.3-0.5 did worse.
+    The defaults are the best settings measured on ``scenes_xml/`` (see the README's Benchmarks
+    section and ``benchmarks/mlt.py``): one target over the scan, few long chains (about 2^13 in
+    all) and mostly small steps.
 
     ``spp`` counts path evaluations per ping (bootstrap plus chains x mutations), so equal
     ``spp`` means about equal work for ``sonar_tof`` and ``sonar_mlt``.
