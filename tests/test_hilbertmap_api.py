@@ -110,7 +110,9 @@ def test_surfaces_from_a_shared_grid_equal_their_own(fitted):
 
 def test_evaluation_report_prints_short_and_keeps_its_arrays(fitted):
     V, F = box_mesh()
+    snap = _snapshot(fitted)
     r = metrics.evaluate(fitted, V, F, n_surface=1000, n_free=5000, resolution=0.2)
+    _unchanged(fitted, snap)  # scoring a map is a query too
     text = repr(r)
     assert len(text) < 2000 and str(r) == text
     assert f"auc={r['auc']:.4g}" in text and "meshes=<ridge:" in text
