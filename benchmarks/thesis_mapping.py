@@ -225,7 +225,7 @@ def main(argv=None) -> int:
         if name.startswith("1x3"):
             plot_half_region(hm, "z", 0.0, truth=truth, extent=((-6, 6), (-5, 5)),
                              path=os.path.join(args.out, f"half_{name}.png"))
-        mv, mf = r["_meshes"]["ridge"]
+        mv, mf = r.meshes["ridge"]
         write_mesh(os.path.join(args.out, f"ridge_{name}.ply"), mv, mf)
         thin = hm._thin(samples)
         entry = {"what": what, "beam_stride": stride, "n_pings": int(samples.info["n_pings"]),
@@ -261,7 +261,7 @@ def main(argv=None) -> int:
         hm, samples, r = kept[args.sklearn_set]
         try:
             # the samples our fit learnt from (after its per-voxel thinning)
-            sk = sklearn_comparison(hm._thin(samples), hm, r["_points"], bands, int(hm.n_passes), args.seed)
+            sk = sklearn_comparison(hm._thin(samples), hm, r.points, bands, int(hm.n_passes), args.seed)
             ours = report["experiments"][args.sklearn_set]
             sk["speed_ratio_fit"] = sk["total_s"] / max(hm.timings_["features_s"] + hm.timings_["sgd_s"], 1e-9)
             sk["ours_auc"] = ours["metrics"]["auc"]
@@ -281,8 +281,8 @@ def main(argv=None) -> int:
             for name, (hm, samples, r) in kept.items():
                 if name not in ("1x3", "21x100", "21x10"):
                     continue
-                true_pts = r["_points"]["surface"]
-                oc = octomap_anchor(samples, r["_points"], truth, args.octomap_resolution, true_pts, bands)
+                true_pts = r.points["surface"]
+                oc = octomap_anchor(samples, r.points, truth, args.octomap_resolution, true_pts, bands)
                 report["octomap"][name] = _clean(oc)
     print(json.dumps(_clean(report), indent=1))
     return 0

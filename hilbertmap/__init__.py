@@ -1,14 +1,22 @@
 """hilbertmap: continuous 3-D occupancy maps learnt from sonar scans (Hilbert maps, thesis ch. 4).
 
-Reads a scan only through its documented attributes (``data`` / ``intensity``, ``ranges``,
-``poses``, ``range_min``, ``range_max``, ``beam_pattern``, ``beamwidth_h``, ``beamwidth_v``), so it
-maps scans from any source; it does not import ``mitsonar``.
+Reads a scan only through the attributes of :class:`~hilbertmap.scanlike.ScanLike` (``data`` /
+``intensity``, ``ranges``, ``poses``, ``range_min``, ``range_max``, ``beamwidth_h``,
+``beamwidth_v``, optionally ``beam_pattern``), so it maps scans from any source; it does not
+import ``mitsonar``.
 
     from hilbertmap import HilbertMap
     hm = HilbertMap(n_inducing=3000).fit(scans)
     p = hm.predict_proba(points)            # (N, 3) -> (N,) in [0, 1]
-"""
-from .model import HilbertMap, MapSlice
-from .mesh import read_mesh, write_mesh
 
-__all__ = ["HilbertMap", "MapSlice", "write_mesh", "read_mesh"]
+Modules: :mod:`~hilbertmap.model` (the estimator), :mod:`~hilbertmap.sgd` (its training steps),
+:mod:`~hilbertmap.surfaces` (surfaces and slices), :mod:`~hilbertmap.persistence` (the file
+format), :mod:`~hilbertmap.embedding` and :mod:`~hilbertmap.classify` (scans to samples),
+:mod:`~hilbertmap.metrics` (scores against known geometry), :mod:`~hilbertmap.plots`.
+"""
+from .mesh import read_mesh, write_mesh
+from .model import HilbertMap
+from .scanlike import ScanLike
+from .surfaces import MapSlice
+
+__all__ = ["HilbertMap", "MapSlice", "ScanLike", "write_mesh", "read_mesh"]

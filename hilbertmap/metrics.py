@@ -6,7 +6,7 @@ ranges of a ping's first echo (the surfaces that answered); free test points whe
 a ping's first echo and in its line of sight (so the inside of walls, acoustic shadows and surfaces
 that never returned an echo do not count).
 
-Comparing maps: ``evaluate`` returns the test points it drew (``_points``), and another map (the
+Comparing maps: ``evaluate`` returns the test points it drew (``report.points``), and another map (the
 OctoMap anchor of ``benchmarks/thesis_mapping.py``) is scored on exactly those points, its unknown
 cells counting as p = 0.5. The insonified tests depend only on the pings, the same for both maps,
 but the free points are also kept only inside ``hm.seen`` (0.25 m voxels holding one of this map's
@@ -16,7 +16,8 @@ reported on all insonified free points (``all_*``), with ``free_seen_share``, th
 the filter keeps; the surface points are not filtered by it. The extracted surfaces are scored on
 the same true-surface points for both.
 
-:func:`evaluate` returns a flat-ish dict (JSON-ready):
+:func:`evaluate` returns an :class:`EvaluationReport`: a dict of numbers (JSON-ready, and short
+to print) whose ``meshes`` and ``points`` attributes hold the surfaces and test points it used:
 
 ``auc``                AUC of p: points on the true surfaces against free points >= 0.1 m away
 ``auc_band_<a>_<b>``   the same against free points a..b metres from a surface (0.1-0.3 is the band
@@ -41,10 +42,54 @@ the same true-surface points for both.
 from __future__ import annotations
 
 import math
+import textwrap
 
 import numpy as np
 
 from . import geometry as geo
+from .surfaces import plateau_step, sample_grid
+
+
+class EvaluationReport(dict):
+    """The metrics of :func:`evaluate`: a dict of numbers (and ``params``, a dict), JSON-ready.
+
+    The arrays it was computed from are attributes, not entries, so printing the report shows
+    numbers only:
+
+    ``meshes``  ``{method: (vertices, faces)}`` of the extracted surfaces
+    ``points``  the test points: ``surface`` (on the true surfaces), ``free`` and ``d_free`` (free
+                points inside ``hm.seen`` and their distance to the truth), ``free_all`` and
+                ``d_free_all`` (every insonified free point)
+
+    ``report["_meshes"]`` and ``report["_points"]`` (the spelling of the plain dict this used to
+    be) still give them.
+    """
+
+    def __init__(self, metrics: dict, meshes: dict, points: dict):
+        super().__init__(metrics)
+        self.meshes = meshes
+        self.points = points
+
+    def __missing__(self, key):
+        if key == "_meshes":
+            return self.meshes
+        if key == "_points":
+            return self.points
+        raise KeyError(key)
+
+    def __repr__(self) -> str:
+        def fmt(v):
+            return f"{v:.4g}" if isinstance(v, float) else repr(v)
+
+        items = [f"{k}={fmt(v)}" for k, v in self.items() if not isinstance(v, dict)]
+        items += [f"{k}=<dict of {len(v)}>" for k, v in self.items() if isinstance(v, dict)]
+        items.append("meshes=<" + ", ".join(f"{k}: {len(f)} faces" for k, (_, f) in self.meshes.items()) + ">")
+        items.append("points=<" + ", ".join(f"{k}: {len(p)}" for k, p in self.points.items()) + ">")
+        text = "EvaluationReport(" + ", ".join(items) + ")"
+        return textwrap.fill(text, width=100, subsequent_indent="    ", break_long_words=False,
+                             break_on_hyphens=False)
+
+    __str__ = __repr__
 
 
 def auc(pos: np.ndarray, neg: np.ndarray) -> float:
@@ -96,7 +141,7 @@ def surface_distances(pred_v, pred_f, true_v, true_f, true_points, rng, n: int =
 def evaluate(hm, vertices, faces, *, surfaces=("ridge", "level"), n_surface: int = 20000, n_free: int = 200000,
              bands=((0.1, 0.3), (0.3, 1.0), (1.0, math.inf)), taus=(0.1, 0.2), slice_axis="z",
              slice_value=None, slice_resolution: float = 0.02, resolution=None, random_state=0,
-             surface_bounds=None) -> dict:
+             surface_bounds=None) -> EvaluationReport:
     """Metrics of a fitted :class:`~hilbertmap.HilbertMap` against the true mesh (see module doc)."""
     rng = np.random.default_rng(random_state)
     V = np.asarray(vertices, dtype=np.float64)
@@ -119,11 +164,11 @@ def evaluate(hm, vertices, faces, *, surfaces=("ridge", "level"), n_surface: int
     out.update({f"all_{k}": v for k, v in point_metrics(p_surf, p_free_all, d_free_all, bands).items()})
     out["free_seen_share"] = float(seen.mean()) if len(seen) else float("nan")
 
-    # --- extracted surfaces ----------------------------------------------------------------
+    # --- extracted surfaces: from one grid of probabilities ------------------------------------
     meshes = {}
+    grid = sample_grid(hm, resolution, surface_bounds) if len(surfaces) else None
     for method in surfaces:
-        kw = dict(resolution=resolution, bounds=surface_bounds)
-        mv, mf = hm.surface("ridge" if method == "ridge" else "level", **kw)
+        mv, mf = hm.surface("ridge" if method == "ridge" else "level", grid=grid)
         meshes[method] = (mv, mf)
         d_acc, d_comp = surface_distances(mv, mf, V, F, surf, rng)
         out.update(_stats(f"{method}_acc", d_acc))
@@ -137,9 +182,8 @@ def evaluate(hm, vertices, faces, *, surfaces=("ridge", "level"), n_surface: int
     out["params"] = dict(hm.get_params(), lengthscale_=float(hm.lengthscale_),
                          n_components_=int(getattr(hm, "n_components_", -1)),
                          n_samples_seen_=int(hm.n_samples_seen_))
-    out["_meshes"] = meshes
-    out["_points"] = dict(surface=surf, free=free, d_free=d_free, free_all=free_all, d_free_all=d_free_all)
-    return out
+    points = dict(surface=surf, free=free, d_free=d_free, free_all=free_all, d_free_all=d_free_all)
+    return EvaluationReport(out, meshes, points)
 
 
 def point_metrics(p_surf, p_free, d_free, bands=((0.1, 0.3), (0.3, 1.0), (1.0, math.inf))) -> dict:
@@ -315,7 +359,5 @@ def _climb(hm, P, fixed_axis, max_shift=None, n=31):
     ts = np.linspace(0, step, n)
     pts = P[:, None, :] + ts[None, :, None] * nrm[:, None, :]
     f = hm.decision_function(pts.reshape(-1, 3)).reshape(len(P), n)
-    from .model import plateau_step
-
     # the same rule as HilbertMap.ridge_surface: the wall's face, not the maximum in its shadow
     return P + plateau_step(f, ts, 0.1)[:, None] * nrm

@@ -3,12 +3,15 @@
     mitsonar map scans/*.exr -o map.npz [--inducing 3000] [--plot slices.png] [--mesh map.ply]
 
 The main CLI calls :func:`add_subcommands`. Every failure the user can cause ends in one line on
-stderr and a non-zero exit code.
+stderr and a non-zero exit code. The output paths are checked before any scan is read; the files
+are written under temporary names in their own folders and renamed only when all are written, so
+a failed run leaves nothing behind.
 """
 from __future__ import annotations
 
 import os
 import sys
+import tempfile
 
 EXIT_ERROR = 1
 EXIT_USAGE = 2
@@ -18,8 +21,9 @@ def add_subcommands(subparsers) -> None:
     m = subparsers.add_parser(
         "map", help="learn a 3-D occupancy map (Hilbert map) from scan files",
         description="Learn a continuous 3-D occupancy map (Hilbert map, thesis chapter 4) from scans "
-                    "(.exr or .npz written by `mitsonar render` or Scan.save) and save it as .npz.")
-    m.add_argument("scans", nargs="+", help="scan files (.exr or .npz) or raw SeaNet logs from `mitsonar record`")
+                    "(.exr or .npz written by `mitsonar render` or Scan.save, or .bin raw SeaNet logs "
+                    "written by `mitsonar record`) and save it as .npz.")
+    m.add_argument("scans", nargs="+", help="scan files (.exr or .npz) or raw SeaNet logs (.bin) from `mitsonar record`")
     m.add_argument("-o", "--output", required=True, help="map file to write (.npz)")
     m.add_argument("--inducing", type=int, default=3000, help="Nystroem inducing points (default 3000)")
     m.add_argument("--passes", type=int, default=None, help="SGD passes over the samples (default: the map's)")
@@ -51,6 +55,100 @@ def _map_error(exc: Exception) -> str:
     return msg
 
 
+# What `map` reads: scans by extension, raw logs by their magic bytes (whatever the extension).
+SCAN_EXTENSIONS = (".exr", ".npz")
+LOG_EXTENSION = ".bin"
+ACCEPTED = ".exr or .npz scans, or .bin raw SeaNet logs"
+
+
+def _output_problem(option: str, path: str) -> str | None:
+    """Why ``path`` cannot be written (None if it can): its folder exists, is a folder and is
+    writable, and the path itself is not a folder."""
+    folder = os.path.dirname(os.path.abspath(path))
+    shown = os.path.dirname(path) or "."
+    if os.path.isdir(path):
+        return f"{option} {path}: is a folder, not a file name"
+    if not os.path.exists(folder):
+        return f"{option} {path}: the folder {shown} does not exist"
+    if not os.path.isdir(folder):
+        return f"{option} {path}: {shown} is not a folder"
+    if not os.access(folder, os.W_OK | os.X_OK):
+        return f"{option} {path}: cannot write in the folder {shown} (permission denied)"
+    return None
+
+
+class _Outputs:
+    """Files written under temporary names next to their final ones, renamed by :meth:`commit`;
+    :meth:`discard` removes whatever was not committed."""
+
+    def __init__(self):
+        self.pending = []  # (temporary, final)
+
+    def temporary(self, final: str) -> str:
+        folder, name = os.path.split(os.path.abspath(final))
+        stem, ext = os.path.splitext(name)
+        # the extension stays last: the mesh and picture writers choose the format by it
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{stem}.", suffix=f".partial{ext}")
+        os.close(fd)
+        self.pending.append((tmp, final))
+        return tmp
+
+    def commit(self) -> None:
+        """Rename every file into place; if one rename fails, remove those already renamed."""
+        umask = os.umask(0)
+        os.umask(umask)
+        done = []
+        try:
+            for tmp, final in self.pending:
+                os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a plain open would give these
+                os.replace(tmp, final)
+                done.append(final)
+        except OSError:
+            for final in done:
+                os.remove(final)
+            raise
+        self.pending = []
+
+    def discard(self) -> None:
+        for tmp, _ in self.pending:
+            try:
+                os.remove(tmp)
+            except OSError:
+                pass
+        self.pending = []
+
+
+def _read_scans(paths):
+    """(scans, None) or (None, the one-line reason) for the scan files and raw logs given."""
+    from mitsonar import load_scan  # lazily: the map command needs no renderer
+    from mitsonar.micron import LOG_MAGIC, replay
+
+    scans = []
+    for path in paths:
+        ext = os.path.splitext(path)[1].lower()
+        try:
+            with open(path, "rb") as fh:
+                is_log = fh.read(len(LOG_MAGIC)) == LOG_MAGIC
+            # A device log holds whole turns of a real (or virtual) head: each becomes a scan.
+            if is_log:
+                got = replay(path)
+                if not got:
+                    return None, (f"{path}: no complete scan in the log (the recording ends before the head "
+                                  "finished its first sweep)")
+                scans.extend(got)
+            elif ext == LOG_EXTENSION:
+                return None, (f"{path}: not a raw SeaNet log (it does not start with the log header "
+                              f"{LOG_MAGIC.decode()!r} that `mitsonar record` writes)")
+            elif ext not in SCAN_EXTENSIONS:
+                return None, f"{path}: map reads {ACCEPTED}, not {ext or 'a file without extension'}"
+            else:
+                scans.append(load_scan(path))
+        except Exception as exc:  # one line: which file, and why
+            reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            return None, f"{path}: cannot read the scan ({reason})"
+    return scans, None
+
+
 def cmd_map(args) -> int:
     if args.inducing is None or args.inducing < 1:
         return _fail("--inducing must be a positive integer", EXIT_USAGE)
@@ -65,34 +163,22 @@ def cmd_map(args) -> int:
         return _fail(f"{args.mesh}: meshes are written as .ply or .obj", EXIT_USAGE)
     if args.plot and os.path.splitext(args.plot)[1].lower() not in (".png", ".pdf", ".svg", ".jpg"):
         return _fail(f"{args.plot}: pictures are written as .png, .pdf, .svg or .jpg", EXIT_USAGE)
+    # every output before any input is read: a bad path must not cost a fit
+    for option, path in (("-o", args.output), ("--mesh", args.mesh), ("--plot", args.plot)):
+        problem = path and _output_problem(option, path)
+        if problem:
+            return _fail(problem)
     for path in args.scans:
         if not os.path.exists(path):
             return _fail(f"{path}: no such file")
         if os.path.isdir(path):
             return _fail(f"{path}: is a directory, not a scan file")
 
-    from mitsonar import load_scan  # lazily: the map command needs no renderer
-    from mitsonar.micron import LOG_MAGIC, replay
+    scans, problem = _read_scans(args.scans)
+    if problem:
+        return _fail(problem)
 
-    scans = []
-    for path in args.scans:
-        try:
-            with open(path, "rb") as fh:
-                is_log = fh.read(len(LOG_MAGIC)) == LOG_MAGIC
-            # A device log holds whole turns of a real (or virtual) head: each becomes a scan.
-            if is_log:
-                got = replay(path)
-                if not got:
-                    return _fail(f"{path}: no complete scan in the log (the recording ends before the head "
-                                 "finished its first sweep)")
-                scans.extend(got)
-            else:
-                scans.append(load_scan(path))
-        except Exception as exc:  # one line: which file, and why
-            reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            return _fail(f"{path}: cannot read the scan ({reason})")
-
-    from hilbertmap import HilbertMap, write_mesh
+    from hilbertmap import HilbertMap
 
     params = dict(n_inducing=args.inducing, random_state=args.seed, source=args.source)
     if args.passes is not None:
@@ -102,35 +188,50 @@ def cmd_map(args) -> int:
         hm.fit(scans)
     except ValueError as exc:
         return _fail(_map_error(exc))
+    V = F = None
     if args.mesh:  # before anything is written: a grid too fine for the region fails here
         try:
             V, F = hm.surface(args.surface, resolution=args.resolution)
         except ValueError as exc:
             return _fail(_map_error(exc))
+    outputs = _Outputs()
     try:
-        hm.save(args.output)
-    except OSError as exc:
-        return _fail(f"{args.output}: {exc.strerror or exc}")
-    written = [args.output]
-    if args.mesh:
+        code = _write(args, hm, len(scans), V, F, outputs)
+        if code:
+            return code
         try:
-            write_mesh(args.mesh, V, F)
+            outputs.commit()
         except OSError as exc:
-            return _fail(f"{args.mesh}: {exc.strerror or exc}")
-        written.append(f"{args.mesh} ({len(F)} triangles)")
-    if args.plot:
-        from hilbertmap.plots import plot_slices
-
-        c = hm.sensor_positions_.mean(axis=0) if len(hm.sensor_positions_) else (0.0, 0.0, 0.0)
-        slices = (("z", float(c[2])), ("y", float(c[1])), ("x", float(c[0])))
-        try:
-            plot_slices(hm, slices, path=args.plot, title=f"Hilbert map of {len(scans)} scan(s)")
-        except OSError as exc:
-            return _fail(f"{args.plot}: {exc.strerror or exc}")
-        written.append(args.plot)
+            return _fail(f"{exc.filename or args.output}: cannot put the output in place ({exc.strerror or exc})")
+    finally:
+        outputs.discard()
+    written = [args.output] + ([f"{args.mesh} ({len(F)} triangles)"] if args.mesh else []) + \
+        ([args.plot] if args.plot else [])
     if not args.quiet:
         t = hm.timings_
         print(f"map: {len(scans)} scan(s), {hm.n_schedule_} training samples, "
               f"{len(hm.inducing_points_)} inducing points "
               f"(length-scale {hm.lengthscale_:.3f} m), fit {t['total_s']:.1f} s; wrote {', '.join(written)}")
+    return 0
+
+
+def _write(args, hm, n_scans: int, V, F, outputs: _Outputs) -> int:
+    """Write the map, mesh and plot under temporary names; 0, or the exit code of a failure."""
+    from hilbertmap import write_mesh
+
+    option, path = "-o", args.output
+    try:
+        hm.save(outputs.temporary(args.output))
+        if args.mesh:
+            option, path = "--mesh", args.mesh
+            write_mesh(outputs.temporary(args.mesh), V, F)
+        if args.plot:
+            from hilbertmap.plots import plot_slices
+
+            option, path = "--plot", args.plot
+            c = hm.sensor_positions_.mean(axis=0) if len(hm.sensor_positions_) else (0.0, 0.0, 0.0)
+            slices = (("z", float(c[2])), ("y", float(c[1])), ("x", float(c[0])))
+            plot_slices(hm, slices, path=outputs.temporary(args.plot), title=f"Hilbert map of {n_scans} scan(s)")
+    except OSError as exc:
+        return _fail(f"{option} {path}: {exc.strerror or exc}")
     return 0

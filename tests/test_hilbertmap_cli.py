@@ -137,3 +137,91 @@ def test_map_names_a_log_without_a_complete_scan(tmp_path):
         record(vm.port, str(log), pings=5, settings=HeadSettings.from_scan(scan), timeout=30)
     line = one_error_line(run("map", str(log), "-o", str(tmp_path / "m.npz")))
     assert f"{log}: no complete scan in the log" in line, line
+
+
+# ----------------------------------------------------------------------------- output paths
+@pytest.mark.parametrize("args,expect", [
+    (["-o", "nodir/m.npz"], "-o nodir/m.npz: the folder nodir does not exist"),
+    (["-o", "m.npz", "--plot", "nodir/q.png"], "--plot nodir/q.png: the folder nodir does not exist"),
+    (["-o", "m.npz", "--mesh", "nodir/m.ply"], "--mesh nodir/m.ply: the folder nodir does not exist"),
+    (["-o", "adir.npz"], "-o adir.npz: is a folder, not a file name"),
+    (["-o", "m.npz", "--mesh", "afile/m.ply"], "--mesh afile/m.ply: afile is not a folder"),
+])
+def test_map_checks_every_output_before_reading_scans(tmp_path, args, expect):
+    """The scan is not even a scan: the output's problem is reported first, before any work."""
+    (tmp_path / "bad.npz").write_bytes(b"not a scan")
+    (tmp_path / "adir.npz").mkdir()
+    (tmp_path / "afile").write_text("")
+    before = sorted(os.listdir(tmp_path))
+    line = one_error_line(run("map", "bad.npz", *args, cwd=str(tmp_path)))
+    assert line == f"mitsonar map: error: {expect}", line
+    assert sorted(os.listdir(tmp_path)) == before
+
+
+@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0, reason="root writes anywhere")
+def test_map_refuses_a_folder_it_cannot_write(tmp_path):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        line = one_error_line(run("map", "bad.npz", "-o", "ro/m.npz", cwd=str(tmp_path)))
+    finally:
+        ro.chmod(0o700)
+    assert "-o ro/m.npz: cannot write in the folder ro" in line, line
+
+
+@pytest.mark.parametrize("name,content,expect", [
+    ("garbage.bin", b"\x00\x01garbage", "garbage.bin: not a raw SeaNet log (it does not start with the log header"),
+    ("scan.txt", b"x", "scan.txt: map reads .exr or .npz scans, or .bin raw SeaNet logs, not .txt"),
+])
+def test_map_names_the_kinds_of_input_it_reads(tmp_path, name, content, expect):
+    (tmp_path / name).write_bytes(content)
+    line = one_error_line(run("map", name, "-o", "m.npz", cwd=str(tmp_path)))
+    assert expect in line, line
+    assert sorted(os.listdir(tmp_path)) == [name]
+
+
+def _map_args(*argv):
+    import argparse
+
+    from mitsonar.map_cli import add_subcommands
+
+    parser = argparse.ArgumentParser()
+    add_subcommands(parser.add_subparsers())
+    return parser.parse_args(["map", *argv])
+
+
+def test_map_writes_all_outputs_or_none(scan_files, tmp_path, monkeypatch, capsys):
+    """Outputs go under temporary names and are renamed at the end: a plot that fails after the
+    map and the mesh were written leaves no file at all; a run that succeeds leaves exactly its
+    outputs, with the permissions a plain open would give."""
+    import hilbertmap.plots
+
+    out = [str(tmp_path / n) for n in ("m.npz", "m.ply", "s.png")]
+    args = _map_args(scan_files[0], "-o", out[0], "--mesh", out[1], "--plot", out[2], "--inducing", "100",
+                     "--passes", "1", "--resolution", "0.3")
+
+    def full_disk(*a, **k):
+        raise OSError(28, "No space left on device")
+
+    with monkeypatch.context() as m:
+        m.setattr(hilbertmap.plots, "plot_slices", full_disk)
+        assert args.func(args) != 0
+    err = capsys.readouterr().err.strip()
+    assert err == f"mitsonar map: error: --plot {out[2]}: No space left on device", err
+    assert os.listdir(tmp_path) == []
+
+    assert args.func(args) == 0
+    assert sorted(os.listdir(tmp_path)) == ["m.npz", "m.ply", "s.png"]
+    umask = os.umask(0)
+    os.umask(umask)
+    assert all((os.stat(p).st_mode & 0o777) == 0o666 & ~umask for p in out)
+
+
+def test_map_output_check_reports_an_unwritable_folder(tmp_path, monkeypatch):
+    """The same check in-process, for runs as root (who may write anywhere)."""
+    from mitsonar import map_cli
+
+    monkeypatch.setattr(map_cli.os, "access", lambda path, mode: False)
+    assert map_cli._output_problem("--plot", str(tmp_path / "q.png")) == \
+        f"--plot {tmp_path / 'q.png'}: cannot write in the folder {tmp_path} (permission denied)"
