@@ -121,7 +121,8 @@ class _Outputs:
 def _read_scans(paths):
     """(scans, None) or (None, the one-line reason) for the scan files and raw logs given."""
     from mitsonar import load_scan  # lazily: the map command needs no renderer
-    from mitsonar.micron import LOG_MAGIC, replay
+    from mitsonar.rawlog import LOG_MAGIC
+    from mitsonar.recording import replay
 
     scans = []
     for path in paths:
