@@ -78,7 +78,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     import mitsonar  # noqa: F401  (variant and plugins)
-    from mitsonar.compare import CompareError, compare, jsonable, load_integrator, parse_budgets, parse_integrators
+    from mitsonar.compare import CompareError, compare, jsonable, load_integrator
+    from mitsonar.compare.parsing import parse_budgets, parse_integrators
 
     try:
         names = parse_integrators(args.integrators)

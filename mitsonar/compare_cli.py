@@ -42,7 +42,8 @@ def add_subcommands(subparsers):
 
 
 def cmd_compare(args):
-    from .compare import compare, parse_budgets, parse_integrators, parse_params, parse_regions
+    from .compare import compare
+    from .compare.parsing import parse_budgets, parse_integrators, parse_params, parse_regions
 
     # Parse everything before the slow part starts, so typos fail at once.
     names = parse_integrators(args.integrators)
