@@ -45,7 +45,8 @@ def cmd_compare(args):
     from .compare import compare
     from .compare.parsing import parse_budgets, parse_integrators, parse_params, parse_regions
 
-    # Parse everything before the slow part starts, so typos fail at once.
+    # Parse everything before the slow part starts, so typos fail at once (compare checks the
+    # rest, the scene, the integrators and the output folder, before it creates anything).
     names = parse_integrators(args.integrators)
     budgets = parse_budgets(args.budget)
     params = parse_params(args.param)

@@ -18,10 +18,11 @@ errors are independent, so their squares add).
 
 Modules: `.engine` (the run, step by step), `.budget` (timing, spp planning and search),
 `.reference` (the reference and its cache), `.metrics` (errors and ratios), `.figures`,
-`.output` (writing the results), `.parsing` (the command line's values), `.integrators`,
+`.output` (the output folder), `.parsing` (the command line's values), `.integrators`,
 `.common` (defaults, seeds, the error type).
 
-Output folder:
+Output folder (created only once the inputs are checked, removed if this run created it and
+fails; its files are written under temporary names and renamed at the end):
 
 ===================================== =========================================================
 file                                  content

@@ -1,5 +1,9 @@
 """The comparison run, `compare`, as its steps: check the settings, load the scene and the
-integrators, calibrate, fill every time budget, get the reference, score, warn, write."""
+integrators, calibrate, fill every time budget, get the reference, score, warn, write.
+
+Nothing is created before the settings, the scene and the integrators are known to be good; the
+output folder is made only for the reference and the results (`mitsonar.compare.output`).
+"""
 from __future__ import annotations
 
 import datetime
@@ -19,7 +23,7 @@ from .common import (CALIBRATION_START_SPP, DEFAULT_BUDGETS, DEFAULT_INTEGRATORS
 from .figures import plot_convergence, plot_polar_grid
 from .integrators import describe, load_integrator, min_spp
 from .metrics import equal_time_ratios, region_mask, score, self_errors, summarise
-from .output import write_json
+from .output import OutputFolder, check_output_folder, write_json
 from .parsing import parse_budgets, parse_integrators
 from .reference import load_or_render_reference, render_reference, scene_digest
 from .render_helpers import scene_sonar
@@ -49,7 +53,8 @@ class Settings:
 def check_settings(scene_path, integrators, budgets, output_dir, reference_spp, seed, repeats, max_depth,
                    integrator_params, regions, reference_factor, calibration_seconds, warm, plots) -> Settings:
     """`compare`'s arguments checked and normalised; `CompareError` (one line) for the first bad
-    one. Creates the output folder."""
+    one. Reads and creates nothing but checks that the scene file exists and that the output
+    folder can be made."""
     names = parse_integrators(integrators)
     budgets = parse_budgets(budgets)
     labels = labels_for(names)
@@ -76,12 +81,7 @@ def check_settings(scene_path, integrators, budgets, output_dir, reference_spp, 
     if not os.path.isfile(scene_path):
         raise CompareError(f"scene file {scene_path!r} does not exist")
     output_dir = os.fspath(output_dir)
-    if os.path.exists(output_dir) and not os.path.isdir(output_dir):
-        raise CompareError(f"output folder {output_dir!r} exists and is not a folder")
-    try:
-        os.makedirs(output_dir, exist_ok=True)
-    except OSError as exc:
-        raise CompareError(f"-o {output_dir!r}: cannot create the output folder ({exc.strerror})") from None
+    check_output_folder(output_dir)
     return Settings(scene_path, names, labels, budgets, output_dir, reference_spp, int(seed), int(repeats),
                     max_depth, params, regions, float(reference_factor), calibration_seconds, bool(warm), bool(plots))
 
@@ -285,23 +285,24 @@ def build_result(s: Settings, bench: Bench, calibrations, ref_info, auto, runs, 
     }
 
 
-def write_outputs(output_dir, result, bench: Bench, ref, first_renders, plots) -> None:
-    """``renders.npz``, the pictures (``plots``) and ``compare.json`` in ``output_dir``; fills
-    ``result["files"]``."""
+def write_outputs(folder: OutputFolder, result, bench: Bench, ref, first_renders, plots) -> None:
+    """``renders.npz``, the pictures (``plots``) and ``compare.json``, staged in ``folder`` and
+    committed together; fills ``result["files"]``."""
     sensor, s = bench.sensor, result["settings"]
     files = result["files"]
     arrays = {"reference": ref.astype(np.float32), "ranges": sensor.bin_centres(), "bearings_deg": sensor.bearings_deg()}
     arrays.update({f"{lab}@{budget:g}s": h.astype(np.float32) for (lab, budget), h in first_renders.items()})
-    files["renders"] = os.path.join(output_dir, "renders.npz")
-    np.savez_compressed(files["renders"], **arrays)
+    np.savez_compressed(folder.stage("renders.npz"), **arrays)
+    files["renders"] = folder.final("renders.npz")
     if plots:
-        files["convergence"] = os.path.join(output_dir, "convergence.png")
-        plot_convergence(result, files["convergence"])
-        files["polar"] = os.path.join(output_dir, "polar.png")
+        plot_convergence(result, folder.stage("convergence.png"))
+        files["convergence"] = folder.final("convergence.png")
         plot_polar_grid(sensor, ref, first_renders, s["integrators"], s["budgets_s"], result["runs"],
-                        files["polar"], result["reference"])
-    files["json"] = os.path.join(output_dir, "compare.json")
-    write_json(result, files["json"])
+                        folder.stage("polar.png"), result["reference"])
+        files["polar"] = folder.final("polar.png")
+    files["json"] = folder.final("compare.json")
+    write_json(result, folder.stage("compare.json"))
+    folder.commit()
 
 
 def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS, output_dir="cmp",
@@ -315,7 +316,8 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
     integrators         plugin names (or ``"a,b"``); the first is the baseline of the ratios.
                         A name given twice is labelled ``name#2`` (e.g. to test the tool)
     budgets             seconds per render (or ``"2,4,8,16"``)
-    output_dir          folder for the results and the cached reference (created)
+    output_dir          folder for the results and the cached reference (created, and removed
+                        again if it was created and the run fails)
     reference_spp       paths per ping of the reference; None: ``reference_factor`` times the
                         spp sonar_tof reached at the largest budget, rounded up to a power of
                         two, or any larger reference already cached for the same key
@@ -335,7 +337,7 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
     =================== =======================================================================
 
     Returns the dict written to ``output_dir/compare.json`` (fields in `mitsonar.compare`'s
-    docstring). Raises `CompareError` (one line) for bad input.
+    docstring). Raises `CompareError` (one line) for bad input, before anything is created.
     """
     s = check_settings(scene_path, integrators, budgets, output_dir, reference_spp, seed, repeats, max_depth,
                        integrator_params, regions, reference_factor, calibration_seconds, warm, plots)
@@ -344,18 +346,19 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
     calibrations = calibrate_all(bench, s, say)
     pending = time_runs(bench, s, calibrations, say)
     ref_spp, auto = reference_spp_for(bench, s, pending)
-    ref, ref_diff, ref_info = load_or_render_reference(
-        bench.scene, bench.sensor, bench.scene_bytes, s.output_dir, ref_spp, s.seed, bench.max_depth, auto=auto,
-        log=say, render=render_reference)
-    ranges = bench.sensor.bin_centres()
-    masks = {rn: region_mask(ranges, lo, hi) for rn, (lo, hi) in s.regions.items()}
-    ref_info["regions"] = {rn: self_errors(ref, ref_diff, m) for rn, m in masks.items()}
-    runs, first_renders = score_runs(pending, ref, ref_info, masks, say)
-    warnings = collect_warnings(runs, s.labels, ref_info["self_rel_l2"], s.warm)
-    result = build_result(s, bench, calibrations, ref_info, auto, runs, warnings)
-    for w in warnings:
-        say(f"warning: {w}")
-    write_outputs(s.output_dir, result, bench, ref, first_renders, s.plots)
+    with OutputFolder(s.output_dir) as folder:
+        ref, ref_diff, ref_info = load_or_render_reference(
+            bench.scene, bench.sensor, bench.scene_bytes, folder.path, ref_spp, s.seed, bench.max_depth, auto=auto,
+            log=say, render=render_reference)
+        ranges = bench.sensor.bin_centres()
+        masks = {rn: region_mask(ranges, lo, hi) for rn, (lo, hi) in s.regions.items()}
+        ref_info["regions"] = {rn: self_errors(ref, ref_diff, m) for rn, m in masks.items()}
+        runs, first_renders = score_runs(pending, ref, ref_info, masks, say)
+        warnings = collect_warnings(runs, s.labels, ref_info["self_rel_l2"], s.warm)
+        result = build_result(s, bench, calibrations, ref_info, auto, runs, warnings)
+        for w in warnings:
+            say(f"warning: {w}")
+        write_outputs(folder, result, bench, ref, first_renders, s.plots)
     return result
 
 
