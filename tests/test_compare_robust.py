@@ -1,4 +1,7 @@
-"""`mitsonar compare`'s rough edges: nothing left behind on failure."""
+"""`mitsonar compare`'s rough edges: nothing left behind on failure, timing that a busy machine
+does not fool (tested with fake clocks, never with timing thresholds), the asked and achieved
+seconds side by side."""
+import json
 import os
 import subprocess
 import sys
@@ -113,3 +116,98 @@ def test_results_are_written_under_temporary_names_then_renamed(small_scene, tmp
     assert len(staged) == 2 and all(n.startswith(".") and ".partial" in n for n in staged), seen
     assert sorted(os.listdir(out)) == sorted(["compare.json", "renders.npz",
                                               os.path.basename(result["reference"]["file"])])
+
+
+# ------------------------------------------------------------------ 2. timing on a busy machine
+class FakeMachine:
+    """A render whose time is ``spp * per_spp`` seconds on a fake clock; the first render at
+    ``slow_spp`` is slowed ``factor`` times, as by another process on the machine."""
+
+    def __init__(self, per_spp=1e-5, slow_spp=None, factor=4.0):
+        self.now, self.per_spp, self.slow_spp, self.factor, self.spps = 0.0, per_spp, slow_spp, factor, []
+
+    def clock(self):
+        return self.now
+
+    def render(self, spp):
+        slowed = spp == self.slow_spp and spp not in self.spps
+        self.now += spp * self.per_spp * (self.factor if slowed else 1.0)
+        self.spps.append(spp)
+
+
+def test_calibration_takes_the_median_of_several_timings(mitsonar_mod):
+    from mitsonar.compare import calibrate, plan_spp
+
+    clean = FakeMachine()
+    largest = max(p[0] for p in calibrate(clean.render, 0.05, start_spp=256, clock=clean.clock)["points"])
+    busy = FakeMachine(slow_spp=largest)
+    cal = calibrate(busy.render, 0.05, start_spp=256, clock=busy.clock)
+    spps = sorted({p[0] for p in cal["points"]})
+    assert spps[-1] == largest
+    assert sum(p[0] == spps[-1] for p in cal["points"]) == 3 and sum(p[0] == spps[-2] for p in cal["points"]) == 3
+    true_spp = 1.0 / 1e-5
+    assert plan_spp(cal["points"], 1.0) == pytest.approx(true_spp, rel=0.02)
+    # One timing each (the former calibration) lets the slowed render set the plan.
+    once = FakeMachine(slow_spp=largest)
+    one = calibrate(once.render, 0.05, start_spp=256, clock=once.clock, tries=1)
+    assert plan_spp(one["points"], 1.0) < 0.5 * true_spp
+
+
+def test_a_larger_budget_never_plans_about_the_same_spp(mitsonar_mod):
+    from mitsonar.compare.budget import BETA_RANGE, plan_spp, search_spp
+
+    # Timings where one slowed render at 20000 spp says it takes 1 s (it takes 0.2 s).
+    timings = [[10000, 0.1], [20000, 1.0]]
+    tried = []
+
+    def timed(spp):
+        tried.append(spp)
+        return None, spp * 1e-5, 0, 0.0, 1
+
+    assert plan_spp(timings, 1.0) == 20000  # the plan alone believes the slowed render
+    found = search_spp(timed, 1.0, timings, previous=(0.5, 50000))
+    assert tried[0] == int(50000 * 2 ** (1 / BETA_RANGE[1]))
+    assert found["spp"] > 50000 and found["attempts"][-1] == [found["spp"], found["spp"] * 1e-5]
+
+
+def fake_run(label, budget, took):
+    return {"integrator": label, "budget_s": budget, "seconds_mean": took, "spp": 1000, "rel_l2": 0.1,
+            "rel_l1": 0.05}
+
+
+def test_runs_off_their_budget_get_one_warning_line():
+    from mitsonar.compare import budget_warning, off_budget
+
+    runs = [fake_run("sonar_tof", 1.0, 1.19), fake_run("sonar_tof", 2.0, 2.5), fake_run("sonar_mlt", 1.0, 0.75),
+            fake_run("sonar_mlt", 2.0, 1.7)]
+    assert [(r["integrator"], r["budget_s"]) for r in off_budget(runs)] == [("sonar_tof", 2.0), ("sonar_mlt", 1.0)]
+    line = budget_warning(runs)
+    assert "\n" not in line and "20 %" in line
+    assert "sonar_tof asked 2 s took 2.5 s" in line and "sonar_mlt asked 1 s took 0.75 s" in line
+    assert budget_warning(runs[:1]) is None
+
+
+def test_printed_report_shows_asked_and_achieved_seconds():
+    from mitsonar.compare_cli import report
+
+    result = {"reference": {"integrator": "sonar_tof", "spp": 4096, "self_rel_l2": 0.01, "from_cache": True},
+              "runs": [fake_run("sonar_tof", 1.0, 1.05), fake_run("sonar_mlt", 1.0, 1.6)],
+              "warnings": ["something"], "files": {"json": "cmp/compare.json"}}
+    lines = report(result).splitlines()
+    assert "asked s" in lines[1] and "took s" in lines[1]
+    assert lines[1].index("asked s") < lines[1].index("took s")
+    assert lines[2].split()[:3] == ["sonar_tof", "1", "1.05"] and not lines[2].endswith("*")
+    assert lines[3].split()[:3] == ["sonar_mlt", "1", "1.6"] and lines[3].endswith("*")
+    assert any(ln.startswith("* took more than 20 %") for ln in lines)
+    assert "warning: something" in lines and lines[-1] == "wrote cmp/compare.json"
+
+
+def test_json_reports_asked_and_achieved_seconds(small_scene, tmp_path):
+    from mitsonar.compare import compare
+
+    result = compare(small_scene, "sonar_tof", (0.01,), str(tmp_path / "cmp"), **QUICK)
+    run = json.loads((tmp_path / "cmp" / "compare.json").read_text())["runs"][0]
+    assert run["budget_s"] == 0.01 and run["seconds_mean"] > 0
+    assert run["seconds_vs_budget"] == pytest.approx(run["seconds_mean"] / 0.01)
+    off = any("off their time budget" in w for w in result["warnings"])
+    assert off == (abs(run["seconds_vs_budget"] - 1) > 0.2)

@@ -2,7 +2,7 @@
 
 `compare` times every integrator at growing spp with its kernels compiled (calibration), then for
 every time budget searches the spp that fills it (a local power law of seconds versus spp through
-the timings so far; a render outside 0.75-1.33 of its budget is tried again with a corrected spp),
+the timings so far; a render outside 0.8-1.2 of its budget is tried again with a corrected spp),
 renders ``repeats`` times with different seeds, renders (or reads from the cache in the output
 folder) a high-sample ``sonar_tof`` reference, and scores every render against it. Both sonar
 integrators read ``spp`` as path evaluations per ping, so equal spp is roughly equal work; the
@@ -52,9 +52,11 @@ field                    meaning
 ``reference``            integrator, spp, seeds, seconds, max_depth, self_rel_l2, self_rel_l1,
                          regions {name: {self_rel_l2, self_rel_l1}}, file, key, from_cache
 ``integrators``          per label: type, params, description (the plugin's ``to_string``),
-                         calibration (points [[spp, seconds], ...], warmup_s, compiling)
-``runs``                 one per (integrator, budget): integrator, budget_s, spp, seeds, seconds
-                         (each repeat), seconds_mean, rel_l2, rel_l1, rel_l2_debiased (RMS over
+                         calibration (points [[spp, seconds], ...]: every timing, the two largest
+                         spp timed several times; warmup_s, compiling)
+``runs``                 one per (integrator, budget): integrator, budget_s (asked), spp, seeds,
+                         seconds (each repeat), seconds_mean (achieved), seconds_vs_budget
+                         (seconds_mean / budget_s), rel_l2, rel_l1, rel_l2_debiased (RMS over
                          repeats), rel_l2_each, rel_l1_each, per_ping_rel_l2, per_ping_rel_l1
                          (RMS over repeats; null where the reference ping is empty), regions
                          {name: {rel_l2, rel_l1, rel_l2_debiased}}, attempts ([[spp, seconds],
@@ -67,7 +69,9 @@ field                    meaning
                          1/sqrt(t) convergence), on rel_l2_debiased; > 1 means lower error than
                          the baseline. Regions likewise.
 ``files``                the files written
-``warnings``             e.g. a reference whose own error is not well below the errors measured
+``warnings``             one line each: a reference whose own error is not well below the errors
+                         measured, kernels compiled while timed, runs whose achieved seconds differ
+                         from their budget by more than 20 %
 ======================== ===========================================================================
 
 The scene file's bytes are hashed, not files it refers to (meshes, beam tables): change those and
@@ -75,7 +79,8 @@ delete the cached reference.
 """
 from __future__ import annotations
 
-from .budget import BETA_RANGE, BUDGET_TOLERANCE, MAX_ATTEMPTS, KernelWatch, calibrate, plan_spp
+from .budget import (BETA_RANGE, BUDGET_TOLERANCE, MAX_ATTEMPTS, TIME_TOLERANCE, KernelWatch, budget_warning,
+                     calibrate, off_budget, plan_spp)
 from .common import (CALIBRATION_START_SPP, DEFAULT_BUDGETS, DEFAULT_INTEGRATORS, DEFAULT_REFERENCE_FACTOR,
                      DEFAULT_REPEATS, MAX_SPP, REFERENCE_INTEGRATOR, REFERENCE_NOISE_WARNING, REFERENCE_SEED_OFFSET,
                      SEED_STRIDE, CompareError, jsonable, labels_for)
@@ -108,7 +113,7 @@ def __getattr__(name):
 __all__ = ["BETA_RANGE", "BUDGET_TOLERANCE", "CALIBRATION_START_SPP", "CompareError", "DEFAULT_BUDGETS",
            "DEFAULT_INTEGRATORS", "DEFAULT_REFERENCE_FACTOR", "DEFAULT_REPEATS", "KernelWatch", "MAX_ATTEMPTS",
            "MAX_SPP", "REFERENCE_INTEGRATOR", "REFERENCE_NOISE_WARNING", "REFERENCE_SEED_OFFSET", "SEED_STRIDE",
-           "cached_references", "calibrate", "compare", "equal_time_ratios",
+           "TIME_TOLERANCE", "budget_warning", "cached_references", "calibrate", "compare", "equal_time_ratios",
            "error_metrics", "jsonable", "labels_for", "load_integrator", "load_or_render_reference",
-           "plan_spp", "plot_convergence", "plot_polar_grid", "reference_key", "reference_path",
+           "off_budget", "plan_spp", "plot_convergence", "plot_polar_grid", "reference_key", "reference_path",
            "render_reference", "scan_from_histogram", "scene_digest", "self_errors", "write_json"]

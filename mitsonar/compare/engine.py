@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .budget import KernelWatch, calibrate, plan_spp, search_spp
+from .budget import KernelWatch, budget_warning, calibrate, plan_spp, search_spp
 from .common import (CALIBRATION_START_SPP, DEFAULT_BUDGETS, DEFAULT_INTEGRATORS, DEFAULT_REFERENCE_FACTOR,
                      DEFAULT_REPEATS, MAX_SPP, REFERENCE_INTEGRATOR, REFERENCE_NOISE_WARNING, SEED_STRIDE, WARM_SEED,
                      CompareError, labels_for)
@@ -165,11 +165,13 @@ def time_runs(bench: Bench, s: Settings, calibrations, say) -> list:
             return compiled
 
         timings = [list(p) for p in calibrations[lab]["points"]]
+        previous = None
         for budget in s.budgets:
-            found = search_spp(timed, budget, timings, bench.min_spp[lab], warm_up if s.warm else None)
+            found = search_spp(timed, budget, timings, bench.min_spp[lab], previous, warm_up if s.warm else None)
             spp = found["spp"]
             renders = [found["render"]] + [timed(spp) for _ in range(s.repeats - 1)]
             timings.extend([spp, r[1]] for r in renders[1:] if not r[2])
+            previous = (budget, spp)
             pending.append({"integrator": lab, "budget_s": float(budget), "spp": int(spp),
                             "seeds": [r[4] for r in renders], "seconds": [r[1] for r in renders],
                             "hists": [r[0] for r in renders], "compiled_kernels": [r[2] for r in renders],
@@ -219,8 +221,8 @@ def score_runs(pending, ref, ref_info, masks, say) -> tuple:
 
 
 def collect_warnings(runs, labels, self_l2, warm) -> list:
-    """One line each: a noisy reference, kernels compiled while timed or warming up, runs well
-    over their time budget."""
+    """One line each: a noisy reference, kernels compiled while timed or warming up, runs off
+    their time budget (`budget_warning`)."""
     warnings = []
     finite = [r["rel_l2"] for r in runs if math.isfinite(r["rel_l2"])]
     if finite and math.isfinite(self_l2) and self_l2 > REFERENCE_NOISE_WARNING * min(finite):
@@ -239,11 +241,9 @@ def collect_warnings(runs, labels, self_l2, warm) -> list:
         if n_warm:
             warnings.append(f"{lab} compiled {n_warm} kernel(s) in the untimed warm-up renders at new spp "
                             "(not counted in its seconds): its kernels depend on spp")
-    for r in runs:
-        if r["seconds_mean"] > 1.5 * r["budget_s"] + 0.05:
-            warnings.append(f"{r['integrator']} at {r['budget_s']:g} s took {r['seconds_mean']:.3g} s on average "
-                            "(a busy machine, a compilation, a render time that is not linear in spp, or an spp floor "
-                            "set by the integrator's explicit settings)")
+    off = budget_warning(runs)
+    if off:
+        warnings.append(off)
     return warnings
 
 

@@ -85,7 +85,11 @@ def score(hist, reference, self_l2, masks, region_self_l2) -> dict:
 
 
 def summarise(label, budget, spp, seeds, secs, metrics, regions) -> dict:
-    """One entry of ``runs``: the repeats' `score` results combined as a root mean square."""
+    """One entry of ``runs``: the repeats' `score` results combined as a root mean square.
+
+    ``seconds_vs_budget`` is the mean measured time over the budget (1 when the spp search filled
+    the budget exactly).
+    """
     def stack(key):
         return np.stack([m[key] for m in metrics])
 
@@ -94,6 +98,7 @@ def summarise(label, budget, spp, seeds, secs, metrics, regions) -> dict:
     run = {
         "integrator": label, "budget_s": float(budget), "spp": int(spp), "seeds": seeds,
         "seconds": [float(s) for s in secs], "seconds_mean": float(np.mean(secs)),
+        "seconds_vs_budget": float(np.mean(secs)) / float(budget),
         "rel_l2": rms([m["rel_l2"] for m in metrics]),
         "rel_l1": rms([m["rel_l1"] for m in metrics]),
         "rel_l2_debiased": rms([m["rel_l2_debiased"] for m in metrics]),
