@@ -1,6 +1,7 @@
 """`mitsonar compare`'s rough edges: nothing left behind on failure, timing that a busy machine
 does not fool (tested with fake clocks, never with timing thresholds), the asked and achieved
-seconds side by side."""
+seconds side by side, and a progress bar only on a terminal."""
+import io
 import json
 import os
 import subprocess
@@ -211,3 +212,32 @@ def test_json_reports_asked_and_achieved_seconds(small_scene, tmp_path):
     assert run["seconds_vs_budget"] == pytest.approx(run["seconds_mean"] / 0.01)
     off = any("off their time budget" in w for w in result["warnings"])
     assert off == (abs(run["seconds_vs_budget"] - 1) > 0.2)
+
+
+# ------------------------------------------------------------------ 3. progress of the reference
+class Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_reference_progress_bar_only_on_a_terminal(small_scene, monkeypatch, mitsonar_mod):
+    from mitsonar.compare.reference import render_reference
+    from mitsonar.compare.render_helpers import scene_sonar
+
+    scene = mitsonar_mod.load_scene(small_scene)
+    sensor = scene_sonar(scene)
+    for stream, progress, drawn in ((Terminal(), True, True), (io.StringIO(), True, False),
+                                    (Terminal(), False, False)):
+        monkeypatch.setattr(sys, "stderr", stream)
+        hist, _, info = render_reference(scene, sensor, 4096, 0, 3, progress=progress)
+        monkeypatch.undo()
+        assert hist.shape == (4, 100) and info["spp"] == 4096
+        assert ("reference" in stream.getvalue()) == drawn, stream.getvalue()
+
+
+def test_cli_output_has_no_progress_bar_when_not_on_a_terminal(small_scene, tmp_path):
+    proc = run_cli("compare", small_scene, "--integrators", "sonar_tof", "--budget", "0.01", "--reference-spp",
+                   "8192", "--repeats", "1", "--calibration-seconds", "0.01", "--no-plots", "-o", str(tmp_path / "c"))
+    assert proc.returncode == 0, proc.stderr
+    assert "\r" not in proc.stderr and "spp/s" not in proc.stderr and "it/s" not in proc.stderr
+    assert "asked s" in proc.stdout and "took s" in proc.stdout

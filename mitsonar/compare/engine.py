@@ -333,7 +333,8 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
                         included): steady-state speed of an integrator that compiles kernels
                         per spp. Off: wall-clock time, compilations included (and reported)
     plots               write ``convergence.png`` and ``polar.png``
-    log                 callable taking one line of progress, or None
+    log                 callable taking one line of progress, or None; with it, a progress bar
+                        is drawn on stderr while the reference renders (on a terminal only)
     =================== =======================================================================
 
     Returns the dict written to ``output_dir/compare.json`` (fields in `mitsonar.compare`'s
@@ -349,7 +350,7 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
     with OutputFolder(s.output_dir) as folder:
         ref, ref_diff, ref_info = load_or_render_reference(
             bench.scene, bench.sensor, bench.scene_bytes, folder.path, ref_spp, s.seed, bench.max_depth, auto=auto,
-            log=say, render=render_reference)
+            log=say, progress=log is not None, render=render_reference)
         ranges = bench.sensor.bin_centres()
         masks = {rn: region_mask(ranges, lo, hi) for rn, (lo, hi) in s.regions.items()}
         ref_info["regions"] = {rn: self_errors(ref, ref_diff, m) for rn, m in masks.items()}

@@ -68,7 +68,7 @@ def read_reference(path):
     return hist, diff, info
 
 
-def render_reference(scene, sensor, spp, seed, max_depth, log=None):
+def render_reference(scene, sensor, spp, seed, max_depth, log=None, progress=False):
     """Render the reference with ``sonar_tof`` as two independent halves.
 
     ============ =========================================================================
@@ -77,6 +77,7 @@ def render_reference(scene, sensor, spp, seed, max_depth, log=None):
                  and the next one, so they never coincide with the runs' seeds
     max_depth    surface bounces
     log          callable taking one line of progress, or None
+    progress     show a progress bar (tqdm, on stderr, only where tqdm finds a terminal)
     ============ =========================================================================
 
     Returns ``(hist, half_difference, info)``: the mean of the halves, ``h1 - h2`` (from which
@@ -84,6 +85,7 @@ def render_reference(scene, sensor, spp, seed, max_depth, log=None):
     seeds, seconds, self_rel_l2 and self_rel_l1.
     """
     import mitsuba as mi
+    from tqdm import tqdm
 
     half = max(1, (int(spp) + 1) // 2)
     integrator = mi.load_dict({"type": REFERENCE_INTEGRATOR})
@@ -91,10 +93,20 @@ def render_reference(scene, sensor, spp, seed, max_depth, log=None):
     seeds = [base & 0xFFFFFFFF, (base + 1) & 0xFFFFFFFF]
     t0 = time.perf_counter()
     halves = []
-    for s in seeds:
-        if log:
-            log(f"reference: {REFERENCE_INTEGRATOR}, {half} spp per half, seed {s}")
-        halves.append(integrator.render_histogram(scene, sensor, seed=s, spp=half, max_depth=max_depth))
+    # disable=None: tqdm draws only on a terminal, so logs and tests stay clean.
+    with tqdm(total=2 * half, unit="spp", unit_scale=True, desc="reference", disable=None if progress else True,
+              leave=False, dynamic_ncols=True) as bar:
+        for i, s in enumerate(seeds):
+            if log:
+                bar.clear()  # the progress line goes, the log line is written, the bar comes back
+                log(f"reference: {REFERENCE_INTEGRATOR}, {half} spp per half, seed {s}")
+                bar.refresh()
+
+            def advance(done, total, offset=i * half):
+                bar.update(offset + done - bar.n)
+
+            halves.append(integrator.render_histogram(scene, sensor, seed=s, spp=half, max_depth=max_depth,
+                                                      progress=advance))
     seconds = time.perf_counter() - t0
     hist = 0.5 * (halves[0] + halves[1])
     diff = halves[0] - halves[1]
@@ -144,7 +156,7 @@ def store_reference(output_dir, key, hist, diff, info):
 
 
 def load_or_render_reference(scene, sensor, scene_bytes, output_dir, spp, seed, max_depth, auto=False, log=None,
-                             render=None):
+                             progress=False, render=None):
     """The cached reference if there is one (`find_cached_reference`), else render it and cache it
     (`store_reference`). ``render`` has `render_reference`'s signature (None: that function).
     Returns ``(hist, half_difference, info)``."""
@@ -152,7 +164,7 @@ def load_or_render_reference(scene, sensor, scene_bytes, output_dir, spp, seed, 
     found = find_cached_reference(output_dir, key, spp, (sensor.n_pings, sensor.n_bins), auto, log)
     if found is not None:
         return found
-    hist, diff, info = (render or render_reference)(scene, sensor, spp, seed, max_depth, log)
+    hist, diff, info = (render or render_reference)(scene, sensor, spp, seed, max_depth, log, progress)
     store_reference(output_dir, key, hist, diff, info)
     return hist, diff, info
 
