@@ -3,8 +3,8 @@
 Runs `mitsonar.compare.compare` (the engine of ``mitsonar compare``) on scenes_xml/box.xml (easy:
 open walls, every echo is found by path tracing), scenes_xml/slot_chamber.xml (hard: a chamber
 seen through a slot), scenes_xml/glossy_corridor.xml (hard: glossy multipath) and
-scenes_xml/hidden_target.xml (diagnostic, no target: a boulder seen only in a glossy plate, where an
-ideal Metropolis sampler would gain 18x per path), with path tracing (``sonar_tof``, the baseline)
+scenes_xml/hidden_target.xml (diagnostic, no target: a boulder seen only in a glossy plate; see
+benchmarks/mlt_oracle.py for what an ideal Metropolis sampler could gain there), with path tracing (``sonar_tof``, the baseline)
 and ``sonar_mlt`` at the same time budgets, and prints one JSON object.
 
 The headline figure per scene is the equal-time error ratio ``rel_l2(sonar_tof) / rel_l2(sonar_mlt)``
@@ -20,10 +20,9 @@ are compiled again for every spp is timed at its steady-state speed (the compila
 are counted in ``kernels_compiled``; ``--cold`` times wall-clock renders instead).
 
 The references are cached in the output folder (default out/benchmark_mlt/<scene>/), so a second
-run only renders the comparisons. The default run (4 budgets up to 2 s, 6 repeats) takes about
-4 minutes on 2 cores with cached references, 8 with cold ones. Six repeats, because the errors are
-heavy-tailed (rare glossy paths): with 2, the glossy corridor's ratio went from 0.96 to 1.34
-between two runs of the same code; with 6, two runs gave 0.78 and 0.88.
+run only renders the comparisons (the JSON's ``seconds_total`` says how long a run took). Six
+repeats by default, because the errors are heavy-tailed (rare glossy paths): the ratio of a few
+repeats swings between runs (README, Benchmarks).
 
 Usage: python benchmarks/mlt.py [--budget 0.25,0.5,1,2] [--repeats 6] [--integrators sonar_tof,sonar_mlt]
                                 [--scenes box,slot_chamber,glossy_corridor,hidden_target]
@@ -78,7 +77,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     import mitsonar  # noqa: F401  (variant and plugins)
-    from mitsonar.compare import CompareError, compare, jsonable, load_integrator, parse_budgets, parse_integrators
+    from mitsonar.compare import CompareError, compare, jsonable, load_integrator
+    from mitsonar.compare.parsing import parse_budgets, parse_integrators
 
     try:
         names = parse_integrators(args.integrators)

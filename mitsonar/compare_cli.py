@@ -42,9 +42,11 @@ def add_subcommands(subparsers):
 
 
 def cmd_compare(args):
-    from .compare import compare, parse_budgets, parse_integrators, parse_params, parse_regions
+    from .compare import compare
+    from .compare.parsing import parse_budgets, parse_integrators, parse_params, parse_regions
 
-    # Parse everything before the slow part starts, so typos fail at once.
+    # Parse everything before the slow part starts, so typos fail at once (compare checks the
+    # rest, the scene, the integrators and the output folder, before it creates anything).
     names = parse_integrators(args.integrators)
     budgets = parse_budgets(args.budget)
     params = parse_params(args.param)
@@ -57,14 +59,27 @@ def cmd_compare(args):
                      repeats=args.repeats, max_depth=args.max_depth, integrator_params=params, regions=regions,
                      reference_factor=args.reference_factor, calibration_seconds=args.calibration_seconds,
                      warm=args.warm, plots=not args.no_plots, log=None if args.quiet else log)
-    ref = result["reference"]
-    print(f"reference: {ref['integrator']} {ref['spp']} spp, own rel L2 {ref['self_rel_l2']:.3g}"
-          + (" (cached)" if ref["from_cache"] else f" ({ref['seconds']:.3g} s)"))
-    print(f"{'integrator':<16} {'budget s':>8} {'spp':>10} {'seconds':>8} {'rel L2':>9} {'rel L1':>9}")
-    for r in result["runs"]:
-        print(f"{r['integrator']:<16} {r['budget_s']:>8g} {r['spp']:>10d} {r['seconds_mean']:>8.3g} "
-              f"{r['rel_l2']:>9.4g} {r['rel_l1']:>9.4g}")
-    for w in result["warnings"]:
-        print(f"warning: {w}")
-    print("wrote " + ", ".join(result["files"].values()))
+    print(report(result))
     return 0
+
+
+def report(result) -> str:
+    """The printed summary of a `compare` result: the reference, one line per run with the asked
+    and the achieved seconds (``*`` where they differ by more than `TIME_TOLERANCE`), warnings,
+    files."""
+    from .compare import TIME_TOLERANCE, off_budget
+
+    ref = result["reference"]
+    off = {(r["integrator"], r["budget_s"]) for r in off_budget(result["runs"])}
+    lines = [f"reference: {ref['integrator']} {ref['spp']} spp, own rel L2 {ref['self_rel_l2']:.3g}"
+             + (" (cached)" if ref["from_cache"] else f" ({ref['seconds']:.3g} s)"),
+             f"{'integrator':<16} {'asked s':>8} {'took s':>8} {'spp':>10} {'rel L2':>9} {'rel L1':>9}"]
+    for r in result["runs"]:
+        mark = " *" if (r["integrator"], r["budget_s"]) in off else ""
+        lines.append(f"{r['integrator']:<16} {r['budget_s']:>8g} {r['seconds_mean']:>8.3g} {r['spp']:>10d} "
+                     f"{r['rel_l2']:>9.4g} {r['rel_l1']:>9.4g}{mark}")
+    if off:
+        lines.append(f"* took more than {100 * TIME_TOLERANCE:.0f} % more or less than asked")
+    lines += [f"warning: {w}" for w in result["warnings"]]
+    lines.append("wrote " + ", ".join(result["files"].values()))
+    return "\n".join(lines)

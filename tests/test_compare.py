@@ -108,7 +108,7 @@ def test_errors_decrease_with_budget(first_run):
 
 
 def test_reference_is_cached_and_reused(first_run, small_scene, monkeypatch):
-    from mitsonar import compare as cmp
+    from mitsonar.compare import engine as cmp
 
     result, out = first_run
     path = result["reference"]["file"]
@@ -183,7 +183,8 @@ def test_bad_input_raises_one_line(mitsonar_mod, call, message):
 
 
 def test_parsers_accept_good_input():
-    from mitsonar.compare import labels_for, parse_budgets, parse_params, parse_regions
+    from mitsonar.compare import labels_for
+    from mitsonar.compare.parsing import parse_budgets, parse_params, parse_regions
 
     assert parse_budgets("4, 2,8,2") == [2.0, 4.0, 8.0]
     assert labels_for(["sonar_tof", "sonar_mlt", "sonar_tof"]) == ["sonar_tof", "sonar_mlt", "sonar_tof#2"]
