@@ -19,11 +19,6 @@ _MOVED = {"load_scene": "scene", "set_variant": "variant", "variant": "variant",
 
 
 def __getattr__(name):
-    # TEMPORARY until compare.py is moved to the public names (merge of the compare package)
-    if name == "_sonar":
-        return sonar_of
-    if name == "_first_reason":
-        return lambda text: mitsuba_error(RuntimeError(text))
     if name in _MOVED:
         import importlib
 

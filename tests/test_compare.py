@@ -175,10 +175,15 @@ def test_spp_planning_from_timings():
     (lambda p: p.load_integrator("path"), "not a sonar integrator"),
 ])
 def test_bad_input_raises_one_line(mitsonar_mod, call, message):
-    from mitsonar import compare as cmp
+    import types
 
+    from mitsonar import compare as cmp
+    from mitsonar.compare import parsing
+
+    api = types.SimpleNamespace(**{n: getattr(parsing, n) for n in dir(parsing) if n.startswith("parse_")},
+                                load_integrator=cmp.load_integrator)
     with pytest.raises(cmp.CompareError) as err:
-        call(cmp)
+        call(api)
     assert message in str(err.value) and "\n" not in str(err.value)
 
 

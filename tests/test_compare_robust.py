@@ -222,10 +222,10 @@ class Terminal(io.StringIO):
 
 def test_reference_progress_bar_only_on_a_terminal(small_scene, monkeypatch, mitsonar_mod):
     from mitsonar.compare.reference import render_reference
-    from mitsonar.compare.render_helpers import scene_sonar
+    from mitsonar.scene import sonar_of
 
     scene = mitsonar_mod.load_scene(small_scene)
-    sensor = scene_sonar(scene)
+    sensor = sonar_of(scene, 0)
     for stream, progress, drawn in ((Terminal(), True, True), (io.StringIO(), True, False),
                                     (Terminal(), False, False)):
         monkeypatch.setattr(sys, "stderr", stream)

@@ -26,7 +26,7 @@ from .metrics import equal_time_ratios, region_mask, score, self_errors, summari
 from .output import OutputFolder, check_output_folder, write_json
 from .parsing import parse_budgets, parse_integrators
 from .reference import load_or_render_reference, render_reference, scene_digest
-from .render_helpers import scene_sonar
+from ..scene import sonar_of
 
 
 @dataclass
@@ -110,7 +110,7 @@ def load_bench(s: Settings) -> Bench:
     with open(s.scene_path, "rb") as fh:
         scene_bytes = fh.read()
     scene = mitsonar.load_scene(s.scene_path)
-    sensor = scene_sonar(scene)
+    sensor = sonar_of(scene, 0)
     max_depth = s.max_depth
     if max_depth is None:
         max_depth = int(getattr(scene.integrator(), "max_depth", 5) or 5)

@@ -2,16 +2,18 @@
 from __future__ import annotations
 
 from .common import CompareError
-from .render_helpers import one_line_reason
 
 
 def load_integrator(name, params=None):
     """``mi.load_dict({"type": name, **params})``, checked to be a sonar integrator.
 
     Raises `CompareError` (one line) for a plugin that is not registered, parameters it refuses,
-    or an integrator without ``render_histogram``.
+    or an integrator that is not a sonar integrator.
     """
     import mitsuba as mi
+
+    from ..plugins import module
+    from ..scene import mitsuba_error
 
     try:
         obj = mi.load_dict({"type": name, **(params or {})})
@@ -20,8 +22,8 @@ def load_integrator(name, params=None):
         if "not found" in text and "Plugin" in text:
             raise CompareError(f"integrator {name!r} is not available (no Mitsuba plugin of that name is "
                                "registered; mitsonar provides sonar_tof and sonar_mlt)") from None
-        raise CompareError(f"integrator {name!r}: {one_line_reason(text)}") from None
-    if not hasattr(obj, "render_histogram"):
+        raise CompareError(f"integrator {name!r}: {mitsuba_error(exc)}") from None
+    if not isinstance(obj, module("common").SonarIntegrator):
         raise CompareError(f"integrator {name!r} is not a sonar integrator (it has no render_histogram); "
                            "use sonar_tof or sonar_mlt")
     return obj
