@@ -4,7 +4,10 @@ Runs `mitsonar.compare.compare` (the engine of ``mitsonar compare``) on scenes_x
 open walls, every echo is found by path tracing), scenes_xml/slot_chamber.xml (hard: a chamber
 seen through a slot), scenes_xml/glossy_corridor.xml (hard: glossy multipath) and
 scenes_xml/hidden_target.xml (diagnostic, no target: a boulder seen only in a glossy plate; see
-benchmarks/mlt_oracle.py for what an ideal Metropolis sampler could gain there), with path tracing (``sonar_tof``, the baseline)
+benchmarks/mlt_oracle.py for what an ideal Metropolis sampler could gain there) and
+scenes_xml/quay_wall.xml (diagnostic, no target: a multibeam frame of a quay wall and piles on the
+seabed, whose dihedral corner echoes need about 20 000 paths per beam with path tracing; see
+benchmarks/dihedral.py), with path tracing (``sonar_tof``, the baseline)
 and ``sonar_mlt`` at the same time budgets, and prints one JSON object.
 
 The headline figure per scene is the equal-time error ratio ``rel_l2(sonar_tof) / rel_l2(sonar_mlt)``
@@ -25,7 +28,7 @@ repeats by default, because the errors are heavy-tailed (rare glossy paths): the
 repeats swings between runs (README, Benchmarks).
 
 Usage: python benchmarks/mlt.py [--budget 0.25,0.5,1,2] [--repeats 6] [--integrators sonar_tof,sonar_mlt]
-                                [--scenes box,slot_chamber,glossy_corridor,hidden_target]
+                                [--scenes box,slot_chamber,glossy_corridor,hidden_target,quay_wall]
                                 [-o out/benchmark_mlt] [--reference-factor 16]
 """
 from __future__ import annotations
@@ -46,12 +49,14 @@ TARGETS = {
     "slot_chamber": ("hard", 2.0, "at least 2x lower error than path tracing"),
     "glossy_corridor": ("hard", 2.0, "at least 2x lower error than path tracing"),
     "hidden_target": ("diagnostic", None, None),
+    "quay_wall": ("diagnostic", None, None),
 }
 #: Range windows scored on their own (information only; the targets use the whole scan).
 REGIONS = {
     "slot_chamber": {"beyond_wall": (3.6, 12.0)},
     "glossy_corridor": {"beyond_8m": (8.0, 12.0)},
     "hidden_target": {"boulder_by_mirror": (6.0, 10.0)},
+    "quay_wall": {"wall_corner": (10.4, 12.0)},
 }
 
 

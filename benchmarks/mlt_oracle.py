@@ -42,15 +42,14 @@ def analyse(name, paths, seed=7):
     import mitsuba as mi
 
     import mitsonar
-    from mitsonar.plugins.echo_path import HashSamples
+    from mitsonar.plugins.samples import HashSamples
     from mitsonar.plugins.sonar_mlt import _Context
-    from mitsonar.plugins.sonar_sensor import PingFrames
-    from mitsonar.plugins.sonar_tof import resolve_sensor
 
     scene = mitsonar.load_scene(os.path.join(HERE, "..", "scenes_xml", f"{name}.xml"))
-    sensor = resolve_sensor(scene, 0)
-    P, B, depth = sensor.n_pings, sensor.n_bins, 5
-    ctx = _Context(scene, sensor, PingFrames(sensor.ping_poses(None)), depth)
+    integrator = mi.load_dict({"type": "sonar_tof"})
+    depth = 5
+    ctx = _Context(integrator, integrator.setup(scene, 0, max_depth=depth))
+    P, B = ctx.sensor.n_pings, ctx.sensor.n_bins
     lane = dr.arange(mi.UInt32, P * paths)
     ping = lane // paths
     f, bins, vals = ctx.records(P * paths)
