@@ -31,7 +31,7 @@ of spp 2^15 (512 beams for the converted scenes), each render's relative L2 dist
 of the 8 (target < 5 %) and its largest bin against the median render's largest (target < 20x).
 
 Usage: python benchmarks/weights.py [--paths 1e8] [--seeds 8] [--scenes box,quay_wall,...]
-                                    [--kinds mechanical,multibeam] [--bar] [--bar-spp 32768]
+                                    [--kinds mechanical,multibeam] [--bar] [--bar-spp 32768] [-o audit.json]
 """
 from __future__ import annotations
 
@@ -40,6 +40,7 @@ import glob
 import json
 import math
 import os
+import re
 import sys
 import time
 import xml.etree.ElementTree as ET
@@ -69,8 +70,11 @@ def scene_names():
 def scene_for_kind(name, kind):
     """The scene's XML text with its sonar as ``kind`` (unchanged when it already is), and
     whether it was converted."""
-    tree = ET.parse(os.path.join(SCENES, f"{name}.xml"))
-    sensor = tree.getroot().find("sensor[@type='sonar']")
+    with open(os.path.join(SCENES, f"{name}.xml"), encoding="utf-8") as fh:
+        text = fh.read()
+    # Mitsuba's parser takes "--" inside comments; ElementTree does not: drop the comments.
+    root = ET.fromstring(re.sub(r"<!--.*?-->", "", text, flags=re.S))
+    sensor = root.find("sensor[@type='sonar']")
     kind_el = sensor.find("string[@name='kind']")
     native = kind_el.get("value") if kind_el is not None else "mechanical"
     if native != kind:
@@ -85,7 +89,7 @@ def scene_for_kind(name, kind):
             if el is None:
                 el = ET.SubElement(sensor, "integer" if isinstance(value, int) else "float", name=key)
             el.set("value", repr(value))
-    return ET.tostring(tree.getroot(), encoding="unicode"), native != kind
+    return ET.tostring(root, encoding="unicode"), native != kind
 
 
 def audit(scene, paths, seeds, max_depth):
@@ -198,6 +202,8 @@ def main(argv=None):
     ap.add_argument("--max-depth", type=int, default=None, help="default: the scene's integrator's")
     ap.add_argument("--bar", action="store_true", help="also run the 8-seed convergence bar on multibeam scenes")
     ap.add_argument("--bar-spp", type=int, default=1 << 15)
+    ap.add_argument("-o", "--output", help="also write the JSON here, rewritten after every scene and kind "
+                                           "(a long run keeps what it measured)")
     args = ap.parse_args(argv)
     names, kinds = args.scenes.split(","), args.kinds.split(",")
     for n in names:
@@ -231,6 +237,11 @@ def main(argv=None):
             result["scenes"][f"{name}/{kind}"] = entry
             result["verdict"].append(line)
             print(line, file=sys.stderr, flush=True)
+            if args.output:
+                from mitsonar._files import replacing
+
+                with replacing(args.output) as tmp, open(tmp, "w") as fh:
+                    json.dump(result, fh, indent=1)
     print(json.dumps(result, indent=1))
 
 
