@@ -1,5 +1,6 @@
-"""Writing output files so that a failure leaves nothing behind: a temporary name in the same
-folder, renamed onto the destination at the end. Imports nothing from mitsonar."""
+"""Writing output files so that a failure leaves nothing behind: each file is written under a
+temporary name in its own folder and renamed onto its final name at the end. Imports nothing
+from mitsonar."""
 from __future__ import annotations
 
 import contextlib
@@ -7,21 +8,61 @@ import os
 import tempfile
 
 
-@contextlib.contextmanager
-def replacing(path):
-    """Yield a temporary file name beside ``path`` (same extension) to write; when the block ends
-    without an exception it is renamed onto ``path`` (with the usual permissions, not mkstemp's
-    0600), otherwise removed. The rename is atomic on one file system."""
-    path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=os.path.splitext(path)[1], dir=folder)
-    os.close(fd)
-    try:
-        yield tmp
+class StagedFiles:
+    """Files written under temporary names next to their final ones: `temporary(final)` gives
+    the name to write, `commit` renames every file into place (all or none: if one rename fails,
+    those already renamed are removed), `discard` removes what was not committed. Temporary names
+    keep the final extension last (writers choose the format by it) and start with a dot."""
+
+    def __init__(self):
+        self.pending = []  # (temporary, final)
+
+    def temporary(self, final) -> str:
+        final = os.fspath(final)
+        folder, name = os.path.split(os.path.abspath(final))
+        stem, ext = os.path.splitext(name)
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{stem}.", suffix=f".partial{ext}")
+        os.close(fd)
+        self.pending.append((tmp, final))
+        return tmp
+
+    def commit(self) -> None:
         umask = os.umask(0)
         os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+        done = []
+        try:
+            for tmp, final in self.pending:
+                os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a plain open would give these
+                os.replace(tmp, final)
+                done.append(final)
+        except OSError:
+            for final in done:
+                os.remove(final)
+            raise
+        self.pending = []
+
+    def discard(self) -> None:
+        for tmp, _ in self.pending:
+            try:
+                os.remove(tmp)
+            except OSError:
+                pass
+        self.pending = []
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            self.commit()
+        else:
+            self.discard()
+        return False
+
+
+@contextlib.contextmanager
+def replacing(path):
+    """Yield a temporary name beside ``path`` to write one file; when the block ends without an
+    exception it is renamed onto ``path``, otherwise removed (`StagedFiles` for one file)."""
+    with StagedFiles() as files:
+        yield files.temporary(path)

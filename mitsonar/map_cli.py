@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import os
 import sys
-import tempfile
+
+from ._files import StagedFiles
 
 EXIT_ERROR = 1
 EXIT_USAGE = 2
@@ -75,47 +76,6 @@ def _output_problem(option: str, path: str) -> str | None:
     if not os.access(folder, os.W_OK | os.X_OK):
         return f"{option} {path}: cannot write in the folder {shown} (permission denied)"
     return None
-
-
-class _Outputs:
-    """Files written under temporary names next to their final ones, renamed by :meth:`commit`;
-    :meth:`discard` removes whatever was not committed."""
-
-    def __init__(self):
-        self.pending = []  # (temporary, final)
-
-    def temporary(self, final: str) -> str:
-        folder, name = os.path.split(os.path.abspath(final))
-        stem, ext = os.path.splitext(name)
-        # the extension stays last: the mesh and picture writers choose the format by it
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{stem}.", suffix=f".partial{ext}")
-        os.close(fd)
-        self.pending.append((tmp, final))
-        return tmp
-
-    def commit(self) -> None:
-        """Rename every file into place; if one rename fails, remove those already renamed."""
-        umask = os.umask(0)
-        os.umask(umask)
-        done = []
-        try:
-            for tmp, final in self.pending:
-                os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a plain open would give these
-                os.replace(tmp, final)
-                done.append(final)
-        except OSError:
-            for final in done:
-                os.remove(final)
-            raise
-        self.pending = []
-
-    def discard(self) -> None:
-        for tmp, _ in self.pending:
-            try:
-                os.remove(tmp)
-            except OSError:
-                pass
-        self.pending = []
 
 
 def _read_scans(paths):
@@ -195,7 +155,7 @@ def cmd_map(args) -> int:
             V, F = hm.surface(args.surface, resolution=args.resolution)
         except ValueError as exc:
             return _fail(_map_error(exc))
-    outputs = _Outputs()
+    outputs = StagedFiles()
     try:
         code = _write(args, hm, len(scans), V, F, outputs)
         if code:
@@ -216,7 +176,7 @@ def cmd_map(args) -> int:
     return 0
 
 
-def _write(args, hm, n_scans: int, V, F, outputs: _Outputs) -> int:
+def _write(args, hm, n_scans: int, V, F, outputs: StagedFiles) -> int:
     """Write the map, mesh and plot under temporary names; 0, or the exit code of a failure."""
     from hilbertmap import write_mesh
 

@@ -48,11 +48,12 @@ import contextlib
 import json
 import os
 import sys
-import tempfile
 import zlib
 from typing import Any
 
 import numpy as np
+
+from ._files import replacing
 
 FORMAT = "mitsonar-scan"
 FORMAT_VERSION = 1
@@ -94,26 +95,13 @@ def write(scan, path) -> None:
     if not os.path.isdir(folder):
         raise ScanFileError(f"{path}: folder {folder} does not exist")
     try:
-        fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=ext, dir=folder)
-    except OSError as exc:
+        with replacing(path) as tmp:
+            if ext == ".exr":
+                _write_exr(scan, text, tmp)
+            else:
+                _write_npz(scan, text, tmp)
+    except OSError as exc:  # its text names the temporary file
         raise ScanFileError(f"{path}: cannot be written ({exc.strerror or exc})") from None
-    os.close(fd)
-    try:
-        if ext == ".exr":
-            _write_exr(scan, text, tmp)
-        else:
-            _write_npz(scan, text, tmp)
-        # mkstemp makes the file private (0600); a scan file gets the usual permissions.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException as exc:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        if isinstance(exc, OSError):  # its text names the temporary file
-            raise ScanFileError(f"{path}: cannot be written ({exc.strerror or exc})") from None
-        raise
 
 
 def read(path) -> tuple[dict[str, Any], str]:

@@ -7,6 +7,7 @@ import json
 import os
 import shutil
 
+from .._files import StagedFiles, replacing
 from .common import CompareError, jsonable
 
 
@@ -40,7 +41,7 @@ class OutputFolder:
     def __init__(self, path):
         self.path = os.fspath(path)
         self.created = None  # the top-most folder this run made, if any
-        self._staged = {}
+        self._staged = StagedFiles()
 
     def __enter__(self):
         check_output_folder(self.path)
@@ -66,23 +67,15 @@ class OutputFolder:
 
     def stage(self, name) -> str:
         """A temporary path (same folder, same extension) for the output file ``name``."""
-        stem, ext = os.path.splitext(name)
-        tmp = os.path.join(self.path, f".{stem}.{os.getpid()}.partial{ext}")
-        self._staged[name] = tmp
-        return tmp
+        return self._staged.temporary(self.final(name))
 
     def commit(self) -> None:
         """Rename every staged file to its final name."""
-        for name, tmp in list(self._staged.items()):
-            os.replace(tmp, self.final(name))
-            del self._staged[name]
+        self._staged.commit()
 
     def discard(self) -> None:
         """Delete the staged files, and the folder if this run created it."""
-        for tmp in self._staged.values():
-            if os.path.exists(tmp):
-                os.remove(tmp)
-        self._staged.clear()
+        self._staged.discard()
         if self.created:
             shutil.rmtree(self.created, ignore_errors=True)
 
@@ -90,11 +83,9 @@ class OutputFolder:
 def write_json(result, path):
     """Write ``result`` as strict JSON (NaN and infinities become null), under a temporary name
     renamed at the end."""
-    tmp = path + ".tmp"
-    with open(tmp, "w") as fh:
+    with replacing(path) as tmp, open(tmp, "w") as fh:
         json.dump(jsonable(result), fh, indent=2)
         fh.write("\n")
-    os.replace(tmp, path)
 
 
 __all__ = ["OutputFolder", "check_output_folder", "write_json"]

@@ -18,6 +18,8 @@ import time
 
 import numpy as np
 
+from .._files import replacing
+
 from .common import REFERENCE_INTEGRATOR, REFERENCE_SEED_OFFSET
 from .metrics import self_errors
 
@@ -148,9 +150,8 @@ def store_reference(output_dir, key, hist, diff, info):
     """Cache a rendered reference (written under another name and renamed, so an interrupted run
     never leaves half a cache file); sets ``info["from_cache"]``, ``"file"`` and ``"key"``."""
     path = reference_path(output_dir, key, info["spp"])
-    tmp = path + ".tmp.npz"
-    np.savez_compressed(tmp, hist=hist, half_difference=diff, info=np.array(json.dumps(info)))
-    os.replace(tmp, path)
+    with replacing(path) as tmp:
+        np.savez_compressed(tmp, hist=hist, half_difference=diff, info=np.array(json.dumps(info)))
     info.update(from_cache=False, file=path, key=key)
     return path
 
