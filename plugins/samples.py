@@ -3,12 +3,14 @@
 A path is a deterministic function of a primary-sample vector U in [0, 1)^D:
 dims 0-1 draw the emitted direction from the beam pattern, and bounce ``k`` (0-based) uses dim
 ``2 + 3k`` to pick a BSDF lobe and dims ``3 + 3k``, ``4 + 3k`` for the outgoing direction.
-Path tracing draws U from a counter-based hash (`HashSamples`); the Metropolis integrator stores
+Path tracing draws U from a counter-based hash (`HashSamples`), with the emitted direction from an
+Owen-scrambled Sobol sequence per row by default (`SobolSamples`); the Metropolis integrator stores
 U per chain and hands the path a sampler that computes the mutated U on the fly
 (``sonar_mlt._Mutation``). Anything with ``get(dim)`` and ``get2(dim)`` is a sampler.
 """
 from __future__ import annotations
 
+import drjit as dr
 import mitsuba as mi
 
 DIMS_EMIT = 2
@@ -36,3 +38,64 @@ class HashSamples:
 
     def get2(self, dim):
         return mi.Point2f(self.get(dim), self.get(mi.UInt32(dim) + 1))
+
+
+def _reverse_bits(x):
+    """The 32 bits of ``x`` (UInt32) in reverse order."""
+    x = ((x >> 1) & 0x55555555) | ((x & 0x55555555) << 1)
+    x = ((x >> 2) & 0x33333333) | ((x & 0x33333333) << 2)
+    x = ((x >> 4) & 0x0F0F0F0F) | ((x & 0x0F0F0F0F) << 4)
+    x = ((x >> 8) & 0x00FF00FF) | ((x & 0x00FF00FF) << 8)
+    return (x >> 16) | (x << 16)
+
+
+def _owen_scramble(x, seed):
+    """Nested uniform (Owen) scrambling of the bits of ``x``, by the Laine-Karras hash in the
+    bit-reversed domain (Burley 2020, "Practical hash-based Owen scrambling", JCGT 9(4)): every
+    bit is flipped by a hash of the bits above it, so a scrambled (0, m, 2)-net stays one and
+    every point is uniform on [0, 1)."""
+    x = _reverse_bits(x)
+    x ^= x * 0x3D20ADEA
+    x += seed
+    x *= (seed >> 16) | 1
+    x ^= x * 0x05526C56
+    x ^= x * 0x53A22864
+    return _reverse_bits(x)
+
+
+def _sobol_dim2(i):
+    """The second dimension of the Sobol sequence at index ``i`` (UInt32): the XOR of the
+    direction numbers ``v_k`` (``v_0 = 2^31``, ``v_{k+1} = v_k ^ (v_k >> 1)``) of the bits of i."""
+    out = mi.UInt32(0)
+    v = 0x80000000
+    for k in range(32):
+        out = dr.select(((i >> k) & 1) != 0, out ^ v, out)
+        v ^= v >> 1
+    return out
+
+
+def _unit(x):
+    """A float in [0, 1) from the top 24 bits of ``x``."""
+    return mi.Float(x >> 8) * (1.0 / 16777216.0)
+
+
+class SobolSamples(HashSamples):
+    """Primary samples for path tracing with a stratified emission: dims 0-1 (the emitted
+    direction) are point ``sample`` of a two-dimensional Sobol sequence, a (0, 2)-sequence, Owen
+    scrambled with seeds hashed from (seed, ping), so the paths of a row cover the beam evenly at
+    any spp; the other dims are `HashSamples`'. Each point is uniform on [0, 1)^2, so the estimate
+    stays unbiased; rows are scrambled independently; the samples depend on (seed, ping, sample)
+    only, so they do not depend on how a render is split into passes.
+    """
+
+    def __init__(self, seed: mi.UInt32, ping: mi.UInt32, sample: mi.UInt32):
+        super().__init__(seed, ping, sample)
+        self.index = mi.UInt32(sample)
+        self.scramble = mi.sample_tea_32(ping, seed ^ 0x50B01, 4)
+
+    def get2(self, dim):
+        if isinstance(dim, int) and dim == 0:
+            x = _owen_scramble(_reverse_bits(self.index), self.scramble[0])
+            y = _owen_scramble(_sobol_dim2(self.index), self.scramble[1])
+            return mi.Point2f(_unit(x), _unit(y))
+        return super().get2(dim)

@@ -5,8 +5,11 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mitsonar._checks import require
+
 from .common import SonarIntegrator
-from .samples import HashSamples
+from .props import text
+from .samples import HashSamples, SobolSamples
 
 # Lanes in one kernel launch. Larger launches keep both cores busy; the cap bounds the number
 # of float32 atomic adds a bin receives before its pass is summed in float64.
@@ -43,6 +46,10 @@ class SonarTOFIntegrator(SonarIntegrator):
     Parameter    Default  Meaning
     ============ ======== ====================================================================
     max_depth    5        surface bounces per path (1 = single bounce; the thesis uses 5)
+    sampling     sobol    the emitted directions of a row: ``sobol`` (an Owen-scrambled Sobol
+                          sequence per row, `samples.SobolSamples`: the beam is covered evenly)
+                          or ``independent`` (uniform random, `samples.HashSamples`); both are
+                          unbiased, the bounces are sampled independently either way
     ============ ======== ====================================================================
 
     ``mi.render(scene)`` returns the range-intensity image as a tensor (n_pings, n_bins, 1);
@@ -50,6 +57,13 @@ class SonarTOFIntegrator(SonarIntegrator):
     """
 
     name = "sonar_tof"
+    SAMPLERS = {"sobol": SobolSamples, "independent": HashSamples}
+
+    def __init__(self, props: mi.Properties):
+        super().__init__(props)
+        self.sampling = text(props, "sampling", "sobol", self.name)
+        require(self.sampling in self.SAMPLERS, self.name, "sampling", self.sampling,
+                "one of " + ", ".join(self.SAMPLERS))
 
     def render_histogram(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None, progress=None):
         """Mean echo energy per bin, float64 ``(n_pings, n_bins)``.
@@ -80,7 +94,7 @@ class SonarTOFIntegrator(SonarIntegrator):
         lane = dr.arange(mi.UInt32, n_pings * count)
         ping = lane // spp_o
         sample = lane - ping * spp_o + dr.opaque(mi.UInt32, start)
-        samples = HashSamples(dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF), ping, sample)
+        samples = self.SAMPLERS[self.sampling](dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF), ping, sample)
         # Float64 bins: sums of many small echoes keep their precision, and the order in which
         # threads add them no longer shows in the float32 result (same seed, same scan).
         hist = dr.zeros(mi.Float64, n_pings * n_bins)
@@ -94,4 +108,4 @@ class SonarTOFIntegrator(SonarIntegrator):
         return hist.numpy()
 
     def to_string(self):
-        return f"SonarTOFIntegrator[max_depth={self.max_depth}]"
+        return f"SonarTOFIntegrator[max_depth={self.max_depth}, sampling={self.sampling}]"

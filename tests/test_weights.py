@@ -100,3 +100,52 @@ def test_single_bounce_multibeam_wall_has_no_firefly(mitsonar_mod):
     e = path_energies(scene, 121, 101, 65536)
     assert np.all(np.isfinite(e)) and e.min() >= 0
     assert e.max() <= 10 * e.mean(), f"largest path {e.max() / e.mean():.3g} x the mean"
+
+
+def test_sobol_emission_samples_are_a_scrambled_net_per_row(mitsonar_mod):
+    """The emitted directions of a row: 2^m points of an Owen-scrambled (0, 2)-sequence put exactly
+    one point in every elementary box of area 2^-m (a (0, m, 2)-net), rows and seeds are scrambled
+    differently, and later dimensions stay the independent hash samples."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from mitsonar.plugins import module
+
+    samples = module("samples")
+    m, n = 10, 1 << 10
+    idx = dr.arange(mi.UInt32, n)
+    grids = []
+    for seed, ping in ((0, 0), (0, 1), (7, 0)):
+        s = samples.SobolSamples(mi.UInt32(seed), dr.full(mi.UInt32, ping, n), idx)
+        u = s.get2(0)
+        x, y = np.asarray(u.x, np.float64), np.asarray(u.y, np.float64)
+        assert 0 <= x.min() and x.max() < 1 and 0 <= y.min() and y.max() < 1
+        for a in range(m + 1):  # boxes of 2^-a x 2^-(m - a)
+            cells = (np.floor(x * 2 ** a) * 2 ** (m - a) + np.floor(y * 2 ** (m - a))).astype(np.int64)
+            assert np.bincount(cells, minlength=n).max() == 1, (seed, ping, a)
+        grids.append(x)
+        h = samples.HashSamples(mi.UInt32(seed), dr.full(mi.UInt32, ping, n), idx)
+        np.testing.assert_array_equal(np.asarray(s.get(2)), np.asarray(h.get(2)))
+    assert not np.array_equal(grids[0], grids[1]) and not np.array_equal(grids[0], grids[2])
+
+
+@pytest.mark.slow
+def test_sobol_emission_lowers_the_error_at_equal_paths(mitsonar_mod):
+    """The box scan at spp 512: with the emitted directions stratified per row the error against a
+    high-spp reference is several times lower than with independent samples (measured: 3.4x at
+    spp 256, 4x at 1024, over 4 seeds), and the two samplers agree on the expectation."""
+    import mitsuba as mi
+
+    scene = mitsonar_mod.load_scene(os.path.join(SCENES, "box.xml"))
+    sensor = scene.sensors()[0]
+
+    def render(sampling, seed, spp):
+        return mi.load_dict({"type": "sonar_tof", "sampling": sampling}).render_histogram(
+            scene, sensor, seed=seed, spp=spp)
+
+    ref = render("independent", 99, 1 << 15)
+    err = {s: np.sqrt(np.mean([(np.linalg.norm(render(s, k, 512) - ref) / np.linalg.norm(ref)) ** 2
+                               for k in range(3)])) for s in ("independent", "sobol")}
+    assert err["sobol"] * 2 < err["independent"], err
+    # unbiased both: the total echo energy agrees within the noise of a 2^15-path reference
+    assert render("sobol", 5, 4096).sum() == pytest.approx(ref.sum(), rel=0.01)
