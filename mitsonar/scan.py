@@ -77,6 +77,20 @@ def check_rigid(matrix, what="sonar 'to_world'"):
     return m
 
 
+def check_rigid_stack(matrices, what) -> np.ndarray:
+    """`check_rigid` for a stack (N, 4, 4) in one vectorised pass; the message names the first
+    matrix refused as ``what[k]``."""
+    m = np.asarray(matrices, dtype=np.float64)
+    if m.ndim != 3 or m.shape[1:] != (4, 4):
+        raise ValueError(f"{what}: expected (N, 4, 4) matrices, got shape {m.shape}")
+    bad = ~np.isfinite(m).all(axis=(1, 2))
+    bad[~bad] = _not_rigid(m[~bad])
+    if bad.any():
+        k = int(np.argmax(bad))
+        check_rigid(m[k], f"{what}[{k}]")
+    return m
+
+
 def _show(value) -> str:
     return repr(value.item() if isinstance(value, np.generic) else value)
 

@@ -26,7 +26,7 @@ import os
 import numpy as np
 
 from ._files import replacing
-from .scan import check_rigid
+from .scan import check_rigid, check_rigid_stack
 
 TUM_FIELDS = ("timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw")
 UNIT_TOLERANCE = 1e-3   # |q| of a TUM line may differ from 1 by this much (then it is normalised)
@@ -154,11 +154,10 @@ class Trajectory:
             k = int(np.argmax(steps)) + 1
             raise TrajectoryError(f"{_source} 'times': {t[k]!r} at index {k} is not after {t[k - 1]!r} "
                                   "(times must increase strictly)")
-        for k in range(t.size):
-            try:
-                check_rigid(p[k], f"{_source} 'poses'[{k}]")
-            except ValueError as exc:
-                raise TrajectoryError(str(exc).replace("; the beam frame is +z boresight, +y scan axis", "")) from None
+        try:
+            check_rigid_stack(p, f"{_source} 'poses'")
+        except ValueError as exc:
+            raise TrajectoryError(str(exc).replace("; the beam frame is +z boresight, +y scan axis", "")) from None
         self.times, self.poses = t, p
         self.quaternions = matrix_to_quat(p[:, :3, :3]) if _quats is None else np.array(_quats, dtype=np.float64)
         self.times.flags.writeable = self.poses.flags.writeable = self.quaternions.flags.writeable = False

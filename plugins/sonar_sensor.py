@@ -10,7 +10,7 @@ import mitsuba as mi
 import numpy as np
 
 from mitsonar._checks import not_allowed, require
-from mitsonar.scan import KINDS, bearing_rotation, check_rigid
+from mitsonar.scan import KINDS, bearing_rotation, check_rigid, check_rigid_stack
 
 from .beam import BeamPattern, read_beam_table
 from .jit_arrays import upload
@@ -222,9 +222,7 @@ class SonarSensor(mi.Sensor):
             if m.shape != (self.n_pings, 4, 4):
                 raise ValueError(f"render_scan 'pose': per-row poses must have shape "
                                  f"(n_pings, 4, 4) = {(self.n_pings, 4, 4)}, got {m.shape}")
-            for k in range(len(m)):
-                check_rigid(m[k], f"render_scan 'pose'[{k}]")
-            return m
+            return check_rigid_stack(m, "render_scan 'pose'")
         return check_rigid(m, "render_scan 'pose'")
 
     def ping_poses(self, pose=None) -> np.ndarray:
