@@ -24,13 +24,13 @@ def _trajectory(args):
     from .trajectory import Trajectory
 
     if (args.trajectory is None) == (args.lawnmower is None):
-        raise CLIError("survey: give exactly one of --trajectory FILE or --lawnmower X_MIN Y_MIN X_MAX Y_MAX")
+        raise CLIError("survey: give exactly one of --trajectory FILE or --lawnmower X_MIN X_MAX Y_MIN Y_MAX")
     if args.trajectory is not None:
         traj = Trajectory.from_tum(args.trajectory)
     else:
         if (args.depth is None) == (args.altitude is None):
             raise CLIError("survey --lawnmower: give exactly one of --depth or --altitude")
-        x0, y0, x1, y1 = args.lawnmower
+        x0, x1, y0, y1 = args.lawnmower
         traj = Trajectory.lawnmower(x0, x1, y0, y1, args.spacing, args.speed, depth=args.depth,
                                     altitude=args.altitude, yaw_rate=args.yaw_rate)
     if args.drift is not None:
@@ -82,7 +82,7 @@ def add_subcommands(sub):
     s.add_argument("scene", help="scene XML file")
     s.add_argument("-o", "--output", required=True, help="output folder (scans, trajectory.tum, track.png)")
     s.add_argument("--trajectory", metavar="TUM", help="trajectory file: 'timestamp tx ty tz qx qy qz qw' per line")
-    s.add_argument("--lawnmower", nargs=4, type=float, metavar=("X_MIN", "Y_MIN", "X_MAX", "Y_MAX"),
+    s.add_argument("--lawnmower", nargs=4, type=float, metavar=("X_MIN", "X_MAX", "Y_MIN", "Y_MAX"),
                    help="a lawnmower survey of this world rectangle (lines along x)")
     s.add_argument("--spacing", type=float, default=10.0, help="lawnmower line spacing, m (default 10)")
     s.add_argument("--speed", type=float, default=1.5, help="lawnmower speed, m/s (default 1.5)")
