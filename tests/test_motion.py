@@ -190,3 +190,24 @@ def test_bad_motion_arguments_are_one_sentence_before_any_render(mitsonar_mod, r
 def test_ping_period_is_refused_below_the_two_way_flight(mitsonar_mod):
     with pytest.raises(mitsonar_mod.SceneError, match=r"sonar 'ping_period': 0.01 is not allowed .*0.016 s"):
         mitsonar_mod.load_scene(scene_xml(sonar_xml(ping_period=0.01)))
+
+
+def test_scan_times_are_checked_saved_and_optional_in_old_files(mitsonar_mod, tmp_path):
+    import dataclasses
+
+    m = mitsonar_mod
+    scan = m.render_scan(m.load_scene(os.path.join(SCENES, "box.xml")), spp=8)
+    with pytest.raises(ValueError, match=r"Scan 'times': 0.0 at index 3 is not allowed \(ping times do not decrease"):
+        dataclasses.replace(scan, times=np.r_[0.0, 1.0, 2.0, 0.0, np.arange(4, scan.n_pings)])
+    with pytest.raises(ValueError, match=r"Scan 'times': shape \(3,\)"):
+        dataclasses.replace(scan, times=np.zeros(3))
+    for ext in (".exr", ".npz"):
+        scan.save(tmp_path / f"s{ext}")
+        np.testing.assert_array_equal(m.load_scan(tmp_path / f"s{ext}").times, scan.times)
+    # a file written before scans had times: the same archive without the 'times' array
+    with np.load(tmp_path / "s.npz") as z:
+        arrays = {k: z[k] for k in z.files if k != "times"}
+    np.savez(tmp_path / "old.npz", **arrays)
+    old = m.load_scan(tmp_path / "old.npz")
+    np.testing.assert_array_equal(old.times, np.zeros(scan.n_pings))
+    np.testing.assert_array_equal(old.intensity, scan.intensity)
