@@ -51,14 +51,11 @@ def cmd_survey(args):
     if os.path.isdir(out) and any(f.startswith("scan_") for f in os.listdir(out)):
         raise CLIError(f"-o {out!r} already holds a survey's scans; choose a new or empty folder")
     ext = "." + args.format
-    scans = mitsonar.render_survey(scene, traj, None, spp=args.spp, seed=args.seed, max_scans=args.max_scans,
-                                   ext=ext, progress=not args.quiet)   # checks the plan; renders nothing yet
-    try:
-        os.makedirs(out, exist_ok=True)
+    try:   # checks every argument and the plan, then makes the folder; renders nothing yet
+        scans = mitsonar.render_survey(scene, traj, out, spp=args.spp, seed=args.seed, max_scans=args.max_scans,
+                                       ext=ext, progress=not args.quiet)
     except OSError as exc:
         raise CLIError(f"-o {out!r}: cannot create the output folder ({exc.strerror})") from None
-    scans = mitsonar.render_survey(scene, traj, out, spp=args.spp, seed=args.seed, max_scans=args.max_scans,
-                                   ext=ext, progress=not args.quiet)
     positions = []
     n = 0
     for scan in scans:

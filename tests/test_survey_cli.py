@@ -15,7 +15,7 @@ def test_survey_writes_scans_trajectory_and_pictures(tmp_path, capsys):
     import mitsonar
 
     out = tmp_path / "out"
-    rc = main(["survey", BOX, "--lawnmower", "-1", "-1", "1", "1", "--spacing", "1", "--speed", "0.2",
+    rc = main(["survey", BOX, "--lawnmower", "-1", "1", "-1", "1", "--spacing", "1", "--speed", "0.2",
                "--depth", "0", "--spp", "16", "--max-scans", "2", "-q", "-o", str(out)])
     assert rc == 0
     names = sorted(os.listdir(out))
