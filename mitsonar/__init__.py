@@ -15,6 +15,8 @@ from .scan import Scan  # noqa: E402
 from .groundtruth import scene_mesh  # noqa: E402
 from .render import render_scan  # noqa: E402
 from .scene import SceneError, load_scene  # noqa: E402
+from .survey import render_survey  # noqa: E402
+from .trajectory import Trajectory, TrajectoryError  # noqa: E402
 from .variant import VariantError, init_on_import, set_variant, variant  # noqa: E402
 
 init_on_import()
@@ -38,5 +40,6 @@ def __getattr__(name):
     raise AttributeError(f"module 'mitsonar' has no attribute {name!r}")
 
 
-__all__ = ["Scan", "SceneError", "VariantError", "load_scan", "load_scene", "render_scan", "scene_mesh",
+__all__ = ["Scan", "SceneError", "Trajectory", "TrajectoryError", "VariantError", "load_scan", "load_scene",
+           "render_scan", "render_survey", "scene_mesh",
            "set_variant", "variant", "__version__", *_LAZY]

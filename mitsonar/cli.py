@@ -182,6 +182,8 @@ def cmd_info(args):
         ("range [m]", f"{scan.range_min:g} .. {scan.range_max:g} (bin {scan.bin_width:.6g} m)"),
         ("bearings [deg]", f"{np.degrees(scan.bearings[0]):.6g} .. {np.degrees(scan.bearings[-1]):.6g}"
                            + (f" step {np.degrees(scan.bearings[1] - scan.bearings[0]):.6g}" if scan.n_pings > 1 else "")),
+        ("ping times [s]", f"{scan.times[0]:.6g} .. {scan.times[-1]:.6g}"
+                           + (f" (start {scan.meta['start_time']:.9g} on the trajectory)" if "start_time" in scan.meta else "")),
         ("beam", f"{scan.beam_pattern} {scan.beamwidth_h:g} x {scan.beamwidth_v:g} deg"),
         ("sound speed [m/s]", scan.sound_speed), ("absorption [dB/m]", scan.absorption),
         (f"position ({scan.row_name[:-1]} 0)", " ".join(f"{v:.6g}" for v in scan.positions[0])),
@@ -271,7 +273,7 @@ def build_parser():
     d.set_defaults(func=cmd_demo)
 
     # Subcommands of other parts of the product register themselves when present.
-    for mod in ("mitsonar.serial_cli", "mitsonar.map_cli", "mitsonar.compare_cli"):
+    for mod in ("mitsonar.serial_cli", "mitsonar.map_cli", "mitsonar.compare_cli", "mitsonar.survey_cli"):
         try:
             m = importlib.import_module(mod)
         except ImportError:

@@ -1,4 +1,5 @@
-"""Pictures of a scan: sonar fan display, world top view with ground truth, A-scan.
+"""Pictures of a scan: sonar fan display, world top view with ground truth, A-scan; and of a
+vehicle's track (`plot_track`).
 
 All functions build a ``matplotlib.figure.Figure`` directly (no pyplot), so no window and no GUI
 backend is ever involved; figures render with Agg (PNG) or the vector backends (PDF, SVG) by the
@@ -228,7 +229,8 @@ def plot_cartesian(scan, mesh=None, path=None, ax=None, db: bool = False, cmap: 
                    title: str | None = None) -> Figure:
     """Top view in world coordinates, with the scene's ground truth cut through the sonar's plane.
 
-    Bin j of ping k sits at ``position_k + ranges[j] * boresight_k``; each ping is drawn as a
+    Bin j of ping k sits at ``position_k + ranges[j] * boresight_k``, from the ping's own pose
+    (a scan rendered in motion shows its distortion, and the head's path); each ping is drawn as a
     wedge ``ping_width`` wide about its scan axis, projected on the plane perpendicular to the
     (mean) scan axis. When the scan axis is world +z or -z the plot axes are world x and y;
     otherwise an orthonormal basis of that plane (named u, v).
@@ -266,7 +268,11 @@ def plot_cartesian(scan, mesh=None, path=None, ax=None, db: bool = False, cmap: 
         mesh_artist = ax.pcolormesh(quad[..., 0], quad[..., 1], values[k][None, :], cmap=cmap,
                                     vmin=lo, vmax=hi, shading="flat", rasterized=True)
     pos2 = np.stack([scan.positions @ e1, scan.positions @ e2], -1)
-    ax.plot(pos2[:, 0], pos2[:, 1], "+", color="tab:cyan", ms=8, label="sonar")
+    if np.ptp(pos2, axis=0).max() > 1e-6:   # a head that moved during the scan: its path, ping 0 marked
+        ax.plot(pos2[:, 0], pos2[:, 1], "-", color="tab:cyan", lw=1.2, label="sonar (moving)")
+        ax.plot(pos2[:1, 0], pos2[:1, 1], "o", color="tab:cyan", ms=4)
+    else:
+        ax.plot(pos2[:, 0], pos2[:, 1], "+", color="tab:cyan", ms=8, label="sonar")
 
     if mesh is not None:
         segments = mesh_section(mesh[0], mesh[1], origin, axis)
@@ -285,6 +291,42 @@ def plot_cartesian(scan, mesh=None, path=None, ax=None, db: bool = False, cmap: 
     if mesh_artist is not None:
         fig.colorbar(mesh_artist, ax=ax, label=label, shrink=0.85)
     ax.set_title(_settings_line(scan) if title is None else title, fontsize=7)
+    _save(fig, path)
+    return fig
+
+
+def plot_track(trajectory, path=None, ax=None, scans=(), *, figsize=(7.0, 6.4), dpi: int = 150,
+               title: str | None = None) -> Figure:
+    """Top view (world x, y) of a vehicle's track: the trajectory's positions, its start and end,
+    its heading every tenth of the way, and the transducer positions of ``scans`` (each scan's
+    pings as dots, so the sweeps along the track show).
+
+    Parameters
+    ----------
+    trajectory : Trajectory (anything with ``positions`` (N, 3), ``poses`` (N, 4, 4), ``span``)
+    path, ax, figsize, dpi, title
+        As in `plot_polar`.
+    scans : iterable of Scan, optional
+    """
+    fig, ax = _new_figure(ax, figsize, dpi)
+    p = np.asarray(trajectory.positions)
+    ax.plot(p[:, 0], p[:, 1], "-", color="tab:blue", lw=1.0, label="track")
+    ax.plot(p[0, 0], p[0, 1], "o", color="tab:green", label="start")
+    ax.plot(p[-1, 0], p[-1, 1], "s", color="tab:red", label="end")
+    every = max(1, len(p) // 10)
+    heads = np.asarray(trajectory.poses)[::every, :3, 0]
+    ax.quiver(p[::every, 0], p[::every, 1], heads[:, 0], heads[:, 1], color="tab:blue", width=0.004,
+              angles="xy", scale_units="inches", scale=4.0)
+    for i, scan in enumerate(scans):
+        q = scan.positions
+        ax.plot(q[:, 0], q[:, 1], ".", ms=1.5, color="tab:orange", label="pings" if i == 0 else None)
+    ax.set_aspect("equal")
+    ax.set_xlabel("world x (m)")
+    ax.set_ylabel("world y (m)")
+    ax.legend(loc="upper right", fontsize=7)
+    lo, hi = trajectory.span
+    ax.set_title(f"track: {len(p)} poses, {hi - lo:.6g} s, {np.sum(np.linalg.norm(np.diff(p, axis=0), axis=1)):.6g} m"
+                 if title is None else title, fontsize=8)
     _save(fig, path)
     return fig
 

@@ -8,6 +8,7 @@ import numpy as np
 
 from .scan import Scan, check_rigid
 from .scene import SceneError, mitsuba_error, scene_name, sonar_of
+from .trajectory import Trajectory
 from .variant import ensure_variant
 
 DEFAULT_SPP = 4096
@@ -52,6 +53,33 @@ def _check_pose(pose):
         raise SceneError(str(exc)) from None
 
 
+def _check_start_time(trajectory, start_time):
+    """A render's trajectory and start time in one sentence each (the span is checked later, with
+    the sensor's ping schedule)."""
+    if not isinstance(trajectory, Trajectory):
+        raise SceneError(f"render_scan 'trajectory': expected a mitsonar.Trajectory, got {type(trajectory).__name__}")
+    if start_time is None:
+        return float(trajectory.times[0])
+    if (isinstance(start_time, bool) or not isinstance(start_time, (int, float, np.integer, np.floating))
+            or not math.isfinite(start_time)):
+        raise SceneError(f"render_scan 'start_time': {start_time!r} is not allowed (a finite time in seconds, "
+                         "on the trajectory's clock)")
+    return float(start_time)
+
+
+def moving_head_poses(sonar, trajectory, start_time, mount=None):
+    """(n_pings, 4, 4) head pose of each row, ``trajectory.at(start_time + times[k]) @ mount``
+    (``mount``: the sensor's ``to_world`` unless given), refused with one sentence naming the
+    scan's ping times and the trajectory's span when the pings do not fit in it."""
+    t = start_time + sonar.ping_times()
+    if not trajectory.covers(t[0], t[-1]):
+        lo, hi = trajectory.span
+        raise SceneError(f"render_scan 'start_time': the scan's pings at {t[0]:.9g} .. {t[-1]:.9g} s "
+                         f"({sonar.n_pings} pings, ping_period {sonar.ping_period:.6g} s) do not fit in the "
+                         f"trajectory's span [{lo:.9g}, {hi:.9g}] s")
+    return trajectory.at(t) @ (sonar.to_world_np if mount is None else mount)
+
+
 SONAR_INTEGRATORS = ("sonar_tof", "sonar_mlt")
 SEED_MAX = 2 ** 32 - 1   # the path seed is a 32-bit integer: larger seeds would repeat smaller ones
 
@@ -89,7 +117,8 @@ def _integrator(scene, integrator):
 
 
 def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integrator=None, sensor=0,
-                max_depth=None, electronics=None, electronics_seed=None, progress=None) -> Scan:
+                max_depth=None, electronics=None, electronics_seed=None, progress=None, trajectory=None,
+                start_time=None) -> Scan:
     """Render one scan of ``scene`` and pass it through the head's electronics.
 
     ============== ==============================================================================
@@ -97,6 +126,7 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     spp            paths per ping (default 4096)
     seed           seed of the paths (and of the electronics noise unless ``electronics_seed``)
     pose           4x4 world transform of the beam frame at bearing 0, replacing ``to_world``
+                   (with a ``trajectory``: the mount on the vehicle, in the vehicle frame)
     integrator     an integrator object or XML dict; default: the scene's if it is a sonar
                    integrator, else ``sonar_tof``
     sensor         sensor index or object
@@ -104,8 +134,18 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     electronics    dict of electronics fields overriding the sensor's (the gain and the A/D window
                    within the head's 0..80 dB: `mitsonar.electronics.HEAD_LIMITS`)
     progress       optional callable ``progress(done_spp, spp)`` called after each render pass
+    trajectory     a `Trajectory` of the vehicle carrying the head; ``to_world`` (or ``pose``) is
+                   then the mount in the vehicle frame (x forward, y port, z up)
+    start_time     s on the trajectory's clock of the scan's first ping (default: the
+                   trajectory's first time)
     ============== ==============================================================================
 
+    With a trajectory, row k is pinged at ``start_time + scan.times[k]`` (the sensor's
+    ``ping_period`` schedule) from ``scan.poses[k] = trajectory.at(start_time + times[k]) @ mount
+    @ bearing_rotation(bearings[k])``, all rows in one wavefront as for a static head. The head
+    is taken as still during one ping's flight ``T = 2 range_max / sound_speed``: moving at ``v``,
+    an echo's range differs from the range measured at the ping's pose by at most ``v T / 2``
+    (1.6 cm at 2 m/s and 12 m, under one 2.4 cm bin of the default 500 bins).
     The same arguments give the same scan, bit for bit.
     """
     ensure_variant()
@@ -121,10 +161,16 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
         max_depth = _whole("max_depth", max_depth, 1, 64, "a whole number of surface bounces from 1 to 64")
     if pose is not None:
         pose = _check_pose(pose)
+    if trajectory is not None:
+        start_time = _check_start_time(trajectory, start_time)
+    elif start_time is not None:
+        raise SceneError("render_scan 'start_time': only used with a 'trajectory'")
     if electronics is not None and not isinstance(electronics, dict):
         raise SceneError(f"render_scan 'electronics': expected a dict of electronics fields, got "
                          f"{type(electronics).__name__}")
     sonar = sonar_of(scene, sensor)
+    if trajectory is not None:
+        pose = moving_head_poses(sonar, trajectory, start_time, pose)
     integrator = _integrator(scene, integrator)
 
     from .electronics import Electronics, check_head_settings
@@ -161,12 +207,15 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
         "bearing_start": sonar.bearing_start,
         "bearing_step": sonar.bearing_step,
         "electronics_seed": int(eseed),
+        "ping_period": float(sonar.ping_period),
     }
+    if trajectory is not None:
+        meta["start_time"] = start_time
     if getattr(sonar, "transmit", None) is not None:  # multibeam: the transmit fan beside the receive beams
         meta.update(tx_pattern=sonar.transmit.kind, tx_beamwidth_h=sonar.transmit.beamwidth_h,
                     tx_beamwidth_v=sonar.transmit.beamwidth_v)
     return Scan(intensity=intensity, data=data, ranges=ranges,
-                bearings=np.radians(sonar.bearings_deg()), poses=poses,
+                bearings=np.radians(sonar.bearings_deg()), poses=poses, times=sonar.ping_times(),
                 range_min=sonar.range_min, range_max=sonar.range_max,
                 beam_pattern=sonar.beam.kind, beamwidth_h=sonar.beam.beamwidth_h,
                 beamwidth_v=sonar.beam.beamwidth_v, kind=sonar.kind, sound_speed=sonar.sound_speed,

@@ -77,6 +77,20 @@ def check_rigid(matrix, what="sonar 'to_world'"):
     return m
 
 
+def check_rigid_stack(matrices, what) -> np.ndarray:
+    """`check_rigid` for a stack (N, 4, 4) in one vectorised pass; the message names the first
+    matrix refused as ``what[k]``."""
+    m = np.asarray(matrices, dtype=np.float64)
+    if m.ndim != 3 or m.shape[1:] != (4, 4):
+        raise ValueError(f"{what}: expected (N, 4, 4) matrices, got shape {m.shape}")
+    bad = ~np.isfinite(m).all(axis=(1, 2))
+    bad[~bad] = _not_rigid(m[~bad])
+    if bad.any():
+        k = int(np.argmax(bad))
+        check_rigid(m[k], f"{what}[{k}]")
+    return m
+
+
 def _show(value) -> str:
     return repr(value.item() if isinstance(value, np.generic) else value)
 
@@ -147,6 +161,11 @@ class Scan:
         The device-electronics settings that turned `intensity` into `data`.
     meta : dict
         Provenance: scene, seed, spp, integrator, max_depth, mitsonar version, ...
+    times : float64 (n_pings,)
+        Seconds of each row's ping from the scan start, finite and non-decreasing: a mechanical
+        head's ``k * ping_period``, zeros for the rows of one multibeam frame. None (the default,
+        for scans built without a schedule, and for files written before scans had times) means
+        zeros: every row at the scan start.
     """
 
     intensity: np.ndarray
@@ -164,6 +183,7 @@ class Scan:
     absorption: float = 0.0
     electronics: dict[str, Any] = field(default_factory=dict)
     meta: dict[str, Any] = field(default_factory=dict)
+    times: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         # The one place a Scan's fields are checked: the renderer, the SeaNet driver, load_scan
@@ -190,12 +210,13 @@ class Scan:
         self.ranges = _array("ranges", self.ranges, np.float64)
         self.bearings = _array("bearings", self.bearings, np.float64)
         self.poses = _array("poses", self.poses, np.float64)
+        self.times = np.zeros(n_pings) if self.times is None else _array("times", self.times, np.float64)
         for name, shape, what in (("data", (n_pings, n_bins), "(n_pings, n_bins) like intensity"),
                                   ("ranges", (n_bins,), "(n_bins,)"), ("bearings", (n_pings,), "(n_pings,)"),
-                                  ("poses", (n_pings, 4, 4), "(n_pings, 4, 4)")):
+                                  ("poses", (n_pings, 4, 4), "(n_pings, 4, 4)"), ("times", (n_pings,), "(n_pings,)")):
             if getattr(self, name).shape != shape:
                 raise ScanFieldError(name, f"shape {getattr(self, name).shape} is not {what} = {shape}")
-        for name in ("intensity", "ranges", "bearings", "poses"):
+        for name in ("intensity", "ranges", "bearings", "poses", "times"):
             bad = ~np.isfinite(getattr(self, name))
             if bad.any():
                 raise ScanFieldError(name, f"{_show(getattr(self, name)[bad][0])} at index {_first(bad)} "
@@ -203,6 +224,11 @@ class Scan:
         if (self.intensity < 0).any():
             raise ScanFieldError("intensity", f"{_show(self.intensity[self.intensity < 0][0])} at index "
                                               f"{_first(self.intensity < 0)} is not allowed (echo energy >= 0)")
+        back = np.diff(self.times) < 0
+        if back.any():
+            k = int(np.argmax(back)) + 1
+            raise ScanFieldError("times", f"{_show(self.times[k])} at index {k} is not allowed (ping times do "
+                                          f"not decrease; the previous is {_show(self.times[k - 1])})")
         not_rigid = _not_rigid(self.poses)
         if not_rigid.any():
             raise ScanFieldError("poses", f"pose {_first(not_rigid)} is not allowed ({_RIGID})")
@@ -266,7 +292,7 @@ class Scan:
         try:
             return cls(**fields)
         except ScanFieldError as exc:
-            arrays = ("ranges", "bearings", "poses") if stored_as == "array" else ()
+            arrays = ("ranges", "bearings", "poses", "times") if stored_as == "array" else ()
             where = stored_as if exc.field in ("intensity", "data", *arrays) else "header"
             raise scanfile.ScanFileError(f"{path}: {where} '{exc.field}': {exc.reason}") from None
 

@@ -28,13 +28,15 @@ mitsonar_version    version of the writer
 n_pings, n_bins     image size
 ranges, bearings    lists of floats (metres, radians)
 poses               ``n_pings`` x 4 x 4 nested lists (world transform of each ping's beam frame)
+times               list of floats: seconds of each ping from the scan start (absent in files
+                    written before scans had times: they load with times None, i.e. zeros)
 range_min/max, beam_pattern, beamwidth_h, beamwidth_v, kind, sound_speed, absorption
 electronics, meta   the Scan's dicts (numpy arrays, numpy scalars and tuples are tagged and restored)
 checksums           CRC-32 of the intensity (float32, little endian) and data (uint8) bytes
 =================== ====================================================================================
 
 The ``.npz`` file holds the arrays ``intensity`` (float32), ``data`` (uint8), ``ranges``,
-``bearings``, ``poses`` (float64) natively, the same JSON (without the arrays) in the 0-d
+``bearings``, ``poses``, ``times`` (float64; ``times`` optional, as above) natively, the same JSON (without the arrays) in the 0-d
 string array ``header`` and its CRC-32 in the 0-d uint32 array ``header_crc32``; it loads with
 ``numpy.load(path, allow_pickle=False)``.
 
@@ -66,6 +68,7 @@ _ZIP_MAGIC = b"PK\x03\x04"
 _SCALARS = ("range_min", "range_max", "beam_pattern", "beamwidth_h", "beamwidth_v", "kind",
             "sound_speed", "absorption")
 _ARRAYS = ("ranges", "bearings", "poses")
+_OPTIONAL_ARRAYS = ("times",)   # added later: a file without them loads with the Scan's default
 
 
 class ScanFileError(ValueError):
@@ -152,6 +155,7 @@ def _header(scan, with_arrays: bool, path: str) -> dict[str, Any]:
         head["ranges"] = scan.ranges.tolist()
         head["bearings"] = scan.bearings.tolist()
         head["poses"] = scan.poses.tolist()
+        head["times"] = scan.times.tolist()
     head["electronics"] = _encode(dict(scan.electronics), f"{path}: electronics")
     head["meta"] = _encode(dict(scan.meta), f"{path}: meta")
     head["checksums"] = _checksums(scan.intensity, scan.data)
@@ -313,6 +317,7 @@ def _read_exr(path: str) -> tuple[dict[str, Any], str]:
             raise ScanFileError(f"{path}: channel '{name}' is missing (channels: {', '.join(sorted(channels)) or 'none'})")
     try:
         arrays = {name: head[name] for name in _ARRAYS}  # Scan checks that they hold numbers
+        arrays.update({name: head[name] for name in _OPTIONAL_ARRAYS if name in head})
     except KeyError as exc:
         raise ScanFileError(f"{path}: the header lacks or garbles {exc}") from None
     return _build(path, head, channels["intensity"], channels["data"], arrays, "channel")
@@ -354,7 +359,8 @@ def _c_output_silenced():
 def _write_npz(scan, text: str, path: str) -> None:
     with open(path, "wb") as fh:
         np.savez_compressed(fh, intensity=scan.intensity.astype(np.float32), data=scan.data.astype(np.uint8),
-                            ranges=scan.ranges, bearings=scan.bearings, poses=scan.poses, header=np.array(text),
+                            ranges=scan.ranges, bearings=scan.bearings, poses=scan.poses, times=scan.times,
+                            header=np.array(text),
                             header_crc32=np.array(_crc_text(text), dtype=np.uint32))
 
 
@@ -368,7 +374,7 @@ def _read_npz(path: str) -> tuple[dict[str, Any], str]:
             missing = [n for n in names if n not in present]
             if missing:
                 raise ScanFileError(f"{path}: array(s) {', '.join(missing)} missing")
-            arrays = {n: z[n] for n in names}
+            arrays = {n: z[n] for n in names + tuple(n for n in _OPTIONAL_ARRAYS if n in present)}
             crc = z["header_crc32"] if "header_crc32" in present else None
     except ScanFileError:
         raise
@@ -381,7 +387,7 @@ def _read_npz(path: str) -> tuple[dict[str, Any], str]:
     if crc is not None:
         crc = int(crc) if crc.shape == () and crc.dtype == np.uint32 else -1
     head = _parse_header(path, str(header), crc)
-    for name in _ARRAYS:
+    for name in _ARRAYS + tuple(n for n in _OPTIONAL_ARRAYS if n in arrays):
         if arrays[name].dtype != np.float64:
             raise ScanFileError(f"{path}: array '{name}' is {arrays[name].dtype}, expected float64")
     intensity, data = arrays.pop("intensity"), arrays.pop("data")

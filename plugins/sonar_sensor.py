@@ -10,7 +10,7 @@ import mitsuba as mi
 import numpy as np
 
 from mitsonar._checks import not_allowed, require
-from mitsonar.scan import KINDS, bearing_rotation, check_rigid
+from mitsonar.scan import KINDS, bearing_rotation, check_rigid, check_rigid_stack
 
 from .beam import BeamPattern, read_beam_table
 from .jit_arrays import upload
@@ -19,6 +19,10 @@ from .props import count, number, text
 TX_PATTERNS = ("gaussian", "sinc", "uniform")
 MAX_BINS, MAX_PINGS = 65536, 100000
 DEFAULT_FREQUENCY = 700e3
+# Seconds a head spends per ping beyond the echo's two-way flight to range_max (stepping the
+# transducer and sending the data for a mechanical head; beamforming for a multibeam one). A
+# Micron then steps every 43 ms at 10 m and 46 ms at 12 m, within its observed 43 to 65 ms.
+HEAD_OVERHEAD = {"mechanical": 0.030, "multibeam": 0.050}
 
 
 class SonarSensor(mi.Sensor):
@@ -34,6 +38,11 @@ class SonarSensor(mi.Sensor):
     beam per row (``beam_pattern`` and ``beamwidth_*``, steered to the row's bearing); the two-way
     gain of row k is ``B_tx(d) B_rx(d in row k's frame)``. All rows share one pose.
 
+    Ping schedule: a mechanical head fires ping ``k`` at ``k * ping_period`` seconds from the scan
+    start; a multibeam head fires all rows of a frame at once, and frames ``ping_period`` apart.
+    The default period is the two-way flight to ``range_max``, ``2 range_max / sound_speed``, plus
+    the head's overhead (`HEAD_OVERHEAD`: 30 ms mechanical, 50 ms multibeam).
+
     ================ ============ ===============================================================
     Parameter        Default      Meaning
     ================ ============ ===============================================================
@@ -46,6 +55,9 @@ class SonarSensor(mi.Sensor):
     bearing_start    0            deg, bearing of the first ping
     bearing_step     1.8          deg between pings (Micron: 200 steps per turn)
     n_pings          200          pings in a scan
+    ping_period      physical     s between pings (multibeam: between frames); default
+                                  ``2 range_max / sound_speed`` + 0.03 s (mechanical) or
+                                  + 0.05 s (multibeam); not less than the two-way flight
     beam_pattern     gaussian     ``gaussian``, ``sinc``, ``uniform`` or ``table``
     beamwidth_h      3            deg, full -3 dB one-way width across the scan plane
     beamwidth_v      35           deg, full -3 dB one-way width along the scan axis
@@ -93,6 +105,7 @@ class SonarSensor(mi.Sensor):
         self.bearing_step = num("bearing_step", 1.8)
         self.sound_speed = num("sound_speed", 1500.0)
         self.absorption = num("absorption", 0.0)
+        self.ping_period = num("ping_period", None)
         pattern = text(props, "beam_pattern", "gaussian", "sonar")
         bw_h = num("beamwidth_h", 3.0)
         bw_v = num("beamwidth_v", 35.0)
@@ -151,6 +164,12 @@ class SonarSensor(mi.Sensor):
             bad("sound_speed", self.sound_speed, "1000 to 2000 m/s for water")
         if not (math.isfinite(self.absorption) and self.absorption >= 0):
             bad("absorption", self.absorption, "a finite attenuation >= 0 dB/m")
+        flight = 2.0 * self.range_max / self.sound_speed
+        if self.ping_period is None:
+            self.ping_period = flight + HEAD_OVERHEAD[self.kind]
+        elif not (math.isfinite(self.ping_period) and flight <= self.ping_period <= 3600.0):
+            bad("ping_period", self.ping_period, f"seconds from the two-way flight to range_max, "
+                f"2 range_max / sound_speed = {flight:.6g} s, to 3600 s")
 
     def _transmit(self, tx, bw_h, bw_v, frequency):
         """The multibeam transmit fan (None for a mechanical head, whose beam transmits itself)."""
@@ -180,12 +199,35 @@ class SonarSensor(mi.Sensor):
     def bearings_deg(self) -> np.ndarray:
         return self.bearing_start + np.arange(self.n_pings) * self.bearing_step
 
+    def ping_times(self) -> np.ndarray:
+        """(n_pings,) seconds of each row's ping from the scan start: ``k * ping_period`` for a
+        mechanical head, zeros for the rows of a multibeam frame (fired together)."""
+        if self.kind == "multibeam":
+            return np.zeros(self.n_pings)
+        return np.arange(self.n_pings) * self.ping_period
+
+    @property
+    def scan_period(self) -> float:
+        """Seconds from one scan's start to the next one's: ``n_pings`` pings of a mechanical head,
+        one frame of a multibeam head."""
+        return self.ping_period * (1 if self.kind == "multibeam" else self.n_pings)
+
     def head_pose(self, pose=None) -> np.ndarray:
-        """The head's beam frame at bearing 0: ``to_world``, or a render's ``pose`` (checked rigid)."""
-        return self.to_world_np if pose is None else check_rigid(pose, "render_scan 'pose'")
+        """The head's beam frame at bearing 0: ``to_world``, or a render's ``pose`` (checked rigid):
+        one 4x4, or one per row, (n_pings, 4, 4), for a head on a moving platform."""
+        if pose is None:
+            return self.to_world_np
+        m = np.asarray(pose, dtype=np.float64)
+        if m.ndim == 3:
+            if m.shape != (self.n_pings, 4, 4):
+                raise ValueError(f"render_scan 'pose': per-row poses must have shape "
+                                 f"(n_pings, 4, 4) = {(self.n_pings, 4, 4)}, got {m.shape}")
+            return check_rigid_stack(m, "render_scan 'pose'")
+        return check_rigid(m, "render_scan 'pose'")
 
     def ping_poses(self, pose=None) -> np.ndarray:
-        """(n_pings, 4, 4) world transform of each ping's beam frame (float64)."""
+        """(n_pings, 4, 4) world transform of each ping's beam frame (float64): the head pose (or
+        row k's head pose) @ the rotation to row k's bearing."""
         return self.head_pose(pose) @ bearing_rotation(np.radians(self.bearings_deg()))
 
     def connection(self, pose=None):
@@ -195,11 +237,13 @@ class SonarSensor(mi.Sensor):
         transmit fan in the head's frame, one copy per row: paths start from the row's receive beam
         and connect back through the fan, which gives the same two-way gain and path lengths as
         transmitting through the fan and receiving in the row (reciprocity; the acoustic BSDF is
-        symmetric), with importance sampling from the narrow beam.
+        symmetric), with importance sampling from the narrow beam. With per-row head poses, row k's
+        fan is at row k's head pose.
         """
         if self.transmit is None:
             return None
-        return PingFrames(np.repeat(self.head_pose(pose)[None], self.n_pings, axis=0)), self.transmit
+        heads = self.head_pose(pose)
+        return PingFrames(np.broadcast_to(heads, (self.n_pings, 4, 4))), self.transmit
 
     # ------------------------------------------------------------------ Mitsuba interface
     def sample_ray(self, time, sample1, sample2, sample3, active=True):

@@ -1,0 +1,95 @@
+"""``mitsonar survey``: render a survey along a trajectory (a TUM file or a lawnmower pattern).
+
+Writes, into the output folder: ``scan_00000.npz``, ``scan_00001.npz``, ... (one per sweep of a
+mechanical head, one per frame of a multibeam head), ``trajectory.tum`` (the trajectory used, drift
+included), ``track.png`` (the track and every ping's position) and ``scan_00000_world.png`` (the
+first scan drawn in world coordinates, each ping from its own pose: the motion distortion shows).
+Everything is checked (trajectory file, scene, folder, that a scan fits in the track) before the
+first file is written; each file is written under a temporary name and renamed.
+"""
+from __future__ import annotations
+
+import os
+
+
+class SurveyCLIError(ValueError):
+    """A user's mistake on the survey command line: printed as one line by ``mitsonar``'s main
+    (this module does not import ``mitsonar.cli``, which registers it)."""
+
+
+CLIError = SurveyCLIError
+
+
+def _trajectory(args):
+    from .trajectory import Trajectory
+
+    if (args.trajectory is None) == (args.lawnmower is None):
+        raise CLIError("survey: give exactly one of --trajectory FILE or --lawnmower X_MIN X_MAX Y_MIN Y_MAX")
+    if args.trajectory is not None:
+        traj = Trajectory.from_tum(args.trajectory)
+    else:
+        if (args.depth is None) == (args.altitude is None):
+            raise CLIError("survey --lawnmower: give exactly one of --depth or --altitude")
+        x0, x1, y0, y1 = args.lawnmower
+        traj = Trajectory.lawnmower(x0, x1, y0, y1, args.spacing, args.speed, depth=args.depth,
+                                    altitude=args.altitude, yaw_rate=args.yaw_rate)
+    if args.drift is not None:
+        traj = traj.with_drift(args.drift)
+    return traj
+
+
+def cmd_survey(args):
+    import mitsonar
+    from . import plots
+    from .survey import SCAN_NAME
+
+    traj = _trajectory(args)                        # a bad file: one line, nothing written
+    scene = mitsonar.load_scene(args.scene)
+    out = args.output
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise CLIError(f"-o {out!r} is a file, not a folder")
+    if os.path.isdir(out) and any(f.startswith("scan_") for f in os.listdir(out)):
+        raise CLIError(f"-o {out!r} already holds a survey's scans; choose a new or empty folder")
+    ext = "." + args.format
+    try:   # checks every argument and the plan, then makes the folder; renders nothing yet
+        scans = mitsonar.render_survey(scene, traj, out, spp=args.spp, seed=args.seed, max_scans=args.max_scans,
+                                       ext=ext, progress=not args.quiet)
+    except OSError as exc:
+        raise CLIError(f"-o {out!r}: cannot create the output folder ({exc.strerror})") from None
+    positions = []
+    n = 0
+    for scan in scans:
+        if n == 0 and scan.kind == "mechanical":
+            plots.plot_cartesian(scan, mesh=mitsonar.scene_mesh(scene),
+                                 path=os.path.join(out, SCAN_NAME.format(0, "_world.png")))
+        positions.append(scan)
+        n += 1
+        if len(positions) > 50:                     # keep the picture's dots, not the scans' bins
+            positions = positions[::2]
+    plots.plot_track(traj, os.path.join(out, "track.png"), scans=positions)
+    print(f"wrote {n} scans, trajectory.tum and track.png to {out} "
+          f"({traj.span[1] - traj.span[0]:.6g} s of track)")
+    return 0
+
+
+def add_subcommands(sub):
+    s = sub.add_parser("survey", help="render consecutive scans along a vehicle trajectory",
+                       description="Render a survey: the scene's sonar (its to_world is the mount on "
+                                   "the vehicle, x forward, y port, z up) pinging along a trajectory.")
+    s.add_argument("scene", help="scene XML file")
+    s.add_argument("-o", "--output", required=True, help="output folder (scans, trajectory.tum, track.png)")
+    s.add_argument("--trajectory", metavar="TUM", help="trajectory file: 'timestamp tx ty tz qx qy qz qw' per line")
+    s.add_argument("--lawnmower", nargs=4, type=float, metavar=("X_MIN", "X_MAX", "Y_MIN", "Y_MAX"),
+                   help="a lawnmower survey of this world rectangle (lines along x)")
+    s.add_argument("--spacing", type=float, default=10.0, help="lawnmower line spacing, m (default 10)")
+    s.add_argument("--speed", type=float, default=1.5, help="lawnmower speed, m/s (default 1.5)")
+    s.add_argument("--depth", type=float, help="lawnmower depth below z = 0, m")
+    s.add_argument("--altitude", type=float, help="lawnmower altitude above z = 0, m")
+    s.add_argument("--yaw-rate", type=float, default=20.0, help="lawnmower turn rate at the corners, deg/s")
+    s.add_argument("--drift", type=int, metavar="SEED", help="add seeded navigation drift (a random walk)")
+    s.add_argument("--spp", type=int, default=1024, help="paths per ping (default 1024)")
+    s.add_argument("--seed", type=int, default=0, help="survey seed (default 0)")
+    s.add_argument("--max-scans", type=int, help="stop after this many scans")
+    s.add_argument("--format", default="npz", choices=("npz", "exr"), help="scan file format (default npz)")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=cmd_survey)
