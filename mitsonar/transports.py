@@ -4,7 +4,10 @@ The driver (`mitsonar.micron.MicronSonar`) and the passive recorder open a port 
 `open_serial` (``serial.serial_for_url``: a device path, ``socket://host:port``, ``rfc2217://``,
 ``loop://`` ...) and read it with `read_available`. The virtual head (`mitsonar.virtual_sonar`)
 serves on `open_transport`: a new pseudo-terminal, a TCP port that pyserial ``socket://``
-clients connect to, or any pyserial URL. Nothing here knows SeaNet.
+clients connect to, a UDP port (``udp://127.0.0.1:PORT``, loopback only: a virtual Ping360
+answers the sender of the last datagram, as the real head does on its Ethernet port), or any
+pyserial URL. The host's side opens ``udp://HOST:PORT`` with `open_serial` as well. Nothing here
+knows SeaNet or ping-protocol.
 """
 from __future__ import annotations
 
@@ -16,7 +19,7 @@ import tty
 from urllib.parse import urlparse
 
 __all__ = ["SonarError", "SonarTimeout", "open_serial", "serial_fileno", "read_available",
-           "open_transport", "check_port"]
+           "open_transport", "check_port", "UdpPort"]
 
 
 class SonarError(RuntimeError):
@@ -31,9 +34,50 @@ class SonarTimeout(SonarError, TimeoutError):
 # The host's side: pyserial
 # --------------------------------------------------------------------------------------------
 
+class UdpPort:
+    """The host's side of a UDP head (``udp://HOST:PORT``): a connected datagram socket with the
+    ``write``/``close`` of a pyserial port; `read_available` reads it through ``_socket``."""
+
+    def __init__(self, host: str, port: int):
+        self.port = f"udp://{host}:{port}"
+        self._socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self._socket.connect((host, port))
+        except BaseException:
+            self._socket.close()
+            raise
+        self._socket.setblocking(False)
+
+    def write(self, data: bytes) -> int:
+        return self._socket.send(bytes(data))
+
+    def reset_input_buffer(self) -> None:
+        while True:
+            try:
+                self._socket.recv(65536)
+            except OSError:
+                return
+
+    def close(self) -> None:
+        self._socket.close()
+
+
+def _host_port(url: str, scheme: str) -> tuple[str, int]:
+    u = urlparse(url)
+    if u.port is None or not u.hostname:
+        raise ValueError(f"needs a host and a port ({scheme}://HOST:PORT)")
+    return u.hostname, u.port
+
+
 def open_serial(port_or_url, baudrate: int, timeout: float, write_timeout: float | None = None):
-    """``serial.serial_for_url`` of ``port_or_url``; `SonarError` "cannot open PORT: reason"."""
+    """``serial.serial_for_url`` of ``port_or_url`` (`UdpPort` for ``udp://HOST:PORT``);
+    `SonarError` "cannot open PORT: reason"."""
     import serial
+    if isinstance(port_or_url, str) and port_or_url.startswith("udp://"):
+        try:
+            return UdpPort(*_host_port(port_or_url, "udp"))
+        except (OSError, ValueError) as e:
+            raise SonarError(f"cannot open {port_or_url}: {e}") from None
     try:
         return serial.serial_for_url(os.fspath(port_or_url), baudrate=baudrate, timeout=timeout,
                                      write_timeout=write_timeout)
@@ -184,6 +228,47 @@ class _TcpServerTransport:
         self.server.close()
 
 
+class _UdpServerTransport:
+    """Bound to 127.0.0.1:port; answers the sender of the last datagram (``udp://`` clients)."""
+
+    def __init__(self, host: str, port: int):
+        if host not in ("127.0.0.1", "localhost"):
+            raise ValueError(f"serves on the loopback only (udp://127.0.0.1:PORT), not {host}")
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self.sock.bind(("127.0.0.1", port))
+        except BaseException:
+            self.sock.close()
+            raise
+        self.sock.setblocking(False)
+        self.port = f"udp://127.0.0.1:{self.sock.getsockname()[1]}"
+        self.peer = None
+
+    def read(self, timeout: float) -> bytes:
+        r, _, _ = select.select([self.sock], [], [], max(0.0, timeout))
+        if not r:
+            return b""
+        try:
+            data, self.peer = self.sock.recvfrom(65536)
+        except OSError:          # ICMP unreachable of an earlier send, or nothing after all
+            return b""
+        return data
+
+    def write(self, data: bytes) -> int:
+        if self.peer is None:
+            return len(data)      # nobody asked yet: the datagram is lost
+        try:
+            self.sock.sendto(data, self.peer)
+        except (BlockingIOError, InterruptedError):
+            return 0
+        except OSError:
+            pass
+        return len(data)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
 class _SerialTransport:
     def __init__(self, url: str, baudrate: int):
         import serial
@@ -224,6 +309,8 @@ def open_transport(port_url: str | None, baudrate: int):
             if u.port is None:
                 raise ValueError("needs a port (socket://HOST:PORT, 0 for any)")
             return _TcpServerTransport(u.hostname or "localhost", u.port)
+        if port_url.startswith("udp://"):
+            return _UdpServerTransport(*_host_port(port_url, "udp"))
         return _SerialTransport(port_url, baudrate)
     except OSError as e:     # also serial.SerialException and socket.gaierror
         # pyserial wraps the OS's reason in its own sentence, which names the port again.
