@@ -1,10 +1,11 @@
 """Recording and replaying a head's raw byte stream: `replay`, and the passive part of recording.
 
-`mitsonar.micron.record` drives a head and logs every byte (`mitsonar.rawlog` format); a
+`mitsonar.micron.record` and `mitsonar.ping360.record` drive a head and log every byte
+(`mitsonar.rawlog` format; the header's ``head`` says which: ``ping360``, else a SeaNet head); a
 passive recording (`record_passive`: a tap on the head's transmit line) needs no driver and
 lives here. `replay` turns a log back into the scans the driver returned while recording,
-with the same `ScanAssembler` and the same rule for usable scanlines (`ping_problem`).
-This module does not import the driver.
+with the same assembler and the same rule for usable pings (`ping_problem`: a Micron's
+`ScanAssembler`, a Ping360's `Ping360Assembler`). This module does not import the drivers.
 """
 from __future__ import annotations
 
@@ -15,6 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from .assembler import ScanAssembler, check_pose
+from .ping360_head import LIMITS as PING360_LIMITS, Ping360Assembler, Ping360Settings
+from .ping360_head import ping_problem as ping360_problem
+from .ping_protocol import StreamParser as PingStreamParser, ids as ping_ids
 from .rawlog import POSE, RX, TX, LogDamageWarning, RawLogWriter, read_log
 from .scan import Scan
 from .seanet.constants import DEFAULT_NIBBLE_ORDER
@@ -27,12 +31,12 @@ __all__ = ["replay", "record_passive", "finish_recording"]
 
 
 def finish_recording(log: RawLogWriter, port, started: float, packets: int,
-                     error: BaseException | None = None) -> None:
+                     error: BaseException | None = None, protocol: str = "SeaNet") -> None:
     """End a recording: rename its log into place, or remove it when no packet came from the head.
 
     ``log`` was opened with ``temporary=True``; ``started`` is the `time.monotonic` of the start,
-    ``packets`` the number of SeaNet packets received, ``error`` what stopped the recording (None
-    for a normal end or Ctrl-C). A log holding a packet is kept whatever happened (a head that
+    ``packets`` the number of packets (``protocol``: SeaNet, ping-protocol) received, ``error`` what
+    stopped the recording (None for a normal end or Ctrl-C). A log holding a packet is kept whatever happened (a head that
     goes quiet after data arrived loses nothing); the `SonarError` that stopped it then says
     where the log is. A log without any packet is removed and the error says so in one line:
     ``no bytes from the head on PORT in N s`` (or that the bytes formed no packet).
@@ -47,7 +51,7 @@ def finish_recording(log: RawLogWriter, port, started: float, packets: int,
         log.discard()
         if error is None or isinstance(error, SonarError):
             if log.bytes_rx:
-                what = (f"no SeaNet packet from the head on {port} in {elapsed:.1f} s ({log.bytes_rx} "
+                what = (f"no {protocol} packet from the head on {port} in {elapsed:.1f} s ({log.bytes_rx} "
                         f"bytes that form none: wrong baud rate?)")
             else:
                 what = f"no bytes from the head on {port} in {elapsed:.1f} s"
@@ -122,11 +126,15 @@ def replay(path, *, sound_speed: float | None = None, pose=None, nibble_order: s
 
     Scanlines count once an mtHeadCommand was sent and when they match the last one sent (as
     the driver does), so a log recorded with ``record(..., scans=k)`` replays into the same
-    scans the driver returned.
+    scans the driver returned. A Ping360 log (``head: ping360``; ``nibble_order``, ``revisit``
+    and ``max_turns`` do not apply) counts each ``device_data`` that answers the last
+    ``transducer`` sent, as `mitsonar.ping360.Ping360Sonar` does.
     """
     if sound_speed is not None and not sound_speed_ok(sound_speed):
         raise ValueError(f"replay: sound_speed = {sound_speed!r} is out of range: allowed {SOUND_SPEED_ALLOWED}")
     meta, records = read_log(path)
+    if meta.get("head") == "ping360":
+        return _replay_ping360(path, meta, records, sound_speed, pose, partial)
     c = sound_speed or meta.get("sound_speed") or 1500.0
     if not sound_speed_ok(c):
         raise ValueError(f"{path}: the log's sound_speed = {c!r} is out of range: allowed "
@@ -181,5 +189,57 @@ def replay(path, *, sound_speed: float | None = None, pose=None, nibble_order: s
         if s is not None:
             s.meta["log"] = str(path)
             s.meta["partial"] = True
+            scans.append(s)
+    return scans
+
+
+def _replay_ping360(path, meta: dict, records: list, sound_speed, pose, partial: bool) -> list[Scan]:
+    """`replay` of a Ping360 log: the `Ping360Sonar.scan` results, from the logged bytes."""
+    lo, hi = PING360_LIMITS["sound_speed"]
+    c = sound_speed or meta.get("sound_speed") or 1500.0
+    if not (isinstance(c, (int, float)) and lo <= c <= hi):
+        raise ValueError(f"{path}: sound_speed = {c!r} is out of range: allowed {lo:g}..{hi:g} m/s")
+    try:
+        settings = Ping360Settings(**{**meta.get("settings", {}), "sound_speed": float(c)})
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{path}: the log's Ping360 settings are unusable ({e})") from None
+    fixed_pose = pose is not None
+    T = check_pose(pose if fixed_pose else meta.get("pose"))
+    asm = Ping360Assembler(settings)
+    rx, tx = PingStreamParser(), PingStreamParser()
+    command, scans = None, []
+    t0 = float(meta.get("start_time", 0.0))
+
+    def take(msgs, t):
+        nonlocal command
+        for m in msgs:
+            if (m.message_id == ping_ids["device_data"] and command is not None
+                    and ping360_problem(m, command) is None):
+                command = None          # the driver takes one reply per request
+                s = asm.add(m, T, t0 + t)
+                if s is not None:
+                    s.meta["log"] = str(path)
+                    scans.append(s)
+
+    for t, kind, data in records:
+        if kind == TX:
+            for m in tx.feed(data):
+                if m.message_id == ping_ids["transducer"] and m.transmit:
+                    command = m
+        elif kind == POSE and not fixed_pose and len(data) == 128:
+            T = np.frombuffer(data, dtype="<f8").reshape(4, 4).copy()
+        elif kind == RX:
+            take(rx.feed(data), t)
+    take(rx.flush(), records[-1][0] if records else 0.0)
+    for parser, way in ((rx, "from"), (tx, "to")):
+        if parser.dropped:
+            reasons = ", ".join(f"{r}: {n}" for r, n in parser.drop_reasons.most_common(3))
+            warnings.warn(LogDamageWarning(f"{Path(path).name}: dropped {parser.dropped} bytes {way} "
+                                           f"the head that form no whole ping-protocol message ({reasons})"),
+                          stacklevel=3)
+    if partial:
+        s = asm.finish()
+        if s is not None:
+            s.meta["log"], s.meta["partial"] = str(path), True
             scans.append(s)
     return scans
