@@ -12,24 +12,21 @@ at the next angle of ``settings.angles`` and its ``device_data`` reply, as ``brp
 """
 from __future__ import annotations
 
-import os
 import time
 from collections import Counter, deque
 from typing import Iterator
 
-import numpy as np
-
 from .ping360_head import Ping360Assembler, Ping360Settings, check_pose, ping_problem
 from .ping_protocol import Message, StreamParser, encode, ids
 from .rawlog import RawLogWriter
-from .recording import finish_recording
+from .recording import record_driven
 from .scan import Scan
-from .transports import SonarError, SonarTimeout, open_serial, read_available, serial_fileno
+from .transports import LineDriver, SonarError, SonarTimeout
 
 __all__ = ["Ping360Sonar", "record", "SonarError", "SonarTimeout"]
 
 
-class Ping360Sonar:
+class Ping360Sonar(LineDriver):
     """A Blue Robotics Ping360 on a serial port or UDP.
 
     ==============  ==========================================================================
@@ -79,10 +76,6 @@ class Ping360Sonar:
         self._inbox: deque = deque()
         self._assembler = Ping360Assembler(settings)
         self._next = 0
-        self._own_log = False
-        self._log = None
-        self._ser = None
-        self._fd = None
         self.port = port_or_url if isinstance(port_or_url, str) else getattr(port_or_url, "port", repr(port_or_url))
         if log is not None:
             if isinstance(log, RawLogWriter):
@@ -91,12 +84,7 @@ class Ping360Sonar:
                 self._log = RawLogWriter(log, self._log_meta())
                 self._own_log = True
         try:
-            if isinstance(port_or_url, (str, os.PathLike)):
-                self._ser = open_serial(os.fspath(port_or_url), self.baudrate, timeout=0.05,
-                                        write_timeout=max(1.0, self.timeout))
-            else:
-                self._ser = port_or_url
-            self._fd = serial_fileno(self._ser)
+            self._open_line(port_or_url, self.baudrate, self.timeout)
             if start:
                 self.start()
         except BaseException:
@@ -115,58 +103,17 @@ class Ping360Sonar:
         wire = (24 + 24 + s.number_of_samples) * 10.0 / self.baudrate
         return 2.0 * (s.ping_time() + s.transmit_duration * 1e-6 + wire + 0.1) + 0.5
 
-    @property
-    def pose(self) -> np.ndarray:
-        return self._pose
-
-    @pose.setter
-    def pose(self, T) -> None:
-        self._pose = check_pose(T)
-        if self._log is not None:
-            self._log.pose(self._pose)
-
     def _log_meta(self) -> dict:
         return {"format": "mitsonar ping360 raw log", "head": "ping360", "port": str(self.port),
                 "baudrate": self.baudrate, "sound_speed": self._settings.sound_speed,
                 "settings": self._settings.as_dict(), "pose": self._pose.tolist(), "passive": False}
 
-    def close(self) -> None:
-        """Close the port (and the log if the driver opened it). Safe to call twice."""
-        ser, self._ser = self._ser, None
-        if ser is not None:
-            try:
-                ser.close()
-            except Exception:      # closing a vanished device must not mask the real error
-                pass
-        if self._own_log and self._log is not None:
-            self._log.close()
-        self._log = None
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
-    def __del__(self):
-        try:
-            self.close()
-        except Exception:
-            pass
-
     # ---- the line ----
+    _check_pose = staticmethod(check_pose)
+
     def _write(self, msg: Message) -> None:
-        if self._ser is None:
-            raise SonarError("the sonar is closed")
         msg.src, msg.dst = 255, 0        # the host's id, as brping's PingDevice.my_id
-        data = encode(msg)
-        try:
-            self._ser.write(data)
-        except Exception as e:
-            raise SonarError(f"{self.port}: write failed: {e}") from None
-        if self._log is not None:
-            self._log.tx(data)
-        self.stats[f"sent {msg.name}"] += 1
+        self._send_bytes(encode(msg), msg.name)
 
     def _poll(self, deadline: float) -> Message | None:
         while True:
@@ -175,12 +122,8 @@ class Ping360Sonar:
             now = time.monotonic()
             if now >= deadline:
                 return None
-            if self._ser is None:
-                raise SonarError("the sonar is closed")
-            data = read_available(self._ser, self._fd, min(deadline - now, 0.1), self.port)
+            data = self._read_some(min(deadline - now, 0.1))
             if data:
-                if self._log is not None:
-                    self._log.rx(data)
                 self._inbox.extend(self.parser.feed(data))
 
     def _ask(self, msg: Message, accept, what: str) -> Message:
@@ -284,31 +227,5 @@ def record(port, path, seconds: float | None = None, *, scans: int | None = None
     for name, v in (("seconds", seconds), ("scans", scans), ("pings", pings)):
         if v is not None and not (isinstance(v, (int, float)) and v > 0):
             raise ValueError(f"record: {name} must be positive, got {v!r}")
-    out = {"bytes_rx": 0, "bytes_tx": 0, "pings": 0, "scans": 0}
     with Ping360Sonar(port, baudrate, settings, pose, start=False, **sonar_kwargs) as sonar:
-        log = RawLogWriter(path, sonar._log_meta(), temporary=True)
-        sonar._log = log
-        started = time.monotonic()
-        end = None if seconds is None else started + seconds
-        error = None
-        try:
-            sonar.start()
-            while end is None or time.monotonic() < end:
-                if scans is not None:
-                    sonar.scan()
-                    out["scans"] += 1
-                    if out["scans"] >= scans:
-                        break
-                else:
-                    sonar.read_ping()
-                    if pings is not None and sonar.stats["pings"] >= pings:
-                        break
-        except KeyboardInterrupt:
-            pass
-        except BaseException as e:      # noqa: BLE001 - finish_recording re-raises it
-            error = e
-        out["pings"] = int(sonar.stats["pings"])
-        out["bytes_dropped"] = int(sonar.parser.dropped)
-        out["bytes_rx"], out["bytes_tx"] = log.bytes_rx, log.bytes_tx
-        finish_recording(log, sonar.port, started, sonar.parser.packets, error, protocol="ping-protocol")
-    return out
+        return record_driven(sonar, path, seconds, scans, pings, sonar.start, "ping-protocol")

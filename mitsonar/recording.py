@@ -27,7 +27,7 @@ from .seanet.settings import SOUND_SPEED_ALLOWED, HeadSettings, ping_problem, so
 from .seanet.stream import StreamParser
 from .transports import SonarError, SonarTimeout, open_serial
 
-__all__ = ["replay", "record_passive", "finish_recording"]
+__all__ = ["replay", "record_passive", "record_driven", "finish_recording"]
 
 
 def finish_recording(log: RawLogWriter, port, started: float, packets: int,
@@ -62,6 +62,47 @@ def finish_recording(log: RawLogWriter, port, started: float, packets: int,
                    else SonarTimeout)(what) from None
     if error is not None:
         raise error
+
+
+def record_driven(sonar, path, seconds: float | None, scans: int | None, pings: int | None,
+                  start, protocol: str = "SeaNet") -> dict:
+    """The recording loop both drivers' ``record`` share: log every byte while driving ``sonar``.
+
+    ``sonar`` is a driver made with ``start=False`` (`mitsonar.micron.MicronSonar`,
+    `mitsonar.ping360.Ping360Sonar`: ``_log_meta``, ``scan``, ``read_ping``, ``stats``, ``parser``,
+    ``port``); ``start()`` starts the head. Stops after ``seconds``, ``scans`` scans or ``pings``
+    pings (one of them, else only Ctrl-C). The log is written under a temporary name and renamed
+    at the end, or removed (`finish_recording`). Returns ``{"bytes_rx", "bytes_tx", "pings",
+    "scans", "bytes_dropped"}``.
+    """
+    out = {"bytes_rx": 0, "bytes_tx": 0, "pings": 0, "scans": 0}
+    log = RawLogWriter(path, sonar._log_meta(), temporary=True)
+    sonar._log = log
+    started = time.monotonic()
+    end = None if seconds is None else started + seconds
+    error = None
+    try:
+        start()
+        while end is None or time.monotonic() < end:
+            if scans is not None:
+                sonar.scan()
+                out["scans"] += 1
+                if out["scans"] >= scans:
+                    break
+            else:
+                sonar.read_ping()
+                out["pings"] += 1
+                if pings is not None and out["pings"] >= pings:
+                    break
+    except KeyboardInterrupt:
+        pass
+    except BaseException as e:      # noqa: BLE001 - finish_recording re-raises it
+        error = e
+    out["pings"] = int(sonar.stats["pings"])
+    out["bytes_dropped"] = int(sonar.parser.dropped)
+    out["bytes_rx"], out["bytes_tx"] = log.bytes_rx, log.bytes_tx
+    finish_recording(log, sonar.port, started, sonar.parser.packets, error, protocol)
+    return out
 
 
 def record_passive(port, path, seconds: float, *, baudrate: int = 115200,

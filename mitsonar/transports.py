@@ -14,12 +14,14 @@ from __future__ import annotations
 import os
 import select
 import socket
+import sys
+import threading
 import time
 import tty
 from urllib.parse import urlparse
 
 __all__ = ["SonarError", "SonarTimeout", "open_serial", "serial_fileno", "read_available",
-           "open_transport", "check_port", "UdpPort"]
+           "open_transport", "check_port", "UdpPort", "LineDriver", "ServedHead"]
 
 
 class SonarError(RuntimeError):
@@ -128,9 +130,148 @@ def read_available(ser, fd, wait: float, port) -> bytes:
     return data
 
 
+class LineDriver:
+    """What every head driver does with its line (`mitsonar.micron.MicronSonar`,
+    `mitsonar.ping360.Ping360Sonar`): open it, send and receive bytes through the raw log
+    (``_log``, a `mitsonar.rawlog.RawLogWriter` or None), count what was sent (``stats``), hold
+    the head's mounting (``pose``, checked by the subclass's ``_check_pose``), close.
+
+    Subclasses set ``port``, ``stats`` and ``_pose`` and call `_open_line`.
+    """
+
+    _ser = None
+    _fd = None
+    _log = None
+    _own_log = False
+
+    def _open_line(self, port_or_url, baudrate: int, timeout: float) -> None:
+        """Open ``port_or_url`` (`open_serial`) unless it is an open pyserial-like object."""
+        if isinstance(port_or_url, (str, os.PathLike)):
+            self._ser = open_serial(os.fspath(port_or_url), baudrate, timeout=0.05,
+                                    write_timeout=max(1.0, timeout))
+        else:
+            self._ser = port_or_url
+        self._fd = serial_fileno(self._ser)
+
+    @staticmethod
+    def _check_pose(T):
+        raise NotImplementedError
+
+    @property
+    def pose(self):
+        return self._pose
+
+    @pose.setter
+    def pose(self, T) -> None:
+        self._pose = self._check_pose(T)
+        if self._log is not None:
+            self._log.pose(self._pose)
+
+    def _send_bytes(self, data: bytes, name: str) -> None:
+        if self._ser is None:
+            raise SonarError("the sonar is closed")
+        try:
+            self._ser.write(data)
+        except Exception as e:
+            raise SonarError(f"{self.port}: write failed: {e}") from None
+        if self._log is not None:
+            self._log.tx(data)
+        self.stats[f"sent {name}"] += 1
+
+    def _read_some(self, wait: float) -> bytes:
+        if self._ser is None:
+            raise SonarError("the sonar is closed")
+        data = read_available(self._ser, self._fd, wait, self.port)
+        if data and self._log is not None:
+            self._log.rx(data)
+        return data
+
+    def close(self) -> None:
+        """Close the port (and the log if the driver opened it). Safe to call twice."""
+        ser, self._ser = self._ser, None
+        if ser is not None:
+            try:
+                ser.close()
+            except Exception:      # closing a vanished device must not mask the real error
+                pass
+        if self._own_log and self._log is not None:
+            self._log.close()
+        self._log = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
 # --------------------------------------------------------------------------------------------
 # The virtual head's side
 # --------------------------------------------------------------------------------------------
+
+class ServedHead:
+    """What every virtual head does with its port (`mitsonar.virtual_sonar.VirtualMicron`,
+    `mitsonar.virtual_ping360.VirtualPing360`): open it (`open_transport` of ``port_url``) and
+    run ``_run`` in a thread until `stop`. Subclasses set ``port_url``, ``baudrate``, ``_stop``
+    (a `threading.Event`), ``_thread = None``, ``_transport = None``, and may prepare the head
+    in ``_power_on`` (called with the port open, before the thread starts)."""
+
+    def _power_on(self) -> None:
+        pass
+
+    @property
+    def port(self) -> str | None:
+        return None if self._transport is None else self._transport.port
+
+    def start(self) -> str:
+        """Open the port, power the head on; returns the port a driver should open."""
+        if self._thread is None:
+            self._transport = open_transport(self.port_url, self.baudrate)
+            self._stop.clear()
+            self._power_on()
+            self._thread = threading.Thread(target=self._run, name=type(self).__name__, daemon=True)
+            self._thread.start()
+        return self.port
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """Stop the head and close the port (safe to call twice)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+            self._thread = None
+        if self._transport is not None:
+            self._transport.close()
+            self._transport = None
+
+    def close(self) -> None:
+        self.stop()
+
+    def __enter__(self):
+        self.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
+
+    def serve(self, seconds: float | None = None, out=None, label: str = "virtual head") -> int:
+        """Run in the foreground: print ``LABEL on PORT``, serve until ``seconds`` or Ctrl-C."""
+        out = sys.stdout if out is None else out
+        with self:
+            print(f"{label} on {self.port}", file=out, flush=True)
+            end = None if seconds is None else time.monotonic() + seconds
+            try:
+                while end is None or time.monotonic() < end:
+                    time.sleep(0.05 if end is None else max(0.0, min(0.05, end - time.monotonic())))
+            except KeyboardInterrupt:
+                pass
+        return 0
+
 
 class _PtyTransport:
     def __init__(self):

@@ -34,7 +34,6 @@ and takes ``(10 + 14 + n) * 10 / baud`` on the line (no transfer time on UDP).
 from __future__ import annotations
 
 import math
-import sys
 import threading
 import time
 from collections import Counter, deque
@@ -44,7 +43,7 @@ import numpy as np
 from .ping360_head import GRADIANS, TICK, angle_to_radians, check_setting
 from .ping_protocol import Message, StreamParser, encode, ids
 from .scan import Scan
-from .transports import open_transport
+from .transports import ServedHead
 
 __all__ = ["VirtualPing360", "serve"]
 
@@ -52,7 +51,7 @@ _STATE = ("gain_setting", "angle", "transmit_duration", "sample_period", "transm
           "number_of_samples")
 
 
-class VirtualPing360:
+class VirtualPing360(ServedHead):
     """A simulated Ping360 on a pseudo-terminal, a loopback UDP port, a TCP port or a pyserial URL.
 
     ===============  ========================================================================
@@ -108,39 +107,9 @@ class VirtualPing360:
         self._free_at = 0.0
         self._queue: deque = deque()      # (due time, bytes)
 
-    # ---- lifecycle ----
-    @property
-    def port(self) -> str | None:
-        return None if self._transport is None else self._transport.port
-
-    def start(self) -> str:
-        """Open the port and power the head on; returns the port a client opens."""
-        if self._thread is None:
-            self._transport = open_transport(self.port_url, self.baudrate)
-            self._udp = self._transport.port.startswith("udp://")
-            self._stop.clear()
-            self._thread = threading.Thread(target=self._run, name="VirtualPing360", daemon=True)
-            self._thread.start()
-        return self.port
-
-    def stop(self, timeout: float = 5.0) -> None:
-        """Stop the head and close the port (safe to call twice)."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout)
-            self._thread = None
-        if self._transport is not None:
-            self._transport.close()
-            self._transport = None
-
-    close = stop
-
-    def __enter__(self):
-        self.start()
-        return self
-
-    def __exit__(self, *exc):
-        self.stop()
+    def _power_on(self) -> None:
+        self._udp = self._transport.port.startswith("udp://")
+        self._reset()
 
     # ---- the line ----
     def _run(self) -> None:
@@ -306,14 +275,4 @@ def serve(scan: Scan, port_url: str | None = None, seconds: float | None = None,
           **kwargs) -> int:
     """Run a `VirtualPing360` in the foreground: print ``virtual Ping360 on PORT``, serve until
     ``seconds`` or Ctrl-C. Other keyword arguments go to `VirtualPing360`."""
-    out = sys.stdout if out is None else out
-    with VirtualPing360(scan, port_url, **kwargs) as vp:
-        print(f"virtual Ping360 on {vp.port}", file=out, flush=True)
-        end = None if seconds is None else time.monotonic() + seconds
-        try:
-            while end is None or time.monotonic() < end:
-                time.sleep(0.05 if end is None else max(0.0, min(0.05, end - time.monotonic())))
-        except KeyboardInterrupt:
-            pass
-    return 0
-
+    return VirtualPing360(scan, port_url, **kwargs).serve(seconds, out, "virtual Ping360")
