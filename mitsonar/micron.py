@@ -20,10 +20,8 @@ from __future__ import annotations
 
 import time
 from collections import Counter, deque
-from typing import Iterator
 
 from .assembler import ScanAssembler as _ScanAssembler, check_pose
-from .rawlog import RawLogWriter as _RawLogWriter
 from .recording import record_driven, record_passive
 from .scan import Scan
 from .seanet.constants import DEFAULT_NIBBLE_ORDER
@@ -78,13 +76,7 @@ class MicronSonar(LineDriver):
             settings = HeadSettings()
         if not isinstance(settings, HeadSettings):
             raise TypeError(f"settings must be a HeadSettings, got {type(settings).__name__}")
-        for name, v in (("timeout", timeout), ("boot_timeout", boot_timeout)):
-            if not (isinstance(v, (int, float)) and v > 0):
-                raise ValueError(f"{name} must be a positive number of seconds, got {v!r}")
-        if ping_timeout is not None and not (isinstance(ping_timeout, (int, float)) and ping_timeout > 0):
-            raise ValueError(f"ping_timeout must be a positive number of seconds, got {ping_timeout!r}")
-        if not (isinstance(retries, int) and retries >= 0):
-            raise ValueError(f"retries must be an integer >= 0, got {retries!r}")
+        self._check_timing(timeout, ping_timeout, retries, boot_timeout=boot_timeout)
         self._settings = settings
         self.baudrate = int(baudrate)
         self._pose = check_pose(pose)
@@ -110,31 +102,10 @@ class MicronSonar(LineDriver):
         self._params_sent_at = -1e9
         self._dropped_at_send = 0
         self._assembler: _ScanAssembler | None = None
-        self.port = port_or_url if isinstance(port_or_url, str) else getattr(port_or_url, "port", repr(port_or_url))
-        if log is not None:
-            if isinstance(log, _RawLogWriter):
-                self._log = log
-            else:
-                self._log = _RawLogWriter(log, self._log_meta())
-                self._own_log = True
-        try:
-            self._open_line(port_or_url, self.baudrate, self.timeout)
-            if start:
-                self.start(reboot=reboot)
-        except BaseException:
-            self.close()
-            raise
+        self._attach(port_or_url, log, (lambda: self.start(reboot=reboot)) if start else None)
 
-    # ---- properties ----
-    @property
-    def settings(self) -> HeadSettings:
-        return self._settings
-
-    @property
-    def ping_timeout(self) -> float:
-        if self._ping_timeout is not None:
-            return float(self._ping_timeout)
-        return 2.0 * self._settings.expected_step_time(self.baudrate) + 0.5
+    def _expected_step_time(self) -> float:
+        return self._settings.expected_step_time(self.baudrate)
 
     _check_pose = staticmethod(check_pose)
 
@@ -325,13 +296,6 @@ class MicronSonar(LineDriver):
         self.stats["pings"] += 1
         self.last_ping_time = time.time()
         return m
-
-    def pings(self, count: int | None = None) -> Iterator[HeadData]:
-        """Iterator over scanlines (`HeadData`), forever or ``count`` of them."""
-        k = 0
-        while count is None or k < count:
-            yield self.read_ping()
-            k += 1
 
     def scan(self) -> Scan:
         """One full turn (continuous) or one sector sweep as a `Scan` (see `ScanAssembler`)."""

@@ -14,11 +14,9 @@ from __future__ import annotations
 
 import time
 from collections import Counter, deque
-from typing import Iterator
 
 from .ping360_head import Ping360Assembler, Ping360Settings, check_pose, ping_problem
 from .ping_protocol import Message, StreamParser, encode, ids
-from .rawlog import RawLogWriter
 from .recording import record_driven
 from .scan import Scan
 from .transports import LineDriver, SonarError, SonarTimeout
@@ -57,11 +55,7 @@ class Ping360Sonar(LineDriver):
         settings = Ping360Settings() if settings is None else settings
         if not isinstance(settings, Ping360Settings):
             raise TypeError(f"settings must be a Ping360Settings, got {type(settings).__name__}")
-        for name, v in (("timeout", timeout), ("ping_timeout", ping_timeout)):
-            if v is not None and not (isinstance(v, (int, float)) and v > 0):
-                raise ValueError(f"{name} must be a positive number of seconds, got {v!r}")
-        if not (isinstance(retries, int) and retries >= 0):
-            raise ValueError(f"retries must be an integer >= 0, got {retries!r}")
+        self._check_timing(timeout, ping_timeout, retries)
         self._settings = settings
         self.baudrate = int(baudrate)
         self._pose = check_pose(pose)
@@ -76,32 +70,13 @@ class Ping360Sonar(LineDriver):
         self._inbox: deque = deque()
         self._assembler = Ping360Assembler(settings)
         self._next = 0
-        self.port = port_or_url if isinstance(port_or_url, str) else getattr(port_or_url, "port", repr(port_or_url))
-        if log is not None:
-            if isinstance(log, RawLogWriter):
-                self._log = log
-            else:
-                self._log = RawLogWriter(log, self._log_meta())
-                self._own_log = True
-        try:
-            self._open_line(port_or_url, self.baudrate, self.timeout)
-            if start:
-                self.start()
-        except BaseException:
-            self.close()
-            raise
+        self._attach(port_or_url, log, self.start if start else None)
 
-    @property
-    def settings(self) -> Ping360Settings:
-        return self._settings
-
-    @property
-    def ping_timeout(self) -> float:
-        if self._ping_timeout is not None:
-            return float(self._ping_timeout)
+    def _expected_step_time(self) -> float:
+        """Request and reply on the line, motor (0.1 s at most), pulse, listening."""
         s = self._settings
         wire = (24 + 24 + s.number_of_samples) * 10.0 / self.baudrate
-        return 2.0 * (s.ping_time() + s.transmit_duration * 1e-6 + wire + 0.1) + 0.5
+        return s.ping_time() + s.transmit_duration * 1e-6 + wire + 0.1
 
     def _log_meta(self) -> dict:
         return {"format": "mitsonar ping360 raw log", "head": "ping360", "port": str(self.port),
@@ -189,13 +164,6 @@ class Ping360Sonar(LineDriver):
         self.stats["pings"] += 1
         self.last_ping_time = time.time()
         return reply
-
-    def pings(self, count: int | None = None) -> Iterator[Message]:
-        """Iterator over pings, forever or ``count`` of them."""
-        k = 0
-        while count is None or k < count:
-            yield self.read_ping()
-            k += 1
 
     def scan(self) -> Scan:
         """One pass over ``settings.angles`` (a full turn or a sector) as a `Scan`."""

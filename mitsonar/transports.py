@@ -136,7 +136,9 @@ class LineDriver:
     (``_log``, a `mitsonar.rawlog.RawLogWriter` or None), count what was sent (``stats``), hold
     the head's mounting (``pose``, checked by the subclass's ``_check_pose``), close.
 
-    Subclasses set ``port``, ``stats`` and ``_pose`` and call `_open_line`.
+    Subclasses check their arguments (`_check_timing`), set ``_settings``, ``baudrate``, ``timeout``,
+    ``_ping_timeout``, ``stats`` and ``_pose``, then call `_attach`; they define ``start``,
+    ``read_ping``, ``_log_meta`` and ``_expected_step_time`` (s per ping when all goes well).
     """
 
     _ser = None
@@ -144,14 +146,60 @@ class LineDriver:
     _log = None
     _own_log = False
 
-    def _open_line(self, port_or_url, baudrate: int, timeout: float) -> None:
-        """Open ``port_or_url`` (`open_serial`) unless it is an open pyserial-like object."""
-        if isinstance(port_or_url, (str, os.PathLike)):
-            self._ser = open_serial(os.fspath(port_or_url), baudrate, timeout=0.05,
-                                    write_timeout=max(1.0, timeout))
-        else:
-            self._ser = port_or_url
-        self._fd = serial_fileno(self._ser)
+    @staticmethod
+    def _check_timing(timeout, ping_timeout, retries, **more_timeouts) -> None:
+        """Refuse a timeout that is not a positive number of seconds, retries below 0."""
+        for name, v in (("timeout", timeout), *more_timeouts.items()):
+            if not (isinstance(v, (int, float)) and v > 0):
+                raise ValueError(f"{name} must be a positive number of seconds, got {v!r}")
+        if ping_timeout is not None and not (isinstance(ping_timeout, (int, float)) and ping_timeout > 0):
+            raise ValueError(f"ping_timeout must be a positive number of seconds, got {ping_timeout!r}")
+        if not (isinstance(retries, int) and retries >= 0):
+            raise ValueError(f"retries must be an integer >= 0, got {retries!r}")
+
+    def _attach(self, port_or_url, log, start) -> None:
+        """Name the port, open the log (a path, or a `RawLogWriter` to share), open the line
+        (`open_serial`, unless ``port_or_url`` is an open pyserial-like object) and call
+        ``start()`` if given; on any failure close what was opened."""
+        from .rawlog import RawLogWriter
+        self.port = (port_or_url if isinstance(port_or_url, str)
+                     else getattr(port_or_url, "port", repr(port_or_url)))
+        if log is not None:
+            if isinstance(log, RawLogWriter):
+                self._log = log
+            else:
+                self._log = RawLogWriter(log, self._log_meta())
+                self._own_log = True
+        try:
+            if isinstance(port_or_url, (str, os.PathLike)):
+                self._ser = open_serial(os.fspath(port_or_url), self.baudrate, timeout=0.05,
+                                        write_timeout=max(1.0, self.timeout))
+            else:
+                self._ser = port_or_url
+            self._fd = serial_fileno(self._ser)
+            if start is not None:
+                start()
+        except BaseException:
+            self.close()
+            raise
+
+    @property
+    def settings(self):
+        return self._settings
+
+    @property
+    def ping_timeout(self) -> float:
+        """s to wait for one reply: as given, else 2x the expected step time + 0.5 s."""
+        if self._ping_timeout is not None:
+            return float(self._ping_timeout)
+        return 2.0 * self._expected_step_time() + 0.5
+
+    def pings(self, count: int | None = None):
+        """Iterator over the head's pings (``read_ping``), forever or ``count`` of them."""
+        k = 0
+        while count is None or k < count:
+            yield self.read_ping()
+            k += 1
 
     @staticmethod
     def _check_pose(T):
