@@ -120,21 +120,10 @@ class MicronSonar(LineDriver):
     def _write(self, msg) -> None:
         self._send_bytes(encode(msg), msg.name)
 
-    def _poll(self, deadline: float):
-        """Next message, or None once ``deadline`` (monotonic) passes."""
-        while True:
-            if self._inbox:
-                return self._inbox.popleft()
-            now = time.monotonic()
-            if now >= deadline:
-                return None
-            data = self._read_some(min(deadline - now, 0.1))
-            if data:
-                msgs = self.parser.feed(data)
-                for m in msgs:
-                    if isinstance(m, Alive):
-                        self.last_alive = m
-                self._inbox.extend(msgs)
+    def _seen(self, msgs: list) -> None:
+        for m in msgs:
+            if isinstance(m, Alive):
+                self.last_alive = m
 
     def _aside(self, m) -> None:
         """A message nobody waits for now: keep usable scanlines, for replay's sake too."""

@@ -90,17 +90,6 @@ class Ping360Sonar(LineDriver):
         msg.src, msg.dst = 255, 0        # the host's id, as brping's PingDevice.my_id
         self._send_bytes(encode(msg), msg.name)
 
-    def _poll(self, deadline: float) -> Message | None:
-        while True:
-            if self._inbox:
-                return self._inbox.popleft()
-            now = time.monotonic()
-            if now >= deadline:
-                return None
-            data = self._read_some(min(deadline - now, 0.1))
-            if data:
-                self._inbox.extend(self.parser.feed(data))
-
     def _ask(self, msg: Message, accept, what: str) -> Message:
         """Send ``msg`` until ``accept(reply)`` holds (``retries`` re-sends); a ``nack`` of it fails."""
         end = time.monotonic() + self.timeout

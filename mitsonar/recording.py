@@ -195,14 +195,29 @@ def replay(path, *, sound_speed: float | None = None, pose=None, nibble_order: s
     asm = ScanAssembler(c, revisit=meta.get("revisit", True) if revisit is None else revisit,
                         max_turns=int(meta.get("max_turns", 3) if max_turns is None else max_turns),
                         settings=settings)
-    rx, tx = StreamParser(nibble_order=nib), StreamParser(nibble_order=nib)
+    return _assemble(path, meta, records, asm, StreamParser(nibble_order=nib), StreamParser(nibble_order=nib),
+                     lambda m: isinstance(m, HeadCommand),
+                     lambda m, c: isinstance(m, HeadData) and ping_problem(m, c) is None,
+                     T, fixed_pose, partial, "SeaNet packet")
+
+
+def _assemble(path, meta: dict, records: list, asm, rx, tx, is_command, usable, T, fixed_pose: bool,
+              partial: bool, what: str, once: bool = False) -> list[Scan]:
+    """The scans the driver assembled while it recorded ``records``: what the head sent (``rx``
+    parser) counts when ``usable(message, command)`` holds for the last message sent to it that
+    ``is_command`` (``tx`` parser); ``once``: one reply per command, as the Ping360 driver takes
+    it. Poses from the log unless ``fixed_pose``; ``LogDamageWarning`` for bytes that form no
+    ``what``."""
     command = None
     scans = []
     t0 = float(meta.get("start_time", 0.0))
 
     def take(msgs, t):
+        nonlocal command
         for m in msgs:
-            if isinstance(m, HeadData) and command is not None and ping_problem(m, command) is None:
+            if command is not None and usable(m, command):
+                if once:
+                    command = None
                 s = asm.add(m, T, t0 + t)
                 if s is not None:
                     s.meta["log"] = str(path)
@@ -211,7 +226,7 @@ def replay(path, *, sound_speed: float | None = None, pose=None, nibble_order: s
     for t, kind, data in records:
         if kind == TX:
             for m in tx.feed(data):
-                if isinstance(m, HeadCommand):
+                if is_command(m):
                     command = m
         elif kind == POSE and not fixed_pose and len(data) == 128:
             T = np.frombuffer(data, dtype="<f8").reshape(4, 4).copy()
@@ -224,7 +239,7 @@ def replay(path, *, sound_speed: float | None = None, pose=None, nibble_order: s
             reasons = ", ".join(f"{r}: {n}" for r, n in parser.drop_reasons.most_common(3))
             warnings.warn(LogDamageWarning(
                 f"{Path(path).name}: dropped {parser.dropped} bytes {way} "
-                f"the head that form no whole SeaNet packet ({reasons})"), stacklevel=2)
+                f"the head that form no whole {what} ({reasons})"), stacklevel=3)
     if partial:
         s = asm.finish()
         if s is not None:
@@ -246,41 +261,7 @@ def _replay_ping360(path, meta: dict, records: list, sound_speed, pose, partial:
         raise ValueError(f"{path}: the log's Ping360 settings are unusable ({e})") from None
     fixed_pose = pose is not None
     T = check_pose(pose if fixed_pose else meta.get("pose"))
-    asm = Ping360Assembler(settings)
-    rx, tx = PingStreamParser(), PingStreamParser()
-    command, scans = None, []
-    t0 = float(meta.get("start_time", 0.0))
-
-    def take(msgs, t):
-        nonlocal command
-        for m in msgs:
-            if (m.message_id == ping_ids["device_data"] and command is not None
-                    and ping360_problem(m, command) is None):
-                command = None          # the driver takes one reply per request
-                s = asm.add(m, T, t0 + t)
-                if s is not None:
-                    s.meta["log"] = str(path)
-                    scans.append(s)
-
-    for t, kind, data in records:
-        if kind == TX:
-            for m in tx.feed(data):
-                if m.message_id == ping_ids["transducer"] and m.transmit:
-                    command = m
-        elif kind == POSE and not fixed_pose and len(data) == 128:
-            T = np.frombuffer(data, dtype="<f8").reshape(4, 4).copy()
-        elif kind == RX:
-            take(rx.feed(data), t)
-    take(rx.flush(), records[-1][0] if records else 0.0)
-    for parser, way in ((rx, "from"), (tx, "to")):
-        if parser.dropped:
-            reasons = ", ".join(f"{r}: {n}" for r, n in parser.drop_reasons.most_common(3))
-            warnings.warn(LogDamageWarning(f"{Path(path).name}: dropped {parser.dropped} bytes {way} "
-                                           f"the head that form no whole ping-protocol message ({reasons})"),
-                          stacklevel=3)
-    if partial:
-        s = asm.finish()
-        if s is not None:
-            s.meta["log"], s.meta["partial"] = str(path), True
-            scans.append(s)
-    return scans
+    return _assemble(path, meta, records, Ping360Assembler(settings), PingStreamParser(), PingStreamParser(),
+                     lambda m: m.message_id == ping_ids["transducer"] and bool(m.transmit),
+                     lambda m, c: m.message_id == ping_ids["device_data"] and ping360_problem(m, c) is None,
+                     T, fixed_pose, partial, "ping-protocol message", once=True)

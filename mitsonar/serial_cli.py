@@ -154,37 +154,27 @@ def _virtual_sonar(args) -> int:
     from .seanet.settings import require_mechanical
     # A port that cannot be opened fails now, not after the render.
     check_port(args.port_url, args.baud)
-    if args.head == "ping360":
-        return _virtual_ping360(args, scene_path)
-    from .virtual_sonar import serve
     scene = mitsonar.load_scene(str(scene_path))
     # Refuse before the render, not after it: a multibeam scene can take a while to render.
-    require_mechanical(resolve_sensor(scene, 0), f"virtual-sonar {scene_path.name}", "no SeaNet scanlines to serve")
+    what = "no Ping360 pings to serve" if args.head == "ping360" else "no SeaNet scanlines to serve"
+    require_mechanical(resolve_sensor(scene, 0), f"virtual-sonar {scene_path.name}", what)
     kw = {"seed": args.seed}
     if args.spp is not None:
         kw["spp"] = args.spp
     scan = mitsonar.render_scan(scene, **kw)
     print(f"rendered {scene_path.name}: {scan.n_pings} pings x {scan.n_bins} bins, "
           f"{scan.range_min:g}..{scan.range_max:g} m", flush=True)
+    if args.head == "ping360":
+        return _virtual_ping360(args, scan)
+    from .virtual_sonar import serve
     return serve(scan, args.port_url, args.seconds, baudrate=args.baud, realtime=not args.fast,
                  dst=not args.no_dst)
 
 
-def _virtual_ping360(args, scene_path: Path) -> int:
+def _virtual_ping360(args, scan) -> int:
     import math
 
-    import mitsonar
-    from .plugins.common import resolve_sensor
-    from .seanet.settings import require_mechanical
     from .virtual_ping360 import serve
-    scene = mitsonar.load_scene(str(scene_path))
-    require_mechanical(resolve_sensor(scene, 0), f"virtual-sonar {scene_path.name}", "no Ping360 pings to serve")
-    kw = {"seed": args.seed}
-    if args.spp is not None:
-        kw["spp"] = args.spp
-    scan = mitsonar.render_scan(scene, **kw)
-    print(f"rendered {scene_path.name}: {scan.n_pings} pings x {scan.n_bins} bins, "
-          f"{scan.range_min:g}..{scan.range_max:g} m", flush=True)
     step = abs(math.degrees(float(scan.bearings[1] - scan.bearings[0]))) if scan.n_pings > 1 else 0.0
     if abs(step - 0.9) > 1e-9:
         print(f"a Ping360 pings every 0.9 deg; the scene's {scan.n_pings} pings are {step:g} deg apart: "

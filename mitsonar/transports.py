@@ -137,7 +137,8 @@ class LineDriver:
     the head's mounting (``pose``, checked by the subclass's ``_check_pose``), close.
 
     Subclasses check their arguments (`_check_timing`), set ``_settings``, ``baudrate``, ``timeout``,
-    ``_ping_timeout``, ``stats`` and ``_pose``, then call `_attach`; they define ``start``,
+    ``_ping_timeout``, ``stats``, ``_pose``, ``parser`` and ``_inbox`` (a deque), then call
+    `_attach`; they define ``start``,
     ``read_ping``, ``_log_meta`` and ``_expected_step_time`` (s per ping when all goes well).
     """
 
@@ -233,6 +234,24 @@ class LineDriver:
         if data and self._log is not None:
             self._log.rx(data)
         return data
+
+    def _poll(self, deadline: float):
+        """Next message (``parser.feed`` of what arrives, queued in ``_inbox``), or None once
+        ``deadline`` (monotonic) passes. ``_seen`` sees every message as it arrives."""
+        while True:
+            if self._inbox:
+                return self._inbox.popleft()
+            now = time.monotonic()
+            if now >= deadline:
+                return None
+            data = self._read_some(min(deadline - now, 0.1))
+            if data:
+                msgs = self.parser.feed(data)
+                self._seen(msgs)
+                self._inbox.extend(msgs)
+
+    def _seen(self, msgs: list) -> None:
+        pass
 
     def close(self) -> None:
         """Close the port (and the log if the driver opened it). Safe to call twice."""
