@@ -286,23 +286,22 @@ class MicronSonar(LineDriver):
         self.last_ping_time = time.time()
         return m
 
-    def scan(self) -> Scan:
-        """One full turn (continuous) or one sector sweep as a `Scan` (see `ScanAssembler`)."""
+    def _scan_assembler(self) -> _ScanAssembler:
         if self._assembler is None:
             self._assembler = _ScanAssembler(self._settings.sound_speed, revisit=self.revisit,
                                             max_turns=self.max_turns, settings=self._settings)
-        while True:
-            ping = self.read_ping()
-            scan = self._assembler.add(ping, self._pose, self.last_ping_time)
-            if scan is not None:
-                scan.meta["port"] = str(self.port)
-                scan.meta["settings"] = self._settings.as_dict()
-                if self.version is not None:
-                    scan.meta["head_serial"] = int(self.version.serial)
-                    scan.meta["head_software"] = int(self.version.software_version)
-                scan.meta["dst"] = bool(self.dst)
-                return scan
+        return self._assembler
 
+    def _head_meta(self) -> dict:
+        out = {"dst": bool(self.dst)}
+        if self.version is not None:
+            out["head_serial"] = int(self.version.serial)
+            out["head_software"] = int(self.version.software_version)
+        return out
+
+    def scan(self) -> Scan:
+        """One full turn (continuous) or one sector sweep as a `Scan` (see `ScanAssembler`)."""
+        return super().scan()
 
 
 def record(port, path, seconds: float | None = None, *, scans: int | None = None,

@@ -154,19 +154,18 @@ class Ping360Sonar(LineDriver):
         self.last_ping_time = time.time()
         return reply
 
+    def _scan_assembler(self) -> Ping360Assembler:
+        return self._assembler
+
+    def _head_meta(self) -> dict:
+        d = self.device_information
+        if d is None:
+            return {}
+        return {"head_firmware": f"{d.firmware_version_major}.{d.firmware_version_minor}.{d.firmware_version_patch}"}
+
     def scan(self) -> Scan:
         """One pass over ``settings.angles`` (a full turn or a sector) as a `Scan`."""
-        while True:
-            ping = self.read_ping()
-            scan = self._assembler.add(ping, self._pose, self.last_ping_time)
-            if scan is not None:
-                scan.meta["port"] = str(self.port)
-                scan.meta["settings"] = self._settings.as_dict()
-                if self.device_information is not None:
-                    d = self.device_information
-                    scan.meta["head_firmware"] = (f"{d.firmware_version_major}.{d.firmware_version_minor}."
-                                                  f"{d.firmware_version_patch}")
-                return scan
+        return super().scan()
 
 
 def record(port, path, seconds: float | None = None, *, scans: int | None = None,

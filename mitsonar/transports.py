@@ -195,6 +195,19 @@ class LineDriver:
             return float(self._ping_timeout)
         return 2.0 * self._expected_step_time() + 0.5
 
+    def scan(self):
+        """The next whole scan of the head's assembler (``_scan_assembler()``), as a `Scan` whose
+        ``meta`` names the port, the settings and what the head said of itself (``_head_meta``)."""
+        asm = self._scan_assembler()
+        while True:
+            ping = self.read_ping()
+            scan = asm.add(ping, self._pose, self.last_ping_time)
+            if scan is not None:
+                scan.meta["port"] = str(self.port)
+                scan.meta["settings"] = self._settings.as_dict()
+                scan.meta.update(self._head_meta())
+                return scan
+
     def pings(self, count: int | None = None):
         """Iterator over the head's pings (``read_ping``), forever or ``count`` of them."""
         k = 0
@@ -285,12 +298,24 @@ class LineDriver:
 class ServedHead:
     """What every virtual head does with its port (`mitsonar.virtual_sonar.VirtualMicron`,
     `mitsonar.virtual_ping360.VirtualPing360`): open it (`open_transport` of ``port_url``) and
-    run ``_run`` in a thread until `stop`. Subclasses set ``port_url``, ``baudrate``, ``_stop``
+    run its ``_tick`` in a thread until `stop`. Subclasses set ``port_url``, ``baudrate``, ``_stop``
     (a `threading.Event`), ``_thread = None``, ``_transport = None``, and may prepare the head
     in ``_power_on`` (called with the port open, before the thread starts)."""
 
     def _power_on(self) -> None:
         pass
+
+    def _run(self) -> None:
+        """Call ``_tick`` (one round: due output, input, commands) until `stop`; an exception in
+        it is kept in ``last_error`` and counted (``stats["internal errors"]``), and the head
+        goes on."""
+        while not self._stop.is_set():
+            try:
+                self._tick()
+            except Exception as e:      # keep the head alive; the test or user sees last_error
+                self.last_error = e
+                self.stats["internal errors"] += 1
+                time.sleep(0.01)
 
     @property
     def port(self) -> str | None:
