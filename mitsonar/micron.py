@@ -76,13 +76,7 @@ class MicronSonar(LineDriver):
             settings = HeadSettings()
         if not isinstance(settings, HeadSettings):
             raise TypeError(f"settings must be a HeadSettings, got {type(settings).__name__}")
-        self._check_timing(timeout, ping_timeout, retries, boot_timeout=boot_timeout)
-        self._settings = settings
-        self.baudrate = int(baudrate)
-        self._pose = check_pose(pose)
-        self.timeout = float(timeout)
-        self._ping_timeout = ping_timeout
-        self.retries = retries
+        self._init_line(settings, baudrate, pose, timeout, ping_timeout, retries, boot_timeout=boot_timeout)
         self.boot_timeout = float(boot_timeout)
         self.revisit = revisit
         self.max_turns = max_turns

@@ -55,13 +55,7 @@ class Ping360Sonar(LineDriver):
         settings = Ping360Settings() if settings is None else settings
         if not isinstance(settings, Ping360Settings):
             raise TypeError(f"settings must be a Ping360Settings, got {type(settings).__name__}")
-        self._check_timing(timeout, ping_timeout, retries)
-        self._settings = settings
-        self.baudrate = int(baudrate)
-        self._pose = check_pose(pose)
-        self.timeout = float(timeout)
-        self._ping_timeout = ping_timeout
-        self.retries = retries
+        self._init_line(settings, baudrate, pose, timeout, ping_timeout, retries)
         self.parser = StreamParser()
         self.stats: Counter = Counter()
         self.protocol_version: Message | None = None

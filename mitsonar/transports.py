@@ -136,8 +136,7 @@ class LineDriver:
     (``_log``, a `mitsonar.rawlog.RawLogWriter` or None), count what was sent (``stats``), hold
     the head's mounting (``pose``, checked by the subclass's ``_check_pose``), close.
 
-    Subclasses check their arguments (`_check_timing`), set ``_settings``, ``baudrate``, ``timeout``,
-    ``_ping_timeout``, ``stats``, ``_pose``, ``parser`` and ``_inbox`` (a deque), then call
+    Subclasses call `_init_line`, set ``stats``, ``parser`` and ``_inbox`` (a deque), then call
     `_attach`; they define ``start``,
     ``read_ping``, ``_log_meta`` and ``_expected_step_time`` (s per ping when all goes well).
     """
@@ -146,6 +145,17 @@ class LineDriver:
     _fd = None
     _log = None
     _own_log = False
+
+    def _init_line(self, settings, baudrate: int, pose, timeout, ping_timeout, retries, **more_timeouts) -> None:
+        """Check and keep what every driver takes: settings, baud rate, mounting pose, timeouts
+        (``more_timeouts``, e.g. ``boot_timeout``, are only checked) and retries."""
+        self._check_timing(timeout, ping_timeout, retries, **more_timeouts)
+        self._settings = settings
+        self.baudrate = int(baudrate)
+        self._pose = self._check_pose(pose)
+        self.timeout = float(timeout)
+        self._ping_timeout = ping_timeout
+        self.retries = retries
 
     @staticmethod
     def _check_timing(timeout, ping_timeout, retries, **more_timeouts) -> None:

@@ -108,16 +108,15 @@ def test_record_from_a_silent_port_says_so_and_leaves_no_file(tmp_path, capsys):
 def test_record_keeps_what_arrived_on_ctrl_c(tmp_path, capsys, monkeypatch):
     from mitsonar import ping360
     scan = synthetic_scan(n_pings=40, step_deg=-9.0, seed=3)
-    real = ping360.Ping360Sonar.read_ping
-    calls = []
+    budget = iter(range(5))      # five pings, then the user presses Ctrl-C
+    read = ping360.Ping360Sonar.read_ping
 
-    def interrupted(self):
-        calls.append(1)
-        if len(calls) > 5:
+    def read_until_ctrl_c(self):
+        if next(budget, None) is None:
             raise KeyboardInterrupt
-        return real(self)
+        return read(self)
 
-    monkeypatch.setattr(ping360.Ping360Sonar, "read_ping", interrupted)
+    monkeypatch.setattr(ping360.Ping360Sonar, "read_ping", read_until_ctrl_c)
     log = tmp_path / "p360.bin"
     with VirtualPing360(scan, realtime=False) as vm:
         assert cli("record", vm.port, "--head", "ping360", "-o", log, "--range", "2.4", "--n-bins", "200",
