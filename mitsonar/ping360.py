@@ -107,11 +107,25 @@ class Ping360Sonar(LineDriver):
                            f"({attempt + 1} requests)")
 
     def start(self) -> None:
-        """Check that a ping-protocol head answers, and which (protocol version, device type)."""
+        """Check that a ping-protocol head answers, and which (protocol version, device type).
+
+        On a serial line it first sends a break and the byte ``'U'`` for the head's baud-rate
+        detection, as ``brping.PingDevice.connect_serial`` does; they are line signals, not
+        messages, and are not logged (so a replay finds no stray byte).
+        """
         try:
             self._ser.reset_input_buffer()
         except Exception:
             pass
+        if callable(getattr(self._ser, "send_break", None)):
+            try:
+                self._ser.send_break(0.01)
+                self._ser.write(b"U")
+            except Exception:        # a port without breaks (socket://, loop://): only the 'U'
+                try:
+                    self._ser.write(b"U")
+                except Exception as e:
+                    raise SonarError(f"{self.port}: write failed: {e}") from None
         for name in ("protocol_version", "device_information"):
             reply = self._ask(Message("general_request", requested_id=ids[name]),
                               lambda m, i=ids[name]: m.message_id == i, name)
