@@ -6,8 +6,11 @@ The driver (`mitsonar.micron.MicronSonar`) and the passive recorder open a port 
 serves on `open_transport`: a new pseudo-terminal, a TCP port that pyserial ``socket://``
 clients connect to, a UDP port (``udp://127.0.0.1:PORT``, loopback only: a virtual Ping360
 answers the sender of the last datagram, as the real head does on its Ethernet port), or any
-pyserial URL. The host's side opens ``udp://HOST:PORT`` with `open_serial` as well. Nothing here
-knows SeaNet or ping-protocol.
+pyserial URL. The host's side opens ``udp://HOST:PORT`` with `open_serial` as well.
+
+What both heads share is here too: `LineDriver`, the base of both drivers (port, raw log, pose,
+polling, scans from an assembler), and `ServedHead`, the base of both virtual heads (port,
+thread, foreground serving). Nothing here knows SeaNet or ping-protocol.
 """
 from __future__ import annotations
 

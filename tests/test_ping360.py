@@ -12,6 +12,7 @@ import warnings
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from mitsonar.ping360 import Ping360Sonar, SonarError, SonarTimeout, record
 from mitsonar.ping360_head import Ping360Assembler, Ping360Settings, angle_to_radians
@@ -308,3 +309,57 @@ def test_rendered_box_scan_survives_the_wire(mitsonar_mod):
     np.testing.assert_allclose(got.bearings, scan.bearings, atol=1e-9)
     np.testing.assert_allclose(got.poses, scan.poses, atol=1e-9)
     np.testing.assert_allclose(got.ranges, scan.ranges, rtol=1e-6)
+
+
+class _ScriptedLine:
+    """A pyserial-like line whose head answers each transducer request with ``before(reply)``
+    bytes and then the right reply (no file descriptor: the driver polls it)."""
+
+    def __init__(self, before):
+        from mitsonar.ping_protocol import StreamParser
+        self.before, self.parser, self.buf, self.timeout, self.port = before, StreamParser(), bytearray(), 0.0, "scripted"
+
+    def write(self, data):
+        from mitsonar.ping_protocol import encode
+        for m in self.parser.feed(data):
+            if m.message_id == ids["general_request"]:
+                name = {v: k for k, v in ids.items()}[m.requested_id]
+                extra = {"device_type": 2} if name == "device_information" else {}
+                self.buf += encode(Message(name, **extra))
+            elif m.message_id == ids["transducer"]:
+                fields = {k: getattr(m, k) for k in m.fields if k not in ("transmit", "reserved")}
+                good = encode(Message("device_data", **fields, data=SCAN.data[m.angle, :m.number_of_samples].tobytes()))
+                self.buf += self.before(good) + good
+        return len(data)
+
+    @property
+    def in_waiting(self):
+        return len(self.buf)
+
+    def read(self, n=1):
+        out = bytes(self.buf[:n])
+        del self.buf[:n]
+        return out
+
+    def close(self):
+        pass
+
+
+@settings(max_examples=int(os.environ.get("MITSONAR_FUZZ_EXAMPLES", 40)), deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(st.binary(max_size=120).map(lambda b: b.replace(b"B", b"b")), st.sampled_from(["cut", "flip", "none"]),
+       st.floats(0.05, 0.95))
+def test_driver_survives_garbage_and_damaged_replies(garbage, damage, where):
+    """Before every good reply: garbage, and a copy of the reply cut short or with a flipped byte.
+    The driver never fails, every ping it returns is the right one, and the skipped bytes are counted."""
+    def before(good):
+        k = 2 + int(where * (len(good) - 3))
+        bad = {"cut": good[:k], "flip": good[:k] + bytes([good[k] ^ 0x21]) + good[k + 1:], "none": b""}[damage]
+        return garbage + bad
+    line = _ScriptedLine(before)
+    settings_ = Ping360Settings(range=2.4, number_of_samples=200, step=100)
+    with Ping360Sonar(line, settings=settings_, timeout=5.0, ping_timeout=0.5) as sonar:
+        got = sonar.scan()
+    assert np.array_equal(got.data, SCAN.data[::100])
+    # four pings, each reply 10 + 14 + 200 bytes: all that came before each good one was skipped
+    assert sonar.parser.dropped == 4 * len(before(bytes(224))) and sonar.stats["request timeouts"] == 0
