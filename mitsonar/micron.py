@@ -18,28 +18,25 @@ Where the rest went (importable from here for one release, with a DeprecationWar
 """
 from __future__ import annotations
 
-import os
 import time
 from collections import Counter, deque
-from typing import Iterator
-
-import numpy as np
 
 from .assembler import ScanAssembler as _ScanAssembler, check_pose
-from .rawlog import RawLogWriter as _RawLogWriter
-from .recording import finish_recording, record_passive
+from .recording import record_driven, record_passive
 from .scan import Scan
 from .seanet.constants import DEFAULT_NIBBLE_ORDER
 from .seanet.messages import (Alive, BBUserData, HeadCommand, HeadData, ReBoot, SendBBUser, SendData,
                               SendVersion, VersionData)
 from .seanet.settings import HeadSettings, ping_problem
 from .seanet.stream import StreamParser, encode
-from .transports import SonarError, SonarTimeout, open_serial, read_available, serial_fileno
+# open_serial stays importable from here (it was, and tests patch it here); the line is opened
+# through it in mitsonar.transports.LineDriver.
+from .transports import LineDriver, SonarError, SonarTimeout, open_serial  # noqa: F401
 
 __all__ = ["SonarError", "SonarTimeout", "MicronSonar", "record"]
 
 
-class MicronSonar:
+class MicronSonar(LineDriver):
     """A Tritech Micron (or other SeaNet imaging head) on a serial port.
 
     Parameters
@@ -79,19 +76,7 @@ class MicronSonar:
             settings = HeadSettings()
         if not isinstance(settings, HeadSettings):
             raise TypeError(f"settings must be a HeadSettings, got {type(settings).__name__}")
-        for name, v in (("timeout", timeout), ("boot_timeout", boot_timeout)):
-            if not (isinstance(v, (int, float)) and v > 0):
-                raise ValueError(f"{name} must be a positive number of seconds, got {v!r}")
-        if ping_timeout is not None and not (isinstance(ping_timeout, (int, float)) and ping_timeout > 0):
-            raise ValueError(f"ping_timeout must be a positive number of seconds, got {ping_timeout!r}")
-        if not (isinstance(retries, int) and retries >= 0):
-            raise ValueError(f"retries must be an integer >= 0, got {retries!r}")
-        self._settings = settings
-        self.baudrate = int(baudrate)
-        self._pose = check_pose(pose)
-        self.timeout = float(timeout)
-        self._ping_timeout = ping_timeout
-        self.retries = retries
+        self._init_line(settings, baudrate, pose, timeout, ping_timeout, retries, boot_timeout=boot_timeout)
         self.boot_timeout = float(boot_timeout)
         self.revisit = revisit
         self.max_turns = max_turns
@@ -111,46 +96,12 @@ class MicronSonar:
         self._params_sent_at = -1e9
         self._dropped_at_send = 0
         self._assembler: _ScanAssembler | None = None
-        self._own_log = False
-        self._log = None
-        self._ser = None
-        self._fd = None
-        self.port = port_or_url if isinstance(port_or_url, str) else getattr(port_or_url, "port", repr(port_or_url))
-        if log is not None:
-            if isinstance(log, _RawLogWriter):
-                self._log = log
-            else:
-                self._log = _RawLogWriter(log, self._log_meta())
-                self._own_log = True
-        try:
-            self._ser = self._open(port_or_url)
-            self._fd = serial_fileno(self._ser)
-            if start:
-                self.start(reboot=reboot)
-        except BaseException:
-            self.close()
-            raise
+        self._attach(port_or_url, log, (lambda: self.start(reboot=reboot)) if start else None)
 
-    # ---- properties ----
-    @property
-    def settings(self) -> HeadSettings:
-        return self._settings
+    def _expected_step_time(self) -> float:
+        return self._settings.expected_step_time(self.baudrate)
 
-    @property
-    def ping_timeout(self) -> float:
-        if self._ping_timeout is not None:
-            return float(self._ping_timeout)
-        return 2.0 * self._settings.expected_step_time(self.baudrate) + 0.5
-
-    @property
-    def pose(self) -> np.ndarray:
-        return self._pose
-
-    @pose.setter
-    def pose(self, T) -> None:
-        self._pose = check_pose(T)
-        if self._log is not None:
-            self._log.pose(self._pose)
+    _check_pose = staticmethod(check_pose)
 
     def _log_meta(self) -> dict:
         return {"format": "mitsonar seanet raw log", "port": str(self.port),
@@ -160,70 +111,13 @@ class MicronSonar:
                 "passive": False}
 
     # ---- port ----
-    def _open(self, port_or_url):
-        if not isinstance(port_or_url, (str, os.PathLike)):
-            return port_or_url
-        return open_serial(port_or_url, self.baudrate, timeout=0.05, write_timeout=max(1.0, self.timeout))
-
-    def close(self) -> None:
-        """Close the port (and the log if the driver opened it). Safe to call twice."""
-        ser, self._ser = self._ser, None
-        if ser is not None:
-            try:
-                ser.close()
-            except Exception:      # closing a vanished device must not mask the real error
-                pass
-        if self._own_log and self._log is not None:
-            self._log.close()
-        self._log = None
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
-    def __del__(self):
-        try:
-            self.close()
-        except Exception:
-            pass
-
     def _write(self, msg) -> None:
-        if self._ser is None:
-            raise SonarError("the sonar is closed")
-        data = encode(msg)
-        try:
-            self._ser.write(data)
-        except Exception as e:
-            raise SonarError(f"{self.port}: write failed: {e}") from None
-        if self._log is not None:
-            self._log.tx(data)
-        self.stats[f"sent {msg.name}"] += 1
+        self._send_bytes(encode(msg), msg.name)
 
-    def _read_some(self, wait: float) -> bytes:
-        if self._ser is None:
-            raise SonarError("the sonar is closed")
-        data = read_available(self._ser, self._fd, wait, self.port)
-        if data and self._log is not None:
-            self._log.rx(data)
-        return data
-
-    def _poll(self, deadline: float):
-        """Next message, or None once ``deadline`` (monotonic) passes."""
-        while True:
-            if self._inbox:
-                return self._inbox.popleft()
-            now = time.monotonic()
-            if now >= deadline:
-                return None
-            data = self._read_some(min(deadline - now, 0.1))
-            if data:
-                msgs = self.parser.feed(data)
-                for m in msgs:
-                    if isinstance(m, Alive):
-                        self.last_alive = m
-                self._inbox.extend(msgs)
+    def _seen(self, msgs: list) -> None:
+        for m in msgs:
+            if isinstance(m, Alive):
+                self.last_alive = m
 
     def _aside(self, m) -> None:
         """A message nobody waits for now: keep usable scanlines, for replay's sake too."""
@@ -386,30 +280,22 @@ class MicronSonar:
         self.last_ping_time = time.time()
         return m
 
-    def pings(self, count: int | None = None) -> Iterator[HeadData]:
-        """Iterator over scanlines (`HeadData`), forever or ``count`` of them."""
-        k = 0
-        while count is None or k < count:
-            yield self.read_ping()
-            k += 1
-
-    def scan(self) -> Scan:
-        """One full turn (continuous) or one sector sweep as a `Scan` (see `ScanAssembler`)."""
+    def _scan_assembler(self) -> _ScanAssembler:
         if self._assembler is None:
             self._assembler = _ScanAssembler(self._settings.sound_speed, revisit=self.revisit,
                                             max_turns=self.max_turns, settings=self._settings)
-        while True:
-            ping = self.read_ping()
-            scan = self._assembler.add(ping, self._pose, self.last_ping_time)
-            if scan is not None:
-                scan.meta["port"] = str(self.port)
-                scan.meta["settings"] = self._settings.as_dict()
-                if self.version is not None:
-                    scan.meta["head_serial"] = int(self.version.serial)
-                    scan.meta["head_software"] = int(self.version.software_version)
-                scan.meta["dst"] = bool(self.dst)
-                return scan
+        return self._assembler
 
+    def _head_meta(self) -> dict:
+        out = {"dst": bool(self.dst)}
+        if self.version is not None:
+            out["head_serial"] = int(self.version.serial)
+            out["head_software"] = int(self.version.software_version)
+        return out
+
+    def scan(self) -> Scan:
+        """One full turn (continuous) or one sector sweep as a `Scan` (see `ScanAssembler`)."""
+        return super().scan()
 
 
 def record(port, path, seconds: float | None = None, *, scans: int | None = None,
@@ -446,39 +332,11 @@ def record(port, path, seconds: float | None = None, *, scans: int | None = None
         if v is not None and not (isinstance(v, (int, float)) and v > 0):
             raise ValueError(f"record: {name} must be positive, got {v!r}")
     settings = settings or HeadSettings()
-    out = {"bytes_rx": 0, "bytes_tx": 0, "pings": 0, "scans": 0}
     if passive:
         return record_passive(port, path, seconds, baudrate=baudrate, settings=settings, pose=pose)
     reboot = sonar_kwargs.pop("reboot", True)
     with MicronSonar(port, baudrate, settings, pose, start=False, **sonar_kwargs) as sonar:
-        # Written under a temporary name: renamed at the end, removed if no packet came.
-        log = _RawLogWriter(path, sonar._log_meta(), temporary=True)
-        sonar._log = log
-        started = time.monotonic()
-        end = None if seconds is None else started + seconds
-        error = None
-        try:
-            sonar.start(reboot=reboot)
-            while end is None or time.monotonic() < end:
-                if scans is not None:
-                    sonar.scan()
-                    out["scans"] += 1
-                    if out["scans"] >= scans:
-                        break
-                else:
-                    sonar.read_ping()
-                    out["pings"] += 1
-                    if pings is not None and out["pings"] >= pings:
-                        break
-        except KeyboardInterrupt:
-            pass
-        except BaseException as e:      # noqa: BLE001 - finish_recording re-raises it
-            error = e
-        out["pings"] = int(sonar.stats["pings"])
-        out["bytes_dropped"] = int(sonar.parser.dropped)
-        out["bytes_rx"], out["bytes_tx"] = log.bytes_rx, log.bytes_tx
-        finish_recording(log, sonar.port, started, sonar.parser.packets, error)
-    return out
+        return record_driven(sonar, path, seconds, scans, pings, lambda: sonar.start(reboot=reboot))
 
 
 # Names that lived here before the driver was split from the log format, the scan assembly

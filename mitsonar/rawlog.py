@@ -8,7 +8,9 @@ Format (little-endian)::
                   d   start time, Unix seconds
                   I   n, length of the metadata
                   n   metadata, UTF-8 JSON: port, baudrate, sound_speed, nibble_order,
-                      settings (HeadSettings fields), pose (4x4), revisit, max_turns, passive
+                      settings (HeadSettings fields), pose (4x4), revisit, max_turns, passive;
+                      head: "ping360" for a Blue Robotics Ping360 (then settings holds
+                      Ping360Settings fields), absent for a SeaNet head
     records       d   time since the start, s
                   B   kind: 0 bytes received from the head, 1 bytes sent to it,
                       2 head pose (16 float64, row-major 4x4)
@@ -18,7 +20,8 @@ Format (little-endian)::
 A record cut short at the end (recorder killed) is not read; neither is a damaged stretch,
 after which reading picks up where whole records follow each other again. Both are reported
 (`read_log`: ``meta["skipped"]`` and a `LogDamageWarning`), as are bytes that
-`mitsonar.recording.replay` finds to be no SeaNet packet. Nothing here knows SeaNet.
+`mitsonar.recording.replay` finds to be no SeaNet packet (or ping-protocol message). Nothing
+here knows either protocol.
 """
 from __future__ import annotations
 

@@ -4,19 +4,27 @@ The driver (`mitsonar.micron.MicronSonar`) and the passive recorder open a port 
 `open_serial` (``serial.serial_for_url``: a device path, ``socket://host:port``, ``rfc2217://``,
 ``loop://`` ...) and read it with `read_available`. The virtual head (`mitsonar.virtual_sonar`)
 serves on `open_transport`: a new pseudo-terminal, a TCP port that pyserial ``socket://``
-clients connect to, or any pyserial URL. Nothing here knows SeaNet.
+clients connect to, a UDP port (``udp://127.0.0.1:PORT``, loopback only: a virtual Ping360
+answers the sender of the last datagram, as the real head does on its Ethernet port), or any
+pyserial URL. The host's side opens ``udp://HOST:PORT`` with `open_serial` as well.
+
+What both heads share is here too: `LineDriver`, the base of both drivers (port, raw log, pose,
+polling, scans from an assembler), and `ServedHead`, the base of both virtual heads (port,
+thread, foreground serving). Nothing here knows SeaNet or ping-protocol.
 """
 from __future__ import annotations
 
 import os
 import select
 import socket
+import sys
+import threading
 import time
 import tty
 from urllib.parse import urlparse
 
 __all__ = ["SonarError", "SonarTimeout", "open_serial", "serial_fileno", "read_available",
-           "open_transport", "check_port"]
+           "open_transport", "check_port", "UdpPort", "LineDriver", "ServedHead"]
 
 
 class SonarError(RuntimeError):
@@ -31,9 +39,50 @@ class SonarTimeout(SonarError, TimeoutError):
 # The host's side: pyserial
 # --------------------------------------------------------------------------------------------
 
+class UdpPort:
+    """The host's side of a UDP head (``udp://HOST:PORT``): a connected datagram socket with the
+    ``write``/``close`` of a pyserial port; `read_available` reads it through ``_socket``."""
+
+    def __init__(self, host: str, port: int):
+        self.port = f"udp://{host}:{port}"
+        self._socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self._socket.connect((host, port))
+        except BaseException:
+            self._socket.close()
+            raise
+        self._socket.setblocking(False)
+
+    def write(self, data: bytes) -> int:
+        return self._socket.send(bytes(data))
+
+    def reset_input_buffer(self) -> None:
+        while True:
+            try:
+                self._socket.recv(65536)
+            except OSError:
+                return
+
+    def close(self) -> None:
+        self._socket.close()
+
+
+def _host_port(url: str, scheme: str) -> tuple[str, int]:
+    u = urlparse(url)
+    if u.port is None or not u.hostname:
+        raise ValueError(f"needs a host and a port ({scheme}://HOST:PORT)")
+    return u.hostname, u.port
+
+
 def open_serial(port_or_url, baudrate: int, timeout: float, write_timeout: float | None = None):
-    """``serial.serial_for_url`` of ``port_or_url``; `SonarError` "cannot open PORT: reason"."""
+    """``serial.serial_for_url`` of ``port_or_url`` (`UdpPort` for ``udp://HOST:PORT``);
+    `SonarError` "cannot open PORT: reason"."""
     import serial
+    if isinstance(port_or_url, str) and port_or_url.startswith("udp://"):
+        try:
+            return UdpPort(*_host_port(port_or_url, "udp"))
+        except (OSError, ValueError) as e:
+            raise SonarError(f"cannot open {port_or_url}: {e}") from None
     try:
         return serial.serial_for_url(os.fspath(port_or_url), baudrate=baudrate, timeout=timeout,
                                      write_timeout=write_timeout)
@@ -84,9 +133,250 @@ def read_available(ser, fd, wait: float, port) -> bytes:
     return data
 
 
+class LineDriver:
+    """What every head driver does with its line (`mitsonar.micron.MicronSonar`,
+    `mitsonar.ping360.Ping360Sonar`): open it, send and receive bytes through the raw log
+    (``_log``, a `mitsonar.rawlog.RawLogWriter` or None), count what was sent (``stats``), hold
+    the head's mounting (``pose``, checked by the subclass's ``_check_pose``), close.
+
+    Subclasses call `_init_line`, set ``stats``, ``parser`` and ``_inbox`` (a deque), then call
+    `_attach`; they define ``start``,
+    ``read_ping``, ``_log_meta`` and ``_expected_step_time`` (s per ping when all goes well).
+    """
+
+    _ser = None
+    _fd = None
+    _log = None
+    _own_log = False
+
+    def _init_line(self, settings, baudrate: int, pose, timeout, ping_timeout, retries, **more_timeouts) -> None:
+        """Check and keep what every driver takes: settings, baud rate, mounting pose, timeouts
+        (``more_timeouts``, e.g. ``boot_timeout``, are only checked) and retries."""
+        self._check_timing(timeout, ping_timeout, retries, **more_timeouts)
+        self._settings = settings
+        self.baudrate = int(baudrate)
+        self._pose = self._check_pose(pose)
+        self.timeout = float(timeout)
+        self._ping_timeout = ping_timeout
+        self.retries = retries
+
+    @staticmethod
+    def _check_timing(timeout, ping_timeout, retries, **more_timeouts) -> None:
+        """Refuse a timeout that is not a positive number of seconds, retries below 0."""
+        for name, v in (("timeout", timeout), *more_timeouts.items()):
+            if not (isinstance(v, (int, float)) and v > 0):
+                raise ValueError(f"{name} must be a positive number of seconds, got {v!r}")
+        if ping_timeout is not None and not (isinstance(ping_timeout, (int, float)) and ping_timeout > 0):
+            raise ValueError(f"ping_timeout must be a positive number of seconds, got {ping_timeout!r}")
+        if not (isinstance(retries, int) and retries >= 0):
+            raise ValueError(f"retries must be an integer >= 0, got {retries!r}")
+
+    def _attach(self, port_or_url, log, start) -> None:
+        """Name the port, open the log (a path, or a `RawLogWriter` to share), open the line
+        (`open_serial`, unless ``port_or_url`` is an open pyserial-like object) and call
+        ``start()`` if given; on any failure close what was opened."""
+        from .rawlog import RawLogWriter
+        self.port = (port_or_url if isinstance(port_or_url, str)
+                     else getattr(port_or_url, "port", repr(port_or_url)))
+        if log is not None:
+            if isinstance(log, RawLogWriter):
+                self._log = log
+            else:
+                self._log = RawLogWriter(log, self._log_meta())
+                self._own_log = True
+        try:
+            if isinstance(port_or_url, (str, os.PathLike)):
+                self._ser = open_serial(os.fspath(port_or_url), self.baudrate, timeout=0.05,
+                                        write_timeout=max(1.0, self.timeout))
+            else:
+                self._ser = port_or_url
+            self._fd = serial_fileno(self._ser)
+            if start is not None:
+                start()
+        except BaseException:
+            self.close()
+            raise
+
+    @property
+    def settings(self):
+        return self._settings
+
+    @property
+    def ping_timeout(self) -> float:
+        """s to wait for one reply: as given, else 2x the expected step time + 0.5 s."""
+        if self._ping_timeout is not None:
+            return float(self._ping_timeout)
+        return 2.0 * self._expected_step_time() + 0.5
+
+    def scan(self):
+        """The next whole scan of the head's assembler (``_scan_assembler()``), as a `Scan` whose
+        ``meta`` names the port, the settings and what the head said of itself (``_head_meta``)."""
+        asm = self._scan_assembler()
+        while True:
+            ping = self.read_ping()
+            scan = asm.add(ping, self._pose, self.last_ping_time)
+            if scan is not None:
+                scan.meta["port"] = str(self.port)
+                scan.meta["settings"] = self._settings.as_dict()
+                scan.meta.update(self._head_meta())
+                return scan
+
+    def pings(self, count: int | None = None):
+        """Iterator over the head's pings (``read_ping``), forever or ``count`` of them."""
+        k = 0
+        while count is None or k < count:
+            yield self.read_ping()
+            k += 1
+
+    @staticmethod
+    def _check_pose(T):
+        raise NotImplementedError
+
+    @property
+    def pose(self):
+        return self._pose
+
+    @pose.setter
+    def pose(self, T) -> None:
+        self._pose = self._check_pose(T)
+        if self._log is not None:
+            self._log.pose(self._pose)
+
+    def _send_bytes(self, data: bytes, name: str) -> None:
+        if self._ser is None:
+            raise SonarError("the sonar is closed")
+        try:
+            self._ser.write(data)
+        except Exception as e:
+            raise SonarError(f"{self.port}: write failed: {e}") from None
+        if self._log is not None:
+            self._log.tx(data)
+        self.stats[f"sent {name}"] += 1
+
+    def _read_some(self, wait: float) -> bytes:
+        if self._ser is None:
+            raise SonarError("the sonar is closed")
+        data = read_available(self._ser, self._fd, wait, self.port)
+        if data and self._log is not None:
+            self._log.rx(data)
+        return data
+
+    def _poll(self, deadline: float):
+        """Next message (``parser.feed`` of what arrives, queued in ``_inbox``), or None once
+        ``deadline`` (monotonic) passes. ``_seen`` sees every message as it arrives."""
+        while True:
+            if self._inbox:
+                return self._inbox.popleft()
+            now = time.monotonic()
+            if now >= deadline:
+                return None
+            data = self._read_some(min(deadline - now, 0.1))
+            if data:
+                msgs = self.parser.feed(data)
+                self._seen(msgs)
+                self._inbox.extend(msgs)
+
+    def _seen(self, msgs: list) -> None:
+        pass
+
+    def close(self) -> None:
+        """Close the port (and the log if the driver opened it). Safe to call twice."""
+        ser, self._ser = self._ser, None
+        if ser is not None:
+            try:
+                ser.close()
+            except Exception:      # closing a vanished device must not mask the real error
+                pass
+        if self._own_log and self._log is not None:
+            self._log.close()
+        self._log = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
 # --------------------------------------------------------------------------------------------
 # The virtual head's side
 # --------------------------------------------------------------------------------------------
+
+class ServedHead:
+    """What every virtual head does with its port (`mitsonar.virtual_sonar.VirtualMicron`,
+    `mitsonar.virtual_ping360.VirtualPing360`): open it (`open_transport` of ``port_url``) and
+    run its ``_tick`` in a thread until `stop`. Subclasses set ``port_url``, ``baudrate``, ``_stop``
+    (a `threading.Event`), ``_thread = None``, ``_transport = None``, and may prepare the head
+    in ``_power_on`` (called with the port open, before the thread starts)."""
+
+    def _power_on(self) -> None:
+        pass
+
+    def _run(self) -> None:
+        """Call ``_tick`` (one round: due output, input, commands) until `stop`; an exception in
+        it is kept in ``last_error`` and counted (``stats["internal errors"]``), and the head
+        goes on."""
+        while not self._stop.is_set():
+            try:
+                self._tick()
+            except Exception as e:      # keep the head alive; the test or user sees last_error
+                self.last_error = e
+                self.stats["internal errors"] += 1
+                time.sleep(0.01)
+
+    @property
+    def port(self) -> str | None:
+        return None if self._transport is None else self._transport.port
+
+    def start(self) -> str:
+        """Open the port, power the head on; returns the port a driver should open."""
+        if self._thread is None:
+            self._transport = open_transport(self.port_url, self.baudrate)
+            self._stop.clear()
+            self._power_on()
+            self._thread = threading.Thread(target=self._run, name=type(self).__name__, daemon=True)
+            self._thread.start()
+        return self.port
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """Stop the head and close the port (safe to call twice)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+            self._thread = None
+        if self._transport is not None:
+            self._transport.close()
+            self._transport = None
+
+    def close(self) -> None:
+        self.stop()
+
+    def __enter__(self):
+        self.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
+
+    def serve(self, seconds: float | None = None, out=None, label: str = "virtual head") -> int:
+        """Run in the foreground: print ``LABEL on PORT``, serve until ``seconds`` or Ctrl-C."""
+        out = sys.stdout if out is None else out
+        with self:
+            print(f"{label} on {self.port}", file=out, flush=True)
+            end = None if seconds is None else time.monotonic() + seconds
+            try:
+                while end is None or time.monotonic() < end:
+                    time.sleep(0.05 if end is None else max(0.0, min(0.05, end - time.monotonic())))
+            except KeyboardInterrupt:
+                pass
+        return 0
+
 
 class _PtyTransport:
     def __init__(self):
@@ -184,6 +474,47 @@ class _TcpServerTransport:
         self.server.close()
 
 
+class _UdpServerTransport:
+    """Bound to 127.0.0.1:port; answers the sender of the last datagram (``udp://`` clients)."""
+
+    def __init__(self, host: str, port: int):
+        if host not in ("127.0.0.1", "localhost"):
+            raise ValueError(f"serves on the loopback only (udp://127.0.0.1:PORT), not {host}")
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self.sock.bind(("127.0.0.1", port))
+        except BaseException:
+            self.sock.close()
+            raise
+        self.sock.setblocking(False)
+        self.port = f"udp://127.0.0.1:{self.sock.getsockname()[1]}"
+        self.peer = None
+
+    def read(self, timeout: float) -> bytes:
+        r, _, _ = select.select([self.sock], [], [], max(0.0, timeout))
+        if not r:
+            return b""
+        try:
+            data, self.peer = self.sock.recvfrom(65536)
+        except OSError:          # ICMP unreachable of an earlier send, or nothing after all
+            return b""
+        return data
+
+    def write(self, data: bytes) -> int:
+        if self.peer is None:
+            return len(data)      # nobody asked yet: the datagram is lost
+        try:
+            self.sock.sendto(data, self.peer)
+        except (BlockingIOError, InterruptedError):
+            return 0
+        except OSError:
+            pass
+        return len(data)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
 class _SerialTransport:
     def __init__(self, url: str, baudrate: int):
         import serial
@@ -224,6 +555,8 @@ def open_transport(port_url: str | None, baudrate: int):
             if u.port is None:
                 raise ValueError("needs a port (socket://HOST:PORT, 0 for any)")
             return _TcpServerTransport(u.hostname or "localhost", u.port)
+        if port_url.startswith("udp://"):
+            return _UdpServerTransport(*_host_port(port_url, "udp"))
         return _SerialTransport(port_url, baudrate)
     except OSError as e:     # also serial.SerialException and socket.gaierror
         # pyserial wraps the OS's reason in its own sentence, which names the port again.

@@ -29,7 +29,6 @@ import heapq
 import itertools
 import math
 import queue
-import sys
 import threading
 import time
 from collections import Counter
@@ -39,7 +38,7 @@ import numpy as np
 
 from ._checks import in_range
 from .scan import Scan
-from .transports import check_port, open_transport
+from .transports import ServedHead, check_port
 from .seanet import (DEFAULT_NIBBLE_ORDER, FULL_TURN, Alive, BBUserData, FpgaCalibrationData,
                      FpgaVersionData, GainCommand, HeadCommand, HeadData, HeadInf, HeadSettings,
                      HeadStatus, HdCtrl, ReBoot, ScanReverse, SendBBUser, SendData, SendVersion,
@@ -89,7 +88,7 @@ class Faults:
 # The head
 # --------------------------------------------------------------------------------------------
 
-class VirtualMicron:
+class VirtualMicron(ServedHead):
     """A simulated Micron on a pseudo-terminal, a TCP port or a pyserial URL.
 
     Parameters
@@ -166,42 +165,11 @@ class VirtualMicron:
         self._reset_state(time.monotonic())
 
     # ---- lifecycle ----
-    @property
-    def port(self) -> str | None:
-        return None if self._transport is None else self._transport.port
-
-    def start(self) -> str:
-        """Open the port, power the head on; returns the port a driver should open."""
-        if self._thread is not None:
-            return self.port
-        self._transport = open_transport(self.port_url, self.baudrate)
-        self._stop.clear()
+    def _power_on(self) -> None:
         now = time.monotonic()
         self._reset_state(now)
         self._boot(now)
         self._schedule(now + self.alive_interval, self._alive_tick, gen=None)
-        self._thread = threading.Thread(target=self._run, name="VirtualMicron", daemon=True)
-        self._thread.start()
-        return self.port
-
-    def stop(self, timeout: float = 5.0) -> None:
-        """Stop the head and close the port (safe to call twice)."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout)
-            self._thread = None
-        if self._transport is not None:
-            self._transport.close()
-            self._transport = None
-
-    close = stop
-
-    def __enter__(self):
-        self.start()
-        return self
-
-    def __exit__(self, *exc):
-        self.stop()
 
     def reboot(self) -> None:
         """Reset the head now (as a power glitch would)."""
@@ -242,25 +210,19 @@ class VirtualMicron:
         self._send_alive(now)
 
     # ---- main loop ----
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            try:
-                now = time.monotonic()
-                self._do_actions(now)
-                self._due(now)
-                self._flush()
-                wait = 0.02
-                if self._events:
-                    wait = min(wait, max(0.0, self._events[0][0] - time.monotonic()))
-                if self._out:
-                    wait = min(wait, 0.002)
-                data = self._transport.read(wait)
-                if data:
-                    self._on_bytes(data, time.monotonic())
-            except Exception as e:      # keep the head alive; the test or user sees last_error
-                self.last_error = e
-                self.stats["internal errors"] += 1
-                time.sleep(0.01)
+    def _tick(self) -> None:
+        now = time.monotonic()
+        self._do_actions(now)
+        self._due(now)
+        self._flush()
+        wait = 0.02
+        if self._events:
+            wait = min(wait, max(0.0, self._events[0][0] - time.monotonic()))
+        if self._out:
+            wait = min(wait, 0.002)
+        data = self._transport.read(wait)
+        if data:
+            self._on_bytes(data, time.monotonic())
 
     def _do_actions(self, now: float) -> None:
         while True:
@@ -550,13 +512,4 @@ def serve(scan_source, port_url: str | None = None, seconds: float | None = None
     ``out`` (default ``sys.stdout``) receives the line ``virtual Micron on PORT``; other keyword
     arguments go to `VirtualMicron`.
     """
-    out = sys.stdout if out is None else out
-    with VirtualMicron(scan_source, port_url, **kwargs) as vm:
-        print(f"virtual Micron on {vm.port}", file=out, flush=True)
-        end = None if seconds is None else time.monotonic() + seconds
-        try:
-            while end is None or time.monotonic() < end:
-                time.sleep(0.05 if end is None else max(0.0, min(0.05, end - time.monotonic())))
-        except KeyboardInterrupt:
-            pass
-    return 0
+    return VirtualMicron(scan_source, port_url, **kwargs).serve(seconds, out, "virtual Micron")
