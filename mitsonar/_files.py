@@ -8,6 +8,16 @@ import os
 import tempfile
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+#: The process's umask, read once (reading it means setting it, which races with other threads).
+_UMASK = _umask()
+
+
 class StagedFiles:
     """Files written under temporary names next to their final ones: `temporary(final)` gives
     the name to write, `commit` renames every file into place (all or none: if one rename fails,
@@ -21,18 +31,19 @@ class StagedFiles:
         final = os.fspath(final)
         folder, name = os.path.split(os.path.abspath(final))
         stem, ext = os.path.splitext(name)
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{stem}.", suffix=f".partial{ext}")
+        try:
+            fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{stem}.", suffix=f".partial{ext}")
+        except OSError as exc:  # its text would name the temporary file: name the user's
+            raise type(exc)(exc.errno, f"cannot write {final} ({exc.strerror})") from None
         os.close(fd)
         self.pending.append((tmp, final))
         return tmp
 
     def commit(self) -> None:
-        umask = os.umask(0)
-        os.umask(umask)
         done = []
         try:
             for tmp, final in self.pending:
-                os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a plain open would give these
+                os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; a plain open would give these
                 os.replace(tmp, final)
                 done.append(final)
         except OSError:

@@ -41,8 +41,8 @@ def _parse_settings(items):
 
 class _Progress:
     """A render's progress bar: call it as ``progress(done, total)``, then `close` it. The bar
-    starts with the render, so its rate is spp over the time since then (``smoothing=0``: a
-    first pass that ended a moment after the bar first showed gave rates of 2e9 spp/s), and it
+    starts with the render, so its rate is spp over the time since then (``smoothing=0``; a rate
+    over the moment between the bar's creation and the first pass's end means nothing), and it
     shows only after half a second (a quick render needs no bar)."""
 
     def __init__(self):
@@ -63,10 +63,13 @@ class _Progress:
             self.bar.close()
 
 
-def _render(scene_path, spp, seed, max_depth=None, electronics=None, quiet=False):
+def _render(scene_path, spp, seed, max_depth=None, electronics=None, quiet=False, mesh=False):
+    """Load and render a scene: ``(scene, scan, mesh)``, the ground-truth mesh (when ``mesh``)
+    made before the render, so a scene that cannot be triangulated costs no render."""
     import mitsonar
 
     scene = mitsonar.load_scene(scene_path)
+    truth = mitsonar.scene_mesh(scene) if mesh else None
     progress = None if quiet else _Progress()
     try:
         scan = mitsonar.render_scan(scene, spp=spp, seed=seed, max_depth=max_depth,
@@ -74,7 +77,7 @@ def _render(scene_path, spp, seed, max_depth=None, electronics=None, quiet=False
     finally:
         if progress is not None:
             progress.close()
-    return scene, scan
+    return scene, scan, truth
 
 
 def _plot(scan, path, kind="polar", ping=0, db=False, use="data", mesh=None):
@@ -130,13 +133,11 @@ def cmd_render(args):
             Electronics.from_dict(settings, source="--set")
         except ValueError as exc:
             raise CLIError(str(exc)) from None
-    scene, scan = _render(args.scene, args.spp, args.seed, args.max_depth, settings, args.quiet)
+    _, scan, mesh = _render(args.scene, args.spp, args.seed, args.max_depth, settings, args.quiet,
+                            mesh=bool(args.plot) and args.kind == "cartesian")
     scan.save(args.output)
     print(f"wrote {args.output} ({scan.n_pings} {scan.row_name} x {scan.n_bins} bins)")
     if args.plot:
-        import mitsonar
-
-        mesh = mitsonar.scene_mesh(scene) if args.kind == "cartesian" else None
         _plot(scan, args.plot, args.kind, db=args.db, mesh=mesh)
         print(f"wrote {args.plot}")
     return 0
@@ -161,13 +162,16 @@ def _format_value(v, most=8):
 
     if isinstance(v, float):
         return f"{v:.10g}"
-    if isinstance(v, (list, tuple, np.ndarray)) and np.size(v) > most:
-        a = np.asarray(v)
+    if isinstance(v, (list, tuple, np.ndarray)) and len(v) > most:
+        try:
+            a = np.asarray(v)
+        except ValueError:  # ragged nesting
+            return f"{len(v)} values"
         if a.dtype.kind in "biuf" and a.ndim == 1:
             ends = ", ".join(_format_value(x.item()) for x in a[:3])
             return (f"{a.size} values, {_format_value(a.min().item())} .. {_format_value(a.max().item())} "
                     f"({ends}, ...)")
-        return f"{np.size(v)} values ({type(v).__name__} of shape {np.shape(v)})"
+        return f"{len(v)} values ({type(v).__name__} of shape {a.shape})"
     return str(v)
 
 
@@ -207,20 +211,18 @@ def _scenes_dir():
 
 
 def cmd_demo(args):
-    import mitsonar
-
     make_output_folder(args.output)
     scenes = _scenes_dir()
     for name in ("box", "intake", "box_fls"):
         path = os.path.join(scenes, f"{name}.xml")
-        scene, scan = _render(path, args.spp, args.seed, quiet=args.quiet)
+        _, scan, mesh = _render(path, args.spp, args.seed, quiet=args.quiet, mesh=True)
         exr = os.path.join(args.output, f"{name}.exr")
         scan.save(exr)
         polar = os.path.join(args.output, f"{name}_polar.png")
         cart = os.path.join(args.output, f"{name}_cartesian.png")
         ascan = os.path.join(args.output, f"{name}_ascan.png")
         _plot(scan, polar, "polar")
-        _plot(scan, cart, "cartesian", mesh=mitsonar.scene_mesh(scene))
+        _plot(scan, cart, "cartesian", mesh=mesh)
         _plot(scan, ascan, "ascan", ping=scan.n_pings // 2 if scan.kind == "multibeam" else 0)  # the fan's centre row
         print(f"{name}: wrote {exr}, {polar}, {cart}, {ascan}")
     return 0

@@ -29,6 +29,17 @@ def _sphere_mesh(n_lat=24, n_lon=48):
     return np.array(verts, float), np.array(faces, np.int64)
 
 
+def _cylinder_mesh(n=64):
+    """The open unit cylinder of Mitsuba's ``cylinder`` shape (radius 1, z from 0 to 1)."""
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    ring = np.stack([np.cos(t), np.sin(t), np.zeros(n)], 1)
+    v = np.concatenate([ring, ring + [0.0, 0.0, 1.0]])
+    j = np.arange(n)
+    k = (j + 1) % n
+    f = np.concatenate([np.stack([j, k, n + k], 1), np.stack([j, n + k, n + j], 1)])
+    return v, f
+
+
 def _disk_mesh(n=64):
     t = np.linspace(0, 2 * np.pi, n, endpoint=False)
     v = np.concatenate([[[0, 0, 0]], np.stack([np.cos(t), np.sin(t), np.zeros(n)], 1)])
@@ -39,7 +50,7 @@ def _disk_mesh(n=64):
 def scene_mesh(scene):
     """The scene's surfaces as one triangle mesh ``(vertices (V, 3) float64, faces (F, 3) int64)``.
 
-    Meshes are taken as they are; rectangles, disks and spheres are triangulated (spheres with
+    Meshes are taken as they are; rectangles, disks, spheres and (open) cylinders are triangulated (spheres with
     ~2300 triangles). This is the ground truth maps are scored against.
     """
     import mitsuba as mi
@@ -63,9 +74,11 @@ def scene_mesh(scene):
                 local, lf = _sphere_mesh()
             elif name == "Disk":
                 local, lf = _disk_mesh()
+            elif name == "Cylinder":
+                local, lf = _cylinder_mesh()
             else:
                 raise SceneError(f"scene_mesh: cannot triangulate shape {shape.id()!r} of type {name}; "
-                                 "use rectangle, disk, sphere or a mesh")
+                                 "use rectangle, disk, sphere, cylinder or a mesh")
             v = local @ m[:3, :3].T + m[:3, 3]
             f = lf
         verts.append(v)

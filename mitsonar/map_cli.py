@@ -80,7 +80,7 @@ def _output_problem(option: str, path: str) -> str | None:
 
 def _read_scans(paths):
     """(scans, None) or (None, the one-line reason) for the scan files and raw logs given."""
-    from mitsonar import load_scan  # lazily: the map command needs no renderer
+    from mitsonar.io import load_scan  # lazily: reading scans needs no renderer
     from mitsonar.rawlog import LOG_MAGIC
     from mitsonar.recording import replay
 

@@ -34,17 +34,17 @@ def _location(line: str) -> str:
 def mitsuba_error(exc: BaseException, where: str | None = None) -> str:
     """One line for an exception Mitsuba raised while loading or instantiating plugins.
 
-    The original exception of one of our plugins when one was raised (with Mitsuba's location
-    of it), else Mitsuba's own message on one line. ``where`` (a file name) leads unless the
-    message names it already.
+    The original exception of one of our plugins when it is the one Mitsuba reports (its message
+    appears in Mitsuba's text), with Mitsuba's location of it; else Mitsuba's own message on one
+    line. ``where`` (a file name) leads unless the message names it already.
     """
     from mitsonar.plugins import take_failure
 
     lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
     first = lines[0] if lines else type(exc).__name__
     failure = take_failure()
-    if failure is not None:
-        reason = str(failure).strip().splitlines()[0] if str(failure).strip() else type(failure).__name__
+    reason = str(failure).strip().splitlines()[0] if failure is not None and str(failure).strip() else None
+    if reason is not None and reason in str(exc):
         place = _location(first) if "failed to instantiate" in first else ""
         if "dictionary node" in place:   # mi.load_dict: no file to name
             place = ""
@@ -77,7 +77,7 @@ def load_scene(path_or_xml: str, **params):
     take_failure()  # forget failures of earlier loads
     try:
         # Serial loading: Mitsuba 3.9's parallel instantiation of Python plugins now and then
-        # fails with std::bad_alloc or a garbled string (about 1 in 150 first loads here).
+        # fails with std::bad_alloc or a garbled string (README, "Use from Python").
         load = mi.load_string if is_xml else mi.load_file
         scene = load(text, parallel=False, **params)
     except Exception as exc:  # Mitsuba raises RuntimeError with a traceback inside the message

@@ -20,7 +20,6 @@ import socket
 import sys
 import threading
 import time
-import tty
 from urllib.parse import urlparse
 
 __all__ = ["SonarError", "SonarTimeout", "open_serial", "serial_fileno", "read_available",
@@ -382,6 +381,8 @@ class _PtyTransport:
     def __init__(self):
         self.master, self.slave = os.openpty()
         # Raw mode before anyone opens the slave: no echo, no CR/LF translation of binary data.
+        import tty  # POSIX only: the offline tools (replay, map) import this module too
+
         tty.setraw(self.slave)
         tty.setraw(self.master)
         os.set_blocking(self.master, False)

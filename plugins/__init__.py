@@ -18,7 +18,7 @@ PLUGINS = (("BSDF", "acoustic", "acoustic_bsdf", "AcousticBSDF"),
            ("integrator", "sonar_tof", "sonar_tof", "SonarTOFIntegrator"),
            ("integrator", "sonar_mlt", "sonar_mlt", "SonarMLTIntegrator"))
 
-# Exceptions raised by our plugins' constructors, newest last. Mitsuba turns one into a
+# The last exception raised by one of our plugins' constructors. Mitsuba turns it into a
 # RuntimeError holding its traceback as text; `take_failure` hands the original back to whoever
 # reports the error (mitsonar.scene), so no message has to be recovered from that text.
 _failures: list = []
@@ -48,7 +48,7 @@ def _constructor(kind, name, mod, cls_name):
             check_all_read(props, kind, name, parameters(cls))
             return obj
         except Exception as exc:
-            _failures.append(exc)
+            _failures[:] = [exc]
             raise
     return construct
 

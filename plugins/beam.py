@@ -262,7 +262,7 @@ class BeamPattern:
         if not np.any(grid > 0):
             raise BeamPatternError("sonar beam pattern is zero everywhere: nothing would be emitted")
         # A floor of 1e-6 of the peak bounds B / pdf in the far tails, where the float32 CDF
-        # inversion can land in cells of vanishing density (one such sample once weighed 1e12).
+        # inversion can land in cells of vanishing density.
         grid = np.maximum(grid, 1e-6 * grid.max())
         self._distr = mi.MarginalContinuous2D0(np.ascontiguousarray(grid, dtype=np.float32))
         self._az_lo, self._el_lo = az_lo, el_lo
@@ -323,10 +323,10 @@ class BeamPattern:
         pos, _ = self._distr.sample(u, active=active)
         # The pdf is evaluated at the position the inversion returned, not taken from the
         # inversion: in float32 the cumulative sums of the far tail cells round to the same value
-        # near 1, and there the inversion returns a position and a pdf that disagree (u = 0.99999964
-        # gave pdf 7e-12 where the density at the returned position is 2e-5, a weight 2e6 times the
-        # beam's solid angle). Evaluated here, B / pdf stays within the interpolation error of the
-        # table's; what the inversion cannot resolve is the tail's mass (< 1e-6 of the beam's).
+        # near 1, and there the inversion returns a position and a pdf that disagree by orders of
+        # magnitude (README, "Which references to trust"). Evaluated here, B / pdf stays within
+        # the interpolation error of the table's; what the inversion cannot resolve is the tail's
+        # mass (< 1e-6 of the beam's).
         pdf = self._distr.eval(pos, active=active)
         az = self._p_az + pos.x * self._p_saz
         el = self._p_el + pos.y * self._p_sel

@@ -231,7 +231,7 @@ class SonarSensor(mi.Sensor):
         return self.head_pose(pose) @ bearing_rotation(np.radians(self.bearings_deg()))
 
     def connection(self, pose=None):
-        """What weights an echo's connection back to the transducer, for `trace_echoes`.
+        """What weights an echo's connection back to the transducer, for `SonarIntegrator.sample`.
 
         None for a mechanical head (its own beam, in the ping's frame). For a multibeam head, the
         transmit fan in the head's frame, one copy per row: paths start from the row's receive beam

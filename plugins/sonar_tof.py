@@ -17,7 +17,7 @@ MAX_LANES_PER_PASS = 1 << 22
 MAX_SPP_PER_PASS = 1 << 16
 
 # Names that moved to mitsonar.plugins.common; importable from here for one release.
-_MOVED = ("SonarIntegrator", "check_max_depth", "resolve_sensor")
+_MOVED = ("check_max_depth", "resolve_sensor")
 
 
 def __getattr__(name):

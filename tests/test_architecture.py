@@ -121,3 +121,24 @@ def test_no_module_is_over_700_lines(name, path):
     with open(path, encoding="utf-8") as fh:
         n = sum(1 for _ in fh)
     assert n <= MAX_LINES, f"{name} has {n} lines"
+
+
+def test_submodules_take_only_submodules_from_their_package():
+    """``from . import __version__`` (or ``from mitsonar import load_scan``) inside mitsonar makes a
+    submodule depend on the package's ``__init__``, which imports the submodules: a cycle the graph
+    above cannot show, since a package gathering its submodules is no edge. Only submodules may
+    be imported from one's own package."""
+    mods = modules()
+    bad = []
+    for name, path in mods.items():
+        if path.endswith("__init__.py"):
+            continue
+        package = name.rpartition(".")[0]
+        with open(path, encoding="utf-8") as fh:
+            tree = ast.parse(fh.read(), path)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                base = targets(name, False, node)[-1]
+                if base in mods and mods[base].endswith("__init__.py") and name.startswith(base + "."):
+                    bad += [(name, a.name) for a in node.names if f"{base}.{a.name}" not in mods]
+    assert bad == []

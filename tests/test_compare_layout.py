@@ -94,10 +94,3 @@ def test_package_import_graph_is_acyclic_and_modules_are_small():
     # The command line imports the package, never the other way round.
     assert not any("compare_cli" in open(os.path.join(PACKAGE, f)).read() for f in os.listdir(PACKAGE)
                    if f.endswith(".py"))
-
-
-def test_no_private_helpers_of_render_are_used():
-    users = [f for f in os.listdir(PACKAGE) if f.endswith(".py")
-             and ("_first_reason" in open(os.path.join(PACKAGE, f)).read()
-                  or "import _sonar" in open(os.path.join(PACKAGE, f)).read())]
-    assert users == []

@@ -69,8 +69,9 @@ def test_multibeam_renders_of_a_quay_agree_across_seeds(mitsonar_mod):
 
 
 def path_energies(scene, ping, seed, n, max_depth=1):
-    """Echo energy of each of the ``n`` paths of one ping, as `render_scan` traces them (the hash
-    samples depend on seed, ping and sample index only, so these are the render's own paths)."""
+    """Echo energy of each of the ``n`` paths of one ping, as ``sonar_tof`` with ``sampling``
+    ``independent`` (the sampler of the issue's report) traces them: the hash samples depend on
+    seed, ping and sample index only, so these are that render's own paths."""
     import drjit as dr
     import mitsuba as mi
 

@@ -24,7 +24,7 @@ def load_integrator(name, params=None):
                                "registered; mitsonar provides sonar_tof and sonar_mlt)") from None
         raise CompareError(f"integrator {name!r}: {mitsuba_error(exc)}") from None
     if not isinstance(obj, module("common").SonarIntegrator):
-        raise CompareError(f"integrator {name!r} is not a sonar integrator (it has no render_histogram); "
+        raise CompareError(f"integrator {name!r} is not a sonar integrator; "
                            "use sonar_tof or sonar_mlt")
     return obj
 

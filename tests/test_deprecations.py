@@ -1,0 +1,67 @@
+"""Old import paths of the renderer keep working for one release, with a DeprecationWarning that
+names the new home (issue "Architecture"); the devices' are in test_device_imports.py."""
+import warnings
+
+import pytest
+
+
+@pytest.mark.parametrize("module, name, home", [
+    ("mitsonar.render", "load_scene", "mitsonar.scene"),
+    ("mitsonar.render", "set_variant", "mitsonar.variant"),
+    ("mitsonar.render", "scene_mesh", "mitsonar.groundtruth"),
+    ("mitsonar.plugins.sonar_tof", "resolve_sensor", "mitsonar.plugins.common"),
+    ("mitsonar.plugins.sonar_tof", "check_max_depth", "mitsonar.plugins.common"),
+    ("mitsonar.plugins.echo_path", "HashSamples", "mitsonar.plugins.samples"),
+    ("mitsonar.plugins.echo_path", "n_dims", "mitsonar.plugins.samples"),
+])
+def test_old_paths_warn_and_give_the_same_object(mitsonar_mod, module, name, home):
+    import importlib
+
+    with pytest.warns(DeprecationWarning, match=home.replace(".", r"\.")):
+        old = getattr(importlib.import_module(module), name)
+    assert old is getattr(importlib.import_module(home), name)
+
+
+def test_trace_echoes_still_traces_the_same_paths(mitsonar_mod):
+    """echo_path.trace_echoes, deprecated, runs the one path function with the same result."""
+    import os
+
+    import drjit as dr
+    import mitsuba as mi
+    import numpy as np
+
+    from conftest import SCENES
+    from mitsonar.plugins import module
+
+    scene = mitsonar_mod.load_scene(os.path.join(SCENES, "box.xml"))
+    integrator = mi.load_dict({"type": "sonar_tof", "max_depth": 2})
+    setup = integrator.setup(scene, 0)
+    n = 4096
+    lane = dr.arange(mi.UInt32, n)
+    ping = lane % 200
+    samples = module("samples").HashSamples(mi.UInt32(3), ping, lane // 200)
+    totals = []
+    for call in ("new", "old"):
+        energy = dr.zeros(mi.Float, n)
+
+        def record(k, rng, e, valid):
+            dr.scatter_add(energy, e, lane, valid)
+
+        if call == "new":
+            integrator.sample(setup, ping, samples, record)
+        else:
+            ep = importlib_module("mitsonar.plugins.echo_path")
+            with pytest.warns(DeprecationWarning):
+                ep.trace_echoes(scene, setup.frames, setup.sensor.beam, ping, samples, setup.depth_o,
+                                setup.absorption, record, connect=setup.connect)
+        totals.append(np.asarray(energy))
+    np.testing.assert_array_equal(totals[0], totals[1])
+    assert totals[0].sum() > 0
+
+
+def importlib_module(name):
+    import importlib
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        return importlib.import_module(name)
