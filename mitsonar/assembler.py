@@ -13,7 +13,8 @@ import math
 
 import numpy as np
 
-from .scan import Scan, bearing_rotation, check_rigid
+from .frames import bearing_rotation, check_rigid
+from .scan import Scan
 from .seanet.constants import FULL_TURN, HdCtrl, bearing_to_radians
 from .seanet.messages import HeadData
 from .seanet.settings import HeadSettings, ad_db, gain_db

@@ -29,7 +29,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ._checks import in_range, is_whole, require
-from .scan import Scan, bearing_rotation, check_rigid
+from .frames import bearing_rotation, check_rigid
+from .scan import Scan
 
 __all__ = ["Ping360Settings", "Ping360Assembler", "GRADIANS", "TICK", "LIMITS", "GAIN_PRESETS",
            "BEAMWIDTH_H", "BEAMWIDTH_V", "angle_to_radians", "ping_problem", "check_pose"]

@@ -6,7 +6,8 @@ import warnings
 
 import numpy as np
 
-from .scan import Scan, check_rigid
+from .frames import check_rigid
+from .scan import Scan
 from .scene import SceneError, mitsuba_error, scene_name, sonar_of
 from .trajectory import Trajectory
 from .variant import ensure_variant

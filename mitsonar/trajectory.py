@@ -26,7 +26,7 @@ import os
 import numpy as np
 
 from ._files import replacing
-from .scan import check_rigid, check_rigid_stack
+from .frames import check_rigid, check_rigid_stack
 
 TUM_FIELDS = ("timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw")
 UNIT_TOLERANCE = 1e-3   # |q| of a TUM line may differ from 1 by this much (then it is normalised)

@@ -10,7 +10,7 @@ import mitsuba as mi
 import numpy as np
 
 from mitsonar._checks import not_allowed, require
-from mitsonar.scan import KINDS, bearing_rotation, check_rigid, check_rigid_stack
+from mitsonar.frames import KINDS, bearing_rotation, check_rigid, check_rigid_stack
 
 from .beam import BeamPattern, read_beam_table
 from .jit_arrays import upload

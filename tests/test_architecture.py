@@ -142,3 +142,19 @@ def test_submodules_take_only_submodules_from_their_package():
                 if base in mods and mods[base].endswith("__init__.py") and name.startswith(base + "."):
                     bad += [(name, a.name) for a in node.names if f"{base}.{a.name}" not in mods]
     assert bad == []
+
+
+def test_the_plugins_use_only_the_lowest_mitsonar_modules():
+    """Data flows scene -> paths -> histogram -> electronics -> Scan -> files, maps, devices: the
+    plugins (paths and histograms) may use mitsonar's helpers below them (value checks, frames)
+    and the electronics' settings (the sensor reads and checks its electronics fields), nothing
+    else of mitsonar (not the Scan, files, render or devices)."""
+    _, edges = import_graph()
+    allowed = {"mitsonar._checks", "mitsonar.frames", "mitsonar.electronics"}
+    for name, out in edges.items():
+        if name.startswith("mitsonar.plugins"):
+            above = {t for t in out if t.startswith("mitsonar") and not t.startswith("mitsonar.plugins")}
+            assert above <= allowed, (name, above - allowed)
+    # and those import nothing of mitsonar's above them
+    for low in allowed:
+        assert not {t for t in edges[low] if t.startswith("mitsonar")} - {"mitsonar._checks"}, low
