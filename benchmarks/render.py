@@ -42,7 +42,8 @@ BOX = os.path.join(HERE, "..", "scenes_xml", "box.xml")
 
 
 def count_segments(scene, spp, seed=0, per_lane=False):
-    """Ray casts of one scan: intersections (one per bounce) + visibility rays (one per echo:
+    """Ray casts of one scan, traced by the scene's integrator's path function with the sensor's own
+    absorption and (multibeam) transmit fan: intersections (one per bounce) + visibility rays (one per echo:
     the path skips the visibility ray of a bounce whose echo is zero, e.g. far outside the beam);
     with ``per_lane`` also, per path, its number of bounces and a bit mask of the bounces that
     cast a visibility ray (two UInt32 arrays)."""

@@ -71,10 +71,11 @@ class EvaluationReport(dict):
         self.points = points
 
     def __missing__(self, key):
-        if key == "_meshes":
-            return self.meshes
-        if key == "_points":
-            return self.points
+        if key in ("_meshes", "_points"):
+            import warnings
+
+            warnings.warn(f"report[{key!r}] is deprecated: use report.{key[1:]}", DeprecationWarning, stacklevel=2)
+            return self.meshes if key == "_meshes" else self.points
         raise KeyError(key)
 
     def __repr__(self) -> str:

@@ -59,11 +59,12 @@ def required_attributes(source: str = "auto") -> tuple:
 def as_scan_list(scans, source: str = "auto") -> list:
     """A list of scans from one scan or an iterable of them; TypeError naming what is wrong."""
     if hasattr(scans, "poses"):
-        return [scans]
-    if isinstance(scans, (str, bytes)) or not hasattr(scans, "__iter__"):
+        scans = [scans]
+    elif isinstance(scans, (str, bytes)) or not hasattr(scans, "__iter__"):
         raise TypeError(f"HilbertMap: fit() needs a scan or a list of scans, not {type(scans).__name__} "
                         "(load scan files with mitsonar.load_scan)")
-    scans = list(scans)
+    else:
+        scans = list(scans)
     if not scans:
         raise ValueError("HilbertMap: fit() needs at least one scan")
     for s in scans:

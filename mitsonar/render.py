@@ -7,6 +7,7 @@ import warnings
 import numpy as np
 
 from .frames import check_rigid
+from .plugins import PLUGINS, module
 from .scan import Scan
 from .scene import SceneError, mitsuba_error, scene_name, sonar_of
 from .trajectory import Trajectory
@@ -81,14 +82,12 @@ def moving_head_poses(sonar, trajectory, start_time, mount=None):
     return trajectory.at(t) @ (sonar.to_world_np if mount is None else mount)
 
 
-SONAR_INTEGRATORS = ("sonar_tof", "sonar_mlt")
+SONAR_INTEGRATORS = tuple(name for kind, name, _, _ in PLUGINS if kind == "integrator")
 SEED_MAX = 2 ** 32 - 1   # the path seed is a 32-bit integer: larger seeds would repeat smaller ones
 
 
 def _integrator(scene, integrator):
     import mitsuba as mi
-
-    from mitsonar.plugins import module
 
     base = module("common").SonarIntegrator
     if integrator is None:
@@ -159,7 +158,8 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
         electronics_seed = _whole("electronics_seed", electronics_seed, 0, SEED_MAX,
                                   f"a whole number from 0 to {SEED_MAX}, or None for seed")
     if max_depth is not None:
-        max_depth = _whole("max_depth", max_depth, 1, 64, "a whole number of surface bounces from 1 to 64")
+        top = module("common").MAX_DEPTH
+        max_depth = _whole("max_depth", max_depth, 1, top, f"a whole number of surface bounces from 1 to {top}")
     if pose is not None:
         pose = _check_pose(pose)
     if trajectory is not None:

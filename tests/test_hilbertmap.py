@@ -350,7 +350,7 @@ def test_evaluate_reports_metrics_and_params(fitted):
     assert r["slice_water_max"] <= r["slice_level_max"] and r["slice_water_mean"] <= r["slice_level_max"]
     assert 0.0 <= r["slice_unobserved_depth"] < 2.0
     # the seen filter keeps a subset of the insonified free points; both sets are scored
-    pts = r["_points"]
+    pts = r.points
     assert 0.0 < r["free_seen_share"] <= 1.0 and "all_auc_band_0.1_0.3" in r
     assert len(pts["free"]) == round(r["free_seen_share"] * len(pts["free_all"]))
     assert np.isin(pts["free"].view([("", pts["free"].dtype)] * 3), pts["free_all"].view([("", pts["free_all"].dtype)] * 3)).all()
