@@ -228,7 +228,8 @@ def cmd_record(args) -> int:
 
 def _replay(args) -> int:
     from .io import EXTENSIONS
-    from .rawlog import LogDamageWarning, part_name
+    from ._files import StagedFiles
+    from .rawlog import LogDamageWarning
     from .recording import replay
     out = _check_output(args.output, EXTENSIONS)
     log = Path(args.log)
@@ -250,16 +251,9 @@ def _replay(args) -> int:
     if args.all:
         # All or nothing: every scan under a temporary name first, renamed once all are written.
         paths = [out.with_name(f"{out.stem}_{k:03d}{out.suffix}") for k in range(len(scans))]
-        parts = [part_name(p) for p in paths]
-        try:
-            for scan, part in zip(scans, parts):
-                scan.save(str(part))
-            for part, path in zip(parts, paths):
-                os.replace(part, path)
-        finally:
-            for part in parts:
-                if part.exists():
-                    part.unlink()
+        with StagedFiles() as files:
+            for scan, path in zip(scans, paths):
+                scan.save(files.temporary(path))
         print(f"{len(scans)} scans from {log} written as {out.stem}_NNN{out.suffix}")
         return 0
     if not -len(scans) <= args.index < len(scans):
