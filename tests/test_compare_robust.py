@@ -241,3 +241,19 @@ def test_cli_output_has_no_progress_bar_when_not_on_a_terminal(small_scene, tmp_
     assert proc.returncode == 0, proc.stderr
     assert "\r" not in proc.stderr and "spp/s" not in proc.stderr and "it/s" not in proc.stderr
     assert "asked s" in proc.stdout and "took s" in proc.stdout
+
+
+def test_a_failed_run_keeps_the_reference_it_rendered_into_a_new_folder(small_scene, tmp_path, monkeypatch):
+    """Nothing is lost: the reference took most of the run's time, so a failure after it was cached
+    leaves the new folder holding only that reference (no results, no temporary files)."""
+    from mitsonar.compare import engine
+
+    def boom(result, path):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(engine, "plot_convergence", boom)
+    out = tmp_path / "new" / "cmp"
+    with pytest.raises(RuntimeError, match="boom"):
+        engine.compare(small_scene, "sonar_tof", (0.01,), str(out), **{**QUICK, "plots": True})
+    names = os.listdir(out)
+    assert len(names) == 1 and names[0].startswith("reference_") and names[0].endswith("_spp4096.npz"), names

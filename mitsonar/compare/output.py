@@ -34,8 +34,8 @@ class OutputFolder:
     On entry the folder is checked (`check_output_folder`) and created with any missing parents.
     `stage` gives a temporary path for an output file and `commit` renames every staged file to
     its name. If the block raises (KeyboardInterrupt included), staged files are deleted and, if
-    this run created the folder, the folder (everything in it) is removed; a folder that existed
-    before keeps what was there and what was committed to it (e.g. a cached reference).
+    this run created the folder and nothing was committed to it, the folder is removed; a cached
+    reference committed before the failure stays, as does whatever a folder held before.
     """
 
     def __init__(self, path):
@@ -74,10 +74,14 @@ class OutputFolder:
         self._staged.commit()
 
     def discard(self) -> None:
-        """Delete the staged files, and the folder if this run created it."""
+        """Delete the staged files, and the folder if this run created it and it holds nothing
+        else: a reference cached before the failure stays (it took most of the run's time, and a
+        later run reuses it)."""
         self._staged.discard()
         if self.created:
-            shutil.rmtree(self.created, ignore_errors=True)
+            kept = [f for _, _, files in os.walk(self.created) for f in files]
+            if not kept:
+                shutil.rmtree(self.created, ignore_errors=True)
 
 
 def write_json(result, path):
