@@ -103,7 +103,9 @@ def _settings_line(scan) -> str:
         prov.insert(0, "SeaNet head" + (f" log {os.path.basename(str(meta['log']))}" if "log" in meta else ""))
     if prov:
         line2.append(", ".join(prov))
-    return ", ".join(parts) + ("\n" + "; ".join(line2) if line2 else "")
+    # a line that would run off a 7-inch title wraps at the parts' boundary
+    sep = "\n" if sum(len(x) + 2 for x in line2) > 95 else "; "
+    return ", ".join(parts) + ("\n" + sep.join(line2) if line2 else "")
 
 
 def _new_figure(ax, figsize, dpi):
