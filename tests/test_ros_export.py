@@ -130,3 +130,35 @@ def test_refusals(tmp_path):
     with pytest.raises(ExportError, match=r"^bad\.npz: the scan has no 'ranges'"):
         write_mcap(tmp_path / "y.mcap", [NoPoses()], names=["bad.npz"])
     assert sorted(os.listdir(tmp_path)) == ["x.mcap"]       # nothing written, no temporary left
+
+
+def test_cli_export_round_trip_and_refusals(tmp_path, capsys):
+    from mitsonar.cli import main
+
+    files = []
+    for i, kind in enumerate(("mechanical", "multibeam")):
+        f = tmp_path / f"s{i}.npz"
+        _scan(kind, start=float(i), seed=i).save(f)
+        files.append(str(f))
+    out = tmp_path / "out.mcap"
+    assert main(["export", *files, "--mcap", str(out), "--start", "10"]) == 0
+    assert f"wrote {out}" in capsys.readouterr().out
+    msgs = _read(out)
+    images = [(lt, d) for t, _, lt, d in msgs if t == "/sonar/image"]
+    assert [lt for lt, _ in images] == [round((10 + 0.05 * k) * 1e9) for k in range(7)] + [11_000_000_000]
+    from mitsonar import load_scan
+    assert bytes(images[-1][1].image.data) == load_scan(files[1]).data.tobytes()
+    # an existing output: one line, untouched; --force overwrites
+    before = out.read_bytes()
+    assert main(["export", files[0], "--mcap", str(out)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == f"mitsonar: error: {out}: exists; refusing to overwrite it (use --force)"
+    assert out.read_bytes() == before
+    assert main(["export", files[0], "--mcap", str(out), "--force"]) == 0
+    # a bad scan among good ones: one line naming the file, nothing written
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a scan")
+    assert main(["export", files[0], str(bad), "--mcap", str(tmp_path / "new.mcap")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and str(bad) in err
+    assert not (tmp_path / "new.mcap").exists()
