@@ -7,7 +7,7 @@ written under a temporary name and renamed at the end, so a failure leaves nothi
 """
 from __future__ import annotations
 
-from .ros.bag import THRESHOLD, ExportError, McapBag, check_output, check_scan
+from .ros.bag import THRESHOLD, ExportError, McapBag, check_output, check_scan, scan_base
 
 
 def add_mcap_options(parser, *, scans_help=True):
@@ -32,6 +32,11 @@ def cmd_export(args):
     for path in args.scans:                       # every input read and checked before any output
         scan = load_scan(path)
         check_scan(scan, path)
+        t0, t1 = scan_base(scan) + scan.times[0], scan_base(scan) + scan.times[-1]
+        if traj is not None and not traj.covers(t0, t1):
+            lo, hi = traj.span
+            raise ExportError(f"{path}: 'times' (+ meta start_time) span [{t0:.9g}, {t1:.9g}] s; allowed: "
+                              f"within the trajectory's span [{lo:.9g}, {hi:.9g}] s")
         scans.append(scan)
     with McapBag(args.mcap, start=args.start, trajectory=traj, threshold=args.threshold, force=args.force) as bag:
         for scan, path in zip(scans, args.scans):

@@ -162,3 +162,42 @@ def test_cli_export_round_trip_and_refusals(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and str(bad) in err
     assert not (tmp_path / "new.mcap").exists()
+
+
+def test_survey_mcap_has_the_vehicle_frames(tmp_path, capsys):
+    from conftest import SCENES
+
+    import mitsonar
+    from mitsonar.cli import main
+    from mitsonar.ros.messages import sonar_pose
+    from mitsonar.trajectory import quat_to_matrix
+
+    out = tmp_path / "survey"
+    bag = out / "survey.mcap"
+    rc = main(["survey", os.path.join(SCENES, "box.xml"), "--lawnmower", "-1", "1", "-1", "1", "--spacing", "1",
+               "--speed", "0.2", "--depth", "0", "--spp", "4", "--max-scans", "2", "-q", "-o", str(out),
+               "--mcap", str(bag)])
+    assert rc == 0 and f"and {bag}" in capsys.readouterr().out
+    scans = [mitsonar.load_scan(f) for f in mitsonar.survey.survey_files(out)]
+    msgs = _read(bag)
+    images = [d for t, _, _, d in msgs if t == "/sonar/image"]
+    assert len(images) == sum(len(np.unique(s.times)) for s in scans)
+    assert b"".join(bytes(m.image.data) for m in images) == b"".join(s.data.tobytes() for s in scans)
+    want = [round((s.meta["start_time"] + t) * 1e9) for s in scans for t in np.unique(s.times)]
+    assert [_ns(m.header.stamp) for m in images] == want
+    tfs = [d for t, _, _, d in msgs if t == "/tf"]
+
+    def matrix(tr):
+        m = np.eye(4)
+        r = tr.transform.rotation
+        m[:3, :3] = quat_to_matrix([r.x, r.y, r.z, r.w])
+        m[:3, 3] = [tr.transform.translation.x, tr.transform.translation.y, tr.transform.translation.z]
+        return m
+
+    first = tfs[0].transforms
+    assert [(t.header.frame_id, t.child_frame_id) for t in first] == [("map", "base_link"), ("base_link", "sonar")]
+    np.testing.assert_allclose(matrix(first[0]) @ matrix(first[1]), sonar_pose(scans[0], 0), atol=1e-9)
+    # a second run onto the same bag is refused before any render
+    assert main(["survey", os.path.join(SCENES, "box.xml"), "--lawnmower", "-1", "1", "-1", "1", "--depth", "0",
+                 "-q", "-o", str(tmp_path / "other"), "--mcap", str(bag)]) == 1
+    assert "exists" in capsys.readouterr().err and not (tmp_path / "other").exists()

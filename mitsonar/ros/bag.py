@@ -77,15 +77,18 @@ def check_scan(scan, name="scan") -> None:
             raise ExportError(f"{name}: '{field}' holds values that are not finite; allowed: finite numbers")
 
 
-def check_output(path, force=False) -> str:
-    """The output path as a string; an existing one is refused unless ``force``."""
+def check_output(path, force=False, folder_may_be=None) -> str:
+    """The output path as a string; an existing one is refused unless ``force``. Its folder must
+    exist, unless it is ``folder_may_be`` (a folder the caller is about to make)."""
+    _require_mcap()
     path = os.fspath(path)
     if os.path.isdir(path):
         raise ExportError(f"{path}: is a folder; give an .mcap file name")
     if os.path.exists(path) and not force:
         raise ExportError(f"{path}: exists; refusing to overwrite it (use --force)")
     folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
+    made = folder_may_be is not None and folder == os.path.abspath(os.fspath(folder_may_be))
+    if not os.path.isdir(folder) and not made:
         raise ExportError(f"{path}: the folder {folder} does not exist")
     if not path.endswith(".mcap"):
         raise ExportError(f"{path}: the file name must end in .mcap")
