@@ -16,7 +16,7 @@ from mcap.reader import make_reader  # noqa: E402
 from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 
 
-def _scan(kind, rows=7, bins=32, start=None, seed=0, head=None):
+def _scan(kind, rows=7, bins=32, start=None, seed=0, head=None, **tx):
     rng = np.random.default_rng(seed)
     data = rng.integers(0, 256, size=(rows, bins), dtype=np.uint8)
     bearings = np.radians(np.linspace(-30, 30, rows)) if kind == "multibeam" else np.radians(np.arange(rows) * 1.8)
@@ -24,6 +24,7 @@ def _scan(kind, rows=7, bins=32, start=None, seed=0, head=None):
     poses = head @ bearing_rotation(bearings)
     times = np.zeros(rows) if kind == "multibeam" else np.arange(rows) * 0.05
     meta = {} if start is None else {"start_time": start}
+    meta.update(tx)
     return Scan(intensity=np.zeros((rows, bins), np.float32), data=data, ranges=np.linspace(0.1, 10, bins),
                 bearings=bearings, poses=poses, range_min=0.0, range_max=10.1, kind=kind, beamwidth_h=2.0,
                 beamwidth_v=20.0, sound_speed=1480.0, times=times, meta=meta)
@@ -53,7 +54,7 @@ def test_definitions_are_the_upstream_ros2_ones():
 
 def test_multibeam_and_mechanical_round_trip(tmp_path):
     fls = _scan("multibeam", start=2.5)
-    mech = _scan("mechanical", rows=5, start=3.0, seed=1)
+    mech = _scan("mechanical", rows=5, start=3.0, seed=1, tx_beamwidth_v=40.0)
     path = tmp_path / "out.mcap"
     counts = write_mcap(path, [fls, mech], start=100.0)
     msgs = _read(path)
@@ -81,6 +82,7 @@ def test_multibeam_and_mechanical_round_trip(tmp_path):
     for k, (_, log_time, msg) in enumerate(images[1:]):
         assert _ns(msg.header.stamp) == log_time == round((103.0 + 0.05 * k) * 1e9)
         assert bytes(msg.image.data) == mech.data[k].tobytes() and msg.image.beam_count == 1
+        assert np.allclose(msg.ping_info.tx_beamwidths, [math.radians(40.0)])
     waterfalls = [m for _, _, m in by_topic["/sonar/waterfall"]]
     assert [bytes(m.data) for m in waterfalls] == [fls.data.tobytes(), mech.data.tobytes()]
     assert (waterfalls[0].height, waterfalls[0].width, waterfalls[0].encoding) == (7, 32, "mono8")
@@ -148,6 +150,7 @@ def test_cli_export_round_trip_and_refusals(tmp_path, capsys):
     assert [lt for lt, _ in images] == [round((10 + 0.05 * k) * 1e9) for k in range(7)] + [11_000_000_000]
     from mitsonar import load_scan
     assert bytes(images[-1][1].image.data) == load_scan(files[1]).data.tobytes()
+    assert np.allclose(images[0][1].ping_info.tx_beamwidths, math.radians(20.0))
     # an existing output: one line, untouched; --force overwrites
     before = out.read_bytes()
     assert main(["export", files[0], "--mcap", str(out)]) == 1

@@ -69,6 +69,13 @@ def frequency(scan) -> float:
     return 0.0          # PingInfo: "Set to 0 if unavailable"
 
 
+def tx_beamwidth_v(scan) -> float:
+    """The transmit beam's vertical width (deg): ``meta['tx_beamwidth_v']`` when the head has its
+    own transmit pattern, else the scan's ``beamwidth_v`` (one pattern both ways)."""
+    v = scan.meta.get("tx_beamwidth_v") if isinstance(scan.meta, dict) else None
+    return float(v) if isinstance(v, (int, float)) and math.isfinite(v) and v > 0 else float(scan.beamwidth_v)
+
+
 def projected_image(scan, rows, ns: int, frame: str = SONAR_FRAME) -> dict:
     """One ping as a ProjectedSonarImage: the rows' device bytes (beam-major: beam 0's bins, then
     beam 1's, ...), the bin-centre ranges and each beam's unit direction in the sonar frame."""
@@ -80,7 +87,7 @@ def projected_image(scan, rows, ns: int, frame: str = SONAR_FRAME) -> dict:
     return {
         "header": header(ns, frame),
         "ping_info": {"frequency": frequency(scan), "sound_speed": float(scan.sound_speed),
-                      "tx_beamwidths": [math.radians(scan.beamwidth_v)] * n,
+                      "tx_beamwidths": [math.radians(tx_beamwidth_v(scan))] * n,
                       "rx_beamwidths": [math.radians(scan.beamwidth_h)] * n},
         "beam_directions": [{"x": float(d[0]), "y": float(d[1]), "z": float(d[2])} for d in dirs],
         "ranges": np.asarray(scan.ranges, dtype=np.float32).tolist(),
