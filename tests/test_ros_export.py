@@ -200,6 +200,11 @@ def test_survey_mcap_has_the_vehicle_frames(tmp_path, capsys):
     first = tfs[0].transforms
     assert [(t.header.frame_id, t.child_frame_id) for t in first] == [("map", "base_link"), ("base_link", "sonar")]
     np.testing.assert_allclose(matrix(first[0]) @ matrix(first[1]), sonar_pose(scans[0], 0), atol=1e-9)
+    # the twist is the vehicle's velocity in base_link: forward at the lawnmower's 0.2 m/s on a line
+    odoms = [d for t, _, _, d in msgs if t == "/odom"]
+    assert odoms[0].child_frame_id == "base_link"
+    lin = odoms[0].twist.twist.linear
+    assert math.isclose(math.hypot(lin.x, lin.y, lin.z), 0.2, rel_tol=1e-6) and lin.x > 0.19
     # a second run onto the same bag is refused before any render
     assert main(["survey", os.path.join(SCENES, "box.xml"), "--lawnmower", "-1", "1", "-1", "1", "--depth", "0",
                  "-q", "-o", str(tmp_path / "other"), "--mcap", str(bag)]) == 1

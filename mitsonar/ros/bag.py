@@ -10,7 +10,7 @@ Topics (see the README, "ROS 2 bags"):
 ``/sonar/waterfall`` sensor_msgs/Image (mono8)                one per scan, rows x bins
 ``/sonar/detections`` sensor_msgs/PointCloud2                 one per scan, frame ``map``
 ``/tf``             tf2_msgs/TFMessage                        one per ping
-``/odom``           nav_msgs/Odometry                         one per ping
+``/odom``           nav_msgs/Odometry                         one per ping (twist: trajectory)
 =================== ========================================= =====================================
 
 Stamps: ``start + base + scan.times[k]`` seconds, ``start`` given by the caller (default 0) and
@@ -134,7 +134,7 @@ class McapBag:
                 vehicle = self.trajectory.at(base + t)
                 tfs = [M.transform(vehicle, ns, M.WORLD_FRAME, M.VEHICLE_FRAME),
                        M.transform(np.linalg.inv(vehicle) @ sonar, ns, M.VEHICLE_FRAME, M.SONAR_FRAME)]
-                odom = M.odometry(vehicle, ns, M.WORLD_FRAME, M.VEHICLE_FRAME)
+                odom = M.odometry(vehicle, ns, M.WORLD_FRAME, M.VEHICLE_FRAME, *M.velocity(self.trajectory, base + t))
             else:
                 tfs = [M.transform(sonar, ns, M.WORLD_FRAME, M.SONAR_FRAME)]
                 odom = M.odometry(sonar, ns, M.WORLD_FRAME, M.SONAR_FRAME)

@@ -192,11 +192,29 @@ def transform(pose: np.ndarray, ns: int, parent: str, child: str) -> dict:
                           "rotation": {"x": float(q[0]), "y": float(q[1]), "z": float(q[2]), "w": float(q[3])}}}
 
 
-def odometry(pose: np.ndarray, ns: int, parent: str, child: str) -> dict:
-    """The pose of ``child`` in ``parent``; the twist is not known here and left zero."""
+def velocity(trajectory, t: float, h: float = 1e-3) -> tuple:
+    """The vehicle's linear and angular velocity at ``t`` in its own frame (REP-105: an Odometry's
+    twist is in its child frame), by central differences over ``[t - h, t + h]`` within the span."""
+    from scipy.spatial.transform import Rotation
+
+    lo, hi = trajectory.span
+    t0, t1 = max(lo, t - h), min(hi, t + h)
+    if t1 <= t0:
+        return np.zeros(3), np.zeros(3)
+    a, b, now = trajectory.at(t0), trajectory.at(t1), trajectory.at(t)
+    linear = now[:3, :3].T @ (b[:3, 3] - a[:3, 3]) / (t1 - t0)
+    angular = Rotation.from_matrix(a[:3, :3].T @ b[:3, :3]).as_rotvec() / (t1 - t0)
+    return linear, angular
+
+
+def odometry(pose: np.ndarray, ns: int, parent: str, child: str, linear=(0, 0, 0), angular=(0, 0, 0)) -> dict:
+    """The pose of ``child`` in ``parent`` and its twist in ``child`` (zero when not known)."""
     tf = transform(pose, ns, parent, child)["transform"]
-    zero = {"x": 0.0, "y": 0.0, "z": 0.0}
+
+    def vec(v):
+        return {"x": float(v[0]), "y": float(v[1]), "z": float(v[2])}
+
     return {"header": header(ns, parent), "child_frame_id": child,
             "pose": {"pose": {"position": tf["translation"], "orientation": tf["rotation"]},
                      "covariance": [0.0] * 36},
-            "twist": {"twist": {"linear": zero, "angular": dict(zero)}, "covariance": [0.0] * 36}}
+            "twist": {"twist": {"linear": vec(linear), "angular": vec(angular)}, "covariance": [0.0] * 36}}
