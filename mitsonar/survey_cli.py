@@ -40,8 +40,6 @@ def _trajectory(args):
 
 def cmd_survey(args):
     import mitsonar
-    from . import plots
-    from .survey import SCAN_NAME
 
     traj = _trajectory(args)                        # a bad file: one line, nothing written
     scene = mitsonar.load_scene(args.scene)
@@ -50,15 +48,44 @@ def cmd_survey(args):
         raise CLIError(f"-o {out!r} is a file, not a folder")
     if os.path.isdir(out) and any(f.startswith("scan_") for f in os.listdir(out)):
         raise CLIError(f"-o {out!r} already holds a survey's scans; choose a new or empty folder")
+    if args.mcap is not None:   # refused before any render (its folder may be the one -o makes)
+        from .ros.bag import check_output
+
+        check_output(args.mcap, args.force, folder_may_be=out)
     ext = "." + args.format
     try:   # checks every argument and the plan, then makes the folder; renders nothing yet
         scans = mitsonar.render_survey(scene, traj, out, spp=args.spp, seed=args.seed, max_scans=args.max_scans,
                                        ext=ext, progress=not args.quiet)
     except OSError as exc:
         raise CLIError(f"-o {out!r}: cannot create the output folder ({exc.strerror})") from None
+    bag = None
+    if args.mcap is not None:   # the ROS 2 bag, written beside the scans, renamed into place at the end
+        from .ros.bag import McapBag
+
+        bag = McapBag(args.mcap, start=args.start, trajectory=traj, threshold=args.threshold, force=args.force)
+    try:
+        n = _draw(args, scene, traj, out, scans, bag)
+    except BaseException:
+        if bag is not None:
+            bag.discard()
+        raise
+    if bag is not None:
+        bag.close()
+    print(f"wrote {n} scans, trajectory.tum and track.png to {out}" + (f" and {args.mcap}" if bag else "") +
+          f" ({traj.span[1] - traj.span[0]:.6g} s of track)")
+    return 0
+
+
+def _draw(args, scene, traj, out, scans, bag):
+    import mitsonar
+    from . import plots
+    from .survey import SCAN_NAME
+
     positions = []
     n = 0
     for scan in scans:
+        if bag is not None:
+            bag.add(scan, SCAN_NAME.format(n, "." + args.format))
         if n == 0 and scan.kind == "mechanical":
             plots.plot_cartesian(scan, mesh=mitsonar.scene_mesh(scene),
                                  path=os.path.join(out, SCAN_NAME.format(0, "_world.png")))
@@ -67,9 +94,7 @@ def cmd_survey(args):
         if len(positions) > 50:                     # keep the picture's dots, not the scans' bins
             positions = positions[::2]
     plots.plot_track(traj, os.path.join(out, "track.png"), scans=positions)
-    print(f"wrote {n} scans, trajectory.tum and track.png to {out} "
-          f"({traj.span[1] - traj.span[0]:.6g} s of track)")
-    return 0
+    return n
 
 
 def add_subcommands(sub):
@@ -92,4 +117,8 @@ def add_subcommands(sub):
     s.add_argument("--max-scans", type=int, help="stop after this many scans")
     s.add_argument("--format", default="npz", choices=("npz", "exr"), help="scan file format (default npz)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--mcap", metavar="OUT", help="also write the survey as a ROS 2 bag (MCAP; see mitsonar export)")
+    from .export_cli import add_mcap_options
+
+    add_mcap_options(s)
     s.set_defaults(func=cmd_survey)
