@@ -71,7 +71,7 @@ def test_multibeam_and_mechanical_round_trip(tmp_path):
     assert _ns(first.header.stamp) == images[0][1] == 102_500_000_000
     assert first.header.frame_id == "sonar"
     assert first.image.beam_count == 7 and first.image.dtype == 0 and not first.image.is_bigendian
-    assert bytes(first.image.data) == fls.data.tobytes()
+    assert bytes(first.image.data) == fls.data.T.tobytes()  # range-major: range * beam_count + beam
     assert np.allclose(first.ranges, fls.ranges.astype(np.float32))
     assert math.isclose(first.ping_info.sound_speed, 1480.0)
     assert np.allclose(first.ping_info.rx_beamwidths, math.radians(2.0))
@@ -81,7 +81,7 @@ def test_multibeam_and_mechanical_round_trip(tmp_path):
     assert np.allclose(dirs, np.stack([0 * fls.bearings, -np.sin(fls.bearings), np.cos(fls.bearings)], 1))
     for k, (_, log_time, msg) in enumerate(images[1:]):
         assert _ns(msg.header.stamp) == log_time == round((103.0 + 0.05 * k) * 1e9)
-        assert bytes(msg.image.data) == mech.data[k].tobytes() and msg.image.beam_count == 1
+        assert bytes(msg.image.data) == mech.data[k].tobytes() and msg.image.beam_count == 1  # one beam
         assert np.allclose(msg.ping_info.tx_beamwidths, [math.radians(40.0)])
     waterfalls = [m for _, _, m in by_topic["/sonar/waterfall"]]
     assert [bytes(m.data) for m in waterfalls] == [fls.data.tobytes(), mech.data.tobytes()]
@@ -149,7 +149,7 @@ def test_cli_export_round_trip_and_refusals(tmp_path, capsys):
     images = [(lt, d) for t, _, lt, d in msgs if t == "/sonar/image"]
     assert [lt for lt, _ in images] == [round((10 + 0.05 * k) * 1e9) for k in range(7)] + [11_000_000_000]
     from mitsonar import load_scan
-    assert bytes(images[-1][1].image.data) == load_scan(files[1]).data.tobytes()
+    assert bytes(images[-1][1].image.data) == load_scan(files[1]).data.T.tobytes()
     assert np.allclose(images[0][1].ping_info.tx_beamwidths, math.radians(20.0))
     # an existing output: one line, untouched; --force overwrites
     before = out.read_bytes()

@@ -77,12 +77,15 @@ def tx_beamwidth_v(scan) -> float:
 
 
 def projected_image(scan, rows, ns: int, frame: str = SONAR_FRAME) -> dict:
-    """One ping as a ProjectedSonarImage: the rows' device bytes (beam-major: beam 0's bins, then
-    beam 1's, ...), the bin-centre ranges and each beam's unit direction in the sonar frame."""
+    """One ping as a ProjectedSonarImage: the rows' device bytes, the bin-centre ranges and each
+    beam's unit direction in the sonar frame. The bytes are range-major, every beam of range 0,
+    then of range 1 (byte ``range * beam_count + beam``), as the message's reference reader
+    indexes them (APL's sonar_image_proc, ``SonarImageMsgInterface::index``), so a scan's
+    (beams, bins) bytes go in transposed."""
     world = sonar_pose(scan, rows[0])
     rot = world[:3, :3].T
     dirs = (rot @ scan.poses[rows][:, :3, 2].T).T
-    data = np.ascontiguousarray(scan.data[rows], dtype=np.uint8)
+    data = np.ascontiguousarray(scan.data[rows].T, dtype=np.uint8)
     n = len(rows)
     return {
         "header": header(ns, frame),
