@@ -1,11 +1,12 @@
-"""The Lambert seabed presets: a render of a flat seabed under a narrow beam gives back the
-published Lambert parameter mu (plugins/materials.py cites the values)."""
+"""Seabed physics: the Lambert seabed presets give back their published Lambert parameter mu
+(plugins/materials.py cites the values), and a pile standing on the seabed echoes its corner at
+the range of the image-source construction."""
 import math
 
 import numpy as np
 import pytest
 
-from conftest import frame_matrix, rectangle_xml, scene_xml, sonar_xml
+from conftest import acoustic_xml, frame_matrix, rectangle_xml, scene_xml, sonar_xml
 
 HEIGHT = 2.0
 BEAM = 2.0  # deg, uniform, square
@@ -81,3 +82,41 @@ def test_seabed_preset_eval_is_the_lambert_cross_section(mitsonar_mod):
             value = bsdf.eval(mi.BSDFContext(), si, si.wi)  # f cos(theta_o), back towards the source
             sigma = float(value[0][0]) * math.sin(g)  # times cos(theta_i)
             assert 10 * math.log10(sigma / math.sin(g) ** 2) == pytest.approx(mu, abs=1e-4)
+
+
+def test_pile_seabed_corner_echo_is_at_the_image_source_range(mitsonar_mod):
+    """A concrete pile (radius 0.3 m, axis at x = 6 m) standing on a mirror-like seabed 3 m below a
+    mechanical head looking at it 25 deg down. Paths sonar - pile - seabed - sonar (and back) are
+    as long as sonar - pile - image of the sonar in the seabed, |SP| + |PS'|, whose minimum over the
+    pile is at its foot: the corner echo starts at the range sqrt((6 - 0.3)^2 + 3^2) = 6.441 m, no
+    earlier, and (the dihedral retro-reflects there) it is the strongest echo of the ping."""
+    h, x, a = 3.0, 6.0, 0.3
+    tilt = math.radians(25.0)
+    sensor = sonar_xml(frame_matrix((math.cos(tilt), 0, -math.sin(tilt)), (0, 0, 1)), kind="mechanical",
+                       beam_pattern="uniform", beamwidth_h=10.0, beamwidth_v=40.0, range_min=4.0,
+                       range_max=9.0, n_bins=250, n_pings=1, bearing_step=0.0)
+    plane = np.diag([20.0, 20.0, 1.0, 1.0])
+    plane[2, 3] = -h
+    # A glossy seabed (no diffuse part: it sends nothing back by itself, only via the pile).
+    seabed = rectangle_xml(plane, acoustic_xml(0.0, 0.9, 300.0))
+    pile = (f'<shape type="cylinder"><point name="p0" x="{x}" y="0" z="{-h}"/>'
+            f'<point name="p1" x="{x}" y="0" z="2"/><float name="radius" value="{a}"/>'
+            '<bsdf type="acoustic"><string name="preset" value="concrete_good"/></bsdf></shape>')
+
+    def render(depth):
+        integrator = f'<integrator type="sonar_tof"><integer name="max_depth" value="{depth}"/></integrator>'
+        scan = mitsonar_mod.render_scan(mitsonar_mod.load_scene(scene_xml(sensor, seabed, pile, integrator=integrator)),
+                                        spp=1 << 16, seed=1)
+        return scan, scan.intensity[0].astype(np.float64)
+
+    scan, direct = render(1)
+    _, both = render(2)
+    corner = math.hypot(x - a, h)
+    k = int((corner - scan.range_min) / scan.bin_width)
+    assert direct[:k].sum() > 0, "the pile's front face echoes before its foot"
+    # Nothing arrives by the seabed before the image-source range ...
+    assert both[:k].sum() == pytest.approx(direct[:k].sum(), rel=0.02)
+    # ... and from its bin on the corner dominates: the strongest bin of the ping, far above the
+    # direct echo of the pile's foot (measured: 200 times; 20 asserted).
+    assert int(np.argmax(both)) == k, f"strongest echo at {scan.ranges[np.argmax(both)]:.3f} m, corner {corner:.3f} m"
+    assert both[k] > 20 * direct[k]
