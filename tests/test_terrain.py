@@ -39,6 +39,10 @@ def test_closed_terrain_is_watertight_and_open_one_has_only_its_outline_open():
     z = closed.z - closed.bottom
     prism = closed.resolution ** 2 * (z[:-1, :-1] + z[:-1, 1:] + z[1:, 1:] + z[1:, :-1]).sum() / 4
     assert volume == pytest.approx(prism, rel=1e-3)   # two triangles per cell against the bilinear cell
+    # height() is the grid at its vertices and bilinear between them.
+    assert closed.height(closed.x[3], closed.y[5]) == pytest.approx(closed.z[5, 3], abs=1e-12)
+    mid = closed.height((closed.x[3] + closed.x[4]) / 2, closed.y[5])
+    assert mid == pytest.approx((closed.z[5, 3] + closed.z[5, 4]) / 2, abs=1e-12)
     # Open: the surface alone, normals up, open only along its rectangular outline.
     V, F = terrain().mesh()
     n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
@@ -123,8 +127,8 @@ def test_ply_loads_in_a_scene_and_is_its_ground_truth(mitsonar_mod, tmp_path):
     ({"size": (5.0, -1.0)}, "terrain 'size': -1.0 is not allowed (a number > 0)"),
     ({"resolution": 0.0}, "terrain 'resolution': 0.0 is not allowed (a number > 0)"),
     ({"resolution": 20.0}, "terrain 'resolution': 20.0 is not allowed (a grid spacing > 0 and <= the smaller side, 8 m)"),
-    ({"resolution": 0.002}, "terrain 'resolution': 0.002 is not allowed (a grid spacing >= about 0.00245 m for "
-                            "a 12 x 8 m terrain: at most 16000000 vertices)"),
+    ({"resolution": 0.003}, "terrain 'resolution': 0.003 is not allowed (a grid spacing >= about 0.00346 m for "
+                            "a 12 x 8 m terrain: at most 8000000 vertices)"),
     ({"rocks": -1}, "terrain 'rocks': -1 is not allowed (a count >= 0)"),
     ({"ripple_wavelength": 0}, "terrain 'ripple_wavelength': 0 is not allowed (a number > 0)"),
 ])
