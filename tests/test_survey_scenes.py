@@ -77,3 +77,21 @@ def test_wreck_pass_shows_the_hull_and_the_deckhouse_shadow(mitsonar_mod):
     shadow = band(11.0, 14.0)
     assert np.all(shadow[bare] > 0)
     assert np.all(shadow[deckhouse] < 1e-3 * np.median(shadow[bare]))
+
+
+def test_demo_survey_draws_both_heads_along_the_harbour_track(tmp_path):
+    import warnings
+
+    from mitsonar.survey_cli import demo_survey
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")   # both heads picked by object: no "2 sonar sensors" warning
+        written = demo_survey(SCENES, str(tmp_path), spp=8, seed=0)
+    names = [os.path.basename(p) for p in written]
+    # 50 s of track, 14 s sweeps (200 pings of 2 x 30.5 / 1500 + 0.03 s): three whole sweeps.
+    assert names == ["harbour_mechanical_0.png", "harbour_mechanical_1.png", "harbour_mechanical_2.png",
+                     "harbour_multibeam_10s.png", "harbour_multibeam_25s.png", "harbour_multibeam_40s.png",
+                     "harbour_track.png"]
+    for p in written:
+        with open(p, "rb") as f:
+            assert f.read(8) == b"\x89PNG\r\n\x1a\n"
