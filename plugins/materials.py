@@ -15,9 +15,11 @@ The Lambert parameters ``LAMBERT_MU`` are representative values, not measurement
 within the ranges reported by APL-UW, "High-Frequency Ocean Environmental Acoustic Models
 Handbook", Technical Report APL-UW TR 9407 (1994), seafloor backscatter section, and by
 D. R. Jackson and M. D. Richardson, "High-Frequency Seafloor Acoustics", Springer (2007):
-sand about -27 dB (the value first reported by K. V. Mackenzie, J. Acoust. Soc. Am. 33, 1498 (1961),
-and the usual sand figure since), mud and clay -30 to -35 dB (mud -32, clay -35: the finer
-sediment, the weaker), gravel about -20 dB, rock -13 to -17 dB (-15, the middle). Sediment
+sand about -27 dB (also Mackenzie's classic Lambert value, K. V. Mackenzie, J. Acoust. Soc. Am.
+33, 1498 (1961), measured on deep-sea sediment near 1 kHz), mud and clay -30 to -35 dB (mud -32,
+clay -35: the finer sediment, the weaker), gravel about -20 dB, rock -13 to -17 dB (-15, the
+middle). These ranges are as summarised in mitsonar's issue 19; the handbook's own tables were not
+at hand to check them against, so no value here claims more than 1 dB of precision. Sediment
 backscatter varies by +-5 dB or more between sites and frequencies; treat these as typical, not
 exact. They are purely diffuse (``specular`` 0): the coherent forward reflection of the
 water-sediment interface and the near-nadir peak are not modelled. The older ``sand`` and ``rock``
