@@ -225,6 +225,8 @@ def cmd_demo(args):
         _plot(scan, cart, "cartesian", mesh=mesh)
         _plot(scan, ascan, "ascan", ping=scan.n_pings // 2 if scan.kind == "multibeam" else 0)  # the fan's centre row
         print(f"{name}: wrote {exr}, {polar}, {cart}, {ascan}")
+    from .survey_cli import demo_survey  # a survey scene with both heads along its track
+    print(f"harbour survey: wrote {', '.join(demo_survey(scenes, args.output, args.spp, args.seed, args.quiet))}")
     return 0
 
 
@@ -264,10 +266,11 @@ def build_parser():
     i.add_argument("scan", help="scan file (.exr or .npz)")
     i.set_defaults(func=cmd_info)
 
-    d = sub.add_parser("demo", help="render the demo scenes (box, intake, box_fls) to EXR and pictures",
+    d = sub.add_parser("demo", help="render the demo scenes (box, intake, box_fls, a harbour survey) to EXR and pictures",
                        description="Render scenes_xml/box.xml, intake.xml (mechanical scans) and "
                                    "box_fls.xml (a multibeam frame): EXR + polar, cartesian and "
-                                   "A-scan pictures.")
+                                   "A-scan pictures; then harbour.xml's mechanical and multibeam "
+                                   "heads along harbour_survey.tum, in world coordinates.")
     d.add_argument("-o", "--output", default="out", help="output folder (default out/)")
     d.add_argument("--spp", type=int, default=4096)
     d.add_argument("--seed", type=int, default=0)

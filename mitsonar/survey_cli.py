@@ -97,6 +97,36 @@ def _draw(args, scene, traj, out, scans, bag):
     return n
 
 
+DEMO_SCENE, DEMO_TRACK = "harbour.xml", "harbour_survey.tum"
+
+
+def demo_survey(scenes, output, spp, seed, quiet=True):
+    """The demo's survey: both heads of ``scenes/harbour.xml`` along ``harbour_survey.tum``: every
+    sweep of the mechanical head and three multibeam frames (at 10, 25 and 40 s), drawn in world
+    coordinates over the ground truth (``harbour_mechanical_<i>.png``, ``harbour_multibeam_<t>s.png``)
+    and the track with every ping's position (``harbour_track.png``). Returns the files written."""
+    import mitsonar
+    from . import plots
+
+    scene = mitsonar.load_scene(os.path.join(scenes, DEMO_SCENE))
+    track = mitsonar.Trajectory.from_tum(os.path.join(scenes, DEMO_TRACK))
+    mesh = mitsonar.scene_mesh(scene)
+    mechanical, multibeam = scene.sensors()[:2]   # the sensor objects: an index would warn
+    written, scans = [], []
+    for i, scan in enumerate(mitsonar.render_survey(scene, track, spp=spp, seed=seed, sensor=mechanical,
+                                                    progress=not quiet)):
+        written.append(os.path.join(output, f"harbour_mechanical_{i}.png"))
+        plots.plot_cartesian(scan, mesh=mesh, path=written[-1])
+        scans.append(scan)
+    for t in (10, 25, 40):
+        scan = mitsonar.render_scan(scene, spp=spp, seed=seed, sensor=multibeam, trajectory=track, start_time=t)
+        written.append(os.path.join(output, f"harbour_multibeam_{t}s.png"))
+        plots.plot_cartesian(scan, mesh=mesh, path=written[-1])
+    written.append(os.path.join(output, "harbour_track.png"))
+    plots.plot_track(track, written[-1], scans=scans)
+    return written
+
+
 def add_subcommands(sub):
     s = sub.add_parser("survey", help="render consecutive scans along a vehicle trajectory",
                        description="Render a survey: the scene's sonar (its to_world is the mount on "

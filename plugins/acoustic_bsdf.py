@@ -26,7 +26,8 @@ class AcousticBSDF(mi.BSDF):
     ============ ========= ==========================================================
     preset       (none)    a material name from ``mitsonar.plugins.materials.PRESETS``
                            (concrete qualities of thesis Table 2.2, ``water_calm``,
-                           ``sand``, ``rock``); explicit values below override it
+                           ``sand``, ``rock``, Lambert seabeds ``seabed_sand``, ``_mud``,
+                           ``_gravel``, ``_rock``, ``_clay``); explicit values override it
     diffuse      0.1       fraction of incident energy scattered diffusely (>= 0)
     specular     0.6       fraction of incident energy in the Phong lobe (>= 0);
                            ``diffuse + specular <= 1`` (energy conservation)
