@@ -239,6 +239,7 @@ class ScanAssembler:
         missing = [k for k in range(n) if k not in self._slots]
         last_T = np.eye(4)
         times = []
+        row_times = np.full(n, np.nan)
         for k in range(n):
             it = self._slots.get(k)
             if it is not None:
@@ -247,6 +248,7 @@ class ScanAssembler:
                 last_T = T
                 if t is not None:
                     times.append(t)
+                    row_times[k] = t
             poses[k] = last_T
         # Missing rows before the first received one take the first pose seen.
         first = next((self._slots[k][1] for k in range(n) if k in self._slots), np.eye(4))
@@ -269,7 +271,7 @@ class ScanAssembler:
         return Scan(intensity=np.zeros((n, nb), np.float32), data=data,
                     ranges=(np.arange(nb) + 0.5) * width, bearings=bearings, poses=poses,
                     range_min=0.0, range_max=float(range_max), beamwidth_h=3.0, beamwidth_v=35.0,
-                    kind="mechanical", sound_speed=c,
+                    kind="mechanical", sound_speed=c, times=_ping_times(row_times),
                     electronics=_wire_electronics(ref), meta=meta)
 
     def finish(self) -> Scan | None:
@@ -286,6 +288,18 @@ class ScanAssembler:
         self.reset()
         return scan
 
+
+
+def _ping_times(row_times: np.ndarray):
+    """``Scan.times`` of an assembled scan: each row's reception time from the first one's (s),
+    a missing row's interpolated between its neighbours'. None (times zero) when no row has a
+    time, or when the rows' times do not increase along the sweep (a revisited bearing)."""
+    known = np.isfinite(row_times)
+    if not known.any():
+        return None
+    k = np.arange(len(row_times))
+    t = np.interp(k, k[known], row_times[known]) - row_times[known].min()
+    return t if np.all(np.diff(t) >= 0) else None
 
 
 def _wire_electronics(ref) -> dict:

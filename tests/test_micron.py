@@ -568,3 +568,23 @@ def test_replay_reports_bytes_that_form_no_packet(two_scan_log, tmp_path):
             w.write(kind, data[:9] + b"junk" + data[9:] if k == hit else data)
     with pytest.warns(LogDamageWarning, match=r"garbled\.bin: dropped \d+ bytes from the head that form no whole SeaNet packet \(.+: \d+"):
         replay(out)
+
+
+def test_assembled_scan_has_its_ping_times():
+    """A received scan's times are each row's reception time from the first row's; a row lost on
+    the wire gets its neighbours' interpolation; no times at all leave zeros."""
+    asm = ScanAssembler()
+    out = None
+    for k in range(200):
+        if k == 57:
+            continue                           # lost on the wire
+        out = asm.add(_ping(100 + 32 * k), t=1000.0 + 0.05 * k) or out
+    out = out or asm.finish()
+    assert out.n_pings == 200 and 57 in out.meta["missing"]
+    np.testing.assert_allclose(out.times, 0.05 * np.arange(200), atol=1e-9)
+    assert out.meta["time_start"] == pytest.approx(1000.0)
+    asm = ScanAssembler()
+    plain = None
+    for k in range(200):
+        plain = asm.add(_ping(100 + 32 * k)) or plain
+    np.testing.assert_array_equal((plain or asm.finish()).times, np.zeros(200))
