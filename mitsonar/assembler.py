@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from .frames import bearing_rotation, check_rigid
-from .scan import Scan
+from .scan import Scan, reception_times
 from .seanet.constants import FULL_TURN, HdCtrl, bearing_to_radians
 from .seanet.messages import HeadData
 from .seanet.settings import HeadSettings, ad_db, gain_db
@@ -271,7 +271,7 @@ class ScanAssembler:
         return Scan(intensity=np.zeros((n, nb), np.float32), data=data,
                     ranges=(np.arange(nb) + 0.5) * width, bearings=bearings, poses=poses,
                     range_min=0.0, range_max=float(range_max), beamwidth_h=3.0, beamwidth_v=35.0,
-                    kind="mechanical", sound_speed=c, times=_ping_times(row_times),
+                    kind="mechanical", sound_speed=c, times=reception_times(row_times),
                     electronics=_wire_electronics(ref), meta=meta)
 
     def finish(self) -> Scan | None:
@@ -288,18 +288,6 @@ class ScanAssembler:
         self.reset()
         return scan
 
-
-
-def _ping_times(row_times: np.ndarray):
-    """``Scan.times`` of an assembled scan: each row's reception time from the first one's (s),
-    a missing row's interpolated between its neighbours'. None (times zero) when no row has a
-    time, or when the rows' times do not increase along the sweep (a revisited bearing)."""
-    known = np.isfinite(row_times)
-    if not known.any():
-        return None
-    k = np.arange(len(row_times))
-    t = np.interp(k, k[known], row_times[known]) - row_times[known].min()
-    return t if np.all(np.diff(t) >= 0) else None
 
 
 def _wire_electronics(ref) -> dict:

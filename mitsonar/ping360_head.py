@@ -30,7 +30,7 @@ import numpy as np
 
 from ._checks import in_range, is_whole, require
 from .frames import bearing_rotation, check_rigid
-from .scan import Scan
+from .scan import Scan, reception_times
 
 __all__ = ["Ping360Settings", "Ping360Assembler", "GRADIANS", "TICK", "LIMITS", "GAIN_PRESETS",
            "BEAMWIDTH_H", "BEAMWIDTH_V", "angle_to_radians", "ping_problem", "check_pose"]
@@ -259,12 +259,14 @@ class Ping360Assembler:
         poses = np.empty((n, 4, 4))
         first = next(self._slots[k][1] for k in range(n) if k in self._slots)
         last_T, times = first, []
+        row_times = np.full(n, np.nan)
         for k in range(n):
             if k in self._slots:
                 row, last_T, t, _ = self._slots[k]
                 data[k, :len(row)] = np.frombuffer(row, np.uint8)[:nb]
                 if t is not None:
                     times.append(t)
+                    row_times[k] = t
             poses[k] = last_T
         meta = {"source": "ping360", "sweep": "continuous" if s.stop_angle is None else "sector",
                 "angles": list(self.angles), "missing": [k for k in range(n) if k not in self._slots],
@@ -276,4 +278,5 @@ class Ping360Assembler:
         return Scan(intensity=np.zeros((n, nb), np.float32), data=data, ranges=(np.arange(nb) + 0.5) * w,
                     bearings=bearings, poses=poses @ bearing_rotation(bearings), range_min=0.0,
                     range_max=float(range_max), beamwidth_h=BEAMWIDTH_H, beamwidth_v=BEAMWIDTH_V,
-                    kind="mechanical", sound_speed=c, electronics={"bit_depth": 8}, meta=meta)
+                    kind="mechanical", sound_speed=c, times=reception_times(row_times),
+                    electronics={"bit_depth": 8}, meta=meta)

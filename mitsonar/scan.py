@@ -33,6 +33,19 @@ class ScanFieldError(ValueError):
         return type(self), (self.field, self.reason)
 
 
+def reception_times(row_times: np.ndarray):
+    """``Scan.times`` of a scan assembled from a real head's replies (SeaNet, Ping360), given each
+    row's reception time (NaN for a row never received): each row's reception time from the first one's (s),
+    a missing row's interpolated between its neighbours'. None (times zero) when no row has a
+    time, or when the rows' times do not increase along the sweep (a revisited bearing)."""
+    known = np.isfinite(row_times)
+    if not known.any():
+        return None
+    k = np.arange(len(row_times))
+    t = np.interp(k, k[known], row_times[known]) - row_times[known].min()
+    return t if np.all(np.diff(t) >= 0) else None
+
+
 def _show(value) -> str:
     return repr(value.item() if isinstance(value, np.generic) else value)
 

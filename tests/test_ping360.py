@@ -269,6 +269,10 @@ def test_record_then_replay_gives_the_same_scans(tmp_path):
         assert_same_scan(a, SCAN)
         assert np.array_equal(a.data, b.data) and np.array_equal(a.poses, b.poses)
     assert replay(log, pose=np.eye(4))[0].poses[0] == pytest.approx(bearing_rotation(SCAN.bearings[0]))
+    # the rows' reception times, from the first row's: rising through the turn, within its span
+    for s in scans:
+        assert s.times[0] == 0 and np.all(np.diff(s.times) >= 0) and s.times[-1] > 0
+        assert s.times[-1] == pytest.approx(s.meta["time_end"] - s.meta["time_start"])
 
 
 def test_replay_of_a_damaged_log_warns_and_keeps_the_rest(tmp_path):
