@@ -60,7 +60,11 @@ BIT_DEPTHS = (8, 4)
 #: fields, the command line's ``--set`` and `render_scan`'s ``electronics`` overrides are held to
 #: these (`check_head_settings`); the `Electronics` class itself takes the wider simulator ranges
 #: of `Electronics.validate` (a negative ``ad_low`` or a 255 dB span, for studies and tests).
-HEAD_LIMITS = {"gain": (0.0, 80.0), "ad_low": (0.0, 80.0), "ad_span": (0.5 * 80.0 / 255, 80.0)}
+HEAD_DB_SCALE = 80.0      # dB of the head's full gain and A/D scale (SeaNet: 0..80 dB)
+HEAD_AD_BYTES = 255       # the A/D window's bytes (ADLow, ADSpan) span that scale
+HEAD_LIMITS = {"gain": (0.0, HEAD_DB_SCALE), "ad_low": (0.0, HEAD_DB_SCALE),
+               # ADSpan must round to at least one byte
+               "ad_span": (0.5 * HEAD_DB_SCALE / HEAD_AD_BYTES, HEAD_DB_SCALE)}
 
 #: Ranges below this are clamped in the TVG so that a bin centre at r = 0 stays finite.
 MIN_TVG_RANGE = 1e-3

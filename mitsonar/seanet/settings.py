@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from .._checks import in_range, is_number
+from ..electronics import HEAD_AD_BYTES, HEAD_DB_SCALE, HEAD_LIMITS
 from .constants import FULL_TURN, STEP_SIZES, HdCtrl, radians_to_bearing
 from .messages import V3B_BLOCK, V3B_NONE, HeadCommand, HeadData
 
@@ -27,7 +28,7 @@ def _round(x: float) -> int:
 
 
 # The receiver's scales on the wire: IGain 0..210 and ADLow/ADSpan 0..255 both span 0..80 dB.
-DB_FULL_SCALE, GAIN_FULL_SCALE, AD_FULL_SCALE = 80.0, 210, 255
+DB_FULL_SCALE, GAIN_FULL_SCALE, AD_FULL_SCALE = HEAD_DB_SCALE, 210, HEAD_AD_BYTES
 
 
 # Sound speeds a head can be set to (m/s), and how messages word the bound: HeadSettings, the
@@ -140,9 +141,9 @@ class HeadSettings:
         n(num(self.range) and 0.3 <= self.range <= 300.0, "range", self.range, "0.3..300 m")
         n(integer(self.n_bins) and 2 <= self.n_bins <= 1500, "n_bins", self.n_bins, "2..1500")
         n(sound_speed_ok(self.sound_speed), "sound_speed", self.sound_speed, SOUND_SPEED_ALLOWED)
-        n(num(self.gain) and 0.0 <= self.gain <= 80.0, "gain", self.gain, "0..80 dB")
-        n(num(self.ad_low) and 0.0 <= self.ad_low <= 80.0, "ad_low", self.ad_low, "0..80 dB")
-        n(num(self.ad_span) and 0.0 < self.ad_span <= 80.0 and self.ad_span_byte >= 1,
+        n(num(self.gain) and in_range(self.gain, *HEAD_LIMITS["gain"]), "gain", self.gain, "0..80 dB")
+        n(num(self.ad_low) and in_range(self.ad_low, *HEAD_LIMITS["ad_low"]), "ad_low", self.ad_low, "0..80 dB")
+        n(num(self.ad_span) and 0.0 < self.ad_span <= HEAD_LIMITS["ad_span"][1] and self.ad_span_byte >= 1,
           "ad_span", self.ad_span, "0.16..80 dB (ADSpan 1..255)")
         n(integer(self.step_size) and self.step_size in STEP_SIZES, "step_size", self.step_size,
           "a divisor of 6400 in 1..200, 1/16 gradian (4, 8, 16, 32 = 0.225, 0.45, 0.9, 1.8 deg)")
