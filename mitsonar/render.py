@@ -6,6 +6,7 @@ import warnings
 
 import numpy as np
 
+from ._checks import is_whole
 from .frames import check_rigid
 from .plugins import PLUGINS, module
 from .scan import Scan
@@ -33,11 +34,7 @@ def __getattr__(name):
 
 def _whole(name, value, lo, hi, what):
     """A count or seed argument: a whole number in [lo, hi] (4096.0 counts; 1.5, True, "8" do not)."""
-    ok = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
-    if (not ok and isinstance(value, (float, np.floating)) and math.isfinite(value)
-            and float(value).is_integer()):
-        ok = True
-    if not ok or not lo <= value <= hi:
+    if not (is_whole(value) and lo <= value <= hi):
         raise SceneError(f"render_scan '{name}': {value!r} is not allowed ({what})")
     return int(value)
 
