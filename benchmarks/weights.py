@@ -53,7 +53,6 @@ KINDS = ("mechanical", "multibeam")
 SINGLE_BOUND = 100.0   # peak / mean of a bin's single-bounce echoes on a bounded integrand
 HEAVY_TAIL = 1000.0    # multipath peak / mean above which a bin's echo needs many paths
 SIGNIFICANT = 1e-4     # bins below this fraction of the frame's largest bin are not audited
-MAX_LANES = 1 << 22
 
 # The sensor of each kind when a scene is converted to it (pose, range window and vertical beam
 # width stay the scene's).
@@ -99,26 +98,23 @@ def audit(scene, paths, seeds, max_depth):
 
     from mitsonar.plugins import module
 
-    integrator = mi.load_dict({"type": "sonar_tof", "max_depth": max_depth})
+    # independent samples: the per-path weights audited are those of the beam and the BSDFs
+    integrator = mi.load_dict({"type": "sonar_tof", "max_depth": max_depth, "sampling": "independent"})
     setup = integrator.setup(scene, 0)
     sensor = setup.sensor
     rows, n_bins = sensor.n_pings, sensor.n_bins
     spp = max(1, math.ceil(paths / seeds / rows))
-    per_pass = max(1, min(spp, MAX_LANES // rows))
+    per_pass = max(1, min(spp, module("sonar_tof").MAX_LANES_PER_PASS // rows))
     size = 2 * rows * n_bins
     total = np.zeros(size)
     count = np.zeros(size)
     peak = np.zeros(size)
-    HashSamples = module("samples").HashSamples
     with dr.suspend_grad():
         for seed in range(seeds):
             start = 0
             while start < spp:
                 n = min(per_pass, spp - start)
-                n_o = dr.opaque(mi.UInt32, n)
-                lane = dr.arange(mi.UInt32, rows * n)
-                ping = lane // n_o
-                samples = HashSamples(dr.opaque(mi.UInt32, seed), ping, lane - ping * n_o + dr.opaque(mi.UInt32, start))
+                ping, samples = integrator.lanes(rows, seed, start, n)
                 s = dr.zeros(mi.Float64, size)
                 c = dr.zeros(mi.UInt32, size)
                 m = dr.zeros(mi.Float, size)

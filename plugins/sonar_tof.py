@@ -87,14 +87,19 @@ class SonarTOFIntegrator(SonarIntegrator):
                     progress(start, spp)
         return (total / spp).reshape(n_pings, n_bins)
 
-    def _pass(self, setup, seed, start, count):
-        n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
-        # Everything that varies between renders is opaque so the kernel compiles once.
+    def lanes(self, n_rows, seed, start, count):
+        """The lanes of one pass: samples ``start .. start + count`` of every row, row-major, as
+        ``(ping, samples)`` (each lane's row and primary samples, this integrator's sampling).
+        Everything that varies between renders is opaque, so the kernel compiles once."""
         spp_o = dr.opaque(mi.UInt32, count)
-        lane = dr.arange(mi.UInt32, n_pings * count)
+        lane = dr.arange(mi.UInt32, n_rows * count)
         ping = lane // spp_o
         sample = lane - ping * spp_o + dr.opaque(mi.UInt32, start)
-        samples = self.SAMPLERS[self.sampling](dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF), ping, sample)
+        return ping, self.SAMPLERS[self.sampling](dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF), ping, sample)
+
+    def _pass(self, setup, seed, start, count):
+        n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
+        ping, samples = self.lanes(n_pings, seed, start, count)
         # Float64 bins: sums of many small echoes keep their precision, and the order in which
         # threads add them no longer shows in the float32 result (same seed, same scan).
         hist = dr.zeros(mi.Float64, n_pings * n_bins)
