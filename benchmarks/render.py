@@ -59,7 +59,7 @@ def count_segments(scene, spp, seed=0, per_lane=False):
     bounces = dr.zeros(mi.UInt32, n)
     shadows = dr.zeros(mi.UInt32, n)
 
-    def record(depth, rng, energy, valid):
+    def record(depth, rng, energy, valid, hit):
         dr.scatter_add(counts, mi.UInt32(1), mi.UInt32(0))
         dr.scatter_add(counts, mi.UInt32(1), mi.UInt32(1), energy > 0)
         dr.scatter_add(bounces, mi.UInt32(1), lane)

@@ -119,7 +119,7 @@ def audit(scene, paths, seeds, max_depth):
                 c = dr.zeros(mi.UInt32, size)
                 m = dr.zeros(mi.Float, size)
 
-                def record(k, rng, energy, valid):
+                def record(k, rng, energy, valid, hit):
                     b, valid = setup.bins.index(rng, valid)
                     cls = dr.select(k == 0, mi.UInt32(0), mi.UInt32(rows * n_bins))
                     idx = cls + setup.bins.flat(ping, b)

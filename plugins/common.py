@@ -109,10 +109,12 @@ class SonarIntegrator(mi.SamplingIntegrator):
         """Trace one echo path per lane and report each bounce's echo.
 
         ``ping`` (UInt32) is each lane's ping, ``samples`` its primary samples (anything with
-        ``get(dim)``/``get2(dim)``, see `samples`), ``record(k, range, energy, valid)`` is called
-        once per bounce ``k`` (0-based) with the echo's range (m, half the total path length) and
-        energy (the formula in the module docstring); ``valid`` marks the lanes whose echo exists
-        (nonzero and not occluded on its way back). A multibeam head's paths start in the row's
+        ``get(dim)``/``get2(dim)``, see `samples`), ``record(k, range, energy, valid, hit)`` is
+        called once per bounce ``k`` (0-based) with the echo's range (m, half the total path length)
+        and energy (the formula in the module docstring); ``valid`` marks the lanes whose echo exists
+        (nonzero and not occluded on its way back) and ``hit`` is the bounce's
+        ``mi.SurfaceInteraction3f`` (where the echo comes from: ``hit.p``, ``hit.shape``), for
+        callbacks that label or key echoes by their surface point. A multibeam head's paths start in the row's
         receive beam and connect back through the transmit fan (``setup.connect``; reciprocity).
         """
         scene, beam = setup.scene, setup.sensor.beam
@@ -151,7 +153,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
             energy = throughput * f * gain / dr.square(dist) * dr.exp2(-atten * total)
             echo = active & (energy > 0)
             echo &= ~scene.ray_test(si.spawn_ray_to(origin), echo)
-            record(depth, 0.5 * total, energy, echo)
+            record(depth, 0.5 * total, energy, echo, si)
 
             base = DIMS_EMIT + DIMS_PER_BOUNCE * depth
             bs, bsdf_weight = bsdf.sample(ctx, si, samples.get(base), samples.get2(base + 1), active)

@@ -18,7 +18,8 @@ def trace_echoes(scene, frames, beam, ping, samples_, max_depth, absorption, rec
     setup.scene, setup.frames, setup.connect, setup.depth_o, setup.absorption = \
         scene, frames, connect, max_depth, absorption
     setup.sensor = type("_Beam", (), {"beam": beam})()
-    common.SonarIntegrator.sample(None, setup, ping, samples_, record, active)
+    common.SonarIntegrator.sample(None, setup, ping, samples_, lambda k, rng, e, valid, hit: record(k, rng, e, valid),
+                                  active)
 
 
 def __getattr__(name):

@@ -358,7 +358,7 @@ class _Context:
         ``bins``/``vals`` are given, record each bounce's bin and energy at ``lane * depth + k``."""
         window, depth = self.bins, self.depth
 
-        def record(k, rng, energy, valid):
+        def record(k, rng, energy, valid, hit):
             b, valid = window.index(rng, valid)
             # Each lane adds only to its own total: no conflicts. Left to Auto, Dr.Jit would
             # expand f into one copy per thread with its size written into the kernel, which

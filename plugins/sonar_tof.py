@@ -105,7 +105,7 @@ class SonarTOFIntegrator(SonarIntegrator):
         hist = dr.zeros(mi.Float64, n_pings * n_bins)
         bins = setup.bins
 
-        def record(depth_k, rng, energy, valid):
+        def record(depth_k, rng, energy, valid, hit):
             b, valid = bins.index(rng, valid)
             dr.scatter_add(hist, mi.Float64(energy), bins.flat(ping, b), valid)
 

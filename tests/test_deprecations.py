@@ -44,7 +44,7 @@ def test_trace_echoes_still_traces_the_same_paths(mitsonar_mod):
     for call in ("new", "old"):
         energy = dr.zeros(mi.Float, n)
 
-        def record(k, rng, e, valid):
+        def record(k, rng, e, valid, hit=None):
             dr.scatter_add(energy, e, lane, valid)
 
         if call == "new":

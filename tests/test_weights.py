@@ -83,7 +83,7 @@ def path_energies(scene, ping, seed, n, max_depth=1):
     ping = dr.full(mi.UInt32, ping, n)
     energy = dr.zeros(mi.Float, n)
 
-    def record(k, rng, e, valid):
+    def record(k, rng, e, valid, hit):
         dr.scatter_add(energy, e, lane, valid)
 
     integrator.sample(setup, ping, module("samples").HashSamples(mi.UInt32(seed), ping, lane), record)
