@@ -11,15 +11,21 @@ The chain follows thesis sections 2.1.2 and 2.4.1 and the Tritech Micron's conve
 2. **Level.** ``level_db = 10 log10(I) + source_level + gain + TVG(r)``, with
    ``TVG(r) = min(n log10 r + 2 absorption r, tvg_cap)`` for the ``20log``/``30log``/``40log``
    laws and 0 for ``off``.
-3. **Background.** A stationary noise floor and the transducer's near-field ring-down are added as
-   powers on the level scale of the A/D converter (the scale of ``ad_low``). They pass neither the
-   gain nor the TVG: the TVG would lift the background by 20 dB across a 12 m window and swamp the
-   far field, while the thesis figures and Micron displays show open water alike at all ranges;
-   and pinning the floor to the A/D scale keeps its place in the display window explicit.
-4. **Speckle.** The sum is multiplied by a mean-one random factor: ``rayleigh`` (exponential
-   intensity, i.e. Rayleigh amplitude: fully developed speckle) or ``weibull`` with shape
-   ``speckle_shape`` (scale chosen so that the mean is 1). The speckle is correlated over the
-   pulse length, as a real resolution cell spans several bins when the pulse is longer than a bin.
+3. **Speckle.** The echo's amplitude is multiplied by the scene's complex speckle ``g`` (mean
+   power 1): fully developed speckle (``rayleigh``: exponential intensity) or its modulus
+   reshaped to a Weibull intensity of shape ``speckle_shape`` (``weibull``), or 1 (``off``).
+   Speckle belongs to the scene, not to the receiver: ``g`` is a function of where each bin's
+   echo comes from and of the head's pose (`mitsonar.speckle`, seeded by ``speckle_seed``), so a
+   still head sees the same pattern ping after ping and a moving one sees it change at the
+   physical rate. Without echo points (an intensity from elsewhere) it is drawn from the seed.
+4. **Background.** The transducer's near-field ring-down (a deterministic ringing, decaying
+   exponentially in time) and the receiver's noise (a circular complex Gaussian of power
+   ``noise_floor``, seeded by the electronics seed, correlated over the pulse) are added to the
+   echo as amplitudes, and the power of the sum is taken: ``|sqrt(I) g + sqrt(R) + sqrt(N) n|^2``.
+   Both are pinned to the A/D converter's level scale (the scale of ``ad_low``) and pass neither
+   the gain nor the TVG: the TVG would lift the background by 20 dB across a 12 m window and
+   swamp the far field, while the thesis figures and Micron displays show open water alike at
+   all ranges.
 5. **Quantisation.** ``data = round(255 clip((level_db - ad_low) / ad_span, 0, 1))`` (halves
    round up), or at 4 bits ``17 round(15 clip(...))``: values 0..15 scaled onto 0..255
    the way the SeaNet driver reports packed 4-bit bins.
@@ -30,15 +36,20 @@ With ``speckle='off'``, ``noise_floor=-inf``, ``ringdown=0``, ``pulse_length=0``
 All randomness comes from ``numpy.random.default_rng(seed)``; the same seed gives the same bytes.
 The input intensity is never modified.
 
-Default settings (Micron-like, tuned so that a default box scan looks like thesis Fig. 2.15):
-the A/D window ``ad_low = 12.5 dB``, ``ad_span = 24 dB`` and ``gain = 28 dB`` are the SeaNet
-typical values (ADLow byte 40, ADSpan byte 77, IGain 0x49 on the 0..80 dB scale); TVG ``20log``
-capped at 40 dB is the thesis's law (2.1.2) and compensates the 1/r^2 of an extended echo;
-``source_level`` is the calibration constant that puts a diffuse concrete wall at 4 m (about 1e-5
-per bin, 42 dB) above the top of the window and grazing floor echoes (1e-7..1e-6, 22..32 dB at
-4 m) inside it; the noise floor sits 1.5 dB below ``ad_low`` so that open water is dark with
-sparse Rayleigh speckle whose non-zero bytes are Weibull-like (shape about 1.35); the ring-down
-leaves the display at 1.3 m; a 100 us pulse (7.5 cm) and 2 cm jitter blur echoes over a few bins.
+Default settings (Micron-like). The A/D window ``ad_low = 12.5 dB``, ``ad_span = 24 dB`` and
+``gain = 28 dB`` are the SeaNet typical values (ADLow byte 40, ADSpan byte 77, IGain 0x49 on the
+0..80 dB scale); TVG ``20log`` capped at 40 dB is the thesis's law (2.1.2) and compensates the
+1/r^2 of an extended echo; ``source_level`` is the calibration constant that puts a diffuse
+concrete wall at 4 m (about 1e-5 per bin, 42 dB) above the top of the window and grazing floor
+echoes (1e-7..1e-6, 22..32 dB at 4 m) inside it; a 100 us pulse (the Micron's short-range
+setting: 7.5 cm) and 2 cm jitter blur echoes over a few bins. The receiver's noise floor
+(15.5 dB, 3 dB above ``ad_low``) and the ring-down (40 dB at the transducer, fading to ``ad_low``
+at 0.55 m: an amplitude decay time ``tau = 2 x 0.55 m / c x 8.69 / 27.5 dB = 0.23 ms``) are fitted
+to the byte statistics of public recordings of a real Micron (200 bins, 10-20 m, harbour and tank
+scenes): beyond 1.6 m, 14-51 % zero bytes and a Weibull shape of 1.05-1.54 for the non-zero
+ones; from 0.1 to 1.0 m a mean byte of 60-96 (`mitsonar.realism`, ``benchmarks/realism.py``).
+The previous defaults (noise floor 1.5 dB below ``ad_low``, a 50 dB ring-down to 1.3 m) gave
+67 %, 0.88 and 184 on the default box scan.
 """
 from __future__ import annotations
 
@@ -91,12 +102,15 @@ class Electronics:
     range_jitter     0.02      m, standard deviation of the Gaussian range jitter
     speckle          rayleigh  ``off``, ``rayleigh`` (exponential intensity), ``weibull``
     speckle_shape    1.2       Weibull shape k of the intensity speckle (``weibull`` only)
-    noise_floor      11.0      dB on the A/D level scale (the scale of ``ad_low``): background
+    speckle_seed     0         the scene's speckle: which scatterers its surfaces hold
+                               (`mitsonar.speckle`); the same seed, pose and scene give the same
+                               pattern whatever the render's path and electronics seeds
+    noise_floor      15.5      dB on the A/D level scale (the scale of ``ad_low``): the receiver's
                                noise power, stationary in range, not moved by ``gain`` or TVG;
                                ``-inf`` for none
-    ringdown         1.3       m, range at which the near-field ring-down fades below ``ad_low``;
+    ringdown         0.55      m, range at which the transducer's ring-down fades to ``ad_low``;
                                0 for none
-    ringdown_level   50.0      dB on the A/D level scale at range 0; falls linearly in dB (an
+    ringdown_level   40.0      dB on the A/D level scale at range 0; falls linearly in dB (an
                                exponentially damped ringing) to ``ad_low`` at ``ringdown``;
                                must exceed ``ad_low`` when ``ringdown > 0``
     ================ ========= ====================================================================
@@ -117,9 +131,10 @@ class Electronics:
     range_jitter: float = 0.02
     speckle: str = "rayleigh"
     speckle_shape: float = 1.2
-    noise_floor: float = 11.0
-    ringdown: float = 1.3
-    ringdown_level: float = 50.0
+    speckle_seed: int = 0
+    noise_floor: float = 15.5
+    ringdown: float = 0.55
+    ringdown_level: float = 40.0
 
     def __post_init__(self) -> None:
         self.validate()
@@ -180,6 +195,8 @@ class Electronics:
             bad("range_jitter", self.range_jitter, "a standard deviation >= 0 m")
         if self.speckle not in SPECKLE_MODELS:
             bad("speckle", self.speckle, "one of " + ", ".join(SPECKLE_MODELS))
+        if not 0 <= self.speckle_seed <= 2 ** 32 - 1:
+            bad("speckle_seed", self.speckle_seed, "a whole number from 0 to 4294967295")
         if not (math.isfinite(self.speckle_shape) and 0.1 <= self.speckle_shape <= 100):
             bad("speckle_shape", self.speckle_shape, "a Weibull shape in [0.1, 100]")
         if math.isnan(self.noise_floor) or self.noise_floor == math.inf:
@@ -333,24 +350,44 @@ class Electronics:
         shape = tuple(shape)
         if self.speckle == "off":
             return np.ones(shape)
-        n_bins = shape[-1]
-        h = np.ones(1) if corr_bins is None else np.asarray(corr_bins, dtype=np.float64)
-        h = h[h > 0]
-        h = h / math.sqrt(float(np.sum(h * h)))
-        k = h.size
-        z = rng.standard_normal(shape[:-1] + (n_bins + k - 1, 2)).view(np.complex128)[..., 0]
-        z *= math.sqrt(0.5)
-        if k > 1:
-            zf = np.zeros(shape, dtype=np.complex128)
-            for j in range(k):
-                zf += h[j] * z[..., j:j + n_bins]
-            z = zf
+        z = _complex_gaussian(shape, rng, corr_bins)
         e = z.real ** 2 + z.imag ** 2  # Exp(1): a unit complex Gaussian's power
         if self.speckle == "rayleigh":
             return e
         shape_k = self.speckle_shape
         # E^(1/k) of an Exp(1) is Weibull(k, 1); its mean is Gamma(1 + 1/k).
         return e ** (1.0 / shape_k) / math.gamma(1.0 + 1.0 / shape_k)
+
+    def scene_speckle(self, poses, ranges, *, sound_speed: float = 1500.0, beamwidth_h: float = 3.0,
+                      frequency: float = 700e3, aperture_h: float | None = None) -> np.ndarray:
+        """The scene's complex speckle amplitude per bin for `apply`'s ``speckle``: the field of
+        the resolution cells the rows' ``poses`` see at ``ranges`` (`mitsonar.speckle.cell_speckle`),
+        seeded by ``speckle_seed``; its range resolution is the pulse's ``c pulse_length / 2``
+        (at least one bin), its aperture the head's (``aperture_h``, else the line aperture of
+        ``beamwidth_h`` at ``frequency``)."""
+        from .speckle import aperture, cell_speckle
+
+        ranges = np.asarray(ranges, dtype=np.float64)
+        if aperture_h is None:
+            aperture_h = aperture(beamwidth_h, frequency, sound_speed)
+        resolution = max(sound_speed * self.pulse_length / 2.0, _bin_width(ranges))
+        if resolution <= 0:   # one bin and no pulse: cells are told apart by pose only
+            resolution = 1.0
+        return cell_speckle(poses, ranges, seed=self.speckle_seed, beamwidth_h=beamwidth_h, aperture_h=aperture_h,
+                            resolution=resolution)
+
+    def ringdown_db(self, ranges) -> np.ndarray:
+        """The transducer's ring-down on the A/D level scale, per range (``-inf`` without one).
+
+        A ringing transducer's amplitude decays as ``exp(-t / tau)`` after the transmit pulse, so
+        its level falls linearly in dB with time ``t = 2 r / c``: from ``ringdown_level`` at
+        ``r = 0`` to ``ad_low`` at ``r = ringdown``, ``ring(r) = ringdown_level + (ad_low -
+        ringdown_level) r / ringdown``, and on below the window beyond it.
+        """
+        r = np.maximum(np.asarray(ranges, dtype=np.float64), 0.0)
+        if self.ringdown <= 0:
+            return np.full(r.shape, -np.inf)
+        return self.ringdown_level + (self.ad_low - self.ringdown_level) * r / self.ringdown
 
     def background_db(self, ranges) -> np.ndarray:
         """Background power (noise floor plus ring-down) on the A/D level scale, per range.
@@ -377,8 +414,14 @@ class Electronics:
 
     # ------------------------------------------------------------------------------------------
 
-    def apply(self, intensity, ranges, absorption=0.0, sound_speed=1500.0, seed=0) -> np.ndarray:
+    def apply(self, intensity, ranges, absorption=0.0, sound_speed=1500.0, seed=0, speckle=None) -> np.ndarray:
         """Turn noise-free echo intensity into device bytes.
+
+        The received amplitude of a bin is the coherent sum of the echo (its amplitude times the
+        speckle ``g``), the transducer's ring-down and the receiver's noise ``n`` (a unit circular
+        complex Gaussian, correlated over the pulse like the matched filter's output); its power
+        ``|sqrt(I) g + sqrt(R) + sqrt(N) n|^2`` (``R``, ``N`` the ring-down and noise floor referred
+        back through the chain) goes through the chain and the A/D window.
 
         Parameters
         ----------
@@ -391,8 +434,14 @@ class Electronics:
         sound_speed : float
             m/s, turns ``pulse_length`` into range.
         seed : int
-            Seed of ``numpy.random.default_rng``; the same seed gives the same bytes (``None``
-            draws fresh entropy).
+            Seed of ``numpy.random.default_rng`` for the receiver's noise (and for the speckle
+            when ``speckle`` is None); the same seed gives the same bytes (``None`` draws fresh
+            entropy).
+        speckle : complex array_like or None
+            The scene's complex speckle amplitude per bin (`mitsonar.speckle`, mean power 1),
+            shaped like ``intensity``; ``speckle`` = ``weibull`` reshapes its modulus to the
+            Weibull law, ``off`` ignores it. None: drawn from ``seed`` (independent per bin,
+            correlated over the pulse), for intensities that do not say where their echoes come from.
 
         Returns
         -------
@@ -417,25 +466,47 @@ class Electronics:
             raise ValueError(f"electronics: absorption {absorption!r} is not a finite value >= 0 dB/m")
         if not (math.isfinite(sound_speed) and sound_speed > 0):
             raise ValueError(f"electronics: sound_speed {sound_speed!r} is not a speed > 0 m/s")
+        if speckle is not None:
+            speckle = np.array(speckle, dtype=np.complex128, ndmin=2)
+            if speckle.shape != inten.shape:
+                raise ValueError(f"electronics: speckle {speckle.shape} does not match intensity {inten.shape}")
         rng = np.random.default_rng(seed)
 
         bin_width = _bin_width(ranges)
         pulse = _spread_kernel(sound_speed * self.pulse_length / 2.0, 0.0, bin_width) if bin_width > 0 else np.ones(1)
+        corr = pulse if pulse.size > 1 else None
         inten = self.spread(inten, ranges, sound_speed)
 
         chain = self.source_level + self.gain + self.tvg_db(ranges, absorption)  # dB, per bin
-        background = self.background_db(ranges)
-        speck = self.speckle_factors(inten.shape, rng, pulse if pulse.size > 1 else None)
-        with np.errstate(divide="ignore", over="ignore"):
-            if np.all(np.isneginf(background)):
-                total = inten * speck
-            else:
-                # The background is referred back through the chain so that the noise-free path
-                # is exactly 10 log10(I) + source_level + gain + TVG.
-                total = (inten + 10.0 ** ((background - chain) / 10.0)) * speck
+        if self.speckle == "off":
+            g = np.ones(inten.shape)
+        else:
+            g = speckle if speckle is not None else _complex_gaussian(inten.shape, rng, corr)
+            if self.speckle == "weibull":
+                power = np.abs(g) ** 2
+                k = self.speckle_shape
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    g = g * np.where(power > 0, power ** (0.5 / k - 0.5), 0.0) / math.sqrt(math.gamma(1.0 + 1.0 / k))
+        if self.ringdown <= 0 and self.noise_floor == -math.inf:
+            total = inten * (np.abs(g) ** 2 if np.iscomplexobj(g) else g)
+        else:
+            total = self._received_power(inten, g, chain, ranges, rng, corr)
+        with np.errstate(divide="ignore"):
             level = 10.0 * np.log10(total) + self.source_level + self.gain + self.tvg_db(ranges, absorption)
         data = self.quantise(level)
         return data[0] if one_ping else data
+
+    def _received_power(self, inten, g, chain, ranges, rng, corr):
+        """``|sqrt(I) g + sqrt(R) + sqrt(N) n|^2`` referred back through ``chain`` (see `apply`)."""
+        amplitude = np.sqrt(inten) * g
+        # The background is referred back through the chain so that the noise-free path is exactly
+        # 10 log10(I) + source_level + gain + TVG.
+        if self.ringdown > 0:
+            amplitude = amplitude + np.sqrt(10.0 ** ((self.ringdown_db(ranges) - chain) / 10.0))
+        if self.noise_floor > -math.inf:
+            noise = _complex_gaussian(inten.shape, rng, corr)
+            amplitude = amplitude + math.sqrt(10.0 ** (self.noise_floor / 10.0)) * 10.0 ** (-chain / 20.0) * noise
+        return amplitude.real ** 2 + amplitude.imag ** 2 if np.iscomplexobj(amplitude) else amplitude ** 2
 
 
 def apply_to_scan(scan, electronics: "Electronics | dict | None" = None, seed: int | None = None):
@@ -449,7 +520,9 @@ def apply_to_scan(scan, electronics: "Electronics | dict | None" = None, seed: i
         Settings; a dict is read with `Electronics.from_dict`; ``None`` re-uses the settings
         recorded in ``scan.electronics`` (defaults for missing ones).
     seed : int or None
-        Noise seed; ``None`` takes ``scan.electronics['seed']``, else ``scan.meta['electronics_seed']``
+        The receiver's noise seed. The speckle of a rendered scan (``meta['speckle'] ==
+        'scene'``) follows its poses and the settings' ``speckle_seed``; a scan from elsewhere
+        (a real head's) has its speckle drawn from this seed too. ``None`` takes ``scan.electronics['seed']``, else ``scan.meta['electronics_seed']``
         (what `render_scan` records), else ``scan.meta['seed']``, else 0.
 
     Returns
@@ -465,12 +538,37 @@ def apply_to_scan(scan, electronics: "Electronics | dict | None" = None, seed: i
         electronics = Electronics.from_dict(electronics)
     if seed is None:
         seed = scan.electronics.get("seed", scan.meta.get("electronics_seed", scan.meta.get("seed", 0)))
+    speckle = None
+    if electronics.speckle != "off" and scan.meta.get("speckle") == "scene":
+        speckle = electronics.scene_speckle(scan.poses, scan.ranges, sound_speed=scan.sound_speed,
+                                            beamwidth_h=scan.beamwidth_h,
+                                            frequency=float(scan.meta.get("frequency", 700e3)),
+                                            aperture_h=scan.meta.get("aperture_h"))
     data = electronics.apply(scan.intensity, scan.ranges, absorption=scan.absorption,
-                             sound_speed=scan.sound_speed, seed=seed)
+                             sound_speed=scan.sound_speed, seed=seed, speckle=speckle)
     out = copy.deepcopy(scan)
     out.data = data
     out.electronics = {**electronics.to_dict(), "seed": seed}
     return out
+
+
+def _complex_gaussian(shape, rng: np.random.Generator, corr_bins=None) -> np.ndarray:
+    """Unit circular complex Gaussian samples of ``shape`` (mean power 1), filtered along the last
+    axis with the amplitude weights ``corr_bins`` (normalised), so that neighbouring bins within
+    one pulse are correlated like the matched filter's output; the marginal law is unchanged."""
+    n_bins = shape[-1]
+    h = np.ones(1) if corr_bins is None else np.asarray(corr_bins, dtype=np.float64)
+    h = h[h > 0]
+    h = h / math.sqrt(float(np.sum(h * h)))
+    k = h.size
+    z = rng.standard_normal(tuple(shape[:-1]) + (n_bins + k - 1, 2)).view(np.complex128)[..., 0]
+    z *= math.sqrt(0.5)
+    if k == 1:
+        return z
+    zf = np.zeros(shape, dtype=np.complex128)
+    for j in range(k):
+        zf += h[j] * z[..., j:j + n_bins]
+    return zf
 
 
 def _round_half_up(v: np.ndarray) -> np.ndarray:

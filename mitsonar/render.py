@@ -115,13 +115,13 @@ def _integrator(scene, integrator):
 
 def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integrator=None, sensor=0,
                 max_depth=None, electronics=None, electronics_seed=None, progress=None, trajectory=None,
-                start_time=None) -> Scan:
+                start_time=None, speckle_seed=None) -> Scan:
     """Render one scan of ``scene`` and pass it through the head's electronics.
 
     ============== ==============================================================================
     scene          a scene from `load_scene` (or ``mi.load_*``) with a ``sonar`` sensor
     spp            paths per ping (default 4096)
-    seed           seed of the paths (and of the electronics noise unless ``electronics_seed``)
+    seed           seed of the paths (and of the receiver's noise unless ``electronics_seed``)
     pose           4x4 world transform of the beam frame at bearing 0, replacing ``to_world``
                    (with a ``trajectory``: the mount on the vehicle, in the vehicle frame)
     integrator     an integrator object or XML dict; default: the scene's if it is a sonar
@@ -129,7 +129,12 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     sensor         sensor index or object
     max_depth      override of the integrator's surface bounces
     electronics    dict of electronics fields overriding the sensor's (the gain and the A/D window
-                   within the head's 0..80 dB: `mitsonar.electronics.HEAD_LIMITS`)
+                   within the head's 0..80 dB: `mitsonar.electronics.HEAD_LIMITS`); its
+                   ``speckle_seed`` picks the scene's speckle (`mitsonar.speckle`)
+    electronics_seed  seed of the receiver's noise only (default ``seed``): never the speckle,
+                   which follows the scene, the ``speckle_seed`` and the head's pose
+    speckle_seed   the scene's speckle (which scatterers its surfaces hold, `mitsonar.speckle`);
+                   default the sensor's ``speckle_seed`` (XML), 0 unless given
     progress       optional callable ``progress(done_spp, spp)`` called after each render pass
     trajectory     a `Trajectory` of the vehicle carrying the head; ``to_world`` (or ``pose``) is
                    then the mount in the vehicle frame (x forward, y port, z up)
@@ -166,6 +171,9 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     if electronics is not None and not isinstance(electronics, dict):
         raise SceneError(f"render_scan 'electronics': expected a dict of electronics fields, got "
                          f"{type(electronics).__name__}")
+    if speckle_seed is not None:
+        speckle_seed = _whole("speckle_seed", speckle_seed, 0, SEED_MAX, f"a whole number from 0 to {SEED_MAX}")
+        electronics = {**(electronics or {}), "speckle_seed": speckle_seed}
     sonar = sonar_of(scene, sensor)
     if trajectory is not None:
         pose = moving_head_poses(sonar, trajectory, start_time, pose)
@@ -190,10 +198,12 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     intensity = hist.astype(np.float32)
     ranges = sonar.bin_centres()
     eseed = seed if electronics_seed is None else electronics_seed
-    data = model.apply(intensity, ranges, absorption=sonar.absorption, sound_speed=sonar.sound_speed, seed=eseed)
+    poses = sonar.ping_poses(pose)
+    speckle = None if model.speckle == "off" else model.scene_speckle(poses, ranges, **speckle_geometry(sonar))
+    data = model.apply(intensity, ranges, absorption=sonar.absorption, sound_speed=sonar.sound_speed, seed=eseed,
+                       speckle=speckle)
     from ._version import __version__
 
-    poses = sonar.ping_poses(pose)
     meta = {
         "scene": scene_name(scene),
         "seed": int(seed),
@@ -206,7 +216,11 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
         "bearing_step": sonar.bearing_step,
         "electronics_seed": int(eseed),
         "ping_period": float(sonar.ping_period),
+        "frequency": float(sonar.beam.frequency),
+        "speckle": "scene",
     }
+    if getattr(sonar.beam, "aperture_h", None) is not None:
+        meta["aperture_h"] = float(sonar.beam.aperture_h)
     if trajectory is not None:
         meta["start_time"] = start_time
     if getattr(sonar, "transmit", None) is not None:  # multibeam: the transmit fan beside the receive beams
@@ -219,3 +233,9 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
                 beamwidth_v=sonar.beam.beamwidth_v, kind=sonar.kind, sound_speed=sonar.sound_speed,
                 absorption=sonar.absorption, electronics={**model.to_dict(), "seed": int(eseed)},
                 meta=meta)
+
+
+def speckle_geometry(sonar) -> dict:
+    """The head's numbers that shape its scene speckle (`Electronics.scene_speckle`'s keywords)."""
+    return {"sound_speed": sonar.sound_speed, "beamwidth_h": sonar.beam.beamwidth_h,
+            "frequency": sonar.beam.frequency, "aperture_h": getattr(sonar.beam, "aperture_h", None)}
