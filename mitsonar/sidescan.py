@@ -61,16 +61,28 @@ def select_side(scan, side):
 
 def first_return(scan, threshold=1e-3, use="intensity") -> np.ndarray:
     """(n_rows,) slant range (m, bin centre) of each row's first bin above ``threshold`` times the
-    row's largest value: the first bottom return, i.e. the altitude when the fan reaches nadir over
-    a flat bottom. NaN for a row with no echo."""
+    median of the row's nonzero values: the first bottom return, i.e. the altitude when the fan
+    reaches nadir over a flat bottom (the median, not the peak: a bright target or a corner
+    reflector in the row must not hide a weak nadir return). With both channels, each ping's
+    altitude is the nearer of its two channels' first returns (they share the nadir). NaN for a row
+    with no echo. From ``intensity`` the estimate is exact when the fan reaches nadir and enough
+    paths do (a weak tail and few paths give a late first return); from ``data`` noise and
+    ring-down come first: give the altitude instead."""
     _check_sidescan(scan, "first_return")
     v = _values(scan, use, "first_return")
     if not (np.isfinite(threshold) and 0 < threshold < 1):
         raise ValueError(f"first_return 'threshold': {threshold!r} is not allowed (a fraction in (0, 1))")
-    peak = v.max(axis=1, keepdims=True)
-    above = (v > threshold * peak) & (peak > 0)
+    with np.errstate(invalid="ignore"):
+        level = np.nanmedian(np.where(v > 0, v, np.nan), axis=1, keepdims=True) if (v > 0).any() else None
+    if level is None:
+        return np.full(scan.n_pings, np.nan)
+    above = np.isfinite(level) & (v > threshold * np.nan_to_num(level))
     out = scan.ranges[np.argmax(above, axis=1)].astype(np.float64)
     out[~above.any(axis=1)] = np.nan
+    ch = scan.channel
+    if (ch == PORT).sum() == (ch == STARBOARD).sum() > 0:     # both channels: one nadir per ping
+        both = np.fmin(out[ch == PORT], out[ch == STARBOARD])
+        out[ch == PORT], out[ch == STARBOARD] = both, both
     return out
 
 

@@ -66,6 +66,8 @@ def test_flat_lambert_seabed_matches_the_closed_form_with_a_nadir_gap_and_separa
     # nadir gap: nothing before the slant range h (the bin holding h is the first with energy)
     first = int(np.argmax(port > 0))
     assert edges[first] <= h < edges[first + 1] and np.all(port[:first] == 0)
+    from mitsonar.sidescan import first_return
+    np.testing.assert_allclose(first_return(scan), (edges[first] + edges[first + 1]) / 2)   # the altitude's bin
     # grazing falloff: the closed form, within 3 % on groups of 5 bins, from the nadir to 20 m
     groups = slice(first - first % 5, n_bins)
     got = port[groups].reshape(-1, 5).sum(1)
