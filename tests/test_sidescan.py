@@ -248,3 +248,16 @@ def test_sidescan_parameters_are_refused_on_other_kinds(mitsonar_mod):
     for kind in ("mechanical", "multibeam"):
         with pytest.raises(ValueError, match="'depression': only used with kind 'sidescan'"):
             mitsonar_mod.load_scene(scene_xml(sonar_xml(kind=kind, depression=10.0), seabed(-5.0, 0.5)))
+
+
+def test_a_new_track_or_start_renders_without_compiling(mitsonar_mod):
+    from conftest import jit_kernels
+    from mitsonar.trajectory import pose
+
+    sonar = sonar_xml(kind="sidescan", n_pings=20, n_bins=100, range_max=15.0)
+    scene = mitsonar_mod.load_scene(scene_xml(sonar, seabed(-5.0, 0.5)))
+    a = mitsonar_mod.Trajectory.straight(2.0, 1.5)
+    b = mitsonar_mod.Trajectory.turn(3.0, 1.0, 10.0, start=pose((3.0, -1.0, 0.5), yaw=0.3))
+    mitsonar_mod.render_scan(scene, spp=16, trajectory=a, start_time=0.2)
+    _, fresh = jit_kernels(mitsonar_mod.render_scan, scene, spp=16, seed=5, trajectory=b, start_time=1.0)
+    assert fresh == []
