@@ -261,3 +261,21 @@ def test_a_new_track_or_start_renders_without_compiling(mitsonar_mod):
     mitsonar_mod.render_scan(scene, spp=16, trajectory=a, start_time=0.2)
     _, fresh = jit_kernels(mitsonar_mod.render_scan, scene, spp=16, seed=5, trajectory=b, start_time=1.0)
     assert fresh == []
+
+
+def test_the_wreck_survey_shows_the_nadir_gap_and_the_deckhouse_shadow_its_header_gives(mitsonar_mod):
+    # First line (y = -5, heading +x, 4 m above the sand): port rows abeam of the deckhouse
+    # (x in [-2, -1]) are empty from the deckhouse's far top edge (slant 6.17 m) to where the ray
+    # over it lands on the sand (11.05 m across, slant 11.75 m); nothing comes before the nadir (4 m).
+    scene = mitsonar_mod.load_scene(os.path.join(SCENES, "wreck_sidescan.xml"))
+    track = mitsonar_mod.Trajectory.from_tum(os.path.join(SCENES, "wreck_sidescan_survey.tum"))
+    scan = mitsonar_mod.render_scan(scene, spp=64, seed=0, trajectory=track, start_time=5.0, max_depth=1)
+    x = scan.positions[:, 0]
+    rows = (scan.channel == 0) & (x >= -2.0) & (x <= -1.0)
+    assert rows.sum() > 30
+    port = scan.intensity[rows].sum(0)
+    r = scan.ranges
+    edge, land = math.hypot(5.8, 2.1), math.hypot(5.8 * 4 / 2.1, 4.0)
+    assert np.all(port[r < 3.9] == 0) and port[(r > 4.0) & (r < 4.3)].sum() > 0
+    assert np.all(port[(r > edge + 0.15) & (r < land - 0.15)] == 0)
+    assert port[(r > edge - 0.3) & (r < edge)].sum() > 0 and port[r > land + 0.15].sum() > 0
