@@ -279,3 +279,24 @@ def test_the_wreck_survey_shows_the_nadir_gap_and_the_deckhouse_shadow_its_heade
     assert np.all(port[r < 3.9] == 0) and port[(r > 4.0) & (r < 4.3)].sum() > 0
     assert np.all(port[(r > edge + 0.15) & (r < land - 0.15)] == 0)
     assert port[(r > edge - 0.3) & (r < edge)].sum() > 0 and port[r > land + 0.15].sum() > 0
+
+
+def test_survey_command_writes_the_waterfall_and_the_mosaic(tmp_path, capsys):
+    from mitsonar.cli import main
+    from mitsonar.mosaic import Mosaic
+
+    scene = tmp_path / "ss.xml"
+    scene.write_text(scene_xml(sonar_xml(kind="sidescan", n_pings=20, n_bins=60, range_max=12.0),
+                               seabed(-4.0, 0.5), integrator=SINGLE))
+    out = tmp_path / "out"
+    rc = main(["survey", str(scene), "--lawnmower", "0", "3", "0", "0", "--speed", "1.5", "--depth", "0",
+               "--spp", "8", "--max-scans", "2", "-q", "-o", str(out)])
+    assert rc == 0, capsys.readouterr().err
+    assert sorted(os.listdir(out)) == ["mosaic.npz", "mosaic.pgw", "mosaic.png", "scan_00000.npz",
+                                       "scan_00000_waterfall.png", "scan_00001.npz", "track.png", "trajectory.tum"]
+    m = Mosaic.load(out / "mosaic.npz")
+    # the track (y = 0, x from 0 to 2 * 20 pings * 16 ms * 1.5 m/s) is covered, beyond the swath is not
+    row, col = m.world_to_pixel(0.5, 5.0)
+    assert m.count[row, col] > 0 and np.isfinite(m.image[row, col])
+    row, col = m.world_to_pixel(0.5, 11.9)
+    assert m.count[row, col] == 0 and np.isnan(m.image[row, col])
