@@ -132,7 +132,9 @@ class Scan:
         Provenance: scene, seed, spp, integrator, max_depth, mitsonar version, ...
     times : float64 (n_pings,)
         Seconds of each row's ping from the scan start, finite and non-decreasing: a mechanical
-        head's ``k * ping_period``, zeros for the rows of one multibeam frame. None (the default,
+        head's ``k * ping_period``, zeros for the rows of one multibeam frame; a side-scan head's
+        ``k * ping_period`` per channel (non-decreasing within each channel's run of rows, the
+        starboard run starting again at 0). None (the default,
         for scans built without a schedule, and for files written before scans had times) means
         zeros: every row at the scan start.
     """
