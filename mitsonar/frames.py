@@ -9,8 +9,36 @@ from __future__ import annotations
 import numpy as np
 
 #: The kinds of sonar head a scan can come from (a row is a ping of a mechanical head, a receive
-#: beam of a multibeam head).
-KINDS = ("mechanical", "multibeam")
+#: beam of a multibeam head, one channel's ping of a side-scan head).
+KINDS = ("mechanical", "multibeam", "sidescan")
+
+#: A side-scan head's ``side`` values, and the channel number of each side (``scan.channel``).
+SIDES = ("port", "starboard", "both")
+PORT, STARBOARD = 0, 1
+
+
+def sidescan_rotation(channel, depression) -> np.ndarray:
+    """4x4 rotation(s) from a side-scan head frame (x along track, y port, z up) to a channel's
+    beam frame, for channel(s) 0 (port) or 1 (starboard) and a depression in radians.
+
+    The beam frame's +z, the boresight, is the head's +y (port) or -y (starboard) turned down by
+    ``depression`` about the head's x axis: ``(0, +-cos d, -sin d)``. Its +y (elevation, across
+    the fan, ``beamwidth_v``) points to the steep, nadir side of the fan on both channels:
+    ``(0, -+sin d, -cos d)``; its +x (azimuth, along the track, ``beamwidth_h``) is then forward
+    for port and aft for starboard (a right-handed frame). So the two channels' patterns are mirror
+    images across the vertical plane of the track, as on a real head.
+    """
+    ch = np.asarray(channel)
+    d = np.asarray(depression, dtype=np.float64)
+    shape = np.broadcast(ch, d).shape
+    s = np.where(np.broadcast_to(ch, shape) == STARBOARD, -1.0, 1.0)     # +1 port, -1 starboard
+    c, n = np.cos(np.broadcast_to(d, shape)), np.sin(np.broadcast_to(d, shape))
+    m = np.zeros(shape + (4, 4))
+    m[..., 0, 0] = s                                   # x: forward (port) / aft (starboard)
+    m[..., 1, 1], m[..., 2, 1] = -s * n, -c            # y: towards nadir
+    m[..., 1, 2], m[..., 2, 2] = s * c, -n             # z: boresight
+    m[..., 3, 3] = 1.0
+    return m
 
 
 def bearing_rotation(bearing) -> np.ndarray:

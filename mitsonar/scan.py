@@ -17,7 +17,7 @@ from . import scanfile
 
 # The frames' helpers live below the Scan (the sensor plugin uses them too); they stay
 # importable from here.
-from .frames import KINDS, _not_rigid, bearing_rotation, check_rigid, check_rigid_stack  # noqa: F401
+from .frames import KINDS, SIDES, _not_rigid, bearing_rotation, check_rigid, check_rigid_stack  # noqa: F401
 
 _RIGID = "only rigid transforms: rotation + translation, no scale, shear or mirror"
 
@@ -44,6 +44,19 @@ def reception_times(row_times: np.ndarray):
     k = np.arange(len(row_times))
     t = np.interp(k, k[known], row_times[known]) - row_times[known].min()
     return t if np.all(np.diff(t) >= 0) else None
+
+
+def sidescan_channels(side, n_rows: int) -> np.ndarray:
+    """(n_rows,) channel of each row of a side-scan scan with ``side`` (``meta['side']``): 0 port,
+    1 starboard; with ``both`` the first half of the rows is port, the second starboard."""
+    if side not in SIDES:
+        raise ScanFieldError("meta", f"side {side!r} is not allowed (a side-scan scan's side: one of {', '.join(SIDES)})")
+    if side == "both":
+        if n_rows % 2:
+            raise ScanFieldError("intensity", f"{n_rows} rows is not allowed (a two-sided side-scan scan has "
+                                              "port then starboard rows: an even number)")
+        return np.repeat(np.array([0, 1]), n_rows // 2)
+    return np.full(n_rows, 0 if side == "port" else 1)
 
 
 def _show(value) -> str:
@@ -109,7 +122,8 @@ class Scan:
     beamwidth_h, beamwidth_v : float
         Full beam widths in degrees (-3 dB one way).
     kind : str
-        ``mechanical`` or ``multibeam``.
+        ``mechanical``, ``multibeam`` or ``sidescan`` (then ``meta['side']``: ``port``,
+        ``starboard`` or ``both``, default ``both``; see `channel`).
     sound_speed : float  (m/s)
     absorption : float  (dB/m)
     electronics : dict
@@ -118,7 +132,9 @@ class Scan:
         Provenance: scene, seed, spp, integrator, max_depth, mitsonar version, ...
     times : float64 (n_pings,)
         Seconds of each row's ping from the scan start, finite and non-decreasing: a mechanical
-        head's ``k * ping_period``, zeros for the rows of one multibeam frame. None (the default,
+        head's ``k * ping_period``, zeros for the rows of one multibeam frame; a side-scan head's
+        ``k * ping_period`` per channel (non-decreasing within each channel's run of rows, the
+        starboard run starting again at 0). None (the default,
         for scans built without a schedule, and for files written before scans had times) means
         zeros: every row at the scan start.
     """
@@ -179,7 +195,10 @@ class Scan:
         if (self.intensity < 0).any():
             raise ScanFieldError("intensity", f"{_show(self.intensity[self.intensity < 0][0])} at index "
                                               f"{_first(self.intensity < 0)} is not allowed (echo energy >= 0)")
-        back = np.diff(self.times) < 0
+        # A two-sided side-scan scan's rows are two runs of pings (port, then starboard): each channel's
+        # times do not decrease.
+        runs = np.diff(self.channel) == 0 if self.kind == "sidescan" else True
+        back = (np.diff(self.times) < 0) & runs
         if back.any():
             k = int(np.argmax(back)) + 1
             raise ScanFieldError("times", f"{_show(self.times[k])} at index {k} is not allowed (ping times do "
@@ -200,6 +219,14 @@ class Scan:
     def row_name(self) -> str:
         """What the rows are: the pings of a rotating head, the receive beams of a multibeam one."""
         return "beams" if self.kind == "multibeam" else "pings"
+
+    @property
+    def channel(self) -> np.ndarray | None:
+        """(n_pings,) channel of each row of a side-scan scan, 0 port and 1 starboard (port rows
+        first); None for the other kinds. `mitsonar.sidescan.select_side` takes one side's rows."""
+        if self.kind != "sidescan":
+            return None
+        return sidescan_channels(self.meta.get("side", "both"), self.n_pings)
 
     @property
     def n_bins(self) -> int:

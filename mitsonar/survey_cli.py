@@ -1,9 +1,12 @@
 """``mitsonar survey``: render a survey along a trajectory (a TUM file or a lawnmower pattern).
 
 Writes, into the output folder: ``scan_00000.npz``, ``scan_00001.npz``, ... (one per sweep of a
-mechanical head, one per frame of a multibeam head), ``trajectory.tum`` (the trajectory used, drift
-included), ``track.png`` (the track and every ping's position) and ``scan_00000_world.png`` (the
-first scan drawn in world coordinates, each ping from its own pose: the motion distortion shows).
+mechanical head, one per frame of a multibeam head, one per ``n_pings`` pings of a side-scan head),
+``trajectory.tum`` (the trajectory used, drift included), ``track.png`` (the track and every ping's
+position) and ``scan_00000_world.png`` (the first scan drawn in world coordinates, each ping from
+its own pose: the motion distortion shows); for a side-scan head instead ``scan_00000_waterfall.png``
+(the first scan's waterfall) and ``mosaic.png`` (+ ``mosaic.pgw``, ``mosaic.npz``: the survey's
+georeferenced mosaic, `mitsonar.mosaic`, 0.1 m cells, flat bottom at the measured altitude).
 Everything is checked (trajectory file, scene, folder, that a scan fits in the track) before the
 first file is written; each file is written under a temporary name and renamed.
 """
@@ -83,18 +86,39 @@ def _draw(args, scene, traj, out, scans, bag):
 
     positions = []
     n = 0
+    mosaic = None
     for scan in scans:
         if bag is not None:
             bag.add(scan, SCAN_NAME.format(n, "." + args.format))
         if n == 0 and scan.kind == "mechanical":
             plots.plot_cartesian(scan, mesh=mitsonar.scene_mesh(scene),
                                  path=os.path.join(out, SCAN_NAME.format(0, "_world.png")))
+        if scan.kind == "sidescan":
+            mosaic = _sidescan_products(scan, n, traj, out, mosaic)
         positions.append(scan)
         n += 1
         if len(positions) > 50:                     # keep the picture's dots, not the scans' bins
             positions = positions[::2]
     plots.plot_track(traj, os.path.join(out, "track.png"), scans=positions)
+    if mosaic is not None:
+        mosaic.result().save(os.path.join(out, "mosaic.png"))
     return n
+
+
+def _sidescan_products(scan, n, traj, out, mosaic):
+    """A side-scan survey's pictures: the first scan's waterfall; every scan into the mosaic (made
+    on the first scan, over the track's extent plus the swath)."""
+    from .mosaic import MosaicBuilder
+    from .survey import SCAN_NAME
+
+    if n == 0:
+        from .sidescan_plots import plot_waterfall
+
+        plot_waterfall(scan, os.path.join(out, SCAN_NAME.format(0, "_waterfall.png")))
+    if mosaic is None:
+        p, r = traj.positions, scan.range_max
+        mosaic = MosaicBuilder((p[:, 0].min() - r, p[:, 0].max() + r, p[:, 1].min() - r, p[:, 1].max() + r), 0.1)
+    return mosaic.add(scan)
 
 
 DEMO_SCENE, DEMO_TRACK = "harbour.xml", "harbour_survey.tum"

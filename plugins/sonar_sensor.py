@@ -1,5 +1,6 @@
-"""The ``sonar`` sensor: a transducer with a beam pattern on a mechanically scanned head, or a
-multibeam (forward-looking) head whose rows are receive beams formed across one transmit fan."""
+"""The ``sonar`` sensor: a transducer with a beam pattern on a mechanically scanned head, a
+multibeam (forward-looking) head whose rows are receive beams formed across one transmit fan, or a
+side-scan head whose rows are its port and starboard channels' pings."""
 from __future__ import annotations
 
 import dataclasses
@@ -10,11 +11,12 @@ import mitsuba as mi
 import numpy as np
 
 from mitsonar._checks import not_allowed, require
-from mitsonar.frames import KINDS, bearing_rotation, check_rigid, check_rigid_stack
+from mitsonar.frames import KINDS, SIDES, STARBOARD, bearing_rotation, check_rigid, check_rigid_stack, sidescan_rotation
 
 from .beam import BeamPattern, read_beam_table
 from .jit_arrays import upload
 from .props import count, number, text
+from .sidescan_heads import PRESETS
 
 TX_PATTERNS = ("gaussian", "sinc", "uniform")
 MAX_BINS, MAX_PINGS = 65536, 100000
@@ -22,7 +24,9 @@ DEFAULT_FREQUENCY = 700e3
 # Seconds a head spends per ping beyond the echo's two-way flight to range_max (stepping the
 # transducer and sending the data for a mechanical head; beamforming for a multibeam one). A
 # Micron then steps every 43 ms at 10 m and 46 ms at 12 m, within its observed 43 to 65 ms.
-HEAD_OVERHEAD = {"mechanical": 0.030, "multibeam": 0.050}
+HEAD_OVERHEAD = {"mechanical": 0.030, "multibeam": 0.050, "sidescan": 0.0}
+# A side-scan head's transducers are tilted down this much unless the XML (or a preset) says.
+DEFAULT_DEPRESSION = 15.0
 
 
 class SonarSensor(mi.Sensor):
@@ -37,27 +41,41 @@ class SonarSensor(mi.Sensor):
     (forward-looking sonar): one transmit fan fixed in the beam frame (``tx_*``) and one receive
     beam per row (``beam_pattern`` and ``beamwidth_*``, steered to the row's bearing); the two-way
     gain of row k is ``B_tx(d) B_rx(d in row k's frame)``. All rows share one pose.
+    ``kind='sidescan'``: ``to_world`` is the head frame (x along track, y port, z up); two
+    channels, port (boresight +y) and starboard (-y), each turned down about +x by ``depression``
+    (`mitsonar.frames.sidescan_rotation`), each a monostatic beam like a mechanical head's
+    (``beamwidth_h`` along track, the beam frame's azimuth; ``beamwidth_v`` the across-track fan, its
+    elevation). ``side`` picks the channels: with ``both`` the rows are the ``n_pings`` port pings then
+    the ``n_pings`` starboard pings (2 n_pings rows, `channels` says which is which), with one side
+    row k is ping k. ``preset`` sets the defaults of a commercial head (`sidescan_heads.PRESETS`).
 
     Ping schedule: a mechanical head fires ping ``k`` at ``k * ping_period`` seconds from the scan
-    start; a multibeam head fires all rows of a frame at once, and frames ``ping_period`` apart.
+    start; a multibeam head fires all rows of a frame at once, and frames ``ping_period`` apart;
+    a side-scan head fires both channels of ping ``k`` together at ``k * ping_period``.
     The default period is the two-way flight to ``range_max``, ``2 range_max / sound_speed``, plus
-    the head's overhead (`HEAD_OVERHEAD`: 30 ms mechanical, 50 ms multibeam).
+    the head's overhead (`HEAD_OVERHEAD`: 30 ms mechanical, 50 ms multibeam, none side-scan).
 
     ================ ============ ===============================================================
     Parameter        Default      Meaning
     ================ ============ ===============================================================
-    kind             mechanical   ``mechanical`` (mechanically scanned imaging sonar, MSIS) or
-                                  ``multibeam`` (rows = receive beams across one transmit fan)
+    kind             mechanical   ``mechanical`` (mechanically scanned imaging sonar, MSIS),
+                                  ``multibeam`` (rows = receive beams across one transmit fan) or
+                                  ``sidescan`` (rows = port then starboard pings)
     to_world         identity     beam frame in the world (rigid)
     range_min        0            m, start of the range window
     range_max        12           m, end of the range window (echoes beyond are dropped)
     n_bins           500          range bins between ``range_min`` and ``range_max``
     bearing_start    0            deg, bearing of the first ping
     bearing_step     1.8          deg between pings (Micron: 200 steps per turn)
-    n_pings          200          pings in a scan
+    n_pings          200          pings in a scan (sidescan: per channel)
+    side             both         sidescan: ``port``, ``starboard`` or ``both`` channels
+    depression       15           sidescan: deg, each channel's boresight below the horizontal
+    preset           (none)       sidescan: a commercial head's defaults (``klein3000_100k``,
+                                  ``klein3000_500k``, ``starfish450``; `sidescan_heads`)
     ping_period      physical     s between pings (multibeam: between frames); default
                                   ``2 range_max / sound_speed`` + 0.03 s (mechanical) or
-                                  + 0.05 s (multibeam); not less than the two-way flight
+                                  + 0.05 s (multibeam) or + 0 (sidescan); not less than the
+                                  two-way flight
     beam_pattern     gaussian     ``gaussian``, ``sinc``, ``uniform`` or ``table``
     beamwidth_h      3            deg, full -3 dB one-way width across the scan plane
     beamwidth_v      35           deg, full -3 dB one-way width along the scan axis
@@ -88,29 +106,36 @@ class SonarSensor(mi.Sensor):
     def __init__(self, props: mi.Properties):
         num = lambda name, default: number(props, name, default, "sonar")  # noqa: E731
         self.n_bins = count(props, "n_bins", 500, "sonar")
-        self.n_pings = count(props, "n_pings", 200, "sonar")
+        self.kind = text(props, "kind", "mechanical", "sonar")
+        if self.kind not in KINDS:
+            raise not_allowed("sonar", "kind", self.kind, "one of " + ", ".join(KINDS))
+        preset = self._sidescan(props)
+        self.pings = count(props, "n_pings", 200, "sonar")
         # Checked before the film is made: without one, Mitsuba makes its default RGB film and
         # prints a warning above our error.
-        for name, value, top in (("n_bins", self.n_bins, MAX_BINS), ("n_pings", self.n_pings, MAX_PINGS)):
+        for name, value, top in (("n_bins", self.n_bins, MAX_BINS), ("n_pings", self.pings, MAX_PINGS)):
             require(1 <= value <= top, "sonar", name, value, f"1 to {top}")
+        # The rows of a scan: a side-scan head with both channels has two per ping.
+        self.n_pings = self.pings * (2 if self.side == "both" else 1)
         if "film" not in props:
             # The film is the scan's range-intensity image: one row per ping, one column per bin.
             props["film"] = mi.load_dict({"type": "hdrfilm", "width": self.n_bins, "height": self.n_pings,
                                           "pixel_format": "luminance", "rfilter": {"type": "box"}})
         super().__init__(props)
-        self.kind = text(props, "kind", "mechanical", "sonar")
         self.range_min = num("range_min", 0.0)
-        self.range_max = num("range_max", 12.0)
+        self.range_max = num("range_max", preset.get("range_max", 12.0))
         self.bearing_start = num("bearing_start", 0.0)
         self.bearing_step = num("bearing_step", 1.8)
         self.sound_speed = num("sound_speed", 1500.0)
         self.absorption = num("absorption", 0.0)
         self.ping_period = num("ping_period", None)
-        pattern = text(props, "beam_pattern", "gaussian", "sonar")
-        bw_h = num("beamwidth_h", 3.0)
-        bw_v = num("beamwidth_v", 35.0)
+        pattern = text(props, "beam_pattern", preset.get("beam_pattern", "gaussian"), "sonar")
+        bw_h = num("beamwidth_h", preset.get("beamwidth_h", 3.0))
+        bw_v = num("beamwidth_v", preset.get("beamwidth_v", 35.0))
         table_path = text(props, "beam_table", "", "sonar")
         frequency = num("frequency", None)
+        if frequency is None and pattern == "sinc":
+            frequency = preset.get("frequency")
         ap_h = num("aperture_h", None)
         ap_v = num("aperture_v", None)
         tx = {k: num(k, None) for k in ("tx_beamwidth_h", "tx_beamwidth_v") if k in props}
@@ -143,11 +168,36 @@ class SonarSensor(mi.Sensor):
         self.beam_table = table_path
         self.to_world_np = check_rigid(np.array(self.world_transform().matrix, dtype=np.float64).reshape(4, 4))
 
+    def _sidescan(self, props) -> dict:
+        """Read and check the side-scan parameters (``side``, ``depression``, ``preset``), refused
+        with any other kind; returns the preset's defaults ({} without one)."""
+        names = ("side", "depression", "preset")
+        if self.kind != "sidescan":
+            given = [n for n in names if n in props]
+            if given:
+                raise ValueError(f"sonar '{given[0]}': only used with kind 'sidescan' (kind is {self.kind!r})")
+            self.side, self.depression, self.preset = None, None, None
+            return {}
+        for name in ("bearing_start", "bearing_step"):
+            if name in props:
+                raise ValueError(f"sonar '{name}': not used with kind 'sidescan' (its channels look port and "
+                                 "starboard: set 'side' and 'depression')")
+        name = text(props, "preset", None, "sonar")
+        if name is not None and name not in PRESETS:
+            raise not_allowed("sonar", "preset", name, "one of " + ", ".join(PRESETS))
+        preset = PRESETS.get(name, {})
+        self.preset = name
+        self.side = text(props, "side", "both", "sonar")
+        if self.side not in SIDES:
+            raise not_allowed("sonar", "side", self.side, "one of " + ", ".join(SIDES))
+        self.depression = number(props, "depression", preset.get("depression", DEFAULT_DEPRESSION), "sonar")
+        if not (math.isfinite(self.depression) and 0.0 <= self.depression <= 90.0):
+            raise not_allowed("sonar", "depression", self.depression, "an angle from 0 to 90 deg below the horizontal")
+        return preset
+
     def _check(self):
         def bad(name, value, allowed):
             raise not_allowed("sonar", name, value, allowed)
-        if self.kind not in KINDS:
-            bad("kind", self.kind, "one of " + ", ".join(KINDS))
         if not (math.isfinite(self.range_min) and self.range_min >= 0):
             bad("range_min", self.range_min, "a range >= 0 m")
         if not (math.isfinite(self.range_max) and self.range_max > self.range_min):
@@ -197,20 +247,33 @@ class SonarSensor(mi.Sensor):
         return self.range_min + (np.arange(self.n_bins) + 0.5) * self.bin_width
 
     def bearings_deg(self) -> np.ndarray:
+        if self.kind == "sidescan":      # fixed channels: each row's direction is in its pose
+            return np.zeros(self.n_pings)
         return self.bearing_start + np.arange(self.n_pings) * self.bearing_step
+
+    def channels(self) -> np.ndarray:
+        """(n_pings,) channel of each row of a side-scan head (0 port, 1 starboard): the port pings,
+        then the starboard pings with ``side='both'``. None for the other kinds."""
+        if self.kind != "sidescan":
+            return None
+        sides = {"port": [0], "starboard": [STARBOARD], "both": [0, STARBOARD]}[self.side]
+        return np.repeat(np.array(sides, dtype=np.int64), self.pings)
 
     def ping_times(self) -> np.ndarray:
         """(n_pings,) seconds of each row's ping from the scan start: ``k * ping_period`` for a
-        mechanical head, zeros for the rows of a multibeam frame (fired together)."""
+        mechanical head and for each channel of a side-scan head (both channels of ping k fire
+        together), zeros for the rows of a multibeam frame (fired together)."""
         if self.kind == "multibeam":
             return np.zeros(self.n_pings)
+        if self.kind == "sidescan":
+            return np.tile(np.arange(self.pings) * self.ping_period, self.n_pings // self.pings)
         return np.arange(self.n_pings) * self.ping_period
 
     @property
     def scan_period(self) -> float:
-        """Seconds from one scan's start to the next one's: ``n_pings`` pings of a mechanical head,
-        one frame of a multibeam head."""
-        return self.ping_period * (1 if self.kind == "multibeam" else self.n_pings)
+        """Seconds from one scan's start to the next one's: ``n_pings`` pings of a mechanical or a
+        side-scan head (``n_pings`` per channel), one frame of a multibeam head."""
+        return self.ping_period * (1 if self.kind == "multibeam" else self.pings)
 
     def head_pose(self, pose=None) -> np.ndarray:
         """The head's beam frame at bearing 0: ``to_world``, or a render's ``pose`` (checked rigid):
@@ -227,7 +290,9 @@ class SonarSensor(mi.Sensor):
 
     def ping_poses(self, pose=None) -> np.ndarray:
         """(n_pings, 4, 4) world transform of each ping's beam frame (float64): the head pose (or
-        row k's head pose) @ the rotation to row k's bearing."""
+        row k's head pose) @ the rotation to row k's bearing (side-scan: to row k's channel)."""
+        if self.kind == "sidescan":
+            return self.head_pose(pose) @ sidescan_rotation(self.channels(), math.radians(self.depression))
         return self.head_pose(pose) @ bearing_rotation(np.radians(self.bearings_deg()))
 
     def connection(self, pose=None):
@@ -261,6 +326,8 @@ class SonarSensor(mi.Sensor):
     def to_string(self):
         tx = "" if self.transmit is None else (f", tx={self.transmit.kind} "
                                                f"{self.transmit.beamwidth_h:g}x{self.transmit.beamwidth_v:g} deg")
+        if self.kind == "sidescan":
+            tx = f", side={self.side}, depression={self.depression:g} deg"
         return (f"SonarSensor[kind={self.kind}, n_pings={self.n_pings}, n_bins={self.n_bins}, "
                 f"range=[{self.range_min:g}, {self.range_max:g}) m, beam={self.beam.kind} "
                 f"{self.beam.beamwidth_h:g}x{self.beam.beamwidth_v:g} deg{tx}]")

@@ -3,4 +3,6 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-exec .venv/bin/mitsonar demo -o out "$@"
+.venv/bin/mitsonar demo -o out "$@"
+# Side-scan: a lawnmower survey over the wreck, its waterfall and georeferenced mosaic (out/wreck_sidescan_*).
+.venv/bin/python -m mitsonar.sidescan_demo -o out -q

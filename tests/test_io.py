@@ -285,7 +285,7 @@ BAD_FIELDS = {  # field: (value, words the message must hold)
     "absorption": (-0.1, ["-0.1 is not allowed", ">= 0 dB/m"]),
     "beamwidth_h": (math.nan, ["nan is not allowed", "(0, 360] deg"]),
     "range_min": (50.0, ["'range_max'", "range_min = 50"]),
-    "kind": ("sidescan", ["'sidescan' is not allowed", "one of mechanical, multibeam"]),
+    "kind": ("fanbeam", ["'fanbeam' is not allowed", "one of mechanical, multibeam, sidescan"]),
     "beam_pattern": (3, ["not a pattern name"]),
     "bearings": (lambda s: _with(s.bearings, 2, math.nan), ["nan at index 2", "finite values only"]),
     "poses": (lambda s: _with(s.poses, (4, 0, 0), 5.0), ["pose 4 is not allowed", "rigid"]),
@@ -358,7 +358,7 @@ def _scaled_pose(poses):
 def test_file_with_bad_content_names_file_and_field(saved, tmp_path, ext):
     stored = "channel" if ext == ".exr" else "array"
     cases = [({"sound_speed": "fast"}, None, "header 'sound_speed': 'fast' is not a number"),
-             ({"kind": "sidescan"}, None, "header 'kind': 'sidescan' is not allowed (one of mechanical, multibeam)"),
+             ({"kind": "fanbeam"}, None, "header 'kind': 'fanbeam' is not allowed (one of mechanical, multibeam, sidescan)"),
              ({"range_min": 50}, None, "header 'range_max': 12.0 is not allowed (a range > range_min = 50 m)"),
              ({"n_bins": -3}, None, "header 'n_bins': -3 is not allowed (a count >= 1)"),
              ({"n_pings": 7.0}, None, "header 'n_pings': 7.0 is not allowed (a count >= 1)"),

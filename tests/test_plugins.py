@@ -75,7 +75,7 @@ def test_misspelled_parameter_names_the_nearest_parameter(mitsonar_mod):
 @pytest.mark.parametrize("params, message", [
     (dict(n_bins=0), r"sonar 'n_bins': 0 is not allowed \(1 to 65536\)"),
     (dict(range_min=5.0, range_max=2.0), r"sonar 'range_max'.*range_min"),
-    (dict(kind="sidescan"), r"sonar 'kind': 'sidescan'.*mechanical, multibeam"),
+    (dict(kind="fanbeam"), r"sonar 'kind': 'fanbeam'.*mechanical, multibeam, sidescan"),
     (dict(tx_beamwidth_h=20.0), r"sonar 'tx_beamwidth_h': only used with kind 'multibeam'"),
     (dict(kind="multibeam", tx_pattern="table"), r"sonar 'tx_pattern': 'table'.*gaussian, sinc, uniform"),
     (dict(kind="multibeam", tx_beamwidth_v=0.0), r"sonar 'tx_beamwidth_v': 0.0 is not allowed"),

@@ -1,0 +1,33 @@
+"""Presets of commercial side-scan heads for the ``sonar`` sensor's ``preset`` (``kind='sidescan'``).
+
+Each preset sets the defaults of ``frequency``, ``beam_pattern`` (``sinc``: a rectangular piston
+whose apertures give the published -3 dB widths at the published frequency), ``beamwidth_h``
+(along track), ``beamwidth_v`` (across-track fan), ``range_max`` (the longest range scale per
+side) and ``depression`` (the tilt of the transducers below the horizontal); any of them given in
+the XML overrides the preset.
+
+Published values (manufacturers' datasheets):
+
+* **Klein System 3000** (Klein Associates / L-3 Klein, "System 3000 Digital Side Scan Sonar"
+  datasheet): dual frequency 100 kHz and 500 kHz; horizontal beam 1 deg at 100 kHz and 0.2 deg
+  at 500 kHz; vertical beam 40 deg; transducer tilt 5 to 25 deg in 5 deg steps (presets: 10 deg);
+  range scales up to 600 m (100 kHz) and 150 m (500 kHz) per side.
+  Presets ``klein3000_100k`` and ``klein3000_500k``.
+* **Tritech StarFish 450** (Tritech International, "StarFish 450 Side Scan Sonar" datasheet):
+  450 kHz CHIRP; horizontal beam 0.8 deg; vertical beam 60 deg; maximum range 100 m per side;
+  the transducers are tilted down 20 deg (preset value: the datasheet gives the fan, not a tilt
+  setting). Preset ``starfish450``.
+
+The values are the datasheets' as recalled at the time of writing; check them against the
+current datasheet before relying on a preset for a procurement or a survey plan.
+"""
+from __future__ import annotations
+
+PRESETS = {
+    "klein3000_100k": dict(frequency=100e3, beam_pattern="sinc", beamwidth_h=1.0, beamwidth_v=40.0,
+                           range_max=600.0, depression=10.0),
+    "klein3000_500k": dict(frequency=500e3, beam_pattern="sinc", beamwidth_h=0.2, beamwidth_v=40.0,
+                           range_max=150.0, depression=10.0),
+    "starfish450": dict(frequency=450e3, beam_pattern="sinc", beamwidth_h=0.8, beamwidth_v=60.0,
+                        range_max=100.0, depression=20.0),
+}
