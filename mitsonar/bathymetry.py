@@ -95,7 +95,8 @@ def detect(intensity, ranges, threshold_db=10.0, method="centroid"):
     """Bottom detection per row: ``(range (n_rows,), energy (n_rows,))``, NaN range (and 0 energy)
     for rows with no echo. The echo's window is found on the intensity smoothed over
     `SMOOTH_BINS` bins (a speckle fade must not cut an echo in two), its range from the intensity
-    itself. See the module docstring for the estimators."""
+    itself. An echo whose window reaches either end of the range window (cut off: its centroid
+    would be biased) is no detection. See the module docstring for the estimators."""
     threshold_db, method = check_options(threshold_db, method)
     I = np.asarray(intensity, dtype=np.float64)
     r = np.asarray(ranges, dtype=np.float64)
@@ -111,16 +112,21 @@ def detect(intensity, ranges, threshold_db=10.0, method="centroid"):
     inside = (j >= left[:, None]) & (j <= right[:, None])
     w = np.where(inside, I, 0.0)
     energy = w.sum(1)
-    found = top > 0
+    # An echo cut by either end of the range window has no trustworthy range: no detection.
+    found = (top > 0) & (left > 0) & (right < n_bins - 1)
     if method == "centroid":
         out = (w * r[None, :]).sum(1) / np.where(found, energy, 1.0)
     else:
+        # the first bin of the window whose own intensity reaches the threshold below the window's
+        # own peak, interpolated linearly from the bin before it (bin centres)
         bin_w = r[1] - r[0] if n_bins > 1 else 1.0
         rows = np.arange(n_rows)
-        prev = np.maximum(left - 1, 0)
-        i0, i1 = S[rows, prev], S[rows, left]
-        frac = np.clip((level - i0) / np.where(i1 > i0, i1 - i0, 1.0), 0.0, 1.0)
-        out = np.where(left > 0, r[prev] + frac * bin_w, r[left] - 0.5 * bin_w)
+        raw_level = w.max(1) * 10.0 ** (-threshold_db / 10.0)
+        first = np.argmax((w >= raw_level[:, None]) & inside & (w > 0), axis=1)
+        prev = np.maximum(first - 1, 0)
+        i0, i1 = I[rows, prev], I[rows, first]
+        frac = np.clip((raw_level - i0) / np.where(i1 > i0, i1 - i0, 1.0), 0.0, 1.0)
+        out = np.where(first > 0, r[prev] + frac * bin_w, r[first] - 0.5 * bin_w)
     return np.where(found, out, np.nan), np.where(found, energy, 0.0)
 
 
@@ -178,14 +184,18 @@ def true_height(scene, x, y, z_from):
     return (z.ravel() - 1e-3 - t).reshape(np.shape(x))
 
 
-def predicted_rms(range_m, angle_deg, beam_width_deg, bin_width):
+def predicted_rms(range_m, angle_deg, beam_width_deg, bin_width, incidence_deg=None):
     """The centroid's rms depth error under speckle at beam angle ``angle_deg`` (module docstring):
     ``cos(theta) sqrt(sigma_r b / (4 sqrt(pi)))``, ``sigma_r`` the echo's rms range spread
-    ``sqrt((r tan(theta) sigma_phi)^2 + b^2 / 12)``, ``sigma_phi = w / sqrt(8 ln 2)``."""
+    ``sqrt((r tan(i) sigma_phi)^2 + b^2 / 12)``, ``sigma_phi = w / sqrt(8 ln 2)``, ``i`` the
+    incidence on the seabed (default the beam angle: a flat seabed). On a seabed tilted by
+    ``beta = theta - i`` in the beam's plane the vertical error is ``cos(i) / cos(beta)`` times
+    the range error (``cos(theta)`` when flat)."""
     th = np.radians(np.asarray(angle_deg, np.float64))
+    inc = th if incidence_deg is None else np.radians(np.asarray(incidence_deg, np.float64))
     sigma_phi = math.radians(beam_width_deg) / math.sqrt(8.0 * math.log(2.0))
-    sigma_r = np.sqrt((np.asarray(range_m) * np.tan(np.abs(th)) * sigma_phi) ** 2 + bin_width ** 2 / 12.0)
-    return np.cos(th) * np.sqrt(sigma_r * bin_width / (4.0 * math.sqrt(math.pi)))
+    sigma_r = np.sqrt((np.asarray(range_m) * np.tan(np.abs(inc)) * sigma_phi) ** 2 + bin_width ** 2 / 12.0)
+    return np.cos(inc) / np.cos(th - inc) * np.sqrt(sigma_r * bin_width / (4.0 * math.sqrt(math.pi)))
 
 
 def error_table(angle, error, depth, angle_step=5.0):
