@@ -82,3 +82,13 @@ def test_surface_option_is_off_by_default_and_adds_one_downward_mirror(mitsonar_
         edit_scene(path, surface="yes")
     with pytest.raises(ValueError, match="already has a shape 'sea_surface'"):
         edit_scene(edit_scene(path, surface=True), surface=True)
+
+
+def test_survey_cli_surface_option(tmp_path, mitsonar_mod):
+    from mitsonar.cli import main
+
+    out = tmp_path / "s"
+    assert main(["survey", os.path.join(SCENES, "wreck.xml"), "--trajectory", os.path.join(SCENES, "wreck_survey.tum"),
+                 "--surface", "--max-scans", "1", "--spp", "8", "-q", "-o", str(out)]) == 0
+    scan = mitsonar_mod.load_scan(str(out / "scan_00000.npz"))
+    assert scan.meta["scene"] == "wreck.xml +surface"
