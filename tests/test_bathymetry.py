@@ -184,6 +184,11 @@ def test_bad_detection_options_and_no_bottom_are_one_line(mitsonar_mod):
             bathymetry.check_options(bad)
     with pytest.raises(ValueError, match="one of centroid, leading_edge"):
         bathymetry.check_options(10, "peak")
+    wide = mitsonar_mod.Scan(intensity=np.ones((3, 10)), data=np.zeros((3, 10), np.uint8),
+                             ranges=0.05 + 0.1 * np.arange(10), bearings=np.radians([-100.0, 0.0, 100.0]),
+                             poses=np.tile(np.eye(4), (3, 1, 1)), range_min=0.0, range_max=1.0, kind="multibeam")
+    with pytest.raises(ValueError, match=r"'a fan of 200 deg' is not allowed \(a bathymetric fan of at most 180 deg\)"):
+        bathymetry.soundings(wide)
     head = echosounders.configure("r2sonic_2024", n_beams=16, range_max=20.0, bin_width=0.05)
     scene = plane_scene(mitsonar_mod, head, slope=0.0, depth=30.0)     # the seabed beyond range_max
     track = mitsonar_mod.Trajectory.straight(2.0, 1.0)
