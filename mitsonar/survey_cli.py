@@ -45,7 +45,12 @@ def cmd_survey(args):
     import mitsonar
 
     traj = _trajectory(args)                        # a bad file: one line, nothing written
-    scene = mitsonar.load_scene(args.scene)
+    if getattr(args, "surface", False):             # + a flat specular sea surface at z = 0
+        from .sea_surface import load_survey_scene
+
+        scene = load_survey_scene(args.scene, surface=True)
+    else:
+        scene = mitsonar.load_scene(args.scene)
     out = args.output
     if os.path.exists(out) and not os.path.isdir(out):
         raise CLIError(f"-o {out!r} is a file, not a folder")
@@ -166,6 +171,8 @@ def add_subcommands(sub):
     s.add_argument("--altitude", type=float, help="lawnmower altitude above z = 0, m")
     s.add_argument("--yaw-rate", type=float, default=20.0, help="lawnmower turn rate at the corners, deg/s")
     s.add_argument("--drift", type=int, metavar="SEED", help="add seeded navigation drift (a random walk)")
+    s.add_argument("--surface", action="store_true",
+                   help="add a flat specular sea surface at z = 0 (shallow-water multipath; off by default)")
     s.add_argument("--spp", type=int, default=1024, help="paths per ping (default 1024)")
     s.add_argument("--seed", type=int, default=0, help="survey seed (default 0)")
     s.add_argument("--max-scans", type=int, help="stop after this many scans")
