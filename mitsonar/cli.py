@@ -278,7 +278,8 @@ def build_parser():
     d.set_defaults(func=cmd_demo)
 
     # Subcommands of other parts of the product register themselves when present.
-    for mod in ("mitsonar.serial_cli", "mitsonar.map_cli", "mitsonar.compare_cli", "mitsonar.survey_cli", "mitsonar.export_cli"):
+    for mod in ("mitsonar.serial_cli", "mitsonar.map_cli", "mitsonar.compare_cli", "mitsonar.survey_cli", "mitsonar.export_cli",
+                "mitsonar.dataset.cli"):
         try:
             m = importlib.import_module(mod)
         except ImportError:

@@ -10,7 +10,8 @@ shapes, so the intensity and the labels come from the same paths.
 Shape ids: shape ``j`` of ``scene.shapes()`` (the scene's order, fixed by its XML) has label
 ``j + 1``; 0 is "no echo". In the kernel a shape pointer is turned into its index by a table
 indexed by the pointer's registry id (``dr.reinterpret_array(UInt32, ShapePtr)``, the same
-number ``scene.shapes_dr()`` holds for shape ``j``).
+number ``scene.shapes_dr()`` holds for shape ``j``). Load the scene with ``optimize=False``:
+Mitsuba otherwise merges the shapes that share a BSDF into one mesh, and their labels with them.
 """
 from __future__ import annotations
 
@@ -89,8 +90,11 @@ def labelling_integrator(max_depth=5, sampling="sobol"):
                 dr.scatter(amount, energy, slot, valid)
 
             self.sample(setup, ping, samples, record)
-            return np.bincount(where.numpy(), weights=amount.numpy().astype(np.float64),
-                               minlength=n_cells + 1)[:n_cells]
+            # Subnormal echoes (< 1.2e-38) are dropped: the threads of Dr.Jit's pool flush them to
+            # zero and the calling thread may not, so they would differ with the thread count.
+            energy = amount.numpy().astype(np.float64)
+            energy[np.abs(energy) < np.finfo(np.float32).tiny] = 0.0
+            return np.bincount(where.numpy(), weights=energy, minlength=n_cells + 1)[:n_cells]
 
     props = mi.Properties("sonar_tof")
     props["max_depth"] = int(max_depth)

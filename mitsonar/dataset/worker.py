@@ -47,7 +47,9 @@ class SampleRenderer:
 
     def __init__(self, cfg, threads=None):
         set_threads(threads)
-        import mitsonar  # noqa: F401  (selects the variant, registers the plugins)
+        from ..variant import ensure_variant
+
+        ensure_variant()   # selects the variant (MITSONAR_VARIANT) and registers the plugins
 
         self.cfg = cfg
         self.key = None
@@ -87,7 +89,9 @@ class SampleRenderer:
         resolver = mi.file_resolver()   # the included scene's own files (PLY meshes) resolve from its folder
         if folder not in [str(p) for p in resolver]:
             resolver.prepend(folder)
-        scene = load_scene(f'<scene version="3.0.0">{body}</scene>')
+        # optimize=False: Mitsuba would merge the shapes sharing a BSDF into one mesh, and the
+        # labels need each shape as itself.
+        scene = load_scene(f'<scene version="3.0.0">{body}</scene>', optimize=False)
         from mitsonar.plugins import module
 
         sonars = [s for s in scene.sensors() if isinstance(s, module("common").SonarSensor)]
