@@ -141,6 +141,29 @@ def test_killed_command_resumes_to_the_same_dataset(reference, tmp_path):
     _same_as(reference, out)
 
 
+def test_a_killed_worker_process_loses_nothing(reference, tmp_path):
+    """SIGKILL one of the two worker processes when the second sample comes back: the pool is
+    started again, the samples it held are rendered again, the dataset is the same."""
+    import multiprocessing
+
+    class KillOne:
+        def __init__(self):
+            self.n, self.killed = 0, []
+
+        def update(self, k=1):
+            self.n += k
+            if self.n == 2:
+                child = multiprocessing.active_children()[0]
+                os.kill(child.pid, signal.SIGKILL)
+                self.killed.append(child.pid)
+
+    spy = KillOne()
+    out = tmp_path / "worker_killed"
+    generate_dataset(small_config(), str(out), workers=2, progress=spy)
+    assert len(spy.killed) == 1 and spy.n >= 6
+    _same_as(reference, out)
+
+
 def test_segmentation_names_the_shape_in_each_bin(tmp_path):
     """Two walls facing the head, 'near' 4 m away along +x and 'far' 7 m away along -x: pings towards
     +x are labelled near from 4 m on, pings towards -x far from 7 m on, sideways pings nothing; the

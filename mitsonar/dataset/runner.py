@@ -181,7 +181,8 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
     address      a Ray cluster's address (uses Ray; ``"local"`` or None with ``engine="ray"`` starts
                  Ray on this machine)
     threads      Dr.Jit render threads per worker (default cores // workers, at least 1)
-    progress     show a progress bar (samples, samples/s, time left) on stderr
+    progress     show a progress bar (samples, samples/s, time left) on stderr; or an object
+                 whose ``update(1)`` is called as each sample comes back
     engine       ``"local"`` (spawned processes), ``"ray"``; default Ray when an address is given
     ============ ==================================================================================
 
@@ -210,7 +211,9 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
     try:
         coord = _Coordinator(cfg, output, manifest, None)
         todo = coord.todo()
-        if progress and todo:
+        if progress is not None and not isinstance(progress, bool):
+            coord.progress = progress   # anything with update(n): benchmarks time each sample
+        elif progress and todo:
             from tqdm import tqdm
 
             bar = tqdm(total=cfg["samples"], initial=cfg["samples"] - len(todo), unit="sample", desc="dataset",
