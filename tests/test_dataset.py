@@ -212,6 +212,7 @@ def test_segmentation_names_the_shape_in_each_bin(tmp_path):
     ({"sonar": {"n_bins": 0}}, "'n_bins': 0 is not allowed"),
     ({"trajectory": {"type": "spiral", "speed": 1}}, "'trajectory.type': 'spiral' is not allowed (one of straight, turn)"),
     ({"materials": {"concrete": {"diffuse": {"choice": []}}}}, "'materials.concrete.diffuse.choice': [] is not allowed"),
+    ({"materials": {"steel": {"diffuse": 0.1}}}, "'materials.steel': no scene has a BSDF of that id (their BSDFs: concrete)"),
 ])
 def test_bad_config_is_one_line_naming_the_key(change, words):
     with pytest.raises(DatasetError) as err:

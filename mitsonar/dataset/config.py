@@ -17,7 +17,7 @@ A config (``examples/dataset_small.yaml``)::
     sonar: {kind: mechanical, n_bins: 120, n_pings: 40}   # replaces the scene's sensor
     pose: {x: {uniform: [-1, 1]}, yaw: {uniform: [0, 360]}}   # the vehicle's pose (m, deg)
     trajectory: {type: straight, speed: {uniform: [0.2, 1]}}  # the vehicle moves during the scan
-    materials: {concrete: {diffuse: {uniform: [0.05, 0.2]}}}  # by BSDF id
+    materials: {concrete: {diffuse: {uniform: [0.05, 0.2]}}}  # by BSDF id (a terrain's: seabed_material)
     electronics: {gain: {uniform: [20, 35]}, speckle: {choice: [rayleigh, weibull]}}
 
 A value is fixed, or drawn: ``{uniform: [lo, hi]}`` (a float), ``{randint: [lo, hi]}`` (a whole
@@ -223,8 +223,36 @@ def check_config(cfg, base=".") -> dict:
         _unknown(f"materials.{bsdf}", params, MATERIAL_KEYS)
         for k, v in params.items():
             check_value(f"materials.{bsdf}.{k}", v, lo=0, hi=1 if k != "shininess" else math.inf)
+    _check_material_ids(cfg)
     _check_electronics(cfg["electronics"])
     return cfg
+
+
+TERRAIN_BSDF = "seabed_material"   # the id of a terrain scene's BSDF (its preset from 'material')
+
+
+def _bsdf_ids(path) -> set:
+    """The ids of the ``<bsdf>`` elements of a scene file (nested ones too)."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.parse(path).getroot()
+    except (ET.ParseError, OSError) as exc:
+        raise DatasetError(f"dataset config: scene file {path!r} is not readable XML ({exc})") from None
+    return {e.get("id") for e in root.iter("bsdf") if e.get("id")}
+
+
+def _check_material_ids(cfg):
+    """Every BSDF id under 'materials' is in at least one scene (scenes without it ignore it)."""
+    if not cfg["materials"]:
+        return
+    ids = set()
+    for s in cfg["scenes"]:
+        ids |= _bsdf_ids(s["xml"]) if "xml" in s else {TERRAIN_BSDF}
+    for bsdf in cfg["materials"]:
+        if bsdf not in ids:
+            raise DatasetError(f"dataset config 'materials.{bsdf}': no scene has a BSDF of that id "
+                               f"(their BSDFs: {', '.join(sorted(ids)) or 'none'})")
 
 
 def _check_scenes(cfg, base):

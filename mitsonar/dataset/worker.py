@@ -65,7 +65,7 @@ class SampleRenderer:
         import mitsuba as mi
 
         from ..scene import load_scene
-        from .config import sonar_xml
+        from .config import TERRAIN_BSDF, sonar_xml
         from .labels import labelling_integrator, shape_names
 
         entry = self.cfg["scenes"][draw["entry"]]
@@ -80,9 +80,9 @@ class SampleRenderer:
             terrain = Terrain(**draw["terrain"])
             ply = os.path.join(self.tmp, "seabed.ply")
             terrain.write_ply(ply)
-            body = (f'<bsdf type="acoustic" id="seabed_material"><string name="preset" value="{draw["material"]}"/>'
+            body = (f'<bsdf type="acoustic" id="{TERRAIN_BSDF}"><string name="preset" value="{draw["material"]}"/>'
                     f'</bsdf><shape type="ply" id="seabed"><string name="filename" value="{ply}"/>'
-                    '<ref id="seabed_material"/></shape>')
+                    f'<ref id="{TERRAIN_BSDF}"/></shape>')
         if sonar:
             sonar.setdefault("mount", DEFAULT_MOUNT.ravel().tolist())
             body += sonar_xml(sonar)
@@ -109,18 +109,16 @@ class SampleRenderer:
                          if k.rsplit(".", 1)[-1] in ("diffuse", "specular", "shininess")}
 
     def _materials(self, materials):
-        """Set the drawn material parameters (and every other one back to its scene value)."""
+        """Set the drawn material parameters (and every other one back to its scene value). A BSDF
+        id this scene does not have is left out (another scene of the config has it); a BSDF
+        wrapped in another (``twosided``) is reached by the outer id."""
         values = dict(self.defaults)
         for bsdf, fields in materials.items():
             for field, v in fields.items():
-                key = f"{bsdf}.{field}"
-                if key not in values:
-                    from .config import DatasetError
-
-                    ids = sorted({k.rsplit(".", 1)[0] for k in self.defaults})
-                    raise DatasetError(f"dataset config 'materials.{bsdf}': the scene has no acoustic BSDF of that "
-                                       f"id (its BSDFs: {', '.join(ids) or 'none'})")
-                values[key] = float(v)
+                for key in self.defaults:
+                    prefix, name = key.rsplit(".", 1)
+                    if name == field and (prefix == bsdf or prefix.startswith(bsdf + ".")):
+                        values[key] = float(v)
         changed = False
         for k, v in values.items():
             if float(self.params[k][0]) != v:
