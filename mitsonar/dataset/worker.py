@@ -14,8 +14,9 @@ import tempfile
 
 import numpy as np
 
-# The standard mount of a head on the vehicle (REP-103: x forward, y port, z up): boresight at
-# bearing 0 forward, scan axis up (beam x = vehicle y, beam y = vehicle z, beam z = vehicle x).
+# The standard mount of a mechanical or multibeam head on the vehicle (REP-103: x forward, y port,
+# z up): boresight at bearing 0 forward, scan axis up (beam x = vehicle y, beam y = vehicle z,
+# beam z = vehicle x). A side-scan head's default mount is the identity.
 DEFAULT_MOUNT = np.array([[0, 0, 1, 0], [1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 0, 1]], dtype=np.float64)
 
 
@@ -83,8 +84,9 @@ class SampleRenderer:
             body = (f'<bsdf type="acoustic" id="{TERRAIN_BSDF}"><string name="preset" value="{draw["material"]}"/>'
                     f'</bsdf><shape type="ply" id="seabed"><string name="filename" value="{ply}"/>'
                     f'<ref id="{TERRAIN_BSDF}"/></shape>')
-        if sonar:
-            sonar.setdefault("mount", DEFAULT_MOUNT.ravel().tolist())
+        if sonar:   # a side-scan head's to_world is the head frame itself (x forward, y port, z up)
+            mount = np.eye(4) if sonar.get("kind") == "sidescan" else DEFAULT_MOUNT
+            sonar.setdefault("mount", mount.ravel().tolist())
             body += sonar_xml(sonar)
         resolver = mi.file_resolver()   # the included scene's own files (PLY meshes) resolve from its folder
         if folder not in [str(p) for p in resolver]:
