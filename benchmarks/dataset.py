@@ -12,7 +12,7 @@ costs under 10 %). Each run writes a fresh temporary folder. Two rates per run:
     the last (what a long run sees: start-up paid once).
 
 Prints one JSON object. Usage:
-    python benchmarks/dataset.py [--config examples/dataset_small.yaml] [--samples 24] [--spp 1024]
+    python benchmarks/dataset.py [--config examples/dataset_small.yaml] [--samples 24] [--spp 1024] [--engine ray]
 """
 from __future__ import annotations
 
@@ -35,13 +35,14 @@ class _Clock:
         self.times.append(time.perf_counter())
 
 
-def run(cfg, workers, threads):
+def run(cfg, workers, threads, engine):
     from mitsonar.dataset import generate_dataset
 
     clock = _Clock()
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        generate_dataset(cfg, os.path.join(tmp, "ds"), workers=workers, threads=threads, progress=clock)
+        generate_dataset(cfg, os.path.join(tmp, "ds"), workers=workers, threads=threads, progress=clock,
+                         engine=engine)
         total = time.perf_counter() - t0
     n = len(clock.times)
     k = min(max(workers, 1), n - 1)
@@ -55,6 +56,7 @@ def main(argv=None):
     ap.add_argument("--config", default=os.path.join(HERE, "..", "examples", "dataset_small.yaml"))
     ap.add_argument("--samples", type=int, default=24)
     ap.add_argument("--spp", type=int, default=1024)
+    ap.add_argument("--engine", choices=("local", "ray"), default="local", help="local processes (default) or Ray actors")
     args = ap.parse_args(argv)
 
     from mitsonar.dataset import read_config
@@ -64,13 +66,13 @@ def main(argv=None):
     cfg.update(samples=args.samples, spp=args.spp)
     cores = _cores()
     counts = sorted({1, 2, cores})
-    runs = [run(cfg, w, max(1, cores // w)) for w in counts]
+    runs = [run(cfg, w, max(1, cores // w), args.engine) for w in counts]
     base = runs[0]
     for r in runs:
         r["ratio"] = round(r["samples_per_s"] / base["samples_per_s"], 3)
         r["steady_ratio"] = round(r["steady_samples_per_s"] / base["steady_samples_per_s"], 3)
     print(json.dumps({"benchmark": "dataset", "config": os.path.relpath(args.config), "samples": args.samples,
-                      "spp": args.spp, "cores": cores, "python": platform.python_version(),
+                      "spp": args.spp, "engine": args.engine, "cores": cores, "python": platform.python_version(),
                       "runs": runs}, indent=1))
     return 0
 

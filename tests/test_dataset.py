@@ -50,13 +50,13 @@ def folder_bytes(folder):
 def reference(tmp_path_factory):
     """The small dataset written by one local worker process."""
     out = tmp_path_factory.mktemp("ds") / "one"
-    result = generate_dataset(small_config(), str(out), workers=1, progress=False)
+    result = generate_dataset(small_config(), str(out), workers=1, engine="local", progress=False)
     assert result == {"rendered": 6, "samples": 6, "seconds": result["seconds"]}
     return out
 
 
 def test_two_workers_write_what_one_writes(reference, tmp_path):
-    generate_dataset(small_config(), str(tmp_path / "two"), workers=2, progress=False)
+    generate_dataset(small_config(), str(tmp_path / "two"), workers=2, engine="local", progress=False)
     one, two = folder_bytes(reference), folder_bytes(tmp_path / "two")
     assert sorted(one) == ["manifest.json", "meshes/" + sorted(os.listdir(reference / "meshes"))[0],
                            "shard-000000.tar", "shard-000001.tar", "shard-000002.tar"]
@@ -130,14 +130,14 @@ def test_killed_command_resumes_to_the_same_dataset(reference, tmp_path):
 
     cfg_path.write_text(yaml.safe_dump(small_config()))
     out = tmp_path / "killed"
-    cmd = [sys.executable, "-m", "mitsonar", "dataset", str(cfg_path), "-o", str(out), "--workers", "1", "-q"]
+    cmd = [sys.executable, "-m", "mitsonar", "dataset", str(cfg_path), "-o", str(out), "--workers", "1", "--engine", "local", "-q"]
     proc = subprocess.Popen(cmd, cwd=ROOT, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.time() + 120
     while time.time() < deadline and proc.poll() is None and not (out / "shard-000000.tar").exists():
         time.sleep(0.05)
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
-    assert main(["dataset", str(cfg_path), "-o", str(out), "--workers", "1", "-q"]) == 0
+    assert main(["dataset", str(cfg_path), "-o", str(out), "--workers", "1", "--engine", "local", "-q"]) == 0
     _same_as(reference, out)
 
 
@@ -159,7 +159,7 @@ def test_a_killed_worker_process_loses_nothing(reference, tmp_path):
 
     spy = KillOne()
     out = tmp_path / "worker_killed"
-    generate_dataset(small_config(), str(out), workers=2, progress=spy)
+    generate_dataset(small_config(), str(out), workers=2, engine="local", progress=spy)
     assert len(spy.killed) == 1 and spy.n >= 6
     _same_as(reference, out)
 

@@ -11,7 +11,7 @@ def cmd_dataset(args):
 
     result = generate_dataset(args.config, args.output, workers=args.workers, address=args.address,
                               threads=args.threads, progress=not args.quiet,
-                              engine="ray" if (args.ray or args.address) else "local")
+                              engine=args.engine)
     rate = result["rendered"] / result["seconds"] if result["seconds"] > 0 else 0.0
     print(f"{args.output}: {result['samples']} samples ({result['rendered']} rendered now, "
           f"{rate:.3g} samples/s); read with mitsonar.open_dataset({args.output!r})")
@@ -29,6 +29,8 @@ def add_subcommands(sub):
     d.add_argument("--threads", type=int, default=None, help="render threads per worker (default: cores / workers)")
     d.add_argument("--address", default=None, metavar="RAY_ADDRESS",
                    help="run on this Ray cluster (e.g. ray://head:10001 or auto; needs mitsonar[cluster])")
-    d.add_argument("--ray", action="store_true", help="use Ray on this machine (ray.init() with no address)")
+    d.add_argument("--engine", choices=("auto", "ray", "local"), default="auto",
+                   help="ray: Ray actors (ray.init() on this machine unless --address); local: spawned processes; "
+                        "auto (default): Ray when --address is given or Ray is installed, else local")
     d.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     d.set_defaults(func=cmd_dataset)

@@ -178,12 +178,13 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
     output       the dataset folder; a folder holding part of this config's dataset is resumed
     workers      worker processes or Ray actors (default: the number of cores); 0 renders in this
                  process
-    address      a Ray cluster's address (uses Ray; ``"local"`` or None with ``engine="ray"`` starts
-                 Ray on this machine)
+    address      a Ray cluster's address (``ray://head:10001``, ``auto``): runs there, on Ray
     threads      Dr.Jit render threads per worker (default cores // workers, at least 1)
     progress     show a progress bar (samples, samples/s, time left) on stderr; or an object
                  whose ``update(1)`` is called as each sample comes back
-    engine       ``"local"`` (spawned processes), ``"ray"``; default Ray when an address is given
+    engine       ``"ray"`` (actors; ``ray.init()`` on this machine without an address), ``"local"``
+                 (spawned processes), or ``"auto"`` (default): Ray when an address is given or Ray
+                 is installed (``mitsonar[cluster]``), local processes otherwise
     ============ ==================================================================================
 
     Returns a dict: ``rendered`` (samples rendered by this call), ``samples`` (in the folder),
@@ -192,11 +193,18 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
     from .config import check_config, read_config
 
     cfg = read_config(config) if isinstance(config, (str, os.PathLike)) else check_config(config)
-    engine = engine or ("ray" if address else "local")
-    if engine not in ("local", "ray"):
-        raise DatasetError(f"engine {engine!r} is not allowed (local or ray)")
+    engine = engine or "auto"
+    if engine not in ("auto", "local", "ray"):
+        raise DatasetError(f"--engine {engine!r} is not allowed (auto, local or ray)")
+    if address and engine == "local":
+        raise DatasetError("--address runs on a Ray cluster: it cannot go with --engine local")
     if workers is None:
         workers = _cores()
+    if engine == "auto":
+        import importlib.util
+
+        ray = address or (workers != 0 and importlib.util.find_spec("ray") is not None)
+        engine = "ray" if ray else "local"
     if not (isinstance(workers, int) and workers >= 0) or (engine == "ray" and workers < 1):
         raise DatasetError(f"--workers {workers!r} is not allowed (a whole number >= 1)")
     if threads is None:
