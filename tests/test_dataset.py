@@ -244,6 +244,14 @@ def test_a_folder_of_another_config_is_not_resumed(reference, tmp_path):
     shutil.copytree(reference, copy)
     with pytest.raises(DatasetError, match=r"holds a dataset of another config \('spp': 64 there, 32 now\)"):
         generate_dataset(small_config(spp=32), str(copy), workers=0, progress=False)
+    scene = tmp_path / "box.xml"
+    scene.write_text(open(BOX).read())
+    generate_dataset(small_config(samples=2, scenes=[{"xml": str(scene)}]), str(tmp_path / "edited"), workers=0,
+                     progress=False)
+    scene.write_text(open(BOX).read().replace("concrete_good", "concrete_poor"))
+    with pytest.raises(DatasetError, match="box.xml changed since this dataset was begun"):
+        generate_dataset(small_config(samples=2, scenes=[{"xml": str(scene)}]), str(tmp_path / "edited"), workers=0,
+                         progress=False)
     (tmp_path / "other").mkdir()
     (tmp_path / "other" / "notes.txt").write_text("mine")
     with pytest.raises(DatasetError, match="holds files but no manifest.json"):

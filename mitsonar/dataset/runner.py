@@ -111,13 +111,41 @@ def prepare_folder(cfg, folder):
         diff = config_difference(manifest["config"], cfg) or "the format differs"
         raise DatasetError(f"-o {folder!r} holds a dataset of another config ({diff}); it cannot be resumed with "
                            "this one: choose a new folder, or delete that one")
+    inputs, version = _inputs(cfg), _version()
+    if manifest is not None:
+        for path, digest_then in manifest.get("inputs", {}).items():
+            if inputs.get(path) != digest_then:
+                raise DatasetError(f"-o {folder!r}: scene file {path} changed since this dataset was begun; resuming "
+                                   "would mix two scenes: choose a new folder, or delete that one")
+        if manifest.get("mitsonar_version") != version:
+            raise DatasetError(f"-o {folder!r} was begun by mitsonar {manifest.get('mitsonar_version')}, this is "
+                               f"{version}: its samples may render differently; choose a new folder, or delete that one")
     lock = RunLock(folder)
     remove_partials(folder)
     if manifest is None:
         manifest = {"format": FORMAT, "config_hash": digest, "config": cfg, "samples": cfg["samples"],
-                    "shard_size": cfg["shard_size"], "shards": [], "labels": ["none"], "meshes": []}
+                    "shard_size": cfg["shard_size"], "shards": [], "labels": ["none"], "meshes": [],
+                    "inputs": inputs, "mitsonar_version": version}
         write_json(os.path.join(folder, MANIFEST), manifest)
     return lock, manifest
+
+
+def _inputs(cfg):
+    """sha256 of every scene file the config names: a resumed run must see the same scenes."""
+    import hashlib
+
+    out = {}
+    for s in cfg["scenes"]:
+        if "xml" in s:
+            with open(s["xml"], "rb") as f:
+                out[s["xml"]] = hashlib.sha256(f.read()).hexdigest()
+    return out
+
+
+def _version():
+    from .._version import __version__
+
+    return __version__
 
 
 def _local(cfg, coord, todo, workers, threads, variant):
