@@ -34,7 +34,10 @@ class DatasetActor:
             os.environ["MITSONAR_VARIANT"] = variant
         from .worker import SampleRenderer
 
+        import atexit
+
         self.renderer = SampleRenderer(cfg, threads)
+        atexit.register(self.renderer.close)
 
     def render(self, t, want_mesh):
         return self.renderer.render(t, want_mesh)

@@ -79,7 +79,7 @@ class SampleRenderer:
 
             folder = self.tmp
             terrain = Terrain(**draw["terrain"])
-            ply = os.path.join(self.tmp, "seabed.ply")
+            ply = os.path.join(self.tmp, f"{draw['key']}.ply")   # removed once loaded (Mitsuba reads it whole)
             terrain.write_ply(ply)
             body = (f'<bsdf type="acoustic" id="{TERRAIN_BSDF}"><string name="preset" value="{draw["material"]}"/>'
                     f'</bsdf><shape type="ply" id="seabed"><string name="filename" value="{ply}"/>'
@@ -93,7 +93,11 @@ class SampleRenderer:
             resolver.prepend(folder)
         # optimize=False: Mitsuba would merge the shapes sharing a BSDF into one mesh, and the
         # labels need each shape as itself.
-        scene = load_scene(f'<scene version="3.0.0">{body}</scene>', optimize=False)
+        try:
+            scene = load_scene(f'<scene version="3.0.0">{body}</scene>', optimize=False)
+        finally:
+            if "terrain" in draw:
+                os.remove(ply)
         from mitsonar.plugins import module
 
         sonars = [s for s in scene.sensors() if isinstance(s, module("common").SonarSensor)]
@@ -178,9 +182,12 @@ _renderer = None
 def init_process(cfg, threads, variant):
     """Initializer of a local worker process (spawned): its variant, threads and renderer."""
     global _renderer
+    from multiprocessing.util import Finalize
+
     if variant:
         os.environ["MITSONAR_VARIANT"] = variant
     _renderer = SampleRenderer(cfg, threads)
+    Finalize(_renderer, _renderer.close, exitpriority=10)   # runs when the pool's process exits
 
 
 def render_in_process(task, want_mesh=False):
