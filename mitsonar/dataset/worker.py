@@ -56,10 +56,11 @@ class SampleRenderer:
         self.key = None
         self.scene = self.sensor = self.integrator = self.params = None
         self.names = []
-        self.tmp = tempfile.mkdtemp(prefix="mitsonar-dataset-")
+        self.tmp = None   # a folder for terrain meshes, made when the first one is
 
     def close(self):
-        shutil.rmtree(self.tmp, ignore_errors=True)
+        if self.tmp is not None:
+            shutil.rmtree(self.tmp, ignore_errors=True)
 
     # ------------------------------------------------------------------ scenes
     def _load(self, draw):
@@ -77,6 +78,8 @@ class SampleRenderer:
         else:
             from ..terrain import Terrain
 
+            if self.tmp is None:
+                self.tmp = tempfile.mkdtemp(prefix="mitsonar-dataset-")
             folder = self.tmp
             terrain = Terrain(**draw["terrain"])
             ply = os.path.join(self.tmp, f"{draw['key']}.ply")   # removed once loaded (Mitsuba reads it whole)
