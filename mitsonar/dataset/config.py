@@ -293,10 +293,28 @@ def _check_scenes(cfg, base):
             for k, v in t.items():
                 if is_spec(v):
                     check_value(f"{where}.terrain.{k}", v, kind="any")
+            _check_terrain(where, t)
             from ..plugins.materials import PRESETS
 
             s.setdefault("material", "seabed_sand")
             check_value(f"{where}.material", s["material"], choices=sorted(PRESETS))
+
+
+def _check_terrain(where, spec):
+    """The terrain's own checks at every end of every range (its heights are not made: zeros)."""
+    from ..terrain import Terrain
+
+    class Shape(Terrain):
+        def _heights(self):
+            return {"plane": np.zeros(self.shape)}
+
+    for trial in _corners(spec):
+        try:
+            Shape(**trial)
+        except ValueError as exc:
+            raise DatasetError(f"dataset config '{where}.terrain': {exc}") from None
+        except TypeError as exc:
+            raise DatasetError(f"dataset config '{where}.terrain': {exc}") from None
 
 
 def _sonar_parameters():

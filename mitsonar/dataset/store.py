@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import fcntl
 import io
+from collections.abc import Sequence
 import json
 import os
 import tarfile
@@ -121,7 +122,7 @@ def _load_npy(payload):
     return np.load(io.BytesIO(payload), allow_pickle=False)
 
 
-class SonarDataset:
+class SonarDataset(Sequence):
     """The samples of a dataset folder in sample order: ``len(ds)``, ``ds[i]``, ``for s in ds``.
 
     Each sample is a dict of NumPy arrays: ``data`` (uint8, rows x bins), ``intensity`` (float32),
