@@ -196,6 +196,18 @@ def test_segmentation_names_the_shape_in_each_bin(tmp_path):
         elif b in (90, 270):
             assert not hit.any() and np.isnan(s["first_return"][row])
     assert {"near", "far"} <= set(ds.labels)
+    # the labelling pass is sonar_tof's: render_scan with the plain integrator, the same paths
+    # (seed, spp, pose), gives the same intensity up to the order of the float64 sums
+    import mitsonar
+    from mitsonar.dataset.config import sonar_xml
+    from mitsonar.dataset.worker import DEFAULT_MOUNT
+
+    text = xml.read_text().replace("</scene>", sonar_xml({**cfg["sonar"], "mount": DEFAULT_MOUNT.ravel()}) + "</scene>")
+    scene = mitsonar.load_scene(text, optimize=False)
+    scan = mitsonar.render_scan(scene, spp=512, seed=json.loads(str(s["meta"]))["seed"], integrator="sonar_tof",
+                                max_depth=1, pose=DEFAULT_MOUNT)
+    assert scan.intensity.max() > 0
+    np.testing.assert_allclose(s["intensity"], scan.intensity, rtol=1e-6, atol=0)
 
 
 # ----------------------------------------------------------------------------- bad input
