@@ -16,6 +16,7 @@ from .groundtruth import scene_mesh  # noqa: E402
 from .render import render_scan  # noqa: E402
 from .scene import SceneError, load_scene  # noqa: E402
 from .survey import render_survey  # noqa: E402
+from .dataset.store import open_dataset  # noqa: E402
 from .trajectory import Trajectory, TrajectoryError  # noqa: E402
 from .variant import VariantError, init_on_import, set_variant, variant  # noqa: E402
 
@@ -42,5 +43,5 @@ def __getattr__(name):
 
 
 __all__ = ["Scan", "SceneError", "Trajectory", "TrajectoryError", "VariantError", "load_scan", "load_scene",
-           "render_scan", "render_survey", "scene_mesh",
+           "open_dataset", "render_scan", "render_survey", "scene_mesh",
            "set_variant", "variant", "__version__", *_LAZY]
