@@ -13,13 +13,16 @@ Published values (manufacturers' datasheets):
   at 500 kHz; vertical beam 40 deg; transducer tilt 5 to 25 deg in 5 deg steps (presets: 10 deg);
   range scales up to 600 m (100 kHz) and 150 m (500 kHz) per side.
   Presets ``klein3000_100k`` and ``klein3000_500k``.
-* **Tritech StarFish 450** (Tritech International, "StarFish 450 Side Scan Sonar" datasheet):
-  450 kHz CHIRP; horizontal beam 0.8 deg; vertical beam 60 deg; maximum range 100 m per side;
-  the transducers are tilted down 20 deg (preset value: the datasheet gives the fan, not a tilt
-  setting). Preset ``starfish450``.
+* **Tritech StarFish 450** (Tritech / Blueview StarFish, "What is a side scan sonar?",
+  starfishsonar.com support pages, checked): 450 kHz CHIRP (425-475 kHz); the two transducers
+  in the lower fins are angled 30 deg down from the horizontal and transmit a fan 2 deg wide
+  (along track) by 100 deg vertically, "most of the acoustic energy confined to the centre
+  60 deg" (the preset's -3 dB across-track width); maximum range 100 m per side (product sheet).
+  Preset ``starfish450``.
 
-The values are the datasheets' as recalled at the time of writing; check them against the
-current datasheet before relying on a preset for a procurement or a survey plan.
+The Klein figures and the StarFish's range are the datasheets' as recalled at the time of
+writing; check them against the current datasheet before relying on a preset for a procurement
+or a survey plan.
 """
 from __future__ import annotations
 
@@ -28,6 +31,6 @@ PRESETS = {
                            range_max=600.0, depression=10.0),
     "klein3000_500k": dict(frequency=500e3, beam_pattern="sinc", beamwidth_h=0.2, beamwidth_v=40.0,
                            range_max=150.0, depression=10.0),
-    "starfish450": dict(frequency=450e3, beam_pattern="sinc", beamwidth_h=0.8, beamwidth_v=60.0,
-                        range_max=100.0, depression=20.0),
+    "starfish450": dict(frequency=450e3, beam_pattern="sinc", beamwidth_h=2.0, beamwidth_v=60.0,
+                        range_max=100.0, depression=30.0),
 }
