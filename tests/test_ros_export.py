@@ -209,3 +209,33 @@ def test_survey_mcap_has_the_vehicle_frames(tmp_path, capsys):
     assert main(["survey", os.path.join(SCENES, "box.xml"), "--lawnmower", "-1", "1", "-1", "1", "--depth", "0",
                  "-q", "-o", str(tmp_path / "other"), "--mcap", str(bag)]) == 1
     assert "exists" in capsys.readouterr().err and not (tmp_path / "other").exists()
+
+
+def test_sidescan_channels_each_in_their_own_frame(tmp_path):
+    """A side-scan ping is two groups, one per channel, each in its own sonar frame whose z axis is
+    that channel's boresight (port looks +y, starboard -y): the starboard rows are not drawn in
+    the port channel's frame. One odometry per ping, no fan picture (a line has no fan)."""
+    from mitsonar.frames import sidescan_rotation
+
+    n, bins = 3, 16
+    channel = np.repeat([0, 1], n)
+    poses = sidescan_rotation(channel, math.radians(15.0))
+    scan = Scan(intensity=np.zeros((2 * n, bins), np.float32), data=np.full((2 * n, bins), 7, np.uint8),
+                ranges=np.linspace(0.5, 20, bins), bearings=np.zeros(2 * n), poses=poses, range_min=0.0,
+                range_max=20.5, kind="sidescan", beamwidth_h=1.0, beamwidth_v=50.0,
+                times=np.tile(np.arange(n) * 0.1, 2), meta={"side": "both"})
+    path = tmp_path / "ss.mcap"
+    counts = write_mcap(path, [scan])
+    msgs = _read(path)
+    images = [d for topic, _, _, d in msgs if topic == "/sonar/image"]
+    assert len(images) == 2 * n and counts.get("/sonar/fan", 0) == 0 and counts["/odom"] == n
+    assert [im.header.frame_id for im in images] == ["sonar_port", "sonar_starboard"] * n
+    tfs = {t.child_frame_id: t for topic, _, _, d in msgs if topic == "/tf" for t in d.transforms}
+    for frame, sign in (("sonar_port", 1.0), ("sonar_starboard", -1.0)):
+        q = tfs[frame].transform.rotation
+        from mitsonar.trajectory import quat_to_matrix
+        rot = quat_to_matrix(np.array([q.x, q.y, q.z, q.w]))
+        assert np.sign(rot[1, 2]) == sign                 # the frame's z (boresight) looks to its side
+    for im in images:                                     # every beam on its own frame's boresight
+        d = im.beam_directions[0]
+        assert np.allclose([d.x, d.y, d.z], [0.0, 0.0, 1.0], atol=1e-9)

@@ -5,8 +5,11 @@ to add scans one at a time (a survey).
 Topics (see the README, "ROS 2 bags"):
 
 =================== ========================================= =====================================
-``/sonar/image``    marine_acoustic_msgs/ProjectedSonarImage  one per ping, frame ``sonar``
-``/sonar/fan``      sensor_msgs/Image (mono8)                 one per scan, the Cartesian fan
+``/sonar/image``    marine_acoustic_msgs/ProjectedSonarImage  one per ping, frame ``sonar`` (side-scan:
+                                                              one per channel, ``sonar_port`` and
+                                                              ``sonar_starboard``)
+``/sonar/fan``      sensor_msgs/Image (mono8)                 one per scan, the Cartesian fan (none
+                                                              for side-scan: a line has no fan)
 ``/sonar/waterfall`` sensor_msgs/Image (mono8)                one per scan, rows x bins
 ``/sonar/detections`` sensor_msgs/PointCloud2                 one per scan, frame ``map``
 ``/tf``             tf2_msgs/TFMessage                        one per ping
@@ -127,22 +130,27 @@ class McapBag:
         check_scan(scan, name)
         base = scan_base(scan)
         groups = M.pings(scan)
-        for i, (t, rows) in enumerate(groups):
+        previous = None
+        for i, (t, rows, frame) in enumerate(groups):
             ns = M.stamp_ns(self.start + base + t)
             sonar = M.sonar_pose(scan, rows[0])
+            first_of_ping = ns != previous      # a side-scan ping has one group per channel
+            previous = ns
             if self.trajectory is not None:
                 vehicle = self.trajectory.at(base + t)
                 tfs = [M.transform(vehicle, ns, M.WORLD_FRAME, M.VEHICLE_FRAME),
-                       M.transform(np.linalg.inv(vehicle) @ sonar, ns, M.VEHICLE_FRAME, M.SONAR_FRAME)]
+                       M.transform(np.linalg.inv(vehicle) @ sonar, ns, M.VEHICLE_FRAME, frame)]
                 odom = M.odometry(vehicle, ns, M.WORLD_FRAME, M.VEHICLE_FRAME, *M.velocity(self.trajectory, base + t))
             else:
-                tfs = [M.transform(sonar, ns, M.WORLD_FRAME, M.SONAR_FRAME)]
-                odom = M.odometry(sonar, ns, M.WORLD_FRAME, M.SONAR_FRAME)
+                tfs = [M.transform(sonar, ns, M.WORLD_FRAME, frame)]
+                odom = M.odometry(sonar, ns, M.WORLD_FRAME, frame)
             self._write("/tf", {"transforms": tfs}, ns)
-            self._write("/odom", odom, ns)
-            self._write("/sonar/image", M.projected_image(scan, rows, ns), ns)
+            if first_of_ping:
+                self._write("/odom", odom, ns)
+            self._write("/sonar/image", M.projected_image(scan, rows, ns, frame), ns)
             if i == 0:
-                self._write("/sonar/fan", M.fan_image(scan, ns), ns)
+                if scan.kind != "sidescan":   # a side-scan line has no fan to draw
+                    self._write("/sonar/fan", M.fan_image(scan, ns), ns)
                 self._write("/sonar/waterfall", M.waterfall(scan, ns), ns)
         last = M.stamp_ns(self.start + base + groups[-1][0])
         pts, levels = M.detections(scan, self.threshold)

@@ -19,6 +19,8 @@ from ..trajectory import matrix_to_quat
 WORLD_FRAME = "map"
 SONAR_FRAME = "sonar"
 VEHICLE_FRAME = "base_link"
+#: A side-scan head's two channels look opposite ways: each has its own sonar frame.
+CHANNEL_FRAMES = ("sonar_port", "sonar_starboard")
 
 PROJECTED = "marine_acoustic_msgs/msg/ProjectedSonarImage"
 IMAGE = "sensor_msgs/msg/Image"
@@ -46,12 +48,22 @@ def header(ns: int, frame: str) -> dict:
 
 
 def pings(scan) -> list:
-    """The scan's rows grouped by ping: ``[(time, row indices), ...]`` in time order (a multibeam
-    frame is one ping of all its rows; a mechanical sweep one ping per row)."""
+    """The scan's rows grouped by ping and sonar frame: ``[(time, row indices, frame), ...]`` in
+    time order (a multibeam frame is one ping of all its rows in ``sonar``; a mechanical sweep one
+    ping per row; a side-scan ping one group per channel, in ``sonar_port`` then
+    ``sonar_starboard``, since the two channels look opposite ways)."""
     times = np.asarray(scan.times, dtype=np.float64)
+    channel = scan.channel if getattr(scan, "kind", None) == "sidescan" else None
     out = []
     for t in np.unique(times):
-        out.append((float(t), np.flatnonzero(times == t)))
+        rows = np.flatnonzero(times == t)
+        if channel is None:
+            out.append((float(t), rows, SONAR_FRAME))
+            continue
+        for c, frame in enumerate(CHANNEL_FRAMES):
+            mine = rows[channel[rows] == c]
+            if len(mine):
+                out.append((float(t), mine, frame))
     return out
 
 
