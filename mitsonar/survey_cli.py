@@ -6,12 +6,14 @@ mechanical head, one per frame of a multibeam head, one per ``n_pings`` pings of
 position) and ``scan_00000_world.png`` (the first scan drawn in world coordinates, each ping from
 its own pose: the motion distortion shows); for a side-scan head instead ``scan_00000_waterfall.png``
 (the first scan's waterfall) and ``mosaic.png`` (+ ``mosaic.pgw``, ``mosaic.npz``: the survey's
-georeferenced mosaic, `mitsonar.mosaic`, 0.1 m cells, flat bottom at the measured altitude).
+georeferenced mosaic, `mitsonar.mosaic`, in cells of a range bin (0.1 m at least, coarser for a
+grid of more than 2e7 cells), flat bottom at the measured altitude).
 Everything is checked (trajectory file, scene, folder, that a scan fits in the track) before the
 first file is written; each file is written under a temporary name and renamed.
 """
 from __future__ import annotations
 
+import math
 import os
 
 
@@ -61,6 +63,7 @@ def cmd_survey(args):
 
         check_output(args.mcap, args.force, folder_may_be=out)
     ext = "." + args.format
+    mosaic = _mosaic_grid(scene, traj)              # a side-scan survey's mosaic, checked before any render
     try:   # checks every argument and the plan, then makes the folder; renders nothing yet
         scans = mitsonar.render_survey(scene, traj, out, spp=args.spp, seed=args.seed, max_scans=args.max_scans,
                                        ext=ext, progress=not args.quiet)
@@ -72,7 +75,7 @@ def cmd_survey(args):
 
         bag = McapBag(args.mcap, start=args.start, trajectory=traj, threshold=args.threshold, force=args.force)
     try:
-        n = _draw(args, scene, traj, out, scans, bag)
+        n = _draw(args, scene, traj, out, scans, bag, mosaic)
     except BaseException:
         if bag is not None:
             bag.discard()
@@ -84,14 +87,13 @@ def cmd_survey(args):
     return 0
 
 
-def _draw(args, scene, traj, out, scans, bag):
+def _draw(args, scene, traj, out, scans, bag, mosaic=None):
     import mitsonar
     from . import plots
     from .survey import SCAN_NAME
 
     positions = []
     n = 0
-    mosaic = None
     for scan in scans:
         if bag is not None:
             bag.add(scan, SCAN_NAME.format(n, "." + args.format))
@@ -110,19 +112,35 @@ def _draw(args, scene, traj, out, scans, bag):
     return n
 
 
-def _sidescan_products(scan, n, traj, out, mosaic):
-    """A side-scan survey's pictures: the first scan's waterfall; every scan into the mosaic (made
-    on the first scan, over the track's extent plus the swath)."""
+#: Most cells of a survey's mosaic: its cell grows beyond the sonar's range bin to stay under this.
+MOSAIC_CELLS = 2 * 10 ** 7
+
+
+def _mosaic_grid(scene, traj):
+    """The empty mosaic of a side-scan survey (None for other heads): the track's extent plus the
+    swath (``range_max``) each side, in cells of the sonar's range bin (0.1 m at least), coarser
+    when that would exceed `MOSAIC_CELLS`; built before any render so a bad grid costs nothing."""
     from .mosaic import MosaicBuilder
+    from .scene import sonar_of
+
+    sonar = sonar_of(scene)
+    if sonar.kind != "sidescan":
+        return None
+    p, r = traj.positions, float(sonar.range_max)
+    bounds = (p[:, 0].min() - r, p[:, 0].max() + r, p[:, 1].min() - r, p[:, 1].max() + r)
+    area = (bounds[1] - bounds[0]) * (bounds[3] - bounds[2])
+    cell = max(0.1, (sonar.range_max - sonar.range_min) / sonar.n_bins, math.sqrt(area / MOSAIC_CELLS))
+    return MosaicBuilder(bounds, cell)
+
+
+def _sidescan_products(scan, n, traj, out, mosaic):
+    """A side-scan survey's pictures: the first scan's waterfall; every scan into the mosaic."""
     from .survey import SCAN_NAME
 
     if n == 0:
         from .sidescan_plots import plot_waterfall
 
         plot_waterfall(scan, os.path.join(out, SCAN_NAME.format(0, "_waterfall.png")))
-    if mosaic is None:
-        p, r = traj.positions, scan.range_max
-        mosaic = MosaicBuilder((p[:, 0].min() - r, p[:, 0].max() + r, p[:, 1].min() - r, p[:, 1].max() + r), 0.1)
     return mosaic.add(scan)
 
 

@@ -300,3 +300,19 @@ def test_survey_command_writes_the_waterfall_and_the_mosaic(tmp_path, capsys):
     assert m.count[row, col] > 0 and np.isfinite(m.image[row, col])
     row, col = m.world_to_pixel(0.5, 11.9)
     assert m.count[row, col] == 0 and np.isnan(m.image[row, col])
+
+
+def test_long_range_survey_mosaic_is_sized_before_any_render(mitsonar_mod):
+    """A 600 m head over a 1 km line: the mosaic's cell grows from the range bin so that the grid
+    fits (at most 2e7 cells), decided before the first render; a mechanical head gets none."""
+    from mitsonar.survey_cli import MOSAIC_CELLS, _mosaic_grid
+
+    scene = mitsonar_mod.load_scene(scene_xml(sonar_xml(kind="sidescan", preset="klein3000_100k", n_bins=1000),
+                                              seabed(-20.0, 0.5)))
+    track = mitsonar_mod.Trajectory.lawnmower(0.0, 1000.0, 0.0, 0.0, 10.0, 2.0, depth=-5.0)
+    grid = _mosaic_grid(scene, track)
+    h, w = grid.shape
+    assert h * w <= MOSAIC_CELLS and grid.transform[0] >= 0.6        # a bin: 600 m / 1000
+    assert w * grid.transform[0] >= 1000.0 + 2 * 600.0
+    mech = mitsonar_mod.load_scene(scene_xml(sonar_xml(), seabed(-5.0, 0.5)))
+    assert _mosaic_grid(mech, track) is None
