@@ -78,7 +78,9 @@ class SonarSensor(mi.Sensor):
                                   two-way flight
     beam_pattern     gaussian     ``gaussian``, ``sinc``, ``uniform`` or ``table``
     beamwidth_h      3            deg, full -3 dB one-way width across the scan plane
+                                  (sidescan: along track, default 1)
     beamwidth_v      35           deg, full -3 dB one-way width along the scan axis
+                                  (sidescan: the across-track fan, default 50)
     beam_table       (none)       CSV (axis, angle_deg, gain_db) for ``table``
     sound_speed      1500         m/s
     absorption       0            dB/m, applied to the whole two-way path
@@ -130,8 +132,10 @@ class SonarSensor(mi.Sensor):
         self.absorption = num("absorption", 0.0)
         self.ping_period = num("ping_period", None)
         pattern = text(props, "beam_pattern", preset.get("beam_pattern", "gaussian"), "sonar")
-        bw_h = num("beamwidth_h", preset.get("beamwidth_h", 3.0))
-        bw_v = num("beamwidth_v", preset.get("beamwidth_v", 35.0))
+        # A side-scan head's beam is narrow along track and a wide fan across it.
+        beam = (1.0, 50.0) if self.kind == "sidescan" else (3.0, 35.0)
+        bw_h = num("beamwidth_h", preset.get("beamwidth_h", beam[0]))
+        bw_v = num("beamwidth_v", preset.get("beamwidth_v", beam[1]))
         table_path = text(props, "beam_table", "", "sonar")
         frequency = num("frequency", None)
         if frequency is None and pattern == "sinc":
