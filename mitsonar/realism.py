@@ -78,7 +78,7 @@ def speckle_correlation(a, b, mean_bytes, *, band: float = 16.0, lo: float = 192
     m = np.asarray(mean_bytes, dtype=np.float64).ravel()
     total, weight = 0.0, 0
     for start in np.arange(lo, hi, band):
-        sel = (m >= start) & (m < start + band)
+        sel = (m >= start) & (m < min(start + band, hi))
         if sel.sum() < min_bins or a[sel].std() == 0 or b[sel].std() == 0:
             continue
         total += np.corrcoef(a[sel], b[sel])[0, 1] * sel.sum()

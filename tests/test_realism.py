@@ -53,8 +53,8 @@ def _quiet_bytes(scan):
 
 def test_still_head_keeps_its_speckle_whatever_the_noise_and_path_seeds(mitsonar_mod, box):
     """Same pose: another receiver-noise seed keeps the pattern (byte correlation > 0.9 over echo
-    bins 20 dB or more above the noise floor, in bands of like level; 0.93 measured), and so does
-    another path seed (> 0.85: the bins' Monte-Carlo means differ a little too; 0.91 measured)."""
+    bins 20 dB or more above the noise floor, in bands of like level; 0.92 measured), and so does
+    another path seed (> 0.85: the bins' Monte-Carlo means differ a little too; 0.88 measured)."""
     a = mitsonar_mod.render_scan(box, spp=1024, seed=3, electronics_seed=1)
     b = mitsonar_mod.render_scan(box, spp=1024, seed=3, electronics_seed=2)
     c = mitsonar_mod.render_scan(box, spp=1024, seed=4, electronics_seed=2)
@@ -77,9 +77,17 @@ def test_speckle_decorrelates_over_an_aperture_and_a_beam_width(mitsonar_mod, bo
     a = mitsonar_mod.render_scan(box, spp=1024, seed=3, electronics_seed=1)
     mean = _quiet_bytes(a)
 
+    moved = []
+
+    def residuals(scan, level):
+        """Speckled bytes minus their noise-free level, over the unsaturated echo bins."""
+        echo = (level >= 192) & (level < 255)
+        return scan.data[echo].astype(np.float64) - level[echo]
+
     def corr(pose):
-        return speckle_correlation(a.data, mitsonar_mod.render_scan(box, spp=1024, seed=3, electronics_seed=2,
-                                                                    pose=pose).data, mean)
+        scan = mitsonar_mod.render_scan(box, spp=1024, seed=3, electronics_seed=2, pose=pose)
+        moved.append(residuals(scan, _quiet_bytes(scan)))
+        return speckle_correlation(a.data, scan.data, mean)
 
     def shifted(f):
         t = base.copy()
@@ -90,6 +98,11 @@ def test_speckle_decorrelates_over_an_aperture_and_a_beam_width(mitsonar_mod, bo
     full_turn, quarter_turn = (corr(base @ bearing_rotation(math.radians(f * 3.0))) for f in (1.0, 0.25))
     assert full_shift < 0.3 and full_turn < 0.3
     assert quarter_shift > full_shift + 0.2 and quarter_turn > full_turn + 0.2
+    # the pattern moved, its distribution did not: the bytes' deviations from their noise-free
+    # level keep their mean (within 3) and spread (within 10 %)
+    still = residuals(a, mean)
+    for values in moved:
+        assert abs(values.mean() - still.mean()) < 3 and abs(values.std() / still.std() - 1) < 0.1
 
 
 def test_cell_speckle_is_fully_developed_and_follows_the_gaussian_beam_law():
