@@ -123,7 +123,7 @@ class AcousticBSDF(mi.BSDF):
     def traverse(self, callback):
         callback.put("diffuse", self.diffuse, mi.ParamFlags.Differentiable)
         callback.put("specular", self.specular, mi.ParamFlags.Differentiable)
-        callback.put("shininess", self.shininess, mi.ParamFlags.NonDifferentiable)
+        callback.put("shininess", self.shininess, mi.ParamFlags.Differentiable)
 
     def parameters_changed(self, keys):
         vals = {k: float(getattr(self, k)[0]) for k in ("diffuse", "specular", "shininess")}
