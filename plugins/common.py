@@ -183,7 +183,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
         derivative means: ``plugins/path_replay.py``."""
         from .path_replay import edge_bins
 
-        setup, seed, passes = self._gradient_setup(scene, sensor, seed, spp)
+        setup, seed, passes = self._gradient_setup(scene, params, sensor, seed, spp)
         n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
         bins = setup.bins
         with dr.resume_grad():
@@ -210,7 +210,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
         parameters with gradients enabled, by path replay (memory independent of ``spp``)."""
         from .path_replay import Adjoint
 
-        setup, seed, passes = self._gradient_setup(scene, sensor, seed, spp)
+        setup, seed, passes = self._gradient_setup(scene, params, sensor, seed, spp)
         n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
         g = dr.detach(mi.TensorXf(grad_in)).array
         if dr.width(g) != n_rows * n_bins:
@@ -224,7 +224,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
                 self.sample(setup, ping, samples, mode=dr.ADMode.Backward, δ=adjoint, state_in=s)
             dr.eval()
 
-    def _gradient_setup(self, scene, sensor, seed, spp):
+    def _gradient_setup(self, scene, params, sensor, seed, spp):
         """(attached `PathSetup`, seed as an int, passes [(start, count)]) of a gradient render;
         refuses a variant without automatic differentiation in one line."""
         variant = mi.variant()
@@ -234,6 +234,9 @@ class SonarIntegrator(mi.SamplingIntegrator):
                              f"variant is {variant}")
         if not hasattr(self, "lanes"):
             raise ValueError(f"{self.name}: gradients are rendered by the sonar_tof integrator only")
+        from .path_replay import check_attached
+
+        check_attached(params, self.name)
         sensor = resolve_sensor(scene, sensor)
         spp = int(spp) or sensor.sampler().sample_count()
         if spp < 1:

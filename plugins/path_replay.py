@@ -85,6 +85,35 @@ def _relative(value):
     return dr.select(ok, value / dr.select(ok, dr.detach(value), 1.0), 0.0)
 
 
+def differentiable_keys(params) -> list:
+    """The keys of ``params`` (``mi.SceneParameters``) whose derivatives the sonar integrators
+    compute: the sonar sensor's and the acoustic BSDF's differentiable parameters, and the
+    ``data``/``value`` of a texture that is an acoustic BSDF's ``diffuse``."""
+    import re
+
+    from .acoustic_bsdf import AcousticBSDF
+    from .sonar_sensor import SonarSensor
+
+    owner = {k: params.properties[k][2] for k in params.keys()}
+    bsdfs = [k.rsplit(".", 1)[0] for k, node in owner.items() if isinstance(node, AcousticBSDF)]
+    return [k for k, node in owner.items()
+            if not params.flags(k) & mi.ParamFlags.NonDifferentiable
+            and (isinstance(node, (SonarSensor, AcousticBSDF))
+                 or any(re.fullmatch(re.escape(b) + r"\.diffuse\.(data|value)", k) for b in bsdfs))]
+
+
+def check_attached(params, source):
+    """Refuse, in one line, parameters with gradients enabled that the sonar integrators do not
+    differentiate (a shape's ``to_world``, a film's size): their derivative would silently be 0."""
+    if params is None or not hasattr(params, "properties"):
+        return
+    allowed = set(differentiable_keys(params))
+    for k in params.keys():
+        if k not in allowed and dr.grad_enabled(params[k]):
+            raise ValueError(f"{source}: parameter {k!r} has gradients enabled but is not differentiated by the "
+                             f"sonar integrators; allowed: {', '.join(sorted(allowed))}")
+
+
 def acoustic_bsdfs(scene):
     """``[(bsdf, instance id)]`` of the scene's ``acoustic`` BSDFs attached directly to shapes."""
     out = {}
