@@ -268,6 +268,20 @@ class SonarIntegrator(mi.SamplingIntegrator):
         """
         if mode is None or (mode == dr.ADMode.Primal and δ is None):
             return self._sample_primal(setup, ping, samples, record, active)
+        if mode == dr.ADMode.Primal:
+            # The reverse pass's primal replay is the primal path itself: per lane, the sum
+            # S = sum_k a_k E_k and the bounces whose echo reached the transducer (bit k), so that
+            # the adjoint replay needs no visibility rays.
+            n = dr.width(ping)
+            total, seen = dr.zeros(mi.Float, n), dr.zeros(mi.UInt32, n)
+            lane = dr.arange(mi.UInt32, n)
+
+            def weigh(k, rng, energy, valid, hit):
+                dr.scatter_add(total, δ.own_bin(ping, rng, valid) * energy, lane, valid)
+                dr.scatter_add(seen, mi.UInt32(1) << k, lane, valid & (k < 32))
+
+            self._sample_primal(setup, ping, samples, weigh, active)
+            return total, seen
         from .path_replay import replay
 
         return replay(setup, mode, ping, samples, δ, state_in, record, active)

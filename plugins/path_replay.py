@@ -56,6 +56,11 @@ class Adjoint:
     def __init__(self, bins, grad):
         self.bins, self.grad = bins, grad
 
+    def own_bin(self, ping, rng, valid):
+        """The adjoint of the bin an echo of range ``rng`` lands in (0 outside the window)."""
+        b, inside = self.bins.index(rng, valid)
+        return dr.gather(mi.Float, self.grad, self.bins.flat(ping, b), inside)
+
     def weights(self, ping, rng, valid):
         """``(a, a_r)``: ``a`` the adjoint of the echo's own bin (0 outside the window), ``a_r`` the
         rate at which moving the echo by dr changes the adjoint-weighted scan (box kernel: the
@@ -154,13 +159,20 @@ def _project(v, w, n, ndw):
 def replay(setup, mode, ping, samples, adjoint=None, state_in=None, record=None, active=True):
     """One AD pass over one path per lane (see the module docstring).
 
-    ``mode`` ``dr.ADMode.Primal``: returns ``S = sum_k a_k E_k`` per lane (``adjoint`` weights).
-    ``dr.ADMode.Backward``: back-propagates ``state_in`` (the ``S`` of the primal replay) and the
-    echoes' adjoints into the parameters with gradients enabled; returns None.
+    ``mode`` ``dr.ADMode.Primal``: returns ``S = sum_k a_k E_k`` per lane (``adjoint`` weights;
+    `SonarIntegrator.sample` runs the primal path function for this instead, which also returns
+    which bounces' echoes were seen). ``dr.ADMode.Backward``: back-propagates ``state_in`` (``S``,
+    or ``(S, seen)`` from `SonarIntegrator.sample`: then bit k of ``seen`` replaces bounce k's
+    visibility ray, for k < 32) and the echoes' adjoints into the parameters with gradients
+    enabled; returns None.
     ``dr.ADMode.Forward``: calls ``record(k, range, energy, valid, hit, d_energy, d_range)`` with
     each echo's derivatives along the parameters' tangents; returns None.
     """
     primal = mode == dr.ADMode.Primal
+    seen = None
+    if isinstance(state_in, tuple):
+        state_in, seen = state_in
+    known = seen is not None and setup.depth <= 32
     backward = mode == dr.ADMode.Backward
     forward = mode == dr.ADMode.Forward
     scene = setup.scene
@@ -216,7 +228,10 @@ def replay(setup, mode, ping, samples, adjoint=None, state_in=None, record=None,
         dist = dr.norm(to_tx)
         r_det = 0.5 * (path_length + dist)
         echo = active & (dist > 0)
-        echo &= ~scene.ray_test(si.spawn_ray_to(origin), echo)
+        if dr.hint(known, mode="scalar"):
+            echo &= ((seen >> depth) & 1) != 0
+        else:
+            echo &= ~scene.ray_test(si.spawn_ray_to(origin), echo)
         a, a_r = mi.Float(0.0), mi.Float(0.0)
         if dr.hint(not forward, mode="scalar"):
             a, a_r = adjoint.weights(ping, r_det, echo)

@@ -252,7 +252,14 @@ def test_replay_retraces_the_primal_paths(mitsonar_mod):
     ping, samples = integrator.lanes(2, SEED, 0, spp)
     with dr.suspend_grad():
         s = integrator.sample(setup, ping, samples, mode=dr.ADMode.Primal, δ=adjoint)
-    assert float(dr.sum(s)[0]) / spp == pytest.approx(hist.sum(), rel=1e-5)
+    total, seen = s
+    assert float(dr.sum(total)[0]) / spp == pytest.approx(hist.sum(), rel=1e-5)
+    # and the same sum by the replay itself (visibility rays traced again)
+    with dr.suspend_grad():
+        again = module("path_replay").replay(setup, dr.ADMode.Primal, ping, samples, adjoint)
+    assert float(dr.sum(again)[0]) / spp == pytest.approx(hist.sum(), rel=1e-5)
+    bits = np.asarray(seen)
+    assert bits.max() < 8 and (bits & 1).any() and (bits & 4).any()
 
 
 def test_primal_is_unchanged_by_gradient_tracking(mitsonar_mod):
