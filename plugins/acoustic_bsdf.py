@@ -10,7 +10,7 @@ from .materials import PRESETS
 from .props import number, text
 
 # What each parameter takes, for the message on a wrong XML type (an <rgb>, a <texture>).
-_EXPECTED = {"diffuse": "a <float> in [0, 1] or a <texture>", "specular": "a <float> in [0, 1]", "shininess": "a <float> >= 0"}
+_EXPECTED = {"diffuse": "a <float> in [0, 1]", "specular": "a <float> in [0, 1]", "shininess": "a <float> >= 0"}
 
 
 class AcousticBSDF(mi.BSDF):

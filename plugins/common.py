@@ -267,7 +267,8 @@ class SonarIntegrator(mi.SamplingIntegrator):
         in ``dr.ADMode.Forward``).
         """
         if mode is None or (mode == dr.ADMode.Primal and δ is None):
-            return self._sample_primal(setup, ping, samples, record, active)
+            # Called unbound too (``echo_path.trace_echoes`` passes self=None).
+            return SonarIntegrator._sample_primal(self, setup, ping, samples, record, active)
         if mode == dr.ADMode.Primal:
             # The reverse pass's primal replay is the primal path itself: per lane, the sum
             # S = sum_k a_k E_k and the bounces whose echo reached the transducer (bit k), so that
@@ -280,7 +281,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
                 dr.scatter_add(total, δ.own_bin(ping, rng, valid) * energy, lane, valid)
                 dr.scatter_add(seen, mi.UInt32(1) << k, lane, valid & (k < 32))
 
-            self._sample_primal(setup, ping, samples, weigh, active)
+            SonarIntegrator._sample_primal(self, setup, ping, samples, weigh, active)
             return total, seen
         from .path_replay import replay
 
