@@ -186,6 +186,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
         setup, seed, passes = self._gradient_setup(scene, params, sensor, seed, spp)
         n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
         bins = setup.bins
+        self._check_forward(params, setup)
         with dr.resume_grad():
             setup.ad.seal_forward()
         grad = dr.zeros(mi.Float, n_rows * n_bins)
@@ -223,6 +224,18 @@ class SonarIntegrator(mi.SamplingIntegrator):
                 s = self.sample(setup, ping, samples, mode=dr.ADMode.Primal, δ=adjoint)
                 self.sample(setup, ping, samples, mode=dr.ADMode.Backward, δ=adjoint, state_in=s)
             dr.eval()
+
+    def _check_forward(self, params, setup):
+        """Forward mode reaches an acoustic BSDF's parameters only where the BSDF is a shape's own
+        (`path_replay._eval_attached`): refuse tangents on one nested in another BSDF (``twosided``)."""
+        if params is None or not hasattr(params, "properties"):
+            return
+        direct = {id(b) for b, _ in setup.ad.bsdfs}
+        for k in params.keys():
+            node = params.properties[k][2]
+            if type(node).__name__ == "AcousticBSDF" and id(node) not in direct and dr.grad_enabled(params[k]):
+                raise ValueError(f"{self.name}: forward-mode derivatives of {k!r} need its acoustic BSDF attached "
+                                 f"directly to the shapes (not inside a twosided BSDF); use reverse mode (dr.backward)")
 
     def _gradient_setup(self, scene, params, sensor, seed, spp):
         """(attached `PathSetup`, seed as an int, passes [(start, count)]) of a gradient render;

@@ -319,3 +319,30 @@ def test_non_ad_variant_is_refused_in_one_line(mitsonar_mod, monkeypatch):
     with pytest.raises(ValueError, match=r"sonar_tof: gradients need a Mitsuba variant with automatic "
                                          r"differentiation .*; the active variant is"):
         sc.integrator().render_backward(sc, None, mi.TensorXf(np.zeros((2, 48, 1), np.float32)))
+
+
+def test_twosided_acoustic_reverse_mode_and_forward_refusal(mitsonar_mod):
+    """An acoustic BSDF inside ``twosided``: reverse mode reaches it (linear in diffuse, as above);
+    forward mode cannot (the parameter is read inside Mitsuba's call of the wrapper) and says so."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from conftest import rectangle_xml
+
+    head = sonar_xml(frame_matrix((0.4, 0.0, -1.0), (0.0, 1.0, 0.0)), n_pings=2, n_bins=48, range_min=1.0,
+                     range_max=4.0, bearing_step=4.0)
+    bsdf = '<bsdf type="twosided" id="mat">' + acoustic_xml(0.35, 0.0) + "</bsdf>"
+    sc = mitsonar_mod.load_scene(scene_xml(head, bsdf, rectangle_xml(plane(-2.0), '<ref id="mat"/>'),
+                                           integrator='<integrator type="sonar_tof"><integer name="max_depth" '
+                                                      'value="1"/></integrator>'))
+    p = mi.traverse(sc)
+    key = "mat.brdf_0.diffuse"
+    dr.enable_grad(p[key])
+    p.update()
+    total = dr.sum(mi.render(sc, p, spp=SPP, seed=SEED).array)
+    dr.backward(total)
+    assert float(dr.grad(p[key])[0]) == pytest.approx(float(total[0]) / 0.35, rel=1e-4)
+    total = dr.sum(mi.render(sc, p, spp=SPP, seed=SEED).array)
+    with pytest.raises(ValueError, match=r"sonar_tof: forward-mode derivatives of 'mat\.brdf_0\.diffuse' need its "
+                                         r"acoustic BSDF attached directly to the shapes .*use reverse mode"):
+        dr.forward(p[key])
