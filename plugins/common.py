@@ -99,7 +99,7 @@ class AttachedSetup:
         self.frames = _AttachedFrames(setup.frames, diff["to_world"], head, sensor.ping_poses())
         from .path_replay import acoustic_bsdfs
 
-        self.bsdfs = acoustic_bsdfs(setup.scene)
+        self.bsdfs, self.other_bsdfs = acoustic_bsdfs(setup.scene)
         self.connect = None
         if setup.connect is not None:
             frames, fan = setup.connect

@@ -120,13 +120,17 @@ def check_attached(params, source):
 
 
 def acoustic_bsdfs(scene):
-    """``[(bsdf, instance id)]`` of the scene's ``acoustic`` BSDFs attached directly to shapes."""
-    out = {}
+    """``([(bsdf, instance id)], others)``: the scene's ``acoustic`` BSDFs attached directly to
+    shapes, and whether any shape has another BSDF."""
+    out, others = {}, False
     for shape in scene.shapes():
         b = shape.bsdf()
-        if b is not None and type(b).__name__ == "AcousticBSDF" and id(b) not in out:
-            out[id(b)] = (b, dr.reinterpret_array(mi.UInt32, mi.BSDFPtr(b))[0])
-    return list(out.values())
+        if b is not None and type(b).__name__ == "AcousticBSDF":
+            if id(b) not in out:
+                out[id(b)] = (b, dr.reinterpret_array(mi.UInt32, mi.BSDFPtr(b))[0])
+        else:
+            others = True
+    return list(out.values()), others
 
 
 def _eval_attached(ad, bsdf, ctx, si, wo, active, forward):
@@ -140,6 +144,8 @@ def _eval_attached(ad, bsdf, ctx, si, wo, active, forward):
         m = active & (ids == instance)
         value = dr.select(m, b.eval(ctx, si, wo, m).x, value)
         known |= m
+    if not ad.other_bsdfs:
+        return value
     others = active & ~known
     if forward:
         with dr.suspend_grad():
