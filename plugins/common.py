@@ -15,6 +15,11 @@ Echo energy (thesis section 2.3, with next-event estimation towards the transduc
 at range ``L / 2`` (``L`` the total path length summed from the hit points), with throughput
 starting at ``B_tx / pdf`` for the emitted direction (on-axis source intensity 1 W/sr, on-axis
 receive aperture 1 m^2) and multiplied by the BSDF sample weight at every bounce.
+
+Gradients: `SonarIntegrator.sample` takes Mitsuba's AD arguments (``mode``, ``δ``, ``state_in``)
+and ``render_forward``/``render_backward`` follow Mitsuba's ``RBIntegrator``, so ``mi.render(scene,
+params)`` is differentiable on the AD variants; the replayed path and what its derivative means:
+``plugins/path_replay.py``.
 """
 from __future__ import annotations
 
