@@ -229,6 +229,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
                 s = self.sample(setup, ping, samples, mode=dr.ADMode.Primal, δ=adjoint)
                 self.sample(setup, ping, samples, mode=dr.ADMode.Backward, δ=adjoint, state_in=s)
             dr.eval()
+            del s  # this pass's per-path state goes before the next pass makes its own
 
     def _check_forward(self, params, setup):
         """Forward mode reaches an acoustic BSDF's parameters only where the BSDF is a shape's own
@@ -264,8 +265,11 @@ class SonarIntegrator(mi.SamplingIntegrator):
         setup = self.setup(scene, sensor)
         with dr.resume_grad():
             setup.attach()
-        per_pass = max(1, min(spp, GRADIENT_LANES_PER_PASS // sensor.n_pings))
-        passes = [(s, min(per_pass, spp - s)) for s in range(0, spp, per_pass)]
+        # Passes of (nearly) equal size, each at most GRADIENT_LANES_PER_PASS lanes: what a pass
+        # allocates is reused by the next, so memory stays that of one pass whatever the spp.
+        n = -(-spp // max(1, GRADIENT_LANES_PER_PASS // sensor.n_pings))
+        sizes = [spp // n + (1 if i < spp % n else 0) for i in range(n)]
+        passes = [(sum(sizes[:i]), sizes[i]) for i in range(n)]
         return setup, seed, passes
 
     def setup(self, scene, sensor=0, pose=None, max_depth=None) -> PathSetup:

@@ -45,7 +45,6 @@ import mitsuba as mi
 from .samples import DIMS_EMIT, DIMS_PER_BOUNCE
 
 _NO_GRAD_OK = dr.ADFlag.Default | dr.ADFlag.AllowNoGrad
-_KEEP_EDGES = dr.ADFlag.ClearInterior | dr.ADFlag.ClearInput | dr.ADFlag.AllowNoGrad
 _KEEP_TANGENTS = dr.ADFlag.ClearNone | dr.ADFlag.AllowNoGrad
 
 
@@ -184,15 +183,10 @@ def replay(setup, mode, ping, samples, adjoint=None, state_in=None, record=None,
     scene = setup.scene
     ad = setup.ad
     x_ax, y_ax, z_ax, origin = setup.frames.gather(ping)
-    with dr.resume_grad(when=not primal):
-        d_local, weight = ad.beam.sample(samples.get2(0), active)
-        rel0 = _relative(weight)
-        if dr.hint(backward, mode="scalar"):
-            dr.backward_from(dr.select(active, state_in * rel0, 0.0), flags=_KEEP_EDGES)
-        rel = mi.Float(0.0)
-        if dr.hint(forward, mode="scalar"):
-            rel = mi.Float(dr.forward_to(rel0, flags=_KEEP_TANGENTS))
-    d_local, weight = dr.detach(d_local), dr.detach(weight)
+    d_local, weight = setup.sensor.beam.sample(samples.get2(0), active)
+    # The emitted direction's angles: the emission weight B / pdf differentiates as dB / B there.
+    az0, el0 = dr.atan2(d_local.x, d_local.z), dr.safe_asin(d_local.y)
+    rel = mi.Float(0.0)
     ray = mi.Ray3f(origin, x_ax * d_local.x + y_ax * d_local.y + z_ax * d_local.z)
     throughput = mi.Float(weight)
     path_length = mi.Float(0.0)
@@ -246,6 +240,11 @@ def replay(setup, mode, ping, samples, adjoint=None, state_in=None, record=None,
         bs, bsdf_weight = bsdf.sample(ctx, si, samples.get(base), samples.get2(base + 1), active)
 
         with dr.resume_grad(when=not primal):
+            # The emission weight's derivative, taken at the first bounce (inside the loop, so that
+            # nothing of a pass outlives it in the AD graph).
+            emit = dr.select(first, _relative(ad.beam.eval(az0, el0)), 0.0)
+            if dr.hint(forward, mode="scalar"):
+                rel += dr.forward_to(emit, flags=_KEEP_TANGENTS)
             # The echo, attached to the parameters and (through the Jacobians) to the head's pose.
             ax, ay, az, ao = ad.frames.gather(ping)
             w0 = ax * d_local.x + ay * d_local.y + az * d_local.z
@@ -280,7 +279,7 @@ def replay(setup, mode, ping, samples, adjoint=None, state_in=None, record=None,
             elif dr.hint(backward, mode="scalar"):
                 rest -= dr.select(echo, a * e_det, 0.0)
                 objective = (dr.select(echo, a * energy + e_det * a_r * rng, 0.0)
-                             + dr.select(go_on, rest * beta, 0.0))
+                             + dr.select(go_on, rest * beta, 0.0) + dr.select(active, state_in * emit, 0.0))
                 dr.backward_from(objective, flags=_NO_GRAD_OK)
             else:
                 d_energy, d_range, d_beta = dr.forward_to(energy, rng, beta, flags=_KEEP_TANGENTS)
