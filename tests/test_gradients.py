@@ -344,3 +344,12 @@ def test_twosided_acoustic_reverse_mode_and_forward_refusal(mitsonar_mod):
     with pytest.raises(ValueError, match=r"sonar_tof: forward-mode derivatives of 'mat\.brdf_0\.diffuse' need its "
                                          r"acoustic BSDF attached directly to the shapes .*use reverse mode"):
         dr.forward(p[key])
+
+
+def test_metropolis_integrator_refuses_gradients(mitsonar_mod):
+    import mitsuba as mi
+
+    sc = scene(mitsonar_mod, [plane(-2.0)])
+    mlt = mi.load_dict({"type": "sonar_mlt"})
+    with pytest.raises(ValueError, match=r"sonar_mlt: gradients are rendered by the sonar_tof integrator only"):
+        mlt.render_backward(sc, None, mi.TensorXf(np.zeros((2, 48, 1), np.float32)))
