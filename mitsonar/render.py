@@ -243,3 +243,35 @@ def speckle_geometry(sonar) -> dict:
     """The head's numbers that shape its scene speckle (`Electronics.scene_speckle`'s keywords)."""
     return {"sound_speed": sonar.sound_speed, "beamwidth_h": sonar.beam.beamwidth_h,
             "frequency": sonar.beam.frequency, "aperture_h": getattr(sonar.beam, "aperture_h", None)}
+
+
+def scan_parameters(scene, keys=None):
+    """The scene's differentiable scan parameters, for ``mi.render(scene, params, ...)``.
+
+    ``keys``: a name or a list of names (None: all of them) among the parameters mitsonar's
+    plugins differentiate: the sonar sensor's ``<id>.to_world``, ``<id>.absorption``,
+    ``<id>.beamwidth_h``/``_v`` (gaussian beam) and the acoustic BSDF's ``<id>.diffuse``,
+    ``.specular``, ``.shininess`` (a textured diffuse: its texture's ``<id>.diffuse.data``).
+    Returns ``mi.traverse(scene)`` kept to those keys. Refused in one line: a variant without
+    automatic differentiation, or a key that is not one of these (the message lists them).
+    """
+    import re
+
+    import drjit as dr
+    import mitsuba as mi
+
+    from .plugins import module
+
+    ensure_variant()
+    if not dr.is_diff_v(mi.Float):
+        raise SceneError(f"scan_parameters: gradients need a Mitsuba variant with automatic differentiation "
+                         f"(llvm_ad_mono, cuda_ad_mono); the active variant is {mi.variant()}")
+    params = mi.traverse(scene)
+    allowed = module("path_replay").differentiable_keys(params)
+    wanted = allowed if keys is None else [keys] if isinstance(keys, str) else list(keys)
+    for k in wanted:
+        if k not in allowed:
+            raise SceneError(f"scan_parameters: {k!r} is not a differentiable parameter of this scene; "
+                             f"allowed: {', '.join(allowed) or 'none'}")
+    params.keep([re.escape(k) + "$" for k in wanted])
+    return params

@@ -28,14 +28,19 @@ class AcousticBSDF(mi.BSDF):
                            (concrete qualities of thesis Table 2.2, ``water_calm``,
                            ``sand``, ``rock``, Lambert seabeds ``seabed_sand``, ``_mud``,
                            ``_gravel``, ``_rock``, ``_clay``); explicit values override it
-    diffuse      0.1       fraction of incident energy scattered diffusely (>= 0)
+    diffuse      0.1       fraction of incident energy scattered diffusely (>= 0); a
+                           ``<float>`` or a ``<texture>`` (e.g. a ``bitmap`` of
+                           reflectance over a seabed, by the shape's uv)
     specular     0.6       fraction of incident energy in the Phong lobe (>= 0);
                            ``diffuse + specular <= 1`` (energy conservation)
     shininess    30        Phong exponent n (>= 0); large is mirror-like
     ============ ========= ==========================================================
 
     ``diffuse``, ``specular`` and ``shininess`` are exposed through ``mi.traverse`` and stay opaque,
-    so changing them does not recompile the render kernels.
+    so changing them does not recompile the render kernels; all three are differentiable. A
+    textured ``diffuse`` is exposed as Mitsuba exposes textured parameters, by the texture's own
+    parameters (``<bsdf id>.diffuse.data`` for a ``bitmap``). ``diffuse + specular <= 1`` is checked
+    with the texture's maximum.
     """
 
     def __init__(self, props: mi.Properties):
@@ -48,7 +53,13 @@ class AcousticBSDF(mi.BSDF):
         else:
             base = {"diffuse": 0.1, "specular": 0.6, "shininess": 30.0}
         self.preset = preset
-        values = {k: number(props, k, base[k], "acoustic", _EXPECTED[k]) for k in ("diffuse", "specular", "shininess")}
+        self.diffuse_texture = None
+        if "diffuse" in props and isinstance(props.get("diffuse"), mi.Texture):
+            self.diffuse_texture = props.get("diffuse")
+        values = {k: number(props, k, base[k], "acoustic", _EXPECTED[k]) for k in ("diffuse", "specular", "shininess")
+                  if not (k == "diffuse" and self.diffuse_texture is not None)}
+        if self.diffuse_texture is not None:
+            values["diffuse"] = texture_max(self.diffuse_texture)
         check_parameters(**values)
         self.diffuse = dr.opaque(mi.Float, values["diffuse"])
         self.specular = dr.opaque(mi.Float, values["specular"])
@@ -67,23 +78,29 @@ class AcousticBSDF(mi.BSDF):
         valid = (cos_i > 0) & (cos_o > 0)
         return cos_o, phong, valid
 
-    def _spec_prob(self):
-        total = self.diffuse + self.specular
+    def _diffuse(self, si, active=True):
+        """The diffuse coefficient at ``si``: the float, or the texture's value there."""
+        if self.diffuse_texture is None:
+            return self.diffuse
+        return self.diffuse_texture.eval_1(si, active)
+
+    def _spec_prob(self, si):
+        total = self._diffuse(si) + self.specular
         return dr.select(total > 0, self.specular / total, 0.0)
 
     def _eval(self, si, wo):
         cos_o, phong, valid = self._lobe_terms(si, wo)
-        f = self.diffuse * dr.inv_pi + self.specular * (self.shininess + 2) * (0.5 * dr.inv_pi) * phong
+        f = self._diffuse(si) * dr.inv_pi + self.specular * (self.shininess + 2) * (0.5 * dr.inv_pi) * phong
         return dr.select(valid, f * cos_o, 0.0), cos_o, phong, valid
 
-    def _pdf(self, cos_o, phong, valid):
-        p_s = self._spec_prob()
+    def _pdf(self, si, cos_o, phong, valid):
+        p_s = self._spec_prob(si)
         pdf = (1 - p_s) * cos_o * dr.inv_pi + p_s * (self.shininess + 1) * (0.5 * dr.inv_pi) * phong
         return dr.select(valid, pdf, 0.0)
 
     # ------------------------------------------------------------------ BSDF interface
     def sample(self, ctx, si, sample1, sample2, active=True):
-        p_s = self._spec_prob()
+        p_s = self._spec_prob(si)
         pick_spec = sample1 < p_s
         # Phong lobe about the mirror direction: cos(alpha) = u^(1/(n+1)).
         mirror = mi.Vector3f(-si.wi.x, -si.wi.y, si.wi.z)
@@ -95,7 +112,7 @@ class AcousticBSDF(mi.BSDF):
         wo = dr.select(pick_spec, wo_spec, wo_diff)
 
         value, cos_o, phong, valid = self._eval(si, wo)
-        pdf = self._pdf(cos_o, phong, valid)
+        pdf = self._pdf(si, cos_o, phong, valid)
         bs = mi.BSDFSample3f()
         bs.wo = wo
         bs.pdf = pdf
@@ -113,26 +130,43 @@ class AcousticBSDF(mi.BSDF):
 
     def pdf(self, ctx, si, wo, active=True):
         _, cos_o, phong, valid = self._eval(si, wo)
-        return dr.select(active, self._pdf(cos_o, phong, valid), 0.0)
+        return dr.select(active, self._pdf(si, cos_o, phong, valid), 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
         value, cos_o, phong, valid = self._eval(si, wo)
         return (mi.Spectrum(dr.select(active, value, 0.0)),
-                dr.select(active, self._pdf(cos_o, phong, valid), 0.0))
+                dr.select(active, self._pdf(si, cos_o, phong, valid), 0.0))
 
     def traverse(self, callback):
-        callback.put("diffuse", self.diffuse, mi.ParamFlags.Differentiable)
+        if self.diffuse_texture is None:
+            callback.put("diffuse", self.diffuse, mi.ParamFlags.Differentiable)
+        else:
+            callback.put("diffuse", self.diffuse_texture, mi.ParamFlags.Differentiable)
         callback.put("specular", self.specular, mi.ParamFlags.Differentiable)
-        callback.put("shininess", self.shininess, mi.ParamFlags.NonDifferentiable)
+        callback.put("shininess", self.shininess, mi.ParamFlags.Differentiable)
 
     def parameters_changed(self, keys):
         vals = {k: float(getattr(self, k)[0]) for k in ("diffuse", "specular", "shininess")}
+        if self.diffuse_texture is not None:
+            vals["diffuse"] = texture_max(self.diffuse_texture)
         check_parameters(**vals)
         dr.make_opaque(self.diffuse, self.specular, self.shininess)
 
     def to_string(self):
         return (f"AcousticBSDF[preset={self.preset!r}, diffuse={self.diffuse[0]:g}, "
                 f"specular={self.specular[0]:g}, shininess={self.shininess[0]:g}]")
+
+
+def texture_max(texture) -> float:
+    """The largest value of a texture: ``Texture.max()``, or (a ``bitmap`` has none) the largest of
+    its traversed ``data``/``value`` arrays."""
+    try:
+        return float(texture.max())
+    except RuntimeError:
+        params = mi.traverse(texture)
+        arrays = [params[k] for k in params.keys() if k.split(".")[-1] in ("data", "value")]
+        values = [float(dr.max(dr.detach(a.array if isinstance(a, mi.TensorXf) else a), axis=None)[0]) for a in arrays]
+        return max(values) if values else 0.0
 
 
 def check_parameters(diffuse, specular, shininess):

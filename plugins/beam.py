@@ -23,6 +23,7 @@ Emission samples directions in proportion to ``B(az, el)`` (times the solid-angl
 """
 from __future__ import annotations
 
+import copy
 import csv
 import io
 import math
@@ -337,3 +338,18 @@ class BeamPattern:
         b = self.eval(az, el)
         weight = dr.select((pdf_w > 0) & (b > 0), b / pdf_w, 0.0)
         return d, weight
+
+    # ---------------------------------------------------------------- gradients
+    def attached(self, beamwidth_h=None, beamwidth_v=None):
+        """A view of this pattern whose kernel widths carry the derivatives of ``beamwidth_h`` and
+        ``beamwidth_v`` (mi.Float, degrees, e.g. the sensor's traversed parameters) while keeping
+        this pattern's values bit for bit (``dr.replace_grad``), for the gradient passes of
+        ``mitsonar.plugins.path_replay``. The sampling table is shared and stays detached: emission
+        weights ``B / pdf`` then differentiate as ``dB / pdf`` (detached sampling)."""
+        view = copy.copy(self)
+        deg = math.pi / 180.0
+        if beamwidth_h is not None:
+            view._p_bh = dr.replace_grad(self._p_bh, beamwidth_h * deg)
+        if beamwidth_v is not None:
+            view._p_bv = dr.replace_grad(self._p_bv, beamwidth_v * deg)
+        return view

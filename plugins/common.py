@@ -15,6 +15,11 @@ Echo energy (thesis section 2.3, with next-event estimation towards the transduc
 at range ``L / 2`` (``L`` the total path length summed from the hit points), with throughput
 starting at ``B_tx / pdf`` for the emitted direction (on-axis source intensity 1 W/sr, on-axis
 receive aperture 1 m^2) and multiplied by the BSDF sample weight at every bounce.
+
+Gradients: `SonarIntegrator.sample` takes Mitsuba's AD arguments (``mode``, ``δ``, ``state_in``)
+and ``render_forward``/``render_backward`` follow Mitsuba's ``RBIntegrator``, so ``mi.render(scene,
+params)`` is differentiable on the AD variants; the replayed path and what its derivative means:
+``plugins/path_replay.py``.
 """
 from __future__ import annotations
 
@@ -31,6 +36,9 @@ from .samples import DIMS_EMIT, DIMS_PER_BOUNCE
 from .sonar_sensor import PingFrames, SonarSensor
 
 MAX_DEPTH = 64
+# Lanes in one gradient pass: a replayed path carries ~40 floats of state, so passes of 2^20
+# lanes bound the memory of a gradient render whatever its spp.
+GRADIENT_LANES_PER_PASS = 1 << 20
 
 
 def check_max_depth(value, source="sonar_tof"):
@@ -70,6 +78,79 @@ class PathSetup:
         self.depth_o = dr.opaque(mi.UInt32, self.depth)
         self.absorption = dr.opaque(mi.Float, sensor.absorption)
         self.bins = RangeBins(sensor)
+        self.ad = None
+
+    def attach(self):
+        """Make ``self.ad`` (`AttachedSetup`): the values the gradient passes differentiate."""
+        self.ad = AttachedSetup(self)
+        return self
+
+
+class AttachedSetup:
+    """The parameters of a `PathSetup` that carry derivatives, with the setup's exact values.
+
+    ``beam`` (widths attached), ``absorption``, ``frames`` and ``connect`` (the per-row beam frames
+    and the multibeam transmit frames, attached to the sensor's traversed ``to_world``): each is
+    ``dr.replace_grad(value used by the primal, expression of the traversed parameter)``, so the
+    replayed paths are the primal's to the bit while their derivatives reach the parameters.
+    """
+
+    def __init__(self, setup):
+        sensor = setup.sensor
+        diff = sensor.differentiable()
+        self.absorption = dr.replace_grad(setup.absorption, diff["absorption"])
+        self.beam = sensor.beam.attached(diff.get("beamwidth_h"), diff.get("beamwidth_v"))
+        head = sensor.head_pose()
+        self.frames = _AttachedFrames(setup.frames, diff["to_world"], head, sensor.ping_poses())
+        from .path_replay import acoustic_bsdfs
+
+        self.bsdfs, self.other_bsdfs = acoustic_bsdfs(setup.scene)
+        self.connect = None
+        if setup.connect is not None:
+            frames, fan = setup.connect
+            self.connect = (_AttachedFrames(frames, diff["to_world"], head, sensor.head_pose()[None]), fan)
+
+
+    def seal_forward(self):
+        """Forward mode: push the tangents of the traversed parameters into the attached values now
+        and restart them as leaves holding those tangents, so that the derivatives taken inside
+        the path loop start within its scope (Dr.Jit cannot forward-propagate across an edge made
+        before a symbolic loop or call began)."""
+        def leaf(v):
+            if not dr.grad_enabled(v):
+                return v
+            t = dr.forward_to(v, flags=dr.ADFlag.ClearEdges | dr.ADFlag.AllowNoGrad)
+            out = type(v)(dr.detach(v))
+            dr.enable_grad(out)
+            dr.set_grad(out, t)
+            return out
+
+        self.absorption = leaf(self.absorption)
+        self.beam._p_bh, self.beam._p_bv = leaf(self.beam._p_bh), leaf(self.beam._p_bv)
+        for frames in (self.frames, None if self.connect is None else self.connect[0]):
+            if frames is not None:
+                frames.x, frames.y, frames.z, frames.p = (leaf(v) for v in (frames.x, frames.y, frames.z, frames.p))
+
+
+class _AttachedFrames:
+    """`PingFrames` whose axes and origins carry the derivatives of the head pose ``to_world``
+    (a ``mi.Transform4f``): row k's frame is ``to_world @ (head^-1 @ poses[k])``."""
+
+    def __init__(self, frames, to_world, head, poses):
+        import numpy as np
+
+        rel = np.linalg.inv(head) @ np.broadcast_to(poses, (len(frames.x) // 3, 4, 4))
+        m = to_world.matrix
+        cols = []
+        for c, flat in enumerate((frames.x, frames.y, frames.z, frames.p)):
+            r = [mi.Float(rel[:, j, c].astype(np.float32)) for j in range(4)]
+            comp = [sum(m[i][j] * r[j] for j in range(4)) for i in range(3)]
+            cols.append(dr.replace_grad(flat, dr.ravel(mi.Vector3f(*comp))))
+        self.x, self.y, self.z, self.p = cols
+
+    def gather(self, ping):
+        return (dr.gather(mi.Vector3f, self.x, ping), dr.gather(mi.Vector3f, self.y, ping),
+                dr.gather(mi.Vector3f, self.z, ping), dr.gather(mi.Point3f, self.p, ping))
 
 
 class SonarIntegrator(mi.SamplingIntegrator):
@@ -91,6 +172,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
         sensor = resolve_sensor(scene, sensor)
         if not spp:
             spp = sensor.sampler().sample_count()
+        seed = int(seed[0]) if isinstance(seed, dr.ArrayBase) else seed
         hist = self.render_histogram(scene, sensor, seed=seed, spp=spp)
         return mi.TensorXf(hist.astype(np.float32)[..., None])
 
@@ -99,14 +181,137 @@ class SonarIntegrator(mi.SamplingIntegrator):
         each pass. ``pose`` replaces the sensor's ``to_world``, ``max_depth`` the integrator's."""
         raise NotImplementedError(f"{type(self).__name__} must implement render_histogram")
 
+    # ------------------------------------------------------------------ gradients (path replay)
+    def render_forward(self, scene, params=None, sensor=0, seed=0, spp=0):
+        """Forward-mode derivative of the scan ``mi.render`` returns, along the tangents set on the
+        traversed parameters: a tensor (n_rows, n_bins, 1). The estimator and what its range
+        derivative means: ``plugins/path_replay.py``."""
+        from .path_replay import edge_bins
+
+        setup, seed, passes = self._gradient_setup(scene, params, sensor, seed, spp)
+        n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
+        bins = setup.bins
+        self._check_forward(params, setup)
+        with dr.resume_grad():
+            setup.ad.seal_forward()
+        grad = dr.zeros(mi.Float, n_rows * n_bins)
+        for start, count in passes:
+            ping, samples = self.lanes(n_rows, seed, start, count)
+
+            def record(k, rng, energy, valid, hit, d_energy, d_range):
+                b, inside = bins.index(rng, valid)
+                dr.scatter_add(grad, d_energy, bins.flat(ping, b), inside)
+                up, lo, e = edge_bins(bins, rng, valid)
+                flow = energy * d_range * bins.inv_width
+                dr.scatter_add(grad, flow, bins.flat(ping, e), up)
+                dr.scatter_add(grad, -flow, bins.flat(ping, e - 1), lo)
+
+            with dr.suspend_grad():
+                self.sample(setup, ping, samples, record, mode=dr.ADMode.Forward)
+            dr.eval(grad)
+        return mi.TensorXf(grad * (1.0 / self._spp), shape=(n_rows, n_bins, 1))
+
+    def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
+        """Reverse-mode derivative: back-propagates ``grad_in`` (n_rows, n_bins, 1) into the traversed
+        parameters with gradients enabled, by path replay (memory independent of ``spp``)."""
+        from .path_replay import Adjoint
+
+        setup, seed, passes = self._gradient_setup(scene, params, sensor, seed, spp)
+        n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
+        g = dr.detach(mi.TensorXf(grad_in)).array
+        if dr.width(g) != n_rows * n_bins:
+            raise ValueError(f"{self.name}: the gradient image has {dr.width(g)} values, the scan "
+                             f"{n_rows} x {n_bins}")
+        adjoint = Adjoint(setup.bins, mi.Float(g) * (1.0 / self._spp))
+        for start, count in passes:
+            ping, samples = self.lanes(n_rows, seed, start, count)
+            with dr.suspend_grad():
+                s = self.sample(setup, ping, samples, mode=dr.ADMode.Primal, δ=adjoint)
+                self.sample(setup, ping, samples, mode=dr.ADMode.Backward, δ=adjoint, state_in=s)
+            dr.eval()
+            del s  # this pass's per-path state goes before the next pass makes its own
+
+    def _check_forward(self, params, setup):
+        """Forward mode reaches an acoustic BSDF's parameters only where the BSDF is a shape's own
+        (`path_replay._eval_attached`): refuse tangents on one nested in another BSDF (``twosided``)."""
+        if params is None or not hasattr(params, "properties"):
+            return
+        direct = {id(b) for b, _ in setup.ad.bsdfs}
+        for k in params.keys():
+            node = params.properties[k][2]
+            if type(node).__name__ == "AcousticBSDF" and id(node) not in direct and dr.grad_enabled(params[k]):
+                raise ValueError(f"{self.name}: forward-mode derivatives of {k!r} need its acoustic BSDF attached "
+                                 f"directly to the shapes (not inside a twosided BSDF); use reverse mode (dr.backward)")
+
+    def _gradient_setup(self, scene, params, sensor, seed, spp):
+        """(attached `PathSetup`, seed as an int, passes [(start, count)]) of a gradient render;
+        refuses a variant without automatic differentiation in one line."""
+        variant = mi.variant()
+        if not dr.is_diff_v(mi.Float):
+            raise ValueError(f"{self.name}: gradients need a Mitsuba variant with automatic "
+                             f"differentiation (llvm_ad_mono, llvm_ad_rgb, cuda_ad_mono, ...); the active "
+                             f"variant is {variant}")
+        if not hasattr(self, "lanes"):
+            raise ValueError(f"{self.name}: gradients are rendered by the sonar_tof integrator only")
+        from .path_replay import check_attached
+
+        check_attached(params, self.name)
+        sensor = resolve_sensor(scene, sensor)
+        spp = int(spp) or sensor.sampler().sample_count()
+        if spp < 1:
+            raise ValueError(f"spp must be a positive number of paths per row, got {spp}")
+        self._spp = spp
+        seed = int(seed[0]) if isinstance(seed, dr.ArrayBase) else int(seed)
+        setup = self.setup(scene, sensor)
+        with dr.resume_grad():
+            setup.attach()
+        # Passes of (nearly) equal size, each at most GRADIENT_LANES_PER_PASS lanes: what a pass
+        # allocates is reused by the next, so memory stays that of one pass whatever the spp.
+        n = -(-spp // max(1, GRADIENT_LANES_PER_PASS // sensor.n_pings))
+        sizes = [spp // n + (1 if i < spp % n else 0) for i in range(n)]
+        passes = [(sum(sizes[:i]), sizes[i]) for i in range(n)]
+        return setup, seed, passes
+
     def setup(self, scene, sensor=0, pose=None, max_depth=None) -> PathSetup:
         """The `PathSetup` of one render (sensor resolved, ``max_depth`` checked)."""
         depth = check_max_depth(self.max_depth if max_depth is None else int(max_depth), self.name)
         return PathSetup(scene, resolve_sensor(scene, sensor), depth, pose)
 
-    @dr.syntax
-    def sample(self, setup: PathSetup, ping, samples, record, active=True):
+    def sample(self, setup: PathSetup, ping, samples, record=None, active=True, mode=None, δ=None,
+               state_in=None):
         """Trace one echo path per lane and report each bounce's echo.
+
+        Mitsuba's AD signature (``mitsuba/python/ad/integrators/common.py``): ``mode`` None (or
+        ``dr.ADMode.Primal`` without ``δ``) is the primal path below, unchanged; with a ``mode`` and
+        ``setup.attach()`` done, the path is replayed for its derivatives by
+        `path_replay.replay` (``δ`` the adjoint image, `path_replay.Adjoint`; ``state_in`` the
+        primal replay's output in ``dr.ADMode.Backward``; ``record`` gets the echoes' derivatives
+        in ``dr.ADMode.Forward``).
+        """
+        if mode is None or (mode == dr.ADMode.Primal and δ is None):
+            # Called unbound too (``echo_path.trace_echoes`` passes self=None).
+            return SonarIntegrator._sample_primal(self, setup, ping, samples, record, active)
+        if mode == dr.ADMode.Primal:
+            # The reverse pass's primal replay is the primal path itself: per lane, the sum
+            # S = sum_k a_k E_k and the bounces whose echo reached the transducer (bit k), so that
+            # the adjoint replay needs no visibility rays.
+            n = dr.width(ping)
+            total, seen = dr.zeros(mi.Float, n), dr.zeros(mi.UInt32, n)
+            lane = dr.arange(mi.UInt32, n)
+
+            def weigh(k, rng, energy, valid, hit):
+                dr.scatter_add(total, δ.own_bin(ping, rng, valid) * energy, lane, valid)
+                dr.scatter_add(seen, mi.UInt32(1) << k, lane, valid & (k < 32))
+
+            SonarIntegrator._sample_primal(self, setup, ping, samples, weigh, active)
+            return total, seen
+        from .path_replay import replay
+
+        return replay(setup, mode, ping, samples, δ, state_in, record, active)
+
+    @dr.syntax
+    def _sample_primal(self, setup: PathSetup, ping, samples, record, active=True):
+        """The primal echo path: trace one path per lane and report each bounce's echo.
 
         ``ping`` (UInt32) is each lane's ping, ``samples`` its primary samples (anything with
         ``get(dim)``/``get2(dim)``, see `samples`), ``record(k, range, energy, valid, hit)`` is

@@ -324,8 +324,43 @@ class SonarSensor(mi.Sensor):
         o, dw = frame.origin(ping), frame.to_world(ping, d)
         return mi.Ray3f(o, dw, time), mi.Spectrum(w)
 
+    # ------------------------------------------------------------------ differentiable parameters
     def traverse(self, callback):
+        """Expose to ``mi.traverse``, all differentiable (``mitsonar.plugins.path_replay``):
+        ``to_world`` (the head's beam frame, a ``mi.Transform4f``), ``absorption`` (dB/m) and, for a
+        ``gaussian`` beam, ``beamwidth_h`` and ``beamwidth_v`` (deg)."""
         super().traverse(callback)
+        for name, value in self.differentiable().items():
+            callback.put(name, value, mi.ParamFlags.Differentiable)
+
+    def differentiable(self) -> dict:
+        """The sensor's traversed parameters by name (made on first use, kept: ``mi.traverse``
+        hands out these very objects, so ``dr.enable_grad`` on them reaches the renders)."""
+        if getattr(self, "_diff", None) is None:
+            self._diff = {"to_world": mi.Transform4f(mi.Matrix4f(self.to_world_np)),
+                          "absorption": mi.Float(self.absorption)}
+            if self.beam.kind == "gaussian":
+                self._diff["beamwidth_h"] = mi.Float(self.beam.beamwidth_h)
+                self._diff["beamwidth_v"] = mi.Float(self.beam.beamwidth_v)
+        return self._diff
+
+    def parameters_changed(self, keys):
+        """Take new values of the traversed parameters, checked as in the XML (rigid ``to_world``,
+        ``absorption`` >= 0, widths in (0, 360] x (0, 180] deg); the beam's sampling table is rebuilt
+        for new widths."""
+        d = self.differentiable()
+        if "to_world" in keys:
+            m = np.array(d["to_world"].matrix, dtype=np.float64).reshape(4, 4)
+            self.to_world_np = check_rigid(m, "sonar 'to_world'")
+        if "absorption" in keys:
+            value = float(d["absorption"][0])
+            if not (math.isfinite(value) and value >= 0):
+                raise not_allowed("sonar", "absorption", value, "a finite attenuation >= 0 dB/m")
+            self.absorption = value
+        if "beamwidth_h" in keys or "beamwidth_v" in keys:
+            h, v = float(d["beamwidth_h"][0]), float(d["beamwidth_v"][0])
+            self.beam = BeamPattern(self.beam.kind, h, v, self.beam.frequency, None, None, self.sound_speed)
+        super().parameters_changed(keys)
 
     def to_string(self):
         tx = "" if self.transmit is None else (f", tx={self.transmit.kind} "

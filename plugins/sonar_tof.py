@@ -54,6 +54,8 @@ class SonarTOFIntegrator(SonarIntegrator):
 
     ``mi.render(scene)`` returns the range-intensity image as a tensor (n_pings, n_bins, 1);
     ``render_histogram`` returns it as a float64 numpy array and accepts a ``pose``.
+    ``mi.render(scene, params)`` is differentiable in both modes (``render_forward``,
+    ``render_backward`` of `common.SonarIntegrator`, by path replay: ``plugins/path_replay.py``).
     """
 
     name = "sonar_tof"
