@@ -13,7 +13,7 @@ from ._version import __version__  # noqa: E402
 
 from .scan import Scan  # noqa: E402
 from .groundtruth import scene_mesh  # noqa: E402
-from .render import render_scan  # noqa: E402
+from .render import render_scan, scan_parameters  # noqa: E402
 from .scene import SceneError, load_scene  # noqa: E402
 from .survey import render_survey  # noqa: E402
 from .dataset.store import open_dataset  # noqa: E402
@@ -43,5 +43,5 @@ def __getattr__(name):
 
 
 __all__ = ["Scan", "SceneError", "Trajectory", "TrajectoryError", "VariantError", "load_scan", "load_scene",
-           "open_dataset", "render_scan", "render_survey", "scene_mesh",
+           "open_dataset", "render_scan", "render_survey", "scan_parameters", "scene_mesh",
            "set_variant", "variant", "__version__", *_LAZY]
