@@ -296,3 +296,37 @@ def test_ray_actors_write_what_local_workers_write(reference, tmp_path):
     pytest.importorskip("ray")
     generate_dataset(small_config(), str(tmp_path / "ray"), workers=2, engine="ray", progress=False)
     assert folder_bytes(tmp_path / "ray") == folder_bytes(reference)
+
+
+# ----------------------------------------------------------------------------- review fixes
+def _scene_folder(root, name, shape_id, corner):
+    """``root/name/s.xml``: one OBJ triangle ``m.obj`` (relative name) with the given id and a
+    vertex at ``corner``; two folders hold same-named files of different content."""
+    folder = root / name
+    folder.mkdir()
+    (folder / "m.obj").write_text(f"v 0 0 0\nv {corner} 0 0\nv 0 1 0\nf 1 2 3\n")
+    (folder / "s.xml").write_text(f"""<scene version="3.0.0">
+      <bsdf type="acoustic" id="mat"><float name="diffuse" value="0.5"/><float name="specular" value="0"/></bsdf>
+      <shape type="obj" id="{shape_id}"><string name="filename" value="m.obj"/><ref id="mat"/></shape>
+    </scene>""")
+    return str(folder / "s.xml")
+
+
+def test_a_worker_loads_the_named_scene_whatever_it_loaded_before(tmp_path):
+    """Scenes a/s.xml and b/s.xml (each with its own m.obj) loaded in the order a, b, a by one
+    worker are a, b, a: neither the scene file nor its mesh is taken from the other folder."""
+    from mitsonar.dataset.worker import SampleRenderer
+    from mitsonar.groundtruth import scene_mesh
+
+    a = _scene_folder(tmp_path, "a", "alpha", 2.0)
+    b = _scene_folder(tmp_path, "b", "beta", 5.0)
+    cfg = check_config({"samples": 3, "scenes": [{"xml": a}, {"xml": b}],
+                        "sonar": {"kind": "mechanical", "n_bins": 10, "n_pings": 2}})
+    renderer = SampleRenderer(cfg)
+    seen = []
+    for entry in (0, 1, 0):
+        renderer._load({"entry": entry, "sonar": dict(cfg["sonar"]), "key": f"scene{entry}-{len(seen)}"})
+        vertices = scene_mesh(renderer.scene)[0]
+        seen.append((renderer.names, float(vertices[:, 0].max())))
+    renderer.close()
+    assert seen == [(["alpha"], 2.0), (["beta"], 5.0), (["alpha"], 2.0)]
