@@ -330,3 +330,60 @@ def test_a_worker_loads_the_named_scene_whatever_it_loaded_before(tmp_path):
         seen.append((renderer.names, float(vertices[:, 0].max())))
     renderer.close()
     assert seen == [(["alpha"], 2.0), (["beta"], 5.0), (["alpha"], 2.0)]
+
+
+def _same_sample(a, b):
+    assert sorted(a) == sorted(b)
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k])
+
+
+def test_an_open_dataset_pickles_and_a_forked_copy_opens_its_own_shard(reference, monkeypatch):
+    """What a DataLoader with worker processes does: pickle the dataset after it has read a sample
+    (spawn), or use it in a forked process (a new pid: it must not read through the parent's file)."""
+    import pickle
+
+    from mitsonar.dataset import store
+
+    ds = store.SonarDataset(reference)
+    first = ds[1]
+    copy = pickle.loads(pickle.dumps(ds))
+    assert len(copy) == 6 and copy.labels == ds.labels
+    _same_sample(copy[1], first)
+    parent_tar = ds._tar(0)[0]
+    monkeypatch.setattr(store.os, "getpid", lambda: -1)      # as in a forked child
+    _same_sample(ds[0], copy[0])
+    assert ds._tar(0)[0] is not parent_tar and parent_tar.closed
+
+
+def test_the_torch_flavoured_dataset_pickles_by_name(reference, monkeypatch):
+    """open_dataset's torch subclass (built here on a stand-in torch.utils.data, so the test needs no
+    torch) is a module-level class: pickle finds it by name, which DataLoader workers need."""
+    import importlib.machinery
+    import pickle
+    import types
+
+    from mitsonar.dataset import store
+
+    class IterableDataset:   # torch's: a plain base class
+        pass
+
+    for name in ("torch", "torch.utils", "torch.utils.data"):
+        mod = types.ModuleType(name)
+        mod.__spec__ = importlib.machinery.ModuleSpec(name, None)
+        monkeypatch.setitem(sys.modules, name, mod)
+    sys.modules["torch.utils.data"].IterableDataset = IterableDataset
+    monkeypatch.setattr(store, "_TORCH_CLASS", None, raising=False)
+    ds = open_dataset(reference)
+    assert isinstance(ds, IterableDataset) and type(ds).__module__ == "mitsonar.dataset.store"
+    ds[0]
+    copy = pickle.loads(pickle.dumps(ds))
+    assert type(copy) is type(ds)
+    _same_sample(copy[4], ds[4])
+
+
+def test_import_mitsonar_needs_no_posix_fcntl():
+    """Windows has no fcntl: only taking the run lock may need it, not ``import mitsonar``."""
+    code = "import sys; sys.modules['fcntl'] = None; import mitsonar; print(mitsonar.open_dataset.__name__)"
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
+    assert out.returncode == 0 and out.stdout.strip() == "open_dataset", out.stderr[-500:]
