@@ -387,3 +387,38 @@ def test_import_mitsonar_needs_no_posix_fcntl():
     code = "import sys; sys.modules['fcntl'] = None; import mitsonar; print(mitsonar.open_dataset.__name__)"
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
     assert out.returncode == 0 and out.stdout.strip() == "open_dataset", out.stderr[-500:]
+
+
+def test_the_manifest_is_read_under_the_lock(reference, tmp_path, monkeypatch):
+    """Another run finishes the dataset while this one waits for the lock: this one must see its
+    manifest (nothing to render), not the empty folder it saw before taking the lock."""
+    import shutil
+
+    from mitsonar.dataset import runner
+    from mitsonar.dataset.store import RunLock
+
+    out = tmp_path / "raced"
+
+    class FinishedMeanwhile(RunLock):
+        def __init__(self, folder):
+            for name in os.listdir(reference):
+                src = reference / name
+                (shutil.copytree if src.is_dir() else shutil.copy)(src, out / name)
+            super().__init__(folder)
+
+    monkeypatch.setattr(runner, "RunLock", FinishedMeanwhile)
+    assert generate_dataset(small_config(), str(out), workers=0, progress=False)["rendered"] == 0
+    _same_as(reference, out)
+
+
+def test_the_lock_is_released_when_preparing_the_folder_fails(tmp_path, monkeypatch):
+    from mitsonar.dataset import runner
+    from mitsonar.dataset.store import RunLock
+
+    def fail(folder):
+        raise PermissionError(f"{folder}: cannot remove a partial file")
+
+    monkeypatch.setattr(runner, "remove_partials", fail)
+    with pytest.raises(PermissionError):
+        generate_dataset(small_config(), str(tmp_path / "ds"), workers=0, progress=False)
+    RunLock(str(tmp_path / "ds")).release()     # free: a second run is not refused
