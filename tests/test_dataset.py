@@ -134,11 +134,18 @@ def test_killed_command_resumes_to_the_same_dataset(reference, tmp_path):
     proc = subprocess.Popen(cmd, cwd=ROOT, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.time() + 120
     while time.time() < deadline and proc.poll() is None and not (out / "shard-000000.tar").exists():
-        time.sleep(0.05)
+        time.sleep(0.01)
+    assert proc.poll() is None, f"the command ended before it was killed: {proc.stderr.read().decode()[-500:]}"
+    assert (out / "shard-000000.tar").exists(), "no shard written within 120 s"
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
-    assert main(["dataset", str(cfg_path), "-o", str(out), "--workers", "1", "--engine", "local", "-q"]) == 0
+    assert proc.returncode == -signal.SIGKILL
+    shards = json.loads((out / "manifest.json").read_text())["shards"]
+    assert len(shards) < 3                                   # killed with the dataset incomplete
+    result = generate_dataset(str(cfg_path), str(out), workers=1, engine="local", progress=False)
+    assert result["rendered"] == 6 - 2 * len(shards) > 0    # the resumed run rendered what was missing
     _same_as(reference, out)
+    assert main(["dataset", str(cfg_path), "-o", str(out), "--workers", "1", "--engine", "local", "-q"]) == 0
 
 
 def test_a_killed_worker_process_loses_nothing(reference, tmp_path):
