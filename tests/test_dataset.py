@@ -3,6 +3,7 @@ interrupt or a kill, labels that name the right shape in the right bins, bad con
 one line before any worker starts."""
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -429,3 +430,33 @@ def test_the_lock_is_released_when_preparing_the_folder_fails(tmp_path, monkeypa
     with pytest.raises(PermissionError):
         generate_dataset(small_config(), str(tmp_path / "ds"), workers=0, progress=False)
     RunLock(str(tmp_path / "ds")).release()     # free: a second run is not refused
+
+
+def test_each_scene_block_draws_its_own_speckle_seed(reference):
+    """The scene's speckle belongs to the scene: the samples of a block (scene_samples = 3) share a
+    speckle seed drawn from the config's seed and the block, the two blocks differ, the render used
+    it (its electronics record it) and the draw is the task's, whatever worker rendered it."""
+    from mitsonar.dataset.config import task
+
+    ds = open_dataset(reference)
+    meta = [json.loads(str(s["meta"])) for s in ds]
+    seeds = [m["speckle_seed"] for m in meta]
+    assert seeds[0] == seeds[1] == seeds[2] != seeds[3] == seeds[4] == seeds[5]
+    assert all(m["electronics"]["speckle_seed"] == m["speckle_seed"] for m in meta)
+    cfg = check_config(small_config())
+    assert seeds == [task(cfg, i)["sample"]["speckle_seed"] for i in range(6)]
+
+
+def test_the_config_fixes_or_draws_the_speckle_seed():
+    from mitsonar.dataset.config import task
+
+    fixed = check_config(small_config(electronics={"speckle_seed": 7}))
+    assert {task(fixed, i)["sample"]["speckle_seed"] for i in range(6)} == {7}
+    drawn = check_config(small_config(samples=30, electronics={"speckle_seed": {"randint": [10, 12]}}))
+    seeds = [task(drawn, i)["sample"]["speckle_seed"] for i in range(30)]
+    assert all(seeds[i] == seeds[i - i % 3] for i in range(30))           # one per block of 3
+    assert set(seeds) == {10, 11, 12}                                     # 10 blocks: P(a value missing) < 0.06
+    for bad, words in (({"uniform": [0, 5]}, "'electronics.speckle_seed': {'uniform': [0, 5]} is not allowed"),
+                       (-1, "'electronics.speckle_seed': -1 is not allowed (a whole number >= 0")):
+        with pytest.raises(DatasetError, match=re.escape(words)):
+            check_config(small_config(electronics={"speckle_seed": bad}))

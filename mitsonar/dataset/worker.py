@@ -171,14 +171,15 @@ class SampleRenderer:
             kwargs["pose"] = vehicle @ mount
         scan = render_scan(self.scene, spp=self.cfg["spp"], seed=s["seed"], integrator=self.integrator,
                            sensor=self.sensor, electronics=s["electronics"] or None,
-                           electronics_seed=s["electronics_seed"], **kwargs)
+                           electronics_seed=s["electronics_seed"], speckle_seed=s["speckle_seed"], **kwargs)
         energy = self.integrator.last_energy
         out = {"index": task["index"], "scene": self.key, "shape_names": list(self.names),
                "arrays": {"data": scan.data, "intensity": scan.intensity, "poses": scan.poses, "times": scan.times,
                           "segmentation": segmentation(energy),
                           "first_return": first_return(scan.intensity, scan.ranges, self.cfg["first_return_db"]),
                           "ranges": scan.ranges, "bearings": scan.bearings},
-               "meta": {"kind": scan.kind, "seed": s["seed"], "electronics": scan.electronics,
+               "meta": {"kind": scan.kind, "seed": s["seed"], "speckle_seed": s["speckle_seed"],
+                        "electronics": scan.electronics,
                         "pose": s["pose"], "trajectory": s["trajectory"], "materials": s["materials"],
                         "range_min": scan.range_min, "range_max": scan.range_max}}
         if want_mesh:
