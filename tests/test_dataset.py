@@ -3,6 +3,7 @@ interrupt or a kill, labels that name the right shape in the right bins, bad con
 one line before any worker starts."""
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -134,11 +135,18 @@ def test_killed_command_resumes_to_the_same_dataset(reference, tmp_path):
     proc = subprocess.Popen(cmd, cwd=ROOT, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.time() + 120
     while time.time() < deadline and proc.poll() is None and not (out / "shard-000000.tar").exists():
-        time.sleep(0.05)
+        time.sleep(0.01)
+    assert proc.poll() is None, f"the command ended before it was killed: {proc.stderr.read().decode()[-500:]}"
+    assert (out / "shard-000000.tar").exists(), "no shard written within 120 s"
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
-    assert main(["dataset", str(cfg_path), "-o", str(out), "--workers", "1", "--engine", "local", "-q"]) == 0
+    assert proc.returncode == -signal.SIGKILL
+    shards = json.loads((out / "manifest.json").read_text())["shards"]
+    assert len(shards) < 3                                   # killed with the dataset incomplete
+    result = generate_dataset(str(cfg_path), str(out), workers=1, engine="local", progress=False)
+    assert result["rendered"] == 6 - 2 * len(shards) > 0    # the resumed run rendered what was missing
     _same_as(reference, out)
+    assert main(["dataset", str(cfg_path), "-o", str(out), "--workers", "1", "--engine", "local", "-q"]) == 0
 
 
 def test_a_killed_worker_process_loses_nothing(reference, tmp_path):
@@ -296,3 +304,159 @@ def test_ray_actors_write_what_local_workers_write(reference, tmp_path):
     pytest.importorskip("ray")
     generate_dataset(small_config(), str(tmp_path / "ray"), workers=2, engine="ray", progress=False)
     assert folder_bytes(tmp_path / "ray") == folder_bytes(reference)
+
+
+# ----------------------------------------------------------------------------- review fixes
+def _scene_folder(root, name, shape_id, corner):
+    """``root/name/s.xml``: one OBJ triangle ``m.obj`` (relative name) with the given id and a
+    vertex at ``corner``; two folders hold same-named files of different content."""
+    folder = root / name
+    folder.mkdir()
+    (folder / "m.obj").write_text(f"v 0 0 0\nv {corner} 0 0\nv 0 1 0\nf 1 2 3\n")
+    (folder / "s.xml").write_text(f"""<scene version="3.0.0">
+      <bsdf type="acoustic" id="mat"><float name="diffuse" value="0.5"/><float name="specular" value="0"/></bsdf>
+      <shape type="obj" id="{shape_id}"><string name="filename" value="m.obj"/><ref id="mat"/></shape>
+    </scene>""")
+    return str(folder / "s.xml")
+
+
+def test_a_worker_loads_the_named_scene_whatever_it_loaded_before(tmp_path):
+    """Scenes a/s.xml and b/s.xml (each with its own m.obj) loaded in the order a, b, a by one
+    worker are a, b, a: neither the scene file nor its mesh is taken from the other folder."""
+    from mitsonar.dataset.worker import SampleRenderer
+    from mitsonar.groundtruth import scene_mesh
+
+    a = _scene_folder(tmp_path, "a", "alpha", 2.0)
+    b = _scene_folder(tmp_path, "b", "beta", 5.0)
+    cfg = check_config({"samples": 3, "scenes": [{"xml": a}, {"xml": b}],
+                        "sonar": {"kind": "mechanical", "n_bins": 10, "n_pings": 2}})
+    renderer = SampleRenderer(cfg)
+    seen = []
+    for entry in (0, 1, 0):
+        renderer._load({"entry": entry, "sonar": dict(cfg["sonar"]), "key": f"scene{entry}-{len(seen)}"})
+        vertices = scene_mesh(renderer.scene)[0]
+        seen.append((renderer.names, float(vertices[:, 0].max())))
+    renderer.close()
+    assert seen == [(["alpha"], 2.0), (["beta"], 5.0), (["alpha"], 2.0)]
+
+
+def _same_sample(a, b):
+    assert sorted(a) == sorted(b)
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k])
+
+
+def test_an_open_dataset_pickles_and_a_forked_copy_opens_its_own_shard(reference, monkeypatch):
+    """What a DataLoader with worker processes does: pickle the dataset after it has read a sample
+    (spawn), or use it in a forked process (a new pid: it must not read through the parent's file)."""
+    import pickle
+
+    from mitsonar.dataset import store
+
+    ds = store.SonarDataset(reference)
+    first = ds[1]
+    copy = pickle.loads(pickle.dumps(ds))
+    assert len(copy) == 6 and copy.labels == ds.labels
+    _same_sample(copy[1], first)
+    parent_tar = ds._tar(0)[0]
+    monkeypatch.setattr(store.os, "getpid", lambda: -1)      # as in a forked child
+    _same_sample(ds[0], copy[0])
+    assert ds._tar(0)[0] is not parent_tar and parent_tar.closed
+
+
+def test_the_torch_flavoured_dataset_pickles_by_name(reference, monkeypatch):
+    """open_dataset's torch subclass (built here on a stand-in torch.utils.data, so the test needs no
+    torch) is a module-level class: pickle finds it by name, which DataLoader workers need."""
+    import importlib.machinery
+    import pickle
+    import types
+
+    from mitsonar.dataset import store
+
+    class IterableDataset:   # torch's: a plain base class
+        pass
+
+    for name in ("torch", "torch.utils", "torch.utils.data"):
+        mod = types.ModuleType(name)
+        mod.__spec__ = importlib.machinery.ModuleSpec(name, None)
+        monkeypatch.setitem(sys.modules, name, mod)
+    sys.modules["torch.utils.data"].IterableDataset = IterableDataset
+    monkeypatch.setattr(store, "_TORCH_CLASS", None, raising=False)
+    ds = open_dataset(reference)
+    assert isinstance(ds, IterableDataset) and type(ds).__module__ == "mitsonar.dataset.store"
+    ds[0]
+    copy = pickle.loads(pickle.dumps(ds))
+    assert type(copy) is type(ds)
+    _same_sample(copy[4], ds[4])
+
+
+def test_import_mitsonar_needs_no_posix_fcntl():
+    """Windows has no fcntl: only taking the run lock may need it, not ``import mitsonar``."""
+    code = "import sys; sys.modules['fcntl'] = None; import mitsonar; print(mitsonar.open_dataset.__name__)"
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
+    assert out.returncode == 0 and out.stdout.strip() == "open_dataset", out.stderr[-500:]
+
+
+def test_the_manifest_is_read_under_the_lock(reference, tmp_path, monkeypatch):
+    """Another run finishes the dataset while this one waits for the lock: this one must see its
+    manifest (nothing to render), not the empty folder it saw before taking the lock."""
+    import shutil
+
+    from mitsonar.dataset import runner
+    from mitsonar.dataset.store import RunLock
+
+    out = tmp_path / "raced"
+
+    class FinishedMeanwhile(RunLock):
+        def __init__(self, folder):
+            for name in os.listdir(reference):
+                src = reference / name
+                (shutil.copytree if src.is_dir() else shutil.copy)(src, out / name)
+            super().__init__(folder)
+
+    monkeypatch.setattr(runner, "RunLock", FinishedMeanwhile)
+    assert generate_dataset(small_config(), str(out), workers=0, progress=False)["rendered"] == 0
+    _same_as(reference, out)
+
+
+def test_the_lock_is_released_when_preparing_the_folder_fails(tmp_path, monkeypatch):
+    from mitsonar.dataset import runner
+    from mitsonar.dataset.store import RunLock
+
+    def fail(folder):
+        raise PermissionError(f"{folder}: cannot remove a partial file")
+
+    monkeypatch.setattr(runner, "remove_partials", fail)
+    with pytest.raises(PermissionError):
+        generate_dataset(small_config(), str(tmp_path / "ds"), workers=0, progress=False)
+    RunLock(str(tmp_path / "ds")).release()     # free: a second run is not refused
+
+
+def test_each_scene_block_draws_its_own_speckle_seed(reference):
+    """The scene's speckle belongs to the scene: the samples of a block (scene_samples = 3) share a
+    speckle seed drawn from the config's seed and the block, the two blocks differ, the render used
+    it (its electronics record it) and the draw is the task's, whatever worker rendered it."""
+    from mitsonar.dataset.config import task
+
+    ds = open_dataset(reference)
+    meta = [json.loads(str(s["meta"])) for s in ds]
+    seeds = [m["speckle_seed"] for m in meta]
+    assert seeds[0] == seeds[1] == seeds[2] != seeds[3] == seeds[4] == seeds[5]
+    assert all(m["electronics"]["speckle_seed"] == m["speckle_seed"] for m in meta)
+    cfg = check_config(small_config())
+    assert seeds == [task(cfg, i)["sample"]["speckle_seed"] for i in range(6)]
+
+
+def test_the_config_fixes_or_draws_the_speckle_seed():
+    from mitsonar.dataset.config import task
+
+    fixed = check_config(small_config(electronics={"speckle_seed": 7}))
+    assert {task(fixed, i)["sample"]["speckle_seed"] for i in range(6)} == {7}
+    drawn = check_config(small_config(samples=30, electronics={"speckle_seed": {"randint": [10, 12]}}))
+    seeds = [task(drawn, i)["sample"]["speckle_seed"] for i in range(30)]
+    assert all(seeds[i] == seeds[i - i % 3] for i in range(30))           # one per block of 3
+    assert set(seeds) == {10, 11, 12}                                     # 10 blocks: P(a value missing) < 0.06
+    for bad, words in (({"uniform": [0, 5]}, "'electronics.speckle_seed': {'uniform': [0, 5]} is not allowed"),
+                       (-1, "'electronics.speckle_seed': -1 is not allowed (a whole number >= 0")):
+        with pytest.raises(DatasetError, match=re.escape(words)):
+            check_config(small_config(electronics={"speckle_seed": bad}))

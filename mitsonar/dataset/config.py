@@ -26,7 +26,10 @@ terrain, its material preset, the sonar settings) is drawn once per block of ``s
 samples from ``numpy.random.default_rng([seed, 0, block])``, so a worker loads a scene once for
 many samples; what a scene can take without being reloaded (pose, trajectory, material
 parameters, electronics, the path seed) is drawn per sample from ``default_rng([seed, 1, i])``.
-Keys are drawn in sorted order. So a sample depends on the config and its index only: any number
+The scene's speckle (``speckle_seed``, `mitsonar.speckle`: which scatterers its surfaces hold)
+belongs to the scene, so it is drawn once per block, from ``default_rng([seed, 2, block])``: a
+whole number in 0 .. 2^32 - 1, or what ``electronics.speckle_seed`` gives (fixed, ``randint`` or
+``choice``). Keys are drawn in sorted order. So a sample depends on the config and its index only: any number
 of workers, on any engine, writes the same samples.
 """
 from __future__ import annotations
@@ -390,6 +393,12 @@ def _check_electronics(elec):
 
     names = [f.name for f in __import__("dataclasses").fields(Electronics)]
     _unknown("electronics", elec, set(names))
+    if "speckle_seed" in elec:   # drawn per scene block: a whole number, never a float draw
+        v = elec["speckle_seed"]
+        if is_spec(v) and "uniform" in v:
+            _fail("electronics.speckle_seed", v, f"a whole number from 0 to {SEED_MAX}, {{randint: [lo, hi]}} or "
+                  "{choice: [...]}: the scene's speckle seed")
+        check_value("electronics.speckle_seed", v, kind="whole", lo=0, hi=SEED_MAX)
     for k, v in elec.items():
         for end in check_value(f"electronics.{k}", v, kind="any"):
             try:
@@ -434,13 +443,25 @@ def scene_draw(cfg, block) -> dict:
     return out
 
 
+def speckle_draw(cfg, block) -> int:
+    """The speckle seed of the scene of block ``block`` (shared by its samples, like the scene):
+    ``electronics.speckle_seed`` drawn (or fixed), else a whole number in 0 .. 2^32 - 1, from
+    ``default_rng([seed, 2, block])``."""
+    rng = np.random.default_rng([cfg["seed"], 2, int(block)])
+    if "speckle_seed" in cfg["electronics"]:
+        return int(draw(cfg["electronics"]["speckle_seed"], rng))
+    return int(rng.integers(0, SEED_MAX + 1))
+
+
 def sample_draw(cfg, index) -> dict:
     """What sample ``index`` takes on top of its scene: path seed, pose, trajectory, materials,
-    electronics (and its electronics seed)."""
+    electronics (and its electronics seed), and its scene block's ``speckle_seed``."""
     rng = np.random.default_rng([cfg["seed"], 1, int(index)])
+    electronics = {k: v for k, v in cfg["electronics"].items() if k != "speckle_seed"}
     return {"seed": int(rng.integers(0, SEED_MAX + 1)), "electronics_seed": int(rng.integers(0, SEED_MAX + 1)),
             "pose": draw(cfg["pose"], rng), "trajectory": draw(cfg["trajectory"], rng),
-            "materials": draw(cfg["materials"], rng), "electronics": draw(cfg["electronics"], rng)}
+            "materials": draw(cfg["materials"], rng), "electronics": draw(electronics, rng),
+            "speckle_seed": speckle_draw(cfg, int(index) // cfg["scene_samples"])}
 
 
 def task(cfg, index) -> dict:

@@ -93,41 +93,53 @@ class _Coordinator:
 
 def prepare_folder(cfg, folder):
     """The folder's lock and manifest: a new one, or the one to resume (same config), else a
-    `DatasetError` saying why not."""
+    `DatasetError` saying why not. The manifest is read and checked under the lock (a run that
+    finished meanwhile has written its last one), and the lock is released if anything fails."""
     if os.path.exists(folder) and not os.path.isdir(folder):
         raise DatasetError(f"-o {folder!r} is a file, not a folder")
     try:
         os.makedirs(folder, exist_ok=True)
     except OSError as exc:
         raise DatasetError(f"-o {folder!r}: cannot create the output folder ({exc.strerror})") from None
-    manifest = read_manifest(folder)
-    digest = config_hash(cfg)
-    if manifest is None:
-        stray = [n for n in os.listdir(folder) if not n.startswith(".")]
+    _refuse_foreign(folder)   # before the lock: no lock file is left in a folder that is not ours
+    lock = RunLock(folder)
+    try:
+        manifest = read_manifest(folder)
+        _refuse_foreign(folder)
+        digest = config_hash(cfg)
+        if manifest is not None and manifest["config_hash"] != digest:
+            diff = config_difference(manifest["config"], cfg) or "the format differs"
+            raise DatasetError(f"-o {folder!r} holds a dataset of another config ({diff}); it cannot be resumed "
+                               "with this one: choose a new folder, or delete that one")
+        inputs, version = _inputs(cfg), _version()
+        if manifest is not None:
+            for path, digest_then in manifest.get("inputs", {}).items():
+                if inputs.get(path) != digest_then:
+                    raise DatasetError(f"-o {folder!r}: scene file {path} changed since this dataset was begun; "
+                                       "resuming would mix two scenes: choose a new folder, or delete that one")
+            if manifest.get("mitsonar_version") != version:
+                raise DatasetError(f"-o {folder!r} was begun by mitsonar {manifest.get('mitsonar_version')}, this "
+                                   f"is {version}: its samples may render differently; choose a new folder, or "
+                                   "delete that one")
+        remove_partials(folder)
+        if manifest is None:
+            manifest = {"format": FORMAT, "config_hash": digest, "config": cfg, "samples": cfg["samples"],
+                        "shard_size": cfg["shard_size"], "shards": [], "labels": ["none"], "meshes": [],
+                        "inputs": inputs, "mitsonar_version": version}
+            write_json(os.path.join(folder, MANIFEST), manifest)
+    except BaseException:
+        lock.release()
+        raise
+    return lock, manifest
+
+
+def _refuse_foreign(folder):
+    """A folder holding files but no manifest is not a dataset this command wrote."""
+    if not os.path.isfile(os.path.join(folder, MANIFEST)):
+        stray = sorted(n for n in os.listdir(folder) if not n.startswith("."))
         if stray:
             raise DatasetError(f"-o {folder!r} holds files but no {MANIFEST} ({stray[0]}, ...): not a dataset this "
                                "command wrote; choose a new or empty folder")
-    elif manifest["config_hash"] != digest:
-        diff = config_difference(manifest["config"], cfg) or "the format differs"
-        raise DatasetError(f"-o {folder!r} holds a dataset of another config ({diff}); it cannot be resumed with "
-                           "this one: choose a new folder, or delete that one")
-    inputs, version = _inputs(cfg), _version()
-    if manifest is not None:
-        for path, digest_then in manifest.get("inputs", {}).items():
-            if inputs.get(path) != digest_then:
-                raise DatasetError(f"-o {folder!r}: scene file {path} changed since this dataset was begun; resuming "
-                                   "would mix two scenes: choose a new folder, or delete that one")
-        if manifest.get("mitsonar_version") != version:
-            raise DatasetError(f"-o {folder!r} was begun by mitsonar {manifest.get('mitsonar_version')}, this is "
-                               f"{version}: its samples may render differently; choose a new folder, or delete that one")
-    lock = RunLock(folder)
-    remove_partials(folder)
-    if manifest is None:
-        manifest = {"format": FORMAT, "config_hash": digest, "config": cfg, "samples": cfg["samples"],
-                    "shard_size": cfg["shard_size"], "shards": [], "labels": ["none"], "meshes": [],
-                    "inputs": inputs, "mitsonar_version": version}
-        write_json(os.path.join(folder, MANIFEST), manifest)
-    return lock, manifest
 
 
 def _inputs(cfg):
@@ -241,8 +253,8 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
         from .ray_engine import check_ray
 
         check_ray()
-    lock, manifest = prepare_folder(cfg, output)
     start = time.time()
+    lock, manifest = prepare_folder(cfg, output)
     bar = None
     try:
         coord = _Coordinator(cfg, output, manifest, None)

@@ -20,7 +20,6 @@ each shard, so it always lists exactly the shards that are there.
 """
 from __future__ import annotations
 
-import fcntl
 import io
 from collections.abc import Sequence
 import json
@@ -90,6 +89,8 @@ class RunLock:
     when the process ends, killed or not); a second run is refused with one sentence."""
 
     def __init__(self, folder):
+        import fcntl   # POSIX only: imported here, so that `import mitsonar` works everywhere
+
         self.path = os.path.join(folder, LOCK)
         self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
@@ -103,6 +104,8 @@ class RunLock:
 
     def release(self):
         if self.fd is not None:
+            import fcntl
+
             fcntl.flock(self.fd, fcntl.LOCK_UN)
             os.close(self.fd)
             self.fd = None
@@ -145,11 +148,28 @@ class SonarDataset(Sequence):
         self.n = sum(s["count"] for s in self.shards)
         self.complete = self.n == manifest["samples"]
         self._open = (None, None)
+        self._pid = os.getpid()
 
     def __len__(self):
         return self.n
 
+    def __getstate__(self):
+        """Pickled (a DataLoader's worker processes, Ray) without the open shard: a copy opens its own."""
+        state = dict(self.__dict__)
+        state["_open"] = (None, None)
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._pid = os.getpid()
+
     def _tar(self, shard):
+        if self._pid != os.getpid():
+            # A forked copy (a DataLoader worker) shares the open file's read position with its
+            # parent: it drops its copy of the handle and opens the shard itself.
+            if self._open[1] is not None:
+                self._open[1][0].close()   # this process's descriptor only
+            self._open, self._pid = (None, None), os.getpid()
         if self._open[0] != shard:
             if self._open[1] is not None:
                 self._open[1][0].close()
@@ -190,15 +210,36 @@ class SonarDataset(Sequence):
         return f"SonarDataset({self.folder!r}, {self.n} samples{'' if self.complete else ', incomplete'})"
 
 
+_TORCH_CLASS = None
+
+
+def _torch_class():
+    """`SonarDataset` that is also a ``torch.utils.data.IterableDataset``, built on first use (so
+    torch is imported only then) and bound to this module as ``TorchSonarDataset``: pickle finds
+    it by that name (DataLoader workers, spawn), through the module's ``__getattr__``."""
+    global _TORCH_CLASS
+    if _TORCH_CLASS is None:
+        from torch.utils.data import IterableDataset
+
+        _TORCH_CLASS = type("TorchSonarDataset", (SonarDataset, IterableDataset),
+                            {"__module__": __name__, "__qualname__": "TorchSonarDataset",
+                             "__doc__": SonarDataset.__doc__})
+    return _TORCH_CLASS
+
+
+def __getattr__(name):
+    if name == "TorchSonarDataset":
+        return _torch_class()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 def open_dataset(path):
     """Open a dataset folder written by ``mitsonar dataset``: a `SonarDataset` (a sequence of dicts
     of NumPy arrays, in sample order). When PyTorch is installed it is also a
-    ``torch.utils.data.IterableDataset`` (import torch is not needed otherwise)."""
+    ``torch.utils.data.IterableDataset`` (import torch is not needed otherwise); it can be pickled
+    and used by a ``DataLoader`` with worker processes (each opens its own shard files)."""
     import importlib.util
 
     if importlib.util.find_spec("torch") is not None:
-        from torch.utils.data import IterableDataset
-
-        cls = type("TorchSonarDataset", (SonarDataset, IterableDataset), {})
-        return cls(path)
+        return _torch_class()(path)
     return SonarDataset(path)

@@ -11,6 +11,7 @@ import math
 import os
 import shutil
 import tempfile
+from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
@@ -73,8 +74,8 @@ class SampleRenderer:
         entry = self.cfg["scenes"][draw["entry"]]
         sonar = dict(draw["sonar"])
         if "xml" in entry:
-            folder = os.path.dirname(entry["xml"])
-            body = f'<include filename="{os.path.basename(entry["xml"])}"/>'
+            folder = os.path.dirname(os.path.abspath(entry["xml"]))
+            body = f'<include filename={quoteattr(os.path.abspath(entry["xml"]))}/>'
         else:
             from ..terrain import Terrain
 
@@ -91,14 +92,21 @@ class SampleRenderer:
             mount = np.eye(4) if sonar.get("kind") == "sidescan" else DEFAULT_MOUNT
             sonar.setdefault("mount", mount.ravel().tolist())
             body += sonar_xml(sonar)
-        resolver = mi.file_resolver()   # the included scene's own files (PLY meshes) resolve from its folder
-        if folder not in [str(p) for p in resolver]:
-            resolver.prepend(folder)
+        # The included scene's own files (PLY meshes, nested includes) resolve from its folder,
+        # first, for this load only: Mitsuba's file resolver is process-wide, and a folder left in
+        # it by an earlier load would let a same-named file there win (a worker's history would
+        # choose the scene). The resolver is put back as it was after the load.
+        resolver = mi.file_resolver()
+        saved = [str(p) for p in resolver]
+        resolver.prepend(folder)
         # optimize=False: Mitsuba would merge the shapes sharing a BSDF into one mesh, and the
         # labels need each shape as itself.
         try:
             scene = load_scene(f'<scene version="3.0.0">{body}</scene>', optimize=False)
         finally:
+            resolver.clear()
+            for p in saved:
+                resolver.append(p)
             if "terrain" in draw:
                 os.remove(ply)
         from mitsonar.plugins import module
@@ -163,14 +171,15 @@ class SampleRenderer:
             kwargs["pose"] = vehicle @ mount
         scan = render_scan(self.scene, spp=self.cfg["spp"], seed=s["seed"], integrator=self.integrator,
                            sensor=self.sensor, electronics=s["electronics"] or None,
-                           electronics_seed=s["electronics_seed"], **kwargs)
+                           electronics_seed=s["electronics_seed"], speckle_seed=s["speckle_seed"], **kwargs)
         energy = self.integrator.last_energy
         out = {"index": task["index"], "scene": self.key, "shape_names": list(self.names),
                "arrays": {"data": scan.data, "intensity": scan.intensity, "poses": scan.poses, "times": scan.times,
                           "segmentation": segmentation(energy),
                           "first_return": first_return(scan.intensity, scan.ranges, self.cfg["first_return_db"]),
                           "ranges": scan.ranges, "bearings": scan.bearings},
-               "meta": {"kind": scan.kind, "seed": s["seed"], "electronics": scan.electronics,
+               "meta": {"kind": scan.kind, "seed": s["seed"], "speckle_seed": s["speckle_seed"],
+                        "electronics": scan.electronics,
                         "pose": s["pose"], "trajectory": s["trajectory"], "materials": s["materials"],
                         "range_min": scan.range_min, "range_max": scan.range_max}}
         if want_mesh:
