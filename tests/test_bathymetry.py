@@ -64,7 +64,8 @@ def test_detector_closed_forms():
 
 def test_sloped_plane_soundings_and_error_growth_with_beam_angle(mitsonar_mod):
     """A plane z = -10 + 0.1 y under a static R2Sonic-like fan (120 deg, 96 beams, 2.5 cm bins),
-    eight pings with seeded speckle. Inner beams (|angle| <= 30 deg): every sounding within 1 % of
+    eight pings, each with the scene's speckle of another ``speckle_seed`` (eight sets of
+    scatterers: a still head would see one pattern eight times). Inner beams (|angle| <= 30 deg): every sounding within 1 % of
     the depth. The rms error per 10 deg of beam angle is within 0.5 to 2.5 times the centroid's
     speckle model (`predicted_rms`, at each beam's incidence on the tilted plane), and it grows:
     the outer beams' (|angle| >= 45) rms is over 1.4 times the inner beams' (|angle| <= 15), as
@@ -75,8 +76,9 @@ def test_sloped_plane_soundings_and_error_growth_with_beam_angle(mitsonar_mod):
     scene = plane_scene(mitsonar_mod, head)
     parts = []
     for seed in range(8):
-        scan = mitsonar_mod.render_scan(scene, spp=256, seed=seed)
-        parts.append(bathymetry.soundings(scan, speckle_seed=100 + seed, ping=seed))
+        scan = mitsonar_mod.render_scan(scene, spp=256, seed=seed, speckle_seed=100 + seed)
+        assert bathymetry.speckle_resolution(scan) == pytest.approx(0.025)   # grains one bin long
+        parts.append(bathymetry.soundings(scan, speckle=True, ping=seed))
     s = np.concatenate(parts)
     assert len(s) >= 0.98 * 8 * 96
     true_z = -DEPTH + SLOPE * s["y"]
@@ -95,6 +97,40 @@ def test_sloped_plane_soundings_and_error_growth_with_beam_angle(mitsonar_mod):
         assert 0.5 * pred < row["rms"] < 2.5 * pred, (row, pred)
     rms = lambda m: np.sqrt(np.mean(err[m] ** 2))  # noqa: E731
     assert rms(np.abs(s["angle"]) >= 45) > 1.4 * rms(np.abs(s["angle"]) <= 15)
+
+
+def test_speckle_follows_the_scene_a_still_head_does_not_sparkle(mitsonar_mod):
+    """Detection's speckle is the scan's scene speckle (issue 23), not fresh noise per ping: a still
+    fan pinged twice with other path seeds sees the same speckle power (exactly) and nearly the same
+    depth errors (correlation over the beams > 0.8: only Monte Carlo noise differs; measured 0.93),
+    another ``speckle_seed`` an unrelated pattern (|correlation| < 0.5; measured 0.1). The power
+    is unit-mean exponential (mean 1 +- 0.05, variance 1 +- 0.15 over 40 x 1200 bins whose grains
+    are one bin long: lag-1 correlation under 0.05, exp(-8 ln 2) = 0.004 by the model). A scan
+    that does not say where its echoes come from is refused in one line."""
+    import dataclasses
+
+    from mitsonar import bathymetry, echosounders
+
+    head = echosounders.configure("r2sonic_2024", swath=120, n_beams=40, bin_width=0.025, range_max=30)
+    scene = plane_scene(mitsonar_mod, head)
+    a, b, c = (mitsonar_mod.render_scan(scene, spp=128, seed=path, speckle_seed=sp)
+               for path, sp in ((1, 7), (2, 7), (1, 8)))
+    pa, pb, pc = (bathymetry.speckle_power(x) for x in (a, b, c))
+    np.testing.assert_array_equal(pa, pb)
+    assert abs(pa.mean() - 1) < 0.05 and abs(pa.var() - 1) < 0.15
+    assert abs(np.corrcoef(pa[:, 1:].ravel(), pa[:, :-1].ravel())[0, 1]) < 0.05
+    err = {}
+    for name, scan in (("a", a), ("b", b), ("c", c)):
+        s = bathymetry.soundings(scan, speckle=True)
+        assert len(s) == 40
+        err[name] = (-DEPTH + SLOPE * s["y"]) - s["z"]
+    assert np.corrcoef(err["a"], err["b"])[0, 1] > 0.8
+    assert abs(np.corrcoef(err["a"], err["c"])[0, 1]) < 0.5
+    foreign = dataclasses.replace(a, meta={})    # a real head's scan: no scene speckle to follow
+    with pytest.raises(ValueError, match="meta\\['speckle'\\] == 'scene'") as info:
+        bathymetry.soundings(foreign, speckle=True)
+    assert "\n" not in str(info.value)
+    np.testing.assert_array_equal(bathymetry.soundings(foreign)["range"], bathymetry.soundings(a)["range"])
 
 
 def test_altimeter_leading_edge_is_unbiased_where_the_centroid_is_long(mitsonar_mod):
