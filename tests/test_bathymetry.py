@@ -102,8 +102,8 @@ def test_sloped_plane_soundings_and_error_growth_with_beam_angle(mitsonar_mod):
 def test_speckle_follows_the_scene_a_still_head_does_not_sparkle(mitsonar_mod):
     """Detection's speckle is the scan's scene speckle (issue 23), not fresh noise per ping: a still
     fan pinged twice with other path seeds sees the same speckle power (exactly) and nearly the same
-    depth errors (correlation over the beams > 0.8: only Monte Carlo noise differs; measured 0.93),
-    another ``speckle_seed`` an unrelated pattern (|correlation| < 0.5; measured 0.1). The power
+    depth errors (correlation over the beams > 0.8: only Monte Carlo noise differs; measured 0.91),
+    another ``speckle_seed`` an unrelated pattern (|correlation| < 0.5; measured -0.05). The power
     is unit-mean exponential (mean 1 +- 0.05, variance 1 +- 0.15 over 40 x 1200 bins whose grains
     are one bin long: lag-1 correlation under 0.05, exp(-8 ln 2) = 0.004 by the model). A scan
     that does not say where its echoes come from is refused in one line."""
@@ -254,3 +254,28 @@ def test_cli_writes_the_products_and_refuses_bad_input_in_one_line(tmp_path, cap
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and message in err, err
         assert not (tmp_path / "bad").exists()
+
+
+def test_cli_summary_and_plot_without_any_ground_truth(tmp_path):
+    """Soundings none of which has a seabed under it in the scene (true height NaN): the summary's
+    errors are None, the printed line says so instead of failing on ``100 * None``, and the plot
+    is drawn (no ``min()`` of an empty table). ``OUTPUTS`` names every file a run may write."""
+    from mitsonar import bathy_cli, bathymetry
+    from mitsonar.soundings import grid_depths
+
+    s = np.zeros(6, bathymetry.SOUNDING_DTYPE)
+    s["x"], s["y"], s["z"], s["head_z"] = np.arange(6.0), np.arange(6.0) % 2, -10.0, 0.0
+    s["angle"] = np.linspace(-50, 50, 6)
+    run = bathymetry.SurveyResult(s, np.full(6, np.nan), 1, dict(kind="multibeam", speckle=True, method="centroid",
+                                                                 beamwidth_h=0.5, bin_width=0.0125))
+    summary = run.summary()
+    assert summary["rms_error"] is None and summary["mean_error"] is None and summary["per_angle"] == []
+    line = bathy_cli.summary_line(summary, ["soundings.ply"], "out")
+    assert "6 soundings from 1 pings" in line and "no depth error" in line and "\n" not in line
+    png = tmp_path / "b.png"
+    bathy_cli.plot_bathymetry(run, grid_depths(s, 1.0), str(png))
+    assert png.stat().st_size > 1000
+    assert "depth.tif" in bathy_cli.OUTPUTS
+    run.true_z[:] = -10.25                                  # 25 cm too shallow everywhere
+    assert "rms depth error 25.00 cm" in bathy_cli.summary_line(
+        bathymetry.SurveyResult(s, run.true_z, 1, run.sonar).summary(), [], "out")
