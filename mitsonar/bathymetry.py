@@ -49,13 +49,19 @@ length ``sigma_r`` and a gaussian speckle correlation of rms length ``l``, its v
 ``b_c = b sum_j exp(-8 ln2 (j b / L)^2)`` the correlation length the bins see (``b_c = 1.008 b``
 for ``L = b``: independent bins; ``b_c = 0.75 L`` for ``L >> b``). A long echo
 (``sigma_r >> l``) thus has ``sqrt(sigma_r b_c / (4 sqrt(pi)))``; a short one (``sigma_r << l``:
-the whole echo under one speckle grain, which scales it without moving it) ``sigma_r^2 / l``. The
-depth error is ``cos(theta)`` times the range error: at nadir with ``L = b`` about ``0.12 b``
-(``sigma_r = b / sqrt(12)``), growing to ``cos(theta) sqrt(r tan(theta) sigma_phi b / 7.1)`` at the
-outer beams (`predicted_rms`) — real MBES see the same growth and switch to phase
-(split-aperture) detection at the outer beams, which this module does not model. Threshold
-truncation makes the measured error somewhat smaller than the formula; finite ``spp`` adds Monte
-Carlo noise; at nadir the echo's sub-bin position (quantisation) dominates the formula.
+the whole echo under one speckle grain, which scales it without moving it) ``sigma_r^2 / l``. (3)
+Quantisation: an echo much shorter than a bin (``p = r tan(theta) sigma_phi << b``: nadir) lies in
+one bin whatever the speckle and is found at that bin's centre, an error uniform over the bin
+(rms ``b / sqrt(12)``); it fades as the echo spreads over bins, stated here as
+``q^2 = b^2 / 12 exp(-4 pi^2 p^2 / b^2)`` (the square of the first Fourier coefficient of a
+gaussian sampled every ``b``; an interpolation between the two limits, not an exact law). The
+depth error is ``cos(theta)`` times the range error: at nadir with ``L = b`` about ``0.31 b``
+(speckle ``0.12 b``, quantisation ``0.29 b``), growing to about
+``cos(theta) sqrt(r tan(theta) sigma_phi b / 7.1)`` at the outer beams (`predicted_rms`) — real
+MBES see the same growth and switch to phase (split-aperture) detection at the outer beams, which
+this module does not model. Threshold truncation makes the measured error somewhat smaller than
+the formula and speckle fades that cut a long echo's window (beyond about 50 deg for 1 deg beams)
+much larger; finite ``spp`` adds Monte Carlo noise.
 """
 from __future__ import annotations
 
@@ -247,8 +253,9 @@ def true_height(scene, x, y, z_from):
 
 def predicted_rms(range_m, angle_deg, beam_width_deg, bin_width, incidence_deg=None, resolution=None):
     """The centroid's rms depth error under the scene's speckle at beam angle ``angle_deg`` (module
-    docstring): the range error ``sqrt(sigma_r^4 / (l^2 (1 + 2 sigma_r^2 / l^2)^(3/2)))`` times
-    ``cos(i) / cos(theta - i)``.
+    docstring): the range error ``sqrt(sigma_r^4 / (l^2 (1 + 2 sigma_r^2 / l^2)^(3/2)) + q^2)``
+    times ``cos(i) / cos(theta - i)``, ``q^2 = b^2 / 12 exp(-4 pi^2 p^2 / b^2)`` the bins'
+    quantisation (``p = r tan(i) sigma_phi``: see the module docstring).
 
     ``sigma_r = sqrt((r tan(i) sigma_phi)^2 + b^2 / 12)`` is the echo's rms range spread,
     ``sigma_phi = w / sqrt(8 ln 2)``, ``i`` the incidence on the seabed (default the beam angle:
@@ -265,9 +272,11 @@ def predicted_rms(range_m, angle_deg, beam_width_deg, bin_width, incidence_deg=N
     b_c = b * float(np.sum(np.exp(-8.0 * math.log(2.0) * (j * b / L) ** 2)))
     ell2 = b_c ** 2 / (2.0 * math.pi)
     sigma_phi = math.radians(beam_width_deg) / math.sqrt(8.0 * math.log(2.0))
-    s2 = (np.asarray(range_m) * np.tan(np.abs(inc)) * sigma_phi) ** 2 + b ** 2 / 12.0
+    p2 = (np.asarray(range_m) * np.tan(np.abs(inc)) * sigma_phi) ** 2     # the echo's own spread
+    s2 = p2 + b ** 2 / 12.0
     var = s2 ** 2 / (ell2 * (1.0 + 2.0 * s2 / ell2) ** 1.5)
-    return np.cos(inc) / np.cos(th - inc) * np.sqrt(var)
+    quantisation = b ** 2 / 12.0 * np.exp(-4.0 * math.pi ** 2 * p2 / b ** 2)
+    return np.cos(inc) / np.cos(th - inc) * np.sqrt(var + quantisation)
 
 
 def error_table(angle, error, depth, angle_step=5.0):

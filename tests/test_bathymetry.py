@@ -62,14 +62,40 @@ def test_detector_closed_forms():
     assert 6.995 <= edge[0] <= 7.005     # between the last empty bin and the first full one
 
 
+@pytest.mark.parametrize("grain, spread", [(1.0, 6.0), (4.0, 6.0), (4.0, 1.5), (8.0, 3.0)])
+def test_predicted_rms_matches_the_centroid_under_the_scene_speckle(grain, spread):
+    """`predicted_rms`'s correlated-speckle law against Monte Carlo: the centroid of a gaussian echo
+    (rms ``spread`` bins) times ``|g|^2`` of `mitsonar.speckle.cell_speckle` with grains ``grain``
+    bins long, over 4000 beams two beam widths apart (independent patterns). Measured std over
+    predicted 0.94 to 1.00 (the linearisation slightly overestimates); bounds 0.88 to 1.05
+    (4000 samples: about 2 % sampling error). At nadir (no spread) the prediction is the
+    quantisation's and the speckle's 0.31 b."""
+    from mitsonar import bathymetry
+    from mitsonar.speckle import cell_speckle
+
+    n, r = 4000, np.arange(-60.0, 61.0)
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    ang = np.arange(n) * math.radians(2.0)
+    poses[:, 0, 2], poses[:, 2, 2] = np.sin(ang), np.cos(ang)
+    g = cell_speckle(poses, r, seed=3, beamwidth_h=1.0, aperture_h=1.0, resolution=grain)
+    intensity = np.exp(-r ** 2 / (2 * spread ** 2))[None, :] * np.abs(g) ** 2
+    centroid = (intensity * r).sum(1) / intensity.sum(1)
+    theta, sigma_phi = 45.0, math.radians(0.5) / math.sqrt(8 * math.log(2))
+    range_m = spread / (math.tan(math.radians(theta)) * sigma_phi)     # r tan(theta) sigma_phi = spread
+    pred = bathymetry.predicted_rms(range_m, theta, 0.5, 1.0, resolution=grain) / math.cos(math.radians(theta))
+    assert 0.88 < centroid.std() / pred < 1.05
+    assert bathymetry.predicted_rms(10.0, 0.0, 0.5, 0.0125) / 0.0125 == pytest.approx(0.313, abs=0.002)
+
+
 def test_sloped_plane_soundings_and_error_growth_with_beam_angle(mitsonar_mod):
     """A plane z = -10 + 0.1 y under a static R2Sonic-like fan (120 deg, 96 beams, 2.5 cm bins),
     eight pings, each with the scene's speckle of another ``speckle_seed`` (eight sets of
-    scatterers: a still head would see one pattern eight times). Inner beams (|angle| <= 30 deg): every sounding within 1 % of
-    the depth. The rms error per 10 deg of beam angle is within 0.5 to 2.5 times the centroid's
-    speckle model (`predicted_rms`, at each beam's incidence on the tilted plane), and it grows:
-    the outer beams' (|angle| >= 45) rms is over 1.4 times the inner beams' (|angle| <= 15), as
-    the echo's range spread r tan(incidence) sigma_phi grows."""
+    scatterers: a still head would see one pattern eight times). Inner beams (|angle| <= 30 deg):
+    every sounding within 1 % of the depth. The rms error per 10 deg of beam angle is within 0.6
+    to 1.8 times the centroid's speckle and quantisation model (`predicted_rms`, at each beam's
+    incidence on the tilted plane; measured 0.87 to 1.36, 64 soundings per bin), and it grows:
+    the outer beams' (|angle| >= 45) rms is over 1.4 times the inner beams' (|angle| <= 15;
+    measured 2.0), as the echo's range spread r tan(incidence) sigma_phi grows."""
     from mitsonar import bathymetry, echosounders
 
     head = echosounders.configure("r2sonic_2024", swath=120, n_beams=96, bin_width=0.025, range_max=30)
@@ -94,7 +120,7 @@ def test_sloped_plane_soundings_and_error_growth_with_beam_angle(mitsonar_mod):
         inc = row["angle"] - beta
         r = DEPTH * math.cos(math.radians(beta)) / math.cos(math.radians(inc))
         pred = bathymetry.predicted_rms(r, row["angle"], 0.5, 0.025, inc)
-        assert 0.5 * pred < row["rms"] < 2.5 * pred, (row, pred)
+        assert 0.6 * pred < row["rms"] < 1.8 * pred, (row, pred)
     rms = lambda m: np.sqrt(np.mean(err[m] ** 2))  # noqa: E731
     assert rms(np.abs(s["angle"]) >= 45) > 1.4 * rms(np.abs(s["angle"]) <= 15)
 
