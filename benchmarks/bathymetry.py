@@ -3,12 +3,15 @@ seabed against the centroid's speckle model and over the rocky slope survey scen
 bottom detection against the render.
 
 Prints one JSON object:
-  * ``flat``: per preset, a static head 10 m over a flat sand plane, ``--pings`` pings with seeded
-    speckle: per 10 deg of beam angle the measured rms depth error, the model's
-    (`mitsonar.bathymetry.predicted_rms`) and their ratio, and ``outer_over_inner`` (rms at
-    |angle| >= 45 deg over rms at |angle| <= 15 deg);
+  * ``flat``: per preset, a static head 10 m over a flat sand plane, ``--pings`` pings, each with
+    the scene's speckle of another ``speckle_seed`` (another set of scatterers): per 10 deg of beam
+    angle the measured rms depth error, the model's (`mitsonar.bathymetry.predicted_rms` at the
+    scan's speckle grain ``speckle_resolution``) and their ratio, ``outer_over_inner`` (rms at
+    |angle| >= 45 deg over rms at |angle| <= 15 deg), and ``still_head_error_correlation``: the
+    correlation over the beams of ping 0's depth errors with those of the same still head pinged
+    again with another path seed (the speckle follows the scene: near 1, only Monte Carlo noise);
   * ``rocky_slope``: per preset, ``--scans`` pings of the survey along the scene's lawnmower
-    track (max_depth 1): soundings, overall rms, the table per beam angle (5 deg bins), and
+    track (max_depth 1; the scene's speckle, changing as the head moves): soundings, overall rms, the table per beam angle (5 deg bins), and
     ``render_s_per_ping`` / ``detect_s_per_ping`` and their ratio (measured in this one run);
   * ``altimeter``: the PA500 over the flat plane: leading-edge and centroid range minus the true
     10 m (the centroid's known long bias).
@@ -46,20 +49,28 @@ def flat_scene(head, depth=10.0):
 def flat(name, spp, pings, depth=10.0):
     head = echosounders.configure(name, range_max=40.0)
     scene = flat_scene(head, depth)
-    parts = [bathymetry.soundings(mitsonar.render_scan(scene, spp=spp, seed=s), speckle_seed=1000 + s, ping=s)
-             for s in range(pings)]
+    scans = [mitsonar.render_scan(scene, spp=spp, seed=s, speckle_seed=1000 + s) for s in range(pings)]
+    parts = [bathymetry.soundings(scan, speckle=True, ping=i) for i, scan in enumerate(scans)]
+    # a still head pinged again (other path seed, same scatterers): its errors repeat
+    again = bathymetry.soundings(mitsonar.render_scan(scene, spp=spp, seed=pings, speckle_seed=1000), speckle=True)
+    e0, e1 = (-p["z"] - depth for p in (parts[0], again))
+    common = np.intersect1d(parts[0]["beam"], again["beam"])
+    still = float(np.corrcoef(e0[np.searchsorted(parts[0]["beam"], common)],
+                              e1[np.searchsorted(again["beam"], common)])[0, 1])
+    L = bathymetry.speckle_resolution(scans[0])
     s = np.concatenate(parts)
     err = -s["z"] - depth                      # measured depth (-z) minus true depth
     rows = bathymetry.error_table(s["angle"], err, np.full(len(s), depth), 10.0)
     w, b = head.sounder.rx_across, head.params["range_max"] / head.params["n_bins"]
     for row in rows:
-        pred = float(bathymetry.predicted_rms(depth / math.cos(math.radians(row["angle"])), row["angle"], w, b))
+        pred = float(bathymetry.predicted_rms(depth / math.cos(math.radians(row["angle"])), row["angle"], w, b,
+                                              resolution=L))
         row.update(predicted_rms=pred, ratio=row["rms"] / pred)
     rms = lambda m: float(np.sqrt(np.mean(err[m] ** 2)))  # noqa: E731
     a = np.abs(s["angle"])
     return dict(beams=head.params["n_pings"], swath=float(head.beam_angles[-1] - head.beam_angles[0]),
-                rx_across_deg=w, bin_width=b, soundings=int(len(s)), outer_over_inner=rms(a >= 45) / rms(a <= 15),
-                per_angle=rows)
+                rx_across_deg=w, bin_width=b, speckle_resolution=L, soundings=int(len(s)),
+                outer_over_inner=rms(a >= 45) / rms(a <= 15), still_head_error_correlation=still, per_angle=rows)
 
 
 def slope(name, spp, scans):
@@ -79,7 +90,7 @@ def slope(name, spp, scans):
         if scan is None:
             break
         t = time.perf_counter()
-        parts.append(bathymetry.soundings(scan, speckle_seed=len(parts), ping=len(parts)))
+        parts.append(bathymetry.soundings(scan, speckle=True, ping=len(parts)))
         t_detect += time.perf_counter() - t
     s = np.concatenate(parts)
     true_z = bathymetry.true_height(scene, s["x"], s["y"], s["head_z"])

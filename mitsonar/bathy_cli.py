@@ -20,7 +20,8 @@ import os
 
 import numpy as np
 
-OUTPUTS = ("soundings.ply", "depth.npz", "errors.json", "bathymetry.png")
+#: Every file a run may write (``depth.tif`` only when ``rasterio`` is installed).
+OUTPUTS = ("soundings.ply", "depth.npz", "depth.tif", "errors.json", "bathymetry.png")
 
 
 class BathymetryCLIError(ValueError):
@@ -50,20 +51,26 @@ def plot_bathymetry(result, grid, path, trajectory=None):
     ok = np.isfinite(err)
     bx.plot(s["angle"][ok], 100 * err[ok], ".", ms=1.5, color="0.6", alpha=0.5, label="soundings")
     rows = result.errors
-    ang = np.array([r["angle"] for r in rows])
-    bx.plot(ang, [100 * r["rms"] for r in rows], "o-", color="C3", label="rms per beam angle")
-    bx.plot(ang, [100 * r["mean"] for r in rows], "s--", color="C0", ms=3, label="mean (bias)")
-    altitude = float(np.nanmedian(s["head_z"] - result.true_z))
-    a = np.linspace(ang.min(), ang.max(), 200)
     info = result.sonar
-    if info.get("speckle") and info.get("method") == "centroid" and info.get("kind") == "multibeam":
-        bx.plot(a, 100 * predicted_rms(altitude / np.cos(np.radians(a)), a, info["beamwidth_h"], info["bin_width"]),
-                "k:", label=f"predicted rms (flat, {altitude:.1f} m)")
+    if rows:     # soundings with a ground truth under them
+        ang = np.array([r["angle"] for r in rows])
+        bx.plot(ang, [100 * r["rms"] for r in rows], "o-", color="C3", label="rms per beam angle")
+        bx.plot(ang, [100 * r["mean"] for r in rows], "s--", color="C0", ms=3, label="mean (bias)")
+        altitude = float(np.nanmedian(s["head_z"] - result.true_z))
+        a = np.linspace(ang.min(), ang.max(), 200)
+        if info.get("speckle") and info.get("method") == "centroid" and info.get("kind") == "multibeam":
+            pred = predicted_rms(altitude / np.cos(np.radians(a)), a, info["beamwidth_h"], info["bin_width"],
+                                 resolution=info.get("speckle_resolution"))
+            bx.plot(a, 100 * pred, "k:", label=f"predicted rms (flat, {altitude:.1f} m)")
+    else:
+        bx.text(0.5, 0.5, "no sounding has a seabed under it in the scene:\nno depth error to show",
+                ha="center", va="center", transform=bx.transAxes)
     lim = np.nanpercentile(np.abs(100 * err[ok]), 99.5) if ok.any() else 1.0
     bx.set(xlabel="beam angle [deg] (port +)", ylabel="depth error [cm] (+: too deep)", ylim=(-1.2 * lim, 1.2 * lim),
            title=f"depth error per beam angle ({len(s)} soundings)")
     bx.grid(True, alpha=0.3)
-    bx.legend(fontsize=8)
+    if rows or ok.any():
+        bx.legend(fontsize=8)
     _save(fig, path)
 
 
@@ -83,7 +90,7 @@ def cmd_bathymetry(args):
     from ._files import StagedFiles
     from .sea_surface import load_survey_scene
     from .soundings import grid_depths, write_ply
-    from .survey_cli import _trajectory
+    from .survey_cli import trajectory_from_args
 
     try:   # every option, before any file or render
         head = echosounders.configure(args.preset, swath=args.swath, n_beams=args.beams, range_max=args.range_max,
@@ -92,7 +99,7 @@ def cmd_bathymetry(args):
         grid_depths(np.zeros(1, bathymetry.SOUNDING_DTYPE), args.cell)
     except ValueError as exc:
         raise BathymetryCLIError(str(exc)) from None
-    traj = _trajectory(args)
+    traj = trajectory_from_args(args, "bathymetry")
     scene = load_survey_scene(args.scene, surface=args.surface, sonar=echosounders.sonar_xml(head))
     _check_folder(args.output)
     run = bathymetry.survey(scene, traj, spp=args.spp, seed=args.seed, threshold_db=args.threshold_db,
@@ -100,7 +107,7 @@ def cmd_bathymetry(args):
                             max_depth=args.max_depth, progress=not args.quiet)
     grid = grid_depths(run.soundings, args.cell)
     out = args.output
-    written = list(OUTPUTS)
+    written = [f for f in OUTPUTS if f != "depth.tif"]
     with StagedFiles() as files:
         write_ply(files.temporary(os.path.join(out, "soundings.ply")), run.soundings)
         grid.save_npz(files.temporary(os.path.join(out, "depth.npz")))
@@ -117,15 +124,24 @@ def cmd_bathymetry(args):
         else:
             grid.write_geotiff(files.temporary(os.path.join(out, "depth.tif")))
             written.append("depth.tif")
-    rms = summary["rms_error"]
-    print(f"wrote {', '.join(written)} to {out}: {len(run.soundings)} soundings from {run.n_pings} pings, "
-          f"rms depth error {100 * rms:.2f} cm")
+    print(summary_line(summary, written, out))
     return 0
+
+
+def summary_line(summary, written, out) -> str:
+    """The line the command prints: what it wrote, and the rms depth error (or why there is none:
+    no sounding with the scene's seabed under it)."""
+    rms = summary.get("rms_error")
+    error = (f"rms depth error {100 * rms:.2f} cm" if rms is not None
+             else "no depth error (no sounding has a seabed under it in the scene)")
+    return (f"wrote {', '.join(written)} to {out}: {summary['n_soundings']} soundings from {summary['n_pings']} "
+            f"pings, {error}")
 
 
 def add_subcommands(sub):
     from .bathymetry import METHODS
     from .echosounders import PRESETS
+    from .survey_cli import add_trajectory_options
 
     s = sub.add_parser("bathymetry", help="a bathymetric survey: soundings, depth grid, depth errors",
                        description="Survey a scene with a preset downward echo sounder (it replaces the "
@@ -143,17 +159,10 @@ def add_subcommands(sub):
     s.add_argument("--no-speckle", action="store_true", help="detect on the noise-free intensity")
     s.add_argument("--surface", action="store_true", help="add a flat specular sea surface at z = 0 (multipath)")
     s.add_argument("--cell", type=float, default=0.5, help="depth grid cell, m (default 0.5)")
-    s.add_argument("--trajectory", metavar="TUM", help="trajectory file: 'timestamp tx ty tz qx qy qz qw' per line")
-    s.add_argument("--lawnmower", nargs=4, type=float, metavar=("X_MIN", "X_MAX", "Y_MIN", "Y_MAX"),
-                   help="a lawnmower survey of this world rectangle (lines along x)")
-    s.add_argument("--spacing", type=float, default=10.0, help="lawnmower line spacing, m (default 10)")
-    s.add_argument("--speed", type=float, default=1.5, help="lawnmower speed, m/s (default 1.5)")
-    s.add_argument("--depth", type=float, help="lawnmower depth below z = 0, m")
-    s.add_argument("--altitude", type=float, help="lawnmower altitude above z = 0, m")
-    s.add_argument("--yaw-rate", type=float, default=20.0, help="lawnmower turn rate at the corners, deg/s")
-    s.add_argument("--drift", type=int, metavar="SEED", help="add seeded navigation drift (a random walk)")
+    add_trajectory_options(s)
     s.add_argument("--spp", type=int, default=128, help="paths per beam (default 128)")
-    s.add_argument("--seed", type=int, default=0, help="survey seed (paths and speckle; default 0)")
+    s.add_argument("--seed", type=int, default=0,
+                   help="survey seed of the paths (default 0); the speckle is the scene's (the sensor's speckle_seed)")
     s.add_argument("--max-scans", type=int, help="stop after this many pings")
     s.add_argument("--max-depth", type=int, help="surface bounces (default: the scene's integrator)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")

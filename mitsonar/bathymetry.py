@@ -12,33 +12,56 @@ and their errors against the scene's true seabed.
 
 Bottom detection (`detect`): in each row (receive beam) of a scan's intensity, the strongest bin
 is found; the echo is the run of bins around it whose intensity is within ``threshold_db`` of that
-peak; its range is the amplitude-weighted mean range of that run (``centroid``, the "weighted
-mean time" / centre-of-gravity amplitude detection of MBES), or (``leading_edge``, for the
-altimeter) the range where the intensity first rises through the threshold, interpolated linearly
-between bins. The sounding is ``transducer + range * boresight`` of the row's beam frame (straight
-rays in a constant sound speed), so every sounding is in the world frame.
+peak; its range is the intensity-weighted (energy-weighted) mean range of that run (``centroid``,
+the "weighted mean time" / centre-of-gravity detection of MBES, here weighted by the echo's power,
+not its amplitude), or (``leading_edge``, for the altimeter) the range where the intensity first
+rises through the threshold, interpolated linearly between bins. The sounding is
+``transducer + range * boresight`` of the row's beam frame (straight rays in a constant sound
+speed), so every sounding is in the world frame.
 
-Speckle: the rendered intensity is an expectation (noise-free but for Monte Carlo noise); real
-echoes fluctuate. With ``speckle_seed`` each bin is multiplied by an independent unit-mean
-exponential variate (fully developed speckle: Rayleigh amplitude), one per bin (bins about one
-range-resolution cell), seeded.
+Speckle (`speckled`): the rendered intensity is an expectation (noise-free but for Monte Carlo
+noise); real echoes fluctuate. Detection with speckle runs on ``intensity * |g|^2``, ``g`` the
+scene's own complex speckle of the scan (`mitsonar.speckle`, through
+`mitsonar.electronics.Electronics.scene_speckle` with the scan's recorded electronics, its
+``speckle_seed`` and geometry: what `mitsonar.render.render_scan` multiplied into the device
+bytes). So a still head sees the same speckle, and the same soundings, ping after ping; a moving
+or turning head sees it change at the physical rate; another ``speckle_seed`` (another set of
+scatterers) gives another pattern. The speckle's grains are one range resolution
+``L = max(c pulse_length / 2, bin)`` long (the bathymetric presets' pulse gives ``L`` = 1.25 cm,
+`mitsonar.echosounders`). Detection does not use the device bytes: their TVG, noise floor and
+8-bit A/D window clip a strong bottom echo's peak to 255 and flatten the centroid's weights; a
+bathymetric head detects on its beamformed power before any display scaling.
 
 Known bias and error of the centroid, and why errors grow at the outer beams: a beam of across-track
 width ``w`` at angle ``theta`` from the vertical, at altitude ``H``, lights the seabed over beam
 angles ``theta + phi``; its echo spreads over ranges ``r(phi) = H / cos(theta + phi)``, a spread of
 about ``sigma_r = r tan(theta) sigma_phi`` with ``sigma_phi = w / sqrt(8 ln 2)`` (the receive
-beam's gaussian, two-way across track: the transmit fan is wide there). At nadir the echo is one
-or two bins long; at 60 deg and 10 m altitude, with w = 0.5 deg, it is 0.13 m rms, ten bins of
-1.25 cm. (1) Bias: the centroid of ``r(phi)`` is ``r (1/2 (1 + 2 tan^2 theta) - 3 tan^2 theta)
-sigma_phi^2`` away from ``r(0)`` (convexity of ``1 / cos`` against the Lambertian ``cos^3``
-weight leaning to nadir), under 1e-4 r for beams under 1 deg: negligible against (2) the random
-error: with speckle the centroid of an echo of rms length ``sigma_r`` sampled in bins ``b`` has a
-standard deviation ``sqrt(sigma_r b / (4 sqrt(pi)))`` (linearised ratio of sums of exponential
-variates), and the depth error is ``cos(theta)`` times the range error. The depth error thus grows
-from about ``0.38 b`` at nadir to ``cos(theta) sqrt(r tan(theta) sigma_phi b / 7.1)`` at the outer
-beams (`predicted_rms`) — real MBES see the same growth and switch to phase (split-aperture)
-detection at the outer beams, which this module does not model. Threshold truncation makes the
-measured error somewhat smaller than the formula; finite ``spp`` adds Monte Carlo noise.
+beam's gaussian, two-way across track: the transmit fan is wide there), plus the bin's own
+``b / sqrt(12)``. At nadir the echo is one or two bins long; at 60 deg and 10 m altitude, with
+w = 0.5 deg, it is 0.13 m rms, ten bins of 1.25 cm. (1) Bias: the centroid of ``r(phi)`` is
+``r (1/2 (1 + 2 tan^2 theta) - 3 tan^2 theta) sigma_phi^2`` away from ``r(0)`` (convexity of
+``1 / cos`` against the Lambertian ``cos^3`` weight leaning to nadir), under 1e-4 r for beams
+under 1 deg: negligible against (2) the random error. Linearised, the centroid's error is
+``sum (r_i - c) I_i (s_i - 1) / sum I_i`` (``s_i = |g_i|^2``, unit-mean exponential, with intensity
+correlation ``exp(-8 ln2 (dr / L)^2)`` between bins ``dr`` apart). For a gaussian echo of rms
+length ``sigma_r`` and a gaussian speckle correlation of rms length ``l``, its variance is
+``sigma_r^4 / (l^2 (1 + 2 sigma_r^2 / l^2)^(3/2))``; ``l = b_c / sqrt(2 pi)`` with
+``b_c = b sum_j exp(-8 ln2 (j b / L)^2)`` the correlation length the bins see (``b_c = 1.008 b``
+for ``L = b``: independent bins; ``b_c = 0.75 L`` for ``L >> b``). A long echo
+(``sigma_r >> l``) thus has ``sqrt(sigma_r b_c / (4 sqrt(pi)))``; a short one (``sigma_r << l``:
+the whole echo under one speckle grain, which scales it without moving it) ``sigma_r^2 / l``. (3)
+Quantisation: an echo much shorter than a bin (``p = r tan(theta) sigma_phi << b``: nadir) lies in
+one bin whatever the speckle and is found at that bin's centre, an error uniform over the bin
+(rms ``b / sqrt(12)``); it fades as the echo spreads over bins, stated here as
+``q^2 = b^2 / 12 exp(-4 pi^2 p^2 / b^2)`` (the square of the first Fourier coefficient of a
+gaussian sampled every ``b``; an interpolation between the two limits, not an exact law). The
+depth error is ``cos(theta)`` times the range error: at nadir with ``L = b`` about ``0.31 b``
+(speckle ``0.12 b``, quantisation ``0.29 b``), growing to about
+``cos(theta) sqrt(r tan(theta) sigma_phi b / 7.1)`` at the outer beams (`predicted_rms`) — real
+MBES see the same growth and switch to phase (split-aperture) detection at the outer beams, which
+this module does not model. Threshold truncation makes the measured error somewhat smaller than
+the formula and speckle fades that cut a long echo's window (beyond about 50 deg for 1 deg beams)
+much larger; finite ``spp`` adds Monte Carlo noise.
 """
 from __future__ import annotations
 
@@ -75,10 +98,42 @@ def check_options(threshold_db=10.0, method="centroid"):
     return float(threshold_db), method
 
 
-def speckle(intensity, seed) -> np.ndarray:
-    """``intensity`` times independent unit-mean exponential variates (one per bin), seeded."""
-    rng = np.random.default_rng(seed)
-    return np.asarray(intensity, dtype=np.float64) * rng.exponential(1.0, np.shape(intensity))
+def speckle_power(scan) -> np.ndarray:
+    """The scene's speckle power ``|g|^2`` (mean 1) of every bin of ``scan`` (n_rows x n_bins):
+    the field `mitsonar.render.render_scan` multiplied into the scan's bytes, from the scan's
+    recorded electronics (``speckle``, ``speckle_seed``, ``pulse_length``, ``speckle_shape``),
+    poses, ranges, beam width and ``meta`` (``frequency``, ``aperture_h``). Ones for ``speckle``
+    ``off``; ``weibull`` reshapes the power as the electronics do. A scan that does not say
+    where its echoes come from (``meta['speckle'] != 'scene'``: a real head's) is refused."""
+    from .electronics import Electronics
+
+    e = Electronics.from_dict(scan.electronics, source=f"{WHERE} scan.electronics")
+    if e.speckle == "off":
+        return np.ones(np.shape(scan.intensity))
+    if scan.meta.get("speckle") != "scene":
+        raise not_allowed(WHERE, "scan", f"speckle {scan.meta.get('speckle')!r}",
+                          "a rendered scan (meta['speckle'] == 'scene'), or speckle=False")
+    g = e.scene_speckle(scan.poses, scan.ranges, sound_speed=scan.sound_speed, beamwidth_h=scan.beamwidth_h,
+                        frequency=float(scan.meta.get("frequency", 700e3)), aperture_h=scan.meta.get("aperture_h"))
+    power = g.real ** 2 + g.imag ** 2
+    if e.speckle == "weibull":
+        k = e.speckle_shape
+        return power ** (1.0 / k) / math.gamma(1.0 + 1.0 / k)
+    return power
+
+
+def speckle_resolution(scan) -> float:
+    """The range length ``L`` (m) of the scan's speckle grains: ``max(c pulse_length / 2, bin)``."""
+    from .electronics import Electronics
+
+    e = Electronics.from_dict(scan.electronics, source=f"{WHERE} scan.electronics")
+    b = float(scan.ranges[1] - scan.ranges[0]) if len(scan.ranges) > 1 else 0.0
+    return max(scan.sound_speed * e.pulse_length / 2.0, b)
+
+
+def speckled(scan) -> np.ndarray:
+    """``scan.intensity * |g|^2``: the echo power with the scene's own speckle (`speckle_power`)."""
+    return np.asarray(scan.intensity, dtype=np.float64) * speckle_power(scan)
 
 
 def smoothed(intensity, width=SMOOTH_BINS):
@@ -130,7 +185,7 @@ def detect(intensity, ranges, threshold_db=10.0, method="centroid"):
     return np.where(found, out, np.nan), np.where(found, energy, 0.0)
 
 
-def soundings(scan, threshold_db=10.0, method="centroid", speckle_seed=None, ping=0, start_time=None):
+def soundings(scan, threshold_db=10.0, method="centroid", speckle=False, ping=0, start_time=None):
     """One sounding per beam of ``scan`` that found the bottom: a `SOUNDING_DTYPE` array.
 
     ``x, y, z`` world position (m), ``intensity`` the echo's energy in dB (10 log10 of the window's
@@ -138,13 +193,17 @@ def soundings(scan, threshold_db=10.0, method="centroid", speckle_seed=None, pin
     multibeam the across-track beam angle, positive to port), ``ping`` (``ping``, e.g. the scan's
     index in a survey), ``time`` the row's ping time (``start_time`` + the scan's row time; the
     scan's ``meta['start_time']`` by default), ``range`` the detected range, ``head_z`` the
-    transducer's height. ``speckle_seed``: None, or a seed for `speckle`.
+    transducer's height. ``speckle``: False detects on the noise-free intensity, True on
+    `speckled` (the scene's speckle of the scan; pick another pattern with `render_scan`'s
+    ``speckle_seed``).
     """
     threshold_db, method = check_options(threshold_db, method)
+    if not isinstance(speckle, bool):
+        raise not_allowed(WHERE, "speckle", speckle, "True (the scan's scene speckle) or False")
     spread = float(np.degrees(np.ptp(scan.bearings))) if scan.n_pings > 1 else 0.0
     if scan.kind == "multibeam" and spread > 180.0 + 1e-9:
         raise not_allowed(WHERE, "scan", f"a fan of {spread:g} deg", "a bathymetric fan of at most 180 deg")
-    I = scan.intensity if speckle_seed is None else speckle(scan.intensity, speckle_seed)
+    I = speckled(scan) if speckle else scan.intensity
     rng, energy = detect(I, scan.ranges, threshold_db, method)
     ok = np.isfinite(rng)
     k = np.flatnonzero(ok)
@@ -192,18 +251,32 @@ def true_height(scene, x, y, z_from):
     return out.reshape(np.shape(x_in))
 
 
-def predicted_rms(range_m, angle_deg, beam_width_deg, bin_width, incidence_deg=None):
-    """The centroid's rms depth error under speckle at beam angle ``angle_deg`` (module docstring):
-    ``cos(theta) sqrt(sigma_r b / (4 sqrt(pi)))``, ``sigma_r`` the echo's rms range spread
-    ``sqrt((r tan(i) sigma_phi)^2 + b^2 / 12)``, ``sigma_phi = w / sqrt(8 ln 2)``, ``i`` the
-    incidence on the seabed (default the beam angle: a flat seabed). On a seabed tilted by
-    ``beta = theta - i`` in the beam's plane the vertical error is ``cos(i) / cos(beta)`` times
-    the range error (``cos(theta)`` when flat)."""
+def predicted_rms(range_m, angle_deg, beam_width_deg, bin_width, incidence_deg=None, resolution=None):
+    """The centroid's rms depth error under the scene's speckle at beam angle ``angle_deg`` (module
+    docstring): the range error ``sqrt(sigma_r^4 / (l^2 (1 + 2 sigma_r^2 / l^2)^(3/2)) + q^2)``
+    times ``cos(i) / cos(theta - i)``, ``q^2 = b^2 / 12 exp(-4 pi^2 p^2 / b^2)`` the bins'
+    quantisation (``p = r tan(i) sigma_phi``: see the module docstring).
+
+    ``sigma_r = sqrt((r tan(i) sigma_phi)^2 + b^2 / 12)`` is the echo's rms range spread,
+    ``sigma_phi = w / sqrt(8 ln 2)``, ``i`` the incidence on the seabed (default the beam angle:
+    a flat seabed; on a seabed tilted by ``beta = theta - i`` in the beam's plane the vertical
+    error is ``cos(i) / cos(beta)`` times the range error, ``cos(theta)`` when flat);
+    ``l = b_c / sqrt(2 pi)``, ``b_c = b sum_j exp(-8 ln2 (j b / L)^2)`` the speckle's correlation
+    length over bins ``b`` for grains ``L = resolution`` long (default one bin: `speckle_resolution`
+    gives a scan's). For ``L = b`` and long echoes this is ``sqrt(sigma_r b / (4 sqrt(pi)))``."""
     th = np.radians(np.asarray(angle_deg, np.float64))
     inc = th if incidence_deg is None else np.radians(np.asarray(incidence_deg, np.float64))
+    b = float(bin_width)
+    L = b if resolution is None else max(float(resolution), b)
+    j = np.arange(-int(math.ceil(4 * L / b)) - 1, int(math.ceil(4 * L / b)) + 2)
+    b_c = b * float(np.sum(np.exp(-8.0 * math.log(2.0) * (j * b / L) ** 2)))
+    ell2 = b_c ** 2 / (2.0 * math.pi)
     sigma_phi = math.radians(beam_width_deg) / math.sqrt(8.0 * math.log(2.0))
-    sigma_r = np.sqrt((np.asarray(range_m) * np.tan(np.abs(inc)) * sigma_phi) ** 2 + bin_width ** 2 / 12.0)
-    return np.cos(inc) / np.cos(th - inc) * np.sqrt(sigma_r * bin_width / (4.0 * math.sqrt(math.pi)))
+    p2 = (np.asarray(range_m) * np.tan(np.abs(inc)) * sigma_phi) ** 2     # the echo's own spread
+    s2 = p2 + b ** 2 / 12.0
+    var = s2 ** 2 / (ell2 * (1.0 + 2.0 * s2 / ell2) ** 1.5)
+    quantisation = b ** 2 / 12.0 * np.exp(-4.0 * math.pi ** 2 * p2 / b ** 2)
+    return np.cos(inc) / np.cos(th - inc) * np.sqrt(var + quantisation)
 
 
 def error_table(angle, error, depth, angle_step=5.0):
@@ -258,11 +331,13 @@ def survey(scene, trajectory, *, spp=256, seed=0, threshold_db=10.0, method=None
            start_time=None, end_time=None, max_depth=None, sensor=0, angle_step=5.0, progress=None):
     """Render a survey of ``scene``'s echo sounder along ``trajectory`` and detect the bottom in
     every ping: a `SurveyResult`. ``method`` defaults to ``centroid`` for a multibeam and
-    ``leading_edge`` for a single beam; ``speckle``: seeded per scan from ``seed`` (True) or off.
+    ``leading_edge`` for a single beam; ``speckle``: detect on each scan's scene speckle (True:
+    `speckled`, the sensor's ``speckle_seed``, changing along the track as the head moves) or on
+    the noise-free intensity (False).
     Every option is checked before the first render; a survey in which no beam finds the bottom
     is refused with one line (`NoBottomError`)."""
     from .scene import sonar_of
-    from .survey import render_survey, scan_seed
+    from .survey import render_survey
 
     sonar = sonar_of(scene, sensor)
     method = method or ("centroid" if sonar.kind == "multibeam" else "leading_edge")
@@ -272,10 +347,10 @@ def survey(scene, trajectory, *, spp=256, seed=0, threshold_db=10.0, method=None
     error_table([], [], [], angle_step)     # the step, checked before any render
     scans = render_survey(scene, trajectory, None, spp=spp, seed=seed, max_scans=max_scans, start_time=start_time,
                           end_time=end_time, sensor=sensor, max_depth=max_depth, progress=progress or False)
-    parts, n = [], 0
+    parts, n, resolution = [], 0, float(sonar.bin_width)
     for i, scan in enumerate(scans):
-        sseed = scan_seed(seed, i) ^ 0x5EC1E if speckle else None
-        parts.append(soundings(scan, threshold_db, method, sseed, ping=i))
+        parts.append(soundings(scan, threshold_db, method, speckle, ping=i))
+        resolution = speckle_resolution(scan)
         n += 1
     s = np.concatenate(parts) if parts else np.zeros(0, SOUNDING_DTYPE)
     if len(s) == 0:
@@ -284,5 +359,6 @@ def survey(scene, trajectory, *, spp=256, seed=0, threshold_db=10.0, method=None
     info = dict(kind=sonar.kind, beams=int(sonar.n_pings), beamwidth_h=float(sonar.beam.beamwidth_h),
                 beamwidth_v=float(sonar.beam.beamwidth_v), bin_width=float(sonar.bin_width),
                 range_min=float(sonar.range_min), range_max=float(sonar.range_max), method=method,
-                threshold_db=threshold_db, speckle=speckle, spp=int(spp), seed=int(seed))
+                threshold_db=threshold_db, speckle=speckle, speckle_resolution=resolution, spp=int(spp),
+                seed=int(seed))
     return SurveyResult(s, true_z, n, info, angle_step)

@@ -32,7 +32,11 @@ Published figures (frequency, beam count, beam widths, swath), and where they co
 
 Figures marked "data sheet" are as the makers publish them but were not re-checked against the
 sheet for this module. The range bin (``bin_width``) is a simulation choice near the heads' range
-resolution ``c / (2 bandwidth)`` (1.25 cm for a 60 kHz bandwidth), not a published figure.
+resolution ``c / (2 bandwidth)`` (1.25 cm for a 60 kHz bandwidth), not a published figure. The
+multibeams' ``pulse_length`` (an electronics field of the sensor) is the matched pulse of that
+resolution, ``2 bin / c`` = 16.7 us at the preset's bin: the scene's speckle grains
+(`mitsonar.speckle`, ``max(c pulse_length / 2, bin)`` long) are then one range resolution long,
+not the Micron default pulse's 7.5 cm. The altimeter keeps the default electronics.
 
     from mitsonar.echosounders import sonar_xml
     xml = sonar_xml("r2sonic_2024", swath=130, range_max=30)    # a <sensor type="sonar"> element
@@ -183,7 +187,7 @@ def configure(name, *, swath=None, n_beams=None, range_min=None, range_max=None,
         params.update(kind="multibeam", n_pings=n, bearing_start=-swath / 2.0, bearing_step=swath / (n - 1),
                       beamwidth_h=s.rx_across, beamwidth_v=RX_ALONG_FACTOR * s.tx_along,
                       tx_pattern="gaussian", tx_beamwidth_h=min(TX_ACROSS_FACTOR * swath, 360.0),
-                      tx_beamwidth_v=s.tx_along)
+                      tx_beamwidth_v=s.tx_along, pulse_length=2.0 * s.bin_width / float(sound_speed))
     else:
         params.update(kind="mechanical", n_pings=1, bearing_start=0.0, bearing_step=0.0,
                       beamwidth_h=s.rx_across, beamwidth_v=s.tx_along)

@@ -27,7 +27,6 @@ WHERE = "soundings"
 
 #: The PointCloud2 layout: (name, numpy type, sensor_msgs/PointField datatype).
 POINTCLOUD2_FIELDS = (("x", "<f4", 7), ("y", "<f4", 7), ("z", "<f4", 7), ("intensity", "<f4", 7), ("beam", "<u2", 4))
-_PLY_TYPES = {"<f4": "float", "<f8": "double", "<u2": "ushort", "<u4": "uint"}
 PLY_FIELDS = (("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("intensity", "<f4"), ("beam", "<u2"), ("ping", "<u4"),
               ("angle", "<f4"))
 MAX_CELLS = 50_000_000
@@ -48,31 +47,22 @@ def pointcloud2(soundings):
 
 def write_ply(path, soundings):
     """Write the soundings as a binary little-endian PLY point cloud (``element vertex`` with double
-    x y z, float intensity, ushort beam, uint ping, float angle), under a temporary name renamed
-    onto ``path`` when complete. Returns the number of points."""
-    dt = np.dtype(list(PLY_FIELDS))
-    rows = np.zeros(len(soundings), dt)
+    x y z, float intensity, ushort beam, uint ping, float angle; `mitsonar.ply`), under a temporary
+    name renamed onto ``path`` when complete. Returns the number of points."""
+    from .ply import write_ply as write
+
+    rows = np.zeros(len(soundings), np.dtype(list(PLY_FIELDS)))
     for n, _ in PLY_FIELDS:
         rows[n] = soundings[n]
-    header = ["ply", "format binary_little_endian 1.0", "comment mitsonar soundings (depth = -z)",
-              f"element vertex {len(rows)}"]
-    header += [f"property {_PLY_TYPES[t]} {n}" for n, t in PLY_FIELDS] + ["end_header", ""]
-    with replacing(path) as tmp, open(tmp, "wb") as f:
-        f.write("\n".join(header).encode("ascii"))
-        f.write(rows.tobytes())
+    write(path, rows, comment="mitsonar soundings (depth = -z)")
     return len(rows)
 
 
 def read_ply(path) -> np.ndarray:
     """Read back a PLY written by `write_ply`: a structured array with its fields."""
-    with open(path, "rb") as f:
-        data = f.read()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    lines = data[:end].decode("ascii").split("\n")
-    n = int(next(ln for ln in lines if ln.startswith("element vertex")).split()[-1])
-    back = {v: k for k, v in _PLY_TYPES.items()}
-    dt = np.dtype([(ln.split()[2], back[ln.split()[1]]) for ln in lines if ln.startswith("property ")])
-    return np.frombuffer(data, dt, n, end).copy()
+    from .ply import read_ply as read
+
+    return read(path)[0]
 
 
 @dataclasses.dataclass

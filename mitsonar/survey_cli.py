@@ -25,16 +25,33 @@ class SurveyCLIError(ValueError):
 CLIError = SurveyCLIError
 
 
-def _trajectory(args):
+def add_trajectory_options(parser):
+    """The trajectory flags a survey-like command takes: ``--trajectory TUM`` or ``--lawnmower
+    X_MIN X_MAX Y_MIN Y_MAX`` with ``--spacing``, ``--speed``, ``--depth``/``--altitude``,
+    ``--yaw-rate``, and ``--drift SEED`` (read back by `trajectory_from_args`)."""
+    parser.add_argument("--trajectory", metavar="TUM", help="trajectory file: 'timestamp tx ty tz qx qy qz qw' per line")
+    parser.add_argument("--lawnmower", nargs=4, type=float, metavar=("X_MIN", "X_MAX", "Y_MIN", "Y_MAX"),
+                        help="a lawnmower survey of this world rectangle (lines along x)")
+    parser.add_argument("--spacing", type=float, default=10.0, help="lawnmower line spacing, m (default 10)")
+    parser.add_argument("--speed", type=float, default=1.5, help="lawnmower speed, m/s (default 1.5)")
+    parser.add_argument("--depth", type=float, help="lawnmower depth below z = 0, m")
+    parser.add_argument("--altitude", type=float, help="lawnmower altitude above z = 0, m")
+    parser.add_argument("--yaw-rate", type=float, default=20.0, help="lawnmower turn rate at the corners, deg/s")
+    parser.add_argument("--drift", type=int, metavar="SEED", help="add seeded navigation drift (a random walk)")
+
+
+def trajectory_from_args(args, command="survey"):
+    """The `Trajectory` the flags of `add_trajectory_options` give (a TUM file, or a lawnmower
+    pattern; plus drift), or a `SurveyCLIError` of one line naming ``command`` and the flags."""
     from .trajectory import Trajectory
 
     if (args.trajectory is None) == (args.lawnmower is None):
-        raise CLIError("survey: give exactly one of --trajectory FILE or --lawnmower X_MIN X_MAX Y_MIN Y_MAX")
+        raise CLIError(f"{command}: give exactly one of --trajectory FILE or --lawnmower X_MIN X_MAX Y_MIN Y_MAX")
     if args.trajectory is not None:
         traj = Trajectory.from_tum(args.trajectory)
     else:
         if (args.depth is None) == (args.altitude is None):
-            raise CLIError("survey --lawnmower: give exactly one of --depth or --altitude")
+            raise CLIError(f"{command} --lawnmower: give exactly one of --depth or --altitude")
         x0, x1, y0, y1 = args.lawnmower
         traj = Trajectory.lawnmower(x0, x1, y0, y1, args.spacing, args.speed, depth=args.depth,
                                     altitude=args.altitude, yaw_rate=args.yaw_rate)
@@ -46,7 +63,7 @@ def _trajectory(args):
 def cmd_survey(args):
     import mitsonar
 
-    traj = _trajectory(args)                        # a bad file: one line, nothing written
+    traj = trajectory_from_args(args)               # a bad file: one line, nothing written
     if getattr(args, "surface", False):             # + a flat specular sea surface at z = 0
         from .sea_surface import load_survey_scene
 
@@ -180,15 +197,7 @@ def add_subcommands(sub):
                                    "the vehicle, x forward, y port, z up) pinging along a trajectory.")
     s.add_argument("scene", help="scene XML file")
     s.add_argument("-o", "--output", required=True, help="output folder (scans, trajectory.tum, track.png)")
-    s.add_argument("--trajectory", metavar="TUM", help="trajectory file: 'timestamp tx ty tz qx qy qz qw' per line")
-    s.add_argument("--lawnmower", nargs=4, type=float, metavar=("X_MIN", "X_MAX", "Y_MIN", "Y_MAX"),
-                   help="a lawnmower survey of this world rectangle (lines along x)")
-    s.add_argument("--spacing", type=float, default=10.0, help="lawnmower line spacing, m (default 10)")
-    s.add_argument("--speed", type=float, default=1.5, help="lawnmower speed, m/s (default 1.5)")
-    s.add_argument("--depth", type=float, help="lawnmower depth below z = 0, m")
-    s.add_argument("--altitude", type=float, help="lawnmower altitude above z = 0, m")
-    s.add_argument("--yaw-rate", type=float, default=20.0, help="lawnmower turn rate at the corners, deg/s")
-    s.add_argument("--drift", type=int, metavar="SEED", help="add seeded navigation drift (a random walk)")
+    add_trajectory_options(s)
     s.add_argument("--surface", action="store_true",
                    help="add a flat specular sea surface at z = 0 (shallow-water multipath; off by default)")
     s.add_argument("--spp", type=int, default=1024, help="paths per ping (default 1024)")

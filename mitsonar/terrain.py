@@ -41,7 +41,6 @@ import sys
 import numpy as np
 
 from ._checks import in_range, is_number, is_whole, require
-from ._files import replacing
 
 #: Most grid vertices a terrain may have: making and writing the mesh peaks at about 270 bytes
 #: each (heights and their parts, the roughness field's FFT, vertex and face arrays; measured on
@@ -187,33 +186,24 @@ class Terrain:
         return verts, np.concatenate(faces).astype(np.int64)
 
     def write_ply(self, path):
-        """Write the mesh as a binary little-endian PLY (float x y z, uchar/int face lists) under a
-        temporary name, renamed onto ``path`` when complete. Returns ``(n_vertices, n_faces)``."""
+        """Write the mesh as a binary little-endian PLY (float x y z, uchar/int face lists;
+        `mitsonar.ply`) under a temporary name, renamed onto ``path`` when complete. Returns
+        ``(n_vertices, n_faces)``."""
+        from .ply import write_ply
+
         verts, faces = self.mesh()
-        header = ("ply\nformat binary_little_endian 1.0\n"
-                  f"comment mitsonar terrain seed {self.seed}\n"
-                  f"element vertex {len(verts)}\nproperty float x\nproperty float y\nproperty float z\n"
-                  f"element face {len(faces)}\nproperty list uchar int vertex_indices\nend_header\n")
-        rows = np.empty(len(faces), dtype=[("n", "u1"), ("i", "<i4", (3,))])
-        rows["n"], rows["i"] = 3, faces
-        with replacing(path) as tmp, open(tmp, "wb") as f:
-            f.write(header.encode("ascii"))
-            f.write(verts.astype("<f4").tobytes())
-            f.write(rows.tobytes())
+        rows = np.empty(len(verts), [("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
+        rows["x"], rows["y"], rows["z"] = verts.T
+        write_ply(path, rows, faces, comment=f"mitsonar terrain seed {self.seed}")
         return len(verts), len(faces)
 
 
 def read_ply(path):
     """Read back a PLY written by :meth:`Terrain.write_ply`: ``(vertices, faces)``."""
-    with open(path, "rb") as f:
-        data = f.read()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    header = data[:end].decode("ascii").split("\n")
-    nv = int(next(ln for ln in header if ln.startswith("element vertex")).split()[-1])
-    nf = int(next(ln for ln in header if ln.startswith("element face")).split()[-1])
-    verts = np.frombuffer(data, "<f4", nv * 3, end).reshape(nv, 3).astype(np.float64)
-    rows = np.frombuffer(data, [("n", "u1"), ("i", "<i4", (3,))], nf, end + nv * 12)
-    return verts, rows["i"].astype(np.int64)
+    from .ply import read_ply as read
+
+    rows, faces = read(path)
+    return np.stack([rows["x"], rows["y"], rows["z"]], 1).astype(np.float64), faces
 
 
 def main(argv=None):
