@@ -1,0 +1,249 @@
+"""Bidirectional echo paths: two subpaths from the transducer joined at every pair of vertices.
+
+The sonar's two ends are points with beam patterns: a path of ``k`` surface bounces
+``v_0 v_1 ... v_k v_{k+1}`` starts at the transducer ``v_0`` (beam ``B_A``, the row's beam, that
+`common.SonarIntegrator.sample` emits from) and ends at the transducer ``v_{k+1}`` (beam ``B_B``:
+the same beam for a mechanical head, the transmit fan ``setup.connect`` for a multibeam one).
+Its energy, in the units of `common` (on-axis source intensity 1 W/sr, on-axis receive aperture
+1 m^2), is the integral over the surface points of
+
+    B_A(v_0 -> v_1) G0(v_0, v_1) prod_i f(v_i) prod_i G(v_i, v_{i+1}) G0(v_k, v_{k+1}) B_B(v_{k+1} -> v_k)
+    * 10^(-absorption L / 10)
+
+with ``G(x, y) = V cos_x cos_y / |x - y|^2`` between surfaces and ``G0 = V cos / r^2`` to the
+transducer (a point: no cosine there); ``L`` is the total path length, the echo's range ``L / 2``.
+
+Strategy ``(s, t)``, ``s + t = k``, takes ``v_1 .. v_s`` from subpath A (beam-sampled, then
+BSDF-sampled) and ``v_k .. v_{s+1}`` from subpath B, and joins ``v_s`` to ``v_{s+1}`` (Veach 1997,
+ch. 10). ``s = k`` is `SonarIntegrator.sample`'s next-event estimator, ``s = 0`` the same from the
+other end; the strategy that would hit the point transducer by chance has probability zero and
+is not used. Each strategy's estimate is ``alpha_A(s) c(s, t) alpha_B(t)`` with ``alpha`` the
+subpath throughputs (beam weight ``B / pdf`` times BSDF weights) and ``c`` the connection
+``f_s f_t / d^2`` (``f`` = BSDF value times cosine, or ``B`` at a transducer end), visibility tested.
+
+Multiple importance sampling: with ``p_j`` the area density of the path under strategy ``j``,
+strategy ``s`` gets ``w_s = p_s^b / sum_j p_j^b`` (``b = 1`` balance, ``b = 2`` power heuristic).
+The ratios are accumulated along each subpath (the recursive form of van Antwerpen 2011 and
+Georgiev et al. 2012, "Light transport simulation with vertex connection and merging"): with
+``a_i`` the density of ``v_i`` sampled from its own end and ``E_1 = 0``,
+
+    E_{i+1} = (g_i / a_i)^b (1 + rev(v_i)^b E_i),   g_i = cos(v_i, v_{i+1}) / |v_i - v_{i+1}|^2
+
+(``rev(v_i)`` the BSDF's solid-angle density at ``v_i`` of sampling the way back, given the way
+forward), so that at a connection ``sum_{j<s} p_j / p_s = (b_s / a_s)^b (1 + rev(v_s)^b E_s)``,
+``b_s`` the density of ``v_s`` sampled from the other subpath's end vertex; the same from B's
+side gives ``sum_{j>s}``.
+
+Subpath B is traced again for every vertex of subpath A (no per-vertex storage): with ``D`` =
+``max_depth`` a path costs ``D (D + 3) / 2`` intersections and ``(D + 1)(D + 2) / 2 - 1`` shadow
+rays, against ``D`` and ``D`` for `SonarIntegrator.sample`.
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+
+from .samples import DIMS_EMIT, DIMS_PER_BOUNCE
+
+HEURISTICS = {"balance": 1, "power": 2}
+
+
+def beam_pdf(beam, d):
+    """Solid-angle density with which ``beam.sample`` draws the beam-frame unit direction ``d``.
+
+    Mirrors `beam.BeamPattern.sample` (a bilinear table over azimuth and elevation, divided by the
+    angular spans and ``cos(el)``); 0 outside the table's support. It reads the pattern's table,
+    which `BeamPattern` keeps private: a public ``BeamPattern.pdf_dir`` would own this.
+    """
+    az = dr.atan2(d.x, d.z)
+    el = dr.safe_asin(d.y)
+    x = (az - beam._p_az) / beam._p_saz
+    y = (el - beam._p_el) / beam._p_sel
+    cos_el = dr.cos(el)
+    inside = (x >= 0) & (x <= 1) & (y >= 0) & (y <= 1) & (cos_el > 0)
+    pdf = beam._distr.eval(mi.Point2f(x, y), active=inside)
+    return dr.select(inside, pdf / (beam._p_saz * beam._p_sel * dr.select(inside, cos_el, 1.0)), 0.0)
+
+
+def _local(frame, v):
+    x, y, z = frame
+    return mi.Vector3f(dr.dot(v, x), dr.dot(v, y), dr.dot(v, z))
+
+
+def _with_wi(si, wi):
+    """A copy of ``si`` whose incident direction (local) is ``wi``."""
+    out = mi.SurfaceInteraction3f(si)
+    out.wi = wi
+    return out
+
+
+def _mis(x, power):
+    return x if power == 1 else dr.power(x, power)
+
+
+class _End:
+    """One end of the path: the transducer's origin, beam frame (x, y, z axes) and beam."""
+
+    def __init__(self, frame, origin, beam):
+        self.frame, self.origin, self.beam = frame, origin, beam
+
+    def emit(self, u, active):
+        """A world direction drawn from the beam: (direction, B / pdf, solid-angle pdf)."""
+        d, weight = self.beam.sample(u, active)
+        x, y, z = self.frame
+        return x * d.x + y * d.y + z * d.z, weight, beam_pdf(self.beam, d)
+
+    def gain_pdf(self, w):
+        """(B, solid-angle pdf) of the world direction ``w`` leaving the transducer."""
+        d = _local(self.frame, w)
+        return self.beam.eval_dir(d), beam_pdf(self.beam, d)
+
+
+def _step(scene, ctx, end, si, at_end, p_cur, a_cur, e_cur, samples, n_surf, power, active):
+    """Extend a subpath from its current vertex (the transducer where ``at_end``, else ``si``).
+
+    ``n_surf`` is the number of surface vertices so far (the BSDF dims of bounce ``n_surf - 1``
+    are used). Returns (next interaction, its area density ``a``, its MIS carry ``E``, the
+    sample weight, the segment length, lanes still alive).
+    """
+    bsdf = si.bsdf()
+    base = DIMS_EMIT + DIMS_PER_BOUNCE * (dr.maximum(n_surf, 1) - 1)
+    on_surf = active & ~at_end
+    bs, bsdf_w = bsdf.sample(ctx, si, samples.get(base), samples.get2(base + 1), on_surf)
+    wo = si.to_world(bs.wo)
+    rev = bsdf.pdf(ctx, _with_wi(si, bs.wo), si.wi, on_surf)
+    e_dir, e_weight, e_pdf = end.emit(samples.get2(0), active & at_end)
+    direction = dr.select(at_end, e_dir, wo)
+    pdf_w = dr.select(at_end, e_pdf, bs.pdf)
+    weight = dr.select(at_end, e_weight, bsdf_w.x)
+    spawn = si.spawn_ray(wo)
+    ray = mi.Ray3f(dr.select(at_end, p_cur, spawn.o), direction)
+    active = active & (weight > 0) & (pdf_w > 0)
+    nxt = scene.ray_intersect(ray, active)
+    active &= nxt.is_valid()
+    seg = dr.norm(nxt.p - p_cur)
+    inv_d2 = dr.rcp(dr.square(seg))
+    a_new = pdf_w * dr.abs(dr.dot(nxt.n, direction)) * inv_d2
+    cos_out = dr.abs(dr.dot(si.n, wo))
+    g_ratio = dr.select(a_cur > 0, cos_out * inv_d2 / a_cur, 0.0)
+    e_new = dr.select(at_end, 0.0, _mis(g_ratio, power) * (1 + _mis(rev, power) * e_cur))
+    return nxt, a_new, e_new, weight, seg, active
+
+
+def _connect(scene, ctx, end_a, end_b, y, y_end, p_y, a_y, e_y, z, z_end, p_z, a_z, e_z, power, active):
+    """Join vertex ``y`` of subpath A to vertex ``z`` of subpath B (either may be its transducer).
+
+    Returns (unweighted contribution ``c`` without the subpath throughputs, MIS weight, length of
+    the joining segment, lanes whose connection exists and is unoccluded).
+    """
+    to_z = p_z - p_y
+    dist = dr.norm(to_z)
+    w = to_z / dist
+    inv_d2 = dr.rcp(dr.square(dist))
+    on_y, on_z = active & ~y_end, active & ~z_end
+
+    bsdf_y = y.bsdf()
+    wo_y = y.to_local(w)
+    f_y, fwd_y = bsdf_y.eval_pdf(ctx, y, wo_y, on_y)
+    rev_y = bsdf_y.pdf(ctx, _with_wi(y, wo_y), y.wi, on_y)
+    g_a, pdf_a = end_a.gain_pdf(w)
+
+    bsdf_z = z.bsdf()
+    wo_z = z.to_local(-w)
+    f_z, fwd_z = bsdf_z.eval_pdf(ctx, z, wo_z, on_z)
+    rev_z = bsdf_z.pdf(ctx, _with_wi(z, wo_z), z.wi, on_z)
+    g_b, pdf_b = end_b.gain_pdf(-w)
+
+    f_a = dr.select(y_end, g_a, f_y.x)
+    f_b = dr.select(z_end, g_b, f_z.x)
+    # Density of z sampled from y's side, and of y sampled from z's side (area measure).
+    a_of_z = dr.select(y_end, pdf_a, fwd_y) * dr.abs(dr.dot(z.n, w)) * inv_d2
+    b_of_y = dr.select(z_end, pdf_b, fwd_z) * dr.abs(dr.dot(y.n, w)) * inv_d2
+    s_a = dr.select(y_end | (a_y <= 0), 0.0, _mis(b_of_y / a_y, power) * (1 + _mis(rev_y, power) * e_y))
+    s_b = dr.select(z_end | (a_z <= 0), 0.0, _mis(a_of_z / a_z, power) * (1 + _mis(rev_z, power) * e_z))
+    weight = dr.rcp(1 + s_a + s_b)
+    weight = dr.select(dr.isfinite(weight), weight, 0.0)
+    c = f_a * f_b * inv_d2
+    valid = active & (c > 0) & dr.isfinite(c)
+    origin = dr.select(y_end, p_y, y.spawn_ray_to(p_z).o)
+    target = dr.select(z_end, p_z, z.spawn_ray(-w).o)
+    shadow = mi.Ray3f(origin, target - origin)
+    shadow.maxt = dr.opaque(mi.Float, 1 - mi.math.ShadowEpsilon)
+    valid &= ~scene.ray_test(shadow, valid)
+    return c, weight, dist, valid
+
+
+@dr.syntax
+def trace_bidirectional(setup, ping, samples_a, samples_b, record, power=1, only_s=None, active=True):
+    """All connection strategies of the paths of one lane per ``ping``; ``record`` gets each.
+
+    ``samples_a``/``samples_b`` are the primary samples of subpaths A and B (layout of
+    `samples`). ``record(s, t, range, energy, valid)`` is called for every strategy with ``s``
+    A-side and ``t`` B-side surface vertices (``1 <= s + t <= max_depth``), energy already MIS
+    weighted (heuristic exponent ``power``). With ``only_s`` (an int) only strategies with that
+    ``s`` are recorded, unweighted: each alone is an unbiased estimator of the paths of at least
+    ``max(only_s, 1)`` bounces.
+    """
+    scene, depth = setup.scene, setup.depth_o
+    x_ax, y_ax, z_ax, origin = setup.frames.gather(ping)
+    end_a = _End((x_ax, y_ax, z_ax), origin, setup.sensor.beam)
+    if setup.connect is None:
+        end_b = end_a
+    else:
+        cx, cy, cz, c_origin = setup.connect[0].gather(ping)
+        end_b = _End((cx, cy, cz), c_origin, setup.connect[1])
+    n = dr.width(ping)
+    ctx = mi.BSDFContext(mi.TransportMode.Importance)
+    atten = setup.absorption * (math.log2(10.0) / 10.0)
+
+    y = dr.zeros(mi.SurfaceInteraction3f, n)
+    s = dr.zeros(mi.UInt32, n)
+    thr_a = dr.full(mi.Float, 1.0, n)
+    len_a = dr.zeros(mi.Float, n)
+    a_y = dr.zeros(mi.Float, n)
+    e_y = dr.zeros(mi.Float, n)
+    p_y = mi.Point3f(end_a.origin)
+    alive = dr.full(mi.Bool, True, n) & active
+    # Strategy filter as opaque values: one kernel serves every choice.
+    unweighted = dr.opaque(mi.Bool, only_s is not None)
+    chosen = dr.opaque(mi.UInt32, 0 if only_s is None else int(only_s))
+
+    while dr.hint(alive, label="bdpt_transmit"):
+        y_end = s == 0
+        # Subpath B, traced again for this vertex of A: t = 0 (its transducer) .. max_depth - s.
+        z = dr.zeros(mi.SurfaceInteraction3f, n)
+        t = dr.zeros(mi.UInt32, n)
+        thr_b = dr.full(mi.Float, 1.0, n)
+        len_b = dr.zeros(mi.Float, n)
+        a_z = dr.zeros(mi.Float, n)
+        e_z = dr.zeros(mi.Float, n)
+        p_z = mi.Point3f(end_b.origin)
+        alive_b = mi.Bool(alive)
+        while dr.hint(alive_b, label="bdpt_receive"):
+            z_end = t == 0
+            join = alive_b & ((s + t) > 0) & (~unweighted | (s == chosen))
+            c, w, dist, ok = _connect(scene, ctx, end_a, end_b, y, y_end, p_y, a_y, e_y,
+                                      z, z_end, p_z, a_z, e_z, power, join)
+            w = dr.select(unweighted, 1.0, w)
+            total = len_a + dist + len_b
+            energy = thr_a * c * thr_b * w * dr.exp2(-atten * total)
+            record(s, t, 0.5 * total, energy, ok & (energy > 0))
+
+            more = alive_b & ((s + t) < depth)
+            z, a_z, e_z, weight, seg, more = _step(scene, ctx, end_b, z, z_end, p_z, a_z, e_z, samples_b, t,
+                                                   power, more)
+            thr_b *= weight
+            len_b += seg
+            p_z = mi.Point3f(z.p)
+            t += 1
+            alive_b = more & (thr_b > 0)
+
+        more = alive & (s < depth)
+        y, a_y, e_y, weight, seg, more = _step(scene, ctx, end_a, y, y_end, p_y, a_y, e_y, samples_a, s, power, more)
+        thr_a *= weight
+        len_a += seg
+        p_y = mi.Point3f(y.p)
+        s += 1
+        alive = more & (thr_a > 0)

@@ -1,0 +1,89 @@
+"""The ``sonar_bdpt`` integrator: bidirectional sonar path tracing into range bins."""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from mitsonar._checks import not_allowed, require
+
+from .bdpt_paths import HEURISTICS, trace_bidirectional
+from .props import count, text
+from .sonar_tof import SonarTOFIntegrator
+
+# Subpath B's samples are the same sampler's with this seed: independent of subpath A's.
+_SEED_B = 0x6A09E667
+
+
+class SonarBDPTIntegrator(SonarTOFIntegrator):
+    """Bidirectional sonar path tracer (Veach 1997, ch. 10) with multiple importance sampling.
+
+    Every ping of the scan is traced in one wavefront (lane -> ping). A lane draws two subpaths
+    from the transducer, each starting in proportion to its beam pattern and continued by BSDF
+    sampling: A from the row's beam (the beam a mechanical head transmits and receives with; a
+    multibeam row's receive beam), B from the other end (the same beam, or a multibeam head's
+    transmit fan). Every vertex of A (the transducer included) is joined to every vertex of B
+    (likewise) with a visibility-tested segment, for every path of 1 to ``max_depth`` surface
+    bounces: the strategy with all bounces on A is ``sonar_tof``'s next-event estimator, the
+    others find what it finds only by chance, such as an echo seen through a glossy surface.
+    Each strategy's echo is weighted by the balance or power heuristic and lands in the bin of
+    range = its total path length / 2 (`range_bins`); energies are in ``sonar_tof``'s units
+    (`common`), so the two agree within Monte-Carlo error. Derivation: `bdpt_paths`.
+    Same seed, same scan; passes are summed in float64 as in ``sonar_tof``.
+
+    ============ ======== ====================================================================
+    Parameter    Default  Meaning
+    ============ ======== ====================================================================
+    max_depth    5        surface bounces of the whole echo path (1 = single bounce), as
+                          ``sonar_tof``
+    sampling     sobol    the emitted directions of both subpaths: ``sobol`` (Owen-scrambled
+                          Sobol per row) or ``independent`` (`samples.HashSamples`)
+    mis          balance  multiple importance sampling weights: ``balance`` or ``power``
+                          (exponent 2) heuristic
+    strategy     all      ``all`` (every strategy, MIS weighted) or a whole number s: only the
+                          strategies with s surface vertices on subpath A, unweighted (for
+                          validation: unbiased for paths of at least max(s, 1) bounces)
+    ============ ======== ====================================================================
+
+    ``render_histogram`` returns the float64 ``(n_pings, n_bins)`` histogram like ``sonar_tof``'s;
+    ``spp`` counts lanes (subpath pairs) per row. A lane costs about ``(max_depth + 3) / 2`` times
+    a ``sonar_tof`` path in rays.
+    """
+
+    name = "sonar_bdpt"
+
+    def __init__(self, props: mi.Properties):
+        super().__init__(props)
+        self.mis = text(props, "mis", "balance", self.name)
+        require(self.mis in HEURISTICS, self.name, "mis", self.mis, "one of " + ", ".join(HEURISTICS))
+        strategy = (str(count(props, "strategy", 0, self.name))
+                    if "strategy" in props and props.type("strategy").name != "String"
+                    else text(props, "strategy", "all", self.name))
+        self.strategy = None if strategy == "all" else _whole(strategy, self.max_depth, self.name)
+
+    def _pass(self, setup, seed, start, count):
+        n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
+        ping, samples_a = self.lanes(n_pings, seed, start, count)
+        _, samples_b = self.lanes(n_pings, (int(seed) ^ _SEED_B) & 0xFFFFFFFF, start, count)
+        hist = dr.zeros(mi.Float64, n_pings * n_bins)
+        bins = setup.bins
+
+        def record(s, t, rng, energy, valid):
+            b, valid = bins.index(rng, valid)
+            dr.scatter_add(hist, mi.Float64(energy), bins.flat(ping, b), valid)
+
+        trace_bidirectional(setup, ping, samples_a, samples_b, record, power=HEURISTICS[self.mis],
+                            only_s=self.strategy)
+        return hist.numpy()
+
+    def to_string(self):
+        strategy = "all" if self.strategy is None else self.strategy
+        return (f"SonarBDPTIntegrator[max_depth={self.max_depth}, sampling={self.sampling}, mis={self.mis}, "
+                f"strategy={strategy}]")
+
+
+def _whole(value: str, max_depth: int, source: str) -> int:
+    """The strategy number in ``value`` (0..max_depth), else the one-line error."""
+    if not (value.isdigit() and int(value) <= max_depth):
+        raise not_allowed(source, "strategy", value, f"'all' or a whole number of transmit-side surface vertices "
+                          f"from 0 to max_depth ({max_depth})")
+    return int(value)
