@@ -101,20 +101,22 @@ class _End:
         return self.beam.eval_dir(d), beam_pdf(self.beam, d)
 
 
-def _step(scene, ctx, end, si, at_end, p_cur, a_cur, e_cur, samples, n_surf, power, active):
+def _step(scene, ctx, emitted, si, at_end, p_cur, a_cur, e_cur, samples, n_surf, power, active):
     """Extend a subpath from its current vertex (the transducer where ``at_end``, else ``si``).
 
-    ``n_surf`` is the number of surface vertices so far (the BSDF dims of bounce ``n_surf - 1``
-    are used). Returns (next interaction, its area density ``a``, its MIS carry ``E``, the
-    sample weight, the segment length, lanes still alive).
+    ``emitted`` is the subpath's first direction (`_End.emit`, drawn once outside the loops),
+    ``n_surf`` the number of surface vertices so far (the BSDF dims of bounce ``n_surf - 1`` are
+    used). Returns (next interaction, its area density ``a``, its MIS carry ``E``, the sample
+    weight, the segment length, lanes still alive).
     """
     bsdf = si.bsdf()
     base = DIMS_EMIT + DIMS_PER_BOUNCE * (dr.maximum(n_surf, 1) - 1)
     on_surf = active & ~at_end
     bs, bsdf_w = bsdf.sample(ctx, si, samples.get(base), samples.get2(base + 1), on_surf)
     wo = si.to_world(bs.wo)
-    rev = bsdf.pdf(ctx, _with_wi(si, bs.wo), si.wi, on_surf)
-    e_dir, e_weight, e_pdf = end.emit(samples.get2(0), active & at_end)
+    # The way back is only weighed from the second surface vertex on (E_1 = 0).
+    rev = bsdf.pdf(ctx, _with_wi(si, bs.wo), si.wi, on_surf & (e_cur > 0))
+    e_dir, e_weight, e_pdf = emitted
     direction = dr.select(at_end, e_dir, wo)
     pdf_w = dr.select(at_end, e_pdf, bs.pdf)
     weight = dr.select(at_end, e_weight, bsdf_w.x)
@@ -147,13 +149,13 @@ def _connect(scene, ctx, end_a, end_b, y, y_end, p_y, a_y, e_y, z, z_end, p_z, a
     bsdf_y = y.bsdf()
     wo_y = y.to_local(w)
     f_y, fwd_y = bsdf_y.eval_pdf(ctx, y, wo_y, on_y)
-    rev_y = bsdf_y.pdf(ctx, _with_wi(y, wo_y), y.wi, on_y)
+    rev_y = bsdf_y.pdf(ctx, _with_wi(y, wo_y), y.wi, on_y & (e_y > 0))
     g_a, pdf_a = end_a.gain_pdf(w)
 
     bsdf_z = z.bsdf()
     wo_z = z.to_local(-w)
     f_z, fwd_z = bsdf_z.eval_pdf(ctx, z, wo_z, on_z)
-    rev_z = bsdf_z.pdf(ctx, _with_wi(z, wo_z), z.wi, on_z)
+    rev_z = bsdf_z.pdf(ctx, _with_wi(z, wo_z), z.wi, on_z & (e_z > 0))
     g_b, pdf_b = end_b.gain_pdf(-w)
 
     f_a = dr.select(y_end, g_a, f_y.x)
@@ -206,6 +208,8 @@ def trace_bidirectional(setup, ping, samples_a, samples_b, record, power=1, only
     e_y = dr.zeros(mi.Float, n)
     p_y = mi.Point3f(end_a.origin)
     alive = dr.full(mi.Bool, True, n) & active
+    emitted_a = end_a.emit(samples_a.get2(0), alive)
+    emitted_b = end_b.emit(samples_b.get2(0), alive)
     # Strategy filter as opaque values: one kernel serves every choice.
     unweighted = dr.opaque(mi.Bool, only_s is not None)
     chosen = dr.opaque(mi.UInt32, 0 if only_s is None else int(only_s))
@@ -232,7 +236,7 @@ def trace_bidirectional(setup, ping, samples_a, samples_b, record, power=1, only
             record(s, t, 0.5 * total, energy, ok & (energy > 0))
 
             more = alive_b & ((s + t) < depth)
-            z, a_z, e_z, weight, seg, more = _step(scene, ctx, end_b, z, z_end, p_z, a_z, e_z, samples_b, t,
+            z, a_z, e_z, weight, seg, more = _step(scene, ctx, emitted_b, z, z_end, p_z, a_z, e_z, samples_b, t,
                                                    power, more)
             thr_b *= weight
             len_b += seg
@@ -241,7 +245,7 @@ def trace_bidirectional(setup, ping, samples_a, samples_b, record, power=1, only
             alive_b = more & (thr_b > 0)
 
         more = alive & (s < depth)
-        y, a_y, e_y, weight, seg, more = _step(scene, ctx, end_a, y, y_end, p_y, a_y, e_y, samples_a, s, power, more)
+        y, a_y, e_y, weight, seg, more = _step(scene, ctx, emitted_a, y, y_end, p_y, a_y, e_y, samples_a, s, power, more)
         thr_a *= weight
         len_a += seg
         p_y = mi.Point3f(y.p)
