@@ -42,7 +42,7 @@ def paths_per_second(integ, scene, depth, n_pings, budget):
         t0 = time.perf_counter()
         integ.render_histogram(scene, 0, seed=0, spp=spp, max_depth=depth)
         dt = time.perf_counter() - t0
-        if dt > 0.1 * budget or spp >= 1 << 20:
+        if dt > 0.3 * budget or spp >= 1 << 20:
             return spp / dt
         spp *= 4
 

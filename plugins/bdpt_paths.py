@@ -34,9 +34,10 @@ forward), so that at a connection ``sum_{j<s} p_j / p_s = (b_s / a_s)^b (1 + rev
 ``b_s`` the density of ``v_s`` sampled from the other subpath's end vertex; the same from B's
 side gives ``sum_{j>s}``.
 
-Subpath B is traced again for every vertex of subpath A (no per-vertex storage): with ``D`` =
-``max_depth`` a path costs ``D (D + 3) / 2`` intersections and ``(D + 1)(D + 2) / 2 - 1`` shadow
-rays, against ``D`` and ``D`` for `SonarIntegrator.sample`.
+Subpath B is traced first and its vertices kept (`_Store`, ``D = max_depth`` slots per lane);
+then subpath A is traced and each of its vertices joined to each of B's: a lane costs ``2 D``
+intersections and ``(D + 1)(D + 2) / 2 - 1`` shadow rays, against ``D`` and ``D`` for
+`SonarIntegrator.sample`.
 """
 from __future__ import annotations
 
@@ -134,7 +135,8 @@ def _step(scene, ctx, emitted, si, at_end, p_cur, a_cur, e_cur, samples, n_surf,
     return nxt, a_new, e_new, weight, seg, active
 
 
-def _connect(scene, ctx, end_a, end_b, y, y_end, p_y, a_y, e_y, z, z_end, p_z, a_z, e_z, power, active):
+def _connect(scene, ctx, end_a, end_b, y, bsdf_y, y_end, p_y, a_y, e_y, z, bsdf_z, z_end, p_z, a_z, e_z, power,
+             active):
     """Join vertex ``y`` of subpath A to vertex ``z`` of subpath B (either may be its transducer).
 
     Returns (unweighted contribution ``c`` without the subpath throughputs, MIS weight, length of
@@ -146,13 +148,11 @@ def _connect(scene, ctx, end_a, end_b, y, y_end, p_y, a_y, e_y, z, z_end, p_z, a
     inv_d2 = dr.rcp(dr.square(dist))
     on_y, on_z = active & ~y_end, active & ~z_end
 
-    bsdf_y = y.bsdf()
     wo_y = y.to_local(w)
     f_y, fwd_y = bsdf_y.eval_pdf(ctx, y, wo_y, on_y)
     rev_y = bsdf_y.pdf(ctx, _with_wi(y, wo_y), y.wi, on_y & (e_y > 0))
     g_a, pdf_a = end_a.gain_pdf(w)
 
-    bsdf_z = z.bsdf()
     wo_z = z.to_local(-w)
     f_z, fwd_z = bsdf_z.eval_pdf(ctx, z, wo_z, on_z)
     rev_z = bsdf_z.pdf(ctx, _with_wi(z, wo_z), z.wi, on_z & (e_z > 0))
@@ -177,6 +177,66 @@ def _connect(scene, ctx, end_a, end_b, y, y_end, p_y, a_y, e_y, z, z_end, p_z, a
     return c, weight, dist, valid
 
 
+class _Store:
+    """Subpath B's surface vertices, ``depth`` slots per lane (slot ``lane * depth + t - 1``):
+    what a connection needs of each (point, normals, incident direction, uv, BSDF) and its
+    throughput, length, density and MIS carry. A slot never written has throughput 0."""
+
+    _FIELDS = (("p", mi.Point3f), ("n", mi.Vector3f), ("sh_n", mi.Vector3f), ("wi", mi.Vector3f), ("uv", mi.Point2f),
+               ("thr", mi.Float), ("length", mi.Float), ("a", mi.Float), ("e", mi.Float))
+
+    def __init__(self, size):
+        self.data = {name: dr.zeros(mi.Float, size * dr.size_v(kind) if dr.size_v(kind) > 0 else size)
+                     for name, kind in self._FIELDS}
+        self.bsdf = dr.zeros(mi.BSDFPtr, size)
+
+    def put(self, index, si, bsdf, thr, length, a, e, active):
+        values = {"p": si.p, "n": si.n, "sh_n": si.sh_frame.n, "wi": si.to_world(si.wi), "uv": si.uv,
+                  "thr": thr, "length": length, "a": a, "e": e}
+        for name, _ in self._FIELDS:
+            dr.scatter(self.data[name], values[name], index, active)
+        dr.scatter(self.bsdf, bsdf, index, active)
+
+    def get(self, index, active):
+        """(interaction, BSDF, throughput, length, a, E) of slot ``index``."""
+        v = {name: dr.gather(kind, self.data[name], index, active) for name, kind in self._FIELDS}
+        si = dr.zeros(mi.SurfaceInteraction3f, dr.width(index))
+        si.p, si.n, si.uv = v["p"], v["n"], v["uv"]
+        si.sh_frame = mi.Frame3f(v["sh_n"])
+        si.wi = si.sh_frame.to_local(v["wi"])
+        return si, dr.gather(mi.BSDFPtr, self.bsdf, index, active), v["thr"], v["length"], v["a"], v["e"]
+
+    def eval(self):
+        dr.eval(self.data, self.bsdf)
+
+
+@dr.syntax
+def _trace_receive(scene, ctx, emitted, origin, samples, depth, slots, power, alive):
+    """Trace subpath B once (up to ``depth`` surface vertices) into a `_Store`."""
+    n = dr.width(alive)
+    store = _Store(n * slots)
+    base = dr.arange(mi.UInt32, n) * dr.opaque(mi.UInt32, slots)
+    z = dr.zeros(mi.SurfaceInteraction3f, n)
+    t = dr.zeros(mi.UInt32, n)
+    thr = dr.full(mi.Float, 1.0, n)
+    length = dr.zeros(mi.Float, n)
+    a = dr.zeros(mi.Float, n)
+    e = dr.zeros(mi.Float, n)
+    p = mi.Point3f(origin)
+    more = mi.Bool(alive)
+    while dr.hint(more, label="bdpt_receive_subpath"):
+        z, a, e, weight, seg, more = _step(scene, ctx, emitted, z, t == 0, p, a, e, samples, t, power, more)
+        thr *= weight
+        length += seg
+        p = mi.Point3f(z.p)
+        t += 1
+        more &= thr > 0
+        store.put(base + t - 1, z, z.bsdf(), thr, length, a, e, more)
+        more &= t < depth
+    store.eval()
+    return store
+
+
 @dr.syntax
 def trace_bidirectional(setup, ping, samples_a, samples_b, record, power=1, only_s=None, active=True):
     """All connection strategies of the paths of one lane per ``ping``; ``record`` gets each.
@@ -186,7 +246,8 @@ def trace_bidirectional(setup, ping, samples_a, samples_b, record, power=1, only
     A-side and ``t`` B-side surface vertices (``1 <= s + t <= max_depth``), energy already MIS
     weighted (heuristic exponent ``power``). With ``only_s`` (an int) only strategies with that
     ``s`` are recorded, unweighted: each alone is an unbiased estimator of the paths of at least
-    ``max(only_s, 1)`` bounces.
+    ``max(only_s, 1)`` bounces. Subpath B is traced first and kept (``max_depth`` vertices per
+    lane), then subpath A, each of whose vertices is joined to each of B's.
     """
     scene, depth = setup.scene, setup.depth_o
     x_ax, y_ax, z_ax, origin = setup.frames.gather(ping)
@@ -199,6 +260,10 @@ def trace_bidirectional(setup, ping, samples_a, samples_b, record, power=1, only
     n = dr.width(ping)
     ctx = mi.BSDFContext(mi.TransportMode.Importance)
     atten = setup.absorption * (math.log2(10.0) / 10.0)
+    alive = dr.full(mi.Bool, True, n) & active
+    store = _trace_receive(scene, ctx, end_b.emit(samples_b.get2(0), alive), end_b.origin, samples_b, depth,
+                           setup.depth, power, alive)
+    base = dr.arange(mi.UInt32, n) * dr.opaque(mi.UInt32, setup.depth)
 
     y = dr.zeros(mi.SurfaceInteraction3f, n)
     s = dr.zeros(mi.UInt32, n)
@@ -207,42 +272,33 @@ def trace_bidirectional(setup, ping, samples_a, samples_b, record, power=1, only
     a_y = dr.zeros(mi.Float, n)
     e_y = dr.zeros(mi.Float, n)
     p_y = mi.Point3f(end_a.origin)
-    alive = dr.full(mi.Bool, True, n) & active
     emitted_a = end_a.emit(samples_a.get2(0), alive)
-    emitted_b = end_b.emit(samples_b.get2(0), alive)
     # Strategy filter as opaque values: one kernel serves every choice.
     unweighted = dr.opaque(mi.Bool, only_s is not None)
     chosen = dr.opaque(mi.UInt32, 0 if only_s is None else int(only_s))
 
     while dr.hint(alive, label="bdpt_transmit"):
         y_end = s == 0
-        # Subpath B, traced again for this vertex of A: t = 0 (its transducer) .. max_depth - s.
-        z = dr.zeros(mi.SurfaceInteraction3f, n)
+        bsdf_y = y.bsdf()
+        # Join vertex s of A to B's transducer (t = 0) and to B's vertices t = 1 .. max_depth - s.
         t = dr.zeros(mi.UInt32, n)
-        thr_b = dr.full(mi.Float, 1.0, n)
-        len_b = dr.zeros(mi.Float, n)
-        a_z = dr.zeros(mi.Float, n)
-        e_z = dr.zeros(mi.Float, n)
-        p_z = mi.Point3f(end_b.origin)
         alive_b = mi.Bool(alive)
-        while dr.hint(alive_b, label="bdpt_receive"):
+        while dr.hint(alive_b, label="bdpt_join"):
             z_end = t == 0
-            join = alive_b & ((s + t) > 0) & (~unweighted | (s == chosen))
-            c, w, dist, ok = _connect(scene, ctx, end_a, end_b, y, y_end, p_y, a_y, e_y,
-                                      z, z_end, p_z, a_z, e_z, power, join)
+            z, bsdf_z, thr_b, len_b, a_z, e_z = store.get(base + dr.maximum(t, 1) - 1, alive_b & ~z_end)
+            thr_b = dr.select(z_end, 1.0, thr_b)
+            len_b = dr.select(z_end, 0.0, len_b)
+            p_z = dr.select(z_end, end_b.origin, z.p)
+            exists = alive_b & (thr_b > 0)
+            join = exists & ((s + t) > 0) & (~unweighted | (s == chosen))
+            c, w, dist, ok = _connect(scene, ctx, end_a, end_b, y, bsdf_y, y_end, p_y, a_y, e_y,
+                                      z, bsdf_z, z_end, p_z, a_z, e_z, power, join)
             w = dr.select(unweighted, 1.0, w)
             total = len_a + dist + len_b
             energy = thr_a * c * thr_b * w * dr.exp2(-atten * total)
             record(s, t, 0.5 * total, energy, ok & (energy > 0))
-
-            more = alive_b & ((s + t) < depth)
-            z, a_z, e_z, weight, seg, more = _step(scene, ctx, emitted_b, z, z_end, p_z, a_z, e_z, samples_b, t,
-                                                   power, more)
-            thr_b *= weight
-            len_b += seg
-            p_z = mi.Point3f(z.p)
             t += 1
-            alive_b = more & (thr_b > 0)
+            alive_b = exists & ((s + t) <= depth)
 
         more = alive & (s < depth)
         y, a_y, e_y, weight, seg, more = _step(scene, ctx, emitted_a, y, y_end, p_y, a_y, e_y, samples_a, s, power, more)

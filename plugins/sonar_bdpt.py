@@ -3,12 +3,16 @@ from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from mitsonar._checks import not_allowed, require
 
 from .bdpt_paths import HEURISTICS, trace_bidirectional
 from .props import count, text
-from .sonar_tof import SonarTOFIntegrator
+from .sonar_tof import MAX_SPP_PER_PASS, SonarTOFIntegrator
+
+# Subpath B vertices kept in one pass (~80 bytes each: 320 MiB).
+MAX_STORED_VERTICES = 1 << 22
 
 # Subpath B's samples are the same sampler's with this seed: independent of subpath A's.
 _SEED_B = 0x6A09E667
@@ -59,6 +63,28 @@ class SonarBDPTIntegrator(SonarTOFIntegrator):
                     if "strategy" in props and props.type("strategy").name != "String"
                     else text(props, "strategy", "all", self.name))
         self.strategy = None if strategy == "all" else _whole(strategy, self.max_depth, self.name)
+
+    def render_histogram(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None, progress=None):
+        """Mean echo energy per bin, float64 ``(n_pings, n_bins)``; ``progress(done_spp, spp)`` after
+        each pass. A pass keeps subpath B's vertices (``max_depth`` per lane, about 80 bytes
+        each), so it holds at most `MAX_STORED_VERTICES` of them."""
+        setup = self.setup(scene, sensor, pose, max_depth)
+        spp = int(spp)
+        if spp < 1:
+            raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
+        n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
+        lanes = max(1, MAX_STORED_VERTICES // setup.depth)
+        spp_pass = max(1, min(spp, MAX_SPP_PER_PASS, lanes // n_pings))
+        total = np.zeros(n_pings * n_bins, dtype=np.float64)
+        start = 0
+        with dr.suspend_grad():
+            while start < spp:
+                count = min(spp_pass, spp - start)
+                total += self._pass(setup, seed, start, count)
+                start += count
+                if progress is not None:
+                    progress(start, spp)
+        return (total / spp).reshape(n_pings, n_bins)
 
     def _pass(self, setup, seed, start, count):
         n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
