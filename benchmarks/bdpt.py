@@ -11,7 +11,9 @@ interest where it has one, e.g. the hidden boulder's echo):
   is in it (about ``1 / sqrt(factor)`` of sonar_tof's error);
 * ``rel_noise``: ``sqrt(sum over bins of the variance across the repeats) / ||I_ref||``: the
   error of an unbiased estimator without the reference's noise (both integrators are unbiased);
-* ``error_ratio``: sonar_tof's ``rel_noise`` over sonar_bdpt's (> 1: bdpt wins at equal time).
+* ``error_ratio``: sonar_tof's ``rel_noise`` over sonar_bdpt's, each scaled to exactly
+  ``--budget`` seconds by ``sqrt(seconds taken / budget)`` (> 1: bdpt wins at equal time);
+* ``cost_ratio``: sonar_bdpt's seconds per lane over sonar_tof's seconds per path.
 
 Prints one JSON object per scene, then a summary line.
 
@@ -90,7 +92,8 @@ def bench(name, budget, repeats, factor):
     out.update(info)
     out["cost_ratio"] = info["sonar_tof"]["paths_per_ping_per_s"] / info["sonar_bdpt"]["paths_per_ping_per_s"]
     for part in ["scan"] + ([region[0]] if region else []):
-        t, b = info["sonar_tof"][part]["rel_noise"], info["sonar_bdpt"][part]["rel_noise"]
+        t, b = (info[k][part]["rel_noise"] and info[k][part]["rel_noise"] * math.sqrt(info[k]["seconds"] / budget)
+                for k in ("sonar_tof", "sonar_bdpt"))
         out[f"error_ratio_{part}"] = (t / b) if t and b else None
     return out
 
