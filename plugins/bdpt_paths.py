@@ -301,7 +301,8 @@ def trace_bidirectional(setup, ping, samples_a, samples_b, record, power=1, only
             alive_b = exists & ((s + t) <= depth)
 
         more = alive & (s < depth)
-        y, a_y, e_y, weight, seg, more = _step(scene, ctx, emitted_a, y, y_end, p_y, a_y, e_y, samples_a, s, power, more)
+        y, a_y, e_y, weight, seg, more = _step(scene, ctx, emitted_a, y, y_end, p_y, a_y, e_y, samples_a, s, power,
+                                               more)
         thr_a *= weight
         len_a += seg
         p_y = mi.Point3f(y.p)
