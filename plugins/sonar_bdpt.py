@@ -113,6 +113,6 @@ class SonarBDPTIntegrator(SonarTOFIntegrator):
 def _whole(value: str, max_depth: int, source: str) -> int:
     """The strategy number in ``value`` (0..max_depth), else the one-line error."""
     if not (value.isdigit() and int(value) <= max_depth):
-        raise not_allowed(source, "strategy", value, f"'all' or a whole number of transmit-side surface vertices "
-                          f"from 0 to max_depth ({max_depth})")
+        raise not_allowed(source, "strategy", value, "'all' or a whole number of surface vertices on the subpath "
+                          f"from the row's beam, 0 to max_depth ({max_depth})")
     return int(value)
