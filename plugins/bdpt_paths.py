@@ -35,9 +35,10 @@ forward), so that at a connection ``sum_{j<s} p_j / p_s = (b_s / a_s)^b (1 + rev
 side gives ``sum_{j>s}``.
 
 Subpath B is traced first and its vertices kept (`_Store`, ``D = max_depth`` slots per lane);
-then subpath A is traced and each of its vertices joined to each of B's: a lane costs ``2 D``
-intersections and ``(D + 1)(D + 2) / 2 - 1`` shadow rays, against ``D`` and ``D`` for
-`SonarIntegrator.sample`.
+then A's transducer is joined to each of them, and subpath A is traced, each of its vertices
+joined to B's transducer and to each of B's vertices (three loops, so that a surface-to-surface
+join holds no beam pattern and a transducer join no BSDF): a lane costs ``2 D`` intersections and
+``(D + 1)(D + 2) / 2 - 1`` shadow rays, against ``D`` and ``D`` for `SonarIntegrator.sample`.
 """
 from __future__ import annotations
 
@@ -135,9 +136,10 @@ def _step(scene, ctx, emitted, si, at_end, p_cur, a_cur, e_cur, samples, n_surf,
     return nxt, a_new, e_new, weight, seg, active
 
 
-def _connect(scene, ctx, end_a, end_b, y, bsdf_y, y_end, p_y, a_y, e_y, z, bsdf_z, z_end, p_z, a_z, e_z, power,
+def _connect(scene, ctx, y_end, z_end, end_a, end_b, y, bsdf_y, p_y, a_y, e_y, z, bsdf_z, p_z, a_z, e_z, power,
              active):
-    """Join vertex ``y`` of subpath A to vertex ``z`` of subpath B (either may be its transducer).
+    """Join vertex ``y`` of subpath A to vertex ``z`` of subpath B; ``y_end``/``z_end`` (Python
+    bools: the kernel holds only what the case needs) say that one is its transducer instead.
 
     Returns (unweighted contribution ``c`` without the subpath throughputs, MIS weight, length of
     the joining segment, lanes whose connection exists and is unoccluded).
@@ -146,31 +148,34 @@ def _connect(scene, ctx, end_a, end_b, y, bsdf_y, y_end, p_y, a_y, e_y, z, bsdf_
     dist = dr.norm(to_z)
     w = to_z / dist
     inv_d2 = dr.rcp(dr.square(dist))
-    on_y, on_z = active & ~y_end, active & ~z_end
-
-    wo_y = y.to_local(w)
-    f_y, fwd_y = bsdf_y.eval_pdf(ctx, y, wo_y, on_y)
-    rev_y = bsdf_y.pdf(ctx, _with_wi(y, wo_y), y.wi, on_y & (e_y > 0))
-    g_a, pdf_a = end_a.gain_pdf(w)
-
-    wo_z = z.to_local(-w)
-    f_z, fwd_z = bsdf_z.eval_pdf(ctx, z, wo_z, on_z)
-    rev_z = bsdf_z.pdf(ctx, _with_wi(z, wo_z), z.wi, on_z & (e_z > 0))
-    g_b, pdf_b = end_b.gain_pdf(-w)
-
-    f_a = dr.select(y_end, g_a, f_y.x)
-    f_b = dr.select(z_end, g_b, f_z.x)
-    # Density of z sampled from y's side, and of y sampled from z's side (area measure).
-    a_of_z = dr.select(y_end, pdf_a, fwd_y) * dr.abs(dr.dot(z.n, w)) * inv_d2
-    b_of_y = dr.select(z_end, pdf_b, fwd_z) * dr.abs(dr.dot(y.n, w)) * inv_d2
-    s_a = dr.select(y_end | (a_y <= 0), 0.0, _mis(b_of_y / a_y, power) * (1 + _mis(rev_y, power) * e_y))
-    s_b = dr.select(z_end | (a_z <= 0), 0.0, _mis(a_of_z / a_z, power) * (1 + _mis(rev_z, power) * e_z))
+    # Each end's value (f cos, or B at a transducer) and its density of sampling the other end.
+    if y_end:
+        f_a, fwd_a = end_a.gain_pdf(w)
+    else:
+        wo_y = y.to_local(w)
+        f_y, fwd_a = bsdf_y.eval_pdf(ctx, y, wo_y, active)
+        f_a = f_y.x
+        rev_y = bsdf_y.pdf(ctx, _with_wi(y, wo_y), y.wi, active & (e_y > 0))
+    if z_end:
+        f_b, fwd_b = end_b.gain_pdf(-w)
+    else:
+        wo_z = z.to_local(-w)
+        f_z, fwd_b = bsdf_z.eval_pdf(ctx, z, wo_z, active)
+        f_b = f_z.x
+        rev_z = bsdf_z.pdf(ctx, _with_wi(z, wo_z), z.wi, active & (e_z > 0))
+    s_a = s_b = 0.0
+    if not y_end:  # density of y sampled from z's side (area measure), against its own
+        b_of_y = fwd_b * dr.abs(dr.dot(y.n, w)) * inv_d2
+        s_a = dr.select(a_y > 0, _mis(b_of_y / a_y, power) * (1 + _mis(rev_y, power) * e_y), 0.0)
+    if not z_end:
+        a_of_z = fwd_a * dr.abs(dr.dot(z.n, w)) * inv_d2
+        s_b = dr.select(a_z > 0, _mis(a_of_z / a_z, power) * (1 + _mis(rev_z, power) * e_z), 0.0)
     weight = dr.rcp(1 + s_a + s_b)
     weight = dr.select(dr.isfinite(weight), weight, 0.0)
     c = f_a * f_b * inv_d2
     valid = active & (c > 0) & dr.isfinite(c)
-    origin = dr.select(y_end, p_y, y.spawn_ray_to(p_z).o)
-    target = dr.select(z_end, p_z, z.spawn_ray(-w).o)
+    origin = p_y if y_end else y.spawn_ray_to(p_z).o
+    target = p_z if z_end else z.spawn_ray(-w).o
     shadow = mi.Ray3f(origin, target - origin)
     shadow.maxt = dr.opaque(mi.Float, 1 - mi.math.ShadowEpsilon)
     valid &= ~scene.ray_test(shadow, valid)
@@ -265,34 +270,53 @@ def trace_bidirectional(setup, ping, samples_a, samples_b, record, power=1, only
                            setup.depth, power, alive)
     base = dr.arange(mi.UInt32, n) * dr.opaque(mi.UInt32, setup.depth)
 
-    y = dr.zeros(mi.SurfaceInteraction3f, n)
-    s = dr.zeros(mi.UInt32, n)
-    thr_a = dr.full(mi.Float, 1.0, n)
-    len_a = dr.zeros(mi.Float, n)
-    a_y = dr.zeros(mi.Float, n)
-    e_y = dr.zeros(mi.Float, n)
-    p_y = mi.Point3f(end_a.origin)
     emitted_a = end_a.emit(samples_a.get2(0), alive)
     # Strategy filter as opaque values: one kernel serves every choice.
     unweighted = dr.opaque(mi.Bool, only_s is not None)
     chosen = dr.opaque(mi.UInt32, 0 if only_s is None else int(only_s))
+    none = dr.zeros(mi.SurfaceInteraction3f, n)
 
+    # s = 0: A's transducer joined to B's vertices t = 1 .. max_depth.
+    t = dr.ones(mi.UInt32, n)
+    alive_b = mi.Bool(alive) & (~unweighted | (chosen == 0))
+    while dr.hint(alive_b, label="bdpt_join_transmitter"):
+        z, bsdf_z, thr_b, len_b, a_z, e_z = store.get(base + t - 1, alive_b)
+        exists = alive_b & (thr_b > 0)
+        c, w, dist, ok = _connect(scene, ctx, True, False, end_a, end_b, none, None, end_a.origin, None, None,
+                                  z, bsdf_z, z.p, a_z, e_z, power, exists)
+        w = dr.select(unweighted, 1.0, w)
+        total = dist + len_b
+        energy = c * thr_b * w * dr.exp2(-atten * total)
+        record(dr.zeros(mi.UInt32, n), t, 0.5 * total, energy, ok & (energy > 0))
+        t += 1
+        alive_b = exists & (t <= depth)
+
+    # A's first vertex, then its vertices s = 1 .. max_depth, each joined to B's transducer (t = 0)
+    # and to B's vertices t = 1 .. max_depth - s.
+    p_y = mi.Point3f(end_a.origin)
+    y, a_y, e_y, thr_a, len_a, alive = _step(scene, ctx, emitted_a, none, dr.full(mi.Bool, True, n), p_y,
+                                             dr.zeros(mi.Float, n), dr.zeros(mi.Float, n), samples_a,
+                                             dr.zeros(mi.UInt32, n), power, alive)
+    alive &= thr_a > 0
+    p_y = mi.Point3f(y.p)
+    s = dr.ones(mi.UInt32, n)
     while dr.hint(alive, label="bdpt_transmit"):
-        y_end = s == 0
         bsdf_y = y.bsdf()
-        # Join vertex s of A to B's transducer (t = 0) and to B's vertices t = 1 .. max_depth - s.
-        t = dr.zeros(mi.UInt32, n)
-        alive_b = mi.Bool(alive)
+        picked = ~unweighted | (s == chosen)
+        c, w, dist, ok = _connect(scene, ctx, False, True, end_a, end_b, y, bsdf_y, p_y, a_y, e_y,
+                                  none, None, end_b.origin, None, None, power, alive & picked)
+        w = dr.select(unweighted, 1.0, w)
+        total = len_a + dist
+        energy = thr_a * c * w * dr.exp2(-atten * total)
+        record(s, dr.zeros(mi.UInt32, n), 0.5 * total, energy, ok & (energy > 0))
+
+        t = dr.ones(mi.UInt32, n)
+        alive_b = alive & picked & ((s + t) <= depth)
         while dr.hint(alive_b, label="bdpt_join"):
-            z_end = t == 0
-            z, bsdf_z, thr_b, len_b, a_z, e_z = store.get(base + dr.maximum(t, 1) - 1, alive_b & ~z_end)
-            thr_b = dr.select(z_end, 1.0, thr_b)
-            len_b = dr.select(z_end, 0.0, len_b)
-            p_z = dr.select(z_end, end_b.origin, z.p)
+            z, bsdf_z, thr_b, len_b, a_z, e_z = store.get(base + t - 1, alive_b)
             exists = alive_b & (thr_b > 0)
-            join = exists & ((s + t) > 0) & (~unweighted | (s == chosen))
-            c, w, dist, ok = _connect(scene, ctx, end_a, end_b, y, bsdf_y, y_end, p_y, a_y, e_y,
-                                      z, bsdf_z, z_end, p_z, a_z, e_z, power, join)
+            c, w, dist, ok = _connect(scene, ctx, False, False, end_a, end_b, y, bsdf_y, p_y, a_y, e_y,
+                                      z, bsdf_z, z.p, a_z, e_z, power, exists)
             w = dr.select(unweighted, 1.0, w)
             total = len_a + dist + len_b
             energy = thr_a * c * thr_b * w * dr.exp2(-atten * total)
@@ -301,8 +325,8 @@ def trace_bidirectional(setup, ping, samples_a, samples_b, record, power=1, only
             alive_b = exists & ((s + t) <= depth)
 
         more = alive & (s < depth)
-        y, a_y, e_y, weight, seg, more = _step(scene, ctx, emitted_a, y, y_end, p_y, a_y, e_y, samples_a, s, power,
-                                               more)
+        y, a_y, e_y, weight, seg, more = _step(scene, ctx, emitted_a, y, dr.zeros(mi.Bool, n), p_y, a_y, e_y,
+                                               samples_a, s, power, more)
         thr_a *= weight
         len_a += seg
         p_y = mi.Point3f(y.p)
