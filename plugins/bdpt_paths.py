@@ -39,6 +39,12 @@ then A's transducer is joined to each of them, and subpath A is traced, each of 
 joined to B's transducer and to each of B's vertices (three loops, so that a surface-to-surface
 join holds no beam pattern and a transducer join no BSDF): a lane costs ``2 D`` intersections and
 ``(D + 1)(D + 2) / 2 - 1`` shadow rays, against ``D`` and ``D`` for `SonarIntegrator.sample`.
+
+Limits: a BSDF with a delta lobe (a smooth Mitsuba ``conductor``, say) is not special-cased: a
+join at such a vertex evaluates to 0 while the weights still count it, so paths through it would
+lose energy (the ``acoustic`` BSDF's Phong lobe is never a delta). The joins use the BSDF's
+``f cos`` at both ends and geometric cosines in the densities, without Veach's (1997, 5.3)
+correction for shading normals, which differ from geometric ones only on smooth-shaded meshes.
 """
 from __future__ import annotations
 

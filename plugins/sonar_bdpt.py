@@ -53,7 +53,7 @@ class SonarBDPTIntegrator(SonarTOFIntegrator):
     ``render_histogram`` returns the float64 ``(n_pings, n_bins)`` histogram like ``sonar_tof``'s;
     ``spp`` counts lanes (subpath pairs) per row. With ``D = max_depth`` a lane casts ``2 D``
     rays and ``(D + 1)(D + 2) / 2 - 1`` shadow rays against ``D`` and ``D`` for a ``sonar_tof``
-    path: at ``D = 5`` it took 3 to 7 times as long (``benchmarks/bdpt.py``).
+    path: at ``D = 5`` it took 1.5 to 7.5 times as long (``benchmarks/bdpt.py``, shared machine).
     """
 
     name = "sonar_bdpt"
