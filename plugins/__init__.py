@@ -9,14 +9,15 @@ from __future__ import annotations
 import importlib
 
 _MODULES = ("materials", "beam", "acoustic_bsdf", "sonar_sensor", "range_bins", "samples", "common", "sonar_tof",
-            "sonar_mlt")
+            "sonar_mlt", "bdpt_paths", "sonar_bdpt")
 _current = None
 
 # (kind, XML plugin name, module, class) of every plugin registered with Mitsuba
 PLUGINS = (("BSDF", "acoustic", "acoustic_bsdf", "AcousticBSDF"),
            ("sensor", "sonar", "sonar_sensor", "SonarSensor"),
            ("integrator", "sonar_tof", "sonar_tof", "SonarTOFIntegrator"),
-           ("integrator", "sonar_mlt", "sonar_mlt", "SonarMLTIntegrator"))
+           ("integrator", "sonar_mlt", "sonar_mlt", "SonarMLTIntegrator"),
+           ("integrator", "sonar_bdpt", "sonar_bdpt", "SonarBDPTIntegrator"))
 
 # The last exception raised by one of our plugins' constructors. Mitsuba turns it into a
 # RuntimeError holding its traceback as text; `take_failure` hands the original back to whoever
