@@ -17,6 +17,9 @@ row at its own pose), and prints one JSON object:
 ``batch``        the same pings fitted in one batch, and the incremental map's agreement with it
 ``no_poses``     the same pings with every row at the survey's first pose: what motion compensation buys
 ``elevation``    the seabed elevation grid's error on the seabed (z = -6 m) where it is known
+``speed``        training epoch seconds per million lanes and queries per second (near the surfaces,
+                 where every query meets nodes, and anywhere in the region seen), next to
+                 scikit-learn's Nystroem (1000 components) + SGDClassifier on the same lanes
 
     python benchmarks/survey_mapping.py [--spp 64] [--frames 100] [--out DIR] [--no-octomap]
 
@@ -115,6 +118,58 @@ def score(hm, V, F, resolution):
     return out, r
 
 
+def speed(samples, seed: int = 0, n_query: int = 1_000_000, nystroem_components: int = 1000) -> dict:
+    """Epoch time per million training lanes and queries per second of the incremental map, and of
+    scikit-learn's Nystroem + SGDClassifier (log loss) on the same lanes, in the same run."""
+    from hilbertmap import IncrementalHilbertMap
+
+    hm = IncrementalHilbertMap(random_state=seed, n_passes=2)
+    s = hm._thin(samples)
+    lanes = len(s.free) + s.occupied.shape[0] * s.occupied.shape[1]
+    hm.fit(None, samples=samples)
+    epoch = hm.timings_["sgd_s"] / 2
+    rng = np.random.default_rng(seed)
+    near = hm.inducing_points_[rng.integers(0, len(hm.inducing_points_), n_query)] + rng.normal(0, 0.3, (n_query, 3))
+    lo, hi = hm.coverage_.bounds()
+    anywhere = rng.uniform(lo, hi, (n_query, 3))
+    hm.predict_proba(near[:1000])  # compile
+    t0 = time.perf_counter()
+    hm.predict_proba(near)
+    t_near = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    hm.predict_proba(anywhere)
+    t_any = time.perf_counter() - t0
+    out = dict(lanes=int(lanes), epoch_s=epoch, epoch_s_per_M=epoch / lanes * 1e6,
+               queries_per_s_near_surfaces=n_query / t_near, queries_per_s_region=n_query / t_any)
+    try:
+        from sklearn.kernel_approximation import Nystroem
+        from sklearn.linear_model import SGDClassifier
+    except ImportError as exc:
+        out["sklearn"] = {"skipped": f"scikit-learn not installed ({exc})"}
+        return out
+    X = np.concatenate([s.free, s.occupied.reshape(-1, 3)])
+    y = np.concatenate([np.zeros(len(s.free)), np.ones(len(X) - len(s.free))])
+    nys = Nystroem(gamma=hm.gamma_, n_components=nystroem_components, random_state=seed)
+    nys.fit(X[rng.choice(len(X), min(len(X), 20000), replace=False)])
+    t0 = time.perf_counter()
+    Z = nys.transform(X)
+    t_tr = time.perf_counter() - t0
+    clf = SGDClassifier(loss="log_loss", random_state=seed)
+    t0 = time.perf_counter()
+    clf.partial_fit(Z, y, classes=[0, 1])
+    t_sgd = time.perf_counter() - t0
+    q = near[:200_000]
+    t0 = time.perf_counter()
+    clf.predict_proba(nys.transform(q))
+    t_q = time.perf_counter() - t0
+    out["sklearn"] = dict(n_components=nystroem_components, transform_s_per_M=t_tr / len(X) * 1e6,
+                          sgd_epoch_s_per_M=t_sgd / len(X) * 1e6,
+                          epoch_with_features_s_per_M=(t_tr + t_sgd) / len(X) * 1e6, queries_per_s=len(q) / t_q)
+    out["epoch_ratio_sklearn_over_ours"] = out["sklearn"]["epoch_with_features_s_per_M"] / out["epoch_s_per_M"]
+    out["query_ratio_ours_over_sklearn"] = out["queries_per_s_near_surfaces"] / out["sklearn"]["queries_per_s"]
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spp", type=int, default=64)
@@ -123,6 +178,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", help="folder for the map, mesh, elevation grid and picture")
     ap.add_argument("--no-octomap", action="store_true")
     ap.add_argument("--no-batch", action="store_true")
+    ap.add_argument("--no-speed", action="store_true")
     args = ap.parse_args(argv)
 
     from mitsonar.groundtruth import scene_mesh
@@ -155,6 +211,9 @@ def main(argv=None) -> int:
             still.append(dataclasses.replace(s, poses=q) if dataclasses.is_dataclass(s) else _with_poses(s, q))
         hx, _, _ = map_incrementally(still)
         report["no_poses"] = score(hx, V, F, args.resolution)[0]
+
+    if not args.no_speed:
+        report["speed"] = speed(samples)
 
     if not args.no_octomap:
         try:
