@@ -43,6 +43,9 @@ ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
 
 
+MULTIBEAM_LIGHT = dict(max_free_per_ping=24, near_free=8, occupied_samples=8)
+
+
 def render(sensor_id: str, spp: int, max_scans=None, seed: int = 1):
     import mitsonar
     from mitsonar.survey import render_survey
@@ -179,6 +182,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-octomap", action="store_true")
     ap.add_argument("--no-batch", action="store_true")
     ap.add_argument("--no-speed", action="store_true")
+    ap.add_argument("--no-eval", action="store_true", help="skip the scores (and so the batch and OctoMap runs)")
     args = ap.parse_args(argv)
 
     from mitsonar.groundtruth import scene_mesh
@@ -189,11 +193,13 @@ def main(argv=None) -> int:
     report["render_s"] = {"mechanical": round(t_render, 2)}
     hm, samples, secs = map_incrementally(scans)
     report["throughput"] = {"mechanical": throughput(scans, sensor, secs, hm)}
-    t0 = time.perf_counter()
-    report["harbour"], full = score(hm, V, F, args.resolution)
-    report["harbour"]["eval_s"] = time.perf_counter() - t0
+    full = None
+    if not args.no_eval:
+        t0 = time.perf_counter()
+        report["harbour"], full = score(hm, V, F, args.resolution)
+        report["harbour"]["eval_s"] = time.perf_counter() - t0
 
-    if not args.no_batch:
+    if not args.no_batch and full is not None:
         from hilbertmap import IncrementalHilbertMap
 
         hb = IncrementalHilbertMap(random_state=0).fit(scans)
@@ -215,7 +221,7 @@ def main(argv=None) -> int:
     if not args.no_speed:
         report["speed"] = speed(samples)
 
-    if not args.no_octomap:
+    if not args.no_octomap and full is not None:
         try:
             import octomap  # noqa: F401
         except ImportError as exc:
@@ -251,6 +257,10 @@ def main(argv=None) -> int:
         report["render_s"]["multibeam"] = round(t_mb, 2)
         hmb, _, secs_mb = map_incrementally(mb_scans)
         report["throughput"]["multibeam"] = throughput(mb_scans, mb_sensor, secs_mb, hmb)
+        # a multibeam's beams are narrow and its frames overlap: far fewer free samples per beam do
+        hmb, _, secs_mb = map_incrementally(mb_scans, **MULTIBEAM_LIGHT)
+        report["throughput"]["multibeam_light"] = dict(throughput(mb_scans, mb_sensor, secs_mb, hmb),
+                                                       params=MULTIBEAM_LIGHT)
 
     if args.out:
         from hilbertmap import write_mesh
@@ -259,8 +269,9 @@ def main(argv=None) -> int:
 
         os.makedirs(args.out, exist_ok=True)
         hm.save(os.path.join(args.out, "harbour_map.npz"))
-        mv, mf = full.meshes["ridge"]
-        write_mesh(os.path.join(args.out, "harbour_ridge.ply"), mv, mf)
+        if full is not None:
+            mv, mf = full.meshes["ridge"]
+            write_mesh(os.path.join(args.out, "harbour_ridge.ply"), mv, mf)
         try:
             import rasterio  # noqa: F401
             ext = ".tif"
