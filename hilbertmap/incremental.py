@@ -54,6 +54,8 @@ from .scanlike import as_scan_list, check_scan
 __all__ = ["IncrementalHilbertMap"]
 
 _OFFSET = 1 << 20  # lattice indices in [-2^20, 2^20) per axis
+REBUILD_SHARE = 0.05  # new nodes join the kernel grid once they are this share of those in it ...
+REBUILD_SCANS = 8     # ... or this many scans after the last rebuild
 
 
 def _keys(idx: np.ndarray) -> np.ndarray:
@@ -64,6 +66,38 @@ def _keys(idx: np.ndarray) -> np.ndarray:
 def _unkey(keys: np.ndarray) -> np.ndarray:
     m = (1 << 21) - 1
     return np.stack([(keys >> 42) & m, (keys >> 21) & m, keys & m], axis=1) - _OFFSET
+
+
+class _LazyCoverage(Coverage):
+    """A :class:`Coverage` whose additions are merged when it is read, or once they outnumber the
+    keys held: a survey adds a scan's voxels many times a second, and merging each into a sorted
+    set of millions would cost more than the scan's learning."""
+
+    def __init__(self, voxel, keys=None):
+        self._pending = []
+        self._n_pending = 0
+        super().__init__(voxel, keys)
+
+    @property
+    def keys(self):
+        if self._pending:
+            self._keys = np.union1d(self._keys, np.concatenate(self._pending))
+            self._pending, self._n_pending = [], 0
+        return self._keys
+
+    @keys.setter
+    def keys(self, value):
+        self._keys = value
+        self._pending, self._n_pending = [], 0
+
+    def add(self, points) -> None:
+        if len(points) == 0:
+            return
+        k = np.unique(self._key(np.floor(np.asarray(points, dtype=np.float64) / self.voxel).astype(np.int64)))
+        self._pending.append(k)
+        self._n_pending += len(k)
+        if self._n_pending > max(len(self._keys), 1 << 16):
+            _ = self.keys
 
 
 class IncrementalHilbertMap(HilbertMap):
@@ -235,13 +269,12 @@ class IncrementalHilbertMap(HilbertMap):
         self.node_last_used_ = np.zeros(0, dtype=np.int64)
         self.intercept_ = 0.0
         self._b_accum = 0.0
-        self.coverage_ = Coverage(self.coverage_voxel)
-        self.echo_coverage_ = Coverage(self.coverage_voxel)
-        self.free_coverage_ = Coverage(self.coverage_voxel)
+        self.coverage_ = _LazyCoverage(self.coverage_voxel)
+        self.echo_coverage_ = _LazyCoverage(self.coverage_voxel)
+        self.free_coverage_ = _LazyCoverage(self.coverage_voxel)
         self.ping_frames_ = np.zeros((0, 4, 4), dtype=np.float32)
         self.ping_beams_ = np.zeros((0, 3), dtype=np.float32)
         self.ping_spans_ = np.zeros((0, 3), dtype=np.float32)
-        self.sensor_positions_ = np.zeros((0, 3))
         self.track_ = np.zeros((0, 3))
         self.n_scans_seen_ = 0
         self.n_pings_seen_ = 0
@@ -250,6 +283,7 @@ class IncrementalHilbertMap(HilbertMap):
         self.t_ = 0.0
         self.loss_curve_ = []
         self._grid = None
+        self._scans_since_build = 0
 
     def _record(self, s: Samples) -> None:
         """The region seen and the ping records (the latter capped at ``max_pings_kept``)."""
@@ -264,7 +298,6 @@ class IncrementalHilbertMap(HilbertMap):
         self.ping_beams_ = cat(self.ping_beams_, s.beams)
         self.ping_spans_ = cat(self.ping_spans_, s.spans)
         self.track_ = cat(self.track_, s.origins)
-        self.sensor_positions_ = _unique_rows(self.track_)
         self.n_pings_seen_ += len(s.frames)
 
     def _grow(self, s: Samples) -> None:
@@ -291,7 +324,15 @@ class IncrementalHilbertMap(HilbertMap):
         over = len(self.node_keys_) - int(self.max_nodes)
         if over > 0:
             self._forget(over)
-        if len(new) or over > 0 or self._grid is None:
+        built = self._grid.n if self._grid is not None else 0
+        self._scans_since_build += 1
+        pending = len(self.node_keys_) - built
+        # New nodes join the kernel grid in batches (rebuilding it costs a sort of every node):
+        # once they are REBUILD_SHARE of the nodes built, or REBUILD_SCANS scans after the last
+        # rebuild. Until then they hold a zero coefficient and this scan trains the nodes built;
+        # a survey's next scans see the same places again.
+        if over > 0 or self._grid is None or (pending and (pending >= REBUILD_SHARE * built
+                                                            or self._scans_since_build >= REBUILD_SCANS)):
             self._rebuild()
 
     def _forget(self, n: int) -> None:
@@ -308,21 +349,23 @@ class IncrementalHilbertMap(HilbertMap):
         for name in ("coverage_", "echo_coverage_", "free_coverage_"):
             cov = getattr(self, name)
             c = cov.centres()
-            setattr(self, name, Coverage(cov.voxel, cov.keys[reach.contains(c, dilate=1)] if len(c) else None))
+            setattr(self, name, _LazyCoverage(cov.voxel, cov.keys[reach.contains(c, dilate=1)] if len(c) else None))
 
     def _rebuild(self) -> None:
         """The kernel grid of the current nodes and a summed-volume table of its cell counts
         (which sample has a node within the kernel's support)."""
+        self._scans_since_build = 0
         if len(self.inducing_points_) == 0:
             self._grid = None
             return
         g = KernelGrid(self.inducing_points_, self.lengthscale_, float(self.kernel_cut), self.variant)
         # keep the caller's order: the grid permutes its own copy, coefficients are mapped through it
         self._grid = g
-        cell = np.minimum(np.floor((self.inducing_points_ - g.lo) / g.h).astype(np.int64), g.dims - 1)
-        cnt = np.zeros(tuple(g.dims + 1), dtype=np.int32)
-        np.add.at(cnt, (cell[:, 0] + 1, cell[:, 1] + 1, cell[:, 2] + 1), 1)
-        self._sat = cnt.cumsum(0).cumsum(1).cumsum(2)
+        sat = np.zeros(tuple(g.dims + 1), dtype=np.int32)
+        sat[1:, 1:, 1:] = g.cell_counts.reshape(tuple(g.dims))
+        for a in range(3):
+            np.cumsum(sat, axis=a, out=sat)
+        self._sat = sat
 
     def _near(self, pts: np.ndarray) -> np.ndarray:
         """Whether a node may lie within the kernel's support of each point (cell box sums)."""
@@ -362,6 +405,8 @@ class IncrementalHilbertMap(HilbertMap):
         pg = np.array_split(self._rng.permutation(G), nb)
         grid = self._grid
         order = grid.order if grid is not None else None  # grid position i holds node order[i]
+        n = grid.n if grid is not None else 0              # the nodes built (newer ones wait, coefficient 0)
+        coef_v, accum_v = self.dual_coef_[:n], self.node_accum_[:n]  # views: updated in place
         near_f = self._near(s.free)
         near_g = self._near(s.occupied.reshape(-1, 3)).reshape(G, m).any(axis=1) if G else np.zeros(0, bool)
         c_occ = self.occupied_weight_
@@ -379,7 +424,7 @@ class IncrementalHilbertMap(HilbertMap):
             lanes = None
             if grid is not None and len(jf) + len(jg):
                 lanes = np.concatenate([s.free[i_f[jf]], s.occupied[i_g[jg]].reshape(-1, 3)])
-                coef = grid.upload(self.dual_coef_[order])
+                coef = grid.upload(coef_v[order])
                 x, y, z = grid.to_lanes(lanes)
                 fl = grid.kernel_sum(x, y, z, coef).numpy().astype(np.float64)
                 f_free[jf] += fl[:len(jf)]
@@ -395,13 +440,13 @@ class IncrementalHilbertMap(HilbertMap):
                 g_lane = np.concatenate([g[jf], np.repeat(g[bf + jg] / m, m)]).astype(np.float32)
                 out = dr.zeros(grid.Float, grid.n)
                 grid.kernel_scatter(x, y, z, grid.upload(g_lane), out)
-                gj = np.empty(grid.n)
+                gj = np.empty(n)
                 gj[order] = out.numpy()
                 touched = gj != 0
-                used |= touched
-                gj[touched] += alpha * self.dual_coef_[touched]
-                self.node_accum_[touched] += gj[touched] ** 2
-                self.dual_coef_[touched] -= eta * gj[touched] / (np.sqrt(self.node_accum_[touched]) + 1e-8)
+                used[:n] |= touched
+                gj[touched] += alpha * coef_v[touched]
+                accum_v[touched] += gj[touched] ** 2
+                coef_v[touched] -= eta * gj[touched] / (np.sqrt(accum_v[touched]) + 1e-8)
             if self.fit_intercept:
                 gb = float(g.sum())
                 self._b_accum += gb * gb
@@ -429,7 +474,7 @@ class IncrementalHilbertMap(HilbertMap):
             grid = self._grid
         if grid is None:
             return out
-        coef = grid.upload(self.dual_coef_[grid.order])
+        coef = grid.upload(self.dual_coef_[:grid.n][grid.order])  # nodes not yet built hold 0
         for a in range(0, len(pts), chunk):
             p = pts[a:a + chunk]
             near = np.nonzero(self._near(p))[0]
@@ -443,6 +488,11 @@ class IncrementalHilbertMap(HilbertMap):
             res[srt] = f
             out[a + near] += res
         return out
+
+    @property
+    def sensor_positions_(self) -> np.ndarray:
+        """(S, 3) the distinct transducer positions of the kept pings (from ``track_``)."""
+        return _unique_rows(self.track_) if hasattr(self, "track_") else np.zeros((0, 3))
 
     @property
     def support_radius_(self) -> float:

@@ -23,7 +23,7 @@ import zlib
 
 import numpy as np
 
-from .inducing import Coverage
+from .incremental import _LazyCoverage
 from .persistence import _first_line, _jsonable
 
 FORMAT = "hilbertmap-incremental/1"
@@ -133,16 +133,13 @@ def load(cls, path):
     hm.node_accum_ = arr["accum"].astype(np.float64)
     hm.node_last_used_ = arr["last_used"].astype(np.int64)
     v = num["coverage_voxel"]
-    hm.coverage_ = Coverage(v, arr["coverage_keys"])
-    hm.echo_coverage_ = Coverage(v, arr["echo_coverage_keys"])
-    hm.free_coverage_ = Coverage(v, arr["free_coverage_keys"])
+    hm.coverage_ = _LazyCoverage(v, arr["coverage_keys"])
+    hm.echo_coverage_ = _LazyCoverage(v, arr["echo_coverage_keys"])
+    hm.free_coverage_ = _LazyCoverage(v, arr["free_coverage_keys"])
     hm.ping_frames_ = arr["ping_frames"].astype(np.float32)
     hm.ping_beams_ = arr["ping_beams"].astype(np.float32)
     hm.ping_spans_ = arr["ping_spans"].astype(np.float32)
     hm.track_ = arr["track"].astype(np.float64)
-    from .model import _unique_rows
-
-    hm.sensor_positions_ = _unique_rows(hm.track_)
     for k, val in cnt.items():
         setattr(hm, k, val)
     hm.loss_curve_ = loss
