@@ -47,7 +47,7 @@ from . import sgd
 from ._backend import KernelGrid, cut_radius
 from ._checks import CHOICES, int_param, need, num_param
 from .embedding import Samples
-from .inducing import Coverage
+from .inducing import Coverage, LazyCoverage
 from .model import HilbertMap, _unique_rows
 from .scanlike import as_scan_list, check_scan
 
@@ -66,38 +66,6 @@ def _keys(idx: np.ndarray) -> np.ndarray:
 def _unkey(keys: np.ndarray) -> np.ndarray:
     m = (1 << 21) - 1
     return np.stack([(keys >> 42) & m, (keys >> 21) & m, keys & m], axis=1) - _OFFSET
-
-
-class _LazyCoverage(Coverage):
-    """A :class:`Coverage` whose additions are merged when it is read, or once they outnumber the
-    keys held: a survey adds a scan's voxels many times a second, and merging each into a sorted
-    set of millions would cost more than the scan's learning."""
-
-    def __init__(self, voxel, keys=None):
-        self._pending = []
-        self._n_pending = 0
-        super().__init__(voxel, keys)
-
-    @property
-    def keys(self):
-        if self._pending:
-            self._keys = np.union1d(self._keys, np.concatenate(self._pending))
-            self._pending, self._n_pending = [], 0
-        return self._keys
-
-    @keys.setter
-    def keys(self, value):
-        self._keys = value
-        self._pending, self._n_pending = [], 0
-
-    def add(self, points) -> None:
-        if len(points) == 0:
-            return
-        k = np.unique(self._key(np.floor(np.asarray(points, dtype=np.float64) / self.voxel).astype(np.int64)))
-        self._pending.append(k)
-        self._n_pending += len(k)
-        if self._n_pending > max(len(self._keys), 1 << 16):
-            _ = self.keys
 
 
 class IncrementalHilbertMap(HilbertMap):
@@ -269,9 +237,9 @@ class IncrementalHilbertMap(HilbertMap):
         self.node_last_used_ = np.zeros(0, dtype=np.int64)
         self.intercept_ = 0.0
         self._b_accum = 0.0
-        self.coverage_ = _LazyCoverage(self.coverage_voxel)
-        self.echo_coverage_ = _LazyCoverage(self.coverage_voxel)
-        self.free_coverage_ = _LazyCoverage(self.coverage_voxel)
+        self.coverage_ = LazyCoverage(self.coverage_voxel)
+        self.echo_coverage_ = LazyCoverage(self.coverage_voxel)
+        self.free_coverage_ = LazyCoverage(self.coverage_voxel)
         self.ping_frames_ = np.zeros((0, 4, 4), dtype=np.float32)
         self.ping_beams_ = np.zeros((0, 3), dtype=np.float32)
         self.ping_spans_ = np.zeros((0, 3), dtype=np.float32)
@@ -349,7 +317,7 @@ class IncrementalHilbertMap(HilbertMap):
         for name in ("coverage_", "echo_coverage_", "free_coverage_"):
             cov = getattr(self, name)
             c = cov.centres()
-            setattr(self, name, _LazyCoverage(cov.voxel, cov.keys[reach.contains(c, dilate=1)] if len(c) else None))
+            setattr(self, name, LazyCoverage(cov.voxel, cov.keys[reach.contains(c, dilate=1)] if len(c) else None))
 
     def _rebuild(self) -> None:
         """The kernel grid of the current nodes and a summed-volume table of its cell counts

@@ -23,7 +23,7 @@ import zlib
 
 import numpy as np
 
-from .incremental import _LazyCoverage
+from .inducing import LazyCoverage
 from .persistence import _first_line, _jsonable
 
 FORMAT = "hilbertmap-incremental/1"
@@ -133,9 +133,9 @@ def load(cls, path):
     hm.node_accum_ = arr["accum"].astype(np.float64)
     hm.node_last_used_ = arr["last_used"].astype(np.int64)
     v = num["coverage_voxel"]
-    hm.coverage_ = _LazyCoverage(v, arr["coverage_keys"])
-    hm.echo_coverage_ = _LazyCoverage(v, arr["echo_coverage_keys"])
-    hm.free_coverage_ = _LazyCoverage(v, arr["free_coverage_keys"])
+    hm.coverage_ = LazyCoverage(v, arr["coverage_keys"])
+    hm.echo_coverage_ = LazyCoverage(v, arr["echo_coverage_keys"])
+    hm.free_coverage_ = LazyCoverage(v, arr["free_coverage_keys"])
     hm.ping_frames_ = arr["ping_frames"].astype(np.float32)
     hm.ping_beams_ = arr["ping_beams"].astype(np.float32)
     hm.ping_spans_ = arr["ping_spans"].astype(np.float32)
