@@ -35,11 +35,18 @@ class ElevationGrid:
 
 
 def elevation_grid(hm, resolution: float = 0.25, z_step: float | None = None, bounds=None, level: float = 0.5,
-                   chunk_points: int = 1 << 21) -> ElevationGrid:
+                   method: str = "peak", chunk_points: int = 1 << 21) -> ElevationGrid:
     """The seabed elevation grid of a fitted map (see the module docstring).
 
-    ``bounds``: ((x0, y0, z0), (x1, y1, z1)) of the grid (default the region seen).
+    ``bounds``: ((x0, y0, z0), (x1, y1, z1)) of the grid (default the region seen). ``method``:
+    ``'peak'`` (default) the height of the column's most probable sample in the region seen, if
+    it reaches ``level``; ``'first'`` the first rise through ``level`` coming down from water seen
+    free. A wide vertical beam spreads each echo over its fan, above the seabed as much as below:
+    the crossing then sits high (on the rocky slope survey by +1.1 m median, the peak by
+    +0.3 m), while on a narrow return the crossing is the sharper of the two.
     """
+    if method not in ("peak", "first"):
+        raise ValueError(f"HilbertMap: method must be 'peak' or 'first', not {method!r}")
     if not (isinstance(resolution, (int, float)) and resolution > 0):
         raise ValueError(f"HilbertMap: resolution must be a number > 0, not {resolution!r}")
     hm._check_fitted()
@@ -65,6 +72,11 @@ def elevation_grid(hm, resolution: float = 0.25, z_step: float | None = None, bo
         seen = hm.seen(P, dilate=1).reshape(n, nz)
         free_above = np.maximum.accumulate((p < level) & seen, axis=1)
         hit = (p >= level) & seen & np.concatenate([np.zeros((n, 1), bool), free_above[:, :-1]], axis=1)
+        if method == "peak":
+            pm = np.where(seen, p, -1.0)
+            k = np.argmax(pm, axis=1)
+            out[a:a + per] = np.where(pm[np.arange(n), k] >= level, zs[k], np.nan)
+            continue
         has = hit.any(axis=1)
         k = np.argmax(hit, axis=1)
         k = np.maximum(k, 1)

@@ -23,7 +23,8 @@ def floor_scan():
 
 def test_elevation_grid_finds_the_floor(floor_scan, tmp_path):
     hm = IncrementalHilbertMap(random_state=0).partial_fit(floor_scan)
-    g = elevation_grid(hm, resolution=0.25, bounds=((-3.0, -2.0, -4.0), (3.0, 2.0, -1.0)))
+    box = ((-3.0, -2.0, -4.0), (3.0, 2.0, -1.0))
+    g = elevation_grid(hm, resolution=0.25, bounds=box, method="first")
     assert g.elevation.shape == (16, 24)
     x, y = g.xy()
     assert np.isclose(x[0], -2.875) and np.isclose(y[0], 1.875)  # north up: row 0 at the largest y
@@ -32,6 +33,11 @@ def test_elevation_grid_finds_the_floor(floor_scan, tmp_path):
     # the floor is z = -3: the elevation is where p rises through 0.5 coming down from the water
     err = g.elevation[known] + 3.0
     assert abs(np.median(err)) < 0.15 and np.percentile(np.abs(err), 90) < 0.3, (np.median(err),)
+    # the most probable height sits in the occupied band, at most a length-scale behind the face
+    peak = elevation_grid(hm, resolution=0.25, bounds=box)
+    assert np.all(np.isfinite(peak.elevation)[known])  # a crossing implies a peak at or above level
+    err = peak.elevation[known] + 3.0
+    assert -hm.lengthscale_ - 0.1 < np.median(err) < 0.1
     path = tmp_path / "seabed.npz"
     write_elevation(path, g)
     back = read_elevation(path)
