@@ -17,6 +17,8 @@ row at its own pose), and prints one JSON object:
 ``batch``        the same pings fitted in one batch, and the incremental map's agreement with it
 ``no_poses``     the same pings with every row at the survey's first pose: what motion compensation buys
 ``elevation``    the seabed elevation grid's error on the seabed (z = -6 m) where it is known
+``seabed``       the rocky slope's multibeam survey (``--seabed-frames`` frames): throughput and the
+                 elevation grid's error against the seabed's height field, where it is known
 ``speed``        training epoch seconds per million lanes and queries per second (near the surfaces,
                  where every query meets nodes, and anywhere in the region seen), next to
                  scikit-learn's Nystroem (1000 components) + SGDClassifier on the same lanes
@@ -46,13 +48,13 @@ sys.path.insert(0, HERE)
 MULTIBEAM_LIGHT = dict(max_free_per_ping=24, near_free=8, occupied_samples=8)
 
 
-def render(sensor_id: str, spp: int, max_scans=None, seed: int = 1):
+def render(sensor_id: str, spp: int, max_scans=None, seed: int = 1, scene_name: str = "harbour"):
     import mitsonar
     from mitsonar.survey import render_survey
     from mitsonar.trajectory import Trajectory
 
-    scene = mitsonar.load_scene(os.path.join(ROOT, "scenes_xml", "harbour.xml"), spp=spp)
-    traj = Trajectory.from_tum(os.path.join(ROOT, "scenes_xml", "harbour_survey.tum"))
+    scene = mitsonar.load_scene(os.path.join(ROOT, "scenes_xml", scene_name + ".xml"), spp=spp)
+    traj = Trajectory.from_tum(os.path.join(ROOT, "scenes_xml", scene_name + "_survey.tum"))
     sensor = [s for s in scene.sensors() if s.id() == sensor_id][0]
     t0 = time.perf_counter()
     scans = list(render_survey(scene, traj, None, spp=spp, seed=seed, sensor=sensor, progress=False,
@@ -173,6 +175,36 @@ def speed(samples, seed: int = 0, n_query: int = 1_000_000, nystroem_components:
     return out
 
 
+def seabed_survey(frames: int, spp: int) -> dict:
+    """The rocky slope's multibeam survey (its first ``frames`` frames): mapping throughput and the
+    elevation grid's error against the seabed's height field (rocky_slope.ply), both methods."""
+    from scipy.interpolate import LinearNDInterpolator
+
+    from hilbertmap import read_mesh
+    from hilbertmap.elevation import elevation_grid
+
+    _, scans, t_render, sensor = render("sonar", spp, max_scans=frames, scene_name="rocky_slope")
+    hm, _, secs = map_incrementally(scans, **MULTIBEAM_LIGHT)
+    out = dict(render_s=t_render, throughput=throughput(scans, sensor, secs, hm))
+    V, _ = read_mesh(os.path.join(ROOT, "scenes_xml", "rocky_slope.ply"))
+    truth = LinearNDInterpolator(V[:, :2], V[:, 2])
+    lo, hi = hm.coverage_.bounds()
+    box = ((max(lo[0], -12.0), max(lo[1], -8.0), -13.0), (min(hi[0], 12.0), min(hi[1], 8.0), -6.0))
+    for method in ("peak", "first"):
+        eg = elevation_grid(hm, resolution=0.25, bounds=box, method=method)
+        xs, ys = eg.xy()
+        X, Y = np.meshgrid(xs, ys)
+        tz = truth(X, Y)
+        k = np.isfinite(eg.elevation) & np.isfinite(tz)
+        err = eg.elevation[k] - tz[k]
+        out[f"elevation_{method}"] = dict(
+            cells_known=int(k.sum()), known_share=float(k.mean()),
+            err_median=float(np.median(err)) if len(err) else None,
+            abs_err_mean=float(np.mean(np.abs(err))) if len(err) else None,
+            abs_err_p95=float(np.percentile(np.abs(err), 95)) if len(err) else None)
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spp", type=int, default=64)
@@ -182,6 +214,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-octomap", action="store_true")
     ap.add_argument("--no-batch", action="store_true")
     ap.add_argument("--no-speed", action="store_true")
+    ap.add_argument("--seabed-frames", type=int, default=60,
+                    help="frames of the rocky-slope multibeam survey for the elevation grid (0: skip)")
     ap.add_argument("--no-eval", action="store_true", help="skip the scores (and so the batch and OctoMap runs)")
     args = ap.parse_args(argv)
 
@@ -261,6 +295,9 @@ def main(argv=None) -> int:
         hmb, _, secs_mb = map_incrementally(mb_scans, **MULTIBEAM_LIGHT)
         report["throughput"]["multibeam_light"] = dict(throughput(mb_scans, mb_sensor, secs_mb, hmb),
                                                        params=MULTIBEAM_LIGHT)
+
+    if args.seabed_frames > 0:
+        report["seabed"] = seabed_survey(args.seabed_frames, args.spp)
 
     if args.out:
         from hilbertmap import write_mesh
