@@ -120,7 +120,8 @@ def test_save_load_round_trip_and_refusals(online, tmp_path):
     with pytest.raises(ValueError, match="missing 'inducing_points'"):
         HilbertMap.load(path)
     old = tmp_path / "thesis.npz"
-    HilbertMap(n_inducing=300, n_passes=1, random_state=0).fit(box_scan(orthogonal_frames()[0], rays=40)).save(old)
+    HilbertMap(n_inducing=100, n_passes=1, random_state=0).fit(
+        box_scan(orthogonal_frames()[0], n_pings=40, bearing_step=9.0, rays=20)).save(old)
     with pytest.raises(ValueError, match=r"format 'hilbertmap/1' is not hilbertmap-incremental/1"):
         IncrementalHilbertMap.load(old)
     broken = tmp_path / "broken.npz"
