@@ -14,7 +14,8 @@ any time:
   Each scan adds the lattice cells holding a point of a full bin's group (an echo), dilated by
   ``node_margin`` cells (the water just in front of a wall needs nodes to become free there).
   Open water far from any echo has no node: its probability is the intercept's, which the free
-  samples push low.
+  samples push low. New nodes join the kernel grid in batches (once they are 5 % of the nodes in
+  it, or 8 scans on); until then they hold a zero coefficient.
 - **Per-ping poses.** Samples are placed with each row's own pose ``scan.poses[k]``
   (:mod:`hilbertmap.embedding`), so a mechanical sweep smeared over metres of motion maps where
   each ping actually looked.
