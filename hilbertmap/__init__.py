@@ -9,14 +9,19 @@ import ``mitsonar``.
     hm = HilbertMap(n_inducing=3000).fit(scans)
     p = hm.predict_proba(points)            # (N, 3) -> (N,) in [0, 1]
 
+    survey = IncrementalHilbertMap()         # along a trajectory, in bounded memory
+    for scan in scans_as_they_arrive:        # every row at its own pose (scan.poses[k])
+        survey.partial_fit(scan)
+
 Modules: :mod:`~hilbertmap.model` (the estimator), :mod:`~hilbertmap.sgd` (its training steps),
 :mod:`~hilbertmap.surfaces` (surfaces and slices), :mod:`~hilbertmap.persistence` (the file
 format), :mod:`~hilbertmap.embedding` and :mod:`~hilbertmap.classify` (scans to samples),
 :mod:`~hilbertmap.metrics` (scores against known geometry), :mod:`~hilbertmap.plots`.
 """
+from .incremental import IncrementalHilbertMap
 from .mesh import read_mesh, write_mesh
 from .model import HilbertMap
 from .scanlike import ScanLike
 from .surfaces import MapSlice
 
-__all__ = ["HilbertMap", "MapSlice", "ScanLike", "write_mesh", "read_mesh"]
+__all__ = ["HilbertMap", "IncrementalHilbertMap", "MapSlice", "ScanLike", "write_mesh", "read_mesh"]

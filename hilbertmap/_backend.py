@@ -77,7 +77,10 @@ class KernelGrid:
         lin = (cell[:, 0] * self.dims[1] + cell[:, 1]) * self.dims[2] + cell[:, 2]
         self.order = np.argsort(lin, kind="stable")
         lin = lin[self.order]
-        start = np.searchsorted(lin, np.arange(int(np.prod(self.dims)) + 1)).astype(np.uint32)
+        # first point of every cell (points sorted by cell): a prefix sum of the cell counts
+        self.cell_counts = np.bincount(lin, minlength=int(np.prod(self.dims)))
+        start = np.zeros(len(self.cell_counts) + 1, dtype=np.uint32)
+        np.cumsum(self.cell_counts, out=start[1:])
         sp = pts[self.order].astype(np.float32)
         self.px, self.py, self.pz = (self.upload(sp[:, c]) for c in range(3))
         self.cell_start = upload(self.UInt32, start, np.uint32)

@@ -58,6 +58,38 @@ class Coverage:
         return len(self.keys) * self.voxel ** 3
 
 
+class LazyCoverage(Coverage):
+    """A :class:`Coverage` whose additions are merged when it is read, or once they outnumber the
+    keys held: a survey adds a scan's voxels many times a second, and merging each into a sorted
+    set of millions would cost more than the scan's learning."""
+
+    def __init__(self, voxel, keys=None):
+        self._pending = []
+        self._n_pending = 0
+        super().__init__(voxel, keys)
+
+    @property
+    def keys(self):
+        if self._pending:
+            self._keys = np.union1d(self._keys, np.concatenate(self._pending))
+            self._pending, self._n_pending = [], 0
+        return self._keys
+
+    @keys.setter
+    def keys(self, value):
+        self._keys = value
+        self._pending, self._n_pending = [], 0
+
+    def add(self, points) -> None:
+        if len(points) == 0:
+            return
+        k = np.unique(self._key(np.floor(np.asarray(points, dtype=np.float64) / self.voxel).astype(np.int64)))
+        self._pending.append(k)
+        self._n_pending += len(k)
+        if self._n_pending > max(len(self._keys), 1 << 16):
+            _ = self.keys
+
+
 def choose_inducing(method: str, n: int, free: np.ndarray, occupied: np.ndarray, coverage: Coverage,
                     rng: np.random.Generator, occupied_share: float = 0.5, kmeans_iter: int = 10,
                     kmeans_points: int = 60000, dedup: float = 0.0) -> np.ndarray:

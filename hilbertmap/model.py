@@ -30,7 +30,7 @@ from ._backend import KernelGrid
 from ._checks import as_points, check_params
 from .embedding import Samples, embed_scan
 from .inducing import Coverage, choose_inducing, spacing
-from .scanlike import ScanLike, as_scan_list
+from .scanlike import ScanLike, as_scan_list, check_scan
 from .surfaces import MapSlice
 
 __all__ = ["HilbertMap", "MapSlice"]
@@ -225,8 +225,11 @@ class HilbertMap:
 
     # -- embedding --------------------------------------------------------------------------
     def embed(self, scan: ScanLike, rng: np.random.Generator | None = None) -> Samples:
-        """Labelled samples of one scan with this map's embedding settings (thesis 4.2.1)."""
+        """Labelled samples of one scan with this map's embedding settings (thesis 4.2.1); a scan
+        without poses, with poses that are not rigid or with NaN ranges is refused in one line
+        (:func:`hilbertmap.scanlike.check_scan`)."""
         check_params(self)
+        check_scan(scan, self.source)
         rng = rng if rng is not None else np.random.default_rng(self.random_state)
         return embed_scan(
             scan, rng, source=self.source, bin_rule=self.bin_rule, threshold=self.threshold,

@@ -106,3 +106,44 @@ def plot_half_region(hm, axis="z", value=0.0, truth=None, path=None, resolution:
         fig.savefig(path, dpi=110, bbox_inches="tight")
         plt.close(fig)
     return fig
+
+
+def plot_survey_map(hm, path=None, elevation=None, slice_z=None, resolution: float = 0.1, title=None):
+    """A plan view of a survey map with the vehicle's track: left, the probability on the
+    horizontal slice ``z = slice_z`` (default the track's mean depth); right, the seabed
+    elevation grid when one is given (:func:`hilbertmap.elevation.elevation_grid`). The track
+    (``hm.track_``, else ``hm.sensor_positions_``) is drawn on both. Returns the figure, saved
+    to ``path`` when given."""
+    plt = _plt()
+    track = np.asarray(getattr(hm, "track_", hm.sensor_positions_))
+    z = float(np.mean(track[:, 2])) if slice_z is None and len(track) else float(slice_z or 0.0)
+    n = 2 if elevation is not None else 1
+    fig, axes = plt.subplots(1, n, figsize=(6.5 * n, 5.5), squeeze=False)
+    ax = axes[0, 0]
+    sl = hm.slice("z", z, resolution=resolution)
+    prob = np.where(sl.seen, sl.prob, np.nan)
+    im = ax.imshow(prob, origin="lower", extent=sl.extent, cmap="viridis", vmin=0, vmax=1)
+    fig.colorbar(im, ax=ax, label="occupancy probability", shrink=0.8)
+    ax.set_title(f"slice z = {z:.2f} m")
+    if elevation is not None:
+        ax2 = axes[0, 1]
+        a, _, c, _, e, f = elevation.transform
+        rows, cols = elevation.elevation.shape
+        im2 = ax2.imshow(elevation.elevation, extent=(c, c + a * cols, f + e * rows, f), cmap="terrain")
+        fig.colorbar(im2, ax=ax2, label="elevation (m)", shrink=0.8)
+        ax2.set_title("seabed elevation")
+    for a_ in axes[0]:
+        if len(track):
+            a_.plot(track[:, 0], track[:, 1], "r-", lw=1.2, label="track")
+            a_.plot(track[0, 0], track[0, 1], "ro", ms=4)
+        a_.set_xlabel("x (m)")
+        a_.set_ylabel("y (m)")
+        a_.set_aspect("equal")
+    axes[0, 0].legend(loc="upper right", fontsize=8)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+    return fig

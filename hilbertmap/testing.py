@@ -101,7 +101,8 @@ def _cast(o, d):
 def box_scan(pose: np.ndarray, n_pings: int = 200, bearing_step: float = 1.8, n_bins: int = 500,
              range_max: float = 12.0, beamwidth_h: float = 3.0, beamwidth_v: float = 35.0,
              rays: int = 400, noise: bool = True, ringdown: float = 1.3, seed: int = 0) -> SyntheticScan:
-    """A mechanical scan of the box from the beam-frame ``pose`` (4x4, bearing 0)."""
+    """A mechanical scan of the box from the beam-frame ``pose`` (4x4, bearing 0), or from one
+    such pose per ping ((n_pings, 4, 4): a head on a moving vehicle, see :func:`moving_poses`)."""
     rng = np.random.default_rng(seed)
     pose = np.asarray(pose, dtype=np.float64)
     bearings = np.radians(np.arange(n_pings) * bearing_step)
@@ -114,7 +115,7 @@ def box_scan(pose: np.ndarray, n_pings: int = 200, bearing_step: float = 1.8, n_
     for k, b in enumerate(bearings):
         c, s = math.cos(b), math.sin(b)
         Ry = np.array([[c, 0, s, 0], [0, 1, 0, 0], [-s, 0, c, 0], [0, 0, 0, 1]])
-        P = pose @ Ry
+        P = (pose[k] if pose.ndim == 3 else pose) @ Ry
         poses[k] = P
         az = rng.normal(0, s_h, rays)
         el = rng.normal(0, s_v, rays)
@@ -135,3 +136,11 @@ def box_scan(pose: np.ndarray, n_pings: int = 200, bearing_step: float = 1.8, n_
     return SyntheticScan(intensity=intensity.astype(np.float32), data=data, ranges=ranges, bearings=bearings,
                          poses=poses, range_min=0.0, range_max=range_max, beamwidth_h=beamwidth_h,
                          beamwidth_v=beamwidth_v, meta=dict(seed=seed, synthetic="box"))
+
+
+def moving_poses(start, end, n_pings: int = 200, scan_axis=(0.0, 0.0, 1.0), boresight=(1.0, 0.0, 0.0)) -> np.ndarray:
+    """(n_pings, 4, 4) bearing-0 beam frames of a head carried at constant speed in a straight line
+    from ``start`` to ``end`` (ping k at the fraction k / n_pings of the way), orientation fixed."""
+    a, b = np.asarray(start, dtype=np.float64), np.asarray(end, dtype=np.float64)
+    f = np.arange(n_pings) / n_pings
+    return np.stack([frame(boresight, scan_axis, a + t * (b - a)) for t in f])

@@ -1,6 +1,7 @@
 """``mitsonar map``: learn a Hilbert map from scan files.
 
     mitsonar map scans/*.exr -o map.npz [--inducing 3000] [--plot slices.png] [--mesh map.ply]
+    mitsonar map survey_dir/ --incremental -o map.npz [--elevation seabed.tif] [--plot plan.png]
 
 The main CLI calls :func:`add_subcommands`. Every failure the user can cause ends in one line on
 stderr and a non-zero exit code. The output paths are checked before any scan is read; the files
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import os
 import sys
+import time
 
 from ._files import StagedFiles
 
@@ -36,6 +38,17 @@ def add_subcommands(subparsers) -> None:
     m.add_argument("--surface", choices=("ridge", "level"), default="ridge",
                    help="surface of --mesh: the probability ridge (default) or the 0.5 level")
     m.add_argument("--resolution", type=float, default=None, help="mesh grid step in metres (default auto)")
+    m.add_argument("--incremental", action="store_true",
+                   help="map the scans one after another as a survey (IncrementalHilbertMap.partial_fit, every "
+                        "row at its own pose, bounded memory); a folder argument stands for its scan_*.npz/.exr "
+                        "files in order (what `mitsonar survey` writes)")
+    m.add_argument("--node-spacing", type=float, default=0.15,
+                   help="--incremental: lattice pitch of the map's nodes in metres (default 0.15)")
+    m.add_argument("--max-nodes", type=int, default=200000,
+                   help="--incremental: at most this many nodes; the least recently used are forgotten")
+    m.add_argument("--elevation", help="--incremental: also write the seabed elevation grid (.tif GeoTIFF with "
+                                       "rasterio, or .npz with 'elevation' and its 'transform')")
+    m.add_argument("--elevation-resolution", type=float, default=0.25, help="elevation grid cell in metres")
     m.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     m.set_defaults(func=cmd_map)
 
@@ -46,7 +59,8 @@ def _fail(msg: str, code: int = EXIT_ERROR) -> int:
 
 
 # The map's own messages name its parameters; on the command line they are these options.
-_OPTIONS = (("n_inducing", "--inducing"), ("n_passes", "--passes"), ("resolution", "--resolution"))
+_OPTIONS = (("n_inducing", "--inducing"), ("n_passes", "--passes"), ("resolution", "--resolution"),
+            ("node_spacing", "--node-spacing"), ("max_nodes", "--max-nodes"))
 
 
 def _map_error(exc: Exception) -> str:
@@ -76,6 +90,19 @@ def _output_problem(option: str, path: str) -> str | None:
     if not os.access(folder, os.W_OK | os.X_OK):
         return f"{option} {path}: cannot write in the folder {shown} (permission denied)"
     return None
+
+
+def _expand_folders(paths) -> list:
+    """Each folder replaced by its survey scans (``scan_*.npz``, else ``scan_*.exr``) in name order."""
+    out = []
+    for p in paths:
+        if os.path.isdir(p):
+            names = sorted(f for f in os.listdir(p) if f.startswith("scan_") and f.endswith(".npz")) or \
+                sorted(f for f in os.listdir(p) if f.startswith("scan_") and f.endswith(".exr"))
+            out.extend(os.path.join(p, f) for f in names)
+        else:
+            out.append(p)
+    return out
 
 
 def _read_scans(paths):
@@ -125,7 +152,30 @@ def cmd_map(args) -> int:
     if args.plot and os.path.splitext(args.plot)[1].lower() not in (".png", ".pdf", ".svg", ".jpg"):
         return _fail(f"{args.plot}: pictures are written as .png, .pdf, .svg or .jpg", EXIT_USAGE)
     # every output before any input is read: a bad path must not cost a fit
-    for option, path in (("-o", args.output), ("--mesh", args.mesh), ("--plot", args.plot)):
+    if not args.incremental:
+        for option in ("elevation",):
+            if getattr(args, option):
+                return _fail(f"--{option} needs --incremental", EXIT_USAGE)
+    else:
+        if not (args.node_spacing > 0):
+            return _fail("--node-spacing must be positive", EXIT_USAGE)
+        if args.max_nodes < 1:
+            return _fail("--max-nodes must be a positive integer", EXIT_USAGE)
+        if not (args.elevation_resolution > 0):
+            return _fail("--elevation-resolution must be positive", EXIT_USAGE)
+        if args.elevation and os.path.splitext(args.elevation)[1].lower() not in (".tif", ".tiff", ".npz"):
+            return _fail(f"{args.elevation}: elevation grids are written as .tif/.tiff (GeoTIFF) or .npz", EXIT_USAGE)
+        if args.elevation and args.elevation.lower().endswith((".tif", ".tiff")):
+            try:
+                import rasterio  # noqa: F401
+            except ImportError:
+                return _fail(f"{args.elevation}: writing GeoTIFF needs rasterio (pip install rasterio); "
+                             "name an .npz instead")
+        args.scans = _expand_folders(args.scans)
+        if not args.scans:
+            return _fail("the survey is empty: no scan files (scan_*.npz or scan_*.exr in the folders given)")
+    for option, path in (("-o", args.output), ("--mesh", args.mesh), ("--plot", args.plot),
+                         ("--elevation", getattr(args, "elevation", None))):
         problem = path and _output_problem(option, path)
         if problem:
             return _fail(problem)
@@ -139,16 +189,39 @@ def cmd_map(args) -> int:
     if problem:
         return _fail(problem)
 
-    from hilbertmap import HilbertMap
+    from hilbertmap import HilbertMap, IncrementalHilbertMap
 
-    params = dict(n_inducing=args.inducing, random_state=args.seed, source=args.source)
-    if args.passes is not None:
-        params["n_passes"] = args.passes
-    hm = HilbertMap(**params)
-    try:
-        hm.fit(scans)
-    except ValueError as exc:
-        return _fail(_map_error(exc))
+    if args.incremental:
+        params = dict(node_spacing=args.node_spacing, max_nodes=args.max_nodes, random_state=args.seed,
+                      source=args.source)
+        if args.passes is not None:
+            params["partial_passes"] = args.passes
+        hm = IncrementalHilbertMap(**params)
+        try:
+            t0 = time.perf_counter()
+            for path, scan in zip(args.scans, scans):
+                try:
+                    hm.partial_fit(scan)
+                except ValueError as exc:
+                    raise ValueError(f"{path}: {exc}") from None
+            hm.timings_ = dict(total_s=time.perf_counter() - t0)
+            hm.n_schedule_ = hm.n_samples_seen_
+            args.elevation_grid = None
+            if args.elevation or (args.plot and args.incremental):
+                from hilbertmap.elevation import elevation_grid
+
+                args.elevation_grid = elevation_grid(hm, resolution=args.elevation_resolution)
+        except ValueError as exc:
+            return _fail(_map_error(exc))
+    else:
+        params = dict(n_inducing=args.inducing, random_state=args.seed, source=args.source)
+        if args.passes is not None:
+            params["n_passes"] = args.passes
+        hm = HilbertMap(**params)
+        try:
+            hm.fit(scans)
+        except ValueError as exc:
+            return _fail(_map_error(exc))
     V = F = None
     if args.mesh:  # before anything is written: a grid too fine for the region fails here
         try:
@@ -167,7 +240,7 @@ def cmd_map(args) -> int:
     finally:
         outputs.discard()
     written = [args.output] + ([f"{args.mesh} ({len(F)} triangles)"] if args.mesh else []) + \
-        ([args.plot] if args.plot else [])
+        ([args.plot] if args.plot else []) + ([args.elevation] if getattr(args, "elevation", None) else [])
     if not args.quiet:
         t = hm.timings_
         print(f"map: {len(scans)} scan(s), {hm.n_schedule_} training samples, "
@@ -186,7 +259,18 @@ def _write(args, hm, n_scans: int, V, F, outputs: StagedFiles) -> int:
         if args.mesh:
             option, path = "--mesh", args.mesh
             write_mesh(outputs.temporary(args.mesh), V, F)
-        if args.plot:
+        if getattr(args, "elevation", None):
+            from hilbertmap.elevation import write_elevation
+
+            option, path = "--elevation", args.elevation
+            write_elevation(outputs.temporary(args.elevation), args.elevation_grid)
+        if args.plot and args.incremental:
+            from hilbertmap.plots import plot_survey_map
+
+            option, path = "--plot", args.plot
+            plot_survey_map(hm, outputs.temporary(args.plot), elevation=args.elevation_grid,
+                            title=f"survey map of {n_scans} scan(s)")
+        elif args.plot:
             from hilbertmap.plots import plot_slices
 
             option, path = "--plot", args.plot
