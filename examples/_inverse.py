@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 import os
 
+import numpy as np
+
 
 def blur_weights(sigma_bins: float):
     """Normalised Gaussian taps (offset, weight) of standard deviation ``sigma_bins`` bins, to 3 sigma."""
@@ -49,6 +51,17 @@ def relative_l2(img, target, sigma_bins: float):
 
     a, t = blur_range(img, sigma_bins), blur_range(target, sigma_bins)
     return dr.sum(dr.square(a - t)) / dr.sum(dr.square(t))
+
+
+def log_l2(img, target, sigma_bins: float, floor: float = 1e-4):
+    """``mean (log(blur(img) + e) - log(blur(target) + e))^2``, ``e = floor * max(blur(target))``: the
+    misfit of the scans in decibels (as a sonar display shows them), so that weak oblique echoes
+    weigh as much as the strong ones near normal incidence."""
+    import drjit as dr
+
+    a, t = blur_range(img, sigma_bins), blur_range(target, sigma_bins)
+    e = floor * dr.max(dr.detach(t))
+    return dr.mean(dr.square(dr.log(a + e) - dr.log(t + e)))
 
 
 def small_pose(t, r):
@@ -100,3 +113,35 @@ def save_figure(fig, path: str):
     os.makedirs(os.path.dirname(os.path.abspath(path)) or ".", exist_ok=True)
     with replacing(path) as tmp:
         fig.savefig(tmp, dpi=110, format=os.path.splitext(path)[1][1:] or "png")
+
+
+def _acoustic(bid, values):
+    d, s, n = values
+    return (f'<bsdf type="acoustic" id="{bid}"><float name="diffuse" value="{d}"/>'
+            f'<float name="specular" value="{s}"/><float name="shininess" value="{n}"/></bsdf>')
+
+
+def tank_xml(mount, n_pings=24, n_bins=160, range_max=8.0, max_depth=1, walls=(0.5, 0.2, 10.0), floor=None):
+    """A tank of known geometry (that of scenes_xml/box.xml: floor z = -3, walls x = +-5 and
+    y = +-4, up to z = +9) seen by a mechanical head ``head`` with beam frame ``mount`` (4 x 4)
+    sweeping a full turn in ``n_pings`` pings (3 x 35 deg gaussian beam, ``n_bins`` bins from 0 to
+    ``range_max``). Materials (acoustic, (diffuse, specular, shininess)): ``wall`` for the walls,
+    and the floor's own ``floor`` when ``floor`` is given (else the floor is ``wall`` too)."""
+    to_world = " ".join(f"{v:.17g}" for v in np.asarray(mount, dtype=float).ravel())
+    step = 360.0 / n_pings
+    rect = ('<shape type="rectangle"><transform name="to_world"><scale x="{sx}" y="{sy}"/>{rot}'
+            '<translate x="{tx}" y="{ty}" z="{tz}"/></transform><ref id="{mat}"/></shape>')
+    fmat = "wall" if floor is None else "floor"
+    shapes = [rect.format(sx=5, sy=4, rot="", tx=0, ty=0, tz=-3, mat=fmat),
+              rect.format(sx=6, sy=4, rot='<rotate y="1" angle="-90"/>', tx=5, ty=0, tz=3, mat="wall"),
+              rect.format(sx=6, sy=4, rot='<rotate y="1" angle="90"/>', tx=-5, ty=0, tz=3, mat="wall"),
+              rect.format(sx=5, sy=6, rot='<rotate x="1" angle="90"/>', tx=0, ty=4, tz=3, mat="wall"),
+              rect.format(sx=5, sy=6, rot='<rotate x="1" angle="-90"/>', tx=0, ty=-4, tz=3, mat="wall")]
+    bsdfs = _acoustic("wall", walls) + ("" if floor is None else _acoustic("floor", floor))
+    return (f'<scene version="3.0.0"><integrator type="sonar_tof"><integer name="max_depth" value="{max_depth}"/>'
+            f'</integrator><sensor type="sonar" id="head"><string name="kind" value="mechanical"/>'
+            f'<transform name="to_world"><matrix value="{to_world}"/></transform>'
+            f'<float name="range_min" value="0"/><float name="range_max" value="{range_max}"/>'
+            f'<integer name="n_bins" value="{n_bins}"/><float name="bearing_step" value="{step}"/>'
+            f'<integer name="n_pings" value="{n_pings}"/><float name="beamwidth_h" value="3"/>'
+            f'<float name="beamwidth_v" value="35"/></sensor>' + bsdfs + "".join(shapes) + "</scene>")

@@ -30,6 +30,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _inverse import positive_int, relative_l2, rotation_angle_deg, save_figure, small_pose  # noqa: E402
+from _inverse import tank_xml as _tank_xml  # noqa: E402
 
 # The mounting error of the example: a few centimetres and degrees (beam frame).
 TRUE_T = (0.04, -0.03, 0.05)        # metres
@@ -46,29 +47,11 @@ def nominal_mount():
     return m
 
 
-def tank_xml(n_pings=48, n_bins=160, range_max=8.0, max_depth=1, diffuse=0.5, specular=0.2, shininess=10.0):
-    """The calibration scene: the box of scenes_xml/box.xml (floor z = -3, walls x = +-5, y = +-4),
-    one material ``wall`` (acoustic), a mechanical head ``head`` sweeping a full turn in
-    ``n_pings`` pings."""
-    to_world = " ".join(f"{v:.17g}" for v in nominal_mount().ravel())
-    step = 360.0 / n_pings
-    rect = ('<shape type="rectangle"><transform name="to_world"><scale x="{sx}" y="{sy}"/>{rot}'
-            '<translate x="{tx}" y="{ty}" z="{tz}"/></transform><ref id="wall"/></shape>')
-    shapes = [rect.format(sx=5, sy=4, rot="", tx=0, ty=0, tz=-3),
-              rect.format(sx=6, sy=4, rot='<rotate y="1" angle="-90"/>', tx=5, ty=0, tz=3),
-              rect.format(sx=6, sy=4, rot='<rotate y="1" angle="90"/>', tx=-5, ty=0, tz=3),
-              rect.format(sx=5, sy=6, rot='<rotate x="1" angle="90"/>', tx=0, ty=4, tz=3),
-              rect.format(sx=5, sy=6, rot='<rotate x="1" angle="-90"/>', tx=0, ty=-4, tz=3)]
-    return (f'<scene version="3.0.0"><integrator type="sonar_tof"><integer name="max_depth" value="{max_depth}"/>'
-            f'</integrator><sensor type="sonar" id="head"><string name="kind" value="mechanical"/>'
-            f'<transform name="to_world"><matrix value="{to_world}"/></transform>'
-            f'<float name="range_min" value="0"/><float name="range_max" value="{range_max}"/>'
-            f'<integer name="n_bins" value="{n_bins}"/><float name="bearing_step" value="{step}"/>'
-            f'<integer name="n_pings" value="{n_pings}"/><float name="beamwidth_h" value="3"/>'
-            f'<float name="beamwidth_v" value="35"/></sensor>'
-            f'<bsdf type="acoustic" id="wall"><float name="diffuse" value="{diffuse}"/>'
-            f'<float name="specular" value="{specular}"/><float name="shininess" value="{shininess}"/></bsdf>'
-            + "".join(shapes) + "</scene>")
+def tank_xml(n_pings=24, n_bins=160, range_max=8.0, max_depth=1):
+    """The calibration scene: `_inverse.tank_xml` with the head at `nominal_mount` sweeping a full
+    turn in ``n_pings`` pings, one material ``wall`` (diffuse 0.5, specular 0.2, shininess 10)."""
+    return _tank_xml(nominal_mount(), n_pings=n_pings, n_bins=n_bins, range_max=range_max, max_depth=max_depth,
+                     walls=(0.5, 0.2, 10.0))
 
 
 def pose_error(t_est, r_est, t_true=TRUE_T, r_true_deg=TRUE_R_DEG):

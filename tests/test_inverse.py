@@ -58,3 +58,19 @@ def test_calibrate_mount_refuses_bad_counts(mitsonar_mod):
     cal = example("calibrate_mount")
     with pytest.raises(SystemExit, match=r"iterations: 0 is not allowed \(a whole number from 1 to 100000\)"):
         cal.calibrate(iterations=0)
+
+
+def test_recover_reflectance_within_5_percent(mitsonar_mod):
+    """Six parameters (diffuse, specular, shininess of the walls and of the floor) from starts up
+    to 2x off, to within 5 % of the truth in 100 Adam steps."""
+    rr = example("recover_reflectance")
+    res = rr.recover(iterations=100, spp=1024, seed=5)
+    start_err = {k: abs(v - res["truth"][k]) / res["truth"][k] for k, v in zip(res["keys"], res["history"][0][1:])}
+    assert min(start_err.values()) > 0.3  # every parameter starts well off
+    assert max(res["relative_errors"].values()) < 0.05, res["relative_errors"]
+
+
+def test_recover_reflectance_refuses_unphysical_values(mitsonar_mod):
+    rr = example("recover_reflectance")
+    with pytest.raises(SystemExit, match=r"start\['wall'\]: \(0\.8, 0\.5, 10\.0\) is not allowed .*diffuse \+ specular <= 1"):
+        rr.recover(start={"wall": (0.8, 0.5, 10.0), "floor": (0.3, 0.2, 8.0)})
