@@ -13,7 +13,8 @@ Parametrisation: each value is ``start * exp(u)``, ``u`` fitted (relative steps,
 ``diffuse + specular`` is kept <= 0.99 (energy conservation) by scaling both down after a step that
 crosses it. Loss: L2 between the logarithms of the range-blurred scans (their misfit in dB, so
 that the weak oblique echoes count as much as the strong normal ones). The target is rendered with the
-seed the fit uses (common random numbers), so the loss is 0 at the truth.
+seed the fit uses (common random numbers), so the loss is 0 at the truth; ``--target-seed``
+renders it with other paths (the optimum then moves by the scans' Monte Carlo noise).
 
 Run: ``python examples/recover_reflectance.py --out recover_reflectance.png``: prints the values per
 iteration and writes a figure of the loss and of each parameter's relative error per iteration.
@@ -67,11 +68,12 @@ def mi_float(v):
 
 
 def recover(iterations=100, spp=1024, seed=5, n_pings=36, n_bins=160, blur=1.0, lr=0.08, truth=TRUTH,
-            start=START, callback=None):
+            start=START, target_seed=None, callback=None):
     """Fit the six reflectance parameters; returns a dict with ``history`` (per iteration: loss and
     the values, in the order of ``keys``), ``keys``, ``values`` (final), ``relative_errors``,
     ``seconds`` and ``iterations``. ``lr``: Adam's step in ``u`` (about a relative change per step),
-    decayed geometrically to a 10th over the iterations."""
+    decayed geometrically to a 10th over the iterations. ``target_seed``: render the target with
+    other paths than the fit (default: the fit's seed)."""
     import drjit as dr
     import mitsuba as mi
 
@@ -90,7 +92,7 @@ def recover(iterations=100, spp=1024, seed=5, n_pings=36, n_bins=160, blur=1.0, 
     keys = _keys()
     params = scan_parameters(scene, keys)
     true_vals = {f"{m}.{n}": truth[m][i] for m in truth for i, n in enumerate(NAMES)}
-    target = mi.render(scene, spp=spp, seed=seed)
+    target = mi.render(scene, spp=spp, seed=seed if target_seed is None else target_seed)
     dr.eval(target)
     start_vals = {f"{m}.{n}": start[m][i] for m in start for i, n in enumerate(NAMES)}
 
@@ -153,13 +155,14 @@ def main(argv=None):
     ap.add_argument("--iterations", type=int, default=100)
     ap.add_argument("--spp", type=int, default=1024)
     ap.add_argument("--seed", type=int, default=5)
+    ap.add_argument("--target-seed", type=int, default=None)
     ap.add_argument("--out", default="recover_reflectance.png", help="figure (PNG)")
     a = ap.parse_args(argv)
 
     def show(it, h, keys):
         print(f"iter {it:3d}  loss {h[0]:.3e}  " + "  ".join(f"{k} {v:.3f}" for k, v in zip(keys, h[1:])))
 
-    res = recover(iterations=a.iterations, spp=a.spp, seed=a.seed, callback=show)
+    res = recover(iterations=a.iterations, spp=a.spp, seed=a.seed, target_seed=a.target_seed, callback=show)
     worst = max(res["relative_errors"].values())
     print("final: " + ", ".join(f"{k} {res['values'][k]:.4f} (true {res['truth'][k]:g})" for k in res["keys"]))
     print(f"largest relative error {100 * worst:.2f} % after {res['iterations']} iterations, {res['seconds']:.1f} s")
