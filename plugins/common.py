@@ -102,9 +102,10 @@ class AttachedSetup:
         self.beam = sensor.beam.attached(diff.get("beamwidth_h"), diff.get("beamwidth_v"))
         head = sensor.head_pose()
         self.frames = _AttachedFrames(setup.frames, diff["to_world"], head, sensor.ping_poses())
-        from .path_replay import acoustic_bsdfs
+        from .path_replay import acoustic_bsdfs, moving_meshes
 
         self.bsdfs, self.other_bsdfs = acoustic_bsdfs(setup.scene)
+        self.geometry = moving_meshes(setup.scene)
         self.connect = None
         if setup.connect is not None:
             frames, fan = setup.connect

@@ -34,6 +34,15 @@ carries the Jacobians of its hit point and path length with respect to the head'
 emitted direction (``Jo``, ``Jw``; 3 x 3 each) and rebuilds, at every bounce, an attached copy of
 the echo from them; the head's axes enter the receive beam directly. Visibility and the path's
 discontinuities (edges, occlusion boundaries) are not differentiated (as in ``prb``).
+
+Mesh vertices (``<shape id>.vertex_positions``, issue "Inverse problems"): the ray, fixed in the
+beam frame, is intersected again with derivatives, so an echo's point slides along its ray when
+its facet moves (``dp = w (n . dx) / (n . w)``: the range changes) and its facet's normal turns
+(the incidence angle changes, in the BSDF); the shading frame turns with the facet normal
+(meshes need ``face_normals``). Not differentiated: silhouettes and facet edges (a facet's normal
+jumps at its edges, and moving vertices moves those jumps; on a coarse height map this is the
+bias measured by ``benchmarks/inverse.py``), and the motion of an earlier bounce's point seen by
+later bounces (exact for single-bounce echoes).
 """
 from __future__ import annotations
 
@@ -92,7 +101,8 @@ def _relative(value):
 def differentiable_keys(params) -> list:
     """The keys of ``params`` (``mi.SceneParameters``) whose derivatives the sonar integrators
     compute: the sonar sensor's and the acoustic BSDF's differentiable parameters, and the
-    ``data``/``value`` of a texture that is an acoustic BSDF's ``diffuse``."""
+    ``data``/``value`` of a texture that is an acoustic BSDF's ``diffuse``, and a mesh's
+    ``vertex_positions`` (`_attached_hit`)."""
     import re
 
     from .acoustic_bsdf import AcousticBSDF
@@ -103,7 +113,14 @@ def differentiable_keys(params) -> list:
     return [k for k, node in owner.items()
             if not params.flags(k) & mi.ParamFlags.NonDifferentiable
             and (isinstance(node, (SonarSensor, AcousticBSDF))
-                 or any(re.fullmatch(re.escape(b) + r"\.diffuse\.(data|value)", k) for b in bsdfs))]
+                 or any(re.fullmatch(re.escape(b) + r"\.diffuse\.(data|value)", k) for b in bsdfs)
+                 or (isinstance(node, mi.Mesh) and k.endswith(".vertex_positions")))]
+
+
+def moving_meshes(scene) -> bool:
+    """Whether a mesh of ``scene`` has gradients enabled on its vertex positions."""
+    return any(isinstance(s, mi.Mesh) and dr.grad_enabled(s.vertex_positions_buffer())
+               for s in scene.shapes())
 
 
 def check_attached(params, source):
@@ -113,6 +130,10 @@ def check_attached(params, source):
         return
     allowed = set(differentiable_keys(params))
     for k in params.keys():
+        if k.endswith(".vertex_normals") and isinstance(params.properties[k][2], mi.Mesh) and dr.grad_enabled(params[k]):
+            raise ValueError(f"{source}: mesh {k[:-len('.vertex_normals')]!r} has vertex normals; its vertex positions "
+                             f"are differentiated with face normals only: give it <boolean name=\"face_normals\" "
+                             f"value=\"true\"/>")
         if k not in allowed and dr.grad_enabled(params[k]):
             raise ValueError(f"{source}: parameter {k!r} has gradients enabled but is not differentiated by the "
                              f"sonar integrators; allowed: {', '.join(sorted(allowed))}")
@@ -152,6 +173,28 @@ def _eval_attached(ad, bsdf, ctx, si, wo, active, forward):
     else:
         other = bsdf.eval(ctx, si, wo, others).x
     return dr.select(others, other, value)
+
+
+def _attached_hit(scene, ray, si, active):
+    """``(dp, frame)``: the displacement of ``si``'s hit point (0, attached to the scene's mesh
+    vertices) and its shading frame attached to them, with ``si``'s exact values.
+
+    The ray is intersected again with derivatives (Mitsuba's default ray flags, not
+    ``mi.RayFlags.FollowShape``): the emitted direction is fixed in the beam frame, so when a
+    facet moves the echo's point moves along the ray, ``dp = w (n . dx) / (n . w)`` (``dx`` the
+    facet's displacement there), and the facet's normal turns (`_attached_hit` turns the shading
+    normal with it). Only the point's own facet is
+    followed: a later bounce does not see an earlier point move (exact for single-bounce echoes),
+    and silhouettes (a ray leaving one facet for another) are not differentiated."""
+    si_s = scene.ray_intersect(mi.Ray3f(ray), mi.RayFlags.All, False, active)
+    dp = si_s.p - dr.detach(si_s.p)
+    # Mitsuba attaches the facet's geometric normal (not the shading frame): the shading frame
+    # turns as its facet does, by the smallest rotation taking n to n + dn (exact for face
+    # normals; for interpolated vertex normals, the turn of the facet under the point).
+    dn = si_s.n - dr.detach(si_s.n)
+    f = si.sh_frame
+    frame = mi.Frame3f(f.s - f.n * dr.dot(f.s, dn), f.t - f.n * dr.dot(f.t, dn), f.n + dn)
+    return dr.select(active, dp, 0.0), frame
 
 
 def _project(v, w, n, ndw):
@@ -254,6 +297,15 @@ def replay(setup, mode, ping, samples, adjoint=None, state_in=None, record=None,
             length = path_length + dr.dot(jlo, dq_o) + dr.dot(jlw, dq_w)
             si_a = mi.SurfaceInteraction3f(si)
             si_a.wi = dr.select(first, si.to_local(-w0), si.wi)
+            if dr.hint(ad.geometry, mode="scalar"):
+                # Mesh vertices with gradients: the hit point slides along the (fixed) ray and the
+                # normal turns with the facet; the echo sees both (range, incidence angle).
+                p_s, frame = _attached_hit(scene, ray, si, active)
+                p = p + p_s
+                length = length + dr.dot(w, p_s)
+                si_a.sh_frame = frame
+                si_a.n = frame.n
+                si_a.wi = si_a.to_local(dr.select(first, -w0, -w))
             if dr.hint(ad.connect is None, mode="scalar"):
                 cx, cy, cz, c_beam = ax, ay, az, ad.beam
             else:
@@ -262,7 +314,7 @@ def replay(setup, mode, ping, samples, adjoint=None, state_in=None, record=None,
             back_v = ao - p
             dist_a = dr.norm(back_v)
             back = back_v / dist_a
-            f = _eval_attached(ad, bsdf, ctx, si_a, si.to_local(back), echo, forward)
+            f = _eval_attached(ad, bsdf, ctx, si_a, si_a.to_local(back), echo, forward)
             rx = -back
             gain = c_beam.eval_dir(mi.Vector3f(dr.dot(rx, cx), dr.dot(rx, cy), dr.dot(rx, cz)))
             total = length + dist_a
