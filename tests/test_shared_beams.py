@@ -62,8 +62,9 @@ def test_shared_paths_agree_with_per_row_paths_within_monte_carlo_error(mitsonar
 
 def test_shared_paths_cut_the_error_of_a_frame(mitsonar_mod):
     """At equal spp (equal paths per frame) the shared estimator's relative L2 error against a
-    high-spp reference is below the per-row one's: measured 0.6-0.7x on this scene; the bound
-    (< 0.9x, each error the mean of 3 seeds) leaves room for the seeds."""
+    high-spp reference is below the per-row one's: measured 0.74-0.83x on this scene (3 seeds per
+    error, four seed sets; 3 deg beams 2 deg apart share each echo with only a few neighbours),
+    0.52-0.68x on quay_wall and box_fls (benchmarks/render.py). Bound: < 0.9x with the mean of 6."""
     import mitsuba as mi
 
     scene = corner_scene(mitsonar_mod)
@@ -73,7 +74,7 @@ def test_shared_paths_cut_the_error_of_a_frame(mitsonar_mod):
     def err(share):
         integ = mi.load_dict({"type": "sonar_tof", "max_depth": 2, "share_beams": share})
         return np.mean([np.linalg.norm(integ.render_histogram(scene, sensor, seed=s, spp=64) - ref)
-                        for s in range(3)]) / np.linalg.norm(ref)
+                        for s in range(6)]) / np.linalg.norm(ref)
 
     assert err(True) < 0.9 * err(False)
 
