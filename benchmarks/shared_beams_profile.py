@@ -11,7 +11,10 @@ Prints one JSON object, all measured in this one run (medians of ``--repeats`` w
     visibility rays, nothing else) for the per-row paths;
   * ``kernels``: Dr.Jit's kernel history of one warm render (codegen, backend compile or cache
     load, execution, in ms) and ``first_render_s``, the first render in this process (tracing +
-    compiling or loading from the kernel cache).
+    compiling or loading from the kernel cache);
+  * ``paired``: per-row paths at ``2 spp`` against shared paths at ``spp``, renders interleaved
+    (the machine's load hits both alike), median seconds and their ratio; on quay_wall and box_fls
+    the shared frame at half the spp has the lower error (benchmarks/render.py).
 
 Usage: python benchmarks/shared_beams_profile.py [--spp 256] [--repeats 5]
 """
@@ -98,6 +101,19 @@ def main(argv=None):
                    "paths_only_s": median_time(paths_only, args.repeats), "kernels": kernel_times(full)}
         row["scoring_s"] = row["render_s"] - row["paths_only_s"]
         out["share_beams" if share else "per_row"] = row
+    its = {sh: mi.load_dict({"type": "sonar_tof", "max_depth": depth, "share_beams": sh}) for sh in (False, True)}
+    runs = ((False, 2 * args.spp), (True, args.spp))
+    times = {False: [], True: []}
+    for sh, spp in runs:
+        its[sh].render_histogram(scene, sensor, seed=0, spp=spp)
+    for r in range(args.repeats):
+        for sh, spp in runs:
+            t = time.perf_counter()
+            its[sh].render_histogram(scene, sensor, seed=1 + r, spp=spp)
+            times[sh].append(time.perf_counter() - t)
+    a, b = statistics.median(times[False]), statistics.median(times[True])
+    out["paired"] = {"per_row_spp": 2 * args.spp, "per_row_s": a, "shared_spp": args.spp, "shared_s": b,
+                     "per_row_over_shared": a / b}
     old = os.getcwd()
     _, _, per_lane = bench.count_segments(scene, args.spp, seed=1, per_lane=True)
     _, segs, secs = bench.ceiling(scene, args.spp, per_lane, args.repeats)
