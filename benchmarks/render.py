@@ -15,11 +15,15 @@ Targets (issue 2): <= 5 % relative L2 error in under 1 s, at >= 0.5 of the ceili
     the time to 5 % relative L2 error of ``sonar_tof`` with each sampling of the emitted
     directions (``independent``: uniform random, the sampler before issue "Survey speed";
     ``sobol``: Owen-scrambled Sobol per row, the default), against a reference rendered with
-    ``ref_factor`` x the largest spp; ``time_to_5pct_ratio`` = independent's time / sobol's.
+    ``ref_factor`` x the largest spp; ``time_to_5pct_ratio`` = independent's time / sobol's;
+    ``sobol+share_beams`` (multibeam frames: quay_wall, box_fls): sobol with the frame's paths
+    traced from the transmit fan and shared between the receive beams (``share_beams``);
+    ``time_to_5pct_over_last``: each sampling's time over the last one's.
     Targets (issue "Survey speed"): the box under 0.05 s, the 512-beam frame at 10 Hz or more.
 
 Usage: python benchmarks/render.py [--spp 256,512,1024,2048,4096] [--repeats 3] [--ref-factor 32]
-                                   [--sampling-scenes box,intake,quay_wall] [--samplings independent,sobol]
+                                   [--sampling-scenes box,intake,quay_wall,box_fls]
+                                   [--samplings independent,sobol,sobol+share_beams]
 """
 from __future__ import annotations
 
@@ -121,7 +125,17 @@ def ceiling(scene, spp, per_lane, repeats):
 
 
 SCENE_SPP = {"box": "128,256,512,1024,2048,4096", "intake": "128,256,512,1024,2048,4096",
-             "quay_wall": "128,256,512,1024,2048"}
+             "quay_wall": "64,128,256,512,1024,2048", "box_fls": "32,64,128,256,512,1024,2048"}
+# A sampling name ``<sampling>+share_beams`` is that sampling with the multibeam frame's paths
+# shared between receive beams (sonar_tof ``share_beams``; multibeam scenes only).
+SHARE = "+share_beams"
+
+
+def integrator_dict(depth, sampling):
+    """The sonar_tof of a sampling name of the comparison (see `SHARE`)."""
+    share = sampling.endswith(SHARE)
+    return {"type": "sonar_tof", "max_depth": depth, "sampling": sampling[:-len(SHARE)] if share else sampling,
+            "share_beams": share}
 
 
 def sweep(scene, integ, sensor, ref, spps, repeats, segments=True):
@@ -162,8 +176,9 @@ def compare_sampling(name, samplings, repeats, ref_factor):
                                                                                   spp=ref_spp)
     out = {"rows": sensor.n_pings, "bins": sensor.n_bins, "kind": sensor.kind, "max_depth": depth,
            "reference_spp": ref_spp, "by_sampling": {}}
+    samplings = [k for k in samplings if sensor.kind == "multibeam" or not k.endswith(SHARE)]
     for sampling in samplings:
-        integ = mi.load_dict({"type": "sonar_tof", "max_depth": depth, "sampling": sampling})
+        integ = mi.load_dict(integrator_dict(depth, sampling))
         results = sweep(scene, integ, sensor, ref, spps, repeats, segments=False)
         best = fastest_within(results)
         out["by_sampling"][sampling] = {"results": results, "fastest_within_5pct": best,
@@ -171,6 +186,9 @@ def compare_sampling(name, samplings, repeats, ref_factor):
     bests = [out["by_sampling"][k]["fastest_within_5pct"] for k in samplings]
     if len(bests) == 2 and all(bests):
         out["time_to_5pct_ratio"] = bests[0]["seconds"] / bests[1]["seconds"]
+    # Each sampling's time to 5 % over the last one's (> 1: the last is faster).
+    out["time_to_5pct_over_last"] = {k: (b["seconds"] / bests[-1]["seconds"] if b and bests[-1] else None)
+                                     for k, b in zip(samplings, bests)}
     return out
 
 
@@ -179,9 +197,9 @@ def main(argv=None):
     ap.add_argument("--spp", default="256,512,1024,2048,4096")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--ref-factor", type=int, default=32)
-    ap.add_argument("--sampling-scenes", default="box,intake,quay_wall",
+    ap.add_argument("--sampling-scenes", default="box,intake,quay_wall,box_fls",
                     help="scenes on which to time the samplers to 5 %% (empty: skip)")
-    ap.add_argument("--samplings", default="independent,sobol")
+    ap.add_argument("--samplings", default="independent,sobol,sobol+share_beams")
     args = ap.parse_args(argv)
     spps = [int(s) for s in args.spp.split(",")]
 

@@ -50,6 +50,12 @@ class SonarTOFIntegrator(SonarIntegrator):
                           sequence per row, `samples.SobolSamples`: the beam is covered evenly)
                           or ``independent`` (uniform random, `samples.HashSamples`); both are
                           unbiased, the bounces are sampled independently either way
+    share_beams  false    multibeam: trace a frame's ``n_rows * spp`` paths from the transmit
+                          fan and score each echo into every receive beam that hears it,
+                          weighted by that beam's gain (`shared_beams`); ``sampling`` then
+                          draws the fan's directions as one sequence per frame. Same
+                          expectation, other variance; per-row poses and gradients use the
+                          per-row paths
     ============ ======== ====================================================================
 
     ``mi.render(scene)`` returns the range-intensity image as a tensor (n_pings, n_bins, 1);
@@ -66,6 +72,11 @@ class SonarTOFIntegrator(SonarIntegrator):
         self.sampling = text(props, "sampling", "sobol", self.name)
         require(self.sampling in self.SAMPLERS, self.name, "sampling", self.sampling,
                 "one of " + ", ".join(self.SAMPLERS))
+        self.share_beams = False
+        if "share_beams" in props:
+            kind = props.type("share_beams").name
+            require(kind == "Bool", self.name, "share_beams", props.get("share_beams"), "<boolean> true or false")
+            self.share_beams = bool(props.get("share_beams"))
 
     def render_histogram(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None, progress=None):
         """Mean echo energy per bin, float64 ``(n_pings, n_bins)``.
@@ -77,13 +88,23 @@ class SonarTOFIntegrator(SonarIntegrator):
         if spp < 1:
             raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
         n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
+        shared = None
+        if self.share_beams:
+            from .shared_beams import SharedFrame, same_pose, window
+
+            window(setup.sensor)  # refuses a head that cannot share, before any work
+            if same_pose(setup.sensor, pose):
+                shared = SharedFrame(setup, pose)
         spp_pass = max(1, min(spp, MAX_SPP_PER_PASS, MAX_LANES_PER_PASS // n_pings))
         total = np.zeros(n_pings * n_bins, dtype=np.float64)
         start = 0
         with dr.suspend_grad():
             while start < spp:
                 count = min(spp_pass, spp - start)
-                total += self._pass(setup, seed, start, count)
+                if shared is None:
+                    total += self._pass(setup, seed, start, count)
+                else:
+                    total += self._shared_pass(shared, seed, start, count)
                 start += count
                 if progress is not None:
                     progress(start, spp)
@@ -114,5 +135,22 @@ class SonarTOFIntegrator(SonarIntegrator):
         self.sample(setup, ping, samples, record)
         return hist.numpy()
 
+    def _shared_pass(self, shared, seed, start, count):
+        """One pass of a frame's shared paths: paths ``start * n_rows .. (start + count) * n_rows``
+        of the frame's one sequence, scored into every row that hears them (`shared_beams`)."""
+        n_rows, n_bins = shared.n_rows, shared.sensor.n_bins
+        n = n_rows * count
+        index = dr.arange(mi.UInt32, n) + dr.opaque(mi.UInt32, start * n_rows)
+        zero = dr.zeros(mi.UInt32, n)
+        samples = self.SAMPLERS[self.sampling](dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF), zero, index)
+        hist = dr.zeros(mi.Float64, n_rows * n_bins)
+
+        def record(depth_k, rng, energy, valid, hit):
+            shared.score(hist, rng, energy, valid, hit)
+
+        self.sample(shared.path_setup, zero, samples, record)
+        return hist.numpy()
+
     def to_string(self):
-        return f"SonarTOFIntegrator[max_depth={self.max_depth}, sampling={self.sampling}]"
+        return (f"SonarTOFIntegrator[max_depth={self.max_depth}, sampling={self.sampling}, "
+                f"share_beams={str(self.share_beams).lower()}]")
