@@ -49,7 +49,7 @@ from ._backend import KernelGrid, cut_radius
 from ._checks import CHOICES, int_param, need, num_param
 from .embedding import Samples
 from .inducing import Coverage, LazyCoverage
-from .model import HilbertMap, _unique_rows
+from .model import HilbertMap, _unique_rows, embed_with
 from .scanlike import as_scan_list, check_scan
 
 __all__ = ["IncrementalHilbertMap"]
@@ -161,21 +161,11 @@ class IncrementalHilbertMap(HilbertMap):
         int_param("random_state", self.random_state, 0, none=True)
 
     def embed(self, scan, rng=None) -> Samples:
-        """Labelled samples of one scan (each row at its own pose), after :func:`check_scan`."""
+        """Labelled samples of one scan (each row at its own pose), after :func:`check_scan`: the
+        batch map's embedding, with this estimator's own settings checked first."""
         self._check()
         check_scan(scan, self.source)
-        from .embedding import embed_scan
-
-        rng = rng if rng is not None else np.random.default_rng(self.random_state)
-        return embed_scan(
-            scan, rng, source=self.source, bin_rule=self.bin_rule, threshold=self.threshold,
-            min_level=self.min_level, cfar_train=self.cfar_train, cfar_guard=self.cfar_guard,
-            cfar_offset=self.cfar_offset, blanking=self.blanking, free_density=self.free_density,
-            max_free_per_ping=self.max_free_per_ping, free_margin=self.free_margin,
-            near_free=self.near_free, near_depth=self.near_depth,
-            occupied_samples=self.occupied_samples, occupied_bins=self.occupied_bins, max_run=self.max_run,
-            beam_sampling=self.beam_sampling, beam_extent=self.beam_extent, ping_stride=self.beam_stride,
-            min_echo_bins=self.min_echo_bins)
+        return embed_with(self, scan, rng)
 
     # -- training ----------------------------------------------------------------------------
     def fit(self, scans, samples: Samples | None = None) -> "IncrementalHilbertMap":

@@ -230,17 +230,7 @@ class HilbertMap:
         (:func:`hilbertmap.scanlike.check_scan`)."""
         check_params(self)
         check_scan(scan, self.source)
-        rng = rng if rng is not None else np.random.default_rng(self.random_state)
-        return embed_scan(
-            scan, rng, source=self.source, bin_rule=self.bin_rule, threshold=self.threshold,
-            min_level=self.min_level, cfar_train=self.cfar_train, cfar_guard=self.cfar_guard,
-            cfar_offset=self.cfar_offset, blanking=self.blanking, free_density=self.free_density,
-            max_free_per_ping=self.max_free_per_ping, free_margin=self.free_margin,
-            near_free=self.near_free, near_depth=self.near_depth,
-            occupied_samples=self.occupied_samples, occupied_bins=self.occupied_bins, max_run=self.max_run,
-            beam_sampling=self.beam_sampling, beam_extent=self.beam_extent, ping_stride=self.beam_stride,
-            min_echo_bins=self.min_echo_bins,
-        )
+        return embed_with(self, scan, rng)
 
     def embed_all(self, scans, rng: np.random.Generator | None = None) -> Samples:
         """The samples of one :class:`~hilbertmap.scanlike.ScanLike` scan or a list of them, concatenated."""
@@ -533,3 +523,19 @@ def _unique_rows(a: np.ndarray) -> np.ndarray:
     if len(a) == 0:
         return np.zeros((0, 3))
     return np.unique(np.round(np.asarray(a, dtype=np.float64), 6), axis=0)
+
+
+def embed_with(hm, scan, rng=None) -> Samples:
+    """`embed_scan` of ``scan`` with the embedding settings of the estimator ``hm`` (a
+    `HilbertMap` or an incremental one), its ``random_state`` seeding ``rng`` when None."""
+    rng = rng if rng is not None else np.random.default_rng(hm.random_state)
+    return embed_scan(
+        scan, rng, source=hm.source, bin_rule=hm.bin_rule, threshold=hm.threshold,
+        min_level=hm.min_level, cfar_train=hm.cfar_train, cfar_guard=hm.cfar_guard,
+        cfar_offset=hm.cfar_offset, blanking=hm.blanking, free_density=hm.free_density,
+        max_free_per_ping=hm.max_free_per_ping, free_margin=hm.free_margin,
+        near_free=hm.near_free, near_depth=hm.near_depth,
+        occupied_samples=hm.occupied_samples, occupied_bins=hm.occupied_bins, max_run=hm.max_run,
+        beam_sampling=hm.beam_sampling, beam_extent=hm.beam_extent, ping_stride=hm.beam_stride,
+        min_echo_bins=hm.min_echo_bins,
+    )
