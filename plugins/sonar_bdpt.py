@@ -9,7 +9,7 @@ from mitsonar._checks import not_allowed, require
 
 from .bdpt_paths import HEURISTICS, trace_bidirectional
 from .props import count, text
-from .sonar_tof import MAX_SPP_PER_PASS, SonarTOFIntegrator
+from .sonar_tof import SonarTOFIntegrator
 
 # Subpath B vertices kept in one pass (~80 bytes each: 320 MiB).
 MAX_STORED_VERTICES = 1 << 22
@@ -72,22 +72,11 @@ class SonarBDPTIntegrator(SonarTOFIntegrator):
         each pass. A pass keeps subpath B's vertices (``max_depth`` per lane, about 80 bytes
         each), so it holds at most `MAX_STORED_VERTICES` of them."""
         setup = self.setup(scene, sensor, pose, max_depth)
-        spp = int(spp)
-        if spp < 1:
-            raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
         n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
         lanes = max(1, MAX_STORED_VERTICES // setup.depth)
-        spp_pass = max(1, min(spp, MAX_SPP_PER_PASS, lanes // n_pings))
-        total = np.zeros(n_pings * n_bins, dtype=np.float64)
-        start = 0
-        with dr.suspend_grad():
-            while start < spp:
-                count = min(spp_pass, spp - start)
-                total += self._pass(setup, seed, start, count)
-                start += count
-                if progress is not None:
-                    progress(start, spp)
-        return (total / spp).reshape(n_pings, n_bins)
+        total = self.accumulate(spp, lanes // n_pings, lambda start, count: self._pass(setup, seed, start, count),
+                                progress)
+        return total.reshape(n_pings, n_bins)
 
     def _pass(self, setup, seed, start, count):
         n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins

@@ -84,9 +84,6 @@ class SonarTOFIntegrator(SonarIntegrator):
         ``progress(done_spp, spp)`` is called after each pass (long renders run several).
         """
         setup = self.setup(scene, sensor, pose, max_depth)
-        spp = int(spp)
-        if spp < 1:
-            raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
         n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
         shared = None
         if self.share_beams:
@@ -95,20 +92,34 @@ class SonarTOFIntegrator(SonarIntegrator):
             window(setup.sensor)  # refuses a head that cannot share, before any work
             if same_pose(setup.sensor, pose):
                 shared = SharedFrame(setup, pose)
-        spp_pass = max(1, min(spp, MAX_SPP_PER_PASS, MAX_LANES_PER_PASS // n_pings))
-        total = np.zeros(n_pings * n_bins, dtype=np.float64)
-        start = 0
+        if shared is None:
+            def one_pass(start, count):
+                return self._pass(setup, seed, start, count)
+        else:
+            def one_pass(start, count):
+                return self._shared_pass(shared, seed, start, count)
+        total = self.accumulate(spp, MAX_LANES_PER_PASS // n_pings, one_pass, progress)
+        return total.reshape(n_pings, n_bins)
+
+    @staticmethod
+    def accumulate(spp, max_per_row, one_pass, progress=None):
+        """The mean over ``spp`` samples per row of ``one_pass(start, count)`` (a float64 array:
+        the summed energy of samples ``start .. start + count`` of every row), run in passes of at
+        most ``max_per_row`` (and `MAX_SPP_PER_PASS`) samples per row with gradients off;
+        ``progress(done_spp, spp)`` after each pass. The pass loop of every histogram integrator."""
+        spp = int(spp)
+        if spp < 1:
+            raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
+        spp_pass = max(1, min(spp, MAX_SPP_PER_PASS, int(max_per_row)))
+        total, start = 0.0, 0
         with dr.suspend_grad():
             while start < spp:
                 count = min(spp_pass, spp - start)
-                if shared is None:
-                    total += self._pass(setup, seed, start, count)
-                else:
-                    total += self._shared_pass(shared, seed, start, count)
+                total = total + one_pass(start, count)
                 start += count
                 if progress is not None:
                     progress(start, spp)
-        return (total / spp).reshape(n_pings, n_bins)
+        return total / spp
 
     def lanes(self, n_rows, seed, start, count):
         """The lanes of one pass: samples ``start .. start + count`` of every row, row-major, as

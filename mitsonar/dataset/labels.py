@@ -42,28 +42,17 @@ def labelling_integrator(max_depth=5, sampling="sobol"):
 
         def render_histogram(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None, progress=None):
             setup = self.setup(scene, sensor, pose, max_depth)
-            spp = int(spp)
-            if spp < 1:
-                raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
             shapes = scene.shapes_dr()
             n_shapes = max(1, len(scene.shapes()))
             registry = dr.reinterpret_array(mi.UInt32, shapes).numpy() if len(scene.shapes()) else np.zeros(1, np.uint32)
             table = np.zeros(int(registry.max()) + 1, np.uint32)
             table[registry] = np.arange(len(registry), dtype=np.uint32)
+            table = mi.UInt32(table)
             n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
-            module_tof = module("sonar_tof")
-            spp_pass = max(1, min(spp, module_tof.MAX_SPP_PER_PASS,
-                                  LANE_SLOTS // (n_rows * setup.depth)))
-            total = np.zeros(n_rows * n_bins * n_shapes, dtype=np.float64)
-            start = 0
-            with dr.suspend_grad():
-                while start < spp:
-                    count = min(spp_pass, spp - start)
-                    total += self._label_pass(setup, seed, start, count, mi.UInt32(table), n_shapes)
-                    start += count
-                    if progress is not None:
-                        progress(start, spp)
-            energy = (total / spp).reshape(n_rows, n_bins, n_shapes)
+            total = self.accumulate(spp, LANE_SLOTS // (n_rows * setup.depth),
+                                    lambda start, count: self._label_pass(setup, seed, start, count, table, n_shapes),
+                                    progress)
+            energy = total.reshape(n_rows, n_bins, n_shapes)
             self.last_energy = energy
             return energy.sum(axis=2)
 
