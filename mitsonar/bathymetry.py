@@ -105,16 +105,16 @@ def speckle_power(scan) -> np.ndarray:
     poses, ranges, beam width and ``meta`` (``frequency``, ``aperture_h``). Ones for ``speckle``
     ``off``; ``weibull`` reshapes the power as the electronics do. A scan that does not say
     where its echoes come from (``meta['speckle'] != 'scene'``: a real head's) is refused."""
-    from .electronics import Electronics
+    from .electronics import Electronics, has_scene_speckle
 
     e = Electronics.from_dict(scan.electronics, source=f"{WHERE} scan.electronics")
     if e.speckle == "off":
         return np.ones(np.shape(scan.intensity))
-    if scan.meta.get("speckle") != "scene":
+    if not has_scene_speckle(scan):
         raise not_allowed(WHERE, "scan", f"speckle {scan.meta.get('speckle')!r}",
                           "a rendered scan (meta['speckle'] == 'scene'), or speckle=False")
     g = e.scene_speckle(scan.poses, scan.ranges, sound_speed=scan.sound_speed, beamwidth_h=scan.beamwidth_h,
-                        frequency=float(scan.meta.get("frequency", 700e3)), aperture_h=scan.meta.get("aperture_h"))
+                        aperture_h=float(scan.meta["aperture_h"]))
     power = g.real ** 2 + g.imag ** 2
     if e.speckle == "weibull":
         k = e.speckle_shape

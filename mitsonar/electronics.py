@@ -358,18 +358,16 @@ class Electronics:
         # E^(1/k) of an Exp(1) is Weibull(k, 1); its mean is Gamma(1 + 1/k).
         return e ** (1.0 / shape_k) / math.gamma(1.0 + 1.0 / shape_k)
 
-    def scene_speckle(self, poses, ranges, *, sound_speed: float = 1500.0, beamwidth_h: float = 3.0,
-                      frequency: float = 700e3, aperture_h: float | None = None) -> np.ndarray:
+    def scene_speckle(self, poses, ranges, *, sound_speed: float, beamwidth_h: float,
+                      aperture_h: float) -> np.ndarray:
         """The scene's complex speckle amplitude per bin for `apply`'s ``speckle``: the field of
         the resolution cells the rows' ``poses`` see at ``ranges`` (`mitsonar.speckle.cell_speckle`),
         seeded by ``speckle_seed``; its range resolution is the pulse's ``c pulse_length / 2``
-        (at least one bin), its aperture the head's (``aperture_h``, else the line aperture of
-        ``beamwidth_h`` at ``frequency``)."""
-        from .speckle import aperture, cell_speckle
+        (at least one bin), its aperture the head's across the narrow beam (``aperture_h``, m:
+        the beam's ``across_aperture()``, recorded by `render_scan` in ``meta['aperture_h']``)."""
+        from .speckle import cell_speckle
 
         ranges = np.asarray(ranges, dtype=np.float64)
-        if aperture_h is None:
-            aperture_h = aperture(beamwidth_h, frequency, sound_speed)
         resolution = max(sound_speed * self.pulse_length / 2.0, _bin_width(ranges))
         if resolution <= 0:   # one bin and no pulse: cells are told apart by pose only
             resolution = 1.0
@@ -539,17 +537,21 @@ def apply_to_scan(scan, electronics: "Electronics | dict | None" = None, seed: i
     if seed is None:
         seed = scan.electronics.get("seed", scan.meta.get("electronics_seed", scan.meta.get("seed", 0)))
     speckle = None
-    if electronics.speckle != "off" and scan.meta.get("speckle") == "scene":
+    if electronics.speckle != "off" and has_scene_speckle(scan):
         speckle = electronics.scene_speckle(scan.poses, scan.ranges, sound_speed=scan.sound_speed,
-                                            beamwidth_h=scan.beamwidth_h,
-                                            frequency=float(scan.meta.get("frequency", 700e3)),
-                                            aperture_h=scan.meta.get("aperture_h"))
+                                            beamwidth_h=scan.beamwidth_h, aperture_h=float(scan.meta["aperture_h"]))
     data = electronics.apply(scan.intensity, scan.ranges, absorption=scan.absorption,
                              sound_speed=scan.sound_speed, seed=seed, speckle=speckle)
     out = copy.deepcopy(scan)
     out.data = data
     out.electronics = {**electronics.to_dict(), "seed": seed}
     return out
+
+
+def has_scene_speckle(scan) -> bool:
+    """Whether ``scan`` says where its echoes come from: a rendered scan records ``meta['speckle']
+    == 'scene'`` and the head's ``meta['aperture_h']`` (a real head's scan does neither)."""
+    return scan.meta.get("speckle") == "scene" and "aperture_h" in scan.meta
 
 
 def _complex_gaussian(shape, rng: np.random.Generator, corr_bins=None) -> np.ndarray:

@@ -218,9 +218,8 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
         "ping_period": float(sonar.ping_period),
         "frequency": float(sonar.beam.frequency),
         "speckle": "scene",
+        "aperture_h": float(sonar.beam.across_aperture()),
     }
-    if getattr(sonar.beam, "aperture_h", None) is not None:
-        meta["aperture_h"] = float(sonar.beam.aperture_h)
     if trajectory is not None:
         meta["start_time"] = start_time
     if sonar.kind == "sidescan":     # which rows are which channel (scan.channel) and the channels' tilt
@@ -242,7 +241,7 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
 def speckle_geometry(sonar) -> dict:
     """The head's numbers that shape its scene speckle (`Electronics.scene_speckle`'s keywords)."""
     return {"sound_speed": sonar.sound_speed, "beamwidth_h": sonar.beam.beamwidth_h,
-            "frequency": sonar.beam.frequency, "aperture_h": getattr(sonar.beam, "aperture_h", None)}
+            "aperture_h": sonar.beam.across_aperture()}
 
 
 def scan_parameters(scene, keys=None):

@@ -61,18 +61,6 @@ import numpy as np
 N_FEATURES = 128
 #: Variance of the features' frequencies: intensity correlation exp(-8 ln2 |dv|^2).
 FREQUENCY_VARIANCE = 8.0 * math.log(2.0)
-#: sinc-beam half-power constant (beam.py's): the one-way -3 dB full width of a uniform line
-#: aperture D at wavelength lam is 2 asin(1.3916 lam / (pi D)).
-_SINC_HALF_POWER = 1.391557
-
-
-def aperture(beamwidth_deg: float, frequency: float, sound_speed: float) -> float:
-    """Length (m) of the uniform line aperture whose one-way -3 dB beam width is ``beamwidth_deg``
-    at ``frequency`` (Hz): ``D = 1.3916 lam / (pi sin(beta / 2))``, ``lam = c / f``."""
-    lam = sound_speed / frequency
-    return _SINC_HALF_POWER * lam / (math.pi * math.sin(math.radians(beamwidth_deg) / 2.0))
-
-
 def cell_speckle(poses, ranges, *, seed: int, beamwidth_h: float, aperture_h: float, resolution: float,
                  n_features: int = N_FEATURES) -> np.ndarray:
     """Complex speckle amplitude (complex128, n_rows x n_bins) of every bin of a scan.

@@ -40,6 +40,13 @@ PATTERNS = ("gaussian", "sinc", "uniform", "table")
 # Solves sinc(t)^2 = 1/2: the -3 dB point of a piston's one-way pattern.
 _SINC_HALF_POWER = 1.3915573
 
+
+def line_aperture(beamwidth_deg: float, frequency: float, sound_speed: float) -> float:
+    """Length (m) of the uniform line aperture whose one-way -3 dB full width is ``beamwidth_deg``
+    at ``frequency`` (Hz): ``D = 1.3916 lam / (pi sin(beta / 2))``, ``lam = c / f``."""
+    lam = sound_speed / frequency
+    return _SINC_HALF_POWER * lam / (math.pi * math.sin(math.radians(beamwidth_deg) / 2))
+
 # Gaussian beams are sampled out to where B < 3e-8 (2.5 beam widths from the axis); the
 # energy beyond is below float32 resolution of the total.
 _GAUSS_SUPPORT = 2.5
@@ -185,11 +192,10 @@ class BeamPattern:
         self.frequency = float(frequency)
         self.sound_speed = float(sound_speed)
         if kind == "sinc":
-            lam = self.sound_speed / self.frequency
             if aperture_h is None:
-                aperture_h = _SINC_HALF_POWER * lam / (math.pi * math.sin(math.radians(beamwidth_h) / 2))
+                aperture_h = line_aperture(beamwidth_h, self.frequency, self.sound_speed)
             if aperture_v is None:
-                aperture_v = _SINC_HALF_POWER * lam / (math.pi * math.sin(math.radians(beamwidth_v) / 2))
+                aperture_v = line_aperture(beamwidth_v, self.frequency, self.sound_speed)
             for name, a in (("aperture_h", aperture_h), ("aperture_v", aperture_v)):
                 if not a > 0:
                     raise BeamPatternError(f"{source} '{name}': {a} m must be > 0")
@@ -205,6 +211,14 @@ class BeamPattern:
         self._build()
 
     # ---------------------------------------------------------------- support and numpy eval
+    def across_aperture(self) -> float:
+        """m, the aperture across the narrow beam: a ``sinc`` piston's own ``aperture_h``, else the
+        line aperture whose one-way -3 dB width is ``beamwidth_h`` at ``frequency`` (what scene
+        speckle decorrelates over as the head moves, `mitsonar.speckle`)."""
+        if self.aperture_h is not None:
+            return self.aperture_h
+        return line_aperture(self.beamwidth_h, self.frequency, self.sound_speed)
+
     def support(self):
         """Angular rectangle (radians) holding all of the pattern: az_lo, az_hi, el_lo, el_hi."""
         bh, bv = math.radians(self.beamwidth_h), math.radians(self.beamwidth_v)

@@ -8,7 +8,7 @@ import pytest
 
 from mitsonar.electronics import Electronics
 from mitsonar.realism import REAL_RANGES, byte_statistics, inside, speckle_correlation
-from mitsonar.speckle import aperture, cell_speckle
+from mitsonar.speckle import cell_speckle
 
 SCENES = os.path.join(os.path.dirname(__file__), "..", "scenes_xml")
 QUIET = dict(speckle="off", noise_floor=-math.inf, ringdown=0.0)
@@ -73,7 +73,7 @@ def test_speckle_decorrelates_over_an_aperture_and_a_beam_width(mitsonar_mod, bo
     from mitsonar.frames import bearing_rotation
 
     base = box.sensors()[0].to_world_np
-    d = aperture(3.0, 700e3, 1500.0)
+    d = box.sensors()[0].beam.across_aperture()   # 3 deg at 700 kHz: 3.6 cm
     a = mitsonar_mod.render_scan(box, spp=1024, seed=3, electronics_seed=1)
     mean = _quiet_bytes(a)
 
