@@ -48,11 +48,10 @@ correction for shading normals, which differ from geometric ones only on smooth-
 """
 from __future__ import annotations
 
-import math
-
 import drjit as dr
 import mitsuba as mi
 
+from .emission import DB_TO_LOG2
 from .samples import DIMS_EMIT, DIMS_PER_BOUNCE
 
 HEURISTICS = {"balance": 1, "power": 2}
@@ -270,7 +269,7 @@ def trace_bidirectional(setup, ping, samples_a, samples_b, record, power=1, only
         end_b = _End((cx, cy, cz), c_origin, setup.connect[1])
     n = dr.width(ping)
     ctx = mi.BSDFContext(mi.TransportMode.Importance)
-    atten = setup.absorption * (math.log2(10.0) / 10.0)
+    atten = setup.absorption * DB_TO_LOG2
     alive = dr.full(mi.Bool, True, n) & active
     store = _trace_receive(scene, ctx, end_b.emit(samples_b.get2(0), alive), end_b.origin, samples_b, depth,
                            setup.depth, power, alive)

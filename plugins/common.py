@@ -23,13 +23,12 @@ params)`` is differentiable on the AD variants; the replayed path and what its d
 """
 from __future__ import annotations
 
-import math
-
 import drjit as dr
 import mitsuba as mi
 
 from mitsonar._checks import not_allowed
 
+from .emission import DB_TO_LOG2, emit
 from .props import count
 from .range_bins import RangeBins
 from .samples import DIMS_EMIT, DIMS_PER_BOUNCE
@@ -323,22 +322,19 @@ class SonarIntegrator(mi.SamplingIntegrator):
         callbacks that label or key echoes by their surface point. A multibeam head's paths start in the row's
         receive beam and connect back through the transmit fan (``setup.connect``; reciprocity).
         """
-        scene, beam = setup.scene, setup.sensor.beam
-        x_ax, y_ax, z_ax, origin = setup.frames.gather(ping)
+        scene = setup.scene
+        x_ax, y_ax, z_ax, origin, d_local, weight, ray = emit(setup, ping, samples, active)
         if setup.connect is None:
-            cx, cy, cz, c_beam = x_ax, y_ax, z_ax, beam
+            cx, cy, cz, c_beam = x_ax, y_ax, z_ax, setup.sensor.beam
         else:
             cx, cy, cz, _ = setup.connect[0].gather(ping)
             c_beam = setup.connect[1]
-        d_local, weight = beam.sample(samples.get2(0), active)
-        ray = mi.Ray3f(origin, x_ax * d_local.x + y_ax * d_local.y + z_ax * d_local.z)
         throughput = mi.Float(weight)
         path_length = mi.Float(0.0)
         previous = mi.Point3f(origin)
         depth = mi.UInt32(0)
         active = mi.Bool(active) & (weight > 0)
-        # Attenuation of intensity: 10^(-absorption L / 10) = 2^(-absorption L log2(10) / 10).
-        atten = setup.absorption * (math.log2(10.0) / 10.0)
+        atten = setup.absorption * DB_TO_LOG2     # 10^(-a L / 10) = 2^(-a L DB_TO_LOG2)
         max_depth = setup.depth_o
         ctx = mi.BSDFContext(mi.TransportMode.Importance)
 

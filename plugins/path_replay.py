@@ -46,11 +46,10 @@ later bounces (exact for single-bounce echoes).
 """
 from __future__ import annotations
 
-import math
-
 import drjit as dr
 import mitsuba as mi
 
+from .emission import DB_TO_LOG2, emit as emit_ray
 from .samples import DIMS_EMIT, DIMS_PER_BOUNCE
 
 _NO_GRAD_OK = dr.ADFlag.Default | dr.ADFlag.AllowNoGrad
@@ -225,12 +224,10 @@ def replay(setup, mode, ping, samples, adjoint=None, state_in=None, record=None,
     forward = mode == dr.ADMode.Forward
     scene = setup.scene
     ad = setup.ad
-    x_ax, y_ax, z_ax, origin = setup.frames.gather(ping)
-    d_local, weight = setup.sensor.beam.sample(samples.get2(0), active)
+    x_ax, y_ax, z_ax, origin, d_local, weight, ray = emit_ray(setup, ping, samples, active)
     # The emitted direction's angles: the emission weight B / pdf differentiates as dB / B there.
     az0, el0 = dr.atan2(d_local.x, d_local.z), dr.safe_asin(d_local.y)
     rel = mi.Float(0.0)
-    ray = mi.Ray3f(origin, x_ax * d_local.x + y_ax * d_local.y + z_ax * d_local.z)
     throughput = mi.Float(weight)
     path_length = mi.Float(0.0)
     previous = mi.Point3f(origin)
@@ -243,7 +240,6 @@ def replay(setup, mode, ping, samples, adjoint=None, state_in=None, record=None,
     jo0, jo1, jo2 = mi.Vector3f(1, 0, 0), mi.Vector3f(0, 1, 0), mi.Vector3f(0, 0, 1)
     jw0, jw1, jw2 = mi.Vector3f(0), mi.Vector3f(0), mi.Vector3f(0)
     jlo, jlw = mi.Vector3f(0), mi.Vector3f(0)
-    log2_10 = math.log2(10.0) / 10.0
     max_depth = setup.depth_o
     ctx = mi.BSDFContext(mi.TransportMode.Importance)
 
@@ -318,7 +314,7 @@ def replay(setup, mode, ping, samples, adjoint=None, state_in=None, record=None,
             rx = -back
             gain = c_beam.eval_dir(mi.Vector3f(dr.dot(rx, cx), dr.dot(rx, cy), dr.dot(rx, cz)))
             total = length + dist_a
-            energy = throughput * f * gain / dr.square(dist_a) * dr.exp2(-ad.absorption * log2_10 * total)
+            energy = throughput * f * gain / dr.square(dist_a) * dr.exp2(-ad.absorption * DB_TO_LOG2 * total)
             rng = 0.5 * total
             echo &= dr.detach(energy) > 0
             e_det = dr.detach(energy)
