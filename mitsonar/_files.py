@@ -18,6 +18,24 @@ def _umask() -> int:
 _UMASK = _umask()
 
 
+def check_output_folder(folder, error, *, holds=None, what="", option="-o") -> None:
+    """Refuse, with one line raised as ``error``, an output folder that is a file, or one that
+    already holds a run (``holds(folder)`` true; ``what`` names the run: "already holds {what};
+    choose a new or empty folder"). Creates nothing: `make_output_folder` does."""
+    if os.path.exists(folder) and not os.path.isdir(folder):
+        raise error(f"{option} {folder!r} is a file, not a folder")
+    if holds is not None and os.path.isdir(folder) and holds(folder):
+        raise error(f"{option} {folder!r} already holds {what}; choose a new or empty folder")
+
+
+def make_output_folder(folder, error, option="-o") -> None:
+    """Create an output folder (and its parents), or raise ``error`` saying in one line why not."""
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as exc:
+        raise error(f"{option} {folder!r}: cannot create the output folder ({exc.strerror})") from None
+
+
 class StagedFiles:
     """Files written under temporary names next to their final ones: `temporary(final)` gives
     the name to write, `commit` renames every file into place (all or none: if one rename fails,

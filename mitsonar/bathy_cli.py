@@ -74,20 +74,9 @@ def plot_bathymetry(result, grid, path, trajectory=None):
     _save(fig, path)
 
 
-def _check_folder(out):
-    if os.path.exists(out) and not os.path.isdir(out):
-        raise BathymetryCLIError(f"-o {out!r} is a file, not a folder")
-    if os.path.isdir(out) and any(os.path.exists(os.path.join(out, f)) for f in OUTPUTS):
-        raise BathymetryCLIError(f"-o {out!r} already holds a bathymetry run; choose a new or empty folder")
-    try:
-        os.makedirs(out, exist_ok=True)
-    except OSError as exc:
-        raise BathymetryCLIError(f"-o {out!r}: cannot create the output folder ({exc.strerror})") from None
-
-
 def cmd_bathymetry(args):
     from . import bathymetry, echosounders
-    from ._files import StagedFiles
+    from ._files import StagedFiles, check_output_folder, make_output_folder
     from .sea_surface import load_survey_scene
     from .soundings import grid_depths, write_ply
     from .survey_cli import trajectory_from_args
@@ -101,7 +90,9 @@ def cmd_bathymetry(args):
         raise BathymetryCLIError(str(exc)) from None
     traj = trajectory_from_args(args, "bathymetry")
     scene = load_survey_scene(args.scene, surface=args.surface, sonar=echosounders.sonar_xml(head))
-    _check_folder(args.output)
+    check_output_folder(args.output, BathymetryCLIError, what="a bathymetry run",
+                        holds=lambda out: any(os.path.exists(os.path.join(out, f)) for f in OUTPUTS))
+    make_output_folder(args.output, BathymetryCLIError)
     run = bathymetry.survey(scene, traj, spp=args.spp, seed=args.seed, threshold_db=args.threshold_db,
                             method=args.method, speckle=not args.no_speckle, max_scans=args.max_scans,
                             max_depth=args.max_depth, progress=not args.quiet)

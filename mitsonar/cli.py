@@ -11,6 +11,8 @@ import os
 import sys
 import time
 
+from . import _files
+
 EXIT_USAGE = 2
 EXIT_ERROR = 1
 
@@ -111,10 +113,7 @@ def _check_output(path, exts):
 
 def make_output_folder(path, option="-o"):
     """Create an output folder (and parents), or say in one sentence why it cannot be."""
-    try:
-        os.makedirs(path, exist_ok=True)
-    except OSError as exc:
-        raise CLIError(f"{option} {path!r}: cannot create the output folder ({exc.strerror})") from None
+    _files.make_output_folder(path, CLIError, option)
     if not os.access(path, os.W_OK):
         raise CLIError(f"{option} {path!r}: the output folder is not writable")
 

@@ -196,14 +196,7 @@ def configure(name, *, swath=None, n_beams=None, range_min=None, range_max=None,
 
 def sonar_xml(name, sensor_id="echosounder", **overrides) -> str:
     """A ``<sensor type="sonar">`` element for preset ``name`` (`configure`'s overrides)."""
+    from .sensor_xml import sensor_xml
+
     head = name if isinstance(name, HeadSetup) else configure(name, **overrides)
-    items = ['<transform name="to_world"><matrix value="'
-             + " ".join(f"{v:.17g}" for v in head.mount.ravel()) + '"/></transform>']
-    for k, v in head.params.items():
-        if isinstance(v, str):
-            items.append(f'<string name="{k}" value="{v}"/>')
-        elif isinstance(v, int):
-            items.append(f'<integer name="{k}" value="{v}"/>')
-        else:
-            items.append(f'<float name="{k}" value="{v:.17g}"/>')
-    return f'<sensor type="sonar" id="{sensor_id}">' + "".join(items) + "</sensor>"
+    return sensor_xml(head.params, head.mount.ravel(), sensor_id)

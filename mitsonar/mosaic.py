@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import northup
 from .sidescan import across_track, ground_range
 
 
@@ -160,9 +161,7 @@ class MosaicBuilder:
         spread = _spacing(scan)
         n_off = max(1, int(math.ceil(spread.max() / (res / 2))) + 1)
         frac = np.linspace(-0.5, 0.5, n_off) if n_off > 1 else np.zeros(1)
-        h, w = self.shape
-        a, _, c, _, e, f = self.transform
-        for k in range(scan.n_pings):
+        for k in range(scan.n_pings):   # ping by ping: memory stays one ping's points
             vals = gr.values[k]
             ok = np.isfinite(vals)
             if not ok.any():
@@ -170,18 +169,13 @@ class MosaicBuilder:
             g = gr.ground[ok]
             p = pos[k, None, :2] + g[:, None] * u[k, None, :2]                         # (n_g, 2)
             p = p[None, :, :] + (frac * spread[k])[:, None, None] * along[k, None, None, :2]
-            col = np.floor((p[..., 0] - c) / a).astype(np.int64).ravel()
-            row = np.floor((p[..., 1] - f) / e).astype(np.int64).ravel()
-            v = np.broadcast_to(vals[ok][None, :], (len(frac), ok.sum())).ravel()
-            inside = (col >= 0) & (col < w) & (row >= 0) & (row < h)
-            idx = row[inside] * w + col[inside]
-            np.add.at(self.sum, idx, v[inside])
-            np.add.at(self.count, idx, 1)
+            v = np.broadcast_to(vals[ok][None, :], (len(frac), ok.sum()))
+            northup.accumulate(self.sum, self.count, self.transform, self.shape, p[..., 0].ravel(),
+                               p[..., 1].ravel(), v.ravel())
         return self
 
     def result(self) -> Mosaic:
-        with np.errstate(invalid="ignore", divide="ignore"):
-            img = np.where(self.count > 0, self.sum / np.maximum(self.count, 1), np.nan)
+        img = northup.mean(self.sum, self.count)
         return Mosaic(image=img.reshape(self.shape), count=self.count.reshape(self.shape).copy(),
                       transform=self.transform, use=self.use)
 

@@ -20,6 +20,7 @@ import math
 
 import numpy as np
 
+from . import northup
 from ._checks import is_number, not_allowed
 from ._files import replacing
 
@@ -134,12 +135,9 @@ def grid_depths(soundings, cell=0.5, bounds=None) -> DepthGrid:
     if rows * cols > MAX_CELLS:
         raise not_allowed(WHERE, "cell", cell, f"a cell of at least {math.sqrt((x1 - x0) * (y1 - y0) / MAX_CELLS):.3g} "
                           f"m for {x1 - x0:g} x {y1 - y0:g} m (at most {MAX_CELLS} cells)")
-    col = np.floor((x - x0) / cell).astype(np.int64)
-    row = np.floor((y0 + rows * cell - y) / cell).astype(np.int64)   # north-up
-    ok = (col >= 0) & (col < cols) & (row >= 0) & (row < rows) & np.isfinite(z)
-    flat = row[ok] * cols + col[ok]
-    count = np.bincount(flat, minlength=rows * cols).reshape(rows, cols)
-    total = np.bincount(flat, weights=-z[ok], minlength=rows * cols).reshape(rows, cols)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        depth = np.where(count > 0, total / count, np.nan)
-    return DepthGrid(depth, count, (float(cell), 0.0, float(x0), 0.0, -float(cell), float(y0 + rows * cell)))
+    transform = (float(cell), 0.0, float(x0), 0.0, -float(cell), float(y0 + rows * cell))
+    ok = np.isfinite(z)
+    total, count = np.zeros(rows * cols), np.zeros(rows * cols, dtype=np.int64)
+    northup.accumulate(total, count, transform, (rows, cols), x[ok], y[ok], -z[ok])
+    depth = northup.mean(total, count).reshape(rows, cols)
+    return DepthGrid(depth, count.reshape(rows, cols), transform)

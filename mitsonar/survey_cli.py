@@ -63,6 +63,8 @@ def trajectory_from_args(args, command="survey"):
 def cmd_survey(args):
     import mitsonar
 
+    from ._files import check_output_folder
+
     traj = trajectory_from_args(args)               # a bad file: one line, nothing written
     if getattr(args, "surface", False):             # + a flat specular sea surface at z = 0
         from .sea_surface import load_survey_scene
@@ -71,10 +73,8 @@ def cmd_survey(args):
     else:
         scene = mitsonar.load_scene(args.scene)
     out = args.output
-    if os.path.exists(out) and not os.path.isdir(out):
-        raise CLIError(f"-o {out!r} is a file, not a folder")
-    if os.path.isdir(out) and any(f.startswith("scan_") for f in os.listdir(out)):
-        raise CLIError(f"-o {out!r} already holds a survey's scans; choose a new or empty folder")
+    check_output_folder(out, CLIError, what="a survey's scans",
+                        holds=lambda out: any(f.startswith("scan_") for f in os.listdir(out)))
     if args.mcap is not None:   # refused before any render (its folder may be the one -o makes)
         from .ros.bag import check_output
 

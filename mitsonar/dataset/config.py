@@ -374,18 +374,11 @@ def _corners(spec):
 
 def sonar_xml(settings, sensor_id="dataset_sonar") -> str:
     """A ``<sensor type="sonar">`` element of ``settings`` (drawn values; ``mount`` is the to_world)."""
-    items = []
-    for k, v in sorted(settings.items()):
-        if k == "mount":
-            items.append(f'<transform name="to_world"><matrix value="{" ".join(f"{float(x):.17g}" for x in v)}"/>'
-                         "</transform>")
-        elif isinstance(v, str):
-            items.append(f'<string name="{k}" value="{v}"/>')
-        elif k in INTEGER_SONAR and is_whole(v):
-            items.append(f'<integer name="{k}" value="{int(v)}"/>')
-        else:
-            items.append(f'<float name="{k}" value="{float(v):.17g}"/>')
-    return f'<sensor type="sonar" id="{sensor_id}">' + "".join(items) + "</sensor>"
+    from ..sensor_xml import sensor_xml
+
+    params = {k: (int(v) if k in INTEGER_SONAR and is_whole(v) else v if isinstance(v, str) else float(v))
+              for k, v in sorted(settings.items()) if k != "mount"}
+    return sensor_xml(params, settings.get("mount"), sensor_id)
 
 
 def _check_electronics(elec):

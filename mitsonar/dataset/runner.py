@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 
+from .._files import check_output_folder, make_output_folder
 from .config import FORMAT, DatasetError, config_difference, config_hash, task
 from .store import MANIFEST, SHARD, RunLock, read_manifest, remove_partials, write_json, write_mesh, write_shard
 
@@ -95,12 +96,8 @@ def prepare_folder(cfg, folder):
     """The folder's lock and manifest: a new one, or the one to resume (same config), else a
     `DatasetError` saying why not. The manifest is read and checked under the lock (a run that
     finished meanwhile has written its last one), and the lock is released if anything fails."""
-    if os.path.exists(folder) and not os.path.isdir(folder):
-        raise DatasetError(f"-o {folder!r} is a file, not a folder")
-    try:
-        os.makedirs(folder, exist_ok=True)
-    except OSError as exc:
-        raise DatasetError(f"-o {folder!r}: cannot create the output folder ({exc.strerror})") from None
+    check_output_folder(folder, DatasetError)
+    make_output_folder(folder, DatasetError)
     _refuse_foreign(folder)   # before the lock: no lock file is left in a folder that is not ours
     lock = RunLock(folder)
     try:
