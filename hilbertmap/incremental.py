@@ -323,10 +323,6 @@ class IncrementalHilbertMap(HilbertMap):
                + S[hi[:, 0], lo[:, 1], lo[:, 2]] - S[lo[:, 0], lo[:, 1], lo[:, 2]])
         return tot > 0
 
-    def _kernel_sum(self, pts: np.ndarray, coef_grid) -> np.ndarray:
-        x, y, z = self._grid.to_lanes(pts)
-        return self._grid.kernel_sum(x, y, z, coef_grid).numpy().astype(np.float64)
-
     def _pass(self, s: Samples) -> float:
         """One shuffled pass of mini-batch AdaGrad; the mean weighted loss seen."""
         try:
@@ -398,10 +394,6 @@ class IncrementalHilbertMap(HilbertMap):
         return loss_sum / max(wsum, 1e-300)
 
     # -- queries -------------------------------------------------------------------------------
-    def _check_fitted(self) -> None:
-        if not hasattr(self, "dual_coef_"):
-            raise RuntimeError("HilbertMap: call fit() or partial_fit() before querying the map")
-
     def decision_function(self, points, chunk: int = 1 << 21) -> np.ndarray:
         """Logit ``f(x) = sum_j a_j k(x, nu_j) + b`` at (N, 3) world points (no side effects)."""
         from ._checks import as_points
@@ -421,13 +413,7 @@ class IncrementalHilbertMap(HilbertMap):
             near = np.nonzero(self._near(p))[0]
             if len(near) == 0:
                 continue
-            q = p[near]
-            srt = np.argsort(grid.cell_keys(q), kind="stable")
-            x, y, z = grid.to_lanes(q[srt])
-            f = grid.kernel_sum(x, y, z, coef).numpy()
-            res = np.empty(len(q))
-            res[srt] = f
-            out[a + near] += res
+            out[a + near] += grid.kernel_sum_at(p[near], coef)
         return out
 
     @property
