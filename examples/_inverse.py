@@ -7,6 +7,7 @@ scans") and Mitsuba's optimiser ``mi.ad.Adam``.
 """
 from __future__ import annotations
 
+import argparse
 import math
 import os
 
@@ -106,13 +107,39 @@ def positive_int(name: str, value, lo: int = 1, hi: int = 1 << 20) -> int:
     return v
 
 
+def argument_parser(doc: str, out: str, iterations: int, seed: int, target_seed: bool = True):
+    """The examples' command line: ``--iterations``, ``--spp``, ``--seed``, ``--target-seed`` (with
+    ``target_seed``) and ``--out`` (the figure), with the example's defaults; the description is the
+    first line of ``doc``."""
+    ap = argparse.ArgumentParser(description=doc.split("\n")[0])
+    ap.add_argument("--iterations", type=int, default=iterations)
+    ap.add_argument("--spp", type=int, default=1024)
+    ap.add_argument("--seed", type=int, default=seed)
+    if target_seed:
+        ap.add_argument("--target-seed", type=int, default=None)
+    ap.add_argument("--out", default=out, help="figure (PNG)")
+    return ap
+
+
+def pyplot():
+    """matplotlib's pyplot on the Agg backend (the examples only write files)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
 def save_figure(fig, path: str):
-    """Write ``fig`` to ``path`` under a temporary name, renamed at the end."""
+    """Lay ``fig`` out, write it to ``path`` under a temporary name renamed at the end, and close it."""
     from mitsonar._files import replacing
 
+    fig.tight_layout()
     os.makedirs(os.path.dirname(os.path.abspath(path)) or ".", exist_ok=True)
     with replacing(path) as tmp:
         fig.savefig(tmp, dpi=110, format=os.path.splitext(path)[1][1:] or "png")
+    pyplot().close(fig)
 
 
 def _acoustic(bid, values):

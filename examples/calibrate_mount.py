@@ -20,7 +20,6 @@ iteration and writes a figure of the loss and the pose error (cm, degrees) per i
 """
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import sys
@@ -29,7 +28,8 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _inverse import positive_int, relative_l2, rotation_angle_deg, save_figure, small_pose  # noqa: E402
+from _inverse import argument_parser, positive_int, pyplot, relative_l2, rotation_angle_deg, save_figure  # noqa: E402
+from _inverse import small_pose  # noqa: E402
 from _inverse import tank_xml as _tank_xml  # noqa: E402
 
 # The mounting error of the example: a few centimetres and degrees (beam frame).
@@ -124,11 +124,7 @@ def calibrate(iterations=100, spp=1024, seed=7, target_seed=None, n_pings=24, n_
 
 
 def figure(result, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     h = np.asarray(result["history"])
     it = np.arange(len(h))
     fig, ax = plt.subplots(1, 2, figsize=(9, 3.4))
@@ -142,19 +138,11 @@ def figure(result, path):
     ax[1].set_xlabel("iteration")
     ax[1].legend()
     fig.suptitle("Mount calibration from scans of a known tank")
-    fig.tight_layout()
     save_figure(fig, path)
-    plt.close(fig)
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--iterations", type=int, default=100)
-    ap.add_argument("--spp", type=int, default=1024)
-    ap.add_argument("--seed", type=int, default=7)
-    ap.add_argument("--target-seed", type=int, default=None)
-    ap.add_argument("--out", default="calibrate_mount.png", help="figure (PNG)")
-    a = ap.parse_args(argv)
+    a = argument_parser(__doc__, "calibrate_mount.png", iterations=100, seed=7).parse_args(argv)
 
     def show(it, h):
         print(f"iter {it:3d}  loss {h[0]:.3e}  translation error {100 * h[1]:6.2f} cm  rotation error {h[2]:5.2f} deg")

@@ -21,7 +21,6 @@ iteration and writes a figure of the loss and of each parameter's relative error
 """
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import sys
@@ -30,7 +29,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _inverse import log_l2, positive_int, save_figure, tank_xml  # noqa: E402
+from _inverse import argument_parser, log_l2, positive_int, pyplot, save_figure, tank_xml  # noqa: E402
 
 TRUTH = {"wall": (0.15, 0.6, 30.0), "floor": (0.4, 0.2, 8.0)}
 START = {"wall": (0.3, 0.35, 12.0), "floor": (0.25, 0.35, 16.0)}
@@ -126,11 +125,7 @@ def recover(iterations=100, spp=1024, seed=5, n_pings=36, n_bins=160, blur=1.0, 
 
 
 def figure(result, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     h = np.asarray(result["history"])
     it = np.arange(len(h))
     fig, ax = plt.subplots(1, 2, figsize=(9, 3.4))
@@ -145,19 +140,11 @@ def figure(result, path):
     ax[1].set_ylabel("relative error")
     ax[1].legend(fontsize=7)
     fig.suptitle("Reflectance recovered from scans of a tank")
-    fig.tight_layout()
     save_figure(fig, path)
-    plt.close(fig)
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--iterations", type=int, default=100)
-    ap.add_argument("--spp", type=int, default=1024)
-    ap.add_argument("--seed", type=int, default=5)
-    ap.add_argument("--target-seed", type=int, default=None)
-    ap.add_argument("--out", default="recover_reflectance.png", help="figure (PNG)")
-    a = ap.parse_args(argv)
+    a = argument_parser(__doc__, "recover_reflectance.png", iterations=100, seed=5).parse_args(argv)
 
     def show(it, h, keys):
         print(f"iter {it:3d}  loss {h[0]:.3e}  " + "  ".join(f"{k} {v:.3f}" for k, v in zip(keys, h[1:])))

@@ -28,7 +28,6 @@ starting and recovered height maps and of the error per iteration.
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import tempfile
@@ -37,7 +36,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _inverse import positive_int, relative_l2, save_figure  # noqa: E402
+from _inverse import argument_parser, positive_int, pyplot, relative_l2, save_figure  # noqa: E402
 
 DEPTH = -2.0
 
@@ -223,11 +222,7 @@ def recover(iterations=30, spp=1024, seed=3, nx=9, ny=25, spacing=0.5, altitude=
 
 
 def figure(result, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     z_true, z_fin = result["heights"]
     ext = [result["y"][0], result["y"][-1], result["x"][0], result["x"][-1]]
     fig, ax = plt.subplots(1, 4, figsize=(13, 3.2))
@@ -243,18 +238,11 @@ def figure(result, path):
     ax[3].plot(100 * h[:, 1])
     ax[3].set_xlabel("iteration")
     ax[3].set_ylabel("RMS height error (cm), seen cells")
-    fig.tight_layout()
     save_figure(fig, path)
-    plt.close(fig)
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--iterations", type=int, default=60)
-    ap.add_argument("--spp", type=int, default=1024)
-    ap.add_argument("--seed", type=int, default=3)
-    ap.add_argument("--out", default="recover_seabed.png", help="figure (PNG)")
-    a = ap.parse_args(argv)
+    a = argument_parser(__doc__, "recover_seabed.png", iterations=60, seed=3, target_seed=False).parse_args(argv)
 
     def show(it, h):
         print(f"iter {it:3d}  loss {h[0]:.3e}  RMS height error {100 * h[1]:5.2f} cm")

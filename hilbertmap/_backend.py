@@ -159,6 +159,15 @@ class KernelGrid:
         """Lane-wise ``sum_j coef[j] k(x, nu_j)``; ``coef`` in grid order (a Dr.Jit Float)."""
         return self._loop(x, y, z, coef=coef)
 
+    def kernel_sum_at(self, pts: np.ndarray, coef) -> np.ndarray:
+        """``sum_j coef[j] k(x, nu_j)`` at (N, 3) world points, float64 in the points' order: the
+        points go to the lanes sorted by cell (neighbouring lanes visit the same cells)."""
+        order = np.argsort(self.cell_keys(pts), kind="stable")
+        x, y, z = self.to_lanes(pts[order])
+        res = np.empty(len(pts), dtype=np.float64)
+        res[order] = self.kernel_sum(x, y, z, coef).numpy()
+        return res
+
     def kernel_scatter(self, x, y, z, g, out):
         """``out[j] += g * k(x, nu_j)`` for every lane (grid order), through atomics."""
         self._loop(x, y, z, g=g, out=out)

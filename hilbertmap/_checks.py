@@ -92,6 +92,24 @@ def check_params(hm) -> None:
     num_param("lengthscale_factor", hm.lengthscale_factor, 0, lo_open=True)
     num_param("kernel_cut", hm.kernel_cut, 0, 1, lo_open=True, hi_open=True)
     num_param("eig_floor", hm.eig_floor, 0, 1, hi_open=True)
+    check_echo_params(hm)
+    num_param("occupied_weight", hm.occupied_weight, 0, lo_open=True, special=("balanced",))
+    num_param("pooling_temperature", hm.pooling_temperature, 0, lo_open=True)
+    num_param("beam_extent", hm.beam_extent, 0, lo_open=True)
+    num_param("beam_stride", hm.beam_stride, 1)
+    num_param("alpha", hm.alpha, 0)
+    num_param("l1_ratio", hm.l1_ratio, 0, 1)
+    num_param("eta0", hm.eta0, 0, lo_open=True, special=("auto",))
+    num_param("k1", hm.k1, 0)
+    num_param("t0", hm.t0, 0, lo_open=True, special=(None,))
+    check_pass_params(hm)
+    check_bounds("bounds", hm.bounds)
+    check_coverage_params(hm)
+
+
+def check_echo_params(hm) -> None:
+    """The echo detection and sampling settings (from ``threshold`` to ``max_run``), which the
+    batch and the incremental map share."""
     for name in ("threshold", "min_level", "cfar_offset"):
         num_param(name, getattr(hm, name), special=(None,))
     int_param("cfar_train", hm.cfar_train, 1)
@@ -105,20 +123,18 @@ def check_params(hm) -> None:
     num_param("near_depth", hm.near_depth, 0)
     int_param("occupied_samples", hm.occupied_samples, 1)
     num_param("max_run", hm.max_run, 0, lo_open=True)
-    num_param("occupied_weight", hm.occupied_weight, 0, lo_open=True, special=("balanced",))
-    num_param("pooling_temperature", hm.pooling_temperature, 0, lo_open=True)
-    num_param("beam_extent", hm.beam_extent, 0, lo_open=True)
-    num_param("beam_stride", hm.beam_stride, 1)
-    num_param("alpha", hm.alpha, 0)
-    num_param("l1_ratio", hm.l1_ratio, 0, 1)
-    num_param("eta0", hm.eta0, 0, lo_open=True, special=("auto",))
-    num_param("k1", hm.k1, 0)
-    num_param("t0", hm.t0, 0, lo_open=True, special=(None,))
+
+
+def check_pass_params(hm) -> None:
+    """The mini-batch and pass settings shared by both maps."""
     int_param("batch_size", hm.batch_size, 1)
     int_param("n_passes", hm.n_passes, 1)
     int_param("partial_passes", hm.partial_passes, 1)
     need("fit_intercept", hm.fit_intercept, isinstance(hm.fit_intercept, (bool, np.bool_)), "True or False")
-    check_bounds("bounds", hm.bounds)
+
+
+def check_coverage_params(hm) -> None:
+    """The region-seen voxel settings and the seed shared by both maps."""
     num_param("coverage_voxel", hm.coverage_voxel, 0, lo_open=True)
     int_param("max_free_per_voxel", hm.max_free_per_voxel, 1, none=True)
     int_param("max_groups_per_voxel", hm.max_groups_per_voxel, 1, none=True)

@@ -46,7 +46,7 @@ import numpy as np
 
 from . import sgd
 from ._backend import KernelGrid, cut_radius
-from ._checks import CHOICES, int_param, need, num_param
+from ._checks import CHOICES, check_coverage_params, check_echo_params, check_pass_params, int_param, need, num_param
 from .embedding import Samples
 from .inducing import Coverage, LazyCoverage
 from .model import HilbertMap, _unique_rows, embed_with
@@ -135,30 +135,12 @@ class IncrementalHilbertMap(HilbertMap):
         num_param("eta0", self.eta0, 0, lo_open=True)
         num_param("kernel_cut", self.kernel_cut, 0, 1, lo_open=True, hi_open=True)
         num_param("alpha", self.alpha, 0)
-        for name in ("threshold", "min_level", "cfar_offset"):
-            num_param(name, getattr(self, name), special=(None,))
-        int_param("cfar_train", self.cfar_train, 1)
-        int_param("cfar_guard", self.cfar_guard, 0)
-        num_param("blanking", self.blanking, 0, special=("auto",))
-        int_param("min_echo_bins", self.min_echo_bins, 0)
-        num_param("free_density", self.free_density, 0)
-        int_param("max_free_per_ping", self.max_free_per_ping, 0)
-        num_param("free_margin", self.free_margin, 0)
-        int_param("near_free", self.near_free, 0)
-        num_param("near_depth", self.near_depth, 0)
-        int_param("occupied_samples", self.occupied_samples, 1)
-        num_param("max_run", self.max_run, 0, lo_open=True)
+        check_echo_params(self)
         num_param("occupied_weight", self.occupied_weight, 0, lo_open=True)
         num_param("beam_extent", self.beam_extent, 0, lo_open=True)
         num_param("beam_stride", self.beam_stride, 1)
-        int_param("batch_size", self.batch_size, 1)
-        int_param("n_passes", self.n_passes, 1)
-        int_param("partial_passes", self.partial_passes, 1)
-        need("fit_intercept", self.fit_intercept, isinstance(self.fit_intercept, (bool, np.bool_)), "True or False")
-        num_param("coverage_voxel", self.coverage_voxel, 0, lo_open=True)
-        int_param("max_free_per_voxel", self.max_free_per_voxel, 1, none=True)
-        int_param("max_groups_per_voxel", self.max_groups_per_voxel, 1, none=True)
-        int_param("random_state", self.random_state, 0, none=True)
+        check_pass_params(self)
+        check_coverage_params(self)
 
     def embed(self, scan, rng=None) -> Samples:
         """Labelled samples of one scan (each row at its own pose), after :func:`check_scan`: the
@@ -341,10 +323,6 @@ class IncrementalHilbertMap(HilbertMap):
                + S[hi[:, 0], lo[:, 1], lo[:, 2]] - S[lo[:, 0], lo[:, 1], lo[:, 2]])
         return tot > 0
 
-    def _kernel_sum(self, pts: np.ndarray, coef_grid) -> np.ndarray:
-        x, y, z = self._grid.to_lanes(pts)
-        return self._grid.kernel_sum(x, y, z, coef_grid).numpy().astype(np.float64)
-
     def _pass(self, s: Samples) -> float:
         """One shuffled pass of mini-batch AdaGrad; the mean weighted loss seen."""
         try:
@@ -416,10 +394,6 @@ class IncrementalHilbertMap(HilbertMap):
         return loss_sum / max(wsum, 1e-300)
 
     # -- queries -------------------------------------------------------------------------------
-    def _check_fitted(self) -> None:
-        if not hasattr(self, "dual_coef_"):
-            raise RuntimeError("HilbertMap: call fit() or partial_fit() before querying the map")
-
     def decision_function(self, points, chunk: int = 1 << 21) -> np.ndarray:
         """Logit ``f(x) = sum_j a_j k(x, nu_j) + b`` at (N, 3) world points (no side effects)."""
         from ._checks import as_points
@@ -439,13 +413,7 @@ class IncrementalHilbertMap(HilbertMap):
             near = np.nonzero(self._near(p))[0]
             if len(near) == 0:
                 continue
-            q = p[near]
-            srt = np.argsort(grid.cell_keys(q), kind="stable")
-            x, y, z = grid.to_lanes(q[srt])
-            f = grid.kernel_sum(x, y, z, coef).numpy()
-            res = np.empty(len(q))
-            res[srt] = f
-            out[a + near] += res
+            out[a + near] += grid.kernel_sum_at(p[near], coef)
         return out
 
     @property

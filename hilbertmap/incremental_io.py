@@ -17,14 +17,13 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import zipfile
 import zlib
 
 import numpy as np
 
 from .inducing import LazyCoverage
-from .persistence import _first_line, _jsonable
+from .persistence import _first_line, from_params, write_archive
 
 FORMAT = "hilbertmap-incremental/1"
 ARRAYS = ("nodes", "node_keys", "coef", "accum", "last_used", "coverage_keys", "echo_coverage_keys",
@@ -34,20 +33,13 @@ COUNTERS = ("n_scans_seen_", "n_pings_seen_", "n_samples_seen_", "n_forgotten_")
 
 def save(hm, path) -> None:
     hm._check_fitted()
-    params = {k: _jsonable(v) for k, v in hm.get_params().items()}
     state = dict(format=FORMAT, lengthscale_=hm.lengthscale_, intercept_=hm.intercept_, b_accum=hm._b_accum,
                  coverage_voxel=hm.coverage_.voxel, t_=hm.t_, loss_curve_=list(hm.loss_curve_),
                  **{k: int(getattr(hm, k)) for k in COUNTERS})
-    path = os.fspath(path)
-    tmp = path + ".part"
-    with open(tmp, "wb") as fh:
-        np.savez_compressed(
-            fh, params=np.array(json.dumps(params)), state=np.array(json.dumps(state)),
-            nodes=hm.inducing_points_, node_keys=hm.node_keys_, coef=hm.dual_coef_, accum=hm.node_accum_,
-            last_used=hm.node_last_used_, coverage_keys=hm.coverage_.keys,
-            echo_coverage_keys=hm.echo_coverage_.keys, free_coverage_keys=hm.free_coverage_.keys,
-            ping_frames=hm.ping_frames_, ping_beams=hm.ping_beams_, ping_spans=hm.ping_spans_, track=hm.track_)
-    os.replace(tmp, path)
+    write_archive(path, hm, state, nodes=hm.inducing_points_, node_keys=hm.node_keys_, coef=hm.dual_coef_,
+                  accum=hm.node_accum_, last_used=hm.node_last_used_, coverage_keys=hm.coverage_.keys,
+                  echo_coverage_keys=hm.echo_coverage_.keys, free_coverage_keys=hm.free_coverage_.keys,
+                  ping_frames=hm.ping_frames_, ping_beams=hm.ping_beams_, ping_spans=hm.ping_spans_, track=hm.track_)
 
 
 def load(cls, path):
@@ -86,14 +78,7 @@ def load(cls, path):
                 arr[name] = z[name]
             except unreadable as exc:
                 raise bad(f"{name!r} cannot be read ({_first_line(exc)})") from None
-    unknown = set(params) - set(cls._get_param_names())
-    if unknown:
-        raise bad(f"'params': unknown parameter(s) {', '.join(sorted(unknown))}")
-    try:
-        hm = cls(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in params.items()})
-        hm._check()
-    except (TypeError, ValueError) as exc:
-        raise bad(f"'params': {str(exc).replace('HilbertMap: ', '')}") from None
+    hm = from_params(cls, params, cls._check, bad)
     try:
         num = {k: float(state[k]) for k in ("lengthscale_", "intercept_", "b_accum", "coverage_voxel", "t_")}
         cnt = {k: int(state[k]) for k in COUNTERS}

@@ -413,13 +413,7 @@ class HilbertMap:
         coef = grid.upload(self.dual_coef_)
         out = np.empty(len(pts), dtype=np.float64)
         for a in range(0, len(pts), chunk):
-            p = pts[a:a + chunk]
-            order = np.argsort(grid.cell_keys(p), kind="stable")
-            x, y, z = grid.to_lanes(p[order])
-            f = grid.kernel_sum(x, y, z, coef).numpy()
-            res = np.empty(len(p), dtype=np.float64)
-            res[order] = f
-            out[a:a + chunk] = res
+            out[a:a + chunk] = grid.kernel_sum_at(pts[a:a + chunk], coef)
         return out + self.intercept_
 
     def predict_proba(self, points) -> np.ndarray:

@@ -1,6 +1,8 @@
 """Saving and loading Hilbert maps: the ``hilbertmap/1`` ``.npz`` format.
 
-Two JSON strings and the learnt arrays, in one ``np.savez_compressed`` archive:
+Two JSON strings and the learnt arrays, in one ``np.savez_compressed`` archive (written under a
+temporary name beside the path and renamed, by :func:`write_archive`, which the incremental map's
+``hilbertmap-incremental/1`` shares):
 
 ``params``              JSON object: the hyper-parameters (``get_params()``; tuples as lists)
 ``state``               JSON object: ``lengthscale_``, ``intercept_``, ``t_``, ``n_samples_seen_``,
@@ -22,6 +24,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import zipfile
 import zlib
 
@@ -42,22 +45,28 @@ STATE_NUMBERS = ("lengthscale_", "intercept_", "t_", "n_samples_seen_", "n_sched
 def save(hm, path) -> None:
     """Write a fitted map (hyper-parameters and learnt state) to ``path`` (``.npz``)."""
     hm._check_fitted()
-    params = {k: _jsonable(v) for k, v in hm.get_params().items()}
     state = dict(lengthscale_=hm.lengthscale_, intercept_=hm.intercept_, t_=hm.t_,
                  n_samples_seen_=int(hm.n_samples_seen_), n_schedule_=float(hm.n_schedule_),
                  occupied_weight_=float(getattr(hm, "occupied_weight_", 1.0)), eta0_=float(hm.eta0_),
                  n_components_=int(len(hm.weights_)),
                  coverage_voxel=hm.coverage_.voxel, loss_curve_=list(getattr(hm, "loss_curve_", [])),
                  format=FORMAT)
-    with open(path, "wb") as fh:
-        np.savez_compressed(
-            fh, params=np.array(json.dumps(params)), state=np.array(json.dumps(state)),
-            inducing_points=hm.inducing_points_, weights=hm.weights_, dual_coef=hm.dual_coef_,
-            coverage_keys=hm.coverage_.keys, echo_coverage_keys=hm.echo_coverage_.keys,
-            free_coverage_keys=free_coverage(hm).keys,
-            sensor_positions=hm.sensor_positions_, ping_frames=hm.ping_frames_, ping_beams=hm.ping_beams_,
-            ping_spans=hm.ping_spans_,
-        )
+    write_archive(path, hm, state, inducing_points=hm.inducing_points_, weights=hm.weights_, dual_coef=hm.dual_coef_,
+                  coverage_keys=hm.coverage_.keys, echo_coverage_keys=hm.echo_coverage_.keys,
+                  free_coverage_keys=free_coverage(hm).keys, sensor_positions=hm.sensor_positions_,
+                  ping_frames=hm.ping_frames_, ping_beams=hm.ping_beams_, ping_spans=hm.ping_spans_)
+
+
+def write_archive(path, hm, state: dict, **arrays) -> None:
+    """``np.savez_compressed`` of ``hm``'s hyper-parameters (JSON ``params``), ``state`` (JSON) and
+    ``arrays``, written under ``path + ".part"`` and renamed to ``path`` at the end (a reader never
+    sees half a map, and a failed save leaves the old file)."""
+    params = {k: _jsonable(v) for k, v in hm.get_params().items()}
+    path = os.fspath(path)
+    tmp = path + ".part"
+    with open(tmp, "wb") as fh:
+        np.savez_compressed(fh, params=np.array(json.dumps(params)), state=np.array(json.dumps(state)), **arrays)
+    os.replace(tmp, path)
 
 
 def load(cls, path):
@@ -77,14 +86,7 @@ def load(cls, path):
         raise bad("not a Hilbert map file ('params' and 'state' must be JSON objects)")
     if state.get("format", FORMAT) != FORMAT:
         raise bad(f"format {state['format']!r} is not {FORMAT}")
-    unknown = set(params) - set(cls._get_param_names())
-    if unknown:
-        raise bad(f"'params': unknown parameter(s) {', '.join(sorted(unknown))}")
-    try:
-        hm = cls(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in params.items()})
-        check_params(hm)
-    except (TypeError, ValueError) as exc:
-        raise bad(f"'params': {str(exc).replace('HilbertMap: ', '')}") from None
+    hm = from_params(cls, params, check_params, bad)
     try:
         st = {k: float(state[k]) for k in STATE_NUMBERS}
         loss_curve = [float(x) for x in state["loss_curve_"]]
@@ -119,6 +121,20 @@ def load(cls, path):
     hm.gamma_ = 1.0 / (2.0 * hm.lengthscale_ ** 2)
     hm.loss_curve_ = loss_curve
     hm._grid = hm._make_grid()  # derived state: queries only read it
+    return hm
+
+
+def from_params(cls, params: dict, check, bad):
+    """A new ``cls`` made from a saved JSON ``params`` object and checked by ``check(hm)``; an
+    unknown name or a refused value becomes ``bad(why)``."""
+    unknown = set(params) - set(cls._get_param_names())
+    if unknown:
+        raise bad(f"'params': unknown parameter(s) {', '.join(sorted(unknown))}")
+    try:
+        hm = cls(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in params.items()})
+        check(hm)
+    except (TypeError, ValueError) as exc:
+        raise bad(f"'params': {str(exc).replace('HilbertMap: ', '')}") from None
     return hm
 
 

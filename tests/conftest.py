@@ -59,6 +59,18 @@ def acoustic_xml(diffuse=0.0, specular=0.0, shininess=30.0):
             f'<float name="specular" value="{specular}"/><float name="shininess" value="{shininess}"/></bsdf>')
 
 
+def example(name):
+    """The module ``examples/<name>.py``, loaded from its file (examples/ is not a package)."""
+    import importlib.util
+
+    path = os.path.join(ROOT, "examples", name + ".py")
+    sys.path.insert(0, os.path.dirname(path))
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
 def jit_kernels(fn, *args, **kwargs):
     """Run ``fn`` and return the Dr.Jit kernels it launched: (hashes, hashes compiled anew).
 

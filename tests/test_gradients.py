@@ -46,6 +46,20 @@ def weights(shape):
     return np.tile(np.linspace(1.0, 2.0, n_bins), (n_rows, 1)) * np.arange(1, n_rows + 1)[:, None]
 
 
+def backward_sum(sc, key):
+    """Gradients enabled on parameter ``key``, the scan's sum rendered (SPP, SEED) and
+    backpropagated: returns the parameters (``dr.grad(p[key])`` now holds d(sum)/d(key)) and the sum."""
+    import drjit as dr
+    import mitsuba as mi
+
+    p = mi.traverse(sc)
+    dr.enable_grad(p[key])
+    p.update()
+    total = dr.sum(mi.render(sc, p, spp=SPP, seed=SEED).array)
+    dr.backward(total)
+    return p, total
+
+
 def check_against_fd(sc, key, h, make=None, rtol=0.02, spp=SPP):
     """Reverse and forward derivative of sum(weights * scan) along ``key`` (or along ``make(v)``,
     v the scalar the parameter is a function of) against a central finite difference."""
@@ -99,11 +113,7 @@ def test_diffuse_only_scan_is_linear_in_diffuse(mitsonar_mod):
     import mitsuba as mi
 
     sc = scene(mitsonar_mod, [plane(-2.0)], boresight=(0.4, 0.0, -1.0), bsdf=acoustic_xml(0.35, 0.0))
-    p = mi.traverse(sc)
-    dr.enable_grad(p["mat.diffuse"])
-    p.update()
-    total = dr.sum(mi.render(sc, p, spp=SPP, seed=SEED).array)
-    dr.backward(total)
+    p, total = backward_sum(sc, "mat.diffuse")
     expected = float(total[0]) / 0.35
     assert expected > 0
     assert float(dr.grad(p["mat.diffuse"])[0]) == pytest.approx(expected, rel=1e-4)
@@ -162,12 +172,8 @@ def test_textured_diffuse_gradient_is_per_texel(mitsonar_mod, tmp_path):
            f'<float name="specular" value="0"/></bsdf>')
     sc = scene(mitsonar_mod, [plane(-2.0, half=2.0)], boresight=(0.3, 0.0, -1.0), bsdf=tex, beamwidth_h=30.0,
                beamwidth_v=30.0, bearing_step=10.0)
-    p = mi.traverse(sc)
     key = "mat.diffuse.data"
-    dr.enable_grad(p[key])
-    p.update()
-    total = dr.sum(mi.render(sc, p, spp=SPP, seed=SEED).array)
-    dr.backward(total)
+    p, total = backward_sum(sc, key)
     grad = np.asarray(dr.grad(p[key]))
     assert float((grad * data).sum()) == pytest.approx(float(total[0]), rel=1e-4)
     assert (grad >= 0).all() and grad[1, 2, 0] > 0
@@ -333,12 +339,8 @@ def test_twosided_acoustic_reverse_mode_and_forward_refusal(mitsonar_mod):
     sc = mitsonar_mod.load_scene(scene_xml(head, bsdf, rectangle_xml(plane(-2.0), '<ref id="mat"/>'),
                                            integrator='<integrator type="sonar_tof"><integer name="max_depth" '
                                                       'value="1"/></integrator>'))
-    p = mi.traverse(sc)
     key = "mat.brdf_0.diffuse"
-    dr.enable_grad(p[key])
-    p.update()
-    total = dr.sum(mi.render(sc, p, spp=SPP, seed=SEED).array)
-    dr.backward(total)
+    p, total = backward_sum(sc, key)
     assert float(dr.grad(p[key])[0]) == pytest.approx(float(total[0]) / 0.35, rel=1e-4)
     total = dr.sum(mi.render(sc, p, spp=SPP, seed=SEED).array)
     with pytest.raises(ValueError, match=r"sonar_tof: forward-mode derivatives of 'mat\.brdf_0\.diffuse' need its "

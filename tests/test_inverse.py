@@ -1,24 +1,12 @@
 """Inverse problems solved with the physical renderer (issue "Inverse problems"): the examples'
 fits converge from fixed wrong starts (examples/calibrate_mount.py, recover_reflectance.py,
 recover_seabed.py)."""
-import importlib.util
 import math
-import os
-import sys
 
 import numpy as np
 import pytest
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-def example(name):
-    path = os.path.join(ROOT, "examples", name + ".py")
-    sys.path.insert(0, os.path.dirname(path))
-    spec = importlib.util.spec_from_file_location(name, path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+from conftest import example
 
 
 def test_small_pose_is_a_rotation_by_the_rotation_vector(mitsonar_mod):

@@ -10,7 +10,7 @@ import os
 import numpy as np
 import pytest
 
-from conftest import acoustic_xml, frame_matrix, scene_xml, sonar_xml
+from conftest import acoustic_xml, example, frame_matrix, scene_xml, sonar_xml
 
 SPP = 1 << 14
 SEED, SEED_GRAD = 3, 11
@@ -18,9 +18,8 @@ N_BINS, N_PINGS = 60, 3
 
 
 def grid_ply(path, heights, half=4.0):
-    """A height map as a PLY mesh: ``heights`` (n, n) at x, y in [-half, half], two triangles a cell."""
-    import mitsuba as mi
-
+    """A height map as a PLY mesh: ``heights`` (n, n) at x, y in [-half, half], two triangles a cell
+    (written by the seabed example's ``write_ply``)."""
     n = heights.shape[0]
     xs = np.linspace(-half, half, n)
     X, Y = np.meshgrid(xs, xs, indexing="xy")
@@ -30,13 +29,7 @@ def grid_ply(path, heights, half=4.0):
         for i in range(n - 1):
             a = j * n + i
             faces += [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
-    F = np.asarray(faces, np.uint32)
-    m = mi.Mesh("seabed", len(V), len(F), has_vertex_normals=False)
-    p = mi.traverse(m)
-    p["vertex_positions"] = mi.Float(V.ravel())
-    p["faces"] = mi.UInt32(F.ravel())
-    p.update()
-    m.write_ply(path)
+    example("recover_seabed").write_ply(path, V, np.asarray(faces, np.uint32))
     return V
 
 

@@ -170,28 +170,44 @@ def test_small_target_follows_two_way_beam_pattern(mitsonar_mod):
     assert np.max(np.abs(meas - one_way)) > 0.2
 
 
+# Ladder 3's head and target: receive beam width, transmit fan width (deg), sphere range,
+# radius (m) and reflectance.
+FAN = (6.0, 30.0, 6.0, 0.1, 0.9)
+
+
+def fan_rows_against_sphere(mitsonar, seeds, spp, integrator_extra=""):
+    """A forward-looking head (a gaussian transmit fan FAN[1] deg wide, 49 gaussian receive rows
+    FAN[0] deg wide at 0.25 deg steps) and a small sphere on the fan's axis, rendered at ``seeds``
+    x ``spp``. Returns the scene, each row's echo energy ``e``, its z-score against the quadrature
+    of B_tx B_rx over the sphere (error floor 1.5 % of the reference), the bearings (rad) and the
+    receive pattern. ``integrator_extra``: XML added inside the sonar_tof integrator."""
+    from mitsonar.plugins import module
+
+    bw, tx_h, R, a, rho = FAN
+    to_world = frame_matrix((1, 0, 0), (0, 0, 1))
+    sensor = sonar_xml(to_world, kind="multibeam", beam_pattern="gaussian", beamwidth_h=bw, beamwidth_v=bw,
+                       tx_beamwidth_h=tx_h, range_min=5.0, range_max=7.0, n_bins=20, n_pings=49,
+                       bearing_start=-6.0, bearing_step=0.25)
+    integrator = ('<integrator type="sonar_tof"><integer name="max_depth" value="1"/>' + integrator_extra
+                  + "</integrator>")
+    scene = mitsonar.load_scene(scene_xml(sensor, sphere_xml((R, 0, 0), a, acoustic_xml(rho)), integrator=integrator))
+    mean, sem = render_mean_and_sem(mitsonar, scene, seeds, spp)
+    e, s = mean.sum(1), np.sqrt((sem ** 2).sum(1))
+    rx = module("beam").BeamPattern("gaussian", bw, bw)
+    tx = module("beam").BeamPattern("gaussian", tx_h, bw)
+    bearings = np.radians(-6.0 + 0.25 * np.arange(49))
+    ref = sphere_echo_reference(rx, R, a, rho, -bearings, transmit=tx)
+    return scene, e, (e - ref) / np.maximum(s, 0.015 * ref), bearings, rx
+
+
 @pytest.mark.slow
 def test_multibeam_rows_follow_receive_beam_times_transmit_fan(mitsonar_mod):
     # A forward-looking head: one gaussian transmit fan 30 deg wide, 49 receive rows of 6 deg at
     # 0.25 deg steps. A small sphere on the fan's axis answers in each row with the receive
     # pattern one way (the fan is nearly flat over it), not the two-way pattern of a rotating
     # head - in absolute units, against the quadrature of B_tx B_rx over the sphere.
-    from mitsonar.plugins import module
-
-    bw, tx_h, R, a, rho = 6.0, 30.0, 6.0, 0.1, 0.9
-    to_world = frame_matrix((1, 0, 0), (0, 0, 1))
-    sensor = sonar_xml(to_world, kind="multibeam", beam_pattern="gaussian", beamwidth_h=bw, beamwidth_v=bw,
-                       tx_beamwidth_h=tx_h, range_min=5.0, range_max=7.0, n_bins=20, n_pings=49,
-                       bearing_start=-6.0, bearing_step=0.25)
-    scene = mitsonar_mod.load_scene(scene_xml(sensor, sphere_xml((R, 0, 0), a, acoustic_xml(rho)),
-                                              integrator='<integrator type="sonar_tof"><integer name="max_depth" value="1"/></integrator>'))
-    mean, sem = render_mean_and_sem(mitsonar_mod, scene, range(10), 1 << 14)
-    e, s = mean.sum(1), np.sqrt((sem ** 2).sum(1))
-    rx = module("beam").BeamPattern("gaussian", bw, bw)
-    tx = module("beam").BeamPattern("gaussian", tx_h, bw)
-    bearings = np.radians(-6.0 + 0.25 * np.arange(49))
-    ref = sphere_echo_reference(rx, R, a, rho, -bearings, transmit=tx)
-    z = (e - ref) / np.maximum(s, 0.015 * ref)
+    bw, tx_h, R, a, rho = FAN
+    scene, e, z, bearings, rx = fan_rows_against_sphere(mitsonar_mod, range(10), 1 << 14)
     assert np.max(np.abs(z)) < 4.0, f"max |z| = {np.max(np.abs(z)):.2f}"
     # the rows' -3 dB full width is the receive beam width (one way), not the -6 dB of a rotating head
     meas = e / e[24]

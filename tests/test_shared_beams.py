@@ -141,23 +141,8 @@ def test_shared_rows_follow_receive_beam_times_transmit_fan(mitsonar_mod):
     under a 30 deg gaussian fan, a small sphere on the axis; each row's echo against the
     quadrature of B_tx B_rx over the sphere (absolute units), |z| < 4 with the same error floor
     (1.5 % of the reference). Every echo here reaches all 49 rows (the every-row branch)."""
-    from test_physics import render_mean_and_sem, sphere_echo_reference
+    from test_physics import fan_rows_against_sphere
 
-    from conftest import sphere_xml as sphere
-    from mitsonar.plugins import module
-
-    bw, tx_h, R, a, rho = 6.0, 30.0, 6.0, 0.1, 0.9
-    sensor = sonar_xml(frame_matrix((1, 0, 0), (0, 0, 1)), kind="multibeam", beam_pattern="gaussian",
-                       beamwidth_h=bw, beamwidth_v=bw, tx_beamwidth_h=tx_h, range_min=5.0, range_max=7.0,
-                       n_bins=20, n_pings=49, bearing_start=-6.0, bearing_step=0.25)
-    scene = mitsonar_mod.load_scene(scene_xml(sensor, sphere((R, 0, 0), a, acoustic_xml(rho)), integrator=(
-        '<integrator type="sonar_tof"><integer name="max_depth" value="1"/>'
-        '<boolean name="share_beams" value="true"/></integrator>')))
-    mean, sem = render_mean_and_sem(mitsonar_mod, scene, range(6), 1 << 13)
-    e, s = mean.sum(1), np.sqrt((sem ** 2).sum(1))
-    rx = module("beam").BeamPattern("gaussian", bw, bw)
-    tx = module("beam").BeamPattern("gaussian", tx_h, bw)
-    bearings = np.radians(-6.0 + 0.25 * np.arange(49))
-    ref = sphere_echo_reference(rx, R, a, rho, -bearings, transmit=tx)
-    z = (e - ref) / np.maximum(s, 0.015 * ref)
+    share = '<boolean name="share_beams" value="true"/>'
+    _, _, z, _, _ = fan_rows_against_sphere(mitsonar_mod, range(6), 1 << 13, integrator_extra=share)
     assert np.max(np.abs(z)) < 4.0, f"max |z| = {np.max(np.abs(z)):.2f}"
