@@ -26,10 +26,11 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from mitsonar._checks import not_allowed
+from mitsonar._checks import not_allowed, require
 
+from . import image_guide
 from .emission import DB_TO_LOG2, emit
-from .props import count
+from .props import count, text
 from .range_bins import RangeBins
 from .samples import DIMS_EMIT, DIMS_PER_BOUNCE
 from .sonar_sensor import PingFrames, SonarSensor
@@ -66,7 +67,7 @@ class PathSetup:
     ``scene``, ``sensor``; ``frames`` the per-ping beam frames at ``pose``; ``connect`` what weights
     the connection back to the transducer (``SonarSensor.connection``); ``depth`` the surface
     bounces (and ``depth_o``, its opaque copy); ``absorption`` (opaque, dB/m); ``bins`` the range
-    window. Every value that differs between renders is opaque: a new pose, window or depth never
+    window; ``guide`` whether paths are image guided (`image_guide`; the integrator's ``guide``). Every value that differs between renders is opaque: a new pose, window or depth never
     recompiles a kernel.
     """
 
@@ -77,6 +78,7 @@ class PathSetup:
         self.depth_o = dr.opaque(mi.UInt32, self.depth)
         self.absorption = dr.opaque(mi.Float, sensor.absorption)
         self.bins = RangeBins(sensor)
+        self.guide = False
         self.ad = None
 
     def attach(self):
@@ -161,10 +163,14 @@ class SonarIntegrator(mi.SamplingIntegrator):
     """
 
     name = "sonar"
+    #: The ``guide`` values this integrator takes, the first its default (`image_guide`).
+    GUIDES = ("none", "image")
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
         self.max_depth = check_max_depth(count(props, "max_depth", 5, self.name), self.name)
+        self.guide = text(props, "guide", self.GUIDES[0], self.name)
+        require(self.guide in self.GUIDES, self.name, "guide", self.guide, "one of " + ", ".join(self.GUIDES))
 
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
         import numpy as np
@@ -263,6 +269,9 @@ class SonarIntegrator(mi.SamplingIntegrator):
         self._spp = spp
         seed = int(seed[0]) if isinstance(seed, dr.ArrayBase) else int(seed)
         setup = self.setup(scene, sensor)
+        # The replayed path (`path_replay`) is the unguided one: a gradient render samples its own
+        # paths, so it estimates the same derivative without the guide.
+        setup.guide = False
         with dr.resume_grad():
             setup.attach()
         # Passes of (nearly) equal size, each at most GRADIENT_LANES_PER_PASS lanes: what a pass
@@ -275,7 +284,9 @@ class SonarIntegrator(mi.SamplingIntegrator):
     def setup(self, scene, sensor=0, pose=None, max_depth=None) -> PathSetup:
         """The `PathSetup` of one render (sensor resolved, ``max_depth`` checked)."""
         depth = check_max_depth(self.max_depth if max_depth is None else int(max_depth), self.name)
-        return PathSetup(scene, resolve_sensor(scene, sensor), depth, pose)
+        setup = PathSetup(scene, resolve_sensor(scene, sensor), depth, pose)
+        setup.guide = self.guide == "image"
+        return setup
 
     def sample(self, setup: PathSetup, ping, samples, record=None, active=True, mode=None, δ=None,
                state_in=None):
@@ -337,11 +348,16 @@ class SonarIntegrator(mi.SamplingIntegrator):
         atten = setup.absorption * DB_TO_LOG2     # 10^(-a L / 10) = 2^(-a L DB_TO_LOG2)
         max_depth = setup.depth_o
         ctx = mi.BSDFContext(mi.TransportMode.Importance)
+        # Image guiding (`image_guide`): the transducer's image through the chain of mirror-like
+        # vertices since the last diffuse one, and the chain's narrowest lobe (0: no chain).
+        guide = getattr(setup, "guide", False)  # a bare setup (shared_beams, echo_path) is unguided
+        image, n_chain = mi.Point3f(origin), mi.Float(0.0)
 
         while dr.hint(active, label="sonar_echo_path"):
             si = scene.ray_intersect(ray, active)
             active &= si.is_valid()
-            path_length += dr.norm(si.p - previous)
+            segment = dr.norm(si.p - previous)
+            path_length += segment
 
             # Next-event connection back to the transducer.
             to_tx = origin - si.p
@@ -358,9 +374,16 @@ class SonarIntegrator(mi.SamplingIntegrator):
             record(depth, 0.5 * total, energy, echo, si)
 
             base = DIMS_EMIT + DIMS_PER_BOUNCE * depth
-            bs, bsdf_weight = bsdf.sample(ctx, si, samples.get(base), samples.get2(base + 1), active)
-            throughput *= bsdf_weight.x
-            ray = si.spawn_ray(si.to_world(bs.wo))
+            if dr.hint(guide, mode="scalar"):
+                wo, bounce_weight, glossy = image_guide.sample_bounce(
+                    bsdf, ctx, si, image, n_chain, segment, samples.get(base), samples.get2(base + 1), active)
+                image, n_chain = image_guide.advance(bsdf, si, origin, image, n_chain, glossy, active)
+                throughput *= bounce_weight
+                ray = si.spawn_ray(wo)
+            else:
+                bs, bsdf_weight = bsdf.sample(ctx, si, samples.get(base), samples.get2(base + 1), active)
+                throughput *= bsdf_weight.x
+                ray = si.spawn_ray(si.to_world(bs.wo))
             previous = mi.Point3f(si.p)
             depth += 1
             active &= (depth < max_depth) & (throughput > 0)

@@ -17,6 +17,7 @@ def trace_echoes(scene, frames, beam, ping, samples_, max_depth, absorption, rec
     setup = common.PathSetup.__new__(common.PathSetup)
     setup.scene, setup.frames, setup.connect, setup.depth_o, setup.absorption = \
         scene, frames, connect, max_depth, absorption
+    setup.guide = False
     setup.sensor = type("_Beam", (), {"beam": beam})()
     common.SonarIntegrator.sample(None, setup, ping, samples_, lambda k, rng, e, valid, hit: record(k, rng, e, valid),
                                   active)

@@ -48,6 +48,9 @@ class SonarBDPTIntegrator(SonarTOFIntegrator):
     strategy     all      ``all`` (every strategy, MIS weighted) or a whole number s: only the
                           strategies with s surface vertices on subpath A, unweighted (for
                           validation: unbiased for paths of at least max(s, 1) bounces)
+    guide        none     only ``none``: the subpaths are sampled by the BSDFs alone (the MIS
+                          weights would need ``sonar_tof``'s image guide's density at the other
+                          subpath's vertices)
     ============ ======== ====================================================================
 
     ``render_histogram`` returns the float64 ``(n_pings, n_bins)`` histogram like ``sonar_tof``'s;
@@ -57,6 +60,9 @@ class SonarBDPTIntegrator(SonarTOFIntegrator):
     """
 
     name = "sonar_bdpt"
+    # Its subpaths are sampled by the BSDFs alone: the MIS weights would need the guide's density
+    # along the other subpath's vertices.
+    GUIDES = ("none",)
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)

@@ -67,6 +67,8 @@ class SonarMLTIntegrator(SonarIntegrator):
     ping_step        1        small steps of the ping coordinate, as a fraction of the others'
                               (``scan`` only; 0 changes pings by large steps alone)
     bootstrap        0        bootstrap paths per ping; 0 takes half of ``spp`` (at least 4x chains)
+    guide            none     ``image``: the path maps primary samples to paths with image
+                              guiding (`image_guide`, as ``sonar_tof``'s ``guide``)
     ================ ======== =================================================================
 
     The defaults are the best settings measured on ``scenes_xml/`` (see the README's Benchmarks

@@ -1,0 +1,98 @@
+"""Image guiding: sample the next bounce towards the transducer's mirror image.
+
+A sonar is monostatic (or nearly: a multibeam's fan and beams share one point), so an echo
+that reached a target through a glossy or mirror-like surface goes home the same way: the path
+``T - P1 - x - P2 - T`` with ``P1``, ``P2`` on one smooth plate (``scenes_xml/hidden_target.xml``).
+After ``x`` (the boulder, diffuse) path tracing needs its BSDF sample to leave within the plate's
+narrow lobe around the one direction that the plate turns back to ``T``: on that scene 2 in 1000
+paths carried 99.9 % of the boulder's echo. That direction is known in closed form: by the
+image-source method (Urick, *Principles of Underwater Sound*, 3rd ed., 1983, sec. 5.5; Allen and
+Berkley 1979) the ray that leaves ``x``, reflects in the plane of ``P1`` and reaches ``T`` points
+at the image ``T'`` of ``T`` in that plane. Reflecting ``T`` in the tangent plane of every
+glossy vertex since the last diffuse one (``T' = R_k(...R_1(T))``) gives the unfolded target of a
+chain of mirrors, e.g. the double bounce of a corner reflector.
+
+The guided direction is one component of a one-sample mixture (Veach 1997, sec. 9.2.4): with
+probability ``alpha`` a Phong lobe ``(n_g + 1) / (2 pi) cos^n_g`` about ``normalize(T' - x)``,
+otherwise the BSDF's own sampling; the path weight is ``f cos / (alpha p_g + (1 - alpha) p_bsdf)``,
+so the estimator stays unbiased whatever the guide's width (the BSDF component covers every
+direction the BSDF reflects into). The width follows the mirror's lobe: a Phong lobe of
+exponent ``n`` at the plate, seen from ``x`` through the unfolded line of length ``D`` of which
+``d`` lies beyond the plate, is narrower by ``d / D`` (a turn ``delta`` at ``x`` moves the hit
+point by ``delta |x - P|`` and turns the reflected ray by ``delta D / d``), so
+``n_g = n (D / d)^2``. A vertex counts as a mirror when its BSDF picked its glossy component and
+the lobe is narrow: the exponent read from the BSDF's density at the mirror direction,
+``n = 2 pi p(mirror) - 1`` (exact for a pure Phong lobe, an underestimate when the BSDF mixes in
+diffuse scatter, which only widens the guide), at least `MIN_EXPONENT`.
+
+Where no glossy vertex precedes a bounce, ``alpha`` is 0 and the bounce is the BSDF's sample, so
+scenes without smooth surfaces are traced as before (one extra BSDF evaluation per bounce).
+The primary samples keep their layout (`samples`): dim ``2 + 3k`` picks the component (rescaled
+for the BSDF's own lobe choice), dims ``3 + 3k``, ``4 + 3k`` draw the direction.
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+#: Probability of the guided component after a mirror-like vertex.
+GUIDE_PROB = 0.5
+#: Narrowest lobe a vertex needs to count as a mirror (Phong exponent; 20: about 30 deg wide).
+MIN_EXPONENT = 20.0
+#: Cap of the guide's exponent (a lobe about 0.4 deg wide).
+MAX_EXPONENT = 1.0e5
+
+
+def phong_pdf(n, cos_a):
+    """Solid-angle density of the normalised Phong lobe ``(n + 1) / (2 pi) cos^n``."""
+    return dr.select(cos_a > 0, (n + 1) * (0.5 * dr.inv_pi) * dr.power(dr.maximum(cos_a, 0.0), n), 0.0)
+
+
+def sample_bounce(bsdf, ctx, si, image, n_chain, segment, u1, u2, active):
+    """The next direction at ``si`` from the mixture of the guide and the BSDF.
+
+    ``image`` is the transducer's image through the glossy vertices since the last diffuse one
+    and ``n_chain`` the narrowest of their lobes' exponents (0: no mirror, the BSDF samples
+    alone); ``segment`` is the length of the ray that reached ``si`` (from the previous vertex,
+    the chain's last mirror when there is one). Returns ``(wo_world, weight, glossy)``: the world
+    direction, ``f cos / pdf`` of the mixture, and whether the BSDF's glossy lobe was sampled
+    (the vertex may then extend the chain, `advance`).
+    """
+    guided = n_chain > 0
+    alpha = dr.select(guided, GUIDE_PROB, 0.0)
+    use_g = active & guided & (u1 < alpha)
+    u_b = dr.select(guided, dr.minimum((u1 - alpha) / (1.0 - alpha), dr.one_minus_epsilon(mi.Float)), u1)
+    bs, _ = bsdf.sample(ctx, si, u_b, u2, active & ~use_g)
+
+    to_image = image - si.p
+    total = dr.norm(to_image)
+    axis = to_image / dr.maximum(total, 1e-12)
+    beyond = dr.maximum(total - segment, 1e-3 * total)
+    n_g = dr.minimum(n_chain * dr.square(total / beyond), MAX_EXPONENT)
+    cos_a = dr.power(u2.x, 1.0 / (n_g + 1.0))
+    sin_a = dr.safe_sqrt(1.0 - cos_a * cos_a)
+    s, c = dr.sincos(2.0 * dr.pi * u2.y)
+    wo_g = mi.Frame3f(axis).to_world(mi.Vector3f(sin_a * c, sin_a * s, cos_a))
+
+    wo = dr.select(use_g, wo_g, si.to_world(bs.wo))
+    value, p_bsdf = bsdf.eval_pdf(ctx, si, si.to_local(wo), active)
+    p_guide = dr.select(guided, phong_pdf(n_g, dr.dot(wo, axis)), 0.0)
+    pdf = alpha * p_guide + (1.0 - alpha) * p_bsdf
+    ok = active & (pdf > 0)
+    weight = dr.select(ok, value.x / dr.select(ok, pdf, 1.0), 0.0)
+    glossy = ~use_g & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Glossy)
+    return wo, weight, glossy
+
+
+def advance(bsdf, si, origin, image, n_chain, glossy, active):
+    """The chain after ``si``: ``(image, n_chain)`` extended by ``si`` when its glossy lobe was
+    sampled and is narrow (the image reflected in its tangent plane), else restarted at the
+    transducer ``origin``."""
+    mirror_dir = mi.Vector3f(-si.wi.x, -si.wi.y, si.wi.z)
+    peak = bsdf.pdf(mi.BSDFContext(mi.TransportMode.Importance), si, mirror_dir, active & glossy)
+    n_here = 2.0 * dr.pi * peak - 1.0
+    mirror = active & glossy & (n_here >= MIN_EXPONENT)
+    nrm = si.sh_frame.n
+    reflected = image - 2.0 * dr.dot(image - si.p, nrm) * nrm
+    return (dr.select(mirror, reflected, origin),
+            dr.select(mirror, dr.select(n_chain > 0, dr.minimum(n_chain, n_here), n_here), 0.0))
