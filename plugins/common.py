@@ -164,7 +164,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
 
     name = "sonar"
     #: The ``guide`` values this integrator takes, the first its default (`image_guide`).
-    GUIDES = ("none", "image")
+    GUIDES = ("image", "none")
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
@@ -285,7 +285,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
         """The `PathSetup` of one render (sensor resolved, ``max_depth`` checked)."""
         depth = check_max_depth(self.max_depth if max_depth is None else int(max_depth), self.name)
         setup = PathSetup(scene, resolve_sensor(scene, sensor), depth, pose)
-        setup.guide = self.guide == "image"
+        setup.guide = self.guide == "image" and image_guide.has_mirrors(scene)
         return setup
 
     def sample(self, setup: PathSetup, ping, samples, record=None, active=True, mode=None, δ=None,
@@ -352,6 +352,10 @@ class SonarIntegrator(mi.SamplingIntegrator):
         # vertices since the last diffuse one, and the chain's narrowest lobe (0: no chain).
         guide = getattr(setup, "guide", False)  # a bare setup (shared_beams, echo_path) is unguided
         image, n_chain = mi.Point3f(origin), mi.Float(0.0)
+        # With ``setup.tag_hard`` the echoes after a chained vertex are told apart (``record``'s
+        # sixth argument): the paths that only the guide finds well (`sonar_mlt`'s split).
+        tag = guide and getattr(setup, "tag_hard", False)
+        hard = mi.Bool(False)
 
         while dr.hint(active, label="sonar_echo_path"):
             si = scene.ray_intersect(ray, active)
@@ -371,13 +375,17 @@ class SonarIntegrator(mi.SamplingIntegrator):
             energy = throughput * f * gain / dr.square(dist) * dr.exp2(-atten * total)
             echo = active & (energy > 0)
             echo &= ~scene.ray_test(si.spawn_ray_to(origin), echo)
-            record(depth, 0.5 * total, energy, echo, si)
+            if dr.hint(tag, mode="scalar"):
+                record(depth, 0.5 * total, energy, echo, si, hard)
+            else:
+                record(depth, 0.5 * total, energy, echo, si)
 
             base = DIMS_EMIT + DIMS_PER_BOUNCE * depth
             if dr.hint(guide, mode="scalar"):
-                wo, bounce_weight, glossy = image_guide.sample_bounce(
+                hard |= active & (n_chain > 0)
+                wo, bounce_weight = image_guide.sample_bounce(
                     bsdf, ctx, si, image, n_chain, segment, samples.get(base), samples.get2(base + 1), active)
-                image, n_chain = image_guide.advance(bsdf, si, origin, image, n_chain, glossy, active)
+                image, n_chain = image_guide.advance(bsdf, si, origin, image, n_chain, active)
                 throughput *= bounce_weight
                 ray = si.spawn_ray(wo)
             else:

@@ -20,18 +20,24 @@ direction the BSDF reflects into). The width follows the mirror's lobe: a Phong 
 exponent ``n`` at the plate, seen from ``x`` through the unfolded line of length ``D`` of which
 ``d`` lies beyond the plate, is narrower by ``d / D`` (a turn ``delta`` at ``x`` moves the hit
 point by ``delta |x - P|`` and turns the reflected ray by ``delta D / d``), so
-``n_g = n (D / d)^2``. A vertex counts as a mirror when its BSDF picked its glossy component and
-the lobe is narrow: the exponent read from the BSDF's density at the mirror direction,
+``n_g = n (D / d)^2``. A vertex counts as a mirror when its BSDF has a narrow lobe, whichever
+component the path sampled there (a path that left the plate diffusely and met the target
+returns through the plate's lobe all the same; tying the chain to the sampled component left
+those paths to chance and they were most of the remaining noise on hidden_target): the
+exponent read from the BSDF's density at the mirror direction,
 ``n = 2 pi p(mirror) - 1`` (exact for a pure Phong lobe, an underestimate when the BSDF mixes in
 diffuse scatter, which only widens the guide), at least `MIN_EXPONENT`.
 
-Where no glossy vertex precedes a bounce, ``alpha`` is 0 and the bounce is the BSDF's sample, so
-scenes without smooth surfaces are traced as before (one extra BSDF density at each glossy
-bounce, to read its lobe).
+Where no mirror precedes a bounce, ``alpha`` is 0 and the bounce is the BSDF's sample. A scene
+without any mirror-like BSDF (`has_mirrors`: concrete, sand, rock, the seabed presets) is traced by
+the unguided kernel itself, so it costs nothing; where there are mirrors each bounce pays one
+more BSDF density, to read the lobe (6-28 % more time per path, `benchmarks/guide.py`).
 The primary samples keep their layout (`samples`): dim ``2 + 3k`` picks the component (rescaled
 for the BSDF's own lobe choice), dims ``3 + 3k``, ``4 + 3k`` draw the direction.
 """
 from __future__ import annotations
+
+import math
 
 import drjit as dr
 import mitsuba as mi
@@ -45,6 +51,28 @@ MIN_EXPONENT = 100.0
 MAX_EXPONENT = 1.0e5
 
 
+def lobe_exponent(bsdf) -> float:
+    """The narrowest lobe ``bsdf`` can have, as the exponent `advance` reads from its density (at
+    normal incidence, where the acoustic BSDF's diffuse share of the density is largest, so its
+    smallest reading is its largest here); infinity for a BSDF of unknown shape (it may be a
+    mirror), 0 for one without a specular part."""
+    from .acoustic_bsdf import AcousticBSDF
+
+    if not isinstance(bsdf, AcousticBSDF):
+        return math.inf
+    d, s, n = (float(dr.detach(getattr(bsdf, k))[0]) for k in ("diffuse", "specular", "shininess"))
+    if s <= 0:
+        return 0.0
+    p_s = s / (d + s)
+    return 2.0 * math.pi * (p_s * (n + 1.0) * 0.5 / math.pi + (1.0 - p_s) / math.pi) - 1.0
+
+
+def has_mirrors(scene) -> bool:
+    """Whether any shape of ``scene`` has a BSDF whose lobe counts as a mirror (`MIN_EXPONENT`):
+    without one no chain can form, so the integrators trace their unguided kernel."""
+    return any(lobe_exponent(shape.bsdf()) >= MIN_EXPONENT for shape in scene.shapes())
+
+
 def phong_pdf(n, cos_a):
     """Solid-angle density of the normalised Phong lobe ``(n + 1) / (2 pi) cos^n``."""
     return dr.select(cos_a > 0, (n + 1) * (0.5 * dr.inv_pi) * dr.power(dr.maximum(cos_a, 0.0), n), 0.0)
@@ -56,9 +84,8 @@ def sample_bounce(bsdf, ctx, si, image, n_chain, segment, u1, u2, active):
     ``image`` is the transducer's image through the glossy vertices since the last diffuse one
     and ``n_chain`` the narrowest of their lobes' exponents (0: no mirror, the BSDF samples
     alone); ``segment`` is the length of the ray that reached ``si`` (from the previous vertex,
-    the chain's last mirror when there is one). Returns ``(wo_world, weight, glossy)``: the world
-    direction, ``f cos / pdf`` of the mixture, and whether the BSDF's glossy lobe was sampled
-    (the vertex may then extend the chain, `advance`).
+    the chain's last mirror when there is one). Returns ``(wo_world, weight)``: the world
+    direction and ``f cos / pdf`` of the mixture.
     """
     guided = n_chain > 0
     alpha = dr.select(guided, GUIDE_PROB, 0.0)
@@ -83,18 +110,17 @@ def sample_bounce(bsdf, ctx, si, image, n_chain, segment, u1, u2, active):
     pdf = alpha * phong_pdf(n_g, dr.dot(wo, axis)) + (1.0 - alpha) * p_bsdf
     ok = active & guided & (pdf > 0)
     weight = dr.select(guided, dr.select(ok, value.x / dr.select(ok, pdf, 1.0), 0.0), bsdf_weight.x)
-    glossy = ~use_g & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Glossy)
-    return wo, weight, glossy
+    return wo, weight
 
 
-def advance(bsdf, si, origin, image, n_chain, glossy, active):
-    """The chain after ``si``: ``(image, n_chain)`` extended by ``si`` when its glossy lobe was
-    sampled and is narrow (the image reflected in its tangent plane), else restarted at the
-    transducer ``origin``."""
+def advance(bsdf, si, origin, image, n_chain, active):
+    """The chain after ``si``: ``(image, n_chain)`` extended by ``si`` when its BSDF's lobe is
+    narrow (the image reflected in its tangent plane), else restarted at the transducer
+    ``origin``."""
     mirror_dir = mi.Vector3f(-si.wi.x, -si.wi.y, si.wi.z)
-    peak = bsdf.pdf(mi.BSDFContext(mi.TransportMode.Importance), si, mirror_dir, active & glossy)
+    peak = bsdf.pdf(mi.BSDFContext(mi.TransportMode.Importance), si, mirror_dir, active)
     n_here = 2.0 * dr.pi * peak - 1.0
-    mirror = active & glossy & (n_here >= MIN_EXPONENT)
+    mirror = active & (n_here >= MIN_EXPONENT)
     nrm = si.sh_frame.n
     reflected = image - 2.0 * dr.dot(image - si.p, nrm) * nrm
     return (dr.select(mirror, reflected, origin),

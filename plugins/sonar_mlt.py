@@ -11,6 +11,7 @@ from mitsonar._checks import require
 
 from .common import PathSetup, SonarIntegrator
 from .jit_arrays import upload
+from .mlt_split import MAX_SHARE, render_split
 from .props import count, number, text
 from .samples import HashSamples, n_dims
 
@@ -26,7 +27,11 @@ class SonarMLTIntegrator(SonarIntegrator):
     ``sonar_tof`` traces (the same function, `SonarIntegrator.sample`). With
     ``normalisation="scan"`` (the default) the ping is one more primary coordinate: the chains
     sample ``f`` over (ping, ``U``) of the whole scan and go to the pings where the echoes are;
-    with ``"ping"`` every ping is a target of its own. Then:
+    with ``"ping"`` every ping is a target of its own. With the image guide (the default) the
+    chains take only the *hard* echoes, those after a bounce that follows a mirror-like one, and
+    path tracing the rest, with the split of the budget chosen by a pilot (`mlt_split`); a scene
+    without mirror-like surfaces is then path traced. The chains, over every echo or the hard
+    ones:
 
     1. a bootstrap of uniform paths (``bootstrap`` per ping) estimates the normalisation
        ``b = E[f]``, over the scan or per ping;
@@ -67,8 +72,12 @@ class SonarMLTIntegrator(SonarIntegrator):
     ping_step        1        small steps of the ping coordinate, as a fraction of the others'
                               (``scan`` only; 0 changes pings by large steps alone)
     bootstrap        0        bootstrap paths per ping; 0 takes half of ``spp`` (at least 4x chains)
-    guide            none     ``image``: the path maps primary samples to paths with image
-                              guiding (`image_guide`, as ``sonar_tof``'s ``guide``)
+    guide            image    ``image``: primary samples map to image-guided paths (`image_guide`,
+                              as ``sonar_tof``'s ``guide``); ``none``: BSDF sampling
+    split            auto     with the guide: path tracing estimates the echoes before any
+                              chained bounce, the chains the others (`mlt_split`); ``auto``
+                              sizes the chains' share from a pilot, a number in [0, 0.9] fixes
+                              it; ``off`` (or ``guide="none"``): chains over every echo
     ================ ======== =================================================================
 
     The defaults are the best settings measured on ``scenes_xml/`` (see the README's Benchmarks
@@ -91,6 +100,12 @@ class SonarMLTIntegrator(SonarIntegrator):
         self.bootstrap = count(props, "bootstrap", 0, "sonar_mlt")
         self.normalisation = text(props, "normalisation", "scan", "sonar_mlt")
         self.ping_step = number(props, "ping_step", 1.0, "sonar_mlt")
+        self.split = "auto"
+        if "split" in props:
+            if props.type("split").name == "String":
+                self.split = text(props, "split", "auto", "sonar_mlt")
+            else:
+                self.split = number(props, "split", 0.0, "sonar_mlt")
         self._check()
 
     def _check(self):
@@ -104,6 +119,8 @@ class SonarMLTIntegrator(SonarIntegrator):
         need(0.0 <= self.ping_step <= 1.0, "ping_step", self.ping_step,
              "a fraction in [0, 1] of the small step applied to the ping")
         need(0.0 <= self.large_step <= 1.0, "large_step", self.large_step, "a probability in [0, 1]")
+        need(self.split in ("auto", "off") or (not isinstance(self.split, str) and 0.0 <= self.split <= MAX_SHARE),
+             "split", self.split, f"'auto', 'off', or the chains' share of the budget, a number in [0, {MAX_SHARE}]")
         need(0.0 < self.small_step_min <= self.small_step_max < 0.5, "small_step_min/small_step_max",
              (self.small_step_min, self.small_step_max), "0 < small_step_min <= small_step_max < 0.5")
 
@@ -152,8 +169,18 @@ class SonarMLTIntegrator(SonarIntegrator):
 
     # ------------------------------------------------------------------ rendering
     def render_histogram(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None, progress=None):
-        """Mean echo energy per bin, float64 ``(n_pings, n_bins)`` (same units as ``sonar_tof``)."""
-        ctx = _Context(self, self.setup(scene, sensor, pose, max_depth))
+        """Mean echo energy per bin, float64 ``(n_pings, n_bins)`` (same units as ``sonar_tof``):
+        the split render (`mlt_split`) with the image guide, else chains over every echo."""
+        setup = self.setup(scene, sensor, pose, max_depth)
+        self.plan(setup.sensor.n_pings, spp)  # refuses explicit counts that do not fit, before any work
+        if self.split != "off" and setup.guide:
+            return render_split(self, setup, seed, int(spp), progress)
+        return self.metropolis(setup, seed, spp, progress=progress)
+
+    def metropolis(self, setup, seed, spp, hard_only=False, progress=None):
+        """The Metropolis estimate of every echo (of the hard ones, `mlt_split`, with
+        ``hard_only``) with a budget of ``spp`` path evaluations per row."""
+        ctx = _Context(self, setup, hard_only)
         sensor, depth = ctx.sensor, ctx.depth
         n_pings, n_bins = sensor.n_pings, sensor.n_bins
         boot, chains, mutations = self.plan(n_pings, spp)
@@ -351,8 +378,9 @@ class _Mutation:
 class _Context:
     """One render's `PathSetup` and the per-bounce records of its path evaluations."""
 
-    def __init__(self, integrator, setup: PathSetup):
+    def __init__(self, integrator, setup: PathSetup, hard_only=False):
         self.integrator, self.setup = integrator, setup
+        self.hard_only = hard_only
         self.sensor, self.depth, self.depth_o, self.bins = setup.sensor, setup.depth, setup.depth_o, setup.bins
 
     def trace(self, samples, ping, lane, f, bins, vals):
@@ -360,8 +388,10 @@ class _Context:
         ``bins``/``vals`` are given, record each bounce's bin and energy at ``lane * depth + k``."""
         window, depth = self.bins, self.depth
 
-        def record(k, rng, energy, valid, hit):
+        def record(k, rng, energy, valid, hit, hard=None):
             b, valid = window.index(rng, valid)
+            if hard is not None:
+                valid &= hard
             # Each lane adds only to its own total: no conflicts. Left to Auto, Dr.Jit would
             # expand f into one copy per thread with its size written into the kernel, which
             # recompiles the bootstrap at every new spp and adds a reduction pass.
@@ -371,7 +401,9 @@ class _Context:
                 dr.scatter(bins, b, slot, valid)
                 dr.scatter(vals, energy, slot, valid)
 
+        self.setup.tag_hard = self.hard_only
         self.integrator.sample(self.setup, ping, samples, record)
+        self.setup.tag_hard = False
 
     def records(self, n):
         """Zeroed path totals and per-bounce (bin, energy) records for ``n`` lanes."""

@@ -56,12 +56,13 @@ class SonarTOFIntegrator(SonarIntegrator):
                           draws the fan's directions as one sequence per frame. Same
                           expectation, other variance; per-row poses and gradients use the
                           per-row paths
-    guide        none     ``image``: after a mirror-like bounce, sample half of the next
-                          bounces towards the transducer's image in the mirror's plane
-                          (`image_guide`): echoes seen through glossy plates get 4-20x less
-                          noise at equal time (hidden_target, periscope), other scenes the
-                          same noise for 0-20 % more time; ``none``: BSDF sampling only.
-                          Gradient renders trace unguided paths
+    guide        image    ``image``: after a bounce on a mirror-like surface (a Phong lobe of
+                          exponent >= 100: steel plates, a calm sea surface), half of the next
+                          bounces aim at the transducer's image in its plane (`image_guide`):
+                          echoes seen only through such plates get 5-20x less noise at equal
+                          time (hidden_target, periscope); scenes without mirror-like BSDFs
+                          trace the unguided kernel (no cost), others pay 6-28 % more time per
+                          path. ``none``: BSDF sampling only. Gradient renders are unguided
     ============ ======== ====================================================================
 
     ``mi.render(scene)`` returns the range-intensity image as a tensor (n_pings, n_bins, 1);

@@ -1,0 +1,127 @@
+"""``sonar_mlt``'s split of path space: path tracing for the bulk, Metropolis chains for the echoes
+that only the image guide finds.
+
+Metropolis sampling pays where a few narrow paths carry an echo (a target seen through a glossy
+plate: ``hidden_target``, ``periscope``) and loses where path tracing with stratified emission is
+already good (direct echoes of walls and floors: the box 6-10x, measured). So the echoes are
+split by a deterministic function of the path, which keeps the sum unbiased: an echo is *hard*
+when the path passed a chained vertex before it (a bounce after a mirror-like one, where
+`image_guide` aims at the transducer's image; ``record``'s ``hard``), else *easy*. Path tracing
+(Sobol emission, image guided, `samples.SobolSamples`) estimates the easy echoes, the Metropolis
+chains (`sonar_mlt`) the hard ones:
+
+    I = E_pt[easy echoes] + E_mlt[hard echoes].
+
+The budget ``spp`` (path evaluations per row) is split by a pilot: the first ``spp / 8`` (at
+least 16) path-traced paths, whose easy echoes are kept, estimate each class's variance per path,
+``V_c = sum over bins of (E[e^2] - E[e]^2)``; the chains get the share
+``sqrt(V_hard) / (sqrt(V_hard) + sqrt(V_easy))`` of the rest (the allocation that minimises the
+summed variance of two independent estimators of equal cost per sample), at most `MAX_SHARE`, and
+none when that is under `MIN_CHAIN_SPP` evaluations per row or the pilot found no hard echo: then
+every echo is path traced and ``sonar_mlt`` costs what ``sonar_tof`` with ``guide="image"`` costs.
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .samples import SobolSamples
+
+#: Fraction of ``spp`` the pilot traces (at least `MIN_PILOT` paths per row).
+PILOT_FRACTION = 1.0 / 8.0
+MIN_PILOT = 16
+#: Most of the budget the chains may take, and the least worth running them for.
+MAX_SHARE = 0.9
+MIN_CHAIN_SPP = 64
+#: Lanes of one path-tracing pass.
+MAX_LANES = 1 << 22
+
+
+def traced(integrator, setup, seed, start, count, moments=False):
+    """Samples ``start .. start + count`` of every row, path traced (Sobol emission, the setup's
+    guide): the summed energies per bin of the easy and the hard echoes, float64 arrays, and with
+    ``moments`` their summed squares (per echo: a path's echoes rarely share a bin)."""
+    n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
+    count_o = dr.opaque(mi.UInt32, count)
+    lane = dr.arange(mi.UInt32, n_rows * count)
+    ping = lane // count_o
+    samples = SobolSamples(dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF), ping,
+                           lane - ping * count_o + dr.opaque(mi.UInt32, start))
+    sums = [dr.zeros(mi.Float64, n_rows * n_bins) for _ in range(4 if moments else 2)]
+    bins = setup.bins
+
+    def record(k, rng, energy, valid, hit, hard):
+        b, valid = bins.index(rng, valid)
+        at, e = bins.flat(ping, b), mi.Float64(energy)
+        for i, keep in enumerate((valid & ~hard, valid & hard)):
+            dr.scatter_add(sums[i], e, at, keep)
+            if moments:
+                dr.scatter_add(sums[2 + i], e * e, at, keep)
+
+    setup.tag_hard = True
+    integrator.sample(setup, ping, samples, record)
+    setup.tag_hard = False
+    dr.eval(sums)
+    return [s.numpy() for s in sums]
+
+
+def share(easy, hard, easy2, hard2, n):
+    """The chains' share of the budget from a pilot of ``n`` paths per row (sums and summed squares
+    of the two classes): the split of the module docstring."""
+    if not hard.any() or n < 2:
+        return 0.0
+    v_easy = max(float((easy2 / n - (easy / n) ** 2).sum()), 0.0)
+    v_hard = max(float((hard2 / n - (hard / n) ** 2).sum()), 0.0)
+    if v_hard == 0.0:
+        return 0.0
+    return min(MAX_SHARE, math.sqrt(v_hard) / (math.sqrt(v_hard) + math.sqrt(v_easy)))
+
+
+def render_split(integrator, setup, seed, spp, progress=None):
+    """The split render of ``integrator`` (a `sonar_mlt.SonarMLTIntegrator`): float64
+    ``(n_rows, n_bins)``; the plan it chose in ``integrator.last_plan``. ``share`` fixed by the
+    integrator's ``split`` (a number) or chosen by the pilot (``auto``)."""
+    n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
+    pilot = min(spp, max(MIN_PILOT, int(spp * PILOT_FRACTION)))
+    # Explicit chains, mutations or bootstrap: the chains spend what they ask (it fits spp, checked
+    # by `plan` before any work), path tracing the rest.
+    explicit = bool(integrator.chains or integrator.mutations or integrator.bootstrap)
+    if explicit:
+        boot, chains, mutations = integrator.plan(n_rows, spp)
+        want = boot + chains * mutations
+        pilot = min(pilot, spp - want)
+        if pilot < 2:
+            return integrator.metropolis(setup, seed, spp, progress=progress)
+    easy, hard, easy2, hard2 = traced(integrator, setup, seed, 0, pilot, moments=True)
+    if explicit:
+        chosen = want / spp if hard.any() else 0.0
+        n_chain = want if hard.any() else 0
+    else:
+        chosen = share(easy, hard, easy2, hard2, pilot) if integrator.split == "auto" else float(integrator.split)
+        n_chain = int(chosen * (spp - pilot))
+        if n_chain < MIN_CHAIN_SPP:
+            n_chain = 0
+    n_traced = spp - n_chain
+    per_pass = max(1, MAX_LANES // n_rows)
+    done = pilot
+    if progress is not None:
+        progress(done, spp)
+    while done < n_traced:
+        count = min(per_pass, n_traced - done)
+        e, h = traced(integrator, setup, seed, done, count)
+        easy, hard = easy + e, hard + h
+        done += count
+        if progress is not None:
+            progress(done, spp)
+    plan = {"split": chosen, "pilot": pilot, "traced": n_traced, "chains_spp": n_chain}
+    if n_chain == 0:
+        integrator.last_plan = plan
+        return ((easy + hard) / n_traced).reshape(n_rows, n_bins)
+    chained = integrator.metropolis(setup, seed, spp if explicit else n_chain, hard_only=True,
+                                    progress=None if progress is None else
+                                    (lambda d, t: progress(n_traced + d * n_chain // max(t, 1), spp)))
+    integrator.last_plan = {**plan, **integrator.last_plan}
+    return (easy / n_traced).reshape(n_rows, n_bins) + chained
