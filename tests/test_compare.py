@@ -296,8 +296,10 @@ def test_hidden_target_echoes_only_by_its_mirror_image(mitsonar_mod):
     # on the pings whose boresight the plate turns towards the boulder (around bearing 0)
     per_ping = far.sum(1)
     assert per_ping[5:16].sum() > 0.95 * per_ping.sum()
-    # the pings 8-10 deg off hold only the 3 deg beam's far tail of it (1.2e-6 with seed 1)
-    assert per_ping[:3].sum() + per_ping[-3:].sum() < 1e-5 * per_ping.sum()
+    # the pings 8-10 deg off hold only the 3 deg beam's far tail of it: the boulder's edge is 4 deg
+    # or more off their axes, where the two-way gain is exp(-8 ln2 (4/3)^2) = 5e-5 (6.7e-5 of it
+    # with seed 1; the unguided tracer, which finds these paths rarely, had 1.2e-6)
+    assert per_ping[:3].sum() + per_ping[-3:].sum() < 1e-3 * per_ping.sum()
 
 
 def test_explicit_mlt_settings_set_the_spp_floor(first_run, small_scene, mitsonar_mod):
