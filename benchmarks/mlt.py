@@ -14,8 +14,8 @@ The headline figure per scene is the equal-time error ratio ``rel_l2(sonar_tof) 
 (> 1: Metropolis is better), the geometric mean over the budgets of the time-adjusted ratios
 (each error scaled by sqrt(its measured seconds), i.e. compared at exactly equal time), on the
 relative L2 error over all bins with the reference's own noise removed (`rel_l2_debiased`).
-Targets (issue 5): on the hard scene >= 2 (Metropolis at least 2x lower error); on the box
->= 1/1.5 (within 1.5x of path tracing). The JSON says for each scene whether its target is met,
+Targets (issue "Metropolis that wins", `TARGETS`): hidden_target and periscope >= 2, glossy_corridor
+>= 1.2, box, slot_chamber and intake >= 1/1.1. The JSON says for each scene whether its target is met,
 and the lines of ``verdict`` say it in words, including where Metropolis loses.
 
 Renders are timed warm: each new spp is rendered once untimed first, so an integrator whose kernels
@@ -43,12 +43,15 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENES = os.path.join(HERE, "..", "scenes_xml")
 
-#: Role, target ratio (err_baseline / err_mlt must reach it) and its wording, per scene.
+#: Role, target ratio (err_baseline / err_mlt must reach it) and its wording, per scene (issue
+#: "Metropolis that wins"; the baseline is sonar_tof with its defaults, image guided since then).
 TARGETS = {
-    "box": ("easy", 1 / 1.5, "within 1.5x of path tracing's error"),
-    "slot_chamber": ("hard", 2.0, "at least 2x lower error than path tracing"),
-    "glossy_corridor": ("hard", 2.0, "at least 2x lower error than path tracing"),
-    "hidden_target": ("diagnostic", None, None),
+    "box": ("easy", 1 / 1.1, "no worse than 1.1x path tracing's error"),
+    "slot_chamber": ("easy", 1 / 1.1, "no worse than 1.1x path tracing's error"),
+    "intake": ("easy", 1 / 1.1, "no worse than 1.1x path tracing's error"),
+    "glossy_corridor": ("hard", 1.2, "at least 1.2x lower error than path tracing"),
+    "hidden_target": ("hard", 2.0, "at least 2x lower error than path tracing"),
+    "periscope": ("hard", 2.0, "at least 2x lower error than path tracing"),
     "quay_wall": ("diagnostic", None, None),
 }
 #: Range windows scored on their own (information only; the targets use the whole scan).
@@ -56,6 +59,7 @@ REGIONS = {
     "slot_chamber": {"beyond_wall": (3.6, 12.0)},
     "glossy_corridor": {"beyond_8m": (8.0, 12.0)},
     "hidden_target": {"boulder_by_mirror": (6.0, 10.0)},
+    "periscope": {"boulder_by_two_mirrors": (10.4, 14.0)},
     "quay_wall": {"wall_corner": (10.4, 12.0)},
 }
 

@@ -17,8 +17,9 @@ least 16) path-traced paths, whose easy echoes are kept, estimate each class's v
 ``V_c = sum over bins of (E[e^2] - E[e]^2)``; the chains get the share
 ``sqrt(V_hard) / (sqrt(V_hard) + sqrt(V_easy))`` of the rest (the allocation that minimises the
 summed variance of two independent estimators of equal cost per sample), at most `MAX_SHARE`, and
-none when that is under `MIN_CHAIN_SPP` evaluations per row or the pilot found no hard echo: then
-every echo is path traced and ``sonar_mlt`` costs what ``sonar_tof`` with ``guide="image"`` costs.
+none when that is under `MIN_CHAIN_SPP` evaluations per row or the pilot found no hard echo (a
+scene without mirror-like surfaces has none): then every echo is path traced and ``sonar_mlt``
+is ``sonar_tof``, at its cost.
 """
 from __future__ import annotations
 
@@ -53,7 +54,9 @@ def traced(integrator, setup, seed, start, count, moments=False):
     sums = [dr.zeros(mi.Float64, n_rows * n_bins) for _ in range(4 if moments else 2)]
     bins = setup.bins
 
-    def record(k, rng, energy, valid, hit, hard):
+    def record(k, rng, energy, valid, hit, hard=None):
+        # without mirrors in the scene the kernel is the unguided one: every echo is easy
+        hard = mi.Bool(False) if hard is None else hard
         b, valid = bins.index(rng, valid)
         at, e = bins.flat(ping, b), mi.Float64(energy)
         for i, keep in enumerate((valid & ~hard, valid & hard)):

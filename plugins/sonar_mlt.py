@@ -173,7 +173,7 @@ class SonarMLTIntegrator(SonarIntegrator):
         the split render (`mlt_split`) with the image guide, else chains over every echo."""
         setup = self.setup(scene, sensor, pose, max_depth)
         self.plan(setup.sensor.n_pings, spp)  # refuses explicit counts that do not fit, before any work
-        if self.split != "off" and setup.guide:
+        if self.split != "off" and self.guide == "image":
             return render_split(self, setup, seed, int(spp), progress)
         return self.metropolis(setup, seed, spp, progress=progress)
 

@@ -159,3 +159,75 @@ def test_explicit_settings_must_fit_the_spp_budget(mitsonar_mod):
     scene = mitsonar_mod.load_scene(text)
     with pytest.raises(mitsonar_mod.SceneError, match="exceed spp = 64; raise spp"):
         mitsonar_mod.render_scan(scene, spp=64)
+
+
+def _scene(mitsonar_mod, name, n_pings=None):
+    import re
+
+    text = open(os.path.join(SCENES, f"{name}.xml")).read()
+    if n_pings is not None:
+        text = re.sub(r'(<integer name="n_pings" value=")\d+', rf"\g<1>{n_pings}", text)
+    return mitsonar_mod.load_scene(text)
+
+
+def test_split_partitions_the_echoes(mitsonar_mod):
+    """mlt_split's easy and hard echoes partition the path-traced scan exactly (same paths, same
+    seed), and on the hidden target the hard ones are the boulder's, seen through the plate (from
+    6.5 m on), the easy ones the plate's own (before 5.4 m)."""
+    import mitsuba as mi
+    from mitsonar.plugins.mlt_split import traced
+
+    scene = _scene(mitsonar_mod, "hidden_target")
+    mlt = mi.load_dict({"type": "sonar_mlt", "max_depth": 5})
+    easy, hard = traced(mlt, mlt.setup(scene, 0), 7, 0, 1024)
+    tof = mi.load_dict({"type": "sonar_tof", "max_depth": 5}).render_histogram(scene, 0, seed=7, spp=1024)
+    assert np.allclose((easy + hard).reshape(tof.shape) / 1024, tof, rtol=1e-9, atol=1e-300)
+    r = scene.sensors()[0].bin_centres()
+    easy, hard = easy.reshape(tof.shape).sum(0), hard.reshape(tof.shape).sum(0)
+    assert hard.sum() > 0.1 * easy.sum()
+    assert hard[r < 6.45].sum() == 0 and easy[r > 5.45].sum() < 1e-3 * easy.sum()
+
+
+def test_split_path_traces_a_scene_without_mirrors(mitsonar_mod):
+    """The box has no mirror-like surface: the pilot finds no hard echo, the chains get nothing and
+    sonar_mlt's scan is sonar_tof's, path for path (float64 sums in another order)."""
+    import mitsuba as mi
+
+    scene = _scene(mitsonar_mod, "box", 8)
+    mlt = mi.load_dict({"type": "sonar_mlt", "max_depth": 3})
+    a = mlt.render_histogram(scene, 0, seed=3, spp=512)
+    b = mi.load_dict({"type": "sonar_tof", "max_depth": 3}).render_histogram(scene, 0, seed=3, spp=512)
+    assert mlt.last_plan["chains_spp"] == 0 and mlt.last_plan["split"] == 0.0
+    assert np.allclose(a, b, rtol=1e-9, atol=1e-300)
+
+
+def test_split_gives_the_hidden_echoes_to_the_chains(mitsonar_mod):
+    """On the periscope the pilot gives the chains a share; a fixed split is taken as given; the
+    split render agrees with the guided path tracer in the boulder's window (z of window sums)."""
+    import mitsuba as mi
+
+    scene = _scene(mitsonar_mod, "periscope")
+    auto = mi.load_dict({"type": "sonar_mlt", "max_depth": 5})
+    auto.render_histogram(scene, 0, seed=1, spp=2048)
+    plan = auto.last_plan
+    assert 0 < plan["split"] <= 0.9 and plan["chains_spp"] > 0
+    assert plan["traced"] + plan["chains_spp"] == 2048
+    fixed = mi.load_dict({"type": "sonar_mlt", "max_depth": 5, "split": 0.5})
+    window = int(10.4 / 14 * 400)
+    sums = {"mlt": [], "tof": []}
+    tof = mi.load_dict({"type": "sonar_tof", "max_depth": 5})
+    for s in range(8):
+        sums["mlt"].append(fixed.render_histogram(scene, 0, seed=10 + s, spp=2048)[:, window:].sum())
+        sums["tof"].append(tof.render_histogram(scene, 0, seed=30 + s, spp=2048)[:, window:].sum())
+    assert fixed.last_plan["chains_spp"] == int(0.5 * (2048 - fixed.last_plan["pilot"]))
+    (m1, s1), (m2, s2) = ((np.mean(v), np.std(v, ddof=1) / math.sqrt(len(v))) for v in sums.values())
+    assert m1 > 0 and abs(m1 - m2) < 4 * math.hypot(s1, s2), (m1, s1, m2, s2)
+
+
+@pytest.mark.parametrize("value, kind", [("0.95", "float"), ("maybe", "string")])
+def test_bad_split_is_refused(mitsonar_mod, value, kind):
+    from conftest import scene_xml, sonar_xml
+
+    with pytest.raises(mitsonar_mod.SceneError, match=r"sonar_mlt 'split'.*'auto', 'off', or the chains' share"):
+        mitsonar_mod.load_scene(scene_xml(sonar_xml(n_pings=1, n_bins=4), integrator=f'<integrator type="sonar_mlt">'
+                                          f'<{kind} name="split" value="{value}"/></integrator>'))
