@@ -285,7 +285,7 @@ class SonarMLTIntegrator(SonarIntegrator):
 
     def to_string(self):
         return (f"SonarMLTIntegrator[max_depth={self.max_depth}, chains={self.chains or 'auto'}, "
-                f"large_step={self.large_step}]")
+                f"large_step={self.large_step}, guide={self.guide}, split={self.split}]")
 
 
 def _resample(f, k, rng):

@@ -171,4 +171,4 @@ class SonarTOFIntegrator(SonarIntegrator):
 
     def to_string(self):
         return (f"SonarTOFIntegrator[max_depth={self.max_depth}, sampling={self.sampling}, "
-                f"share_beams={str(self.share_beams).lower()}]")
+                f"share_beams={str(self.share_beams).lower()}, guide={self.guide}]")
