@@ -27,7 +27,7 @@ run only renders the comparisons (the JSON's ``seconds_total`` says how long a r
 repeats by default, because the errors are heavy-tailed (rare glossy paths): the ratio of a few
 repeats swings between runs (README, Benchmarks).
 
-Usage: python benchmarks/mlt.py [--budget 0.25,0.5,1,2] [--repeats 6] [--integrators sonar_tof,sonar_mlt]
+Usage: python benchmarks/mlt.py [--budget 0.25,0.5,1,2] [--repeats 6] [--integrators sonar_tof,sonar_mlt] [--split auto]
                                 [--scenes box,slot_chamber,glossy_corridor,hidden_target,quay_wall]
                                 [-o out/benchmark_mlt] [--reference-factor 16]
 """
@@ -77,6 +77,9 @@ def main(argv=None):
                     help="baseline,contender (default sonar_tof,sonar_mlt; sonar_tof,sonar_tof tests the machinery)")
     ap.add_argument("--scenes", default=",".join(TARGETS),
                     help=f"scene names in scenes_xml/ (default {','.join(TARGETS)})")
+    ap.add_argument("--split", default="auto",
+                    help="sonar_mlt's split (auto: the pilot's share; a share in [0, 0.9]; off: chains over every "
+                         "echo); its default, 0, is the path tracer itself (default auto)")
     ap.add_argument("-o", "--output", default=os.path.join("out", "benchmark_mlt"))
     ap.add_argument("--reference-factor", type=float, default=16.0)
     ap.add_argument("--seed", type=int, default=0)
@@ -110,6 +113,11 @@ def main(argv=None):
             print(line, file=sys.stderr, flush=True)
 
     base, other = names[0], (names[1] if names[1] != names[0] else f"{names[1]}#2")
+    try:
+        split = float(args.split)
+    except ValueError:
+        split = args.split
+    params = {other: {"split": split}} if names[1] == "sonar_mlt" else None
     t_start = time.perf_counter()
     out = {"benchmark": "mlt_vs_path_tracing_equal_time", "integrators": [base, other], "budgets_s": budgets,
            "repeats": args.repeats, "timing": "cold (compilations included)" if args.cold else
@@ -124,7 +132,7 @@ def main(argv=None):
         log(f"== {s} ({role})")
         result = compare(os.path.join(SCENES, f"{s}.xml"), names, budgets, folder, seed=args.seed,
                          repeats=args.repeats, regions=REGIONS.get(s), reference_factor=args.reference_factor,
-                         warm=not args.cold, log=log)
+                         warm=not args.cold, log=log, integrator_params=params)
         et = result["equal_time"]
         adjusted = [e["ratios"][other]["ratio_time_adjusted"] for e in et]
         raw = [e["ratios"][other]["ratio_raw"] for e in et]

@@ -22,6 +22,7 @@ target over the scan), the spread of the per-ping totals (``ping_total_cv2``), t
 f and the share of paths with f = 0.
 
     python benchmarks/mlt_oracle.py [--scenes box,slot_chamber,glossy_corridor,hidden_target] [--paths 4096]
+                                    [--guide image|none]
 
 The ratios are estimates from the paths traced: on hidden_target, where 2 paths in 1000 carry nearly
 all of the boulder's echo, 4096 paths per ping give an ideal ratio of 24 and 65536 give 18.
@@ -37,7 +38,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
-def analyse(name, paths, seed=7):
+def analyse(name, paths, seed=7, guide="image"):
     import drjit as dr
     import mitsuba as mi
 
@@ -46,7 +47,7 @@ def analyse(name, paths, seed=7):
     from mitsonar.plugins.sonar_mlt import _Context
 
     scene = mitsonar.load_scene(os.path.join(HERE, "..", "scenes_xml", f"{name}.xml"))
-    integrator = mi.load_dict({"type": "sonar_tof"})
+    integrator = mi.load_dict({"type": "sonar_tof", "guide": guide})
     depth = 5
     ctx = _Context(integrator, integrator.setup(scene, 0, max_depth=depth))
     P, B = ctx.sensor.n_pings, ctx.sensor.n_bins
@@ -102,8 +103,10 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", default="box,slot_chamber,glossy_corridor,hidden_target")
     ap.add_argument("--paths", type=int, default=4096)
+    ap.add_argument("--guide", default="image", choices=("image", "none"),
+                    help="the path function's guide (sonar_tof's default image, or none: BSDF sampling)")
     args = ap.parse_args(argv)
-    print(json.dumps([analyse(s, args.paths) for s in args.scenes.split(",")], indent=1))
+    print(json.dumps([analyse(s, args.paths, guide=args.guide) for s in args.scenes.split(",")], indent=1))
 
 
 if __name__ == "__main__":

@@ -98,12 +98,13 @@ def render_split(integrator, setup, seed, spp, progress=None):
         pilot = min(pilot, spp - want)
         if pilot < 2:
             return integrator.metropolis(setup, seed, spp, progress=progress)
-    easy, hard, easy2, hard2 = traced(integrator, setup, seed, 0, pilot, moments=True)
+    sums = traced(integrator, setup, seed, 0, pilot, moments=integrator.split == "auto" and not explicit)
+    easy, hard = sums[:2]
     if explicit:
         chosen = want / spp if hard.any() else 0.0
         n_chain = want if hard.any() else 0
     else:
-        chosen = share(easy, hard, easy2, hard2, pilot) if integrator.split == "auto" else float(integrator.split)
+        chosen = share(*sums, pilot) if integrator.split == "auto" else float(integrator.split)
         n_chain = int(chosen * (spp - pilot))
         if n_chain < MIN_CHAIN_SPP:
             n_chain = 0

@@ -29,7 +29,7 @@ class SonarMLTIntegrator(SonarIntegrator):
     sample ``f`` over (ping, ``U``) of the whole scan and go to the pings where the echoes are;
     with ``"ping"`` every ping is a target of its own. With the image guide (the default) the
     chains take only the *hard* echoes, those after a bounce that follows a mirror-like one, and
-    path tracing the rest, with the split of the budget chosen by a pilot (`mlt_split`); a scene
+    path tracing the rest, with the split of the budget chosen by ``split`` (`mlt_split`); a scene
     without mirror-like surfaces is then path traced. The chains, over every echo or the hard
     ones:
 
@@ -74,10 +74,14 @@ class SonarMLTIntegrator(SonarIntegrator):
     bootstrap        0        bootstrap paths per ping; 0 takes half of ``spp`` (at least 4x chains)
     guide            image    ``image``: primary samples map to image-guided paths (`image_guide`,
                               as ``sonar_tof``'s ``guide``); ``none``: BSDF sampling
-    split            auto     with the guide: path tracing estimates the echoes before any
-                              chained bounce, the chains the others (`mlt_split`); ``auto``
-                              sizes the chains' share from a pilot, a number in [0, 0.9] fixes
-                              it; ``off`` (or ``guide="none"``): chains over every echo
+    split            0        with the guide: the chains' share of the budget after a pilot;
+                              path tracing estimates the echoes before any chained bounce, the
+                              chains the others (`mlt_split`). 0 (the default): no chains, the
+                              scan is ``sonar_tof``'s (at equal time the chains lost 2-6x to
+                              the guided path tracer on every scene with mirrors, README
+                              "Benchmarks"); ``auto``: the share from the pilot's variances;
+                              a number in [0, 0.9]; ``off`` (or ``guide="none"``): chains over
+                              every echo, Kelemen's PSSMLT as before the guide
     ================ ======== =================================================================
 
     The defaults are the best settings measured on ``scenes_xml/`` (see the README's Benchmarks
@@ -100,7 +104,7 @@ class SonarMLTIntegrator(SonarIntegrator):
         self.bootstrap = count(props, "bootstrap", 0, "sonar_mlt")
         self.normalisation = text(props, "normalisation", "scan", "sonar_mlt")
         self.ping_step = number(props, "ping_step", 1.0, "sonar_mlt")
-        self.split = "auto"
+        self.split = 0.0
         if "split" in props:
             if props.type("split").name == "String":
                 self.split = text(props, "split", "auto", "sonar_mlt")

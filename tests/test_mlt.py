@@ -24,13 +24,16 @@ def scene_files():
 @pytest.mark.parametrize("name, params", [(f, {}) for f in scene_files()] + [
     # Mostly small steps with Kelemen's own step sizes: the chains, not the uniform samples of
     # the combination, carry the estimate.
-    ("box.xml", {"large_step": 0.01, "small_step_min": 1 / 1024, "small_step_max": 1 / 64}),
-    ("glossy_corridor.xml", {"large_step": 0.01}),
+    # (split "off": chains over every echo, Kelemen's PSSMLT)
+    ("box.xml", {"large_step": 0.01, "small_step_min": 1 / 1024, "small_step_max": 1 / 64, "split": "off"}),
+    ("glossy_corridor.xml", {"large_step": 0.01, "split": "off"}),
     # One target per ping (the chains never change ping), with the settings that suit it.
-    ("box.xml", {"normalisation": "ping", "large_step": 0.7}),
-    ("slot_chamber.xml", {"normalisation": "ping", "large_step": 0.05}),
+    ("box.xml", {"normalisation": "ping", "large_step": 0.7, "split": "off"}),
+    ("slot_chamber.xml", {"normalisation": "ping", "large_step": 0.05, "split": "off"}),
     # The ping coordinate changes by large steps only.
-    ("glossy_corridor.xml", {"ping_step": 0.0})])
+    ("glossy_corridor.xml", {"ping_step": 0.0, "split": "off"}),
+    # Classic chains over image-guided paths.
+    ("hidden_target.xml", {"split": "off"})])
 def test_mlt_has_the_expectation_of_path_tracing(mitsonar_mod, name, params):
     """Welch t tests on block sums (and the total) of independent renders, Bonferroni-corrected so
     that the whole test raises a false alarm with probability 1e-3 when both estimators have the
@@ -45,7 +48,9 @@ def test_mlt_has_the_expectation_of_path_tracing(mitsonar_mod, name, params):
     # plates (hidden_target, periscope) come from a few paths in 10^5 and a t test of 8 renders
     # does not see its heavy tail (test_image_guide checks the guide against BSDF sampling).
     pt = mi.load_dict({"type": "sonar_tof", "max_depth": 5, "guide": "image"})
-    mlt = mi.load_dict({"type": "sonar_mlt", "max_depth": 5, **params})
+    # Every scene with the split chosen by the pilot (chains for the echoes behind mirrors, path
+    # tracing for the rest; the default split 0 would be sonar_tof itself).
+    mlt = mi.load_dict({"type": "sonar_mlt", "max_depth": 5, "split": "auto", **params})
     runs = 8
     spp = max(1024, (1 << 18) // sensor.n_pings)
     groups = (min(10, sensor.n_pings), 6)
@@ -194,7 +199,7 @@ def test_split_path_traces_a_scene_without_mirrors(mitsonar_mod):
     import mitsuba as mi
 
     scene = _scene(mitsonar_mod, "box", 8)
-    mlt = mi.load_dict({"type": "sonar_mlt", "max_depth": 3})
+    mlt = mi.load_dict({"type": "sonar_mlt", "max_depth": 3, "split": "auto"})
     a = mlt.render_histogram(scene, 0, seed=3, spp=512)
     b = mi.load_dict({"type": "sonar_tof", "max_depth": 3}).render_histogram(scene, 0, seed=3, spp=512)
     assert mlt.last_plan["chains_spp"] == 0 and mlt.last_plan["split"] == 0.0
@@ -203,11 +208,12 @@ def test_split_path_traces_a_scene_without_mirrors(mitsonar_mod):
 
 def test_split_gives_the_hidden_echoes_to_the_chains(mitsonar_mod):
     """On the periscope the pilot gives the chains a share; a fixed split is taken as given; the
-    split render agrees with the guided path tracer in the boulder's window (z of window sums)."""
+    split render agrees with the guided path tracer in the boulder's window (z of window sums);
+    the default split (0) is the path tracer's scan."""
     import mitsuba as mi
 
     scene = _scene(mitsonar_mod, "periscope")
-    auto = mi.load_dict({"type": "sonar_mlt", "max_depth": 5})
+    auto = mi.load_dict({"type": "sonar_mlt", "max_depth": 5, "split": "auto"})
     auto.render_histogram(scene, 0, seed=1, spp=2048)
     plan = auto.last_plan
     assert 0 < plan["split"] <= 0.9 and plan["chains_spp"] > 0
@@ -222,6 +228,8 @@ def test_split_gives_the_hidden_echoes_to_the_chains(mitsonar_mod):
     assert fixed.last_plan["chains_spp"] == int(0.5 * (2048 - fixed.last_plan["pilot"]))
     (m1, s1), (m2, s2) = ((np.mean(v), np.std(v, ddof=1) / math.sqrt(len(v))) for v in sums.values())
     assert m1 > 0 and abs(m1 - m2) < 4 * math.hypot(s1, s2), (m1, s1, m2, s2)
+    default = mi.load_dict({"type": "sonar_mlt", "max_depth": 5}).render_histogram(scene, 0, seed=4, spp=256)
+    assert np.allclose(default, tof.render_histogram(scene, 0, seed=4, spp=256), rtol=1e-9, atol=1e-300)
 
 
 @pytest.mark.parametrize("value, kind", [("0.95", "float"), ("maybe", "string")])
