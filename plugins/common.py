@@ -67,7 +67,8 @@ class PathSetup:
     ``scene``, ``sensor``; ``frames`` the per-ping beam frames at ``pose``; ``connect`` what weights
     the connection back to the transducer (``SonarSensor.connection``); ``depth`` the surface
     bounces (and ``depth_o``, its opaque copy); ``absorption`` (opaque, dB/m); ``bins`` the range
-    window; ``guide`` whether paths are image guided (`image_guide`; the integrator's ``guide``). Every value that differs between renders is opaque: a new pose, window or depth never
+    window; ``guide`` whether paths are image guided (`image_guide`; set by the integrator).
+    Every value that differs between renders is opaque: a new pose, window or depth never
     recompiles a kernel.
     """
 

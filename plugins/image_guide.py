@@ -31,7 +31,7 @@ diffuse scatter, which only widens the guide), at least `MIN_EXPONENT`.
 Where no mirror precedes a bounce, ``alpha`` is 0 and the bounce is the BSDF's sample. A scene
 without any mirror-like BSDF (`has_mirrors`: concrete, sand, rock, the seabed presets) is traced by
 the unguided kernel itself, so it costs nothing; where there are mirrors each bounce pays one
-more BSDF density, to read the lobe (6-28 % more time per path, `benchmarks/guide.py`).
+more BSDF density, to read the lobe (0-31 % more time per path on the scenes of scenes_xml/, `benchmarks/guide.py`).
 The primary samples keep their layout (`samples`): dim ``2 + 3k`` picks the component (rescaled
 for the BSDF's own lobe choice), dims ``3 + 3k``, ``4 + 3k`` draw the direction.
 """

@@ -61,7 +61,7 @@ class SonarTOFIntegrator(SonarIntegrator):
                           bounces aim at the transducer's image in its plane (`image_guide`):
                           echoes seen only through such plates get 5-20x less noise at equal
                           time (hidden_target, periscope); scenes without mirror-like BSDFs
-                          trace the unguided kernel (no cost), others pay 6-28 % more time per
+                          trace the unguided kernel (no cost), others pay up to 31 % more time per
                           path. ``none``: BSDF sampling only. Gradient renders are unguided
     ============ ======== ====================================================================
 
