@@ -182,3 +182,182 @@ class KernelGrid:
         G = np.exp(-self._gamma * d2)
         G[G < self.kernel_cut] = 0.0  # the same cut as the queries: the approximated kernel is the cut one
         return G
+
+
+BRICK_SHIFT = 3  # LatticeGrid bricks of 8^3 lattice cells
+BRICK = 1 << BRICK_SHIFT
+
+
+class LatticeGrid:
+    """Nodes on a regular lattice (node ``j`` at ``(k_j + 1/2) h`` for integer ``k_j``), held for
+    the same two kernels as :class:`KernelGrid` without any search.
+
+    A lane at ``x`` lies in lattice cell ``i = floor(x / h)``; the nodes whose kernel reaches it
+    are among ``i + o`` for the fixed offsets ``o`` with ``sum_a max(|o_a| - 1/2, 0)^2 h^2 < r_cut^2``
+    (251 offsets for ``r_cut = 3.03 h``: ``lengthscale = h``, ``kernel_cut = 1e-2``). The RBF factorises over
+    the axes, ``exp(-gamma |d|^2) = prod_a exp(-gamma d_a^2)`` with ``d_a = (f_a - o_a - 1/2) h`` and
+    ``f = x / h - i``, so a lane forms ``3 (2R + 1)`` exponentials and one product per
+    neighbour; the offsets are unrolled into one kernel (no loop, no divergence). Which node sits
+    in a lattice cell is read from a two-level table: a dense array over the nodes' bounding box
+    in bricks of ``8^3`` cells (0: no node in the brick) and, per brick holding nodes, ``8^3``
+    entries ``node + 1`` (0: no node). An absent brick points to brick 0, all zeros. Memory is
+    ``4 bytes x (bricks in the box + 512 x bricks holding nodes)``.
+
+    Node order is the caller's (``order`` is the identity, kept for :class:`KernelGrid`'s interface).
+    The kernel is cut where ``|d|^2 >= r_cut^2``, the same set as :class:`KernelGrid`.
+    """
+
+    def __init__(self, lattice_index: np.ndarray, h: float, lengthscale: float, kernel_cut: float,
+                 variant: str = "llvm"):
+        mod = _variant(variant)
+        self.mod = mod
+        self.Float, self.UInt32, self.Int32 = mod.Float, mod.UInt32, mod.Int32
+        idx = np.asarray(lattice_index, dtype=np.int64).reshape(-1, 3)
+        self.n = len(idx)
+        self.h = float(h)
+        self.lengthscale = float(lengthscale)
+        self.kernel_cut = float(kernel_cut)
+        self.r_cut = cut_radius(lengthscale, kernel_cut)
+        self._gamma = 1.0 / (2.0 * self.lengthscale ** 2)
+        self.order = np.arange(self.n)
+        self.inv_order = self.order
+        rr = self.r_cut / self.h
+        self.R = int(math.floor(rr + 0.5))
+        while self.R - 0.5 >= rr:
+            self.R -= 1
+        self.base = idx.min(axis=0) if self.n else np.zeros(3, dtype=np.int64)
+        rel = idx - self.base
+        self.bdims = (rel.max(axis=0) >> BRICK_SHIFT) + 1 if self.n else np.ones(3, dtype=np.int64)
+        b = rel >> BRICK_SHIFT
+        bl = (b[:, 0] * self.bdims[1] + b[:, 1]) * self.bdims[2] + b[:, 2]
+        ub, slot = np.unique(bl, return_inverse=True)
+        top = np.zeros(int(np.prod(self.bdims)), dtype=np.uint32)
+        top[ub] = (np.arange(len(ub), dtype=np.uint32) + 1) * BRICK ** 3
+        loc = rel & (BRICK - 1)
+        pool = np.zeros((len(ub) + 1) * BRICK ** 3, dtype=np.uint32)
+        pos = (slot + 1) * BRICK ** 3 + (loc[:, 0] * BRICK + loc[:, 1]) * BRICK + loc[:, 2]
+        pool[pos] = np.arange(1, self.n + 1)
+        self.pool_size = len(pool)
+        self.pos = upload(self.UInt32, pos, np.uint32)
+        self._top_np = top
+        self.top = upload(self.UInt32, top, np.uint32)
+        self.pool = upload(self.UInt32, pool, np.uint32)
+        offs = np.stack(np.meshgrid(*[np.arange(-self.R, self.R + 1)] * 3, indexing="ij"), -1).reshape(-1, 3)
+        reach = np.sum(np.maximum(np.abs(offs) - 0.5, 0.0) ** 2, axis=1) * self.h ** 2
+        self.offsets = offs[reach < self.r_cut ** 2]
+        cols = np.unique(self.offsets[:, :2], axis=0)
+        self._cols = (cols[:, 0].astype(np.int32), cols[:, 1].astype(np.int32))
+
+    def upload(self, values) -> "Float":
+        """A float32 Dr.Jit array of this grid's variant (see `upload`)."""
+        return upload(self.Float, values, np.float32)
+
+    def to_lanes(self, pts: np.ndarray):
+        p = np.asarray(pts, dtype=np.float32)
+        return self.upload(p[:, 0]), self.upload(p[:, 1]), self.upload(p[:, 2])
+
+    def sort_keys(self, pts: np.ndarray) -> np.ndarray:
+        """An int64 key per point, equal for points in the same block of ``4^3`` lattice cells
+        and ordered x-major: sorting lanes by it gives neighbouring lanes the same nodes."""
+        i = np.floor(np.asarray(pts, dtype=np.float64).reshape(-1, 3) / (4.0 * self.h)).astype(np.int64)
+        i -= i.min(axis=0) if len(i) else 0
+        return (i[:, 0] << 42) | (i[:, 1] << 21) | i[:, 2]
+
+    def near(self, pts: np.ndarray) -> np.ndarray:
+        """Whether a brick holding nodes meets the box of offsets around each point: a superset
+        of the points that some node's kernel reaches (the others need no kernel work)."""
+        pts = np.asarray(pts, dtype=np.float64).reshape(-1, 3)
+        if self.n == 0 or len(pts) == 0:
+            return np.zeros(len(pts), dtype=bool)
+        i = np.floor(pts / self.h) - self.base
+        i = np.clip(i, -self.R - 1, self.bdims * BRICK + self.R).astype(np.int64)
+        lo_b = (i - self.R) >> BRICK_SHIFT
+        hi_b = (i + self.R) >> BRICK_SHIFT
+        out = np.zeros(len(pts), dtype=bool)
+        D = self.bdims
+        for cx in (lo_b[:, 0], hi_b[:, 0]):
+            for cy in (lo_b[:, 1], hi_b[:, 1]):
+                for cz in (lo_b[:, 2], hi_b[:, 2]):
+                    ok = (cx >= 0) & (cy >= 0) & (cz >= 0) & (cx < D[0]) & (cy < D[1]) & (cz < D[2])
+                    k = np.where(ok, (cx * D[1] + cy) * D[2] + cz, 0)
+                    out |= ok & (self._top_np[k] != 0)
+        return out
+
+    def _columns(self, x, y, z, coef_pool=None, g=None, out=None):
+        Float, UInt32, Int32 = self.Float, self.UInt32, self.Int32
+        R, h = self.R, self.h
+        inv_h = dr.opaque(Float, 1.0 / h)
+        hh = dr.opaque(Float, h)
+        gamma = dr.opaque(Float, self._gamma)
+        rc2 = dr.opaque(Float, self.r_cut ** 2)
+        D = [dr.opaque(Int32, int(v) * BRICK) for v in self.bdims]
+        bz_max = dr.opaque(Int32, int(self.bdims[2]) - 1)
+        stride = [dr.opaque(Int32, int(self.bdims[1] * self.bdims[2])), dr.opaque(Int32, int(self.bdims[2]))]
+        frac, cell = [], []
+        for a, c in enumerate((x, y, z)):
+            u = c * inv_h - dr.opaque(Float, float(self.base[a]))
+            fl = dr.clip(dr.floor(u), -R - 1.0, float(self.bdims[a] * BRICK + R))
+            frac.append(u - fl)
+            cell.append(Int32(fl))
+        # the z offsets of a column are unrolled, their factors formed once per lane; the column's
+        # cells lie in at most two bricks (R < 8): the bricks below and above
+        bz_lo = dr.clip((cell[2] - R) >> BRICK_SHIFT, 0, bz_max)
+        bz_hi = dr.clip((cell[2] + R) >> BRICK_SHIFT, 0, bz_max)
+        zs = []
+        for o in range(-R, R + 1):
+            d2 = dr.square((frac[2] - (o + 0.5)) * hh)
+            ci = cell[2] + o
+            zs.append((d2, dr.exp(-gamma * d2), (ci >= 0) & (ci < D[2]), (ci >> BRICK_SHIFT) == bz_lo,
+                       UInt32(ci & (BRICK - 1))))
+        cox = upload(Int32, self._cols[0], np.int32)
+        coy = upload(Int32, self._cols[1], np.int32)
+        n_cols = len(self._cols[0])
+        i = dr.zeros(UInt32, dr.width(x))
+        acc = dr.zeros(Float, dr.width(x))
+
+        def body(i, acc):
+            ox = dr.gather(Int32, cox, i)
+            oy = dr.gather(Int32, coy, i)
+            dxy2 = dr.square((frac[0] - Float(ox) - 0.5) * hh) + dr.square((frac[1] - Float(oy) - 0.5) * hh)
+            exy = dr.exp(-gamma * dxy2)
+            cx, cy = cell[0] + ox, cell[1] + oy
+            vxy = (cx >= 0) & (cx < D[0]) & (cy >= 0) & (cy < D[1]) & (dxy2 < rc2)
+            bxy = (cx >> BRICK_SHIFT) * stride[0] + (cy >> BRICK_SHIFT) * stride[1]
+            t_lo = dr.gather(UInt32, self.top, UInt32(bxy + bz_lo), vxy)
+            t_hi = dr.gather(UInt32, self.top, UInt32(bxy + bz_hi), vxy)
+            lxy = UInt32(((cx & (BRICK - 1)) * BRICK + (cy & (BRICK - 1))) * BRICK)
+            for dz2, ez, vz, lo, lz in zs:
+                m = vxy & vz & (dxy2 + dz2 < rc2)
+                k = dr.select(lo, t_lo, t_hi) + lxy + lz
+                kv = exy * ez
+                if out is None:
+                    acc = dr.fma(kv, dr.gather(Float, coef_pool, k, m), acc)
+                else:
+                    node = dr.gather(UInt32, self.pool, k, m)
+                    dr.scatter_add(out, g * kv, node - 1, m & (node != 0), mode=dr.ReduceMode.Local)
+            return i + 1, acc
+
+        i, acc = dr.while_loop((i, acc), lambda i, acc: i < n_cols, body, label="hilbertmap_lattice")
+        return acc
+
+    def pooled(self, coef):
+        """The node coefficients (a Dr.Jit Float, node order) laid out as the brick pool (0 where
+        there is no node): what :meth:`kernel_sum` reads."""
+        cp = dr.zeros(self.Float, self.pool_size)
+        dr.scatter(cp, coef, self.pos)
+        return cp
+
+    def kernel_sum(self, x, y, z, coef, pooled=False):
+        """Lane-wise ``sum_j coef[j] k(x, nu_j)`` (``coef`` a Dr.Jit Float in node order, or
+        already laid out by :meth:`pooled` when ``pooled``)."""
+        return self._columns(x, y, z, coef_pool=coef if pooled else self.pooled(coef))
+
+    def kernel_scatter(self, x, y, z, g, out):
+        """``out[j] += g * k(x, nu_j)`` for every lane, through atomics."""
+        self._columns(x, y, z, g=g, out=out)
+        return out
+
+    def kernel_sum_at(self, pts: np.ndarray, coef, pooled=False) -> np.ndarray:
+        """``sum_j coef[j] k(x, nu_j)`` at (N, 3) world points, float64 in the points' order."""
+        x, y, z = self.to_lanes(pts)
+        return self.kernel_sum(x, y, z, coef, pooled).numpy().astype(np.float64)

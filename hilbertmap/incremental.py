@@ -45,7 +45,7 @@ import time
 import numpy as np
 
 from . import sgd
-from ._backend import KernelGrid, cut_radius
+from ._backend import LatticeGrid, cut_radius
 from ._checks import CHOICES, check_coverage_params, check_echo_params, check_pass_params, int_param, need, num_param
 from .embedding import Samples
 from .inducing import Coverage, LazyCoverage
@@ -293,46 +293,34 @@ class IncrementalHilbertMap(HilbertMap):
             setattr(self, name, LazyCoverage(cov.voxel, cov.keys[reach.contains(c, dilate=1)] if len(c) else None))
 
     def _rebuild(self) -> None:
-        """The kernel grid of the current nodes and a summed-volume table of its cell counts
-        (which sample has a node within the kernel's support)."""
+        """The kernel grid of the current nodes: a :class:`~hilbertmap._backend.LatticeGrid` (the
+        nodes sit on the lattice of pitch ``node_spacing``: a point's lattice cell gives its
+        neighbouring nodes directly, no search)."""
         self._scans_since_build = 0
         if len(self.inducing_points_) == 0:
             self._grid = None
             return
-        g = KernelGrid(self.inducing_points_, self.lengthscale_, float(self.kernel_cut), self.variant)
-        # keep the caller's order: the grid permutes its own copy, coefficients are mapped through it
-        self._grid = g
-        sat = np.zeros(tuple(g.dims + 1), dtype=np.int32)
-        sat[1:, 1:, 1:] = g.cell_counts.reshape(tuple(g.dims))
-        for a in range(3):
-            np.cumsum(sat, axis=a, out=sat)
-        self._sat = sat
+        self._grid = LatticeGrid(_unkey(self.node_keys_), float(self.node_spacing), self.lengthscale_,
+                                 float(self.kernel_cut), self.variant)
 
     def _near(self, pts: np.ndarray) -> np.ndarray:
-        """Whether a node may lie within the kernel's support of each point (cell box sums)."""
+        """Whether a node may lie within the kernel's support of each point (a superset:
+        :meth:`~hilbertmap._backend.LatticeGrid.near`)."""
         g = self._grid
         if g is None or len(pts) == 0:
             return np.zeros(len(pts), dtype=bool)
-        c = np.floor((pts - g.lo) / g.h).astype(np.int64)
-        R = 2  # the grid's CELL_DIV: the cells a lane visits
-        lo = np.clip(c - R, 0, g.dims)
-        hi = np.clip(c + R + 1, 0, g.dims)
-        S = self._sat
-        tot = (S[hi[:, 0], hi[:, 1], hi[:, 2]] - S[lo[:, 0], hi[:, 1], hi[:, 2]] - S[hi[:, 0], lo[:, 1], hi[:, 2]]
-               - S[hi[:, 0], hi[:, 1], lo[:, 2]] + S[lo[:, 0], lo[:, 1], hi[:, 2]] + S[lo[:, 0], hi[:, 1], lo[:, 2]]
-               + S[hi[:, 0], lo[:, 1], lo[:, 2]] - S[lo[:, 0], lo[:, 1], lo[:, 2]])
-        return tot > 0
+        return g.near(pts)
 
     def _pass(self, s: Samples) -> float:
         """One shuffled pass of mini-batch AdaGrad; the mean weighted loss seen."""
-        try:
-            from threadpoolctl import threadpool_limits
-        except ImportError:
-            return self._pass_inner(s)
-        with threadpool_limits(limits=1, user_api="blas"):
-            return self._pass_inner(s)
+        return self._pass_inner(s)
 
     def _pass_inner(self, s: Samples) -> float:
+        """The mini-batches in order. Per batch: the logits of the lanes that have nodes near
+        (one Dr.Jit kernel, lanes sorted by lattice brick for cache locality; the result does not
+        depend on their order), the loss and per-sample gradients in numpy, the kernel's adjoint
+        into the nodes and the AdaGrad step of the touched nodes (Dr.Jit, float32, in place: the
+        coefficients stay on the Dr.Jit side for the whole pass)."""
         import drjit as dr
 
         F, G = len(s.free), len(s.occupied)
@@ -341,15 +329,21 @@ class IncrementalHilbertMap(HilbertMap):
         pf = np.array_split(self._rng.permutation(F), nb)
         pg = np.array_split(self._rng.permutation(G), nb)
         grid = self._grid
-        order = grid.order if grid is not None else None  # grid position i holds node order[i]
-        n = grid.n if grid is not None else 0              # the nodes built (newer ones wait, coefficient 0)
-        coef_v, accum_v = self.dual_coef_[:n], self.node_accum_[:n]  # views: updated in place
+        n = grid.n if grid is not None else 0  # the nodes built (newer ones wait, coefficient 0)
         near_f = self._near(s.free)
         near_g = self._near(s.occupied.reshape(-1, 3)).reshape(G, m).any(axis=1) if G else np.zeros(0, bool)
+        if grid is not None:
+            key_f = grid.sort_keys(s.free)
+            key_g = grid.sort_keys(s.occupied[:, 0]) if G else np.zeros(0, dtype=np.int64)
+            coef = grid.upload(self.dual_coef_[:n])
+            accum = grid.upload(self.node_accum_[:n])
+            pool = grid.pooled(coef)
+            used = dr.zeros(grid.mod.Bool, n)
+            alpha_dr = dr.opaque(grid.Float, float(self.alpha))
+            eta_dr = dr.opaque(grid.Float, float(self.eta0))
         c_occ = self.occupied_weight_
-        alpha, eta = float(self.alpha), float(self.eta0)
+        eta = float(self.eta0)
         loss_sum = wsum = 0.0
-        used = np.zeros(len(self.dual_coef_), dtype=bool)
         for b in range(nb):
             i_f, i_g = pf[b], pg[b]
             bf, bg = len(i_f), len(i_g)
@@ -360,10 +354,11 @@ class IncrementalHilbertMap(HilbertMap):
             jf, jg = np.nonzero(near_f[i_f])[0], np.nonzero(near_g[i_g])[0]
             lanes = None
             if grid is not None and len(jf) + len(jg):
+                jf = jf[np.argsort(key_f[i_f[jf]], kind="stable")]
+                jg = jg[np.argsort(key_g[i_g[jg]], kind="stable")]
                 lanes = np.concatenate([s.free[i_f[jf]], s.occupied[i_g[jg]].reshape(-1, 3)])
-                coef = grid.upload(coef_v[order])
                 x, y, z = grid.to_lanes(lanes)
-                fl = grid.kernel_sum(x, y, z, coef).numpy().astype(np.float64)
+                fl = grid.kernel_sum(x, y, z, pool, pooled=True).numpy().astype(np.float64)
                 f_free[jf] += fl[:len(jf)]
                 f_grp[jg] += fl[len(jf):].reshape(len(jg), m).mean(axis=1)
             f = np.concatenate([f_free, f_grp])
@@ -375,27 +370,33 @@ class IncrementalHilbertMap(HilbertMap):
             g = c * (sgd.sigmoid(f) - yv) / csum
             if lanes is not None:
                 g_lane = np.concatenate([g[jf], np.repeat(g[bf + jg] / m, m)]).astype(np.float32)
-                out = dr.zeros(grid.Float, grid.n)
-                grid.kernel_scatter(x, y, z, grid.upload(g_lane), out)
-                gj = np.empty(n)
-                gj[order] = out.numpy()
+                gj = grid.kernel_scatter(x, y, z, grid.upload(g_lane), dr.zeros(grid.Float, n))
                 touched = gj != 0
-                used[:n] |= touched
-                gj[touched] += alpha * coef_v[touched]
-                accum_v[touched] += gj[touched] ** 2
-                coef_v[touched] -= eta * gj[touched] / (np.sqrt(accum_v[touched]) + 1e-8)
+                gj = gj + alpha_dr * coef
+                accum = dr.select(touched, dr.fma(gj, gj, accum), accum)
+                coef = dr.select(touched, coef - eta_dr * gj / (dr.sqrt(accum) + 1e-8), coef)
+                dr.scatter(pool, coef, grid.pos, touched)
+                used = used | touched
+                dr.eval(coef, accum, pool, used)
             if self.fit_intercept:
                 gb = float(g.sum())
                 self._b_accum += gb * gb
                 self.intercept_ -= eta * gb / (math.sqrt(self._b_accum) + 1e-8)
             self.t_ += bf + bg
             self.n_samples_seen_ += bf + bg
-        self.node_last_used_[used] = self.n_scans_seen_
+        if grid is not None:
+            self.dual_coef_[:n] = coef.numpy()
+            self.node_accum_[:n] = accum.numpy()
+            self.node_last_used_[:n][used.numpy()] = self.n_scans_seen_
         return loss_sum / max(wsum, 1e-300)
 
     # -- queries -------------------------------------------------------------------------------
-    def decision_function(self, points, chunk: int = 1 << 21) -> np.ndarray:
-        """Logit ``f(x) = sum_j a_j k(x, nu_j) + b`` at (N, 3) world points (no side effects)."""
+    def decision_function(self, points, chunk: int = 1 << 20) -> np.ndarray:
+        """Logit ``f(x) = sum_j a_j k(x, nu_j) + b`` at (N, 3) world points (no side effects).
+
+        Points go to the kernel in chunks of ``chunk``, each sorted by lattice brick (neighbouring
+        lanes read the same nodes); a point no node reaches reads only the empty brick and gets
+        ``b``."""
         from ._checks import as_points
 
         self._check_fitted()
@@ -407,13 +408,11 @@ class IncrementalHilbertMap(HilbertMap):
             grid = self._grid
         if grid is None:
             return out
-        coef = grid.upload(self.dual_coef_[:grid.n][grid.order])  # nodes not yet built hold 0
+        pool = grid.pooled(grid.upload(self.dual_coef_[:grid.n]))  # nodes not yet built hold 0
         for a in range(0, len(pts), chunk):
             p = pts[a:a + chunk]
-            near = np.nonzero(self._near(p))[0]
-            if len(near) == 0:
-                continue
-            out[a + near] += grid.kernel_sum_at(p[near], coef)
+            order = np.argsort(grid.sort_keys(p), kind="stable")
+            out[a + order] += grid.kernel_sum_at(p[order], pool, pooled=True)
         return out
 
     @property
