@@ -272,12 +272,14 @@ class LatticeGrid:
         i = np.floor(pts / self.h) - self.base
         i = np.clip(i, -self.R - 1, self.bdims * BRICK + self.R).astype(np.int64)
         lo_b = (i - self.R) >> BRICK_SHIFT
-        hi_b = (i + self.R) >> BRICK_SHIFT
+        K = (2 * self.R + 7) // BRICK + 1
         out = np.zeros(len(pts), dtype=bool)
         D = self.bdims
-        for cx in (lo_b[:, 0], hi_b[:, 0]):
-            for cy in (lo_b[:, 1], hi_b[:, 1]):
-                for cz in (lo_b[:, 2], hi_b[:, 2]):
+        steps = range(K)
+        for kx in steps:
+            for ky in steps:
+                for kz in steps:
+                    cx, cy, cz = lo_b[:, 0] + kx, lo_b[:, 1] + ky, lo_b[:, 2] + kz
                     ok = (cx >= 0) & (cy >= 0) & (cz >= 0) & (cx < D[0]) & (cy < D[1]) & (cz < D[2])
                     k = np.where(ok, (cx * D[1] + cy) * D[2] + cz, 0)
                     out |= ok & (self._top_np[k] != 0)
@@ -300,14 +302,15 @@ class LatticeGrid:
             frac.append(u - fl)
             cell.append(Int32(fl))
         # the z offsets of a column are unrolled, their factors formed once per lane; the column's
-        # cells lie in at most two bricks (R < 8): the bricks below and above
-        bz_lo = dr.clip((cell[2] - R) >> BRICK_SHIFT, 0, bz_max)
-        bz_hi = dr.clip((cell[2] + R) >> BRICK_SHIFT, 0, bz_max)
+        # 2R + 1 cells lie in at most K bricks, read once per column
+        K = (2 * R + 7) // BRICK + 1
+        bz0 = (cell[2] - R) >> BRICK_SHIFT
+        bzs = [dr.clip(bz0 + k, 0, bz_max) for k in range(K)]
         zs = []
         for o in range(-R, R + 1):
             d2 = dr.square((frac[2] - (o + 0.5)) * hh)
             ci = cell[2] + o
-            zs.append((d2, dr.exp(-gamma * d2), (ci >= 0) & (ci < D[2]), (ci >> BRICK_SHIFT) == bz_lo,
+            zs.append((d2, dr.exp(-gamma * d2), (ci >= 0) & (ci < D[2]), (ci >> BRICK_SHIFT) - bz0,
                        UInt32(ci & (BRICK - 1))))
         cox = upload(Int32, self._cols[0], np.int32)
         coy = upload(Int32, self._cols[1], np.int32)
@@ -323,12 +326,14 @@ class LatticeGrid:
             cx, cy = cell[0] + ox, cell[1] + oy
             vxy = (cx >= 0) & (cx < D[0]) & (cy >= 0) & (cy < D[1]) & (dxy2 < rc2)
             bxy = (cx >> BRICK_SHIFT) * stride[0] + (cy >> BRICK_SHIFT) * stride[1]
-            t_lo = dr.gather(UInt32, self.top, UInt32(bxy + bz_lo), vxy)
-            t_hi = dr.gather(UInt32, self.top, UInt32(bxy + bz_hi), vxy)
+            tops = [dr.gather(UInt32, self.top, UInt32(bxy + bz), vxy) for bz in bzs]
             lxy = UInt32(((cx & (BRICK - 1)) * BRICK + (cy & (BRICK - 1))) * BRICK)
-            for dz2, ez, vz, lo, lz in zs:
+            for dz2, ez, vz, kz, lz in zs:
                 m = vxy & vz & (dxy2 + dz2 < rc2)
-                k = dr.select(lo, t_lo, t_hi) + lxy + lz
+                t = tops[0]
+                for kk in range(1, K):
+                    t = dr.select(kz == kk, tops[kk], t)
+                k = t + lxy + lz
                 kv = exy * ez
                 if out is None:
                     acc = dr.fma(kv, dr.gather(Float, coef_pool, k, m), acc)
