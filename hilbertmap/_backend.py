@@ -186,6 +186,7 @@ class KernelGrid:
 
 BRICK_SHIFT = 3  # LatticeGrid bricks of 8^3 lattice cells
 BRICK = 1 << BRICK_SHIFT
+_FAR = 1e30  # a squared distance no kernel reaches (folds a validity mask into the distance test)
 
 
 class LatticeGrid:
@@ -194,14 +195,19 @@ class LatticeGrid:
 
     A lane at ``x`` lies in lattice cell ``i = floor(x / h)``; the nodes whose kernel reaches it
     are among ``i + o`` for the fixed offsets ``o`` with ``sum_a max(|o_a| - 1/2, 0)^2 h^2 < r_cut^2``
-    (251 offsets for ``r_cut = 3.03 h``: ``lengthscale = h``, ``kernel_cut = 1e-2``). The RBF factorises over
-    the axes, ``exp(-gamma |d|^2) = prod_a exp(-gamma d_a^2)`` with ``d_a = (f_a - o_a - 1/2) h`` and
-    ``f = x / h - i``, so a lane forms ``3 (2R + 1)`` exponentials and one product per
-    neighbour; the offsets are unrolled into one kernel (no loop, no divergence). Which node sits
-    in a lattice cell is read from a two-level table: a dense array over the nodes' bounding box
-    in bricks of ``8^3`` cells (0: no node in the brick) and, per brick holding nodes, ``8^3``
-    entries ``node + 1`` (0: no node). An absent brick points to brick 0, all zeros. Memory is
-    ``4 bytes x (bricks in the box + 512 x bricks holding nodes)``.
+    (251 offsets for ``r_cut = 3.03 h``: ``lengthscale = h``, ``kernel_cut = 1e-2``), visited as
+    columns along z (one symbolic loop per column length, the column's cells unrolled). The RBF
+    factorises over the axes, ``exp(-gamma |d|^2) = prod_a exp(-gamma d_a^2)`` with
+    ``d_a = (f_a - o_a - 1/2) h`` and ``f = x / h - i``: a lane forms ``2R + 1`` exponentials in z,
+    one per column, and one product and one masked gather per offset.
+
+    Storage: the nodes' bounding box in bricks of ``8 x 8 x 8`` cells; a dense table gives each
+    brick holding nodes a block of the pool (0: none, which reads the all-zero block 0). A block
+    stores ``8 x 8 x (8 + 2A)`` cells: its own and an apron of ``A = R`` cells below and above, so
+    that a column of cells around a lane always lies in the lane's own block (one table read per
+    column). A node near a brick's top or bottom is so stored twice; ``pos`` lists every copy.
+    The pool holds ``node + 1`` (0: no node) and, laid out by :meth:`pooled`, the coefficients.
+    Memory: ``4 bytes x (bricks in the box + 64 (8 + 2A) x blocks)``.
 
     Node order is the caller's (``order`` is the identity, kept for :class:`KernelGrid`'s interface).
     The kernel is cut where ``|d|^2 >= r_cut^2``, the same set as :class:`KernelGrid`.
@@ -225,28 +231,59 @@ class LatticeGrid:
         self.R = int(math.floor(rr + 0.5))
         while self.R - 0.5 >= rr:
             self.R -= 1
-        self.base = idx.min(axis=0) if self.n else np.zeros(3, dtype=np.int64)
-        rel = idx - self.base
-        self.bdims = (rel.max(axis=0) >> BRICK_SHIFT) + 1 if self.n else np.ones(3, dtype=np.int64)
-        b = rel >> BRICK_SHIFT
-        bl = (b[:, 0] * self.bdims[1] + b[:, 1]) * self.bdims[2] + b[:, 2]
-        ub, slot = np.unique(bl, return_inverse=True)
-        top = np.zeros(int(np.prod(self.bdims)), dtype=np.uint32)
-        top[ub] = (np.arange(len(ub), dtype=np.uint32) + 1) * BRICK ** 3
-        loc = rel & (BRICK - 1)
-        pool = np.zeros((len(ub) + 1) * BRICK ** 3, dtype=np.uint32)
-        pos = (slot + 1) * BRICK ** 3 + (loc[:, 0] * BRICK + loc[:, 1]) * BRICK + loc[:, 2]
-        pool[pos] = np.arange(1, self.n + 1)
-        self.pool_size = len(pool)
-        self.pos = upload(self.UInt32, pos, np.uint32)
-        self._top_np = top
-        self.top = upload(self.UInt32, top, np.uint32)
-        self.pool = upload(self.UInt32, pool, np.uint32)
         offs = np.stack(np.meshgrid(*[np.arange(-self.R, self.R + 1)] * 3, indexing="ij"), -1).reshape(-1, 3)
         reach = np.sum(np.maximum(np.abs(offs) - 0.5, 0.0) ** 2, axis=1) * self.h ** 2
         self.offsets = offs[reach < self.r_cut ** 2]
-        cols = np.unique(self.offsets[:, :2], axis=0)
-        self._cols = (cols[:, 0].astype(np.int32), cols[:, 1].astype(np.int32))
+        # columns (ox, oy) grouped by their half length in z
+        cols = {}
+        for ox, oy, oz in self.offsets.tolist():
+            cols[(ox, oy)] = max(cols.get((ox, oy), 0), abs(oz))
+        self._groups = {}
+        for (ox, oy), zr in sorted(cols.items()):
+            self._groups.setdefault(zr, []).append((ox, oy))
+        self._build(idx)
+
+    def _build(self, idx):
+        A = self.R
+        self.depth = BRICK + 2 * A  # cells per block column
+        self.block = BRICK * BRICK * self.depth
+        self.base = idx.min(axis=0) if self.n else np.zeros(3, dtype=np.int64)
+        rel = idx - self.base
+        self.bdims = (rel.max(axis=0) >> BRICK_SHIFT) + 1 if self.n else np.ones(3, dtype=np.int64)
+        D = self.bdims
+        bx, by, bz = (rel >> BRICK_SHIFT).T
+        lxy = ((rel[:, 0] & (BRICK - 1)) * BRICK + (rel[:, 1] & (BRICK - 1))) * self.depth
+        node, key, loc = [], [], []
+        reach = -(-A // BRICK)
+        for d in range(-reach, reach + 1):  # the node's own brick and those whose apron holds it
+            b = bz + d
+            lz = rel[:, 2] - b * BRICK + A
+            ok = (b >= 0) & (b < D[2]) & (lz >= 0) & (lz < self.depth)
+            node.append(np.nonzero(ok)[0])
+            key.append(((bx * D[1] + by) * D[2] + b)[ok])
+            loc.append((lxy + lz)[ok])
+        node, key, loc = np.concatenate(node), np.concatenate(key), np.concatenate(loc)
+        ub, slot = np.unique(key, return_inverse=True)
+        top = np.zeros(int(np.prod(D)), dtype=np.uint32)
+        top[ub] = (np.arange(len(ub), dtype=np.uint32) + 1) * self.block
+        pos = (slot + 1) * self.block + loc
+        pool = np.zeros((len(ub) + 1) * self.block, dtype=np.uint32)
+        pool[pos] = node + 1
+        self.pool_size = len(pool)
+        self._top_np = top
+        self.top = upload(self.UInt32, top, np.uint32)
+        self.pool = upload(self.UInt32, pool, np.uint32)
+        # pos: one column per copy, a node with fewer copies repeats its first
+        n_copy = np.bincount(node, minlength=self.n)
+        first = np.zeros(self.n, dtype=np.int64)
+        cols = []
+        order = np.argsort(node, kind="stable")
+        start = np.r_[0, np.cumsum(n_copy)[:-1]]
+        for c in range(int(n_copy.max()) if self.n else 0):
+            k = np.where(n_copy > c, start + c, start)
+            cols.append(pos[order[k]])
+        self.pos = [upload(self.UInt32, c, np.uint32) for c in cols]
+        del first
 
     def upload(self, values) -> "Float":
         """A float32 Dr.Jit array of this grid's variant (see `upload`)."""
@@ -293,7 +330,6 @@ class LatticeGrid:
         gamma = dr.opaque(Float, self._gamma)
         rc2 = dr.opaque(Float, self.r_cut ** 2)
         D = [dr.opaque(Int32, int(v) * BRICK) for v in self.bdims]
-        bz_max = dr.opaque(Int32, int(self.bdims[2]) - 1)
         stride = [dr.opaque(Int32, int(self.bdims[1] * self.bdims[2])), dr.opaque(Int32, int(self.bdims[2]))]
         frac, cell = [], []
         for a, c in enumerate((x, y, z)):
@@ -301,56 +337,60 @@ class LatticeGrid:
             fl = dr.clip(dr.floor(u), -R - 1.0, float(self.bdims[a] * BRICK + R))
             frac.append(u - fl)
             cell.append(Int32(fl))
-        # the z offsets of a column are unrolled, their factors formed once per lane; the column's
-        # 2R + 1 cells lie in at most K bricks, read once per column
-        K = (2 * R + 7) // BRICK + 1
-        bz0 = (cell[2] - R) >> BRICK_SHIFT
-        bzs = [dr.clip(bz0 + k, 0, bz_max) for k in range(K)]
-        zs = []
+        # the lane's own brick in z holds (with its apron) every cell of its columns
+        bz = dr.clip(cell[2] >> BRICK_SHIFT, 0, dr.opaque(Int32, int(self.bdims[2]) - 1))
+        lz0 = cell[2] - bz * BRICK + self.R
+        zs = {}
         for o in range(-R, R + 1):
             d2 = dr.square((frac[2] - (o + 0.5)) * hh)
             ci = cell[2] + o
-            zs.append((d2, dr.exp(-gamma * d2), (ci >= 0) & (ci < D[2]), (ci >> BRICK_SHIFT) - bz0,
-                       UInt32(ci & (BRICK - 1))))
-        cox = upload(Int32, self._cols[0], np.int32)
-        coy = upload(Int32, self._cols[1], np.int32)
-        n_cols = len(self._cols[0])
-        i = dr.zeros(UInt32, dr.width(x))
+            zs[o] = (dr.select((ci >= 0) & (ci < D[2]), d2, _FAR), dr.exp(-gamma * d2),
+                     UInt32(dr.clip(lz0 + o, 0, self.depth - 1)))
         acc = dr.zeros(Float, dr.width(x))
+        for zr, cols in self._groups.items():
+            cox = upload(Int32, [c[0] for c in cols], np.int32)
+            coy = upload(Int32, [c[1] for c in cols], np.int32)
+            n_cols = len(cols)
 
-        def body(i, acc):
-            ox = dr.gather(Int32, cox, i)
-            oy = dr.gather(Int32, coy, i)
-            dxy2 = dr.square((frac[0] - Float(ox) - 0.5) * hh) + dr.square((frac[1] - Float(oy) - 0.5) * hh)
-            exy = dr.exp(-gamma * dxy2)
-            cx, cy = cell[0] + ox, cell[1] + oy
-            vxy = (cx >= 0) & (cx < D[0]) & (cy >= 0) & (cy < D[1]) & (dxy2 < rc2)
-            bxy = (cx >> BRICK_SHIFT) * stride[0] + (cy >> BRICK_SHIFT) * stride[1]
-            tops = [dr.gather(UInt32, self.top, UInt32(bxy + bz), vxy) for bz in bzs]
-            lxy = UInt32(((cx & (BRICK - 1)) * BRICK + (cy & (BRICK - 1))) * BRICK)
-            for dz2, ez, vz, kz, lz in zs:
-                m = vxy & vz & (dxy2 + dz2 < rc2)
-                t = tops[0]
-                for kk in range(1, K):
-                    t = dr.select(kz == kk, tops[kk], t)
-                k = t + lxy + lz
-                kv = exy * ez
-                if out is None:
-                    acc = dr.fma(kv, dr.gather(Float, coef_pool, k, m), acc)
-                else:
-                    node = dr.gather(UInt32, self.pool, k, m)
-                    dr.scatter_add(out, g * kv, node - 1, m & (node != 0), mode=dr.ReduceMode.Local)
-            return i + 1, acc
+            def body(i, acc, zr=zr, cox=cox, coy=coy):
+                ox = dr.gather(Int32, cox, i)
+                oy = dr.gather(Int32, coy, i)
+                dxy2 = dr.square((frac[0] - Float(ox) - 0.5) * hh) + dr.square((frac[1] - Float(oy) - 0.5) * hh)
+                exy = dr.exp(-gamma * dxy2)
+                cx, cy = cell[0] + ox, cell[1] + oy
+                dxy2 = dr.select((cx >= 0) & (cx < D[0]) & (cy >= 0) & (cy < D[1]), dxy2, _FAR)
+                t = dr.gather(UInt32, self.top, UInt32((cx >> BRICK_SHIFT) * stride[0]
+                                                       + (cy >> BRICK_SHIFT) * stride[1] + bz), dxy2 < rc2)
+                t = t + UInt32(((cx & (BRICK - 1)) * BRICK + (cy & (BRICK - 1))) * self.depth)
+                for o in range(-zr, zr + 1):
+                    dz2, ez, lz = zs[o]
+                    m = dxy2 + dz2 < rc2
+                    k = t + lz
+                    kv = exy * ez
+                    if out is None:
+                        acc = dr.fma(kv, dr.gather(Float, coef_pool, k, m), acc)
+                    else:
+                        node = dr.gather(UInt32, self.pool, k, m)
+                        dr.scatter_add(out, g * kv, node - 1, m & (node != 0), mode=dr.ReduceMode.Local)
+                return i + 1, acc
 
-        i, acc = dr.while_loop((i, acc), lambda i, acc: i < n_cols, body, label="hilbertmap_lattice")
+            i = dr.zeros(UInt32, dr.width(x))
+            i, acc = dr.while_loop((i, acc), lambda i, acc, n_cols=n_cols: i < n_cols, body,
+                                   label=f"hilbertmap_lattice_{zr}")
         return acc
 
     def pooled(self, coef):
-        """The node coefficients (a Dr.Jit Float, node order) laid out as the brick pool (0 where
-        there is no node): what :meth:`kernel_sum` reads."""
+        """The node coefficients (a Dr.Jit Float, node order) laid out as the pool (0 where there
+        is no node, every copy of a node written): what :meth:`kernel_sum` reads."""
         cp = dr.zeros(self.Float, self.pool_size)
-        dr.scatter(cp, coef, self.pos)
+        for pos in self.pos:
+            dr.scatter(cp, coef, pos)
         return cp
+
+    def update_pooled(self, pool, coef, mask):
+        """Write the coefficients of the nodes in ``mask`` (all copies) into ``pool``."""
+        for pos in self.pos:
+            dr.scatter(pool, coef, pos, mask)
 
     def kernel_sum(self, x, y, z, coef, pooled=False):
         """Lane-wise ``sum_j coef[j] k(x, nu_j)`` (``coef`` a Dr.Jit Float in node order, or

@@ -375,7 +375,7 @@ class IncrementalHilbertMap(HilbertMap):
                 gj = gj + alpha_dr * coef
                 accum = dr.select(touched, dr.fma(gj, gj, accum), accum)
                 coef = dr.select(touched, coef - eta_dr * gj / (dr.sqrt(accum) + 1e-8), coef)
-                dr.scatter(pool, coef, grid.pos, touched)
+                grid.update_pooled(pool, coef, touched)
                 used = used | touched
                 dr.eval(coef, accum, pool, used)
             if self.fit_intercept:
