@@ -195,8 +195,9 @@ class LatticeGrid:
 
     A lane at ``x`` lies in lattice cell ``i = floor(x / h)``; the nodes whose kernel reaches it
     are among ``i + o`` for the fixed offsets ``o`` with ``sum_a max(|o_a| - 1/2, 0)^2 h^2 < r_cut^2``
-    (251 offsets for ``r_cut = 3.03 h``: ``lengthscale = h``, ``kernel_cut = 1e-2``), visited as
-    columns along z (one symbolic loop per column length, the column's cells unrolled). The RBF
+    (251 offsets for ``r_cut = 3.03 h``: ``lengthscale = h``, ``kernel_cut = 1e-2``); of these a
+    lane visits the 163 that can reach its octant of the cell (mirrored per axis), as columns along
+    z (one symbolic loop per column extent, the column's cells unrolled). The RBF
     factorises over the axes, ``exp(-gamma |d|^2) = prod_a exp(-gamma d_a^2)`` with
     ``d_a = (f_a - o_a - 1/2) h`` and ``f = x / h - i``: a lane forms ``2R + 1`` exponentials in z,
     one per column, and one product and one masked gather per offset.
@@ -234,11 +235,18 @@ class LatticeGrid:
         offs = np.stack(np.meshgrid(*[np.arange(-self.R, self.R + 1)] * 3, indexing="ij"), -1).reshape(-1, 3)
         reach = np.sum(np.maximum(np.abs(offs) - 0.5, 0.0) ** 2, axis=1) * self.h ** 2
         self.offsets = offs[reach < self.r_cut ** 2]
-        # columns (ox, oy) grouped by their half length in z
+        # The offsets that can reach a lane in the lower octant of its cell (f < 1/2 on every
+        # axis): |o_a + 1/2 - f_a| >= o_a for o_a >= 0 and >= |o_a| - 1/2 below. A lane in another
+        # octant visits their mirror image (o_a -> -o_a on the axes where f_a >= 1/2): 163
+        # offsets instead of 251 for r_cut = 3.03 h.
+        low = np.where(offs >= 0, offs, np.abs(offs) - 0.5).astype(np.float64)
+        canon = offs[np.sum(low ** 2, axis=1) * self.h ** 2 < self.r_cut ** 2]
+        self.n_visits = len(canon)
         cols = {}
-        for ox, oy, oz in self.offsets.tolist():
-            cols[(ox, oy)] = max(cols.get((ox, oy), 0), abs(oz))
-        self._groups = {}
+        for ox, oy, oz in canon.tolist():
+            lo, hi = cols.get((ox, oy), (oz, oz))
+            cols[(ox, oy)] = (min(lo, oz), max(hi, oz))
+        self._groups = {}  # (z from, z to) -> columns (ox, oy)
         for (ox, oy), zr in sorted(cols.items()):
             self._groups.setdefault(zr, []).append((ox, oy))
         self._build(idx)
@@ -337,24 +345,27 @@ class LatticeGrid:
             fl = dr.clip(dr.floor(u), -R - 1.0, float(self.bdims[a] * BRICK + R))
             frac.append(u - fl)
             cell.append(Int32(fl))
+        # the octant of the lane in its cell: offsets are mirrored where f >= 1/2
+        sgn = [dr.select(f < 0.5, 1, -1) for f in frac]
+        sgnf = [Float(v) for v in sgn]
         # the lane's own brick in z holds (with its apron) every cell of its columns
         bz = dr.clip(cell[2] >> BRICK_SHIFT, 0, dr.opaque(Int32, int(self.bdims[2]) - 1))
         lz0 = cell[2] - bz * BRICK + self.R
         zs = {}
         for o in range(-R, R + 1):
-            d2 = dr.square((frac[2] - (o + 0.5)) * hh)
-            ci = cell[2] + o
+            d2 = dr.square((frac[2] - (sgnf[2] * o + 0.5)) * hh)
+            ci = cell[2] + sgn[2] * o
             zs[o] = (dr.select((ci >= 0) & (ci < D[2]), d2, _FAR), dr.exp(-gamma * d2),
-                     UInt32(dr.clip(lz0 + o, 0, self.depth - 1)))
+                     UInt32(dr.clip(lz0 + sgn[2] * o, 0, self.depth - 1)))
         acc = dr.zeros(Float, dr.width(x))
-        for zr, cols in self._groups.items():
+        for (z0, z1), cols in self._groups.items():
             cox = upload(Int32, [c[0] for c in cols], np.int32)
             coy = upload(Int32, [c[1] for c in cols], np.int32)
             n_cols = len(cols)
 
-            def body(i, acc, zr=zr, cox=cox, coy=coy):
-                ox = dr.gather(Int32, cox, i)
-                oy = dr.gather(Int32, coy, i)
+            def body(i, acc, z0=z0, z1=z1, cox=cox, coy=coy):
+                ox = dr.gather(Int32, cox, i) * sgn[0]
+                oy = dr.gather(Int32, coy, i) * sgn[1]
                 dxy2 = dr.square((frac[0] - Float(ox) - 0.5) * hh) + dr.square((frac[1] - Float(oy) - 0.5) * hh)
                 exy = dr.exp(-gamma * dxy2)
                 cx, cy = cell[0] + ox, cell[1] + oy
@@ -362,7 +373,7 @@ class LatticeGrid:
                 t = dr.gather(UInt32, self.top, UInt32((cx >> BRICK_SHIFT) * stride[0]
                                                        + (cy >> BRICK_SHIFT) * stride[1] + bz), dxy2 < rc2)
                 t = t + UInt32(((cx & (BRICK - 1)) * BRICK + (cy & (BRICK - 1))) * self.depth)
-                for o in range(-zr, zr + 1):
+                for o in range(z0, z1 + 1):
                     dz2, ez, lz = zs[o]
                     m = dxy2 + dz2 < rc2
                     k = t + lz
@@ -376,7 +387,7 @@ class LatticeGrid:
 
             i = dr.zeros(UInt32, dr.width(x))
             i, acc = dr.while_loop((i, acc), lambda i, acc, n_cols=n_cols: i < n_cols, body,
-                                   label=f"hilbertmap_lattice_{zr}")
+                                   label=f"hilbertmap_lattice_{z0}_{z1}")
         return acc
 
     def pooled(self, coef):
@@ -402,7 +413,29 @@ class LatticeGrid:
         self._columns(x, y, z, g=g, out=out)
         return out
 
+    def brick_keys(self, pts: np.ndarray) -> np.ndarray:
+        """The linear index of each point's brick, clamped into the box (uint16 when the box has
+        at most 65536 bricks, so that a stable argsort is a radix sort)."""
+        p = np.asarray(pts, dtype=np.float32).reshape(-1, 3)
+        D = self.bdims
+        key = np.zeros(len(p), dtype=np.int64)
+        for a in range(3):
+            b = np.floor(p[:, a] * np.float32(1.0 / (self.h * BRICK)) - np.float32(self.base[a] / BRICK))
+            key = key * int(D[a]) + np.clip(b, 0, D[a] - 1).astype(np.int64)
+        return key.astype(np.uint16 if np.prod(D) <= 1 << 16 else np.uint32)
+
     def kernel_sum_at(self, pts: np.ndarray, coef, pooled=False) -> np.ndarray:
-        """``sum_j coef[j] k(x, nu_j)`` at (N, 3) world points, float64 in the points' order."""
-        x, y, z = self.to_lanes(pts)
-        return self.kernel_sum(x, y, z, coef, pooled).numpy().astype(np.float64)
+        """``sum_j coef[j] k(x, nu_j)`` at (N, 3) world points, float64 in the points' order.
+
+        The lanes take the points in brick order (a radix sort of :meth:`brick_keys`: neighbouring
+        lanes read the same blocks); the permutation is a gather and a scatter inside the kernel."""
+        pts = np.asarray(pts, dtype=np.float32).reshape(-1, 3)
+        if len(pts) == 0:
+            return np.zeros(0)
+        order = upload(self.UInt32, np.argsort(self.brick_keys(pts), kind="stable"), np.uint32)
+        X, Y, Z = self.to_lanes(pts)
+        x, y, z = (dr.gather(self.Float, c, order) for c in (X, Y, Z))
+        f = self.kernel_sum(x, y, z, coef, pooled)
+        res = dr.zeros(self.Float, len(pts))
+        dr.scatter(res, f, order)
+        return res.numpy().astype(np.float64)

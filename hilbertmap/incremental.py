@@ -395,8 +395,8 @@ class IncrementalHilbertMap(HilbertMap):
         """Logit ``f(x) = sum_j a_j k(x, nu_j) + b`` at (N, 3) world points (no side effects).
 
         Points go to the kernel in chunks of ``chunk``, each sorted by lattice brick (neighbouring
-        lanes read the same nodes); a point no node reaches reads only the empty brick and gets
-        ``b``."""
+        lanes read the same nodes: :meth:`~hilbertmap._backend.LatticeGrid.kernel_sum_at`); a point
+        no node reaches reads only the empty block and gets ``b``."""
         from ._checks import as_points
 
         self._check_fitted()
@@ -410,9 +410,7 @@ class IncrementalHilbertMap(HilbertMap):
             return out
         pool = grid.pooled(grid.upload(self.dual_coef_[:grid.n]))  # nodes not yet built hold 0
         for a in range(0, len(pts), chunk):
-            p = pts[a:a + chunk]
-            order = np.argsort(grid.sort_keys(p), kind="stable")
-            out[a + order] += grid.kernel_sum_at(p[order], pool, pooled=True)
+            out[a:a + chunk] += grid.kernel_sum_at(pts[a:a + chunk], pool, pooled=True)
         return out
 
     @property
