@@ -252,46 +252,48 @@ class LatticeGrid:
         self._build(idx)
 
     def _build(self, idx):
-        A = self.R
-        self.depth = BRICK + 2 * A  # cells per block column
-        self.block = BRICK * BRICK * self.depth
         self.base = idx.min(axis=0) if self.n else np.zeros(3, dtype=np.int64)
         rel = idx - self.base
-        self.bdims = (rel.max(axis=0) >> BRICK_SHIFT) + 1 if self.n else np.ones(3, dtype=np.int64)
-        D = self.bdims
-        bx, by, bz = (rel >> BRICK_SHIFT).T
-        lxy = ((rel[:, 0] & (BRICK - 1)) * BRICK + (rel[:, 1] & (BRICK - 1))) * self.depth
-        node, key, loc = [], [], []
-        reach = -(-A // BRICK)
-        for d in range(-reach, reach + 1):  # the node's own brick and those whose apron holds it
-            b = bz + d
-            lz = rel[:, 2] - b * BRICK + A
-            ok = (b >= 0) & (b < D[2]) & (lz >= 0) & (lz < self.depth)
-            node.append(np.nonzero(ok)[0])
-            key.append(((bx * D[1] + by) * D[2] + b)[ok])
-            loc.append((lxy + lz)[ok])
-        node, key, loc = np.concatenate(node), np.concatenate(key), np.concatenate(loc)
-        ub, slot = np.unique(key, return_inverse=True)
-        top = np.zeros(int(np.prod(D)), dtype=np.uint32)
-        top[ub] = (np.arange(len(ub), dtype=np.uint32) + 1) * self.block
-        pos = (slot + 1) * self.block + loc
-        pool = np.zeros((len(ub) + 1) * self.block, dtype=np.uint32)
-        pool[pos] = node + 1
-        self.pool_size = len(pool)
-        self._top_np = top
-        self.top = upload(self.UInt32, top, np.uint32)
+        D = self.dims = rel.max(axis=0) + 1 if self.n else np.ones(3, dtype=np.int64)
+        if D[2] >= 1 << 16:
+            raise ValueError(f"HilbertMap: the nodes span {D[2]} lattice cells in z; at most 65535 are supported")
+        # columns: the nodes of one (x, y) cell, stored densely from their lowest to highest z
+        col = rel[:, 0] * D[1] + rel[:, 1]
+        order = np.lexsort((rel[:, 2], col))
+        cs = col[order]
+        first = np.r_[0, np.nonzero(cs[1:] != cs[:-1])[0] + 1] if self.n else np.zeros(0, dtype=np.int64)
+        last = np.r_[first[1:], len(cs)] - 1 if self.n else first
+        ucol = cs[first]
+        zmin = rel[order[first], 2]
+        length = rel[order[last], 2] - zmin + 1
+        start = np.r_[0, np.cumsum(length)[:-1]].astype(np.int64)
+        inv = np.repeat(np.arange(len(ucol)), last - first + 1)
+        pos = np.empty(self.n, dtype=np.int64)
+        pos[order] = start[inv] + rel[order, 2] - zmin[inv]
+        self.pool_size = int(length.sum()) if self.n else 1
+        pool = np.zeros(max(self.pool_size, 1), dtype=np.uint32)
+        pool[pos] = np.arange(1, self.n + 1)
+        # column headers (start << 32 | zmin << 16 | length) in tiles of 8 x 8 columns; a dense
+        # table over the box gives each tile holding nodes its 64 headers (0: none, tile 0 is empty)
+        ux, uy = ucol // D[1], ucol % D[1]
+        self.tdims = (D[:2] + BRICK - 1) >> BRICK_SHIFT
+        tkey = (ux >> BRICK_SHIFT) * self.tdims[1] + (uy >> BRICK_SHIFT)
+        utile, tinv = np.unique(tkey, return_inverse=True)
+        tiles = np.zeros(int(np.prod(self.tdims)), dtype=np.uint32)
+        tiles[utile] = (np.arange(len(utile), dtype=np.uint32) + 1) * BRICK * BRICK
+        headers = np.zeros((len(utile) + 1) * BRICK * BRICK, dtype=np.uint64)
+        headers[(tinv + 1) * BRICK * BRICK + (ux & (BRICK - 1)) * BRICK + (uy & (BRICK - 1))] = (
+            (start.astype(np.uint64) << np.uint64(32)) | (zmin.astype(np.uint64) << np.uint64(16))
+            | length.astype(np.uint64))
+        self.tiles = upload(self.UInt32, tiles, np.uint32)
+        self.headers = upload(self.mod.UInt64, headers, np.uint64)
         self.pool = upload(self.UInt32, pool, np.uint32)
-        # pos: one column per copy, a node with fewer copies repeats its first
-        n_copy = np.bincount(node, minlength=self.n)
-        first = np.zeros(self.n, dtype=np.int64)
-        cols = []
-        order = np.argsort(node, kind="stable")
-        start = np.r_[0, np.cumsum(n_copy)[:-1]]
-        for c in range(int(n_copy.max()) if self.n else 0):
-            k = np.where(n_copy > c, start + c, start)
-            cols.append(pos[order[k]])
-        self.pos = [upload(self.UInt32, c, np.uint32) for c in cols]
-        del first
+        self.pos = upload(self.UInt32, pos, np.uint32)
+        # occupancy of bricks of 8^3 cells, for near()
+        self.bdims = (D + BRICK - 1) >> BRICK_SHIFT
+        bk = rel >> BRICK_SHIFT
+        self._top_np = np.zeros(int(np.prod(self.bdims)), dtype=bool)
+        self._top_np[(bk[:, 0] * self.bdims[1] + bk[:, 1]) * self.bdims[2] + bk[:, 2]] = True
 
     def upload(self, values) -> "Float":
         """A float32 Dr.Jit array of this grid's variant (see `upload`)."""
@@ -315,7 +317,7 @@ class LatticeGrid:
         if self.n == 0 or len(pts) == 0:
             return np.zeros(len(pts), dtype=bool)
         i = np.floor(pts / self.h) - self.base
-        i = np.clip(i, -self.R - 1, self.bdims * BRICK + self.R).astype(np.int64)
+        i = np.clip(i, -self.R - 1, self.dims + self.R).astype(np.int64)
         lo_b = (i - self.R) >> BRICK_SHIFT
         K = (2 * self.R + 7) // BRICK + 1
         out = np.zeros(len(pts), dtype=bool)
@@ -327,7 +329,7 @@ class LatticeGrid:
                     cx, cy, cz = lo_b[:, 0] + kx, lo_b[:, 1] + ky, lo_b[:, 2] + kz
                     ok = (cx >= 0) & (cy >= 0) & (cz >= 0) & (cx < D[0]) & (cy < D[1]) & (cz < D[2])
                     k = np.where(ok, (cx * D[1] + cy) * D[2] + cz, 0)
-                    out |= ok & (self._top_np[k] != 0)
+                    out |= ok & self._top_np[k]
         return out
 
     def _columns(self, x, y, z, coef_pool=None, g=None, out=None):
@@ -337,27 +339,23 @@ class LatticeGrid:
         hh = dr.opaque(Float, h)
         gamma = dr.opaque(Float, self._gamma)
         rc2 = dr.opaque(Float, self.r_cut ** 2)
-        D = [dr.opaque(Int32, int(v) * BRICK) for v in self.bdims]
-        stride = [dr.opaque(Int32, int(self.bdims[1] * self.bdims[2])), dr.opaque(Int32, int(self.bdims[2]))]
+        D = [dr.opaque(Int32, int(v)) for v in self.dims]
+        ty = dr.opaque(Int32, int(self.tdims[1]))
         frac, cell = [], []
         for a, c in enumerate((x, y, z)):
             u = c * inv_h - dr.opaque(Float, float(self.base[a]))
-            fl = dr.clip(dr.floor(u), -R - 1.0, float(self.bdims[a] * BRICK + R))
+            fl = dr.clip(dr.floor(u), -R - 1.0, float(self.dims[a] + R))
             frac.append(u - fl)
             cell.append(Int32(fl))
         # the octant of the lane in its cell: offsets are mirrored where f >= 1/2
         sgn = [dr.select(f < 0.5, 1, -1) for f in frac]
         sgnf = [Float(v) for v in sgn]
-        # the lane's own brick in z holds (with its apron) every cell of its columns
-        bz = dr.clip(cell[2] >> BRICK_SHIFT, 0, dr.opaque(Int32, int(self.bdims[2]) - 1))
-        lz0 = cell[2] - bz * BRICK + self.R
         zs = {}
         for o in range(-R, R + 1):
             d2 = dr.square((frac[2] - (sgnf[2] * o + 0.5)) * hh)
-            ci = cell[2] + sgn[2] * o
-            zs[o] = (dr.select((ci >= 0) & (ci < D[2]), d2, _FAR), dr.exp(-gamma * d2),
-                     UInt32(dr.clip(lz0 + sgn[2] * o, 0, self.depth - 1)))
+            zs[o] = (d2, dr.exp(-gamma * d2), cell[2] + sgn[2] * o)
         acc = dr.zeros(Float, dr.width(x))
+        mask16 = dr.opaque(self.mod.UInt64, 0xFFFF)
         for (z0, z1), cols in self._groups.items():
             cox = upload(Int32, [c[0] for c in cols], np.int32)
             coy = upload(Int32, [c[1] for c in cols], np.int32)
@@ -369,14 +367,18 @@ class LatticeGrid:
                 dxy2 = dr.square((frac[0] - Float(ox) - 0.5) * hh) + dr.square((frac[1] - Float(oy) - 0.5) * hh)
                 exy = dr.exp(-gamma * dxy2)
                 cx, cy = cell[0] + ox, cell[1] + oy
-                dxy2 = dr.select((cx >= 0) & (cx < D[0]) & (cy >= 0) & (cy < D[1]), dxy2, _FAR)
-                t = dr.gather(UInt32, self.top, UInt32((cx >> BRICK_SHIFT) * stride[0]
-                                                       + (cy >> BRICK_SHIFT) * stride[1] + bz), dxy2 < rc2)
-                t = t + UInt32(((cx & (BRICK - 1)) * BRICK + (cy & (BRICK - 1))) * self.depth)
+                live = (cx >= 0) & (cx < D[0]) & (cy >= 0) & (cy < D[1]) & (dxy2 < rc2)
+                tile = dr.gather(UInt32, self.tiles, UInt32((cx >> BRICK_SHIFT) * ty + (cy >> BRICK_SHIFT)), live)
+                hdr = dr.gather(self.mod.UInt64, self.headers,
+                                tile + UInt32((cx & (BRICK - 1)) * BRICK + (cy & (BRICK - 1))), live)
+                start = UInt32(hdr >> 32)
+                zmin = Int32(UInt32((hdr >> 16) & mask16))
+                length = UInt32(hdr & mask16)
                 for o in range(z0, z1 + 1):
-                    dz2, ez, lz = zs[o]
-                    m = dxy2 + dz2 < rc2
-                    k = t + lz
+                    dz2, ez, cz = zs[o]
+                    zoff = UInt32(cz - zmin)
+                    m = (zoff < length) & (dxy2 + dz2 < rc2)
+                    k = start + zoff
                     kv = exy * ez
                     if out is None:
                         acc = dr.fma(kv, dr.gather(Float, coef_pool, k, m), acc)
@@ -391,17 +393,15 @@ class LatticeGrid:
         return acc
 
     def pooled(self, coef):
-        """The node coefficients (a Dr.Jit Float, node order) laid out as the pool (0 where there
-        is no node, every copy of a node written): what :meth:`kernel_sum` reads."""
+        """The node coefficients (a Dr.Jit Float, node order) laid out as the column store (0 in
+        the gaps of a column): what :meth:`kernel_sum` reads."""
         cp = dr.zeros(self.Float, self.pool_size)
-        for pos in self.pos:
-            dr.scatter(cp, coef, pos)
+        dr.scatter(cp, coef, self.pos)
         return cp
 
     def update_pooled(self, pool, coef, mask):
-        """Write the coefficients of the nodes in ``mask`` (all copies) into ``pool``."""
-        for pos in self.pos:
-            dr.scatter(pool, coef, pos, mask)
+        """Write the coefficients of the nodes in ``mask`` into ``pool``."""
+        dr.scatter(pool, coef, self.pos, mask)
 
     def kernel_sum(self, x, y, z, coef, pooled=False):
         """Lane-wise ``sum_j coef[j] k(x, nu_j)`` (``coef`` a Dr.Jit Float in node order, or
