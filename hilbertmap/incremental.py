@@ -48,7 +48,7 @@ from . import sgd
 from ._backend import LatticeGrid, cut_radius
 from ._checks import CHOICES, check_coverage_params, check_echo_params, check_pass_params, int_param, need, num_param
 from .embedding import Samples
-from .inducing import Coverage, LazyCoverage
+from .inducing import Coverage, LazyCoverage, sorted_unique
 from .model import HilbertMap, _unique_rows, embed_with
 from .scanlike import as_scan_list, check_scan
 
@@ -246,12 +246,12 @@ class IncrementalHilbertMap(HilbertMap):
         h = float(self.node_spacing)
         occ = s.occupied.reshape(-1, 3)
         if len(occ):
-            base = np.unique(_keys(np.floor(occ / h).astype(np.int64)))
+            base = sorted_unique(_keys(np.floor(occ / h).astype(np.int64)))
             r = int(self.node_margin)
             offs = np.stack(np.meshgrid(*[np.arange(-r, r + 1)] * 3, indexing="ij"), -1).reshape(-1, 3)
             offs = offs[np.sum(offs ** 2, axis=1) <= r * r + 1e-9]  # a ball of cells, not a cube
             idx = _unkey(base)
-            cand = np.unique(_keys((idx[:, None, :] + offs[None, :, :]).reshape(-1, 3)))
+            cand = sorted_unique(_keys((idx[:, None, :] + offs[None, :, :]).reshape(-1, 3)))
             new = np.setdiff1d(cand, self.node_keys_, assume_unique=True)
         else:
             new = np.zeros(0, dtype=np.int64)
@@ -285,12 +285,33 @@ class IncrementalHilbertMap(HilbertMap):
         for name in ("node_keys_", "inducing_points_", "dual_coef_", "node_accum_", "node_last_used_"):
             setattr(self, name, getattr(self, name)[keep])
         self.n_forgotten_ += int(n)
+        # the voxels of the kept nodes dilated by one voxel, marked once on a dense grid over
+        # their box: a region-seen voxel is kept when it is marked (the same as a node's voxel
+        # lying within one voxel of it)
         reach = Coverage(self.coverage_voxel)
         reach.add(self.inducing_points_)
+        idx = reach._idx(reach.keys)
+        lo = idx.min(axis=0) - 1 if len(idx) else np.zeros(3, dtype=np.int64)
+        shape = idx.max(axis=0) - lo + 2 if len(idx) else np.ones(3, dtype=np.int64)
+        if np.prod(shape) <= 1 << 26:
+            from scipy.ndimage import binary_dilation
+
+            mark = np.zeros(tuple(shape), dtype=bool)
+            mark[tuple((idx - lo).T)] = True
+            mark = binary_dilation(mark, structure=np.ones((3, 3, 3), dtype=bool))
+
+            def kept(keys):
+                c = reach._idx(keys) - lo
+                ok = np.all((c >= 0) & (c < shape), axis=1)
+                c = np.where(ok[:, None], c, 0)
+                return ok & mark[c[:, 0], c[:, 1], c[:, 2]]
+        else:
+            def kept(keys):
+                return reach.contains(reach._idx(keys) * reach.voxel + 0.5 * reach.voxel, dilate=1)
         for name in ("coverage_", "echo_coverage_", "free_coverage_"):
             cov = getattr(self, name)
-            c = cov.centres()
-            setattr(self, name, LazyCoverage(cov.voxel, cov.keys[reach.contains(c, dilate=1)] if len(c) else None))
+            k = cov.keys
+            setattr(self, name, LazyCoverage(cov.voxel, k[kept(k)] if len(k) and len(idx) else k[:0]))
 
     def _rebuild(self) -> None:
         """The kernel grid of the current nodes: a :class:`~hilbertmap._backend.LatticeGrid` (the
