@@ -9,6 +9,10 @@ formed, so no denormal reaches any product.
 
 Two kernels share the loop: ``kernel_sum`` (lane -> sum_j c_j k(x, nu_j)) and ``kernel_scatter``
 (``out[j] += g_lane k(x_lane, nu_j)``, the adjoint, used for the SGD gradient).
+
+:class:`LatticeGrid` holds nodes that sit on a regular lattice (those of
+:class:`~hilbertmap.IncrementalHilbertMap`) for the same two kernels without any search: a lane's
+lattice cell gives its neighbouring nodes directly, and the RBF factorises over the axes.
 """
 from __future__ import annotations
 
