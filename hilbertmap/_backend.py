@@ -263,7 +263,7 @@ class LatticeGrid:
             raise ValueError(f"HilbertMap: the nodes span {D[2]} lattice cells in z; at most 65535 are supported")
         # columns: the nodes of one (x, y) cell, stored densely from their lowest to highest z
         col = rel[:, 0] * D[1] + rel[:, 1]
-        order = np.lexsort((rel[:, 2], col))
+        order = np.argsort(col * D[2] + rel[:, 2])
         cs = col[order]
         first = np.r_[0, np.nonzero(cs[1:] != cs[:-1])[0] + 1] if self.n else np.zeros(0, dtype=np.int64)
         last = np.r_[first[1:], len(cs)] - 1 if self.n else first
@@ -282,7 +282,9 @@ class LatticeGrid:
         ux, uy = ucol // D[1], ucol % D[1]
         self.tdims = (D[:2] + BRICK - 1) >> BRICK_SHIFT
         tkey = (ux >> BRICK_SHIFT) * self.tdims[1] + (uy >> BRICK_SHIFT)
-        utile, tinv = np.unique(tkey, return_inverse=True)
+        utile = np.sort(tkey)
+        utile = utile[np.r_[True, utile[1:] != utile[:-1]]] if len(utile) else utile
+        tinv = np.searchsorted(utile, tkey)
         tiles = np.zeros(int(np.prod(self.tdims)), dtype=np.uint32)
         tiles[utile] = (np.arange(len(utile), dtype=np.uint32) + 1) * BRICK * BRICK
         headers = np.zeros((len(utile) + 1) * BRICK * BRICK, dtype=np.uint64)
