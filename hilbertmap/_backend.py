@@ -188,9 +188,8 @@ class KernelGrid:
         return G
 
 
-BRICK_SHIFT = 3  # LatticeGrid bricks of 8^3 lattice cells
+BRICK_SHIFT = 3  # LatticeGrid tiles of 8 x 8 columns, and bricks of 8^3 cells for near()
 BRICK = 1 << BRICK_SHIFT
-_FAR = 1e30  # a squared distance no kernel reaches (folds a validity mask into the distance test)
 
 
 class LatticeGrid:
