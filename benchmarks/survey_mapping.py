@@ -5,7 +5,8 @@ and ``--frames`` frames of the 128-beam multibeam), maps each with
 :class:`hilbertmap.IncrementalHilbertMap` scan by scan (``partial_fit`` as the scans arrive, every
 row at its own pose), and prints one JSON object:
 
-``throughput``   per head: pings mapped per second of mapping (embedding + update), against the
+``throughput``   per head: pings mapped per second of mapping (embedding + update; wall, and per
+                 CPU second of this process, ``load_1min`` the load then), against the
                  rate the head produces them (``head_pings_per_s``: rows per ``ping_period``) and
                  a 256-beam 10 Hz multibeam (2560 pings/s); ``nodes``, ``forgotten``
 ``harbour``      the mechanical survey's map against the scene (``hilbertmap.metrics.evaluate``:
@@ -20,8 +21,11 @@ row at its own pose), and prints one JSON object:
 ``seabed``       the rocky slope's multibeam survey (``--seabed-frames`` frames): throughput and the
                  elevation grid's error against the seabed's height field, where it is known
 ``speed``        training epoch seconds per million lanes and queries per second (near the surfaces,
-                 where every query meets nodes, and anywhere in the region seen), next to
-                 scikit-learn's Nystroem (1000 components) + SGDClassifier on the same lanes
+                 where every query meets nodes, and anywhere in the region seen), wall and CPU
+                 seconds, next to scikit-learn's Nystroem (1000 components) + SGDClassifier on the
+                 same lanes in the same run
+``speed_targets`` the issue's targets (2 s per epoch per M lanes, 5 M queries/s, 2560 multibeam
+                 beams/s, the mechanical head's ping rate) beside what was measured
 
     python benchmarks/survey_mapping.py [--spp 64] [--frames 100] [--out DIR] [--no-octomap]
 
@@ -69,13 +73,15 @@ def map_incrementally(scans, **params):
 
     hm = IncrementalHilbertMap(random_state=0, **params)
     rng = np.random.default_rng(0)
-    parts, secs = [], []
+    parts, secs, cpu = [], [], []
     for s in scans:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         smp = hm.embed(s, rng)
         hm.partial_fit(s, samples=smp)
         secs.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
         parts.append(smp)
+    hm.scan_cpu_s_ = np.array(cpu)  # read by throughput()
     return hm, Samples.concatenate(parts), np.array(secs)
 
 
@@ -88,8 +94,11 @@ def throughput(scans, sensor, secs, hm) -> dict:
     # the first scan includes Dr.Jit's kernel compilation: reported apart
     steady = secs[1:] if len(secs) > 1 else secs
     rate = n_rows / float(np.mean(steady))
+    cpu = getattr(hm, "scan_cpu_s_", None)
+    cpu_rate = n_rows / float(np.mean(cpu[1:] if len(cpu) > 1 else cpu)) if cpu is not None else float("nan")
     return dict(kind=kind, scans=len(scans), rows_per_scan=n_rows, first_scan_s=float(secs[0]),
-                mean_scan_s=float(np.mean(steady)), pings_per_s=rate, head_pings_per_s=head_rate,
+                mean_scan_s=float(np.mean(steady)), pings_per_s=rate, pings_per_cpu_s=cpu_rate,
+                load_1min=os.getloadavg()[0], head_pings_per_s=head_rate,
                 realtime_factor=rate / head_rate, multibeam_256x10Hz_factor=rate / 2560.0,
                 nodes=int(len(hm.inducing_points_)), forgotten=int(hm.n_forgotten_),
                 samples_seen=int(hm.n_samples_seen_))
@@ -123,29 +132,51 @@ def score(hm, V, F, resolution):
     return out, r
 
 
+TARGETS = dict(epoch_s_per_M=2.0, queries_per_s=5e6, multibeam_beams_per_s=2560.0)  # issue 31, part 5
+
+
+def _timed(fn, reps: int = 1):
+    """(wall s, CPU s of this process) of the fastest of ``reps`` calls: on a shared machine the
+    CPU seconds say what the work costs, the wall seconds what the other jobs left of it."""
+    best = None
+    for _ in range(reps):
+        w, c = time.perf_counter(), time.process_time()
+        fn()
+        r = (time.perf_counter() - w, time.process_time() - c)
+        best = r if best is None or r[0] < best[0] else best
+    return best
+
+
 def speed(samples, seed: int = 0, n_query: int = 1_000_000, nystroem_components: int = 1000) -> dict:
     """Epoch time per million training lanes and queries per second of the incremental map, and of
-    scikit-learn's Nystroem + SGDClassifier (log loss) on the same lanes, in the same run."""
+    scikit-learn's Nystroem + SGDClassifier (log loss) on the same lanes, in the same run.
+
+    The epoch is one more shuffled pass over the samples after a one-pass ``fit`` (which compiled
+    the kernels), the fastest of two; queries are 1 M points near the nodes (every one meets ~117
+    nodes) and 1 M anywhere in the region seen. Wall and CPU seconds both; ``load_1min`` is the
+    machine's load average when measured (2 cores here, shared)."""
     from hilbertmap import IncrementalHilbertMap
 
-    hm = IncrementalHilbertMap(random_state=seed, n_passes=2)
+    hm = IncrementalHilbertMap(random_state=seed, n_passes=1)
     s = hm._thin(samples)
     lanes = len(s.free) + s.occupied.shape[0] * s.occupied.shape[1]
     hm.fit(None, samples=samples)
-    epoch = hm.timings_["sgd_s"] / 2
+    t_ep, c_ep = _timed(lambda: hm._pass(s), reps=2)
     rng = np.random.default_rng(seed)
     near = hm.inducing_points_[rng.integers(0, len(hm.inducing_points_), n_query)] + rng.normal(0, 0.3, (n_query, 3))
     lo, hi = hm.coverage_.bounds()
     anywhere = rng.uniform(lo, hi, (n_query, 3))
     hm.predict_proba(near[:1000])  # compile
-    t0 = time.perf_counter()
-    hm.predict_proba(near)
-    t_near = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    hm.predict_proba(anywhere)
-    t_any = time.perf_counter() - t0
-    out = dict(lanes=int(lanes), epoch_s=epoch, epoch_s_per_M=epoch / lanes * 1e6,
-               queries_per_s_near_surfaces=n_query / t_near, queries_per_s_region=n_query / t_any)
+    t_near, c_near = _timed(lambda: hm.predict_proba(near), reps=2)
+    t_any, c_any = _timed(lambda: hm.predict_proba(anywhere), reps=2)
+    grid = hm._grid
+    out = dict(lanes=int(lanes), nodes=int(grid.n), epoch_s=t_ep, epoch_s_per_M=t_ep / lanes * 1e6,
+               epoch_cpu_s_per_M=c_ep / lanes * 1e6,
+               queries_per_s_near_surfaces=n_query / t_near, queries_per_cpu_s_near_surfaces=n_query / c_near,
+               queries_per_s_region=n_query / t_any, queries_per_cpu_s_region=n_query / c_any,
+               offsets_visited_per_query=int(grid.n_visits),
+               cpu_ns_per_offset_visited=c_near / n_query / grid.n_visits * 1e9,
+               load_1min=os.getloadavg()[0])
     try:
         from sklearn.kernel_approximation import Nystroem
         from sklearn.linear_model import SGDClassifier
@@ -156,22 +187,41 @@ def speed(samples, seed: int = 0, n_query: int = 1_000_000, nystroem_components:
     y = np.concatenate([np.zeros(len(s.free)), np.ones(len(X) - len(s.free))])
     nys = Nystroem(gamma=hm.gamma_, n_components=nystroem_components, random_state=seed)
     nys.fit(X[rng.choice(len(X), min(len(X), 20000), replace=False)])
-    t0 = time.perf_counter()
-    Z = nys.transform(X)
-    t_tr = time.perf_counter() - t0
+    Z = [None]
+    t_tr, c_tr = _timed(lambda: Z.__setitem__(0, nys.transform(X)))
     clf = SGDClassifier(loss="log_loss", random_state=seed)
-    t0 = time.perf_counter()
-    clf.partial_fit(Z, y, classes=[0, 1])
-    t_sgd = time.perf_counter() - t0
+    t_sgd, c_sgd = _timed(lambda: clf.partial_fit(Z[0], y, classes=[0, 1]))
     q = near[:200_000]
-    t0 = time.perf_counter()
-    clf.predict_proba(nys.transform(q))
-    t_q = time.perf_counter() - t0
+    t_q, c_q = _timed(lambda: clf.predict_proba(nys.transform(q)))
     out["sklearn"] = dict(n_components=nystroem_components, transform_s_per_M=t_tr / len(X) * 1e6,
                           sgd_epoch_s_per_M=t_sgd / len(X) * 1e6,
-                          epoch_with_features_s_per_M=(t_tr + t_sgd) / len(X) * 1e6, queries_per_s=len(q) / t_q)
+                          epoch_with_features_s_per_M=(t_tr + t_sgd) / len(X) * 1e6,
+                          epoch_with_features_cpu_s_per_M=(c_tr + c_sgd) / len(X) * 1e6,
+                          queries_per_s=len(q) / t_q, queries_per_cpu_s=len(q) / c_q)
     out["epoch_ratio_sklearn_over_ours"] = out["sklearn"]["epoch_with_features_s_per_M"] / out["epoch_s_per_M"]
     out["query_ratio_ours_over_sklearn"] = out["queries_per_s_near_surfaces"] / out["sklearn"]["queries_per_s"]
+    return out
+
+
+def targets(report: dict) -> dict:
+    """The issue's speed targets next to what this run measured."""
+    out = {}
+    sp = report.get("speed", {})
+    if "epoch_s_per_M" in sp:
+        out["epoch_s_per_M"] = dict(target=TARGETS["epoch_s_per_M"], wall=sp["epoch_s_per_M"],
+                                    cpu=sp["epoch_cpu_s_per_M"], met=sp["epoch_s_per_M"] <= TARGETS["epoch_s_per_M"])
+        out["queries_per_s"] = dict(target=TARGETS["queries_per_s"], wall=sp["queries_per_s_near_surfaces"],
+                                    per_cpu_s=sp["queries_per_cpu_s_near_surfaces"],
+                                    met=sp["queries_per_s_near_surfaces"] >= TARGETS["queries_per_s"])
+    for name, tp in report.get("throughput", {}).items():
+        if tp.get("kind") == "multibeam":
+            out[f"{name}_beams_per_s"] = dict(target=TARGETS["multibeam_beams_per_s"], wall=tp["pings_per_s"],
+                                              per_cpu_s=tp["pings_per_cpu_s"],
+                                              met=tp["pings_per_s"] >= TARGETS["multibeam_beams_per_s"])
+        elif name == "mechanical":
+            out["mechanical_pings_per_s"] = dict(target=tp["head_pings_per_s"], wall=tp["pings_per_s"],
+                                                 per_cpu_s=tp["pings_per_cpu_s"],
+                                                 met=tp["pings_per_s"] >= tp["head_pings_per_s"])
     return out
 
 
@@ -318,6 +368,7 @@ def main(argv=None) -> int:
         plot_survey_map(hm, os.path.join(args.out, "harbour_map.png"), elevation=eg,
                         title="harbour survey: incremental Hilbert map")
         report["outputs"] = sorted(os.listdir(args.out))
+    report["speed_targets"] = targets(report)
     print(json.dumps(_clean(report), indent=1))
     return 0
 

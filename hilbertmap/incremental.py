@@ -45,10 +45,10 @@ import time
 import numpy as np
 
 from . import sgd
-from ._backend import KernelGrid, cut_radius
+from ._backend import LatticeGrid, cut_radius
 from ._checks import CHOICES, check_coverage_params, check_echo_params, check_pass_params, int_param, need, num_param
 from .embedding import Samples
-from .inducing import Coverage, LazyCoverage
+from .inducing import Coverage, LazyCoverage, sorted_unique
 from .model import HilbertMap, _unique_rows, embed_with
 from .scanlike import as_scan_list, check_scan
 
@@ -246,12 +246,12 @@ class IncrementalHilbertMap(HilbertMap):
         h = float(self.node_spacing)
         occ = s.occupied.reshape(-1, 3)
         if len(occ):
-            base = np.unique(_keys(np.floor(occ / h).astype(np.int64)))
+            base = sorted_unique(_keys(np.floor(occ / h).astype(np.int64)))
             r = int(self.node_margin)
             offs = np.stack(np.meshgrid(*[np.arange(-r, r + 1)] * 3, indexing="ij"), -1).reshape(-1, 3)
             offs = offs[np.sum(offs ** 2, axis=1) <= r * r + 1e-9]  # a ball of cells, not a cube
             idx = _unkey(base)
-            cand = np.unique(_keys((idx[:, None, :] + offs[None, :, :]).reshape(-1, 3)))
+            cand = sorted_unique(_keys((idx[:, None, :] + offs[None, :, :]).reshape(-1, 3)))
             new = np.setdiff1d(cand, self.node_keys_, assume_unique=True)
         else:
             new = np.zeros(0, dtype=np.int64)
@@ -285,54 +285,63 @@ class IncrementalHilbertMap(HilbertMap):
         for name in ("node_keys_", "inducing_points_", "dual_coef_", "node_accum_", "node_last_used_"):
             setattr(self, name, getattr(self, name)[keep])
         self.n_forgotten_ += int(n)
+        # the voxels of the kept nodes dilated by one voxel, marked once on a dense grid over
+        # their box: a region-seen voxel is kept when it is marked (the same as a node's voxel
+        # lying within one voxel of it)
         reach = Coverage(self.coverage_voxel)
         reach.add(self.inducing_points_)
+        idx = reach._idx(reach.keys)
+        lo = idx.min(axis=0) - 1 if len(idx) else np.zeros(3, dtype=np.int64)
+        shape = idx.max(axis=0) - lo + 2 if len(idx) else np.ones(3, dtype=np.int64)
+        if np.prod(shape) <= 1 << 26:
+            from scipy.ndimage import binary_dilation
+
+            mark = np.zeros(tuple(shape), dtype=bool)
+            mark[tuple((idx - lo).T)] = True
+            mark = binary_dilation(mark, structure=np.ones((3, 3, 3), dtype=bool))
+
+            def kept(keys):
+                c = reach._idx(keys) - lo
+                ok = np.all((c >= 0) & (c < shape), axis=1)
+                c = np.where(ok[:, None], c, 0)
+                return ok & mark[c[:, 0], c[:, 1], c[:, 2]]
+        else:
+            def kept(keys):
+                return reach.contains(reach._idx(keys) * reach.voxel + 0.5 * reach.voxel, dilate=1)
         for name in ("coverage_", "echo_coverage_", "free_coverage_"):
             cov = getattr(self, name)
-            c = cov.centres()
-            setattr(self, name, LazyCoverage(cov.voxel, cov.keys[reach.contains(c, dilate=1)] if len(c) else None))
+            k = cov.keys
+            setattr(self, name, LazyCoverage(cov.voxel, k[kept(k)] if len(k) and len(idx) else k[:0]))
 
     def _rebuild(self) -> None:
-        """The kernel grid of the current nodes and a summed-volume table of its cell counts
-        (which sample has a node within the kernel's support)."""
+        """The kernel grid of the current nodes: a :class:`~hilbertmap._backend.LatticeGrid` (the
+        nodes sit on the lattice of pitch ``node_spacing``: a point's lattice cell gives its
+        neighbouring nodes directly, no search)."""
         self._scans_since_build = 0
         if len(self.inducing_points_) == 0:
             self._grid = None
             return
-        g = KernelGrid(self.inducing_points_, self.lengthscale_, float(self.kernel_cut), self.variant)
-        # keep the caller's order: the grid permutes its own copy, coefficients are mapped through it
-        self._grid = g
-        sat = np.zeros(tuple(g.dims + 1), dtype=np.int32)
-        sat[1:, 1:, 1:] = g.cell_counts.reshape(tuple(g.dims))
-        for a in range(3):
-            np.cumsum(sat, axis=a, out=sat)
-        self._sat = sat
+        self._grid = LatticeGrid(_unkey(self.node_keys_), float(self.node_spacing), self.lengthscale_,
+                                 float(self.kernel_cut), self.variant)
 
     def _near(self, pts: np.ndarray) -> np.ndarray:
-        """Whether a node may lie within the kernel's support of each point (cell box sums)."""
+        """Whether a node may lie within the kernel's support of each point (a superset:
+        :meth:`~hilbertmap._backend.LatticeGrid.near`)."""
         g = self._grid
         if g is None or len(pts) == 0:
             return np.zeros(len(pts), dtype=bool)
-        c = np.floor((pts - g.lo) / g.h).astype(np.int64)
-        R = 2  # the grid's CELL_DIV: the cells a lane visits
-        lo = np.clip(c - R, 0, g.dims)
-        hi = np.clip(c + R + 1, 0, g.dims)
-        S = self._sat
-        tot = (S[hi[:, 0], hi[:, 1], hi[:, 2]] - S[lo[:, 0], hi[:, 1], hi[:, 2]] - S[hi[:, 0], lo[:, 1], hi[:, 2]]
-               - S[hi[:, 0], hi[:, 1], lo[:, 2]] + S[lo[:, 0], lo[:, 1], hi[:, 2]] + S[lo[:, 0], hi[:, 1], lo[:, 2]]
-               + S[hi[:, 0], lo[:, 1], lo[:, 2]] - S[lo[:, 0], lo[:, 1], lo[:, 2]])
-        return tot > 0
+        return g.near(pts)
 
     def _pass(self, s: Samples) -> float:
         """One shuffled pass of mini-batch AdaGrad; the mean weighted loss seen."""
-        try:
-            from threadpoolctl import threadpool_limits
-        except ImportError:
-            return self._pass_inner(s)
-        with threadpool_limits(limits=1, user_api="blas"):
-            return self._pass_inner(s)
+        return self._pass_inner(s)
 
     def _pass_inner(self, s: Samples) -> float:
+        """The mini-batches in order. Per batch: the logits of the lanes that have nodes near
+        (one Dr.Jit kernel, lanes sorted by lattice brick for cache locality; the result does not
+        depend on their order), the loss and per-sample gradients in numpy, the kernel's adjoint
+        into the nodes and the AdaGrad step of the touched nodes (Dr.Jit, float32, in place: the
+        coefficients stay on the Dr.Jit side for the whole pass)."""
         import drjit as dr
 
         F, G = len(s.free), len(s.occupied)
@@ -341,15 +350,21 @@ class IncrementalHilbertMap(HilbertMap):
         pf = np.array_split(self._rng.permutation(F), nb)
         pg = np.array_split(self._rng.permutation(G), nb)
         grid = self._grid
-        order = grid.order if grid is not None else None  # grid position i holds node order[i]
-        n = grid.n if grid is not None else 0              # the nodes built (newer ones wait, coefficient 0)
-        coef_v, accum_v = self.dual_coef_[:n], self.node_accum_[:n]  # views: updated in place
+        n = grid.n if grid is not None else 0  # the nodes built (newer ones wait, coefficient 0)
         near_f = self._near(s.free)
         near_g = self._near(s.occupied.reshape(-1, 3)).reshape(G, m).any(axis=1) if G else np.zeros(0, bool)
+        if grid is not None:
+            key_f = grid.sort_keys(s.free)
+            key_g = grid.sort_keys(s.occupied[:, 0]) if G else np.zeros(0, dtype=np.int64)
+            coef = grid.upload(self.dual_coef_[:n])
+            accum = grid.upload(self.node_accum_[:n])
+            pool = grid.pooled(coef)
+            used = dr.zeros(grid.mod.Bool, n)
+            alpha_dr = dr.opaque(grid.Float, float(self.alpha))
+            eta_dr = dr.opaque(grid.Float, float(self.eta0))
         c_occ = self.occupied_weight_
-        alpha, eta = float(self.alpha), float(self.eta0)
+        eta = float(self.eta0)
         loss_sum = wsum = 0.0
-        used = np.zeros(len(self.dual_coef_), dtype=bool)
         for b in range(nb):
             i_f, i_g = pf[b], pg[b]
             bf, bg = len(i_f), len(i_g)
@@ -360,10 +375,11 @@ class IncrementalHilbertMap(HilbertMap):
             jf, jg = np.nonzero(near_f[i_f])[0], np.nonzero(near_g[i_g])[0]
             lanes = None
             if grid is not None and len(jf) + len(jg):
+                jf = jf[np.argsort(key_f[i_f[jf]], kind="stable")]
+                jg = jg[np.argsort(key_g[i_g[jg]], kind="stable")]
                 lanes = np.concatenate([s.free[i_f[jf]], s.occupied[i_g[jg]].reshape(-1, 3)])
-                coef = grid.upload(coef_v[order])
                 x, y, z = grid.to_lanes(lanes)
-                fl = grid.kernel_sum(x, y, z, coef).numpy().astype(np.float64)
+                fl = grid.kernel_sum(x, y, z, pool, pooled=True).numpy().astype(np.float64)
                 f_free[jf] += fl[:len(jf)]
                 f_grp[jg] += fl[len(jf):].reshape(len(jg), m).mean(axis=1)
             f = np.concatenate([f_free, f_grp])
@@ -375,27 +391,33 @@ class IncrementalHilbertMap(HilbertMap):
             g = c * (sgd.sigmoid(f) - yv) / csum
             if lanes is not None:
                 g_lane = np.concatenate([g[jf], np.repeat(g[bf + jg] / m, m)]).astype(np.float32)
-                out = dr.zeros(grid.Float, grid.n)
-                grid.kernel_scatter(x, y, z, grid.upload(g_lane), out)
-                gj = np.empty(n)
-                gj[order] = out.numpy()
+                gj = grid.kernel_scatter(x, y, z, grid.upload(g_lane), dr.zeros(grid.Float, n))
                 touched = gj != 0
-                used[:n] |= touched
-                gj[touched] += alpha * coef_v[touched]
-                accum_v[touched] += gj[touched] ** 2
-                coef_v[touched] -= eta * gj[touched] / (np.sqrt(accum_v[touched]) + 1e-8)
+                gj = gj + alpha_dr * coef
+                accum = dr.select(touched, dr.fma(gj, gj, accum), accum)
+                coef = dr.select(touched, coef - eta_dr * gj / (dr.sqrt(accum) + 1e-8), coef)
+                grid.update_pooled(pool, coef, touched)
+                used = used | touched
+                dr.eval(coef, accum, pool, used)
             if self.fit_intercept:
                 gb = float(g.sum())
                 self._b_accum += gb * gb
                 self.intercept_ -= eta * gb / (math.sqrt(self._b_accum) + 1e-8)
             self.t_ += bf + bg
             self.n_samples_seen_ += bf + bg
-        self.node_last_used_[used] = self.n_scans_seen_
+        if grid is not None:
+            self.dual_coef_[:n] = coef.numpy()
+            self.node_accum_[:n] = accum.numpy()
+            self.node_last_used_[:n][used.numpy()] = self.n_scans_seen_
         return loss_sum / max(wsum, 1e-300)
 
     # -- queries -------------------------------------------------------------------------------
-    def decision_function(self, points, chunk: int = 1 << 21) -> np.ndarray:
-        """Logit ``f(x) = sum_j a_j k(x, nu_j) + b`` at (N, 3) world points (no side effects)."""
+    def decision_function(self, points, chunk: int = 1 << 20) -> np.ndarray:
+        """Logit ``f(x) = sum_j a_j k(x, nu_j) + b`` at (N, 3) world points (no side effects).
+
+        Points go to the kernel in chunks of ``chunk``, each sorted by lattice brick (neighbouring
+        lanes read the same nodes: :meth:`~hilbertmap._backend.LatticeGrid.kernel_sum_at`); a point
+        no node reaches reads only the empty block and gets ``b``."""
         from ._checks import as_points
 
         self._check_fitted()
@@ -407,13 +429,9 @@ class IncrementalHilbertMap(HilbertMap):
             grid = self._grid
         if grid is None:
             return out
-        coef = grid.upload(self.dual_coef_[:grid.n][grid.order])  # nodes not yet built hold 0
+        pool = grid.pooled(grid.upload(self.dual_coef_[:grid.n]))  # nodes not yet built hold 0
         for a in range(0, len(pts), chunk):
-            p = pts[a:a + chunk]
-            near = np.nonzero(self._near(p))[0]
-            if len(near) == 0:
-                continue
-            out[a + near] += grid.kernel_sum_at(p[near], coef)
+            out[a:a + chunk] += grid.kernel_sum_at(pts[a:a + chunk], pool, pooled=True)
         return out
 
     @property

@@ -1,0 +1,76 @@
+"""The lattice kernels of the incremental Hilbert map (hilbertmap._backend.LatticeGrid).
+
+Nodes sit at ``(k + 1/2) h`` for integer lattice indices ``k``; the grid finds a point's nodes
+from its lattice cell. Checked against the dense numpy sums of the cut RBF kernel, for several
+kernel supports (the number of lattice offsets a lane visits changes with them).
+"""
+import numpy as np
+import pytest
+
+import drjit as dr
+
+from hilbertmap import IncrementalHilbertMap
+from hilbertmap._backend import LatticeGrid, cut_radius
+from hilbertmap.testing import box_scan, moving_poses
+
+
+def _dense(idx, h, ell, cut, x):
+    nu = (idx + 0.5) * h
+    d2 = ((x[:, None, :] - nu[None]) ** 2).sum(-1)
+    K = np.exp(-d2 / (2 * ell ** 2))
+    K[d2 >= cut_radius(ell, cut) ** 2] = 0.0
+    return K
+
+
+@pytest.mark.parametrize("ell_factor,cut", [(1.0, 1e-2), (0.6, 1e-3), (1.7, 1e-2)])
+def test_lattice_kernels_match_dense_numpy(ell_factor, cut):
+    rng = np.random.default_rng(1)
+    h = 0.15
+    # a sheet with a margin and scattered nodes, some at negative indices, across brick borders
+    sheet = np.stack(np.meshgrid(np.arange(-9, 9), np.arange(-3, 11), np.arange(-2, 1), indexing="ij"), -1)
+    idx = np.unique(np.concatenate([sheet.reshape(-1, 3), rng.integers(-20, 20, (300, 3))]), axis=0)
+    ell = ell_factor * h
+    g = LatticeGrid(idx, h, ell, cut)
+    # points near the nodes, between them and far outside their bounding box
+    x = np.concatenate([(idx[rng.integers(0, len(idx), 600)] + rng.uniform(-2, 3, (600, 3))) * h,
+                        rng.uniform(-5, 5, (200, 3)), [[1e4, -1e4, 3.0], [-40.0, 0.0, 0.0]]])
+    K = _dense(idx, h, ell, cut, x)
+    coef = rng.normal(size=len(idx))
+    f = g.kernel_sum(*g.to_lanes(x), g.upload(coef))
+    np.testing.assert_allclose(f.numpy(), K @ coef, atol=3e-5 * np.abs(coef).sum() ** 0.5)
+    gl = rng.normal(size=len(x))
+    out = g.kernel_scatter(*g.to_lanes(x), g.upload(gl), dr.zeros(g.Float, g.n))
+    np.testing.assert_allclose(out.numpy(), K.T @ gl, atol=1e-4)
+    # near() is a superset of the points that some node reaches, and not everything
+    reached = (K > 0).any(axis=1)
+    near = g.near(x)
+    assert near[reached].all() and not near.all()
+    # the offsets visited are all those that can reach, and no more than the ball allows
+    assert len(g.offsets) < (2 * g.R + 1) ** 3
+    assert np.ptp(g.offsets, axis=0).max() == 2 * g.R
+
+
+def test_query_order_and_seed_do_not_change_the_map():
+    scans = [box_scan(moving_poses((-2 + i, -1, 0), (-1 + i, 0, 0)), rays=40, seed=i) for i in range(2)]
+    maps = []
+    for _ in range(2):
+        hm = IncrementalHilbertMap(random_state=3)
+        for s in scans:
+            hm.partial_fit(s)
+        maps.append(hm)
+    # the same up to the order of float32 atomic additions (Dr.Jit's threads): 1e-6 here
+    np.testing.assert_allclose(maps[0].dual_coef_, maps[1].dual_coef_, rtol=0, atol=1e-5)
+    assert abs(maps[0].intercept_ - maps[1].intercept_) < 1e-5
+    rng = np.random.default_rng(0)
+    pts = rng.uniform([-5, -4, -3], [5, 4, 1], (5000, 3))
+    f = maps[0].decision_function(pts)
+    perm = rng.permutation(len(pts))
+    np.testing.assert_array_equal(maps[0].decision_function(pts[perm]), f[perm])
+    # the chunked evaluation (each chunk sorted on its own) gives the same values
+    np.testing.assert_array_equal(maps[0].decision_function(pts, chunk=777), f)
+    # the logit is the dense kernel expansion of the nodes that are built
+    hm = maps[0]
+    n = hm._grid.n
+    idx = np.floor(hm.inducing_points_[:n] / hm.node_spacing).astype(np.int64)
+    K = _dense(idx, hm.node_spacing, hm.lengthscale_, hm.kernel_cut, pts[:800])
+    np.testing.assert_allclose(f[:800], K @ hm.dual_coef_[:n] + hm.intercept_, atol=1e-4)
