@@ -1,0 +1,163 @@
+"""Frozen render passes: a pass's kernel recorded once and replayed (issue "Survey speed").
+
+A histogram pass (`sonar_tof.SonarTOFIntegrator`) traces the echo path in Python and Dr.Jit
+turns the trace into one kernel. Tracing, assembling the kernel's IR and looking it up in the
+kernel cache cost milliseconds per pass whatever the number of paths: at the spp of a 5 % scan
+(a 200-ping box scan in tens of milliseconds) that is a tenth of the frame. ``dr.freeze``
+(Dr.Jit's frozen functions, `drjit.freeze`) records the kernel launches of a call and replays
+them on the next call with compatible inputs, skipping the Python tracing.
+
+What makes a replay give the same numbers as tracing again:
+
+* every JIT value the pass reads is an input of the frozen call: the arguments (seed, first
+  sample, the emitted directions) and `jit_state` of the pass's context (the `common.PathSetup`
+  or `shared_beams.SharedFrame`: the ping frames, the range window, the beam's parameters, the
+  scene), all opaque, so a new pose, window, seed or pass start is new data for the same kernel;
+* everything else that shapes the kernel is in the recording's key (`Context`): the pass's body
+  and integrator, the scene, sensor and beam objects, and every Python number and string of the
+  context (sizes, the beam's kind, the window's width in beams);
+* the emitted directions are drawn before the frozen call (`emitted`): the beam's sampling table
+  (``mi.MarginalContinuous2D0``) hides its arrays from Dr.Jit's traversal, so it cannot be read
+  inside a recording. Drawn in a kernel of its own, the direction and its weight are the same
+  float32 values as when the path kernel draws them itself (checked bit for bit in
+  tests/test_speed.py, with and without freezing).
+
+Dr.Jit refuses (``record(): ... was not specified as an input variable``) a recording that reads
+a JIT value the inputs do not name, so a value missed here cannot be baked in silently.
+``FREEZE = False`` (or ``dr.set_flag(dr.JitFlag.KernelFreezing, False)``) traces every pass.
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+# Trace every pass when False (the frozen and traced passes give the same histogram, bit for bit).
+FREEZE = True
+# Recordings kept per process (one per scene, sensor, integrator and pass size in use); past this
+# number they are all dropped and made anew as needed.
+MAX_RECORDINGS = 32
+
+
+def jit_state(obj):
+    """(JIT values, Python scalars) reachable from ``obj``: arrays and Dr.Jit-traversable objects
+    (the scene, its plugins) go to the first list, in a fixed order; numbers and strings, and the
+    identity of objects that are neither, to the second (the recording's key)."""
+    values, scalars, seen = [], [], set()
+
+    def walk(o, path):
+        if isinstance(o, (bool, int, float, str, type(None), np.generic)):
+            scalars.append((path, o if not isinstance(o, np.generic) else o.item()))
+            return
+        if isinstance(o, np.ndarray):
+            return      # host data: read into JIT values (which are inputs) when a setup is built
+        if id(o) in seen:
+            return
+        seen.add(id(o))
+        if isinstance(o, dr.ArrayBase):
+            values.append(o)
+            scalars.append((path, type(o).__name__, dr.width(o)))
+            return
+        if isinstance(o, (tuple, list)):
+            for i, v in enumerate(o):
+                walk(v, f"{path}[{i}]")
+            return
+        if isinstance(o, dict):
+            for k in sorted(o, key=str):
+                walk(o[k], f"{path}[{k!r}]")
+            return
+        if isinstance(o, dr.detail.TraversableBase):
+            values.append(o)      # Dr.Jit traverses it (a scene: shapes, BSDFs; a Python plugin: its members)
+            scalars.append((path, type(o).__name__, id(o)))
+            if not hasattr(o, "__dict__"):
+                return
+        elif not hasattr(o, "__dict__"):
+            scalars.append((path, type(o).__name__, id(o)))
+            return
+        for k, v in sorted(vars(o).items()):
+            walk(v, f"{path}.{k}")
+
+    walk(obj, "")
+    return values, tuple(scalars)
+
+
+class Context:
+    """The non-JIT argument of a frozen pass: ``body(ctx, *args)`` and its context; equal (and
+    hashed alike) when the body, the integrator and every Python scalar of the context are, so
+    Dr.Jit replays a recording only for the pass it recorded."""
+
+    def __init__(self, body, owner, ctx):
+        self.body, self.ctx = body, ctx
+        self.values, scalars = jit_state(ctx)
+        self.key = (body.__qualname__, id(owner), scalars)
+
+    def __hash__(self):
+        return hash(self.key)
+
+    def __eq__(self, other):
+        return isinstance(other, Context) and other.key == self.key
+
+
+def _state(context, *args):
+    return tuple(context.values)
+
+
+def _call(context, *args):
+    return context.body(context.ctx, *args)
+
+
+_frozen = dr.freeze(_call, state_fn=_state, limit=MAX_RECORDINGS)
+# The contexts of the recordings, kept alive: the objects whose identity is in a key (the scene,
+# the sensor, the beams) cannot be freed and their addresses reused by other objects while a
+# recording may be replayed.
+_alive = {}
+
+
+def clear():
+    """Drop every recording (the next pass of each context records anew)."""
+    _frozen.clear()
+    _alive.clear()
+
+
+def run(body, owner, ctx, *args):
+    """``body(ctx, *args)`` (a JIT array out), frozen unless `FREEZE` is off: traced and recorded
+    on the first call with this context's key, replayed after. ``args`` are JIT values (opaque).
+
+    A recording's virtual calls (the scene's BSDFs and shapes) are bound to Dr.Jit's registry of
+    instances as it was when it was recorded; when scenes have been loaded or freed since, Dr.Jit
+    refuses the replay (``assign_with_registry()``) and the recordings are made anew."""
+    if not FREEZE:
+        return body(ctx, *args)
+    context = Context(body, owner, ctx)
+    if len(_alive) >= MAX_RECORDINGS and context.key not in _alive:
+        clear()
+    _alive.setdefault(context.key, context)
+    try:
+        return _frozen(context, *args)
+    except RuntimeError as exc:
+        if "registry" not in str(exc):
+            raise
+    clear()
+    _alive[context.key] = context
+    return _frozen(context, *args)
+
+
+class Emitted:
+    """A beam whose ``sample`` returns directions drawn beforehand (`emitted`); the rest of the
+    beam (``eval_dir``, ``eval``, ...) is the beam's own."""
+
+    def __init__(self, beam, d, weight):
+        self._beam, self._d, self._w = beam, d, weight
+
+    def sample(self, u, active=True):
+        return self._d, self._w
+
+    def __getattr__(self, name):
+        return getattr(self._beam, name)
+
+
+def emitted(beam, samples):
+    """The emitted directions and weights of ``samples`` (dims 0-1) from ``beam``, evaluated."""
+    d, w = beam.sample(samples.get2(0), True)
+    dr.eval(d, w)
+    return d, w

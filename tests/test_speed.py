@@ -1,0 +1,120 @@
+"""Issue "Survey speed": frozen render passes (plugins/frozen_pass.py) give the traced passes'
+histogram bit for bit whatever changes between renders (seed, pose, pass start), replay one
+recording, and draw the emitted directions as the fused path kernel does; ``share_beams`` is the
+default for multibeam heads that can share, with a silent fallback and an explicit opt-out."""
+import numpy as np
+import pytest
+
+from conftest import acoustic_xml, frame_matrix, rectangle_xml, scene_xml, sonar_xml, sphere_xml
+
+
+def small_scene(mitsonar_mod, kind="mechanical", pattern="gaussian", share=None, n_pings=12):
+    """A head over a floor z = -2 with a sphere on it: single and multi-bounce echoes."""
+    head = frame_matrix((1.0, 0.0, -0.4), (0.0, 0.0, 1.0))
+    params = dict(kind=kind, range_min=0.5, range_max=8.0, n_bins=40, bearing_start=-11.0, n_pings=n_pings,
+                  beam_pattern=pattern, beamwidth_h=3.0, beamwidth_v=20.0)
+    params["bearing_step"] = 2.0
+    floor = np.diag([8.0, 8.0, 1.0, 1.0])
+    floor[:3, 3] = (2.0, 0.0, -2.0)
+    bsdf = acoustic_xml(diffuse=0.6, specular=0.3, shininess=20.0)
+    extra = "" if share is None else f'<boolean name="share_beams" value="{str(share).lower()}"/>'
+    integ = f'<integrator type="sonar_tof"><integer name="max_depth" value="3"/>{extra}</integrator>'
+    return mitsonar_mod.load_scene(scene_xml(sonar_xml(head, **params), rectangle_xml(floor, bsdf),
+                                             sphere_xml((4.0, 0.5, -1.5), 0.5, bsdf), integrator=integ))
+
+
+def render(scene, freeze, monkeypatch, **kw):
+    from mitsonar.plugins import module
+
+    monkeypatch.setattr(module("frozen_pass"), "FREEZE", freeze)
+    return scene.integrator().render_histogram(scene, 0, **kw)
+
+
+@pytest.mark.parametrize("kind,share", [("mechanical", None), ("multibeam", False), ("multibeam", True)])
+def test_frozen_passes_equal_traced_passes(mitsonar_mod, monkeypatch, kind, share):
+    """Record (first call), then replay with another seed and another pose: each equals the
+    traced pass (per-row paths: float64 bit for bit; shared paths scatter float64 atomics in
+    thread order, so bit for bit in the float32 of the scan); one recording serves them all."""
+    from mitsonar.plugins import module
+
+    fp = module("frozen_pass")
+    scene = small_scene(mitsonar_mod, kind, share=share)
+    head = scene.sensors()[0].head_pose()
+    moved = head.copy()
+    moved[:3, 3] += (0.3, -0.2, 0.1)
+    before = fp._frozen.n_recordings
+    cast = (lambda h: h.astype(np.float32)) if share else (lambda h: h)
+    for seed, pose in ((3, None), (4, None), (4, moved), (5, head)):
+        frozen = render(scene, True, monkeypatch, seed=seed, spp=32, pose=pose)
+        traced = render(scene, False, monkeypatch, seed=seed, spp=32, pose=pose)
+        np.testing.assert_array_equal(cast(frozen), cast(traced))
+        assert frozen.sum() > 0
+    assert fp._frozen.n_recordings == before + 1
+    assert not np.array_equal(render(scene, True, monkeypatch, seed=3, spp=32),
+                              render(scene, True, monkeypatch, seed=4, spp=32))
+
+
+def test_frozen_passes_split_into_passes_as_traced(mitsonar_mod, monkeypatch):
+    """Several passes per render (pass start opaque, a last pass of another size): the frozen
+    render equals the traced one and the one-pass render."""
+    from mitsonar.plugins import module
+
+    scene = small_scene(mitsonar_mod)
+    one = render(scene, True, monkeypatch, seed=7, spp=40)
+    monkeypatch.setattr(module("sonar_tof"), "MAX_SPP_PER_PASS", 16)   # passes of 16, 16, 8
+    frozen = render(scene, True, monkeypatch, seed=7, spp=40)
+    np.testing.assert_array_equal(frozen, render(scene, False, monkeypatch, seed=7, spp=40))
+    np.testing.assert_allclose(frozen, one, rtol=1e-9, atol=0)
+
+
+def test_emitted_directions_drawn_apart_equal_the_fused_path(mitsonar_mod, monkeypatch):
+    """The pass draws the emitted directions in a kernel of their own (the beam's sampling table
+    cannot be read inside a recording): the histogram equals that of the path function drawing
+    them itself, bit for bit."""
+    import drjit as dr
+    import mitsuba as mi
+
+    scene = small_scene(mitsonar_mod)
+    integ, sensor = scene.integrator(), scene.sensors()[0]
+    setup = integ.setup(scene, sensor)
+    ping, samples = integ.lanes(sensor.n_pings, 9, 0, 24)
+    hist = dr.zeros(mi.Float64, sensor.n_pings * sensor.n_bins)
+
+    def record(k, rng, energy, valid, hit):
+        b, valid = setup.bins.index(rng, valid)
+        dr.scatter_add(hist, mi.Float64(energy), setup.bins.flat(ping, b), valid)
+
+    with dr.suspend_grad():
+        integ.sample(setup, ping, samples, record)
+    fused = hist.numpy().reshape(sensor.n_pings, sensor.n_bins) / 24
+    np.testing.assert_array_equal(render(scene, True, monkeypatch, seed=9, spp=24), fused)
+
+
+def test_multibeam_heads_share_beams_by_default(mitsonar_mod):
+    """Unset ``share_beams``: a multibeam head that can share traces shared paths (the render of
+    ``share_beams="true"``), a sinc receive beam falls back to per-row paths without a word (the
+    render of ``"false"``), and ``"false"`` opts out."""
+    def scan(pattern, share, kind="multibeam"):
+        scene = small_scene(mitsonar_mod, kind, pattern, share=share)
+        return scene.integrator().render_histogram(scene, 0, seed=2, spp=16).astype(np.float32)
+
+    auto = scan("gaussian", None)
+    np.testing.assert_array_equal(auto, scan("gaussian", True))
+    assert not np.array_equal(auto, scan("gaussian", False))
+    np.testing.assert_array_equal(scan("sinc", None), scan("sinc", False))
+    np.testing.assert_array_equal(scan("gaussian", None, "mechanical"), scan("gaussian", False, "mechanical"))
+    scene = small_scene(mitsonar_mod, "multibeam")
+    assert "share_beams=auto" in str(scene.integrator())
+
+
+def test_a_scene_loaded_between_renders_records_anew(mitsonar_mod, monkeypatch):
+    """A recording's BSDF and shape calls are bound to Dr.Jit's registry of instances: after
+    another scene is loaded the replay is refused by Dr.Jit and the pass is recorded anew, with
+    the traced pass's result."""
+    scene = small_scene(mitsonar_mod)
+    first = render(scene, True, monkeypatch, seed=1, spp=16)
+    other = small_scene(mitsonar_mod, n_pings=5)     # more BSDFs and shapes in the registry
+    render(other, True, monkeypatch, seed=1, spp=16)
+    again = render(scene, True, monkeypatch, seed=1, spp=16)
+    np.testing.assert_array_equal(again, first)
+    np.testing.assert_array_equal(again, render(scene, False, monkeypatch, seed=1, spp=16))
