@@ -53,7 +53,7 @@ SCATTER_MODE = dr.ReduceMode.Direct
 # Russian roulette for faint beams: a beam whose gain g is below this is scored with probability
 # g / ROULETTE_GAIN at weight ROULETTE_GAIN (expectation g, unbiased), which spares most of the
 # float64 scatters of a gaussian window's tails (0 turns it off).
-ROULETTE_GAIN = 0.125
+ROULETTE_GAIN = 0.01
 
 
 def window(sensor):
@@ -148,6 +148,8 @@ class SharedFrame:
         self.last_row = dr.opaque(mi.Float, self.n_rows - 1)
         self.centre = dr.opaque(mi.Float, bearings[0] + 0.5 * (self.n_rows - 1) * self.step)
         self.bins = RangeBins(sensor)
+        # read here, so that a frozen pass's key (`frozen_pass.Context`) holds them
+        self.roulette, self.scatter_mode = float(ROULETTE_GAIN), SCATTER_MODE.name
 
     def score(self, hist, rng, energy, valid, hit, u=None):
         """Add the echoes of one bounce (``energy`` without the receive gain) into ``hist`` (flat
@@ -170,12 +172,13 @@ class SharedFrame:
             use = valid & (k >= 0) & (k <= self.last_row) & (dr.abs(off) <= self.w_o)
             gain = beam.eval(off, el)
             use &= gain > 0
-            if u is not None and ROULETTE_GAIN > 0:
-                faint = gain < ROULETTE_GAIN
-                use &= ~faint | (u * ROULETTE_GAIN < gain)
-                gain = dr.select(faint, ROULETTE_GAIN, gain)
+            if u is not None and self.roulette > 0:
+                faint = gain < self.roulette
+                use &= ~faint | (u * self.roulette < gain)
+                gain = dr.select(faint, self.roulette, gain)
             row = mi.UInt32(dr.maximum(k, 0.0))
-            dr.scatter_add(hist, mi.Float64(energy * gain), self.bins.flat(row, b), use, mode=SCATTER_MODE)
+            dr.scatter_add(hist, mi.Float64(energy * gain), self.bins.flat(row, b), use,
+                           mode=getattr(dr.ReduceMode, self.scatter_mode))
 
 
 def _opaque(cls, values):
