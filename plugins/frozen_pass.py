@@ -106,7 +106,8 @@ def _call(context, *args):
     return context.body(context.ctx, *args)
 
 
-_frozen = dr.freeze(_call, state_fn=_state, limit=MAX_RECORDINGS)
+# One recording per pass size is expected (a sweep over spp makes many): no warning for that.
+_frozen = dr.freeze(_call, state_fn=_state, limit=MAX_RECORDINGS, warn_after=1 << 30)
 # The contexts of the recordings, kept alive: the objects whose identity is in a key (the scene,
 # the sensor, the beams) cannot be freed and their addresses reused by other objects while a
 # recording may be replayed.
