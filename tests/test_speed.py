@@ -118,3 +118,20 @@ def test_a_scene_loaded_between_renders_records_anew(mitsonar_mod, monkeypatch):
     again = render(scene, True, monkeypatch, seed=1, spp=16)
     np.testing.assert_array_equal(again, first)
     np.testing.assert_array_equal(again, render(scene, False, monkeypatch, seed=1, spp=16))
+
+
+def test_a_changed_scene_parameter_reaches_the_replay(mitsonar_mod, monkeypatch):
+    """A BSDF parameter changed through ``mi.traverse`` between renders is an input of the
+    replay, not a value baked into the recording: the replay equals the traced render of the
+    changed scene, and differs from the render before the change."""
+    import mitsuba as mi
+
+    scene = small_scene(mitsonar_mod)
+    before = render(scene, True, monkeypatch, seed=1, spp=16)
+    params = mi.traverse(scene)
+    key = next(k for k in params.keys() if k.endswith("diffuse"))
+    params[key] = mi.Float(0.2)
+    params.update()
+    after = render(scene, True, monkeypatch, seed=1, spp=16)
+    np.testing.assert_array_equal(after, render(scene, False, monkeypatch, seed=1, spp=16))
+    assert not np.allclose(after, before)
