@@ -107,11 +107,14 @@ def _call(context, *args):
 
 
 # One recording per pass size is expected (a sweep over spp makes many): no warning for that.
-_frozen = dr.freeze(_call, state_fn=_state, limit=MAX_RECORDINGS, warn_after=1 << 30)
-# The contexts of the recordings, kept alive: the objects whose identity is in a key (the scene,
-# the sensor, the beams) cannot be freed and their addresses reused by other objects while a
-# recording may be replayed.
-_alive = {}
+# No limit inside Dr.Jit: it would drop a recording during a call (see `run`); `run` drops them.
+_frozen = dr.freeze(_call, state_fn=_state, warn_after=1 << 30)
+# Every context a recording was made with, kept alive until `clear` (outside any recording).
+# A context holds its setup, whose ping frames are NumPy memory mapped by Dr.Jit: freeing such
+# an array queues a host callback, which Dr.Jit cannot record and aborts the process on, so none
+# may be freed while a recording is made. Keeping the contexts also keeps the objects whose
+# identity is in a key (scene, sensor, beams) from being freed and their addresses reused.
+_alive = []
 
 
 def clear():
@@ -129,18 +132,33 @@ def run(body, owner, ctx, *args):
     refuses the replay (``assign_with_registry()``) and the recordings are made anew."""
     if not FREEZE:
         return body(ctx, *args)
-    context = Context(body, owner, ctx)
-    if len(_alive) >= MAX_RECORDINGS and context.key not in _alive:
+    if len(_alive) >= MAX_RECORDINGS:
         clear()
-    _alive.setdefault(context.key, context)
+    context = Context(body, owner, ctx)
     try:
-        return _frozen(context, *args)
+        return _recorded(context, args)
     except RuntimeError as exc:
         if "registry" not in str(exc):
             raise
     clear()
-    _alive[context.key] = context
-    return _frozen(context, *args)
+    return _recorded(context, args)
+
+
+def _recorded(context, args):
+    """The frozen call, with the cyclic garbage collector held off (it could free an old setup's
+    mapped arrays during a recording) and ``context`` kept when Dr.Jit recorded with it."""
+    import gc
+
+    n = _frozen.n_recordings
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        return _frozen(context, *args)
+    finally:
+        if enabled:
+            gc.enable()
+        if _frozen.n_recordings != n:
+            _alive.append(context)
 
 
 class Emitted:

@@ -65,6 +65,10 @@ class SonarTOFIntegrator(SonarIntegrator):
                           ``false``: per-row paths. Gradients use the per-row paths
     ============ ======== ====================================================================
 
+    Each pass runs as a Dr.Jit frozen function (`frozen_pass`): its kernel is traced once per
+    scene, sensor and pass size and replayed after, with the seed, pose, window and pass start as
+    inputs (the same histogram as tracing every pass; ``frozen_pass.FREEZE = False`` traces).
+
     ``mi.render(scene)`` returns the range-intensity image as a tensor (n_pings, n_bins, 1);
     ``render_histogram`` returns it as a float64 numpy array and accepts a ``pose``.
     ``mi.render(scene, params)`` is differentiable in both modes (``render_forward``,
@@ -152,13 +156,16 @@ class SonarTOFIntegrator(SonarIntegrator):
         n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
         ping, samples = self.lanes(n_pings, seed_o, start_o, count)
         # Float64 bins: sums of many small echoes keep their precision, and the order in which
-        # threads add them no longer shows in the float32 result (same seed, same scan).
+        # threads add them no longer shows in the float32 result (same seed, same scan). Atomic
+        # adds straight to memory: the default (per-thread copies and a block reduction) needs
+        # Dr.Jit to dry-run a frozen pass before replaying it, and costs as much (box, spp 256,
+        # 15 interleaved renders: 0.139 s median against 0.133 s).
         hist = dr.zeros(mi.Float64, n_pings * n_bins)
         bins = setup.bins
 
         def record(depth_k, rng, energy, valid, hit):
             b, valid = bins.index(rng, valid)
-            dr.scatter_add(hist, mi.Float64(energy), bins.flat(ping, b), valid)
+            dr.scatter_add(hist, mi.Float64(energy), bins.flat(ping, b), valid, mode=dr.ReduceMode.Direct)
 
         self.sample(_emitting(setup, d, w), ping, samples, record)
         return hist
