@@ -16,6 +16,9 @@ What makes a replay give the same numbers as tracing again:
 * everything else that shapes the kernel is in the recording's key (`Context`): the pass's body
   and integrator, the scene, sensor and beam objects, and every Python number and string of the
   context (sizes, the beam's kind, the window's width in beams);
+* a scene whose BSDFs hold textures is traced every pass (`Context.freezable`): a replay after
+  texels changed through ``mi.traverse`` read the old texels (tests/test_gradients.py's
+  per-texel finite difference found it);
 * the emitted directions are drawn before the frozen call (`emitted`): the beam's sampling table
   (``mi.MarginalContinuous2D0``) hides its arrays from Dr.Jit's traversal, so it cannot be read
   inside a recording. Drawn in a kernel of its own, the direction and its weight are the same
@@ -69,6 +72,12 @@ def jit_state(obj):
         if isinstance(o, dr.detail.TraversableBase):
             values.append(o)      # Dr.Jit traverses it (a scene: shapes, BSDFs; a Python plugin: its members)
             scalars.append((path, type(o).__name__, id(o)))
+            if isinstance(o, mi.Scene):
+                # A Python BSDF's members are walked here: Dr.Jit's traversal of the scene does
+                # not reach the textures they hold (a bitmap's texels changed through
+                # mi.traverse would otherwise replay stale).
+                for i, shape in enumerate(o.shapes()):
+                    walk(shape.bsdf(), f"{path}.shapes[{i}].bsdf")
             if not hasattr(o, "__dict__"):
                 return
         elif not hasattr(o, "__dict__"):
@@ -90,6 +99,9 @@ class Context:
         self.body, self.ctx = body, ctx
         self.values, scalars = jit_state(ctx)
         self.key = (body.__qualname__, id(owner), scalars)
+        # Textures (a bitmap of diffuse reflectance) are traced every pass: a replay after their
+        # texels changed through mi.traverse was seen to read the texels before the change.
+        self.freezable = not any(isinstance(v, mi.Texture) for v in self.values)
 
     def __hash__(self):
         return hash(self.key)
@@ -135,6 +147,8 @@ def run(body, owner, ctx, *args):
     if len(_alive) >= MAX_RECORDINGS:
         clear()
     context = Context(body, owner, ctx)
+    if not context.freezable:
+        return body(ctx, *args)
     try:
         return _recorded(context, args)
     except RuntimeError as exc:

@@ -140,3 +140,32 @@ def test_a_changed_scene_parameter_reaches_the_replay(mitsonar_mod, monkeypatch)
     traced = render(scene, False, monkeypatch, seed=1, spp=16)
     np.testing.assert_array_equal(after.astype(np.float32), traced.astype(np.float32))
     assert not np.allclose(after, before)
+
+
+def test_textured_bsdf_follows_its_texels(mitsonar_mod, monkeypatch, tmp_path):
+    """A diffuse bitmap's texels changed through mi.traverse between frozen renders: each render
+    equals the traced one of the changed scene (such scenes are traced: a replay was seen to read
+    the texels before a change)."""
+    import mitsuba as mi
+
+    path = str(tmp_path / "reflectance.exr")
+    mi.Bitmap(np.full((4, 4, 1), 0.3, np.float32)).write(path)
+    tex = (f'<bsdf type="acoustic"><texture type="bitmap" name="diffuse"><string name="filename" value="{path}"/>'
+           '<boolean name="raw" value="true"/><string name="filter_type" value="nearest"/></texture>'
+           '<float name="specular" value="0"/></bsdf>')
+    floor = np.diag([4.0, 4.0, 1.0, 1.0])
+    floor[:3, 3] = (0.0, 0.0, -2.0)
+    scene = mitsonar_mod.load_scene(scene_xml(sonar_xml(frame_matrix((0.3, 0.0, -1.0), (0.0, 1.0, 0.0)), n_pings=4,
+                                                        n_bins=30, beamwidth_h=30.0, beamwidth_v=30.0,
+                                                        bearing_step=10.0), rectangle_xml(floor, tex)))
+    params = mi.traverse(scene)
+    key = next(k for k in params.keys() if k.endswith("diffuse.data"))
+    totals = []
+    for v in (0.65, 0.55, 0.6):
+        params[key] = mi.TensorXf(np.full((4, 4, 1), v, np.float32))
+        params.update()
+        frozen = render(scene, True, monkeypatch, seed=1, spp=64)
+        totals.append(frozen.sum())
+        np.testing.assert_array_equal(frozen.astype(np.float32),
+                                      render(scene, False, monkeypatch, seed=1, spp=64).astype(np.float32))
+    assert totals[0] > totals[2] > totals[1] > 0
