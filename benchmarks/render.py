@@ -207,13 +207,17 @@ def measure_at(scene, integ, sensor, ref, spp, repeats, seed0=1000):
     """Median seconds and relative L2 error of ``repeats`` warm renders at ``spp`` (seeds not used
     by the sweep)."""
     integ.render_histogram(scene, sensor, seed=seed0 - 1, spp=spp)
-    times, errs = [], []
+    times, cpu, errs = [], [], []
     for r in range(repeats):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         h = integ.render_histogram(scene, sensor, seed=seed0 + r, spp=spp)
         times.append(time.perf_counter() - t)
+        cpu.append(time.process_time() - c)
         errs.append(float(np.linalg.norm(h - ref) / np.linalg.norm(ref)))
+    # CPU seconds of this process over the cores: about the wall time on an idle machine (the
+    # kernels run on every core; other jobs on a shared machine lengthen the wall time, not this).
     return {"spp": spp, "seconds": statistics.median(times), "seconds_min": min(times),
+            "cpu_seconds_per_core": statistics.median(cpu) / os.cpu_count(),
             "rel_l2_error": statistics.median(errs), "rel_l2_error_max": max(errs)}
 
 
@@ -262,6 +266,7 @@ def compare_sampling(name, samplings, repeats, ref_factor):
     # The same from the fitted error curve, measured at the fitted spp (finer than the sweep's grid).
     fits = {k: out["by_sampling"][k]["time_to_5pct"]["measured"] for k in samplings}
     out["time_to_5pct_fitted"] = {k: {"spp": f["spp"], "seconds": f["seconds"], "seconds_min": f["seconds_min"],
+                                      "cpu_seconds_per_core": f["cpu_seconds_per_core"],
                                       "rel_l2_error": f["rel_l2_error"], "frames_per_s": 1.0 / f["seconds"]}
                                   for k, f in fits.items()}
     return out
