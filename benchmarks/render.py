@@ -367,14 +367,18 @@ def main(argv=None):
     # Issue "Survey speed": time to 5 % per scene and sampling (fitted spp, measured there) and
     # whether the targets are met: the box under 0.05 s, a 512-beam frame with a floor at 10 Hz.
     out["time_to_5pct"] = {name: v["time_to_5pct_fitted"] for name, v in out["sampling"].items()}
-    targets = {"box": ("seconds", 0.05), "quay_wall": ("frames_per_s", 10.0)}
+    targets = {"box": ("seconds", 0.05), "quay_wall": ("frames_per_s", 10.0), "box_fls": ("frames_per_s", 10.0)}
     out["survey_speed_targets"] = {}
     for name, (key, bound) in targets.items():
         if name in out["time_to_5pct"]:
             best = min(out["time_to_5pct"][name].values(), key=lambda f: f["seconds"])
             ok = (best[key] < bound if key == "seconds" else best[key] >= bound) and best["rel_l2_error"] <= 0.05
+            # The same with the CPU seconds per core (about an idle machine's wall time).
+            cpu = best["cpu_seconds_per_core"]
+            ok_cpu = (cpu < bound if key == "seconds" else 1.0 / cpu >= bound) and best["rel_l2_error"] <= 0.05
             out["survey_speed_targets"][name] = {key: best[key], "bound": bound, "spp": best["spp"],
-                                                 "rel_l2_error": best["rel_l2_error"], "met": bool(ok)}
+                                                 "rel_l2_error": best["rel_l2_error"], "met": bool(ok),
+                                                 "cpu_seconds_per_core": cpu, "met_by_cpu_seconds": bool(ok_cpu)}
     if args.freeze_ab:
         out["frozen_vs_traced"] = {}
         for name in filter(None, args.sampling_scenes.split(",")):
