@@ -13,9 +13,9 @@ What makes a replay give the same numbers as tracing again:
   sample, the emitted directions) and `jit_state` of the pass's context (the `common.PathSetup`
   or `shared_beams.SharedFrame`: the ping frames, the range window, the beam's parameters, the
   scene), all opaque, so a new pose, window, seed or pass start is new data for the same kernel;
-* everything else that shapes the kernel is in the recording's key (`Context`): the pass's body
-  and integrator, the scene, sensor and beam objects, and every Python number and string of the
-  context (sizes, the beam's kind, the window's width in beams);
+* everything else that shapes the kernel is in the recording's key (`Context`): the pass's body,
+  the integrator's class and settings, the scene, sensor and beam objects, and every Python
+  number and string of the context (sizes, the beam's kind, the window's width in beams);
 * a scene whose BSDFs hold textures is traced every pass (`Context.freezable`): a replay after
   texels changed through ``mi.traverse`` read the old texels (tests/test_gradients.py's
   per-texel finite difference found it);
@@ -98,7 +98,11 @@ class Context:
     def __init__(self, body, owner, ctx):
         self.body, self.ctx = body, ctx
         self.values, scalars = jit_state(ctx)
-        self.key = (body.__qualname__, id(owner), scalars)
+        # The owner (the integrator) by its class and settings, not its identity: render_scan
+        # with an integrator dict makes a new one per call, which may replay the same recording.
+        settings = tuple((k, v) for k, v in sorted(vars(owner).items())
+                         if isinstance(v, (bool, int, float, str, type(None))))
+        self.key = (body.__qualname__, type(owner).__qualname__, settings, scalars)
         # Textures (a bitmap of diffuse reflectance) are traced every pass: a replay after their
         # texels changed through mi.traverse was seen to read the texels before the change.
         self.freezable = not any(isinstance(v, mi.Texture) for v in self.values)

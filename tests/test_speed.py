@@ -2,6 +2,8 @@
 histogram bit for bit whatever changes between renders (seed, pose, pass start), replay one
 recording, and draw the emitted directions as the fused path kernel does; ``share_beams`` is the
 default for multibeam heads that can share, with a silent fallback and an explicit opt-out."""
+import gc
+
 import numpy as np
 import pytest
 
@@ -169,3 +171,30 @@ def test_textured_bsdf_follows_its_texels(mitsonar_mod, monkeypatch, tmp_path):
         np.testing.assert_array_equal(frozen.astype(np.float32),
                                       render(scene, False, monkeypatch, seed=1, spp=64).astype(np.float32))
     assert totals[0] > totals[2] > totals[1] > 0
+
+
+def test_integrators_with_the_same_settings_share_a_recording(mitsonar_mod, monkeypatch):
+    """render_scan with an integrator dict makes a new integrator per call: equal settings replay
+    the recording, other settings (sampling) record their own and render their own scan."""
+    from mitsonar.plugins import module
+
+    fp = module("frozen_pass")
+    monkeypatch.setattr(fp, "FREEZE", True)
+    scene = small_scene(mitsonar_mod)
+    scans, counts = {}, []
+    # Objects freed in between (other tests' scenes) change Dr.Jit's registry, which makes the
+    # next pass record anew (`frozen_pass.run`): collect them first and hold the collector off.
+    gc.collect()
+    gc.disable()
+    try:
+        for sampling in ("sobol", "sobol", "independent"):
+            counts.append(fp._frozen.n_recordings)
+            scan = mitsonar_mod.render_scan(scene, spp=16, seed=2, integrator={"type": "sonar_tof", "max_depth": 3,
+                                                                                "sampling": sampling})
+            scans.setdefault(sampling, []).append(scan.intensity)
+    finally:
+        gc.enable()
+    counts.append(fp._frozen.n_recordings)
+    assert np.diff(counts).tolist()[1:] == [0, 1], counts    # the second sobol render replays
+    np.testing.assert_array_equal(scans["sobol"][0], scans["sobol"][1])
+    assert not np.array_equal(scans["sobol"][0], scans["independent"][0])
