@@ -35,7 +35,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-# Trace every pass when False (the frozen and traced passes give the same histogram, bit for bit).
+# Trace every pass when False (the frozen and traced passes give the same scan, float32 bit for bit).
 FREEZE = True
 # Recordings kept per process (one per scene, sensor, integrator and pass size in use); past this
 # number they are all dropped and made anew as needed.
