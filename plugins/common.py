@@ -351,7 +351,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
         ctx = mi.BSDFContext(mi.TransportMode.Importance)
         # Image guiding (`image_guide`): the transducer's image through the chain of mirror-like
         # vertices since the last diffuse one, and the chain's narrowest lobe (0: no chain).
-        guide = getattr(setup, "guide", False)  # a bare setup (shared_beams, echo_path) is unguided
+        guide = getattr(setup, "guide", False)  # a bare setup (echo_path's) is unguided
         image, n_chain = mi.Point3f(origin), mi.Float(0.0)
         # With ``setup.tag_hard`` the echoes after a chained vertex are told apart (``record``'s
         # sixth argument): the paths that only the guide finds well (`sonar_mlt`'s split).

@@ -26,7 +26,8 @@ Row k's frame is the head frame turned by ``b_k`` about +y, so a head-frame dire
 (``BeamPattern.support``) except for a gaussian, where it is 2 beam widths (beyond, ``B < 2^-16``
 and the pattern's mass is below 1e-5 of the beam's: the truncation is far below any Monte-Carlo
 error at reachable spp). A ``sinc`` receive pattern (side lobes over the whole half-space)
-would be scored into every row and is refused, as are echoes reaching more than `MAX_BEAMS` beams.
+would be scored into every row: it is refused with ``share_beams="true"``, as are echoes reaching
+more than `MAX_BEAMS` beams, and left to the per-row paths when ``share_beams`` is unset (`can_share`).
 """
 from __future__ import annotations
 
@@ -49,6 +50,10 @@ GAUSSIAN_WINDOW = 2.0
 # packet-local pre-reduction of the default mode only costs (one A/B on a loaded machine: a
 # quay-wall frame at spp 256 took 0.10 s against 0.14-0.16 s with ReduceMode.Auto).
 SCATTER_MODE = dr.ReduceMode.Direct
+# Russian roulette for faint beams: a beam whose gain g is below this is scored with probability
+# g / ROULETTE_GAIN at weight ROULETTE_GAIN (expectation g, unbiased), which spares most of the
+# float64 scatters of a gaussian window's tails (0 turns it off).
+ROULETTE_GAIN = 0.01
 
 
 def window(sensor):
@@ -76,6 +81,16 @@ def window(sensor):
                          f"{beam.beamwidth_h:g} deg, step {sensor.bearing_step:g} deg), more than {MAX_BEAMS}; "
                          "use share_beams false")
     return w, m
+
+
+def can_share(sensor):
+    """True when ``sensor``'s frames can share paths (`window` accepts it): the default of
+    ``sonar_tof``'s ``share_beams``, which falls back to per-row paths otherwise."""
+    try:
+        window(sensor)
+    except ValueError:
+        return False
+    return True
 
 
 class _Gate:
@@ -120,7 +135,8 @@ class SharedFrame:
         frames = PingFrames(head[None])
         self.path_setup = SimpleNamespace(scene=setup.scene, sensor=SimpleNamespace(beam=sensor.transmit),
                                           frames=frames, connect=(frames, gate), depth=setup.depth,
-                                          depth_o=setup.depth_o, absorption=setup.absorption, bins=setup.bins)
+                                          depth_o=setup.depth_o, absorption=setup.absorption, bins=setup.bins,
+                                          guide=setup.guide)
         self.axes = [_opaque(mi.Vector3f, head[:3, c]) for c in range(3)]
         self.origin = _opaque(mi.Point3f, head[:3, 3])
         self.start = dr.opaque(mi.Float, bearings[0])
@@ -133,10 +149,14 @@ class SharedFrame:
         self.last_row = dr.opaque(mi.Float, self.n_rows - 1)
         self.centre = dr.opaque(mi.Float, bearings[0] + 0.5 * (self.n_rows - 1) * self.step)
         self.bins = RangeBins(sensor)
+        # read here, so that a frozen pass's key (`frozen_pass.Context`) holds them
+        self.roulette, self.scatter_mode = float(ROULETTE_GAIN), SCATTER_MODE.name
 
-    def score(self, hist, rng, energy, valid, hit):
+    def score(self, hist, rng, energy, valid, hit, u=None):
         """Add the echoes of one bounce (``energy`` without the receive gain) into ``hist`` (flat
-        n_rows x n_bins, Float64) for every row within the window of the echo's direction."""
+        n_rows x n_bins, Float64) for every row within the window of the echo's direction.
+        ``u``: a uniform number per echo for the roulette of faint beams (`ROULETTE_GAIN`); the
+        beams of one echo share it (each beam's expectation is its gain either way)."""
         beam = self.sensor.beam
         d = dr.normalize(hit.p - self.origin)
         x, y, z = (dr.dot(d, a) for a in self.axes)
@@ -152,8 +172,14 @@ class SharedFrame:
             off = az - (self.start + k * self.step_o)
             use = valid & (k >= 0) & (k <= self.last_row) & (dr.abs(off) <= self.w_o)
             gain = beam.eval(off, el)
+            use &= gain > 0
+            if u is not None and self.roulette > 0:
+                faint = gain < self.roulette
+                use &= ~faint | (u * self.roulette < gain)
+                gain = dr.select(faint, self.roulette, gain)
             row = mi.UInt32(dr.maximum(k, 0.0))
-            dr.scatter_add(hist, mi.Float64(energy * gain), self.bins.flat(row, b), use & (gain > 0), mode=SCATTER_MODE)
+            dr.scatter_add(hist, mi.Float64(energy * gain), self.bins.flat(row, b), use,
+                           mode=getattr(dr.ReduceMode, self.scatter_mode))
 
 
 def _opaque(cls, values):
