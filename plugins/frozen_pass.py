@@ -16,7 +16,7 @@ What makes a replay give the same numbers as tracing again:
 * everything else that shapes the kernel is in the recording's key (`Context`): the pass's body,
   the integrator's class and settings, the scene, sensor and beam objects, and every Python
   number and string of the context (sizes, the beam's kind, the window's width in beams);
-* a scene whose BSDFs hold textures is traced every pass (`Context.freezable`): a replay after
+* a scene that holds textures anywhere (`has_textures`) is traced every pass (`Context.freezable`): a replay after
   texels changed through ``mi.traverse`` read the old texels (tests/test_gradients.py's
   per-texel finite difference found it);
 * the emitted directions are drawn before the frozen call (`emitted`): the beam's sampling table
@@ -104,14 +104,34 @@ class Context:
                          if isinstance(v, (bool, int, float, str, type(None))))
         self.key = (body.__qualname__, type(owner).__qualname__, settings, scalars)
         # Textures (a bitmap of diffuse reflectance) are traced every pass: a replay after their
-        # texels changed through mi.traverse was seen to read the texels before the change.
-        self.freezable = not any(isinstance(v, mi.Texture) for v in self.values)
+        # texels changed through mi.traverse was seen to read the texels before the change, also
+        # for a texture a C++ BSDF holds (an acoustic BSDF in a twosided, Mitsuba's diffuse with a
+        # bitmap), which the walk above does not reach: the scene's own traversal says.
+        self.freezable = not any(isinstance(v, mi.Texture) or (isinstance(v, mi.Scene) and has_textures(v))
+                                 for v in self.values)
 
     def __hash__(self):
         return hash(self.key)
 
     def __eq__(self, other):
         return isinstance(other, Context) and other.key == self.key
+
+
+# id(scene) -> (scene, whether anything it holds is a texture); the scene is kept so that its id
+# is not reused while the entry lives; emptied past `MAX_RECORDINGS` entries.
+_textured = {}
+
+
+def has_textures(scene) -> bool:
+    """Whether any parameter ``mi.traverse(scene)`` reaches belongs to a texture (once per scene)."""
+    entry = _textured.get(id(scene))
+    if entry is None or entry[0] is not scene:
+        if len(_textured) >= MAX_RECORDINGS:
+            _textured.clear()
+        params = mi.traverse(scene)
+        found = any(isinstance(params.properties[k][2], mi.Texture) for k in params.keys())
+        entry = _textured[id(scene)] = (scene, found)
+    return entry[1]
 
 
 def _state(context, *args):

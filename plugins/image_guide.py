@@ -87,7 +87,9 @@ def sample_bounce(bsdf, ctx, si, image, n_chain, segment, u1, u2, active):
     the chain's last mirror when there is one). Returns ``(wo_world, weight)``: the world
     direction and ``f cos / pdf`` of the mixture.
     """
-    guided = n_chain > 0
+    # A BSDF with a delta lobe (Mitsuba's conductor, smooth plastic) keeps its own sampling: the
+    # mixture's eval / pdf would give its delta lobe a weight of zero.
+    guided = (n_chain > 0) & ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta)
     alpha = dr.select(guided, GUIDE_PROB, 0.0)
     use_g = active & guided & (u1 < alpha)
     u_b = dr.select(guided, dr.minimum((u1 - alpha) / (1.0 - alpha), dr.one_minus_epsilon(mi.Float)), u1)

@@ -12,14 +12,15 @@ chains (`sonar_mlt`) the hard ones:
 
     I = E_pt[easy echoes] + E_mlt[hard echoes].
 
-The budget ``spp`` (path evaluations per row) is split by a pilot: the first ``spp / 8`` (at
-least 16) path-traced paths, whose easy echoes are kept, estimate each class's variance per path,
+The budget ``spp`` (path evaluations per row) is split by ``split``: a fixed share, or (``auto``)
+by a pilot: the first ``spp / 8`` (at least 16) path-traced paths, which only choose (they are
+not part of the estimate), estimate each class's variance per path,
 ``V_c = sum over bins of (E[e^2] - E[e]^2)``; the chains get the share
 ``sqrt(V_hard) / (sqrt(V_hard) + sqrt(V_easy))`` of the rest (the allocation that minimises the
 summed variance of two independent estimators of equal cost per sample), at most `MAX_SHARE`, and
-none when that is under `MIN_CHAIN_SPP` evaluations per row or the pilot found no hard echo (a
-scene without mirror-like surfaces has none): then every echo is path traced and ``sonar_mlt``
-is ``sonar_tof``, at its cost.
+none when that is under `MIN_CHAIN_SPP` evaluations per row or the pilot found no hard echo. A
+scene without mirror-like surfaces has no hard echo and gets no chains whatever ``split`` says:
+every echo is path traced.
 """
 from __future__ import annotations
 
@@ -85,47 +86,50 @@ def share(easy, hard, easy2, hard2, n):
 
 def render_split(integrator, setup, seed, spp, progress=None):
     """The split render of ``integrator`` (a `sonar_mlt.SonarMLTIntegrator`): float64
-    ``(n_rows, n_bins)``; the plan it chose in ``integrator.last_plan``. ``share`` fixed by the
-    integrator's ``split`` (a number) or chosen by the pilot (``auto``)."""
+    ``(n_rows, n_bins)``; the plan it chose in ``integrator.last_plan``.
+
+    The chains' budget: ``split`` times ``spp`` (a number), what explicit chains, mutations or
+    bootstrap ask (they fit ``spp``, checked by ``plan`` before any work), or (``auto``) the pilot's
+    share of what the pilot leaves. The pilot's paths only choose: they are left out of the
+    estimate, whose path count would otherwise depend on their own values (a ratio estimator's
+    bias). A scene without mirrors has no hard echo (no chain can form), so it gets no chains."""
     n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
-    pilot = min(spp, max(MIN_PILOT, int(spp * PILOT_FRACTION)))
-    # Explicit chains, mutations or bootstrap: the chains spend what they ask (it fits spp, checked
-    # by `plan` before any work), path tracing the rest.
     explicit = bool(integrator.chains or integrator.mutations or integrator.bootstrap)
-    if explicit:
+    pilot, chosen = 0, 0.0
+    if not setup.guide:
+        n_chain = 0
+    elif explicit:
         boot, chains, mutations = integrator.plan(n_rows, spp)
-        want = boot + chains * mutations
-        pilot = min(pilot, spp - want)
-        if pilot < 2:
-            return integrator.metropolis(setup, seed, spp, progress=progress)
-    sums = traced(integrator, setup, seed, 0, pilot, moments=integrator.split == "auto" and not explicit)
-    easy, hard = sums[:2]
-    if explicit:
-        chosen = want / spp if hard.any() else 0.0
-        n_chain = want if hard.any() else 0
-    else:
-        chosen = share(*sums, pilot) if integrator.split == "auto" else float(integrator.split)
+        n_chain = boot + chains * mutations
+        chosen = n_chain / spp
+    elif integrator.split == "auto":
+        pilot = min(spp - 1, max(MIN_PILOT, int(spp * PILOT_FRACTION)))
+        chosen = share(*traced(integrator, setup, seed, 0, pilot, moments=True), pilot) if pilot >= 2 else 0.0
         n_chain = int(chosen * (spp - pilot))
-        if n_chain < MIN_CHAIN_SPP:
-            n_chain = 0
-    n_traced = spp - n_chain
+    else:
+        chosen = float(integrator.split)
+        n_chain = int(chosen * spp)
+    if not explicit and n_chain < MIN_CHAIN_SPP:
+        n_chain = 0
+    n_traced = spp - pilot - n_chain
+    if n_traced < 1:   # explicit chains that take the whole budget: chains over every echo
+        return integrator.metropolis(setup, seed, spp, progress=progress)
     per_pass = max(1, MAX_LANES // n_rows)
-    done = pilot
-    if progress is not None:
-        progress(done, spp)
+    easy = hard = 0.0
+    done = 0
     while done < n_traced:
         count = min(per_pass, n_traced - done)
-        e, h = traced(integrator, setup, seed, done, count)
+        e, h = traced(integrator, setup, seed, pilot + done, count)
         easy, hard = easy + e, hard + h
         done += count
         if progress is not None:
-            progress(done, spp)
+            progress(pilot + done, spp)
     plan = {"split": chosen, "pilot": pilot, "traced": n_traced, "chains_spp": n_chain}
     if n_chain == 0:
         integrator.last_plan = plan
         return ((easy + hard) / n_traced).reshape(n_rows, n_bins)
     chained = integrator.metropolis(setup, seed, spp if explicit else n_chain, hard_only=True,
                                     progress=None if progress is None else
-                                    (lambda d, t: progress(n_traced + d * n_chain // max(t, 1), spp)))
+                                    (lambda d, t: progress(pilot + n_traced + d * n_chain // max(t, 1), spp)))
     integrator.last_plan = {**plan, **integrator.last_plan}
     return (easy / n_traced).reshape(n_rows, n_bins) + chained

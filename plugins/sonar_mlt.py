@@ -74,14 +74,14 @@ class SonarMLTIntegrator(SonarIntegrator):
     bootstrap        0        bootstrap paths per ping; 0 takes half of ``spp`` (at least 4x chains)
     guide            image    ``image``: primary samples map to image-guided paths (`image_guide`,
                               as ``sonar_tof``'s ``guide``); ``none``: BSDF sampling
-    split            0        with the guide: the chains' share of the budget after a pilot;
-                              path tracing estimates the echoes before any chained bounce, the
-                              chains the others (`mlt_split`). 0 (the default): no chains, the
-                              scan is ``sonar_tof``'s (at equal time the chains lost 2-6x to
-                              the guided path tracer on every scene with mirrors, README
-                              "Benchmarks"); ``auto``: the share from the pilot's variances;
-                              a number in [0, 0.9]; ``off`` (or ``guide="none"``): chains over
-                              every echo, Kelemen's PSSMLT as before the guide
+    split            0        with the guide: the chains' share of the budget; path tracing
+                              estimates the echoes before any chained bounce, the chains the
+                              others (`mlt_split`). 0 (the default): no chains, the path
+                              tracer's estimate with per-row paths (at equal time the chains
+                              lost 2-6x to the guided path tracer on every scene with mirrors,
+                              README "Benchmarks"); ``auto``: the share from a pilot's
+                              variances; a number in [0, 0.9]; ``off`` (or ``guide="none"``):
+                              chains over every echo, Kelemen's PSSMLT as before the guide
     ================ ======== =================================================================
 
     The defaults are the best settings measured on ``scenes_xml/`` (see the README's Benchmarks
@@ -392,10 +392,13 @@ class _Context:
         ``bins``/``vals`` are given, record each bounce's bin and energy at ``lane * depth + k``."""
         window, depth = self.bins, self.depth
 
+        hard_only = self.hard_only
+
         def record(k, rng, energy, valid, hit, hard=None):
             b, valid = window.index(rng, valid)
-            if hard is not None:
-                valid &= hard
+            if hard_only:
+                # untagged (an unguided kernel: no mirrors in the scene): no echo is hard
+                valid &= mi.Bool(False) if hard is None else hard
             # Each lane adds only to its own total: no conflicts. Left to Auto, Dr.Jit would
             # expand f into one copy per thread with its size written into the kernel, which
             # recompiles the bootstrap at every new spp and adds a reduction pass.

@@ -6,11 +6,12 @@ Statistics as in test_bdpt: means over independent seeds, z = difference / combi
 error of the means (10 seeds: t with about 9 degrees of freedom, |z| > 6 has probability 2e-4).
 """
 import math
+import os
 
 import numpy as np
 import pytest
 
-from conftest import acoustic_xml, frame_matrix, rectangle_xml, scene_xml, sonar_xml
+from conftest import SCENES, acoustic_xml, frame_matrix, rectangle_xml, scene_xml, sonar_xml
 from test_bdpt import SEEDS, integrator, load, stats, z_scores
 from test_physics import lambert_plane_reference, plane_matrix
 
@@ -92,9 +93,13 @@ def test_guide_cuts_the_noise_of_echoes_behind_mirrors(mitsonar_mod, name, start
     assert abs(sums[0].mean() - sums[1].mean()) < 4 * se
 
 
-def test_guide_is_inert_without_mirrors(mitsonar_mod):
-    """A Lambertian plane has no narrow lobe, so no chain forms: the guided render takes the very
-    same directions (equal to float rounding) and matches the closed form (test_physics)."""
+def test_guide_is_inert_without_mirrors(mitsonar_mod, monkeypatch):
+    """A Lambertian plane has no narrow lobe, so no chain forms: the guided kernel (forced on here:
+    `has_mirrors` would trace the unguided one) takes the very same directions (equal to float
+    rounding) and matches the closed form (test_physics)."""
+    from mitsonar.plugins import image_guide
+
+    monkeypatch.setattr(image_guide, "has_mirrors", lambda scene: True)
     tilt = math.radians(40.0)
     bw_h, bw_v, height, rho = 20.0, 30.0, 2.0, 0.8
     boresight = (math.sin(tilt), 0.0, -math.cos(tilt))
@@ -125,3 +130,27 @@ def test_bad_guide_is_refused(mitsonar_mod, plugin, value, message):
     with pytest.raises(mitsonar_mod.SceneError, match=message):
         mitsonar_mod.load_scene(scene_xml(sensor, integrator=f'<integrator type="{plugin}">'
                                           f'<string name="guide" value="{value}"/></integrator>'))
+
+
+def test_a_delta_mirror_after_a_chain_keeps_its_echo(mitsonar_mod):
+    """The periscope with plate B a smooth Mitsuba conductor (a delta lobe): after plate A's chain
+    the conductor keeps its own sampling (the mixture's eval / pdf would give a delta lobe zero),
+    so the boulder's echo through both plates is the unguided tracer's, path for path."""
+    import re
+
+    import mitsuba as mi
+
+    text = open(os.path.join(SCENES, "periscope.xml")).read()
+    text = text.replace('<bsdf type="acoustic" id="rock">', '<bsdf type="conductor" id="steel"><string name="material" '
+                        'value="none"/></bsdf>\n<bsdf type="acoustic" id="rock">')
+    i = text.index('id="mirror_b"')
+    j = text.index('<ref id="plate"/>', i)
+    text = text[:j] + '<ref id="steel"/>' + text[j + len('<ref id="plate"/>'):]
+    text = re.sub(r'(<integer name="n_pings" value=")\d+', r'\g<1>5', text)
+    text = re.sub(r'(<float name="bearing_start" value=")[-0-9.]+', r'\g<1>-2', text)
+    scene = mitsonar_mod.load_scene(text)
+    window = int(10.4 / 14 * 400)
+    guided, plain = (mi.load_dict({"type": "sonar_tof", "max_depth": 5, "guide": g}).render_histogram(
+        scene, 0, seed=2, spp=2048) for g in ("image", "none"))
+    assert guided[:, window:].sum() > 0
+    np.testing.assert_allclose(guided, plain, rtol=1e-6, atol=1e-12 * plain.max())

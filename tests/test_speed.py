@@ -144,10 +144,12 @@ def test_a_changed_scene_parameter_reaches_the_replay(mitsonar_mod, monkeypatch)
     assert not np.allclose(after, before)
 
 
-def test_textured_bsdf_follows_its_texels(mitsonar_mod, monkeypatch, tmp_path):
+@pytest.mark.parametrize("nested", [False, True])
+def test_textured_bsdf_follows_its_texels(mitsonar_mod, monkeypatch, tmp_path, nested):
     """A diffuse bitmap's texels changed through mi.traverse between frozen renders: each render
     equals the traced one of the changed scene (such scenes are traced: a replay was seen to read
-    the texels before a change)."""
+    the texels before a change), also when the acoustic BSDF sits inside a twosided one (a C++
+    BSDF, which the recording's walk over Python objects does not enter)."""
     import mitsuba as mi
 
     path = str(tmp_path / "reflectance.exr")
@@ -155,6 +157,9 @@ def test_textured_bsdf_follows_its_texels(mitsonar_mod, monkeypatch, tmp_path):
     tex = (f'<bsdf type="acoustic"><texture type="bitmap" name="diffuse"><string name="filename" value="{path}"/>'
            '<boolean name="raw" value="true"/><string name="filter_type" value="nearest"/></texture>'
            '<float name="specular" value="0"/></bsdf>')
+    if nested:
+        tex = f'<bsdf type="twosided">{tex}</bsdf>'
+
     floor = np.diag([4.0, 4.0, 1.0, 1.0])
     floor[:3, 3] = (0.0, 0.0, -2.0)
     scene = mitsonar_mod.load_scene(scene_xml(sonar_xml(frame_matrix((0.3, 0.0, -1.0), (0.0, 1.0, 0.0)), n_pings=4,
