@@ -136,7 +136,8 @@ def ridge_surface(hm, resolution: float | None = None, bounds=None, level: float
     within ``plateau`` of the largest p on its line (:func:`plateau_step`; ``None``: at the
     maximum itself, the classical ridge, refined by a parabola through the three samples around
     it). With ``front_only`` the faces on the shadow side of the plateau are dropped: those whose
-    low side (0.1 m downhill) holds no free sample, i.e. was never seen empty.
+    low side (0.1 m downhill from the level) was never seen empty (:func:`seen_empty`: neither a
+    free sample in its voxel nor inside the free part of a ping's frustum).
     """
     V, Fc = isosurface(hm, level=level, resolution=resolution, bounds=bounds, only_seen=only_seen, grid=grid)
     if len(V) == 0:
@@ -146,6 +147,14 @@ def ridge_surface(hm, resolution: float | None = None, bounds=None, level: float
     offs = np.eye(3) * h
     grad = np.stack([(hm.decision_function(V + o) - hm.decision_function(V - o)) / (2 * h) for o in offs], axis=1)
     n = grad / np.maximum(np.linalg.norm(grad, axis=1, keepdims=True), 1e-12)
+    if front_only:
+        # decided on the level's vertices and normals, so the lines below are only sampled for
+        # the faces that stay (about half of them in the thesis box)
+        front = seen_empty(hm, V - 0.1 * n)
+        keep = front[Fc].all(axis=1)
+        if keep.any():
+            used = np.unique(Fc[keep])
+            V, n, Fc = V[used], n[used], compact(V, Fc[keep])[1]
     ts = np.linspace(0.0, step, 25)
     pts = V[:, None, :] + ts[None, :, None] * n[:, None, :]
     f = hm.decision_function(pts.reshape(-1, 3)).reshape(len(V), len(ts))
@@ -161,13 +170,7 @@ def ridge_surface(hm, resolution: float | None = None, bounds=None, level: float
         t = np.where(k == k0, t, ts[k])
     else:
         t = plateau_step(f, ts, plateau)
-    R = V + t[:, None] * n
-    if front_only:
-        front = seen_empty(hm, V - 0.1 * n)
-        keep = front[Fc].all(axis=1)
-        if keep.any():
-            R, Fc = compact(R, Fc[keep])
-    return R, Fc
+    return V + t[:, None] * n, Fc
 
 
 def surface(hm, method: str = "ridge", **kw):

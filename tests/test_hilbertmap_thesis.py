@@ -39,7 +39,12 @@ def thesis_report(thesis_map):
     from hilbertmap.metrics import evaluate
 
     hm, V, F = thesis_map
-    return evaluate(hm, V, F, surfaces=("ridge",), n_surface=5000, n_free=40000, contours=False, random_state=SEED)
+    # the surface is extracted in a slab around the plane through the sonar (z = 0), the part the
+    # cut needs: the same ridge there, a fifteenth of the grid
+    lo, hi = hm.coverage_.bounds()
+    slab = ([lo[0], lo[1], -0.5], [hi[0], hi[1], 0.5])
+    return evaluate(hm, V, F, surfaces=("ridge",), n_surface=3000, n_free=20000, contours=False,
+                    surface_bounds=slab, random_state=SEED)
 
 
 def test_thesis_setting_map_quality(thesis_report):
