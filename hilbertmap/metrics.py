@@ -33,7 +33,9 @@ to print) whose ``meshes`` and ``points`` attributes hold the surfaces and test 
                        true lines (:func:`mesh_slice_metrics`; issue #31's measure for the ridge)
 ``slice_*``            in the plane through the sonar (``slice_axis``, default z): distance from the
                        0.5 contour to the truth (``slice_level_max``, ``_mean``) and back
-                       (``slice_level_comp_max``), the same for the ridge, mean p on the truth lines;
+                       (``slice_level_comp_max``), the same for the ridge climbed from the contour
+                       (the contour's shadow side left out, as the ridge surface's), mean p on the
+                       truth lines;
                        ``slice_water_*``: the part of the 0.5 contour that bounds the water the
                        sonar is in (the thesis's half-probability region, Fig. 5.2), leaving out
                        the contour that closes the p > 0.5 band behind the walls, in their shadow;
@@ -50,7 +52,7 @@ import textwrap
 import numpy as np
 
 from . import geometry as geo
-from .surfaces import plateau_step, sample_grid
+from .surfaces import plateau_step, sample_grid, seen_empty
 
 
 class EvaluationReport(dict):
@@ -404,6 +406,11 @@ def _climb(hm, P, fixed_axis, max_shift=None, n=31):
         o[i] = h
         grad[:, i] = (hm.decision_function(P + o) - hm.decision_function(P - o)) / (2 * h)
     nrm = grad / np.maximum(np.linalg.norm(grad, axis=1, keepdims=True), 1e-12)
+    # the same front rule as the ridge surface: contour points whose low side was never seen empty
+    # close the p > 0.5 band in a wall's shadow and are not the wall's face
+    front = seen_empty(hm, P - 0.1 * nrm)
+    if front.any():
+        P, nrm = P[front], nrm[front]
     step = max_shift if max_shift is not None else 1.5 * hm.lengthscale_
     ts = np.linspace(0, step, n)
     pts = P[:, None, :] + ts[None, :, None] * nrm[:, None, :]
