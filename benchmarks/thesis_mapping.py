@@ -9,7 +9,11 @@ fit timings, plus query and epoch speeds, the scikit-learn Nystroem + SGDClassif
 the same samples, and the OctoMap anchor on the same pings (if ``octomap-python`` is installed).
 Figures go to ``--out`` (default ``out/thesis_mapping``).
 
-    python benchmarks/thesis_mapping.py [--out DIR] [--quick] [--no-sklearn] [--no-octomap]
+    python benchmarks/thesis_mapping.py [--out DIR] [--quick] [--no-sklearn] [--no-octomap] [--seed N]
+        [--only 1x3,...] [--box LxWxD --origin x,y,z --speckle-seed N]
+
+``--box 9x7x2.5 --origin 0.6,-0.4,0`` maps a held-out box (other walls, the sonar off-centre);
+with ``--only 1x3`` only the thesis setting's three scans are rendered.
 """
 from __future__ import annotations
 
@@ -29,16 +33,42 @@ POSITIONS = [(0.0, 0.0, 0.0), (2.5, 0.0, 0.0), (-2.5, 0.0, 0.0), (0.0, 2.0, 0.0)
              (2.0, 1.5, -1.0), (-2.0, -1.5, -1.0)]
 
 
-def render_sets(seed: int = 0):
+def box_xml(size: str, out_dir: str) -> str:
+    """``scenes_xml/box.xml`` with other dimensions: ``size`` is ``LxWxD`` (length along x, width
+    along y, floor depth below the origin, metres); the file is written to ``out_dir``."""
+    try:
+        L, W, D = (float(v) for v in size.lower().split("x"))
+        assert L > 0 and W > 0 and D > 0
+    except (ValueError, AssertionError):
+        raise SystemExit(f"thesis_mapping: --box must be LxWxD in metres (e.g. 9x7x2.5), not {size!r}") from None
+    X, Y, Z0 = L / 2, W / 2, -D
+    hz, cz = (30 - Z0) / 2, (30 + Z0) / 2
+    text = open(os.path.join(ROOT, "scenes_xml", "box.xml")).read()
+    head = text[:text.index("    <!-- floor")]
+    walls = [("floor", f'<scale x="{X}" y="{Y}"/><translate z="{Z0}"/>'),
+             ("wall_xpos", f'<scale x="{hz}" y="{Y}"/><rotate y="1" angle="-90"/><translate x="{X}" z="{cz}"/>'),
+             ("wall_xneg", f'<scale x="{hz}" y="{Y}"/><rotate y="1" angle="90"/><translate x="{-X}" z="{cz}"/>'),
+             ("wall_ypos", f'<scale x="{X}" y="{hz}"/><rotate x="1" angle="90"/><translate y="{Y}" z="{cz}"/>'),
+             ("wall_yneg", f'<scale x="{X}" y="{hz}"/><rotate x="1" angle="-90"/><translate y="{-Y}" z="{cz}"/>')]
+    body = "".join(f'    <shape type="rectangle" id="{n}"><transform name="to_world">{t}</transform>'
+                   f'<ref id="concrete"/></shape>\n' for n, t in walls)
+    path = os.path.join(out_dir, f"box_{size}.xml")
+    with open(path + ".tmp", "w") as f:
+        f.write(head + body + "</scene>\n")
+    os.replace(path + ".tmp", path)
+    return path
+
+
+def render_sets(seed: int = 0, scene_path: str | None = None, positions=POSITIONS, speckle_seed=None):
     import mitsonar
     from hilbertmap.testing import orthogonal_frames
 
-    scene = mitsonar.load_scene(os.path.join(ROOT, "scenes_xml", "box.xml"))
+    scene = mitsonar.load_scene(scene_path or os.path.join(ROOT, "scenes_xml", "box.xml"))
     scans = []
     t0 = time.perf_counter()
-    for i, p in enumerate(POSITIONS):
+    for i, p in enumerate(positions):
         for j, T in enumerate(orthogonal_frames(p)):
-            scans.append(mitsonar.render_scan(scene, seed=seed + 3 * i + j, pose=T))
+            scans.append(mitsonar.render_scan(scene, seed=seed + 3 * i + j, pose=T, speckle_seed=speckle_seed))
     t_render = time.perf_counter() - t0
     V, F = mitsonar.scene_mesh(scene)
     return scans, (np.asarray(V, dtype=np.float64), np.asarray(F, dtype=np.int64)), t_render
@@ -71,7 +101,9 @@ def headline(r: dict) -> dict:
             "level_acc_mean", "level_acc_p95", "level_acc_max",
             "slice_truth_p_mean", "slice_level_max", "slice_level_mean", "slice_level_comp_max",
             "slice_water_max", "slice_water_mean", "slice_water_comp_max", "slice_unobserved_depth",
-            "slice_ridge_max", "slice_ridge_mean", "slice_ridge_comp_max"]
+            "slice_ridge_max", "slice_ridge_mean", "slice_ridge_comp_max",
+            "ridge_slice_max", "ridge_slice_comp_max", "ridge_slice_hausdorff",
+            "level_slice_max", "level_slice_comp_max", "level_slice_hausdorff"]
     return {k: (round(float(r[k]), 4) if r.get(k) is not None and math.isfinite(float(r[k])) else None)
             for k in keys if k in r}
 
@@ -182,21 +214,41 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "thesis_mapping"))
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--quick", action="store_true", help="only the 1 x 3 and 21 x 10 % experiments")
+    ap.add_argument("--quick", action="store_true", help="only the 1 x 3 and 21 x 10 %% experiments")
     ap.add_argument("--no-sklearn", action="store_true")
     ap.add_argument("--no-octomap", action="store_true")
     ap.add_argument("--octomap-resolution", type=float, default=0.1)
     ap.add_argument("--sklearn-set", default="21x10", help="experiment whose samples scikit-learn also fits")
+    ap.add_argument("--only", default=None, help="comma-separated experiments to run (1x3, 1x3_30, 21x10, 21x30, "
+                    "21x100); 1x3 alone renders only its 3 scans")
+    ap.add_argument("--box", default=None, help="a box of other dimensions, LxWxD metres (held-out geometry; "
+                    "default scenes_xml/box.xml, 10x8x3)")
+    ap.add_argument("--origin", default=None, help="x,y,z of the first position (the 1 x 3 experiments' sonar)")
+    ap.add_argument("--speckle-seed", type=int, default=None, help="the scene's speckle (default the sensor's)")
     args = ap.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
+    positions = list(POSITIONS)
+    if args.origin is not None:
+        try:
+            positions[0] = tuple(float(v) for v in args.origin.split(","))
+            assert len(positions[0]) == 3
+        except (ValueError, AssertionError):
+            raise SystemExit(f"thesis_mapping: --origin must be x,y,z in metres, not {args.origin!r}") from None
+    only = None if args.only is None else set(args.only.split(","))
+    if only is not None and not only <= {"1x3", "1x3_30", "21x10", "21x30", "21x100"}:
+        raise SystemExit(f"thesis_mapping: --only takes 1x3, 1x3_30, 21x10, 21x30, 21x100, not {args.only!r}")
+    if only is not None and only <= {"1x3", "1x3_30"}:
+        positions = positions[:1]
+    scene_path = box_xml(args.box, args.out) if args.box else None
 
     from hilbertmap import HilbertMap, write_mesh
     from hilbertmap import metrics as M
     from hilbertmap.plots import plot_half_region, plot_slices
 
-    scans, truth, t_render = render_sets(args.seed)
+    scans, truth, t_render = render_sets(args.seed, scene_path, positions, args.speckle_seed)
     V, F = truth
-    report = {"scene": "scenes_xml/box.xml", "positions": POSITIONS, "n_scans": len(scans),
+    report = {"scene": f"box {args.box}" if args.box else "scenes_xml/box.xml", "seed": args.seed,
+              "speckle_seed": args.speckle_seed, "positions": positions, "n_scans": len(scans),
               "render_s": t_render, "cpu_count": os.cpu_count(), "experiments": {}}
     experiments = [("1x3", scans[:3], 1.0, "Fig. 5.1 / 5.2: 1 position x 3 orientations, 100 % beams"),
                    ("1x3_30", scans[:3], 10.0 / 3.0, "Fig. 4.4: 1 position x 3 orientations, 30 % beams"),
@@ -205,6 +257,8 @@ def main(argv=None) -> int:
                    ("21x100", scans, 1.0, "Fig. 4.3: 21 scans, 100 % beams")]
     if args.quick:
         experiments = [e for e in experiments if e[0] in ("1x3", "21x10")]
+    if only is not None:
+        experiments = [e for e in experiments if e[0] in only]
     bands = ((0.1, 0.3), (0.3, 1.0), (1.0, math.inf))
     slices = (("z", 0.0), ("y", 0.0), ("x", 0.0))
     extents = [((-6, 6), (-5, 5)), ((-6, 6), (-3.5, 6)), ((-5, 5), (-3.5, 6))]

@@ -27,10 +27,15 @@ to print) whose ``meshes`` and ``points`` attributes hold the surfaces and test 
                        (``free_seen_share``: the share inside ``hm.seen``)
 ``<method>_*``         for each extracted surface (``ridge`` and ``level``, the 0.5 isosurface):
                        ``_acc_mean/_p95/_max`` distance from it to the truth, ``_comp_mean/_p95/_max``
-                       from the truth to it (completeness), ``_fscore@0.1`` and ``_fscore@0.2``
+                       from the truth to it (completeness), ``_fscore@0.1`` and ``_fscore@0.2``;
+                       ``_slice_max``, ``_slice_comp_max``, ``_slice_hausdorff``: the same two ways
+                       in the plane through the sonar, between the surface's cut and the insonified
+                       true lines (:func:`mesh_slice_metrics`; issue #31's measure for the ridge)
 ``slice_*``            in the plane through the sonar (``slice_axis``, default z): distance from the
                        0.5 contour to the truth (``slice_level_max``, ``_mean``) and back
-                       (``slice_level_comp_max``), the same for the ridge, mean p on the truth lines;
+                       (``slice_level_comp_max``), the same for the ridge climbed from the contour
+                       (the contour's shadow side left out, as the ridge surface's), mean p on the
+                       truth lines;
                        ``slice_water_*``: the part of the 0.5 contour that bounds the water the
                        sonar is in (the thesis's half-probability region, Fig. 5.2), leaving out
                        the contour that closes the p > 0.5 band behind the walls, in their shadow;
@@ -47,7 +52,7 @@ import textwrap
 import numpy as np
 
 from . import geometry as geo
-from .surfaces import plateau_step, sample_grid
+from .surfaces import plateau_step, sample_grid, seen_empty
 
 
 class EvaluationReport(dict):
@@ -142,8 +147,12 @@ def surface_distances(pred_v, pred_f, true_v, true_f, true_points, rng, n: int =
 def evaluate(hm, vertices, faces, *, surfaces=("ridge", "level"), n_surface: int = 20000, n_free: int = 200000,
              bands=((0.1, 0.3), (0.3, 1.0), (1.0, math.inf)), taus=(0.1, 0.2), slice_axis="z",
              slice_value=None, slice_resolution: float = 0.02, resolution=None, random_state=0,
-             surface_bounds=None) -> EvaluationReport:
-    """Metrics of a fitted :class:`~hilbertmap.HilbertMap` against the true mesh (see module doc)."""
+             surface_bounds=None, contours: bool = True) -> EvaluationReport:
+    """Metrics of a fitted :class:`~hilbertmap.HilbertMap` against the true mesh (see module doc).
+
+    ``contours=False`` leaves out the 0.5 contour's and the climbed ridge's ``slice_*`` metrics
+    (the slowest part); the extracted surfaces' cuts (``<method>_slice_*``) are always reported.
+    """
     rng = np.random.default_rng(random_state)
     V = np.asarray(vertices, dtype=np.float64)
     F = np.asarray(faces, dtype=np.int64)
@@ -177,9 +186,12 @@ def evaluate(hm, vertices, faces, *, surfaces=("ridge", "level"), n_surface: int
         for tau in taus:
             out[f"{method}_fscore@{tau:g}"] = fscore(d_acc, d_comp, tau)
         out[f"{method}_n_faces"] = int(len(mf))
+        out.update(mesh_slice_metrics(hm, mv, mf, V, F, axis=slice_axis, value=slice_value,
+                                      step=slice_resolution / 2, prefix=f"{method}_slice"))
 
     # --- the cross-section through the sonar -------------------------------------------------
-    out.update(slice_metrics(hm, V, F, axis=slice_axis, value=slice_value, resolution=slice_resolution))
+    if contours:
+        out.update(slice_metrics(hm, V, F, axis=slice_axis, value=slice_value, resolution=slice_resolution))
     out["params"] = dict(hm.get_params(), lengthscale_=float(hm.lengthscale_),
                          n_components_=int(getattr(hm, "n_components_", -1)),
                          n_samples_seen_=int(hm.n_samples_seen_))
@@ -215,6 +227,44 @@ def point_set_surface_metrics(pred_points, true_points, vertices, faces, taus=(0
     out.update(_stats(f"{prefix}_comp", d_comp))
     for tau in taus:
         out[f"{prefix}_fscore@{tau:g}"] = fscore(d_acc, d_comp, tau)
+    return out
+
+
+def slice_truth(hm, vertices, faces, axis=2, value=None, step: float = 0.01):
+    """Points every ``step`` metres on the true surfaces' cut by the plane ``x[axis] = value``
+    (default: through the sonar, the median of the sensor positions), kept where a ping's first
+    echo came from them (``hm.insonified(part='echo')``); returns ``(points, axis, value)``."""
+    a = "xyz".index(axis) if isinstance(axis, str) else int(axis)
+    if value is None:
+        value = float(np.median(hm.sensor_positions_[:, a])) if len(hm.sensor_positions_) else 0.0
+    truth = geo.sample_segments(geo.plane_section(vertices, faces, a, value), step)
+    return truth[hm.insonified(truth, part="echo")], a, float(value)
+
+
+def mesh_slice_metrics(hm, mesh_v, mesh_f, vertices, faces, axis="z", value=None, step: float = 0.01,
+                       prefix: str = "ridge_slice") -> dict:
+    """Two-sided distances between an extracted surface and the truth in one plane (thesis Fig. 5.2).
+
+    The surface mesh ``(mesh_v, mesh_f)`` and the true mesh are both cut by the plane (through the
+    sonar by default) and sampled every ``step`` metres; the true line is kept where it was
+    insonified (:func:`slice_truth`). ``<prefix>_max``: the farthest point of the surface's line
+    from the true surfaces (accuracy); ``<prefix>_comp_max``: the farthest point of the insonified
+    true line from the surface's line (completeness: inf where the surface has no line in the
+    plane); ``<prefix>_hausdorff``: the larger of the two.
+    """
+    from scipy.spatial import cKDTree
+
+    truth, a, value = slice_truth(hm, vertices, faces, axis, value, step)
+    pts = geo.sample_segments(geo.plane_section(mesh_v, mesh_f, a, value), step) if len(mesh_f) else np.zeros((0, 3))
+    d_acc = geo.point_mesh_distance(pts, vertices, faces) if len(pts) else np.zeros(0)
+    out = {f"{prefix}_max": float(d_acc.max()) if len(d_acc) else float("nan")}
+    if len(truth) == 0:
+        d_comp = np.zeros(0)
+    else:
+        d_comp = cKDTree(pts).query(truth)[0] if len(pts) else np.full(len(truth), np.inf)
+    out[f"{prefix}_comp_max"] = float(d_comp.max()) if len(d_comp) else float("nan")
+    both = [v for v in (out[f"{prefix}_max"], out[f"{prefix}_comp_max"]) if not math.isnan(v)]
+    out[f"{prefix}_hausdorff"] = max(both) if both else float("nan")
     return out
 
 
@@ -356,6 +406,11 @@ def _climb(hm, P, fixed_axis, max_shift=None, n=31):
         o[i] = h
         grad[:, i] = (hm.decision_function(P + o) - hm.decision_function(P - o)) / (2 * h)
     nrm = grad / np.maximum(np.linalg.norm(grad, axis=1, keepdims=True), 1e-12)
+    # the same front rule as the ridge surface: contour points whose low side was never seen empty
+    # close the p > 0.5 band in a wall's shadow and are not the wall's face
+    front = seen_empty(hm, P - 0.1 * nrm)
+    if front.any():
+        P, nrm = P[front], nrm[front]
     step = max_shift if max_shift is not None else 1.5 * hm.lengthscale_
     ts = np.linspace(0, step, n)
     pts = P[:, None, :] + ts[None, :, None] * nrm[:, None, :]
