@@ -157,7 +157,7 @@ def embed_scan(scan, rng: np.random.Generator, *, source="auto", bin_rule="otsu+
                free_density=40.0, max_free_per_ping=400, free_margin=0.0, near_free=0, near_depth=0.5,
                occupied_samples=16,
                occupied_bins="first_run", max_run=0.3, beam_sampling="pattern", beam_extent=1.0, ping_stride=1,
-               min_echo_bins=5,
+               min_echo_bins=4,
                ping_offset=0) -> Samples:
     """Samples of one scan (see the module docstring). Only the scan's attributes are read."""
     values, src = scan_values(scan, source)

@@ -110,7 +110,7 @@ class IncrementalHilbertMap(HilbertMap):
     def __init__(self, node_spacing=0.15, *, lengthscale_factor=1.0, node_margin=2, max_nodes=200_000,
                  max_pings_kept=100_000, eta0=0.1, kernel_cut=1e-2, alpha=1e-4, source="auto",
                  bin_rule="otsu+cfar", threshold=None, min_level=None, cfar_train=16, cfar_guard=2,
-                 cfar_offset=None, blanking="auto", min_echo_bins=5, free_density=40.0, max_free_per_ping=400,
+                 cfar_offset=None, blanking="auto", min_echo_bins=4, free_density=40.0, max_free_per_ping=400,
                  free_margin=0.0, near_free=32, near_depth=0.3, occupied_samples=16, occupied_bins="first_run",
                  max_run=0.3, occupied_weight=5.0, beam_sampling="pattern", beam_extent=1.0, beam_stride=1,
                  batch_size=4096, n_passes=3, partial_passes=1, fit_intercept=True, coverage_voxel=0.25,

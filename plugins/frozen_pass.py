@@ -97,6 +97,10 @@ class Context:
 
     def __init__(self, body, owner, ctx):
         self.body, self.ctx = body, ctx
+        # Before the walk: a scene's first mi.traverse changes what the walk would find (the next
+        # call then missed the recording made after it).
+        scene = getattr(ctx, "scene", None) or getattr(getattr(ctx, "path_setup", None), "scene", None)
+        textured = scene is not None and has_textures(scene)
         self.values, scalars = jit_state(ctx)
         # The owner (the integrator) by its class and settings, not its identity: render_scan
         # with an integrator dict makes a new one per call, which may replay the same recording.
@@ -107,8 +111,7 @@ class Context:
         # texels changed through mi.traverse was seen to read the texels before the change, also
         # for a texture a C++ BSDF holds (an acoustic BSDF in a twosided, Mitsuba's diffuse with a
         # bitmap), which the walk above does not reach: the scene's own traversal says.
-        self.freezable = not any(isinstance(v, mi.Texture) or (isinstance(v, mi.Scene) and has_textures(v))
-                                 for v in self.values)
+        self.freezable = not textured and not any(isinstance(v, mi.Texture) for v in self.values)
 
     def __hash__(self):
         return hash(self.key)

@@ -51,12 +51,15 @@ def test_surface_ghost_at_the_image_source_range_only_with_the_surface(mitsonar_
     assert direct > 0 and band(on, D - A - 0.02, D + 0.02) == pytest.approx(direct, rel=0.05)
     assert off[r > D + bin_w].sum() == 0                                         # no surface: no ghost
     assert band(on, MIXED - A - 0.02, MIXED + 0.02) > 1e-2 * direct
-    assert band(on, D + bin_w, MIXED - A - bin_w) == 0                          # nothing earlier than the constructions
+    assert band(on, D + bin_w, MIXED - A - bin_w) <= 1e-12 * direct             # nothing earlier than the constructions
     ghost = band(on, IMAGE - A - bin_w, IMAGE + 0.02)
     assert ghost > 1e-3 * direct
-    late = r[(on > 0) & (r > MIXED + bin_w)]
+    # "nothing" is below 1e-12 of the direct echo: a multibeam frame's shared paths score every echo
+    # into the neighbouring beams by their gain, whose gaussian tail puts 1e-35 where a beam's own
+    # paths put exactly 0
+    late = r[(on > 1e-12 * direct) & (r > MIXED + bin_w)]
     assert abs(late[0] - (IMAGE - A)) <= bin_w                                   # the ghost's onset: the image range
-    assert band(on, MIXED + bin_w, IMAGE - A - bin_w) == 0                       # after a gap
+    assert band(on, MIXED + bin_w, IMAGE - A - bin_w) <= 1e-12 * direct          # after a gap
 
 
 def test_surface_option_is_off_by_default_and_adds_one_downward_mirror(mitsonar_mod, tmp_path, monkeypatch):

@@ -55,7 +55,7 @@ def test_thesis_setting_map_quality(thesis_report):
     assert r["auc"] > 0.95, r
     assert r["auc_band_0.1_0.3"] > 0.85, r
     # the horizontal plane through the sonar, both ways: 0.23-0.45 m on seeds 0, 3 and 11 (before
-    # min_echo_bins=5 and the frustum front test: 0.63-0.67 m on seeds 0 and 3), the worst points at
+    # min_echo_bins=4 and the frustum front test: 0.63-0.67 m on seeds 0 and 3), the worst points at
     # concave corners and at oblique walls next to them
     assert r["ridge_slice_hausdorff"] == max(r["ridge_slice_max"], r["ridge_slice_comp_max"])
     assert r["ridge_slice_max"] < 0.25, r
