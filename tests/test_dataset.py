@@ -172,6 +172,28 @@ def test_a_killed_worker_process_loses_nothing(reference, tmp_path):
     _same_as(reference, out)
 
 
+def test_a_pool_broken_at_submit_loses_nothing(reference, tmp_path, monkeypatch):
+    """A worker that dies between two waits breaks the pool, and the next submit raises: the sample
+    being handed out stays pending (it was once dropped: 5 samples of 6 came back)."""
+    import concurrent.futures
+    from concurrent.futures.process import BrokenProcessPool
+
+    class Breaking(concurrent.futures.ProcessPoolExecutor):
+        calls = 0
+
+        def submit(self, *args, **kwargs):
+            Breaking.calls += 1
+            if Breaking.calls == 3:
+                raise BrokenProcessPool("a worker died")
+            return super().submit(*args, **kwargs)
+
+    monkeypatch.setattr(concurrent.futures, "ProcessPoolExecutor", Breaking)
+    out = tmp_path / "broken_at_submit"
+    result = generate_dataset(small_config(), str(out), workers=2, engine="local", progress=False)
+    assert Breaking.calls > 6 and result["samples"] == 6
+    _same_as(reference, out)
+
+
 def test_segmentation_names_the_shape_in_each_bin(tmp_path):
     """Two walls facing the head, 'near' 4 m away along +x and 'far' 7 m away along -x: pings towards
     +x are labelled near from 4 m on, pings towards -x far from 7 m on, sideways pings nothing; the

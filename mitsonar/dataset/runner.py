@@ -175,9 +175,12 @@ def _local(cfg, coord, todo, workers, threads, variant):
         try:
             while pending or running:
                 while pending and len(running) < 2 * workers:
-                    i = pending.pop(0)
+                    # taken off `pending` only once submitted: a pool broken since the last wait
+                    # raises in submit, and the sample must stay pending (it was lost: 5 of 6)
+                    i = pending[0]
                     t = task(cfg, i)
                     running[pool.submit(render_in_process, t, coord.want_mesh(t))] = i
+                    pending.pop(0)
                 finished, _ = wait(running, return_when=FIRST_COMPLETED)
                 for f in sorted(finished, key=running.get):
                     result = f.result()   # a dead worker raises here; its index stays in running
