@@ -28,7 +28,6 @@ import math
 
 import drjit as dr
 import mitsuba as mi
-import numpy as np
 
 from .samples import SobolSamples
 

@@ -103,20 +103,27 @@ def test_hidden_boulder_echo_matches_sonar_tof(mitsonar_mod):
     assert abs(eb - et) < 4 * math.hypot(sb, st), (eb, sb, et, st)
 
 
-@pytest.mark.parametrize("strategy", ["0", "1", "all"])
-def test_each_strategy_reproduces_the_lambert_plane(mitsonar_mod, strategy):
-    """Single bounce on a Lambertian plane under a uniform beam (test_physics' closed form): the
-    strategy from the transmit end (s = 1), the one from the receive end (s = 0), each alone and
-    unweighted, and both MIS-weighted."""
+def lambert_plane(mitsonar):
+    """test_physics' ladder-1 scene (a uniform 20 x 30 deg beam tilted 40 deg onto a Lambertian
+    plane 2 m below, one ping of 30 bins from 1.5 to 4.5 m) and its closed-form bins."""
     tilt = math.radians(40.0)
     bw_h, bw_v, height, rho = 20.0, 30.0, 2.0, 0.8
     boresight = (math.sin(tilt), 0.0, -math.cos(tilt))
     sensor = sonar_xml(frame_matrix(boresight, (0, 1, 0)), beam_pattern="uniform", beamwidth_h=bw_h,
                        beamwidth_v=bw_v, range_min=1.5, range_max=4.5, n_bins=30, n_pings=1, bearing_step=0.0)
-    scene = mitsonar_mod.load_scene(scene_xml(sensor, rectangle_xml(plane_matrix(-height), acoustic_xml(rho))))
+    scene = mitsonar.load_scene(scene_xml(sensor, rectangle_xml(plane_matrix(-height), acoustic_xml(rho))))
+    return scene, lambert_plane_reference(rho, height, tilt, math.radians(bw_h), math.radians(bw_v),
+                                          np.linspace(1.5, 4.5, 31))
+
+
+@pytest.mark.parametrize("strategy", ["0", "1", "all"])
+def test_each_strategy_reproduces_the_lambert_plane(mitsonar_mod, strategy):
+    """Single bounce on a Lambertian plane under a uniform beam (test_physics' closed form): the
+    strategy from the transmit end (s = 1), the one from the receive end (s = 0), each alone and
+    unweighted, and both MIS-weighted."""
+    scene, ref = lambert_plane(mitsonar_mod)
     m, s = stats(integrator(type="sonar_bdpt", max_depth=1, strategy=strategy), scene, 1 << 12)
     m, s = m[0], s[0]
-    ref = lambert_plane_reference(rho, height, tilt, math.radians(bw_h), math.radians(bw_v), np.linspace(1.5, 4.5, 31))
     lit = ref > 1e-3 * ref.max()
     assert lit.sum() >= 8
     assert np.all(m[ref == 0] == 0)

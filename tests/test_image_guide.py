@@ -11,9 +11,8 @@ import os
 import numpy as np
 import pytest
 
-from conftest import SCENES, acoustic_xml, frame_matrix, rectangle_xml, scene_xml, sonar_xml
-from test_bdpt import SEEDS, integrator, load, stats, z_scores
-from test_physics import lambert_plane_reference, plane_matrix
+from conftest import SCENES, sonar_xml, scene_xml
+from test_bdpt import SEEDS, integrator, lambert_plane, load, stats, z_scores
 
 
 def test_image_of_the_transducer_in_a_chain_of_plates(mitsonar_mod):
@@ -100,16 +99,10 @@ def test_guide_is_inert_without_mirrors(mitsonar_mod, monkeypatch):
     from mitsonar.plugins import image_guide
 
     monkeypatch.setattr(image_guide, "has_mirrors", lambda scene: True)
-    tilt = math.radians(40.0)
-    bw_h, bw_v, height, rho = 20.0, 30.0, 2.0, 0.8
-    boresight = (math.sin(tilt), 0.0, -math.cos(tilt))
-    sensor = sonar_xml(frame_matrix(boresight, (0, 1, 0)), beam_pattern="uniform", beamwidth_h=bw_h,
-                       beamwidth_v=bw_v, range_min=1.5, range_max=4.5, n_bins=30, n_pings=1, bearing_step=0.0)
-    scene = mitsonar_mod.load_scene(scene_xml(sensor, rectangle_xml(plane_matrix(-height), acoustic_xml(rho))))
+    scene, ref = lambert_plane(mitsonar_mod)
     guided = integrator(type="sonar_tof", max_depth=2, guide="image").render_histogram(scene, 0, seed=5, spp=1 << 14)
     plain = integrator(type="sonar_tof", max_depth=2, guide="none").render_histogram(scene, 0, seed=5, spp=1 << 14)
     assert np.allclose(guided, plain, rtol=1e-4, atol=1e-12 * plain.max())
-    ref = lambert_plane_reference(rho, height, tilt, math.radians(bw_h), math.radians(bw_v), np.linspace(1.5, 4.5, 31))
     assert abs(guided.sum() - ref.sum()) < 0.01 * ref.sum()
 
 
