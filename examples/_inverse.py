@@ -131,6 +131,19 @@ def pyplot():
     return plt
 
 
+def loss_figure(history, loss_label: str):
+    """A two-panel figure of an optimisation: the loss (first column of ``history``) on a log scale
+    in the left panel; returns ``(fig, right_axes, history_array, iterations)`` for the caller's
+    parameter errors."""
+    h = np.asarray(history)
+    it = np.arange(len(h))
+    fig, ax = pyplot().subplots(1, 2, figsize=(9, 3.4))
+    ax[0].semilogy(it, h[:, 0])
+    ax[0].set_xlabel("iteration")
+    ax[0].set_ylabel(loss_label)
+    return fig, ax[1], h, it
+
+
 def save_figure(fig, path: str):
     """Lay ``fig`` out, write it to ``path`` under a temporary name renamed at the end, and close it."""
     from mitsonar._files import replacing

@@ -28,7 +28,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _inverse import argument_parser, positive_int, pyplot, relative_l2, rotation_angle_deg, save_figure  # noqa: E402
+from _inverse import argument_parser, loss_figure, positive_int, relative_l2, rotation_angle_deg, save_figure  # noqa: E402
 from _inverse import small_pose  # noqa: E402
 from _inverse import tank_xml as _tank_xml  # noqa: E402
 
@@ -124,19 +124,13 @@ def calibrate(iterations=100, spp=1024, seed=7, target_seed=None, n_pings=24, n_
 
 
 def figure(result, path):
-    plt = pyplot()
-    h = np.asarray(result["history"])
-    it = np.arange(len(h))
-    fig, ax = plt.subplots(1, 2, figsize=(9, 3.4))
-    ax[0].semilogy(it, h[:, 0])
-    ax[0].set_xlabel("iteration")
-    ax[0].set_ylabel("relative L2 loss")
-    ax[1].plot(it, 100 * h[:, 1], label="translation error (cm)")
-    ax[1].plot(it, h[:, 2], label="rotation error (deg)")
-    ax[1].axhline(1.0, color="0.6", lw=0.8, ls="--")
-    ax[1].axhline(0.2, color="0.6", lw=0.8, ls=":")
-    ax[1].set_xlabel("iteration")
-    ax[1].legend()
+    fig, right, h, it = loss_figure(result["history"], "relative L2 loss")
+    right.plot(it, 100 * h[:, 1], label="translation error (cm)")
+    right.plot(it, h[:, 2], label="rotation error (deg)")
+    right.axhline(1.0, color="0.6", lw=0.8, ls="--")
+    right.axhline(0.2, color="0.6", lw=0.8, ls=":")
+    right.set_xlabel("iteration")
+    right.legend()
     fig.suptitle("Mount calibration from scans of a known tank")
     save_figure(fig, path)
 

@@ -29,7 +29,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _inverse import argument_parser, log_l2, positive_int, pyplot, save_figure, tank_xml  # noqa: E402
+from _inverse import argument_parser, log_l2, loss_figure, positive_int, save_figure, tank_xml  # noqa: E402
 
 TRUTH = {"wall": (0.15, 0.6, 30.0), "floor": (0.4, 0.2, 8.0)}
 START = {"wall": (0.3, 0.35, 12.0), "floor": (0.25, 0.35, 16.0)}
@@ -125,20 +125,14 @@ def recover(iterations=100, spp=1024, seed=5, n_pings=36, n_bins=160, blur=1.0, 
 
 
 def figure(result, path):
-    plt = pyplot()
-    h = np.asarray(result["history"])
-    it = np.arange(len(h))
-    fig, ax = plt.subplots(1, 2, figsize=(9, 3.4))
-    ax[0].semilogy(it, h[:, 0])
-    ax[0].set_xlabel("iteration")
-    ax[0].set_ylabel("L2 loss of log intensity")
+    fig, right, h, it = loss_figure(result["history"], "L2 loss of log intensity")
     for j, k in enumerate(result["keys"]):
         t = result["truth"][k]
-        ax[1].semilogy(it, np.abs(h[:, 1 + j] - t) / t, label=k)
-    ax[1].axhline(0.05, color="0.6", lw=0.8, ls="--")
-    ax[1].set_xlabel("iteration")
-    ax[1].set_ylabel("relative error")
-    ax[1].legend(fontsize=7)
+        right.semilogy(it, np.abs(h[:, 1 + j] - t) / t, label=k)
+    right.axhline(0.05, color="0.6", lw=0.8, ls="--")
+    right.set_xlabel("iteration")
+    right.set_ylabel("relative error")
+    right.legend(fontsize=7)
     fig.suptitle("Reflectance recovered from scans of a tank")
     save_figure(fig, path)
 
