@@ -94,9 +94,7 @@ class AcousticBSDF(mi.BSDF):
         return dr.select(valid, f * cos_o, 0.0), cos_o, phong, valid
 
     def _pdf(self, si, cos_o, phong, valid):
-        p_s = self._spec_prob(si)
-        pdf = (1 - p_s) * cos_o * dr.inv_pi + p_s * (self.shininess + 1) * (0.5 * dr.inv_pi) * phong
-        return dr.select(valid, pdf, 0.0)
+        return dr.select(valid, lobe_pdf(self._spec_prob(si), self.shininess, cos_o, phong), 0.0)
 
     # ------------------------------------------------------------------ BSDF interface
     def sample(self, ctx, si, sample1, sample2, active=True):
@@ -155,6 +153,13 @@ class AcousticBSDF(mi.BSDF):
     def to_string(self):
         return (f"AcousticBSDF[preset={self.preset!r}, diffuse={self.diffuse[0]:g}, "
                 f"specular={self.specular[0]:g}, shininess={self.shininess[0]:g}]")
+
+
+def lobe_pdf(p_spec, shininess, cos_o, phong):
+    """The sampling density (solid angle) of the acoustic BSDF: the cosine lobe with probability
+    ``1 - p_spec``, the normalised Phong lobe ``(n + 1) / (2 pi) cos^n alpha`` (``phong`` =
+    ``cos^n alpha``) with ``p_spec``. Dr.Jit arrays or Python floats."""
+    return (1 - p_spec) * cos_o * dr.inv_pi + p_spec * (shininess + 1) * (0.5 * dr.inv_pi) * phong
 
 
 def texture_max(texture) -> float:

@@ -56,15 +56,20 @@ def lobe_exponent(bsdf) -> float:
     normal incidence, where the acoustic BSDF's diffuse share of the density is largest, so its
     smallest reading is its largest here); infinity for a BSDF of unknown shape (it may be a
     mirror), 0 for one without a specular part."""
-    from .acoustic_bsdf import AcousticBSDF
+    from .acoustic_bsdf import AcousticBSDF, lobe_pdf
 
     if not isinstance(bsdf, AcousticBSDF):
         return math.inf
     d, s, n = (float(dr.detach(getattr(bsdf, k))[0]) for k in ("diffuse", "specular", "shininess"))
     if s <= 0:
         return 0.0
-    p_s = s / (d + s)
-    return 2.0 * math.pi * (p_s * (n + 1.0) * 0.5 / math.pi + (1.0 - p_s) / math.pi) - 1.0
+    return exponent_of_peak(lobe_pdf(s / (d + s), n, 1.0, 1.0))
+
+
+def exponent_of_peak(peak):
+    """The Phong exponent ``n`` whose normalised lobe has the density ``peak`` at its axis:
+    ``(n + 1) / (2 pi) = peak``."""
+    return 2.0 * math.pi * peak - 1.0
 
 
 def has_mirrors(scene) -> bool:
@@ -121,7 +126,7 @@ def advance(bsdf, si, origin, image, n_chain, active):
     ``origin``."""
     mirror_dir = mi.Vector3f(-si.wi.x, -si.wi.y, si.wi.z)
     peak = bsdf.pdf(mi.BSDFContext(mi.TransportMode.Importance), si, mirror_dir, active)
-    n_here = 2.0 * dr.pi * peak - 1.0
+    n_here = exponent_of_peak(peak)
     mirror = active & (n_here >= MIN_EXPONENT)
     nrm = si.sh_frame.n
     reflected = image - 2.0 * dr.dot(image - si.p, nrm) * nrm
