@@ -67,7 +67,8 @@ class PathSetup:
     ``scene``, ``sensor``; ``frames`` the per-ping beam frames at ``pose``; ``connect`` what weights
     the connection back to the transducer (``SonarSensor.connection``); ``depth`` the surface
     bounces (and ``depth_o``, its opaque copy); ``absorption`` (opaque, dB/m); ``bins`` the range
-    window; ``guide`` whether paths are image guided (`image_guide`; set by the integrator).
+    window; ``guide`` whether paths are image guided (`image_guide`; set by the integrator);
+    ``tag_hard`` whether ``record`` is told the hard echoes (`tagging_hard`).
     Every value that differs between renders is opaque: a new pose, window or depth never
     recompiles a kernel.
     """
@@ -80,12 +81,23 @@ class PathSetup:
         self.absorption = dr.opaque(mi.Float, sensor.absorption)
         self.bins = RangeBins(sensor)
         self.guide = False
+        self.tag_hard = False
         self.ad = None
 
     def attach(self):
         """Make ``self.ad`` (`AttachedSetup`): the values the gradient passes differentiate."""
         self.ad = AttachedSetup(self)
         return self
+
+
+def tagging_hard(setup):
+    """A shallow copy of ``setup`` whose paths tell their hard echoes apart (``record``'s sixth
+    argument, `SonarIntegrator.sample`); the setup itself is left as it is."""
+    import copy
+
+    tagged = copy.copy(setup)
+    tagged.tag_hard = True
+    return tagged
 
 
 class AttachedSetup:

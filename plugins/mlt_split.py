@@ -29,7 +29,11 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from .samples import SobolSamples
+import numpy as np
+
+from .common import tagging_hard
+from .samples import SobolSamples, row_lanes
+from .sonar_tof import MAX_LANES_PER_PASS, SonarTOFIntegrator
 
 #: Fraction of ``spp`` the pilot traces (at least `MIN_PILOT` paths per row).
 PILOT_FRACTION = 1.0 / 8.0
@@ -37,8 +41,6 @@ MIN_PILOT = 16
 #: Most of the budget the chains may take, and the least worth running them for.
 MAX_SHARE = 0.9
 MIN_CHAIN_SPP = 64
-#: Lanes of one path-tracing pass.
-MAX_LANES = 1 << 22
 
 
 def traced(integrator, setup, seed, start, count, moments=False):
@@ -46,11 +48,7 @@ def traced(integrator, setup, seed, start, count, moments=False):
     guide): the summed energies per bin of the easy and the hard echoes, float64 arrays, and with
     ``moments`` their summed squares (per echo: a path's echoes rarely share a bin)."""
     n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
-    count_o = dr.opaque(mi.UInt32, count)
-    lane = dr.arange(mi.UInt32, n_rows * count)
-    ping = lane // count_o
-    samples = SobolSamples(dr.opaque(mi.UInt32, int(seed) & 0xFFFFFFFF), ping,
-                           lane - ping * count_o + dr.opaque(mi.UInt32, start))
+    ping, samples = row_lanes(SobolSamples, n_rows, seed, start, count)
     sums = [dr.zeros(mi.Float64, n_rows * n_bins) for _ in range(4 if moments else 2)]
     bins = setup.bins
 
@@ -64,9 +62,7 @@ def traced(integrator, setup, seed, start, count, moments=False):
             if moments:
                 dr.scatter_add(sums[2 + i], e * e, at, keep)
 
-    setup.tag_hard = True
-    integrator.sample(setup, ping, samples, record)
-    setup.tag_hard = False
+    integrator.sample(tagging_hard(setup), ping, samples, record)
     dr.eval(sums)
     return [s.numpy() for s in sums]
 
@@ -113,22 +109,18 @@ def render_split(integrator, setup, seed, spp, progress=None):
     n_traced = spp - pilot - n_chain
     if n_traced < 1:   # explicit chains that take the whole budget: chains over every echo
         return integrator.metropolis(setup, seed, spp, progress=progress)
-    per_pass = max(1, MAX_LANES // n_rows)
-    easy = hard = 0.0
-    done = 0
-    while done < n_traced:
-        count = min(per_pass, n_traced - done)
-        e, h = traced(integrator, setup, seed, pilot + done, count)
-        easy, hard = easy + e, hard + h
-        done += count
-        if progress is not None:
-            progress(pilot + done, spp)
+    # sonar_tof's pass loop over the paths after the pilot's; each pass gives [easy | hard] sums
+    mean = SonarTOFIntegrator.accumulate(
+        n_traced, MAX_LANES_PER_PASS // n_rows,
+        lambda start, count: np.concatenate(traced(integrator, setup, seed, pilot + start, count)),
+        None if progress is None else (lambda done, total: progress(pilot + done, spp)))
+    easy, hard = np.split(mean, 2)
     plan = {"split": chosen, "pilot": pilot, "traced": n_traced, "chains_spp": n_chain}
     if n_chain == 0:
         integrator.last_plan = plan
-        return ((easy + hard) / n_traced).reshape(n_rows, n_bins)
+        return (easy + hard).reshape(n_rows, n_bins)
     chained = integrator.metropolis(setup, seed, spp if explicit else n_chain, hard_only=True,
                                     progress=None if progress is None else
                                     (lambda d, t: progress(pilot + n_traced + d * n_chain // max(t, 1), spp)))
     integrator.last_plan = {**plan, **integrator.last_plan}
-    return (easy / n_traced).reshape(n_rows, n_bins) + chained
+    return easy.reshape(n_rows, n_bins) + chained

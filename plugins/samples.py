@@ -99,3 +99,19 @@ class SobolSamples(HashSamples):
             y = _owen_scramble(_sobol_dim2(self.index), self.scramble[1])
             return mi.Point2f(_unit(x), _unit(y))
         return super().get2(dim)
+
+
+def opaque_u32(v):
+    """An opaque UInt32 of ``v`` (an int, taken mod 2^32), or ``v`` if it is a JIT value already."""
+    return v if isinstance(v, dr.ArrayBase) else dr.opaque(mi.UInt32, int(v) & 0xFFFFFFFF)
+
+
+def row_lanes(sampler, n_rows, seed, start, count):
+    """The lanes of one pass: samples ``start .. start + count`` of every row, row-major, as
+    ``(ping, samples)`` (each lane's row, and its primary samples from ``sampler``, e.g.
+    `SobolSamples`). Everything that varies between renders is opaque, so the kernel compiles
+    once (``seed`` and ``start``: ints, or opaque UInt32 values)."""
+    count_o = dr.opaque(mi.UInt32, count)
+    lane = dr.arange(mi.UInt32, n_rows * count)
+    ping = lane // count_o
+    return ping, sampler(opaque_u32(seed), ping, lane - ping * count_o + opaque_u32(start))

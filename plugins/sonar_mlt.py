@@ -9,7 +9,7 @@ import numpy as np
 
 from mitsonar._checks import require
 
-from .common import PathSetup, SonarIntegrator
+from .common import PathSetup, SonarIntegrator, tagging_hard
 from .jit_arrays import upload
 from .mlt_split import MAX_SHARE, render_split
 from .props import count, number, text
@@ -408,9 +408,7 @@ class _Context:
                 dr.scatter(bins, b, slot, valid)
                 dr.scatter(vals, energy, slot, valid)
 
-        self.setup.tag_hard = self.hard_only
-        self.integrator.sample(self.setup, ping, samples, record)
-        self.setup.tag_hard = False
+        self.integrator.sample(tagging_hard(self.setup) if hard_only else self.setup, ping, samples, record)
 
     def records(self, n):
         """Zeroed path totals and per-bounce (bin, energy) records for ``n`` lanes."""

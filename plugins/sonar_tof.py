@@ -10,7 +10,7 @@ from mitsonar._checks import require
 from . import frozen_pass
 from .common import SonarIntegrator
 from .props import text
-from .samples import HashSamples, SobolSamples
+from .samples import HashSamples, SobolSamples, opaque_u32, row_lanes
 
 # Lanes in one kernel launch. Larger launches keep both cores busy; the cap bounds the number
 # of float32 atomic adds a bin receives before its pass is summed in float64.
@@ -141,20 +141,13 @@ class SonarTOFIntegrator(SonarIntegrator):
         return total / spp
 
     def lanes(self, n_rows, seed, start, count):
-        """The lanes of one pass: samples ``start .. start + count`` of every row, row-major, as
-        ``(ping, samples)`` (each lane's row and primary samples, this integrator's sampling).
-        Everything that varies between renders is opaque, so the kernel compiles once (``seed``
-        and ``start``: ints, or opaque UInt32 values)."""
-        spp_o = dr.opaque(mi.UInt32, count)
-        lane = dr.arange(mi.UInt32, n_rows * count)
-        ping = lane // spp_o
-        sample = lane - ping * spp_o + _u32(start)
-        return ping, self.SAMPLERS[self.sampling](_u32(seed), ping, sample)
+        """The lanes of one pass (`samples.row_lanes`) with this integrator's sampling."""
+        return row_lanes(self.SAMPLERS[self.sampling], n_rows, seed, start, count)
 
     def _pass(self, setup, seed, start, count):
         """One pass of per-row paths: the summed echo energy per bin, float64 numpy. The emitted
         directions are drawn first, then the paths run as a frozen function (`frozen_pass`)."""
-        seed_o, start_o = _u32(seed), _u32(start)
+        seed_o, start_o = opaque_u32(seed), opaque_u32(start)
         _, samples = self.lanes(setup.sensor.n_pings, seed_o, start_o, count)
         d, w = frozen_pass.emitted(setup.sensor.beam, samples)
         return frozen_pass.run(self._pass_body, self, setup, seed_o, start_o, d, w, count).numpy()
@@ -180,7 +173,7 @@ class SonarTOFIntegrator(SonarIntegrator):
     def _shared_pass(self, shared, seed, start, count):
         """One pass of a frame's shared paths: paths ``start * n_rows .. (start + count) * n_rows``
         of the frame's one sequence, scored into every row that hears them (`shared_beams`)."""
-        seed_o, first_o = _u32(seed), _u32(start * shared.n_rows)
+        seed_o, first_o = opaque_u32(seed), opaque_u32(start * shared.n_rows)
         _, samples = self._shared_lanes(shared.n_rows * count, seed_o, first_o)
         d, w = frozen_pass.emitted(shared.path_setup.sensor.beam, samples)
         return frozen_pass.run(self._shared_body, self, shared, seed_o, first_o, d, w, count).numpy()
@@ -208,11 +201,6 @@ class SonarTOFIntegrator(SonarIntegrator):
         return (f"SonarTOFIntegrator[max_depth={self.max_depth}, sampling={self.sampling}, "
                 f"share_beams={'auto' if self.share_beams is None else str(self.share_beams).lower()}, "
                 f"guide={self.guide}]")
-
-
-def _u32(v):
-    """An opaque UInt32 of ``v`` (an int, taken mod 2^32), or ``v`` if it is a JIT value already."""
-    return v if isinstance(v, dr.ArrayBase) else dr.opaque(mi.UInt32, int(v) & 0xFFFFFFFF)
 
 
 def _emitting(setup, d, w):
