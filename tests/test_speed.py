@@ -190,6 +190,8 @@ def test_integrators_with_the_same_settings_share_a_recording(mitsonar_mod, monk
     # Objects freed in between (other tests' scenes) change Dr.Jit's registry, which makes the
     # next pass record anew (`frozen_pass.run`): collect them first and hold the collector off.
     gc.collect()
+    # and start from no recording: past `MAX_RECORDINGS` (other tests' passes) all are dropped
+    fp.clear()
     gc.disable()
     try:
         for sampling in ("sobol", "sobol", "independent"):
