@@ -15,6 +15,18 @@ compares, per path evaluation, the variance of the bins of
   the ping a primary coordinate, paths spread over the pings in proportion to their echoes, one
   ``B`` estimated from all uniform paths).
 
+The ratios above compare with path tracing by *independent* uniform paths, the estimator whose
+per-path variance the traced paths give directly. ``sonar_tof`` itself draws its paths from a
+scrambled Sobol sequence (`samples.SobolSamples`), which lowers its error by 1.2-15x at the same
+paths depending on the scene; with ``--baseline-spp`` the oracle also renders the default
+``sonar_tof`` ``--baseline-repeats`` times at each of those spp (new seeds each), measures its
+actual relative L2 error (the summed per-bin variance over the repeats over the summed squared
+mean) and reports, per spp, ``sonar_tof_rel_error``, ``sobol_gain`` (independent over Sobol) and
+``global_ideal_over_sonar_tof``: the error of ``sonar_tof`` over the ideal Metropolis sampler's at
+equal paths. It bounds what any Metropolis sampler of this path function can gain over the
+default path tracer: a real one also pays for chain correlation, the normalisation and a
+costlier evaluation, so at equal time it gains less.
+
 Prints one JSON object per scene: ``ideal_variance_ratio`` (PT / ideal Metropolis; the square
 root is the best equal-sample error ratio, ``ideal_error_ratio``), ``normalisation_bound_error_ratio``
 (PT / b-only), ``global_ideal_error_ratio`` and ``global_normalisation_bound_error_ratio`` (one
@@ -22,7 +34,7 @@ target over the scan), the spread of the per-ping totals (``ping_total_cv2``), t
 f and the share of paths with f = 0.
 
     python benchmarks/mlt_oracle.py [--scenes box,slot_chamber,glossy_corridor,hidden_target] [--paths 4096]
-                                    [--guide image|none]
+                                    [--guide image|none] [--baseline-spp 4096,32768 --baseline-repeats 8]
 
 The ratios are estimates from the paths traced: on hidden_target, where 2 paths in 1000 carry nearly
 all of the boulder's echo, 4096 paths per ping give an ideal ratio of 24 and 65536 give 18.
@@ -38,7 +50,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
-def analyse(name, paths, seed=7, guide="image"):
+def analyse(name, paths, seed=7, guide="image", baseline_spp=(), baseline_repeats=8, baseline_sampling="sobol"):
     import drjit as dr
     import mitsuba as mi
 
@@ -87,7 +99,7 @@ def analyse(name, paths, seed=7, guide="image"):
     var_glob = float(np.sum(B_all * np.asarray(g2f) - np.asarray(mean2) / P))
     cv2_all = (f ** 2).mean() / B_all ** 2 - 1.0
     var_B = cv2_all / P * norm2
-    return {"scene": name, "paths_per_ping": paths,
+    out = {"scene": name, "paths_per_ping": paths,
             "global_ideal_error_ratio": float(np.sqrt(var_pt / var_glob)),
             "global_normalisation_bound_error_ratio": float(np.sqrt(var_pt / var_B)),
             "ping_total_cv2": float(np.var(f.mean(1)) / np.mean(f.mean(1)) ** 2),
@@ -97,6 +109,30 @@ def analyse(name, paths, seed=7, guide="image"):
             "normalisation_bound_error_ratio": float(np.sqrt(var_pt / var_b)),
             "median_cv2_of_f": float(np.median(cv2)),
             "zero_f_share": float(np.mean(f == 0))}
+    if baseline_spp:
+        tof = mi.load_dict({"type": "sonar_tof", "guide": guide, "sampling": baseline_sampling})
+        out["baseline"] = baseline(tof, scene, out, baseline_spp, baseline_repeats, depth)
+    return out
+
+
+def baseline(integrator, scene, oracle, spps, repeats, depth):
+    """``sonar_tof`` (by default its Sobol emission, the oracle's guide) measured against the oracle:
+    per spp, its relative L2 error over ``repeats`` renders (seeds 1000, 1001, ...), the error the
+    independent-path estimator would have there, and the ideal Metropolis sampler's."""
+    if repeats < 2:
+        raise ValueError(f"--baseline-repeats {repeats}: at least 2 renders are needed for a variance")
+    rows = {}
+    for spp in spps:
+        H = np.stack([integrator.render_histogram(scene, seed=1000 + r, spp=spp, max_depth=depth)
+                      for r in range(repeats)])
+        rel = float(np.sqrt(H.var(axis=0, ddof=1).sum() / (H.mean(axis=0) ** 2).sum()))
+        indep = oracle["pt_rel_error_per_path"] / np.sqrt(spp)
+        ideal = indep / oracle["global_ideal_error_ratio"]
+        bound = indep / oracle["global_normalisation_bound_error_ratio"]
+        rows[str(spp)] = {"sonar_tof_rel_error": rel, "independent_rel_error": float(indep),
+                          "sobol_gain": float(indep / rel), "global_ideal_over_sonar_tof": float(rel / ideal),
+                          "global_normalisation_bound_over_sonar_tof": float(rel / bound)}
+    return rows
 
 
 def main(argv=None):
@@ -105,8 +141,19 @@ def main(argv=None):
     ap.add_argument("--paths", type=int, default=4096)
     ap.add_argument("--guide", default="image", choices=("image", "none"),
                     help="the path function's guide (sonar_tof's default image, or none: BSDF sampling)")
+    ap.add_argument("--baseline-spp", default="",
+                    help="also render the default sonar_tof at these spp (comma separated) and compare the ideal "
+                         "sampler with its measured error (see the module's docstring)")
+    ap.add_argument("--baseline-repeats", type=int, default=8, help="renders per baseline spp (default 8)")
     args = ap.parse_args(argv)
-    print(json.dumps([analyse(s, args.paths, guide=args.guide) for s in args.scenes.split(",")], indent=1))
+    try:
+        spps = [int(v) for v in args.baseline_spp.split(",") if v.strip()]
+    except ValueError:
+        ap.error(f"--baseline-spp {args.baseline_spp!r}: give whole numbers of paths per ping, comma separated")
+    if any(v < 1 for v in spps) or (spps and args.baseline_repeats < 2):
+        ap.error("--baseline-spp takes positive numbers and --baseline-repeats at least 2")
+    print(json.dumps([analyse(s, args.paths, guide=args.guide, baseline_spp=spps,
+                              baseline_repeats=args.baseline_repeats) for s in args.scenes.split(",")], indent=1))
 
 
 if __name__ == "__main__":
