@@ -297,11 +297,17 @@ def plot_cartesian(scan, mesh=None, path=None, ax=None, db: bool = False, cmap: 
     return fig
 
 
-def plot_track(trajectory, path=None, ax=None, scans=(), *, figsize=(7.0, 6.4), dpi: int = 150,
+#: `plot_track`: the shorter side of the top view is at least this share of the longer.
+TRACK_MIN_ASPECT = 0.4
+
+
+def plot_track(trajectory, path=None, ax=None, scans=(), mesh=None, *, figsize=(7.0, 6.4), dpi: int = 150,
                title: str | None = None) -> Figure:
     """Top view (world x, y) of a vehicle's track: the trajectory's positions, its start and end,
-    its heading every tenth of the way, and the transducer positions of ``scans`` (each scan's
-    pings as dots, so the sweeps along the track show).
+    its heading every tenth of the way, the transducer positions of ``scans`` (each scan's pings
+    as dots, so the sweeps along the track show) and, given a ``mesh``, the ground truth where it
+    crosses the horizontal plane at the track's mean depth. The view frames all of these, its
+    shorter side at least `TRACK_MIN_ASPECT` of the longer.
 
     Parameters
     ----------
@@ -309,9 +315,18 @@ def plot_track(trajectory, path=None, ax=None, scans=(), *, figsize=(7.0, 6.4), 
     path, ax, figsize, dpi, title
         As in `plot_polar`.
     scans : iterable of Scan, optional
+    mesh : (vertices (V, 3), faces (F, 3)), optional
+        Ground-truth triangles (e.g. ``mitsonar.scene_mesh(scene)``), as in `plot_cartesian`.
     """
     fig, ax = _new_figure(ax, figsize, dpi)
     p = np.asarray(trajectory.positions)
+    framed = [p[:, :2]] + [np.asarray(s.positions)[:, :2] for s in scans]
+    if mesh is not None:
+        segments = mesh_section(mesh[0], mesh[1], [0.0, 0.0, float(p[:, 2].mean())], [0.0, 0.0, 1.0])
+        if len(segments):
+            ax.add_collection(LineCollection(segments[..., :2], colors="tab:green", linewidths=1.0,
+                                             label=f"ground truth at z = {p[:, 2].mean():.3g} m"))
+            framed.append(segments[..., :2].reshape(-1, 2))
     ax.plot(p[:, 0], p[:, 1], "-", color="tab:blue", lw=1.0, label="track")
     ax.plot(p[0, 0], p[0, 1], "o", color="tab:green", label="start")
     ax.plot(p[-1, 0], p[-1, 1], "s", color="tab:red", label="end")
@@ -322,10 +337,19 @@ def plot_track(trajectory, path=None, ax=None, scans=(), *, figsize=(7.0, 6.4), 
     for i, scan in enumerate(scans):
         q = scan.positions
         ax.plot(q[:, 0], q[:, 1], ".", ms=1.5, color="tab:orange", label="pings" if i == 0 else None)
+    # Equal axes, with the shorter side at least TRACK_MIN_ASPECT of the longer: a straight run
+    # is otherwise drawn as a strip a few pixels high under its own legend.
+    pts = np.concatenate(framed)
+    lo_xy, hi_xy = pts.min(axis=0), pts.max(axis=0)
+    centre, half = (lo_xy + hi_xy) / 2.0, (hi_xy - lo_xy) / 2.0
+    half = np.maximum(half, TRACK_MIN_ASPECT * half.max()) + 0.08 * half.max() + 1e-6
+    ax.set_xlim(centre[0] - half[0], centre[0] + half[0])
+    ax.set_ylim(centre[1] - half[1], centre[1] + half[1])
     ax.set_aspect("equal")
     ax.set_xlabel("world x (m)")
     ax.set_ylabel("world y (m)")
-    ax.legend(loc="upper right", fontsize=7)
+    # below the axes: inside, it covered the track's end on every straight run
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=5, fontsize=7, frameon=False)
     lo, hi = trajectory.span
     ax.set_title(f"track: {len(p)} poses, {hi - lo:.6g} s, {np.sum(np.linalg.norm(np.diff(p, axis=0), axis=1)):.6g} m"
                  if title is None else title, fontsize=8)

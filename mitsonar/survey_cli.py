@@ -168,7 +168,7 @@ def demo_survey(scenes, output, spp, seed, quiet=True):
     """The demo's survey: both heads of ``scenes/harbour.xml`` along ``harbour_survey.tum``: every
     sweep of the mechanical head and three multibeam frames (at 10, 25 and 40 s), drawn in world
     coordinates over the ground truth (``harbour_mechanical_<i>.png``, ``harbour_multibeam_<t>s.png``)
-    and the track with every ping's position (``harbour_track.png``). Returns the files written."""
+    and the track with every ping's position over the ground truth (``harbour_track.png``). Returns the files written."""
     import mitsonar
     from . import plots
 
@@ -187,7 +187,7 @@ def demo_survey(scenes, output, spp, seed, quiet=True):
         written.append(os.path.join(output, f"harbour_multibeam_{t}s.png"))
         plots.plot_cartesian(scan, mesh=mesh, path=written[-1])
     written.append(os.path.join(output, "harbour_track.png"))
-    plots.plot_track(track, written[-1], scans=scans)
+    plots.plot_track(track, written[-1], scans=scans, mesh=mesh)
     return written
 
 

@@ -90,6 +90,29 @@ def test_cartesian_places_bins_in_world_coordinates_and_cuts_the_mesh(tmp_path):
     assert fig.axes[0].get_xlabel().startswith("world x")
 
 
+def test_track_frames_a_straight_run_and_draws_the_ground_truth_at_its_depth(tmp_path):
+    """A straight 25 m run at z = -2 beside a wall x = 20 (z from -5 to 1): the view holds the wall's
+    cut, its short side is at least TRACK_MIN_ASPECT of the long one (it was a strip 0.1 as high as
+    wide), and the track's end is drawn where it is, not under the legend."""
+    from mitsonar.trajectory import Trajectory
+
+    t = np.linspace(0.0, 50.0, 51)
+    poses = np.tile(np.eye(4), (len(t), 1, 1))
+    poses[:, :3, 3] = np.stack([-10.0 + 0.5 * t, np.full_like(t, -14.0), np.full_like(t, -2.0)], 1)
+    track = Trajectory(t, poses)
+    v = np.array([[20, -20, -5], [20, 20, -5], [20, 20, 1], [20, -20, 1]], float)
+    f = np.array([[0, 1, 2], [0, 2, 3]])
+    png = str(tmp_path / "track.png")
+    fig = plots.plot_track(track, png, mesh=(v, f), figsize=(6, 5), dpi=100)
+    ax = fig.axes[0]
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    assert x0 < -10.0 and x1 > 20.0 and y0 < -20.0 and y1 > 20.0   # track and the wall's cut x = 20
+    assert min(x1 - x0, y1 - y0) >= plots.TRACK_MIN_ASPECT * max(x1 - x0, y1 - y0)
+    assert close(pixel(fig, png, 20.0, 0.0), "tab:green", tol=0.2)
+    assert close(pixel(fig, png, 15.0, -14.0), "tab:red", tol=0.2)
+    assert any("z = -2" in t.get_text() for t in ax.get_legend().get_texts())
+
+
 def test_mesh_section():
     v = np.array([[0, 0, -1], [1, 0, 1], [0, 1, 1], [5, 5, 2], [6, 5, 3], [5, 6, 4]], float)
     seg = plots.mesh_section(v, [[0, 1, 2], [3, 4, 5]], origin=(0, 0, 0), normal=(0, 0, 2))
