@@ -111,11 +111,12 @@ def _draw(args, scene, traj, out, scans, bag, mosaic=None):
 
     positions = []
     n = 0
+    mesh = mitsonar.scene_mesh(scene)
     for scan in scans:
         if bag is not None:
             bag.add(scan, SCAN_NAME.format(n, "." + args.format))
         if n == 0 and scan.kind == "mechanical":
-            plots.plot_cartesian(scan, mesh=mitsonar.scene_mesh(scene),
+            plots.plot_cartesian(scan, mesh=mesh,
                                  path=os.path.join(out, SCAN_NAME.format(0, "_world.png")))
         if scan.kind == "sidescan":
             mosaic = _sidescan_products(scan, n, traj, out, mosaic)
@@ -123,7 +124,7 @@ def _draw(args, scene, traj, out, scans, bag, mosaic=None):
         n += 1
         if len(positions) > 50:                     # keep the picture's dots, not the scans' bins
             positions = positions[::2]
-    plots.plot_track(traj, os.path.join(out, "track.png"), scans=positions)
+    plots.plot_track(traj, os.path.join(out, "track.png"), scans=positions, mesh=mesh)
     if mosaic is not None:
         mosaic.result().save(os.path.join(out, "mosaic.png"))
     return n
