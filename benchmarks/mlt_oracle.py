@@ -27,6 +27,11 @@ equal paths. It bounds what any Metropolis sampler of this path function can gai
 default path tracer: a real one also pays for chain correlation, the normalisation and a
 costlier evaluation, so at equal time it gains less.
 
+``--resample-draws N`` runs the ideal global sampler instead of computing it: N paths per ping
+resampled in proportion to ``f`` from the traced ones, ``B e_k / f`` each; its measured error
+matches the formula's (0.95-1.03 of it on box, glossy_corridor, hidden_target and intake with
+16384 paths and 512 draws per ping).
+
 Prints one JSON object per scene: ``ideal_variance_ratio`` (PT / ideal Metropolis; the square
 root is the best equal-sample error ratio, ``ideal_error_ratio``), ``normalisation_bound_error_ratio``
 (PT / b-only), ``global_ideal_error_ratio`` and ``global_normalisation_bound_error_ratio`` (one
@@ -50,7 +55,8 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
-def analyse(name, paths, seed=7, guide="image", baseline_spp=(), baseline_repeats=8, baseline_sampling="sobol"):
+def analyse(name, paths, seed=7, guide="image", baseline_spp=(), baseline_repeats=8, baseline_sampling="sobol",
+            resample_draws=0, resample_repeats=8):
     import drjit as dr
     import mitsuba as mi
 
@@ -109,10 +115,39 @@ def analyse(name, paths, seed=7, guide="image", baseline_spp=(), baseline_repeat
             "normalisation_bound_error_ratio": float(np.sqrt(var_pt / var_b)),
             "median_cv2_of_f": float(np.median(cv2)),
             "zero_f_share": float(np.mean(f == 0))}
+    if resample_draws:
+        out["resampled_ideal"] = resampled_ideal(f, bins, vals, resample_draws, resample_repeats, seed)
     if baseline_spp:
         tof = mi.load_dict({"type": "sonar_tof", "guide": guide, "sampling": baseline_sampling})
         out["baseline"] = baseline(tof, scene, out, baseline_spp, baseline_repeats, depth)
     return out
+
+
+def resampled_ideal(f, bins, vals, draws, repeats, seed):
+    """The ideal global sampler run, not computed: ``draws`` paths per ping drawn in proportion to
+    ``f`` from the traced pool (all pings at once, with replacement), each adding ``B e_k / f``
+    to its ping's bins (``B`` the pool's mean ``f``), ``repeats`` times. Its relative error around
+    the pool's own mean (what it is unbiased for) checks ``global_ideal_error_ratio``'s formula:
+    the pool must hold many more paths than are drawn."""
+    P, paths, depth = bins.shape
+    n_bins = int(bins.max()) + 1
+    F = f.ravel()
+    cdf = np.cumsum(F) / F.sum()
+    B_all = F.mean()
+    exact = np.zeros((P, n_bins))
+    np.add.at(exact, (np.repeat(np.arange(P), paths * depth), bins.ravel()), vals.ravel() / paths)
+    rng = np.random.default_rng([seed, 0x0AC1E])
+    errs = []
+    for _ in range(repeats):
+        idx = np.minimum(np.searchsorted(cdf, rng.random(P * draws), side="right"), len(F) - 1)
+        p, i = idx // paths, idx % paths
+        w = (B_all / draws) / F[idx]
+        est = np.zeros((P, n_bins))
+        for k in range(depth):
+            np.add.at(est, (p, bins[p, i, k]), vals[p, i, k] * w)
+        errs.append(((est - exact) ** 2).sum())
+    return {"draws_per_ping": draws, "repeats": repeats,
+            "rel_error": float(np.sqrt(np.mean(errs) / (exact ** 2).sum()))}
 
 
 def baseline(integrator, scene, oracle, spps, repeats, depth):
@@ -145,6 +180,9 @@ def main(argv=None):
                     help="also render the default sonar_tof at these spp (comma separated) and compare the ideal "
                          "sampler with its measured error (see the module's docstring)")
     ap.add_argument("--baseline-repeats", type=int, default=8, help="renders per baseline spp (default 8)")
+    ap.add_argument("--resample-draws", type=int, default=0,
+                    help="also run the ideal sampler by resampling this many paths per ping from the traced ones "
+                         "(checks the ideal ratio's formula; keep it well under --paths)")
     args = ap.parse_args(argv)
     try:
         spps = [int(v) for v in args.baseline_spp.split(",") if v.strip()]
@@ -152,8 +190,10 @@ def main(argv=None):
         ap.error(f"--baseline-spp {args.baseline_spp!r}: give whole numbers of paths per ping, comma separated")
     if any(v < 1 for v in spps) or (spps and args.baseline_repeats < 2):
         ap.error("--baseline-spp takes positive numbers and --baseline-repeats at least 2")
-    print(json.dumps([analyse(s, args.paths, guide=args.guide, baseline_spp=spps,
-                              baseline_repeats=args.baseline_repeats) for s in args.scenes.split(",")], indent=1))
+    if args.resample_draws < 0:
+        ap.error("--resample-draws takes a number of paths per ping (0: off)")
+    print(json.dumps([analyse(s, args.paths, guide=args.guide, baseline_spp=spps, baseline_repeats=args.baseline_repeats,
+                              resample_draws=args.resample_draws) for s in args.scenes.split(",")], indent=1))
 
 
 if __name__ == "__main__":
