@@ -203,6 +203,26 @@ def speed(samples, seed: int = 0, n_query: int = 1_000_000, nystroem_components:
     return out
 
 
+def multibeam_quality(hm_default, hm_light, V, F, resolution) -> dict:
+    """The multibeam survey's maps with the default and the light sampling (``MULTIBEAM_LIGHT``),
+    each scored by ``hilbertmap.metrics.evaluate`` (its own test points: the same pings give the same
+    insonified region, but ``auc`` counts only free points in voxels that map drew samples in;
+    ``all_auc`` counts every insonified free point), and the light map's AUCs on the default
+    map's test points (``light_on_default_points``)."""
+    from hilbertmap import metrics as M
+
+    out = {}
+    t0 = time.perf_counter()
+    out["default"], full = score(hm_default, V, F, resolution)
+    out["light"] = score(hm_light, V, F, resolution)[0]
+    pts = full.points
+    out["light_on_default_points"] = {k: v for k, v in M.point_metrics(
+        hm_light.predict_proba(pts["surface"]), hm_light.predict_proba(pts["free_all"]),
+        pts["d_free_all"]).items() if k in ("auc", "auc_band_0.1_0.3", "surface_p_mean")}
+    out["eval_s"] = time.perf_counter() - t0
+    return out
+
+
 def targets(report: dict) -> dict:
     """The issue's speed targets next to what this run measured."""
     out = {}
@@ -267,18 +287,26 @@ def main(argv=None) -> int:
     ap.add_argument("--seabed-frames", type=int, default=60,
                     help="frames of the rocky-slope multibeam survey for the elevation grid (0: skip)")
     ap.add_argument("--no-eval", action="store_true", help="skip the scores (and so the batch and OctoMap runs)")
+    ap.add_argument("--no-mechanical", action="store_true",
+                    help="skip the mechanical survey (its map, scores, batch, speed, elevation and outputs)")
     args = ap.parse_args(argv)
 
     from mitsonar.groundtruth import scene_mesh
 
     report = {"command": "python benchmarks/survey_mapping.py " + " ".join(argv if argv is not None else sys.argv[1:])}
-    scene, scans, t_render, sensor = render("sonar", args.spp)
+    report["render_s"], report["throughput"] = {}, {}
+    hm = full = None
+    if args.no_mechanical:
+        import mitsonar
+
+        scene = mitsonar.load_scene(os.path.join(ROOT, "scenes_xml", "harbour.xml"), spp=args.spp)
+    else:
+        scene, scans, t_render, sensor = render("sonar", args.spp)
+        report["render_s"]["mechanical"] = round(t_render, 2)
+        hm, samples, secs = map_incrementally(scans)
+        report["throughput"]["mechanical"] = throughput(scans, sensor, secs, hm)
     V, F = scene_mesh(scene)
-    report["render_s"] = {"mechanical": round(t_render, 2)}
-    hm, samples, secs = map_incrementally(scans)
-    report["throughput"] = {"mechanical": throughput(scans, sensor, secs, hm)}
-    full = None
-    if not args.no_eval:
+    if hm is not None and not args.no_eval:
         t0 = time.perf_counter()
         report["harbour"], full = score(hm, V, F, args.resolution)
         report["harbour"]["eval_s"] = time.perf_counter() - t0
@@ -302,7 +330,7 @@ def main(argv=None) -> int:
         hx, _, _ = map_incrementally(still)
         report["no_poses"] = score(hx, V, F, args.resolution)[0]
 
-    if not args.no_speed:
+    if hm is not None and not args.no_speed:
         report["speed"] = speed(samples)
 
     if not args.no_octomap and full is not None:
@@ -323,18 +351,19 @@ def main(argv=None) -> int:
             oc["total_s"] = time.perf_counter() - t0
             report["octomap"] = {k: v for k, v in oc.items() if not isinstance(v, (list, np.ndarray))}
 
-    from hilbertmap.elevation import elevation_grid
+    if hm is not None:
+        from hilbertmap.elevation import elevation_grid
 
-    lo, hi = hm.coverage_.bounds()
-    eg = elevation_grid(hm, resolution=0.25, bounds=(lo, (hi[0], hi[1], min(hi[2], -3.0))))
-    xs, ys = eg.xy()
-    X, Y = np.meshgrid(xs, ys)
-    # the flat seabed is at z = -6 away from the quays (x < 19, y < 19) and piles (> 1 m away)
-    flat = (X < 19) & (Y < 19) & (np.min([np.hypot(X - px, Y + 8) for px in (4, 8, 12, 16)], axis=0) > 1.0)
-    err = eg.elevation[flat & np.isfinite(eg.elevation)] + 6.0
-    report["elevation"] = dict(cells=int(flat.sum()), known_share=float(np.isfinite(eg.elevation[flat]).mean()),
-                               err_median=float(np.median(err)) if len(err) else None,
-                               abs_err_p95=float(np.percentile(np.abs(err), 95)) if len(err) else None)
+        lo, hi = hm.coverage_.bounds()
+        eg = elevation_grid(hm, resolution=0.25, bounds=(lo, (hi[0], hi[1], min(hi[2], -3.0))))
+        xs, ys = eg.xy()
+        X, Y = np.meshgrid(xs, ys)
+        # the flat seabed is at z = -6 away from the quays (x < 19, y < 19) and piles (> 1 m away)
+        flat = (X < 19) & (Y < 19) & (np.min([np.hypot(X - px, Y + 8) for px in (4, 8, 12, 16)], axis=0) > 1.0)
+        err = eg.elevation[flat & np.isfinite(eg.elevation)] + 6.0
+        report["elevation"] = dict(cells=int(flat.sum()), known_share=float(np.isfinite(eg.elevation[flat]).mean()),
+                                   err_median=float(np.median(err)) if len(err) else None,
+                                   abs_err_p95=float(np.percentile(np.abs(err), 95)) if len(err) else None)
 
     if args.frames > 0:
         _, mb_scans, t_mb, mb_sensor = render("multibeam", args.spp, max_scans=args.frames)
@@ -342,14 +371,16 @@ def main(argv=None) -> int:
         hmb, _, secs_mb = map_incrementally(mb_scans)
         report["throughput"]["multibeam"] = throughput(mb_scans, mb_sensor, secs_mb, hmb)
         # a multibeam's beams are narrow and its frames overlap: far fewer free samples per beam do
-        hmb, _, secs_mb = map_incrementally(mb_scans, **MULTIBEAM_LIGHT)
-        report["throughput"]["multibeam_light"] = dict(throughput(mb_scans, mb_sensor, secs_mb, hmb),
+        hml, _, secs_mb = map_incrementally(mb_scans, **MULTIBEAM_LIGHT)
+        report["throughput"]["multibeam_light"] = dict(throughput(mb_scans, mb_sensor, secs_mb, hml),
                                                        params=MULTIBEAM_LIGHT)
+        if not args.no_eval:
+            report["multibeam_quality"] = multibeam_quality(hmb, hml, V, F, args.resolution)
 
     if args.seabed_frames > 0:
         report["seabed"] = seabed_survey(args.seabed_frames, args.spp)
 
-    if args.out:
+    if args.out and hm is not None:
         from hilbertmap import write_mesh
         from hilbertmap.elevation import write_elevation
         from hilbertmap.plots import plot_survey_map
