@@ -270,14 +270,14 @@ def embed_scan(scan, rng: np.random.Generator, *, source="auto", bin_rule="otsu+
 def _drop_short_runs(full: np.ndarray, k: int) -> np.ndarray:
     """Keep only the full bins that belong to a run of at least k contiguous full bins."""
     n = full.shape[1]
-    c = np.concatenate([np.zeros((full.shape[0], 1), dtype=np.int64), np.cumsum(full, axis=1)], axis=1)
+    if k > n:
+        return np.zeros_like(full)
+    c = np.zeros((full.shape[0], n + 1), dtype=np.int32)
+    np.cumsum(full, axis=1, out=c[:, 1:])
+    win = (c[:, k:] - c[:, :n - k + 1]) == k  # win[:, j]: bins j .. j + k - 1 all full
     keep = np.zeros_like(full)
     for start in range(k):  # a bin is kept when some window of k bins containing it is all full
-        lo = np.arange(n) - start
-        ok = (lo >= 0) & (lo + k <= n)
-        lo_c = np.clip(lo, 0, n - k)
-        win = (c[:, lo_c + k] - c[:, lo_c]) == k
-        keep |= win & ok[None, :]
+        keep[:, start:start + n - k + 1] |= win
     return full & keep
 
 
