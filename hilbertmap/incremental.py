@@ -256,12 +256,17 @@ class IncrementalHilbertMap(HilbertMap):
             offs = offs[np.sum(offs ** 2, axis=1) <= r * r + 1e-9]  # a ball of cells, not a cube
             idx = _unkey(base)
             cand = sorted_unique(_keys((idx[:, None, :] + offs[None, :, :]).reshape(-1, 3)))
-            new = np.setdiff1d(cand, self.node_keys_, assume_unique=True)
+            known = self._sorted_keys()
+            pos = np.minimum(np.searchsorted(known, cand), max(len(known) - 1, 0))
+            new = cand[known[pos] != cand] if len(known) else cand
         else:
             new = np.zeros(0, dtype=np.int64)
         if len(new):
             stamp = self.n_scans_seen_
+            known = self._sorted_keys()
             self.node_keys_ = np.concatenate([self.node_keys_, new])
+            # keep the sorted copy sorted: new keys inserted where they belong (O(n), no sort)
+            self._keys_sorted = (self.node_keys_, np.insert(known, np.searchsorted(known, new), new))
             self.inducing_points_ = np.concatenate([self.inducing_points_, (_unkey(new) + 0.5) * h])
             self.dual_coef_ = np.concatenate([self.dual_coef_, np.zeros(len(new))])
             self.node_accum_ = np.concatenate([self.node_accum_, np.zeros(len(new))])
@@ -280,6 +285,15 @@ class IncrementalHilbertMap(HilbertMap):
         if over > 0 or self._grid is None or (pending and (pending >= REBUILD_SHARE * built
                                                             or self._scans_since_build >= REBUILD_SCANS)):
             self._rebuild()
+
+    def _sorted_keys(self) -> np.ndarray:
+        """``node_keys_`` sorted (for the lookup of a scan's cells among the nodes): kept up to date
+        by :meth:`_grow`, sorted anew whenever ``node_keys_`` was replaced otherwise (forgetting,
+        loading)."""
+        cached = getattr(self, "_keys_sorted", None)
+        if cached is None or cached[0] is not self.node_keys_:
+            cached = self._keys_sorted = (self.node_keys_, np.sort(self.node_keys_))
+        return cached[1]
 
     def _forget(self, n: int) -> None:
         """Drop the ``n`` least recently used nodes (ties: the oldest added first) and the
