@@ -97,7 +97,16 @@ class IncrementalHilbertMap(HilbertMap):
     n_passes, partial_passes : int >= 1, default 3, 1
         Passes of ``fit`` over all samples, of ``partial_fit`` over one scan's.
 
-    The embedding and thinning parameters (``source`` ... ``beam_stride``, ``occupied_weight``,
+    max_free_per_ping, near_free, occupied_samples : int or 'auto', default 'auto'
+        The sampling budget of each scan (see :class:`~hilbertmap.HilbertMap`); ``'auto'`` takes
+        it from the scan's ``kind``: 24 / 8 / 8 for a multibeam frame (about 26 training lanes a
+        beam: fast enough for a 256-beam head at 10 Hz), 400 / 32 / 16 for the other kinds.
+        On the harbour survey's multibeam (100 frames) the light budget gives the same AUC (0.951
+        against 0.950), near-wall AUC 0.914 against 0.919, ridge F-score at 0.1 m 0.26 against
+        0.085, but a ridge with more false surface (its mean distance to the walls 0.90 m against
+        0.19 m); pass numbers to choose otherwise.
+
+    The other embedding and thinning parameters (``source`` ... ``beam_stride``, ``occupied_weight``,
     ``coverage_voxel``, ``max_free_per_voxel``, ``max_groups_per_voxel``), ``batch_size``,
     ``fit_intercept``, ``random_state`` and ``variant`` are those of :class:`~hilbertmap.HilbertMap`.
 
@@ -114,8 +123,9 @@ class IncrementalHilbertMap(HilbertMap):
     def __init__(self, node_spacing=0.15, *, lengthscale_factor=1.0, node_margin=2, max_nodes=200_000,
                  max_pings_kept=100_000, eta0=0.1, kernel_cut=1e-2, alpha=1e-4, source="auto",
                  bin_rule="otsu+cfar", threshold=None, min_level=None, cfar_train=16, cfar_guard=2,
-                 cfar_offset=None, blanking="auto", min_echo_bins=4, free_density=40.0, max_free_per_ping=400,
-                 free_margin=0.0, near_free=32, near_depth=0.3, occupied_samples=16, occupied_bins="first_run",
+                 cfar_offset=None, blanking="auto", min_echo_bins=4, free_density=40.0,
+                 max_free_per_ping="auto", free_margin=0.0, near_free="auto", near_depth=0.3, occupied_samples="auto",
+                 occupied_bins="first_run",
                  max_run=0.3, occupied_weight=5.0, beam_sampling="pattern", beam_extent=1.0, beam_stride=1,
                  batch_size=4096, n_passes=3, partial_passes=1, fit_intercept=True, coverage_voxel=0.25,
                  max_free_per_voxel=12, max_groups_per_voxel=2, random_state=None, variant="llvm"):

@@ -457,7 +457,7 @@ def test_wall_is_thin_with_free_space_in_front(scans):
     ("cfar_train", 0, "an integer >= 1"),
     ("blanking", -1.0, "'auto' or a number >= 0"),
     ("free_density", float("inf"), "a number >= 0"),
-    ("occupied_samples", 0, "an integer >= 1"),
+    ("occupied_samples", 0, "'auto' or an integer >= 1"),
     ("occupied_weight", "heavy", "'balanced' or a number > 0"),
     ("beam_stride", 0.5, "a number >= 1"),
     ("t0", 0.0, "None or a number > 0"),

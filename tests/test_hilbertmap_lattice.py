@@ -126,3 +126,34 @@ def test_forgetting_drops_a_slice_below_the_cap():
     assert events >= 1
     assert events < len(scans) - 1  # not every scan after the cap was reached
     assert len(hm.inducing_points_) == len(hm.dual_coef_) == len(hm.node_accum_) == len(hm.node_keys_)
+
+
+def test_auto_sampling_follows_the_scan_kind():
+    # "auto" (IncrementalHilbertMap's default) samples a multibeam frame lightly (24 free + 8 near
+    # samples a beam, 8 points a full bin) and the other kinds as before (400 + 32, 16)
+    import dataclasses
+
+    from hilbertmap.embedding import SAMPLING_AUTO, Samples
+
+    mech = box_scan(moving_poses((-2, -1, 0), (-1, 0, 0)), rays=20, n_pings=40, seed=0)
+    multi = dataclasses.replace(mech, kind="multibeam")
+    hm = IncrementalHilbertMap(random_state=0)
+    for scan, budget in ((mech, SAMPLING_AUTO[None]), (multi, SAMPLING_AUTO["multibeam"])):
+        s = hm.embed(scan, np.random.default_rng(0))
+        assert s.occupied.shape[1] == budget["occupied_samples"]
+        assert len(s.free) <= len(s.frames) * (budget["max_free_per_ping"] + budget["near_free"])
+        near = np.isfinite(s.gaps()) & (s.gaps() <= hm.near_depth)
+        assert near.sum() >= budget["near_free"] * int(np.isfinite(s.spans[:, 1]).sum())
+    light = hm.embed(multi, np.random.default_rng(0))
+    # explicit numbers are kept whatever the kind
+    same = IncrementalHilbertMap(random_state=0, max_free_per_ping=400, near_free=32, occupied_samples=16)
+    dense = same.embed(multi, np.random.default_rng(0))
+    assert dense.occupied.shape[1] == 16 and len(dense.free) > 4 * len(light.free)
+    assert len(dense.occupied) == len(light.occupied)  # the same full bins, fewer points each
+    # a batch of both kinds: the 8-point groups are repeated to 16 points, with the same means
+    both = Samples.concatenate([light, dense])
+    assert both.occupied.shape[1] == 16
+    np.testing.assert_allclose(both.occupied[:len(light.occupied)].mean(axis=1), light.occupied.mean(axis=1))
+    IncrementalHilbertMap(random_state=0).fit([mech, multi])
+    with pytest.raises(ValueError, match="near_free must be 'auto' or an integer >= 0"):
+        IncrementalHilbertMap(near_free="light").partial_fit(multi)
