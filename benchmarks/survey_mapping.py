@@ -12,6 +12,8 @@ row at its own pose), and prints one JSON object:
                  multibeam twice: ``multibeam`` with the mechanical head's sampling budget
                  (``MULTIBEAM_DENSE``), ``multibeam_light`` with what ``"auto"`` (the default)
                  gives a multibeam frame (``MULTIBEAM_LIGHT``)
+                 With ``--stack 2``, ``multibeam_x2``: the frames' rows stacked in pairs (a
+                 256-beam head at the same frame rate), mapped with the default budget
 ``multibeam_quality`` both multibeam maps scored as ``harbour`` below, and the light map's AUCs
                  on the dense map's test points
 ``harbour``      the mechanical survey's map against the scene (``hilbertmap.metrics.evaluate``:
@@ -295,6 +297,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seabed-frames", type=int, default=60,
                     help="frames of the rocky-slope multibeam survey for the elevation grid (0: skip)")
     ap.add_argument("--no-eval", action="store_true", help="skip the scores (and so the batch and OctoMap runs)")
+    ap.add_argument("--stack", type=int, default=1,
+                    help="also map the multibeam frames stacked by this many (2: a 256-beam head at the same rate)")
     ap.add_argument("--no-mechanical", action="store_true",
                     help="skip the mechanical survey (its map, scores, batch, speed, elevation and outputs)")
     args = ap.parse_args(argv)
@@ -383,6 +387,11 @@ def main(argv=None) -> int:
         hml, _, secs_mb = map_incrementally(mb_scans, **MULTIBEAM_LIGHT)
         report["throughput"]["multibeam_light"] = dict(throughput(mb_scans, mb_sensor, secs_mb, hml),
                                                        params=MULTIBEAM_LIGHT)
+        if args.stack > 1:  # a wider head: consecutive frames' rows stacked, each row at its own pose
+            wide = [stack_frames(mb_scans[i:i + args.stack])
+                    for i in range(0, len(mb_scans) - args.stack + 1, args.stack)]
+            hmw, _, secs_w = map_incrementally(wide)
+            report["throughput"][f"multibeam_x{args.stack}"] = throughput(wide, mb_sensor, secs_w, hmw)
         if not args.no_eval:
             report["multibeam_quality"] = multibeam_quality(hmb, hml, V, F, args.resolution)
 
@@ -411,6 +420,16 @@ def main(argv=None) -> int:
     report["speed_targets"] = targets(report)
     print(json.dumps(_clean(report), indent=1))
     return 0
+
+
+def stack_frames(frames):
+    """One scan of the rows of consecutive multibeam ``frames`` (every per-row field stacked): a
+    head with ``len(frames)`` times the beams at the same frame rate."""
+    n = frames[0].data.shape[0]
+    per_row = {f.name for f in dataclasses.fields(frames[0])
+               if isinstance(getattr(frames[0], f.name), np.ndarray) and getattr(frames[0], f.name).ndim
+               and getattr(frames[0], f.name).shape[0] == n and f.name != "ranges"}
+    return dataclasses.replace(frames[0], **{k: np.concatenate([getattr(f, k) for f in frames]) for k in per_row})
 
 
 def _with_poses(scan, poses):
