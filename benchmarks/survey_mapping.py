@@ -8,7 +8,14 @@ row at its own pose), and prints one JSON object:
 ``throughput``   per head: pings mapped per second of mapping (embedding + update; wall, and per
                  CPU second of this process, ``load_1min`` the load then), against the
                  rate the head produces them (``head_pings_per_s``: rows per ``ping_period``) and
-                 a 256-beam 10 Hz multibeam (2560 pings/s); ``nodes``, ``forgotten``
+                 a 256-beam 10 Hz multibeam (2560 pings/s); ``nodes``, ``forgotten``. The
+                 multibeam twice: ``multibeam`` with the mechanical head's sampling budget
+                 (``MULTIBEAM_DENSE``), ``multibeam_light`` with what ``"auto"`` (the default)
+                 gives a multibeam frame (``MULTIBEAM_LIGHT``)
+                 With ``--stack 2``, ``multibeam_x2``: the frames' rows stacked in pairs (a
+                 256-beam head at the same frame rate), mapped with the default budget
+``multibeam_quality`` both multibeam maps scored as ``harbour`` below, and the light map's AUCs
+                 on the dense map's test points
 ``harbour``      the mechanical survey's map against the scene (``hilbertmap.metrics.evaluate``:
                  AUC and near-wall AUC (free points 0.1-0.3 m from a surface), mean p on the
                  insonified true surfaces, the ridge surface's accuracy / completeness mean, p95
@@ -28,6 +35,7 @@ row at its own pose), and prints one JSON object:
                  beams/s, the mechanical head's ping rate) beside what was measured
 
     python benchmarks/survey_mapping.py [--spp 64] [--frames 100] [--out DIR] [--no-octomap]
+    python benchmarks/survey_mapping.py --no-mechanical --frames 30 --seabed-frames 0 --no-eval  # multibeam speed only
 
 With ``--out`` the map (.npz), its ridge mesh (.ply), the elevation grid (.tif with rasterio, else
 .npz) and a plan-view picture with the track (.png) are written there.
@@ -49,7 +57,8 @@ ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
 
 
-MULTIBEAM_LIGHT = dict(max_free_per_ping=24, near_free=8, occupied_samples=8)
+MULTIBEAM_LIGHT = dict(max_free_per_ping=24, near_free=8, occupied_samples=8)  # what "auto" gives a multibeam
+MULTIBEAM_DENSE = dict(max_free_per_ping=400, near_free=32, occupied_samples=16)  # the other kinds' budget
 
 
 def render(sensor_id: str, spp: int, max_scans=None, seed: int = 1, scene_name: str = "harbour"):
@@ -203,6 +212,27 @@ def speed(samples, seed: int = 0, n_query: int = 1_000_000, nystroem_components:
     return out
 
 
+def multibeam_quality(hm_default, hm_light, V, F, resolution) -> dict:
+    """The multibeam survey's maps with the dense (``MULTIBEAM_DENSE``, the ``default`` entry: the
+    mechanical head's budget) and the light sampling (``MULTIBEAM_LIGHT``, what ``"auto"`` gives),
+    each scored by ``hilbertmap.metrics.evaluate`` (its own test points: the same pings give the same
+    insonified region, but ``auc`` counts only free points in voxels that map drew samples in;
+    ``all_auc`` counts every insonified free point), and the light map's AUCs on the default
+    map's test points (``light_on_default_points``)."""
+    from hilbertmap import metrics as M
+
+    out = {}
+    t0 = time.perf_counter()
+    out["default"], full = score(hm_default, V, F, resolution)
+    out["light"] = score(hm_light, V, F, resolution)[0]
+    pts = full.points
+    out["light_on_default_points"] = {k: v for k, v in M.point_metrics(
+        hm_light.predict_proba(pts["surface"]), hm_light.predict_proba(pts["free_all"]),
+        pts["d_free_all"]).items() if k in ("auc", "auc_band_0.1_0.3", "surface_p_mean")}
+    out["eval_s"] = time.perf_counter() - t0
+    return out
+
+
 def targets(report: dict) -> dict:
     """The issue's speed targets next to what this run measured."""
     out = {}
@@ -267,18 +297,28 @@ def main(argv=None) -> int:
     ap.add_argument("--seabed-frames", type=int, default=60,
                     help="frames of the rocky-slope multibeam survey for the elevation grid (0: skip)")
     ap.add_argument("--no-eval", action="store_true", help="skip the scores (and so the batch and OctoMap runs)")
+    ap.add_argument("--stack", type=int, default=1,
+                    help="also map the multibeam frames stacked by this many (2: a 256-beam head at the same rate)")
+    ap.add_argument("--no-mechanical", action="store_true",
+                    help="skip the mechanical survey (its map, scores, batch, speed, elevation and outputs)")
     args = ap.parse_args(argv)
 
     from mitsonar.groundtruth import scene_mesh
 
     report = {"command": "python benchmarks/survey_mapping.py " + " ".join(argv if argv is not None else sys.argv[1:])}
-    scene, scans, t_render, sensor = render("sonar", args.spp)
+    report["render_s"], report["throughput"] = {}, {}
+    hm = full = None
+    if args.no_mechanical:
+        import mitsonar
+
+        scene = mitsonar.load_scene(os.path.join(ROOT, "scenes_xml", "harbour.xml"), spp=args.spp)
+    else:
+        scene, scans, t_render, sensor = render("sonar", args.spp)
+        report["render_s"]["mechanical"] = round(t_render, 2)
+        hm, samples, secs = map_incrementally(scans)
+        report["throughput"]["mechanical"] = throughput(scans, sensor, secs, hm)
     V, F = scene_mesh(scene)
-    report["render_s"] = {"mechanical": round(t_render, 2)}
-    hm, samples, secs = map_incrementally(scans)
-    report["throughput"] = {"mechanical": throughput(scans, sensor, secs, hm)}
-    full = None
-    if not args.no_eval:
+    if hm is not None and not args.no_eval:
         t0 = time.perf_counter()
         report["harbour"], full = score(hm, V, F, args.resolution)
         report["harbour"]["eval_s"] = time.perf_counter() - t0
@@ -302,7 +342,7 @@ def main(argv=None) -> int:
         hx, _, _ = map_incrementally(still)
         report["no_poses"] = score(hx, V, F, args.resolution)[0]
 
-    if not args.no_speed:
+    if hm is not None and not args.no_speed:
         report["speed"] = speed(samples)
 
     if not args.no_octomap and full is not None:
@@ -323,33 +363,42 @@ def main(argv=None) -> int:
             oc["total_s"] = time.perf_counter() - t0
             report["octomap"] = {k: v for k, v in oc.items() if not isinstance(v, (list, np.ndarray))}
 
-    from hilbertmap.elevation import elevation_grid
+    if hm is not None:
+        from hilbertmap.elevation import elevation_grid
 
-    lo, hi = hm.coverage_.bounds()
-    eg = elevation_grid(hm, resolution=0.25, bounds=(lo, (hi[0], hi[1], min(hi[2], -3.0))))
-    xs, ys = eg.xy()
-    X, Y = np.meshgrid(xs, ys)
-    # the flat seabed is at z = -6 away from the quays (x < 19, y < 19) and piles (> 1 m away)
-    flat = (X < 19) & (Y < 19) & (np.min([np.hypot(X - px, Y + 8) for px in (4, 8, 12, 16)], axis=0) > 1.0)
-    err = eg.elevation[flat & np.isfinite(eg.elevation)] + 6.0
-    report["elevation"] = dict(cells=int(flat.sum()), known_share=float(np.isfinite(eg.elevation[flat]).mean()),
-                               err_median=float(np.median(err)) if len(err) else None,
-                               abs_err_p95=float(np.percentile(np.abs(err), 95)) if len(err) else None)
+        lo, hi = hm.coverage_.bounds()
+        eg = elevation_grid(hm, resolution=0.25, bounds=(lo, (hi[0], hi[1], min(hi[2], -3.0))))
+        xs, ys = eg.xy()
+        X, Y = np.meshgrid(xs, ys)
+        # the flat seabed is at z = -6 away from the quays (x < 19, y < 19) and piles (> 1 m away)
+        flat = (X < 19) & (Y < 19) & (np.min([np.hypot(X - px, Y + 8) for px in (4, 8, 12, 16)], axis=0) > 1.0)
+        err = eg.elevation[flat & np.isfinite(eg.elevation)] + 6.0
+        report["elevation"] = dict(cells=int(flat.sum()), known_share=float(np.isfinite(eg.elevation[flat]).mean()),
+                                   err_median=float(np.median(err)) if len(err) else None,
+                                   abs_err_p95=float(np.percentile(np.abs(err), 95)) if len(err) else None)
 
     if args.frames > 0:
         _, mb_scans, t_mb, mb_sensor = render("multibeam", args.spp, max_scans=args.frames)
         report["render_s"]["multibeam"] = round(t_mb, 2)
-        hmb, _, secs_mb = map_incrementally(mb_scans)
-        report["throughput"]["multibeam"] = throughput(mb_scans, mb_sensor, secs_mb, hmb)
-        # a multibeam's beams are narrow and its frames overlap: far fewer free samples per beam do
-        hmb, _, secs_mb = map_incrementally(mb_scans, **MULTIBEAM_LIGHT)
-        report["throughput"]["multibeam_light"] = dict(throughput(mb_scans, mb_sensor, secs_mb, hmb),
+        # the mechanical head's sampling budget, then the default for a multibeam ("auto": a
+        # multibeam's beams are narrow and its frames overlap, far fewer free samples per beam do)
+        hmb, _, secs_mb = map_incrementally(mb_scans, **MULTIBEAM_DENSE)
+        report["throughput"]["multibeam"] = dict(throughput(mb_scans, mb_sensor, secs_mb, hmb), params=MULTIBEAM_DENSE)
+        hml, _, secs_mb = map_incrementally(mb_scans, **MULTIBEAM_LIGHT)
+        report["throughput"]["multibeam_light"] = dict(throughput(mb_scans, mb_sensor, secs_mb, hml),
                                                        params=MULTIBEAM_LIGHT)
+        if args.stack > 1:  # a wider head: consecutive frames' rows stacked, each row at its own pose
+            wide = [stack_frames(mb_scans[i:i + args.stack])
+                    for i in range(0, len(mb_scans) - args.stack + 1, args.stack)]
+            hmw, _, secs_w = map_incrementally(wide)
+            report["throughput"][f"multibeam_x{args.stack}"] = throughput(wide, mb_sensor, secs_w, hmw)
+        if not args.no_eval:
+            report["multibeam_quality"] = multibeam_quality(hmb, hml, V, F, args.resolution)
 
     if args.seabed_frames > 0:
         report["seabed"] = seabed_survey(args.seabed_frames, args.spp)
 
-    if args.out:
+    if args.out and hm is not None:
         from hilbertmap import write_mesh
         from hilbertmap.elevation import write_elevation
         from hilbertmap.plots import plot_survey_map
@@ -371,6 +420,16 @@ def main(argv=None) -> int:
     report["speed_targets"] = targets(report)
     print(json.dumps(_clean(report), indent=1))
     return 0
+
+
+def stack_frames(frames):
+    """One scan of the rows of consecutive multibeam ``frames`` (every per-row field stacked): a
+    head with ``len(frames)`` times the beams at the same frame rate."""
+    n = frames[0].data.shape[0]
+    per_row = {f.name for f in dataclasses.fields(frames[0])
+               if isinstance(getattr(frames[0], f.name), np.ndarray) and getattr(frames[0], f.name).ndim
+               and getattr(frames[0], f.name).shape[0] == n and f.name != "ranges"}
+    return dataclasses.replace(frames[0], **{k: np.concatenate([getattr(f, k) for f in frames]) for k in per_row})
 
 
 def _with_poses(scan, poses):

@@ -347,7 +347,8 @@ class LatticeGrid:
         frac, cell = [], []
         for a, c in enumerate((x, y, z)):
             u = c * inv_h - dr.opaque(Float, float(self.base[a]))
-            fl = dr.clip(dr.floor(u), -R - 1.0, float(self.dims[a] + R))
+            # the box changes with every rebuild: an opaque bound, or each grid compiles its own kernels
+            fl = dr.clip(dr.floor(u), -R - 1.0, dr.opaque(Float, float(self.dims[a] + R)))
             frac.append(u - fl)
             cell.append(Int32(fl))
         # the octant of the lane in its cell: offsets are mirrored where f >= 1/2

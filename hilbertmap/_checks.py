@@ -44,10 +44,10 @@ def need(name: str, value, ok: bool, allowed: str) -> None:
         raise ValueError(f"HilbertMap: {name} must be {allowed}, not {value!r}")
 
 
-def int_param(name, v, lo, none=False):
-    """An integer >= ``lo`` (or None with ``none``); bools and floats are refused."""
-    need(name, v, (none and v is None) or (_is_int(v) and v >= lo),
-         ("None or " if none else "") + f"an integer >= {lo}")
+def int_param(name, v, lo, none=False, auto=False):
+    """An integer >= ``lo`` (or None with ``none``, or 'auto' with ``auto``); bools and floats are refused."""
+    need(name, v, (none and v is None) or (auto and isinstance(v, str) and v == "auto") or (_is_int(v) and v >= lo),
+         ("None or " if none else "") + ("'auto' or " if auto else "") + f"an integer >= {lo}")
 
 
 def num_param(name, v, lo=None, hi=None, lo_open=False, hi_open=False, special=()):
@@ -117,11 +117,11 @@ def check_echo_params(hm) -> None:
     num_param("blanking", hm.blanking, 0, special=("auto",))
     int_param("min_echo_bins", hm.min_echo_bins, 0)
     num_param("free_density", hm.free_density, 0)
-    int_param("max_free_per_ping", hm.max_free_per_ping, 0)
+    int_param("max_free_per_ping", hm.max_free_per_ping, 0, auto=True)
     num_param("free_margin", hm.free_margin, 0)
-    int_param("near_free", hm.near_free, 0)
+    int_param("near_free", hm.near_free, 0, auto=True)
     num_param("near_depth", hm.near_depth, 0)
-    int_param("occupied_samples", hm.occupied_samples, 1)
+    int_param("occupied_samples", hm.occupied_samples, 1, auto=True)
     num_param("max_run", hm.max_run, 0, lo_open=True)
 
 

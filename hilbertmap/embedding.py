@@ -30,6 +30,25 @@ from .classify import classify, scan_values
 
 FOUR_SQRT_LN2 = 4.0 * math.sqrt(math.log(2.0))
 
+# What ``"auto"`` means for the sampling budget of a scan, by its ``kind``. A multibeam frame has
+# many narrow beams that overlap from frame to frame: about 26 training lanes a beam instead of
+# about 310 map it 7.7x faster, with the same AUC (harbour survey, 100 frames: 0.951 against
+# 0.950), near-wall AUC 0.914 against 0.919 on the same test points, the ridge's F-score at
+# 0.1 m 0.26 against 0.085 and mean probability on the true walls 0.66 against 0.18; the ridge
+# also holds more false surface (mean distance from it to the walls 0.90 m against 0.19 m).
+SAMPLING_AUTO = {
+    "multibeam": dict(max_free_per_ping=24, near_free=8, occupied_samples=8),
+    None: dict(max_free_per_ping=400, near_free=32, occupied_samples=16),  # every other kind
+}
+
+
+def sampling_for(scan, max_free_per_ping, near_free, occupied_samples) -> dict:
+    """The three sampling budgets for ``scan``, each ``"auto"`` one from ``SAMPLING_AUTO`` by the
+    scan's ``kind`` (a scan without ``kind`` counts as mechanical)."""
+    auto = SAMPLING_AUTO.get(str(getattr(scan, "kind", "")), SAMPLING_AUTO[None])
+    given = dict(max_free_per_ping=max_free_per_ping, near_free=near_free, occupied_samples=occupied_samples)
+    return {k: auto[k] if isinstance(v, str) and v == "auto" else v for k, v in given.items()}
+
 
 @dataclass
 class Samples:
@@ -60,8 +79,12 @@ class Samples:
 
     @staticmethod
     def concatenate(parts: list["Samples"]) -> "Samples":
+        """One ``Samples`` of all ``parts``. Groups of fewer points than the largest (scans of
+        kinds sampled with different ``occupied_samples``) have their points repeated cyclically
+        up to its size: the group's mean is the same when the sizes divide (8 and 16)."""
         m = max((p.occupied.shape[1] for p in parts), default=1)
-        occ = [p.occupied for p in parts if len(p.occupied)]
+        occ = [p.occupied if p.occupied.shape[1] == m else p.occupied[:, np.arange(m) % p.occupied.shape[1]]
+               for p in parts if len(p.occupied)]
         info: dict = {}
         for p in parts:
             for k, v in p.info.items():
@@ -270,14 +293,14 @@ def embed_scan(scan, rng: np.random.Generator, *, source="auto", bin_rule="otsu+
 def _drop_short_runs(full: np.ndarray, k: int) -> np.ndarray:
     """Keep only the full bins that belong to a run of at least k contiguous full bins."""
     n = full.shape[1]
-    c = np.concatenate([np.zeros((full.shape[0], 1), dtype=np.int64), np.cumsum(full, axis=1)], axis=1)
+    if k > n:
+        return np.zeros_like(full)
+    c = np.zeros((full.shape[0], n + 1), dtype=np.int32)
+    np.cumsum(full, axis=1, out=c[:, 1:])
+    win = (c[:, k:] - c[:, :n - k + 1]) == k  # win[:, j]: bins j .. j + k - 1 all full
     keep = np.zeros_like(full)
     for start in range(k):  # a bin is kept when some window of k bins containing it is all full
-        lo = np.arange(n) - start
-        ok = (lo >= 0) & (lo + k <= n)
-        lo_c = np.clip(lo, 0, n - k)
-        win = (c[:, lo_c + k] - c[:, lo_c]) == k
-        keep |= win & ok[None, :]
+        keep[:, start:start + n - k + 1] |= win
     return full & keep
 
 

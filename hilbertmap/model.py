@@ -28,7 +28,7 @@ import numpy as np
 from . import persistence, sgd, surfaces
 from ._backend import KernelGrid
 from ._checks import as_points, check_params
-from .embedding import Samples, embed_scan
+from .embedding import Samples, embed_scan, sampling_for
 from .inducing import Coverage, choose_inducing, spacing
 from .scanlike import ScanLike, as_scan_list, check_scan
 from .surfaces import MapSlice
@@ -93,17 +93,20 @@ class HilbertMap:
         3-4 bins under speckle).
     free_density : float >= 0, default 40.0
         Free samples per cubic metre of empty beam volume ...
-    max_free_per_ping : int >= 0, default 400
-        ... at most this many per ping.
+    max_free_per_ping : int >= 0 or 'auto', default 400
+        ... at most this many per ping. ``'auto'`` (here and for ``near_free`` and
+        ``occupied_samples``): chosen per scan by its ``kind``, 24 / 8 / 8 for a multibeam frame,
+        400 / 32 / 16 for the others (``hilbertmap.embedding.SAMPLING_AUTO``, where the measured
+        trade-off is stated); :class:`~hilbertmap.IncrementalHilbertMap`'s default.
     free_margin : float >= 0, default 0.0
         Metres of the empty beam left unsampled before the first echo.
-    near_free : int >= 0, default 32
+    near_free : int >= 0 or 'auto', default 32
         Extra free samples per ping with an echo, uniform in range over the last ``near_depth``
         metres before it. Volume sampling puts few there, yet that shell is what tells the wall from
         the water just in front of it; they are thinned on their own per-voxel budget.
     near_depth : float >= 0, default 0.3
         See ``near_free``.
-    occupied_samples : int >= 1, default 16
+    occupied_samples : int >= 1 or 'auto', default 16
         Points per full bin (averaged in feature space, eq. 4.6).
     occupied_bins : {'first_run', 'first', 'all'}, default 'first_run'
         The first full bin, the full bins contiguous with it (at most ``max_run`` metres), or all.
@@ -533,13 +536,13 @@ def embed_with(hm, scan, rng=None) -> Samples:
     """`embed_scan` of ``scan`` with the embedding settings of the estimator ``hm`` (a
     `HilbertMap` or an incremental one), its ``random_state`` seeding ``rng`` when None."""
     rng = rng if rng is not None else np.random.default_rng(hm.random_state)
+    budget = sampling_for(scan, hm.max_free_per_ping, hm.near_free, hm.occupied_samples)  # "auto": by kind
     return embed_scan(
         scan, rng, source=hm.source, bin_rule=hm.bin_rule, threshold=hm.threshold,
         min_level=hm.min_level, cfar_train=hm.cfar_train, cfar_guard=hm.cfar_guard,
         cfar_offset=hm.cfar_offset, blanking=hm.blanking, free_density=hm.free_density,
-        max_free_per_ping=hm.max_free_per_ping, free_margin=hm.free_margin,
-        near_free=hm.near_free, near_depth=hm.near_depth,
-        occupied_samples=hm.occupied_samples, occupied_bins=hm.occupied_bins, max_run=hm.max_run,
+        free_margin=hm.free_margin, near_depth=hm.near_depth, **budget,
+        occupied_bins=hm.occupied_bins, max_run=hm.max_run,
         beam_sampling=hm.beam_sampling, beam_extent=hm.beam_extent, ping_stride=hm.beam_stride,
         min_echo_bins=hm.min_echo_bins,
     )

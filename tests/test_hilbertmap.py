@@ -45,6 +45,42 @@ def test_otsu_splits_two_populations():
     assert 40 < t < 180
 
 
+def test_otsu_histogram_of_integer_levels_is_numpys():
+    # integer data (a device's levels) is histogrammed through its distinct values: the same counts
+    from hilbertmap.classify import _histogram
+
+    rng = np.random.default_rng(3)
+    for v in (rng.integers(0, 256, 20000).astype(float), rng.integers(-40, 90, 777).astype(float),
+              np.round(rng.normal(120, 30, 5000)), rng.normal(0, 1, 999)):
+        lo, hi = float(v.min()), float(v.max())
+        for bins in (256, 7):
+            h, e = _histogram(v, bins, lo, hi)
+            h0, e0 = np.histogram(v, bins=bins, range=(lo, hi))
+            assert np.array_equal(h, h0) and np.array_equal(e, e0)
+
+
+def test_short_run_filter_matches_its_definition():
+    # a full bin is kept iff it lies in a run of at least k contiguous full bins
+    from hilbertmap.embedding import _drop_short_runs
+
+    rng = np.random.default_rng(4)
+    f = rng.random((40, 60)) < 0.7
+    for k in (1, 2, 4, 9, 60, 61):
+        want = np.zeros_like(f)
+        for i, row in enumerate(f):
+            j = 0
+            while j < len(row):
+                if row[j]:
+                    e = j
+                    while e < len(row) and row[e]:
+                        e += 1
+                    want[i, j:e] = e - j >= k
+                    j = e
+                else:
+                    j += 1
+        assert np.array_equal(_drop_short_runs(f, k), want), k
+
+
 def test_cfar_finds_echo_leading_edge_not_plateau():
     v = np.zeros((1, 100))
     v[0, 50:60] = 200.0
@@ -457,7 +493,7 @@ def test_wall_is_thin_with_free_space_in_front(scans):
     ("cfar_train", 0, "an integer >= 1"),
     ("blanking", -1.0, "'auto' or a number >= 0"),
     ("free_density", float("inf"), "a number >= 0"),
-    ("occupied_samples", 0, "an integer >= 1"),
+    ("occupied_samples", 0, "'auto' or an integer >= 1"),
     ("occupied_weight", "heavy", "'balanced' or a number > 0"),
     ("beam_stride", 0.5, "a number >= 1"),
     ("t0", 0.0, "None or a number > 0"),
