@@ -365,6 +365,10 @@ class SonarIntegrator(mi.SamplingIntegrator):
         # vertices since the last diffuse one, and the chain's narrowest lobe (0: no chain).
         guide = getattr(setup, "guide", False)  # a bare setup (echo_path's) is unguided
         image, n_chain = mi.Point3f(origin), mi.Float(0.0)
+        # the image before the chain's last mirror, and the way back's target after a diffuse
+        # vertex (`image_guide.advance_chain`)
+        prev_image, prev_n = mi.Point3f(origin), mi.Float(0.0)
+        ret_image, ret_n = mi.Point3f(origin), mi.Float(0.0)
         # With ``setup.tag_hard`` the echoes after a chained vertex are told apart (``record``'s
         # sixth argument): the paths that only the guide finds well (`sonar_mlt`'s split).
         tag = guide and getattr(setup, "tag_hard", False)
@@ -396,9 +400,15 @@ class SonarIntegrator(mi.SamplingIntegrator):
             base = DIMS_EMIT + DIMS_PER_BOUNCE * depth
             if dr.hint(guide, mode="scalar"):
                 hard |= active & (n_chain > 0)
+                n_here = image_guide.lobe_at(bsdf, si, active)
+                # on the way back from a target seen through two mirrors: at the nearer one, aim at
+                # the image in the farther (unnarrowed: the mirror is ahead, not behind)
+                homeward = (ret_n > 0) & (n_here >= image_guide.MIN_EXPONENT) & image_guide.RETURN_GUIDE
                 wo, bounce_weight = image_guide.sample_bounce(
-                    bsdf, ctx, si, image, n_chain, segment, samples.get(base), samples.get2(base + 1), active)
-                image, n_chain = image_guide.advance(bsdf, si, origin, image, n_chain, active)
+                    bsdf, ctx, si, dr.select(homeward, ret_image, image), dr.select(homeward, ret_n, n_chain),
+                    dr.select(homeward, 0.0, segment), samples.get(base), samples.get2(base + 1), active)
+                image, n_chain, prev_image, prev_n, ret_image, ret_n = image_guide.advance_chain(
+                    si, origin, image, n_chain, prev_image, prev_n, n_here, active)
                 throughput *= bounce_weight
                 ray = si.spawn_ray(wo)
             else:

@@ -28,6 +28,14 @@ exponent read from the BSDF's density at the mirror direction,
 ``n = 2 pi p(mirror) - 1`` (exact for a pure Phong lobe, an underestimate when the BSDF mixes in
 diffuse scatter, which only widens the guide), at least `MIN_EXPONENT`.
 
+The way back through two mirrors (a periscope, a corner reflector: ``T - A - B - x - B - A - T``)
+is guided too (`advance_chain`): at ``x`` the bounce aims at ``R_B(R_A(T))``, and at ``B`` on the
+way back at ``R_A(T)``, the image the chain held before ``B``; without it that bounce was ``B``'s
+own sample and ``A``'s lobe was only met at the connection to ``T``, a heavy-tailed estimate. On
+`scenes_xml/periscope.xml` (3 seeds of 1.4 M independent paths) guiding the way back lowers the
+boulder window's variance per path 2.0-2.8x, and its largest path from 28 000 to 11 000-13 000
+times the ping's mean, for 8 % more time per path.
+
 Where no mirror precedes a bounce, ``alpha`` is 0 and the bounce is the BSDF's sample. A scene
 without any mirror-like BSDF (`has_mirrors`: concrete, sand, rock, the seabed presets) is traced by
 the unguided kernel itself, so it costs nothing; where there are mirrors each bounce pays one
@@ -49,6 +57,9 @@ GUIDE_PROB = 0.5
 MIN_EXPONENT = 100.0
 #: Cap of the guide's exponent (a lobe about 0.4 deg wide).
 MAX_EXPONENT = 1.0e5
+#: Guide the way back through a chain of two mirrors too (`advance_chain`); read when a path
+#: kernel is traced (a frozen pass keeps what it recorded: `frozen_pass.clear` after a change).
+RETURN_GUIDE = True
 
 
 def lobe_exponent(bsdf) -> float:
@@ -120,15 +131,37 @@ def sample_bounce(bsdf, ctx, si, image, n_chain, segment, u1, u2, active):
     return wo, weight
 
 
+def lobe_at(bsdf, si, active):
+    """The exponent of ``bsdf``'s lobe at ``si``, read from its density at the mirror direction of
+    the incoming ray (`exponent_of_peak`): a mirror when at least `MIN_EXPONENT`."""
+    mirror_dir = mi.Vector3f(-si.wi.x, -si.wi.y, si.wi.z)
+    return exponent_of_peak(bsdf.pdf(mi.BSDFContext(mi.TransportMode.Importance), si, mirror_dir, active))
+
+
+def advance_chain(si, origin, image, n_chain, prev_image, prev_n, n_here, active):
+    """`advance` with the way back: ``(image, n_chain, prev_image, prev_n, ret_image, ret_n)``.
+
+    ``prev_image``/``prev_n`` are the chain's image and exponent before its last mirror. A path
+    that left a chain of two mirrors ``A, B`` for a diffuse target ``x`` (a periscope, a corner
+    reflector) comes home through ``B`` and then ``A``: the bounce at ``x`` aims at ``R_B(R_A(T))``
+    (the chain's image), and the bounce at ``B`` on the way back at ``R_A(T)``, the image before
+    ``B``. That one is returned as ``ret_image``/``ret_n`` at a diffuse vertex after at least two
+    mirrors (else ``ret_n`` is 0), for the next vertex to use if it is a mirror; a mirror uses it
+    up. One level is kept: with ``max_depth`` 5 a round trip through more mirrors cannot close."""
+    mirror = active & (n_here >= MIN_EXPONENT)
+    nrm = si.sh_frame.n
+    reflected = image - 2.0 * dr.dot(image - si.p, nrm) * nrm
+    extended = dr.select(n_chain > 0, dr.minimum(n_chain, n_here), n_here)
+    zero = mi.Float(0.0)
+    return (dr.select(mirror, reflected, origin), dr.select(mirror, extended, zero),
+            dr.select(mirror, image, origin), dr.select(mirror, n_chain, zero),
+            dr.select(mirror, origin, prev_image), dr.select(mirror, zero, prev_n))
+
+
 def advance(bsdf, si, origin, image, n_chain, active):
     """The chain after ``si``: ``(image, n_chain)`` extended by ``si`` when its BSDF's lobe is
     narrow (the image reflected in its tangent plane), else restarted at the transducer
     ``origin``."""
-    mirror_dir = mi.Vector3f(-si.wi.x, -si.wi.y, si.wi.z)
-    peak = bsdf.pdf(mi.BSDFContext(mi.TransportMode.Importance), si, mirror_dir, active)
-    n_here = exponent_of_peak(peak)
-    mirror = active & (n_here >= MIN_EXPONENT)
-    nrm = si.sh_frame.n
-    reflected = image - 2.0 * dr.dot(image - si.p, nrm) * nrm
-    return (dr.select(mirror, reflected, origin),
-            dr.select(mirror, dr.select(n_chain > 0, dr.minimum(n_chain, n_here), n_here), 0.0))
+    o = mi.Point3f(origin)
+    image, n_chain, *_ = advance_chain(si, o, image, n_chain, o, mi.Float(0.0), lobe_at(bsdf, si, active), active)
+    return image, n_chain

@@ -44,6 +44,80 @@ def test_image_of_the_transducer_in_a_chain_of_plates(mitsonar_mod):
     assert n[0] == 0 and dr.all(image == origin, axis=None)
 
 
+def test_the_way_back_through_two_mirrors_aims_at_the_image_in_the_farther_one(mitsonar_mod):
+    """Periscope, chain A then B then the boulder (diffuse): the way back's target is the
+    transducer's image in A, (4, -4, 0), with A's exponent; plate B on the way back uses it up
+    (and starts a chain of its own, the image in B); after one mirror there is no way-back target
+    (hidden_target's single plate: the bounce at the target already aims home)."""
+    import mitsuba as mi
+    from mitsonar.plugins import image_guide as ig
+
+    scene = load(mitsonar_mod, "periscope")
+    origin = mi.Point3f(0, 0, 0)
+    si_a = scene.ray_intersect(mi.Ray3f(origin, mi.Vector3f(1, 0, 0)))
+    si_b = scene.ray_intersect(mi.Ray3f(si_a.p, mi.Vector3f(0, 1, 0)))
+    si_x = scene.ray_intersect(mi.Ray3f(si_b.p, mi.Vector3f(-1, 0, 0)))
+    si_b2 = scene.ray_intersect(mi.Ray3f(si_x.p, mi.Vector3f(1, 0, 0)))
+    assert all(bool(si.is_valid()[0]) for si in (si_a, si_b, si_x, si_b2))
+    on = mi.Bool(True)
+    state = (origin, mi.Float(0.0), origin, mi.Float(0.0))
+
+    def step(si, state):
+        return ig.advance_chain(si, origin, *state, ig.lobe_at(si.bsdf(), si, on), on)
+
+    def xyz(p):
+        return np.array([p.x[0], p.y[0], p.z[0]])
+
+    after_a = step(si_a, state)
+    assert after_a[5][0] == 0                                  # one mirror: no way-back target yet
+    after_b = step(si_b, after_a[:4])
+    assert np.allclose(xyz(after_b[0]), [12, 4, 0], atol=1e-4) and np.allclose(xyz(after_b[2]), [4, -4, 0], atol=1e-4)
+    after_x = step(si_x, after_b[:4])
+    assert np.allclose(xyz(after_x[4]), [4, -4, 0], atol=1e-4)  # the way back: the image in A
+    assert after_x[5][0] == pytest.approx(after_a[1][0])       # with A's exponent
+    assert after_x[1][0] == 0 and np.allclose(xyz(after_x[0]), 0)   # the chain itself restarts
+    after_b2 = step(si_b2, after_x[:4])
+    assert after_b2[5][0] == 0                                 # used up at B
+    # a diffuse vertex after a single mirror: nothing to aim at on the way back
+    assert step(si_x, after_a[:4])[5][0] == 0
+
+
+def test_guiding_the_way_back_lowers_the_variance_per_path(mitsonar_mod, monkeypatch):
+    """The periscope's boulder window (10.4-14 m), 21 pings x 32768 independent paths each way:
+    the variance per path (summed over the window's bins) is at least 1.5x lower with the way back
+    guided (2.0-2.8x measured on three seeds of twice as many paths), and the echo's energy agrees."""
+    import drjit as dr
+    import mitsuba as mi
+    from mitsonar.plugins import frozen_pass, image_guide
+    from mitsonar.plugins.samples import HashSamples
+    from mitsonar.plugins.sonar_mlt import _Context
+
+    scene = load(mitsonar_mod, "periscope")
+    lo, paths = int(10.4 / 14 * 400), 32768
+
+    def window(flag):
+        monkeypatch.setattr(image_guide, "RETURN_GUIDE", flag)
+        frozen_pass.clear()
+        integ = integrator(type="sonar_tof", max_depth=5, guide="image")
+        ctx = _Context(integ, integ.setup(scene, 0, max_depth=5))
+        n = ctx.sensor.n_pings
+        lane = dr.arange(mi.UInt32, n * paths)
+        ping = lane // paths
+        f, bins, vals = ctx.records(n * paths)
+        ctx.trace(HashSamples(mi.UInt32(9), ping, lane - ping * paths), ping, lane, f, bins, vals)
+        b = bins.numpy().reshape(n, paths, -1)
+        v = np.where(b >= lo, vals.numpy().astype(np.float64).reshape(n, paths, -1), 0.0)
+        mean = np.zeros((n, 400))
+        np.add.at(mean, (np.repeat(np.arange(n), v[0].size), b.ravel()), v.ravel() / paths)
+        return (v ** 2).sum() / paths - (mean ** 2).sum(), mean.sum(), math.sqrt((v.sum(axis=2) ** 2).sum()) / paths
+
+    (var_on, e_on, se_on), (var_off, e_off, se_off) = window(True), window(False)
+    frozen_pass.clear()
+    assert e_on > 0
+    assert var_off > 1.5 * var_on, (var_off, var_on)
+    assert abs(e_on - e_off) < 4 * math.hypot(se_on, se_off)
+
+
 @pytest.mark.parametrize("name, n_pings, depth, spp, floor", [
     ("hidden_target", 21, 3, 2048, 1e-3),
     ("periscope", 13, 5, 2048, 1e-2),
