@@ -362,13 +362,9 @@ class SonarIntegrator(mi.SamplingIntegrator):
         max_depth = setup.depth_o
         ctx = mi.BSDFContext(mi.TransportMode.Importance)
         # Image guiding (`image_guide`): the transducer's image through the chain of mirror-like
-        # vertices since the last diffuse one, and the chain's narrowest lobe (0: no chain).
-        guide = getattr(setup, "guide", False)  # a bare setup (echo_path's) is unguided
-        image, n_chain = mi.Point3f(origin), mi.Float(0.0)
-        # the image before the chain's last mirror, and the way back's target after a diffuse
-        # vertex (`image_guide.advance_chain`)
-        prev_image, prev_n = mi.Point3f(origin), mi.Float(0.0)
-        ret_image, ret_n = mi.Point3f(origin), mi.Float(0.0)
+        # vertices since the last diffuse one, the chain's narrowest lobe, and the way back's target.
+        guide = setup.guide
+        chain = image_guide.start_chain(origin)
         # With ``setup.tag_hard`` the echoes after a chained vertex are told apart (``record``'s
         # sixth argument): the paths that only the guide finds well (`sonar_mlt`'s split).
         tag = guide and getattr(setup, "tag_hard", False)
@@ -399,16 +395,9 @@ class SonarIntegrator(mi.SamplingIntegrator):
 
             base = DIMS_EMIT + DIMS_PER_BOUNCE * depth
             if dr.hint(guide, mode="scalar"):
-                hard |= active & (n_chain > 0)
-                n_here = image_guide.lobe_at(bsdf, si, active)
-                # on the way back from a target seen through two mirrors: at the nearer one, aim at
-                # the image in the farther (unnarrowed: the mirror is ahead, not behind)
-                homeward = (ret_n > 0) & (n_here >= image_guide.MIN_EXPONENT) & image_guide.RETURN_GUIDE
-                wo, bounce_weight = image_guide.sample_bounce(
-                    bsdf, ctx, si, dr.select(homeward, ret_image, image), dr.select(homeward, ret_n, n_chain),
-                    dr.select(homeward, 0.0, segment), samples.get(base), samples.get2(base + 1), active)
-                image, n_chain, prev_image, prev_n, ret_image, ret_n = image_guide.advance_chain(
-                    si, origin, image, n_chain, prev_image, prev_n, n_here, active)
+                hard |= active & image_guide.chained(chain)
+                wo, bounce_weight, chain = image_guide.bounce(
+                    bsdf, ctx, si, chain, origin, segment, samples.get(base), samples.get2(base + 1), active)
                 throughput *= bounce_weight
                 ray = si.spawn_ray(wo)
             else:

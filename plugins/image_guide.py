@@ -63,7 +63,7 @@ RETURN_GUIDE = True
 
 
 def lobe_exponent(bsdf) -> float:
-    """The narrowest lobe ``bsdf`` can have, as the exponent `advance` reads from its density (at
+    """The narrowest lobe ``bsdf`` can have, as the exponent `lobe_at` reads from its density (at
     normal incidence, where the acoustic BSDF's diffuse share of the density is largest, so its
     smallest reading is its largest here); infinity for a BSDF of unknown shape (it may be a
     mirror), 0 for one without a specular part."""
@@ -156,6 +156,33 @@ def advance_chain(si, origin, image, n_chain, prev_image, prev_n, n_here, active
     return (dr.select(mirror, reflected, origin), dr.select(mirror, extended, zero),
             dr.select(mirror, image, origin), dr.select(mirror, n_chain, zero),
             dr.select(mirror, origin, prev_image), dr.select(mirror, zero, prev_n))
+
+
+def start_chain(origin):
+    """A path's guide state at the transducer ``origin``, no mirror met yet: the tuple
+    ``(image, n_chain, prev_image, prev_n, ret_image, ret_n)`` of `advance_chain`."""
+    return (mi.Point3f(origin), mi.Float(0.0), mi.Point3f(origin), mi.Float(0.0), mi.Point3f(origin), mi.Float(0.0))
+
+
+def chained(chain):
+    """Whether a mirror-like vertex precedes the next bounce (the chain is not empty)."""
+    return chain[1] > 0
+
+
+def bounce(bsdf, ctx, si, chain, origin, segment, u1, u2, active):
+    """One guided bounce at ``si``: ``(wo_world, weight, chain after si)``.
+
+    The target is the chain's image (the guide's width narrowed by ``segment``, the ray that
+    reached ``si``, `sample_bounce`), except on the way back from a target seen through two
+    mirrors: at the nearer mirror the bounce aims at the image in the farther one (``ret_image``,
+    `advance_chain`), unnarrowed, since that mirror lies ahead, not behind (`RETURN_GUIDE`)."""
+    image, n_chain, prev_image, prev_n, ret_image, ret_n = chain
+    n_here = lobe_at(bsdf, si, active)
+    homeward = (ret_n > 0) & (n_here >= MIN_EXPONENT) & RETURN_GUIDE
+    wo, weight = sample_bounce(bsdf, ctx, si, dr.select(homeward, ret_image, image),
+                               dr.select(homeward, ret_n, n_chain), dr.select(homeward, 0.0, segment),
+                               u1, u2, active)
+    return wo, weight, advance_chain(si, origin, image, n_chain, prev_image, prev_n, n_here, active)
 
 
 def advance(bsdf, si, origin, image, n_chain, active):
