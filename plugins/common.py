@@ -366,8 +366,9 @@ class SonarIntegrator(mi.SamplingIntegrator):
         guide = setup.guide
         chain = image_guide.start_chain(origin)
         # With ``setup.tag_hard`` the echoes after a chained vertex are told apart (``record``'s
-        # sixth argument): the paths that only the guide finds well (`sonar_mlt`'s split).
-        tag = guide and getattr(setup, "tag_hard", False)
+        # sixth argument): the paths that only the guide finds well (`sonar_mlt`'s split). An
+        # unguided kernel (a scene without mirrors) forms no chain: none of its echoes is hard.
+        tag = getattr(setup, "tag_hard", False)
         hard = mi.Bool(False)
 
         while dr.hint(active, label="sonar_echo_path"):

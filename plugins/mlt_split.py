@@ -52,9 +52,7 @@ def traced(integrator, setup, seed, start, count, moments=False):
     sums = [dr.zeros(mi.Float64, n_rows * n_bins) for _ in range(4 if moments else 2)]
     bins = setup.bins
 
-    def record(k, rng, energy, valid, hit, hard=None):
-        # without mirrors in the scene the kernel is the unguided one: every echo is easy
-        hard = mi.Bool(False) if hard is None else hard
+    def record(k, rng, energy, valid, hit, hard):
         b, valid = bins.index(rng, valid)
         at, e = bins.flat(ping, b), mi.Float64(energy)
         for i, keep in enumerate((valid & ~hard, valid & hard)):

@@ -397,8 +397,7 @@ class _Context:
         def record(k, rng, energy, valid, hit, hard=None):
             b, valid = window.index(rng, valid)
             if hard_only:
-                # untagged (an unguided kernel: no mirrors in the scene): no echo is hard
-                valid &= mi.Bool(False) if hard is None else hard
+                valid &= hard
             # Each lane adds only to its own total: no conflicts. Left to Auto, Dr.Jit would
             # expand f into one copy per thread with its size written into the kernel, which
             # recompiles the bootstrap at every new spp and adds a reduction pass.
