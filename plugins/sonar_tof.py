@@ -174,20 +174,21 @@ class SonarTOFIntegrator(SonarIntegrator):
         """One pass of a frame's shared paths: paths ``start * n_rows .. (start + count) * n_rows``
         of the frame's one sequence, scored into every row that hears them (`shared_beams`)."""
         seed_o, first_o = opaque_u32(seed), opaque_u32(start * shared.n_rows)
-        _, samples = self._shared_lanes(shared.n_rows * count, seed_o, first_o)
+        _, _, samples = self._shared_lanes(shared.n_rows * count, seed_o, first_o)
         d, w = frozen_pass.emitted(shared.path_setup.sensor.beam, samples)
         return frozen_pass.run(self._shared_body, self, shared, seed_o, first_o, d, w, count).numpy()
 
     def _shared_lanes(self, n, seed_o, first_o):
+        """``n`` lanes of a frame's one sequence from path ``first_o`` on: (row 0 for all, each
+        lane's path number in the sequence, its primary samples)."""
         zero = dr.zeros(mi.UInt32, n)
         index = dr.arange(mi.UInt32, n) + first_o
-        return zero, self.SAMPLERS[self.sampling](seed_o, zero, index)
+        return zero, index, self.SAMPLERS[self.sampling](seed_o, zero, index)
 
     def _shared_body(self, shared, seed_o, first_o, d, w, count):
         n = shared.n_rows * count
-        zero, samples = self._shared_lanes(n, seed_o, first_o)
+        zero, index, samples = self._shared_lanes(n, seed_o, first_o)
         hist = dr.zeros(mi.Float64, shared.n_rows * shared.sensor.n_bins)
-        index = dr.arange(mi.UInt32, n) + first_o      # the path's number in the frame's sequence
 
         def record(depth_k, rng, energy, valid, hit):
             # the roulette's number: a hash of (path, bounce, seed), apart from the path's samples
