@@ -256,7 +256,11 @@ def test_range_window_drops_echoes_outside_it(mitsonar_mod):
 @pytest.mark.parametrize("scene_file", ["box.xml", "box_fls.xml"])
 def test_second_render_with_new_pose_seed_spp_and_material_does_not_recompile(mitsonar_mod, scene_file):
     import mitsuba as mi
+    from mitsonar.plugins import module
 
+    # start from no frozen-pass recording: past `MAX_RECORDINGS` (earlier tests' passes) all are
+    # dropped, and a pass recorded anew between the two renders launches its traced kernels
+    module("frozen_pass").clear()
     scene = mitsonar_mod.load_scene(os.path.join(SCENES, scene_file))
     mitsonar_mod.render_scan(scene, spp=64, seed=0)
     first, _ = jit_kernels(mitsonar_mod.render_scan, scene, spp=64, seed=0)
