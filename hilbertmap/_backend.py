@@ -22,6 +22,8 @@ import numpy as np
 
 import drjit as dr
 
+from .inducing import sorted_unique
+
 CELL_DIV = 2  # cells per cut radius; 2 visits 125 cells of (r/2)^3: measured fastest of 1, 2, 3
 
 
@@ -280,8 +282,7 @@ class LatticeGrid:
         ux, uy = ucol // D[1], ucol % D[1]
         self.tdims = (D[:2] + BRICK - 1) >> BRICK_SHIFT
         tkey = (ux >> BRICK_SHIFT) * self.tdims[1] + (uy >> BRICK_SHIFT)
-        utile = np.sort(tkey)
-        utile = utile[np.r_[True, utile[1:] != utile[:-1]]] if len(utile) else utile
+        utile = sorted_unique(tkey)
         tinv = np.searchsorted(utile, tkey)
         tiles = np.zeros(int(np.prod(self.tdims)), dtype=np.uint32)
         tiles[utile] = (np.arange(len(utile), dtype=np.uint32) + 1) * BRICK * BRICK
