@@ -273,7 +273,6 @@ class IncrementalHilbertMap(HilbertMap):
             new = np.zeros(0, dtype=np.int64)
         if len(new):
             stamp = self.n_scans_seen_
-            known = self._sorted_keys()
             self.node_keys_ = np.concatenate([self.node_keys_, new])
             # keep the sorted copy sorted: new keys inserted where they belong (O(n), no sort)
             self._keys_sorted = (self.node_keys_, np.insert(known, np.searchsorted(known, new), new))
