@@ -276,13 +276,8 @@ def slice_metrics(hm, vertices, faces, axis="z", value=None, resolution: float =
     from matplotlib import contour as _contour  # noqa: F401  (ensures the backend is loaded)
     import matplotlib.pyplot as plt
 
-    a = "xyz".index(axis) if isinstance(axis, str) else int(axis)
-    if value is None:
-        value = float(np.median(hm.sensor_positions_[:, a])) if len(hm.sensor_positions_) else 0.0
-    segs = geo.plane_section(vertices, faces, a, value)
-    truth = geo.sample_segments(segs, resolution / 2)
-    truth = truth[hm.insonified(truth, part="echo")]
-    res = {"slice_axis": "xyz"[a], "slice_value": float(value)}
+    truth, a, value = slice_truth(hm, vertices, faces, axis, value, resolution / 2)
+    res = {"slice_axis": "xyz"[a], "slice_value": value}
     if len(truth) == 0:
         return res
     others = [i for i in range(3) if i != a]
