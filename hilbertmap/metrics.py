@@ -52,7 +52,7 @@ import textwrap
 import numpy as np
 
 from . import geometry as geo
-from .surfaces import plateau_step, sample_grid, seen_empty
+from .surfaces import in_front, plateau_step, sample_grid
 
 
 class EvaluationReport(dict):
@@ -403,7 +403,7 @@ def _climb(hm, P, fixed_axis, max_shift=None, n=31):
     nrm = grad / np.maximum(np.linalg.norm(grad, axis=1, keepdims=True), 1e-12)
     # the same front rule as the ridge surface: contour points whose low side was never seen empty
     # close the p > 0.5 band in a wall's shadow and are not the wall's face
-    front = seen_empty(hm, P - 0.1 * nrm)
+    front = in_front(hm, P, nrm)
     if front.any():
         P, nrm = P[front], nrm[front]
     step = max_shift if max_shift is not None else 1.5 * hm.lengthscale_

@@ -150,7 +150,7 @@ def ridge_surface(hm, resolution: float | None = None, bounds=None, level: float
     if front_only:
         # decided on the level's vertices and normals, so the lines below are only sampled for
         # the faces that stay (about half of them in the thesis box)
-        front = seen_empty(hm, V - 0.1 * n)
+        front = in_front(hm, V, n)
         keep = front[Fc].all(axis=1)
         if keep.any():
             used = np.unique(Fc[keep])
@@ -185,6 +185,17 @@ def surface(hm, method: str = "ridge", **kw):
 def free_coverage(hm):
     """The voxels holding free samples (maps saved before that record existed: all voxels seen)."""
     return getattr(hm, "free_coverage_", None) or hm.coverage_
+
+
+#: How far downhill (against the map's gradient, metres) a surface point's low side is tested for
+#: having been seen empty: the front rule of the ridge surface and of the slice metrics' ridge.
+FRONT_DEPTH = 0.1
+
+
+def in_front(hm, points, normals) -> np.ndarray:
+    """Whether each point's low side, `FRONT_DEPTH` downhill along its unit normal (the map's
+    gradient direction), was seen empty (:func:`seen_empty`): the point faces observed water."""
+    return seen_empty(hm, np.asarray(points) - FRONT_DEPTH * np.asarray(normals))
 
 
 #: at most this many (ping, point) pairs are tested by :func:`seen_empty` (about 10 s); beyond it
