@@ -136,7 +136,7 @@ def ridge_surface(hm, resolution: float | None = None, bounds=None, level: float
     within ``plateau`` of the largest p on its line (:func:`plateau_step`; ``None``: at the
     maximum itself, the classical ridge, refined by a parabola through the three samples around
     it). With ``front_only`` the faces on the shadow side of the plateau are dropped: those whose
-    low side (0.1 m downhill from the level) was never seen empty (:func:`seen_empty`: neither a
+    low side (`FRONT_DEPTH`, 0.1 m downhill from the level) was never seen empty (:func:`in_front`: neither a
     free sample in its voxel nor inside the free part of a ping's frustum).
     """
     V, Fc = isosurface(hm, level=level, resolution=resolution, bounds=bounds, only_seen=only_seen, grid=grid)
