@@ -75,8 +75,8 @@ def _unkey(keys: np.ndarray) -> np.ndarray:
 class IncrementalHilbertMap(HilbertMap):
     """Hilbert map learnt incrementally along a survey (see the module docstring).
 
-    Parameters (new here)
-    ---------------------
+    Parameters
+    ----------
     node_spacing : float > 0, default 0.15
         Lattice pitch of the nodes (metres).
     lengthscale_factor : float > 0, default 1.0
@@ -114,7 +114,7 @@ class IncrementalHilbertMap(HilbertMap):
     ----------
     inducing_points_ (n, 3), dual_coef_ (n,), intercept_, lengthscale_ : the map.
     node_keys_ (n,) int64 lattice keys; node_last_used_ (n,) scan counter of the last use;
-        node_accum_ (n,) AdaGrad's sums of squared gradients.
+        ``node_accum_`` (n,) AdaGrad's sums of squared gradients.
     n_scans_seen_, n_pings_seen_, n_samples_seen_, n_forgotten_ : counts.
     track_ (T, 3) : transducer positions of the pings (at most ``max_pings_kept``).
     timings_ : seconds of the last fit / partial_fit (``embed_s``, ``nodes_s``, ``sgd_s``, ``total_s``).

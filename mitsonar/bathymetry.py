@@ -1,5 +1,5 @@
 """Bathymetry from a downward echo sounder: bottom detection per beam, soundings in the world frame,
-and their errors against the scene's true seabed.
+and their errors against the scene's true seabed::
 
     import mitsonar
     from mitsonar import bathymetry, echosounders, sea_surface
@@ -282,7 +282,7 @@ def predicted_rms(range_m, angle_deg, beam_width_deg, bin_width, incidence_deg=N
 def error_table(angle, error, depth, angle_step=5.0):
     """Depth error statistics per beam angle: a list of dicts, one per ``angle_step``-wide bin of
     beam angle (deg, edges at whole multiples of the step) holding soundings: ``angle`` (bin
-    centre), ``n``, ``mean``, ``std``, ``rms``, ``p95`` (95th percentile of |error|) in metres,
+    centre), ``n``, ``mean``, ``std``, ``rms``, ``p95`` (95th percentile of ``|error|``) in metres,
     and ``rms_percent`` (rms over the mean depth, %). ``error`` is measured minus true depth
     (positive: too deep); NaN errors (no truth) are left out."""
     if not (is_number(angle_step) and 0 < angle_step <= 180):

@@ -7,14 +7,14 @@ extension of ``path``. Each function returns the figure it drew into.
 
 Values shown (``use`` and ``db``):
 
-============ ======= ==============================================================================
-use          db      colour
-============ ======= ==============================================================================
-``data``     False   device bytes 0..255 (what the head outputs)
-``data``     True    the bytes' level on the A/D scale, ``ad_low + byte / 255 * ad_span`` dB
-``intensity`` False  noise-free echo energy per bin (linear)
-``intensity`` True   ``10 log10`` of it, the top ``dynamic_range`` dB shown (zeros at the bottom)
-============ ======= ==============================================================================
+============= ======= =============================================================================
+use           db      colour
+============= ======= =============================================================================
+``data``      False   device bytes 0..255 (what the head outputs)
+``data``      True    the bytes' level on the A/D scale, ``ad_low + byte / 255 * ad_span`` dB
+``intensity`` False   noise-free echo energy per bin (linear)
+``intensity`` True    ``10 log10`` of it, the top ``dynamic_range`` dB shown (zeros at the bottom)
+============= ======= =============================================================================
 """
 from __future__ import annotations
 

@@ -118,30 +118,51 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
                 start_time=None, speckle_seed=None) -> Scan:
     """Render one scan of ``scene`` and pass it through the head's electronics.
 
-    ============== ==============================================================================
-    scene          a scene from `load_scene` (or ``mi.load_*``) with a ``sonar`` sensor
-    spp            paths per ping (default 4096)
-    seed           seed of the paths (and of the receiver's noise unless ``electronics_seed``)
-    pose           4x4 world transform of the beam frame at bearing 0, replacing ``to_world``
-                   (with a ``trajectory``: the mount on the vehicle, in the vehicle frame)
-    integrator     an integrator object or XML dict; default: the scene's if it is a sonar
-                   integrator, else ``sonar_tof``
-    sensor         sensor index or object
-    max_depth      override of the integrator's surface bounces
-    electronics    dict of electronics fields overriding the sensor's (the gain and the A/D window
-                   within the head's 0..80 dB: `mitsonar.electronics.HEAD_LIMITS`); its
-                   ``speckle_seed`` picks the scene's speckle (`mitsonar.speckle`)
-    electronics_seed  seed of the receiver's noise only (default ``seed``): never the speckle,
-                   which follows the scene, the ``speckle_seed`` and the head's pose
-    speckle_seed   the scene's speckle (which scatterers its surfaces hold, `mitsonar.speckle`);
-                   default the sensor's ``speckle_seed`` (XML), 0 unless given
-    progress       optional callable ``progress(done_spp, spp)`` called after each render pass
-    trajectory     a `Trajectory` of the vehicle carrying the head; ``to_world`` (or ``pose``) is
-                   then the mount in the vehicle frame (x forward, y port, z up)
-    start_time     s on the trajectory's clock of the scan's first ping (default: the
-                   trajectory's first time)
-    ============== ==============================================================================
+    Parameters
+    ----------
+    scene : mitsuba.Scene
+        A scene from `load_scene` (or ``mi.load_*``) with a ``sonar`` sensor.
+    spp : int
+        Paths per ping (default 4096).
+    seed : int
+        Seed of the paths (and of the receiver's noise unless ``electronics_seed``).
+    pose : array_like, optional
+        4x4 world transform of the beam frame at bearing 0, replacing ``to_world``
+        (with a ``trajectory``: the mount on the vehicle, in the vehicle frame).
+    integrator : mitsuba.Integrator or dict, optional
+        An integrator object or XML dict; default: the scene's if it is a sonar
+        integrator, else ``sonar_tof``.
+    sensor : int or mitsuba.Sensor
+        Sensor index or object.
+    max_depth : int, optional
+        Override of the integrator's surface bounces.
+    electronics : dict, optional
+        Electronics fields overriding the sensor's (the gain and the A/D window
+        within the head's 0..80 dB: `mitsonar.electronics.HEAD_LIMITS`); its
+        ``speckle_seed`` picks the scene's speckle (`mitsonar.speckle`).
+    electronics_seed : int, optional
+        Seed of the receiver's noise only (default ``seed``): never the speckle,
+        which follows the scene, the ``speckle_seed`` and the head's pose.
+    progress : callable, optional
+        ``progress(done_spp, spp)``, called after each render pass.
+    trajectory : Trajectory, optional
+        The vehicle carrying the head; ``to_world`` (or ``pose``) is
+        then the mount in the vehicle frame (x forward, y port, z up).
+    start_time : float, optional
+        Seconds on the trajectory's clock of the scan's first ping (default: the
+        trajectory's first time).
+    speckle_seed : int, optional
+        The scene's speckle (which scatterers its surfaces hold, `mitsonar.speckle`);
+        default the sensor's ``speckle_seed`` (XML), 0 unless given.
 
+    Returns
+    -------
+    Scan
+        The noise-free ``intensity`` and the device's ``data``, with the ranges, bearings,
+        poses and times of every row.
+
+    Notes
+    -----
     With a trajectory, row k is pinged at ``start_time + scan.times[k]`` (the sensor's
     ``ping_period`` schedule) from ``scan.poses[k] = trajectory.at(start_time + times[k]) @ mount
     @ bearing_rotation(bearings[k])``, all rows in one wavefront as for a static head. The head

@@ -62,7 +62,7 @@ def load_scene(path_or_xml: str, **params):
     """Load a Mitsuba XML scene (a file path, or an XML string starting with ``<``).
 
     ``params`` are substituted for ``$name`` placeholders as in ``mi.load_file``. Registers the
-    plugins for the active variant first. Errors come back as one-line `SceneError`s naming the
+    plugins for the active variant first. Errors come back as a one-line `SceneError` naming the
     file and the offending parameter.
     """
     ensure_variant()

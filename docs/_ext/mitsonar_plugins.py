@@ -1,0 +1,84 @@
+"""Sphinx directive ``.. mitsonar-plugin:: NAME``: a plugin's reference from its own class.
+
+For an entry of ``mitsonar.plugins.PLUGINS`` (the XML plugin name: ``sonar``, ``acoustic``,
+``sonar_tof``, ...) it loads the class for the active variant (``mitsonar.plugins.module``),
+emits its docstring, which holds the RST parameter table the plugin validates its XML against
+(``plugins/props.py: table_parameters`` reads the same table), and then the list
+``mitsonar.plugins.parameters(cls)``: every name the plugin accepts. The documentation and the
+validation therefore read one source and cannot disagree.
+
+``.. mitsonar-electronics::`` does the same for ``mitsonar.electronics.Electronics`` (the
+electronics fields every ``sonar`` sensor accepts).
+"""
+from __future__ import annotations
+
+import dataclasses
+import inspect
+
+from docutils import nodes
+from docutils.statemachine import StringList
+from sphinx.util.docutils import SphinxDirective
+from sphinx.util.nodes import nested_parse_with_titles
+
+
+def _plugin_entry(name: str):
+    from mitsonar import plugins
+
+    for kind, xml_name, module_name, cls_name in plugins.PLUGINS:
+        if xml_name == name:
+            return kind, getattr(plugins.module(module_name), cls_name)
+    known = ", ".join(entry[1] for entry in plugins.PLUGINS)
+    raise ValueError(f"mitsonar-plugin: no plugin {name!r} in mitsonar.plugins.PLUGINS ({known})")
+
+
+class _RSTDirective(SphinxDirective):
+    def _parse(self, lines: list[str]) -> list[nodes.Node]:
+        node = nodes.container()
+        source = self.get_source_info()[0]
+        content = StringList()
+        for i, line in enumerate(lines):
+            content.append(line, source, i)
+        nested_parse_with_titles(self.state, content, node)
+        return node.children
+
+
+class PluginDirective(_RSTDirective):
+    """``.. mitsonar-plugin:: sonar``: the plugin's docstring and its accepted parameter names."""
+
+    required_arguments = 1
+    has_content = False
+
+    def run(self):
+        from mitsonar import plugins
+
+        name = self.arguments[0]
+        try:
+            kind, cls = _plugin_entry(name)
+        except ValueError as exc:
+            raise self.error(str(exc)) from None
+        names = plugins.parameters(cls)
+        lines = [f"*{kind}* ``{name}`` (class ``{cls.__module__}.{cls.__name__}``)", ""]
+        lines += inspect.cleandoc(cls.__doc__ or "").splitlines()
+        lines += ["", f"Every XML parameter ``{name}`` accepts (any other name is refused, naming the nearest "
+                      "of these): " + ", ".join(f"``{n}``" for n in names) + ".", ""]
+        return self._parse(lines)
+
+
+class ElectronicsDirective(_RSTDirective):
+    """``.. mitsonar-electronics::``: the fields of ``mitsonar.electronics.Electronics``."""
+
+    has_content = False
+
+    def run(self):
+        from mitsonar.electronics import Electronics
+
+        lines = inspect.cleandoc(Electronics.__doc__ or "").splitlines()
+        fields = [f.name for f in dataclasses.fields(Electronics)]
+        lines += ["", "Fields: " + ", ".join(f"``{n}``" for n in fields) + ".", ""]
+        return self._parse(lines)
+
+
+def setup(app):
+    app.add_directive("mitsonar-plugin", PluginDirective)
+    app.add_directive("mitsonar-electronics", ElectronicsDirective)
+    return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}
