@@ -45,6 +45,9 @@ html_theme_options = {
 }
 html_show_sourcelink = False
 
+# `name` in docstrings is a Python object (rendered as code, linked where documented).
+default_role = "py:obj"
+
 autodoc_member_order = "bysource"
 autodoc_default_options = {"members": True, "undoc-members": False}
 autodoc_typehints = "none"

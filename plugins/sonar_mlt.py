@@ -79,13 +79,13 @@ class SonarMLTIntegrator(SonarIntegrator):
                               others (`mlt_split`). 0 (the default): no chains, the path
                               tracer's estimate with per-row paths (at equal time the chains
                               lost 2-6x to the guided path tracer on every scene with mirrors,
-                              README "Benchmarks"); ``auto``: the share from a pilot's
+                              docs/benchmarks.rst); ``auto``: the share from a pilot's
                               variances; a number in [0, 0.9]; ``off`` (or ``guide="none"``):
                               chains over every echo, Kelemen's PSSMLT as before the guide
     ================ ======== =================================================================
 
-    The defaults are the best settings measured on ``scenes_xml/`` (see the README's Benchmarks
-    section and ``benchmarks/mlt.py``): one target over the scan, few long chains (about 2^13 in
+    The defaults are the best settings measured on ``scenes_xml/`` (see the documentation's
+    Benchmarks page and ``benchmarks/mlt.py``): one target over the scan, few long chains (about 2^13 in
     all) and mostly small steps.
 
     ``spp`` counts path evaluations per ping (bootstrap plus chains x mutations), so equal

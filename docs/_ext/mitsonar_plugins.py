@@ -8,7 +8,8 @@ emits its docstring, which holds the RST parameter table the plugin validates it
 validation therefore read one source and cannot disagree.
 
 ``.. mitsonar-electronics::`` does the same for ``mitsonar.electronics.Electronics`` (the
-electronics fields every ``sonar`` sensor accepts).
+electronics fields every ``sonar`` sensor accepts), and ``.. mitsonar-cli::`` prints the
+``--help`` of every ``mitsonar`` command from the parser the command line itself uses.
 """
 from __future__ import annotations
 
@@ -78,7 +79,38 @@ class ElectronicsDirective(_RSTDirective):
         return self._parse(lines)
 
 
+class CLIDirective(SphinxDirective):
+    """``.. mitsonar-cli::``: one section per ``mitsonar`` command, its ``--help`` verbatim."""
+
+    has_content = False
+
+    def run(self):
+        import argparse
+        import os
+
+        from mitsonar.cli import build_parser
+
+        old = os.environ.get("COLUMNS")
+        os.environ["COLUMNS"] = "100"          # argparse wraps to the terminal: fix it
+        try:
+            parser = build_parser()
+            sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+            out = []
+            for name, command in sub.choices.items():
+                section = nodes.section(ids=[f"cli-{name}"], names=[f"mitsonar {name}"])
+                section += nodes.title(text=f"mitsonar {name}")
+                section += nodes.literal_block(text=command.format_help().rstrip())
+                out.append(section)
+        finally:
+            if old is None:
+                os.environ.pop("COLUMNS", None)
+            else:
+                os.environ["COLUMNS"] = old
+        return out
+
+
 def setup(app):
     app.add_directive("mitsonar-plugin", PluginDirective)
     app.add_directive("mitsonar-electronics", ElectronicsDirective)
+    app.add_directive("mitsonar-cli", CLIDirective)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}

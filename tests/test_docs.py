@@ -1,0 +1,56 @@
+"""The documentation site covers what the code offers: every registered plugin has a generated
+reference section, every public name of the package is in the API reference, and the
+electronics table the docs print names exactly the fields the sensor accepts.
+
+(The site itself is built with warnings as errors by ``.ci/run``; these checks need no Sphinx.)
+"""
+from __future__ import annotations
+
+import dataclasses
+import re
+from pathlib import Path
+
+import mitsonar
+from mitsonar.electronics import Electronics
+from mitsonar.plugins import PLUGINS
+from mitsonar.plugins.props import table_parameters
+
+DOCS = Path(__file__).resolve().parent.parent / "docs"
+
+
+def test_every_plugin_has_a_generated_reference_section():
+    page = (DOCS / "plugins.rst").read_text()
+    documented = re.findall(r"^\.\. mitsonar-plugin:: (\S+)\s*$", page, flags=re.M)
+    assert sorted(documented) == sorted(entry[1] for entry in PLUGINS)
+    assert re.search(r"^\.\. mitsonar-electronics::\s*$", page, flags=re.M)
+
+
+def test_every_public_name_is_in_the_api_reference():
+    page = (DOCS / "api.rst").read_text()
+    names = [n for n in mitsonar.__all__ if n != "__version__"]
+    missing = [n for n in names if not re.search(rf"\bmitsonar\.{re.escape(n)}\b", page)]
+    assert not missing, f"docs/api.rst does not document: {', '.join(missing)}"
+    for name in ("hilbertmap.HilbertMap", "hilbertmap.IncrementalHilbertMap", "mitsonar.plots",
+                 "mitsonar.bathymetry", "mitsonar.echosounders", "mitsonar.sidescan",
+                 "mitsonar.electronics.Electronics"):
+        assert re.search(rf"^\.\. auto\w+:: {re.escape(name)}\s*$", page, flags=re.M), name
+
+
+def test_electronics_table_names_every_field():
+    # The plugin reference prints Electronics' docstring table; the sensor accepts its fields.
+    assert table_parameters(Electronics.__doc__) == [f.name for f in dataclasses.fields(Electronics)]
+
+
+def test_every_page_is_in_a_table_of_contents():
+    pages = {p.relative_to(DOCS).with_suffix("").as_posix() for p in DOCS.rglob("*.rst")
+             if "_build" not in p.parts}
+    listed = {"index"}
+    for page in DOCS.rglob("*.rst"):
+        if "_build" in page.parts:
+            continue
+        text = page.read_text()
+        for block in re.findall(r"^\.\. toctree::\n((?:[ \t]+.*\n|\n)+)", text, flags=re.M):
+            base = page.parent.relative_to(DOCS)
+            for entry in re.findall(r"^[ \t]+([\w/]+)\s*$", block, flags=re.M):
+                listed.add((base / entry).as_posix())
+    assert pages <= listed, f"pages outside every toctree: {sorted(pages - listed)}"
