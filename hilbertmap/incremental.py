@@ -106,9 +106,9 @@ class IncrementalHilbertMap(HilbertMap):
         0.085, but a ridge with more false surface (its mean distance to the walls 0.90 m against
         0.19 m); pass numbers to choose otherwise.
 
-    The other embedding and thinning parameters (``source`` ... ``beam_stride``, ``occupied_weight``,
-    ``coverage_voxel``, ``max_free_per_voxel``, ``max_groups_per_voxel``), ``batch_size``,
-    ``fit_intercept``, ``random_state`` and ``variant`` are those of :class:`~hilbertmap.HilbertMap`.
+    source ... beam_stride, occupied_weight, coverage_voxel, max_free_per_voxel, max_groups_per_voxel, batch_size, fit_intercept, random_state, variant
+        The other embedding and thinning parameters, ``batch_size``, ``fit_intercept``,
+        ``random_state`` and ``variant`` are those of :class:`~hilbertmap.HilbertMap`.
 
     Attributes
     ----------

@@ -39,8 +39,6 @@ __all__ = ["SonarError", "SonarTimeout", "MicronSonar", "record"]
 class MicronSonar(LineDriver):
     """A Tritech Micron (or other SeaNet imaging head) on a serial port.
 
-    Parameters
-    ----------
     ==============  ==========================================================================
     port_or_url     device path or pyserial URL (``socket://host:port``, ``loop://``, ...), or an
                     already open pyserial-like object (read/write/in_waiting/timeout)
@@ -303,8 +301,6 @@ def record(port, path, seconds: float | None = None, *, scans: int | None = None
            passive: bool = False, pose=None, **sonar_kwargs) -> dict:
     """Record the raw byte stream of a head into a raw log (format: `mitsonar.rawlog`).
 
-    Parameters
-    ----------
     ========  =================================================================
     port      device path or pyserial URL
     path      log file to write

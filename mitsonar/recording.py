@@ -153,8 +153,6 @@ def replay(path, *, sound_speed: float | None = None, pose=None, nibble_order: s
            revisit: bool | None = None, max_turns: int | None = None, partial: bool = False) -> list[Scan]:
     """Scans of a raw log, assembled exactly as `MicronSonar.scan` did while recording.
 
-    Parameters
-    ----------
     ============  ================================================================
     path          raw log (``record``)
     sound_speed   m/s; default the log's (settings), else 1500

@@ -91,8 +91,6 @@ class Faults:
 class VirtualMicron(ServedHead):
     """A simulated Micron on a pseudo-terminal, a TCP port or a pyserial URL.
 
-    Parameters
-    ----------
     =================  =========================================================================
     scan_source        a `Scan`, or a callable ``scan_source(settings: HeadSettings) -> Scan``
                        called each time the host sends parameters (e.g.

@@ -64,8 +64,6 @@ def require_mechanical(scan, who: str, lacks: str) -> None:
 class HeadSettings:
     """Scanning parameters of a Micron-class head, in engineering units.
 
-    Parameters
-    ----------
     ===============  ===========  ==============================================================
     name             default      meaning, allowed values
     ===============  ===========  ==============================================================

@@ -182,8 +182,6 @@ def _header_state(buf, j: int, max_len: int) -> tuple[str, int]:
 class StreamParser:
     """Streaming SeaNet parser: ``feed(bytes) -> list`` of messages, resynchronising on damage.
 
-    Parameters
-    ----------
     ============  ==============================================================
     nibble_order  ``"low_first"`` (default) or ``"high_first"``, for 4-bit mtHeadData
     check_count   reject packets whose byte 9 is neither 0 nor payload + 3 (default True)
@@ -191,9 +189,7 @@ class StreamParser:
     log_size      how many drop records `drops` keeps (default 1000)
     ============  ==============================================================
 
-    Attributes
-    ----------
-    ``dropped`` bytes discarded so far; ``drops`` a deque of ``(reason, n_bytes)`` (latest
+    Attributes: ``dropped`` bytes discarded so far; ``drops`` a deque of ``(reason, n_bytes)`` (latest
     ``log_size``); ``drop_reasons`` a Counter of bytes per reason; ``packets`` messages
     emitted; ``pending`` bytes held waiting for the rest of a packet.
 
