@@ -1,0 +1,84 @@
+"""Render the pictures of the documentation (docs/_static/*.png): small, palette-quantised PNGs.
+
+Run by hand when the renderer's output changes (the docs build never renders):
+
+    .venv/bin/python docs/make_images.py
+
+Each picture's code is the code shown on the gallery page (docs/gallery.rst).
+"""
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+import mitsonar
+from mitsonar import plots
+
+ROOT = Path(__file__).resolve().parent.parent
+STATIC = ROOT / "docs" / "_static"
+SCENES = ROOT / "scenes_xml"
+
+
+def save_small(fig_or_path, name: str, colors: int = 96) -> None:
+    """Quantise a PNG written by a plot function into docs/_static/<name>."""
+    from PIL import Image
+
+    im = Image.open(fig_or_path).convert("RGB").quantize(colors=colors)
+    im.save(STATIC / name, optimize=True)
+    print(f"wrote {STATIC / name} ({(STATIC / name).stat().st_size // 1024} KiB)")
+
+
+def main(only=()) -> None:
+    tmp = Path(tempfile.mkdtemp())
+    small = dict(figsize=(5.0, 4.6), dpi=100)
+
+    def want(name):
+        return not only or name in only
+
+    if want("box_scan.png") or want("box_top.png") or want("box_ascan.png"):
+        scene = mitsonar.load_scene(str(SCENES / "box.xml"))
+        scan = mitsonar.render_scan(scene, spp=4096, seed=0)
+        if want("box_scan.png"):
+            plots.plot_polar(scan, tmp / "a.png", resolution=500, **small)
+            save_small(tmp / "a.png", "box_scan.png", 64)
+        if want("box_top.png"):
+            plots.plot_cartesian(scan, mesh=mitsonar.scene_mesh(scene), path=tmp / "b.png", **small)
+            save_small(tmp / "b.png", "box_top.png")
+        if want("box_ascan.png"):
+            plots.plot_ascan(scan, 0, tmp / "c.png", db=True, figsize=(6.0, 3.2), dpi=100)
+            save_small(tmp / "c.png", "box_ascan.png")
+    if want("box_fls.png"):
+        scene = mitsonar.load_scene(str(SCENES / "box_fls.xml"))
+        frame = mitsonar.render_scan(scene, spp=256, seed=0)
+        plots.plot_polar(frame, tmp / "d.png", resolution=500, **small)
+        save_small(tmp / "d.png", "box_fls.png")
+    if want("box_moving.png"):
+        scene = mitsonar.load_scene(str(SCENES / "box.xml"))
+        track = mitsonar.Trajectory.turn(30.0, 0.3, 6.0)
+        scan = mitsonar.render_scan(scene, trajectory=track, start_time=2.0, spp=1024)
+        plots.plot_cartesian(scan, mesh=mitsonar.scene_mesh(scene), path=tmp / "e.png", **small)
+        save_small(tmp / "e.png", "box_moving.png")
+    if want("wreck_waterfall.png"):
+        from mitsonar import sidescan_plots
+
+        scene = mitsonar.load_scene(str(SCENES / "wreck_sidescan.xml"))
+        track = mitsonar.Trajectory.from_tum(SCENES / "wreck_sidescan_survey.tum")
+        scans = list(mitsonar.render_survey(scene, track, spp=64, max_scans=3, progress=False))
+        sidescan_plots.plot_waterfall(scans[2], tmp / "f.png", figsize=(6.0, 4.0), dpi=100)
+        save_small(tmp / "f.png", "wreck_waterfall.png")
+    if want("box_map.png"):
+        from hilbertmap import HilbertMap
+        from hilbertmap.plots import plot_slices
+
+        scene = mitsonar.load_scene(str(SCENES / "box.xml"))
+        scan = mitsonar.render_scan(scene, spp=4096, seed=0)
+        hm = HilbertMap(random_state=0).fit([scan])                 # about 40 s on 2 cores
+        plot_slices(hm, truth=mitsonar.scene_mesh(scene), path=tmp / "g.png")
+        save_small(tmp / "g.png", "box_map.png")
+
+
+if __name__ == "__main__":
+    main(tuple(sys.argv[1:]))
