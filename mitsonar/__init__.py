@@ -44,5 +44,5 @@ def __getattr__(name):
 
 
 __all__ = ["Scan", "SceneError", "Trajectory", "TrajectoryError", "VariantError", "example_scene",
-           "example_scenes", "load_scan", "load_scene", "open_dataset", "render_scan", "render_survey", "scan_parameters", "scene_mesh",
-           "set_variant", "variant", "__version__", *_LAZY]
+           "example_scenes", "load_scan", "load_scene", "open_dataset", "render_scan", "render_survey",
+           "scan_parameters", "scene_mesh", "set_variant", "variant", "__version__", *_LAZY]

@@ -115,7 +115,7 @@ def __getattr__(name):
 __all__ = ["BETA_RANGE", "BUDGET_TOLERANCE", "CALIBRATION_START_SPP", "CompareError", "DEFAULT_BUDGETS",
            "DEFAULT_INTEGRATORS", "DEFAULT_REFERENCE_FACTOR", "DEFAULT_REPEATS", "KernelWatch", "MAX_ATTEMPTS",
            "MAX_SPP", "PathClock", "REFERENCE_INTEGRATOR", "REFERENCE_NOISE_WARNING", "REFERENCE_SEED_OFFSET",
-           "SEED_STRIDE", "TIME_TOLERANCE", "budget_warning", "cached_references", "calibrate", "compare", "equal_time_ratios",
-           "error_metrics", "jsonable", "labels_for", "load_integrator", "load_or_render_reference",
+           "SEED_STRIDE", "TIME_TOLERANCE", "budget_warning", "cached_references", "calibrate", "compare",
+           "equal_time_ratios", "error_metrics", "jsonable", "labels_for", "load_integrator", "load_or_render_reference",
            "off_budget", "plan_spp", "plot_convergence", "plot_polar_grid", "reference_key", "reference_path",
            "render_reference", "scan_from_histogram", "scene_digest", "self_errors", "write_json"]
