@@ -142,7 +142,8 @@ def test_the_path_clock_ignores_the_machine(first_run, small_scene, tmp_path, mo
     for key in ("integrator", "budget_s", "spp", "seeds", "seconds", "attempts"):
         assert [r[key] for r in again["runs"]] == [r[key] for r in result["runs"]], key
     for lab in ("sonar_tof", "sonar_tof#2"):
-        assert again["integrators"][lab]["calibration"] == result["integrators"][lab]["calibration"]
+        # the timings (a render that compiled kernels, in a fresh process only, is listed apart)
+        assert again["integrators"][lab]["calibration"]["points"] == result["integrators"][lab]["calibration"]["points"]
     assert not any("off their time budget" in w for w in again["warnings"])
 
 
