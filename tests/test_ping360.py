@@ -194,7 +194,9 @@ def test_auto_transmit_streams_auto_device_data():
             ser.write(encode(Message("auto_transmit", mode=1, gain_setting=1, transmit_duration=10,
                                      sample_period=640, transmit_frequency=750, number_of_samples=200,
                                      start_angle=10, stop_angle=30, num_steps=10)))
-            p, got, end = StreamParser(), [], time.monotonic() + 5
+            # the loop ends when 5 messages are in; the deadline only ends a broken run (it was
+            # 5 s, which a loaded machine could reach)
+            p, got, end = StreamParser(), [], time.monotonic() + 60
             while len(got) < 5 and time.monotonic() < end:
                 got += p.feed(read_available(ser, serial_fileno(ser), 0.1, vm.port))
             ser.write(encode(Message("motor_off")))

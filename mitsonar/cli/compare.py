@@ -36,6 +36,10 @@ def add_subcommands(subparsers):
     c.add_argument("--warm", action="store_true",
                    help="render once, untimed, at each new spp before timing: steady-state speed of an integrator "
                         "that compiles kernels per spp (default: wall-clock time, compilations included)")
+    c.add_argument("--paths-per-second", type=float, metavar="R",
+                   help="time renders by a deterministic count instead of the wall clock: a render of N paths per "
+                        "ping over P pings takes N*P/R seconds, so each budget fixes the spp (equal work; the same "
+                        "results on any machine and load)")
     c.add_argument("--no-plots", action="store_true", help="write compare.json only")
     c.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     c.set_defaults(func=cmd_compare)
@@ -58,7 +62,8 @@ def cmd_compare(args):
     result = compare(args.scene, names, budgets, args.output, reference_spp=args.reference_spp, seed=args.seed,
                      repeats=args.repeats, max_depth=args.max_depth, integrator_params=params, regions=regions,
                      reference_factor=args.reference_factor, calibration_seconds=args.calibration_seconds,
-                     warm=args.warm, plots=not args.no_plots, log=None if args.quiet else log)
+                     warm=args.warm, plots=not args.no_plots, log=None if args.quiet else log,
+                     paths_per_second=args.paths_per_second)
     print(report(result))
     return 0
 

@@ -46,7 +46,9 @@ field                    meaning
 ======================== ===========================================================================
 ``settings``             scene path, integrators (labels), integrator_types, budgets_s, repeats, seed,
                          max_depth, reference_spp, reference_spp_auto, reference_factor,
-                         calibration_seconds, warm, regions, integrator_params
+                         calibration_seconds, warm, paths_per_second (null: wall-clock seconds;
+                         a number: seconds = paths traced / it, see `PathClock`), regions,
+                         integrator_params
 ``scene``                path, sha256, n_pings, n_bins, range_min, range_max, bearings_deg
 ``environment``          mitsonar/mitsuba/drjit versions, variant, python, platform, cpu count, date
 ``reference``            integrator, spp, seeds, seconds, max_depth, self_rel_l2, self_rel_l1,
@@ -79,8 +81,8 @@ delete the cached reference.
 """
 from __future__ import annotations
 
-from mitsonar.jobs.compare.budget import (BETA_RANGE, BUDGET_TOLERANCE, MAX_ATTEMPTS, TIME_TOLERANCE, KernelWatch, budget_warning,
-                     calibrate, off_budget, plan_spp)
+from mitsonar.jobs.compare.budget import (BETA_RANGE, BUDGET_TOLERANCE, MAX_ATTEMPTS, TIME_TOLERANCE, KernelWatch, PathClock,
+                     budget_warning, calibrate, off_budget, plan_spp)
 from mitsonar.jobs.compare.common import (CALIBRATION_START_SPP, DEFAULT_BUDGETS, DEFAULT_INTEGRATORS, DEFAULT_REFERENCE_FACTOR,
                      DEFAULT_REPEATS, MAX_SPP, REFERENCE_INTEGRATOR, REFERENCE_NOISE_WARNING, REFERENCE_SEED_OFFSET,
                      SEED_STRIDE, CompareError, jsonable, labels_for)
@@ -112,8 +114,8 @@ def __getattr__(name):
 
 __all__ = ["BETA_RANGE", "BUDGET_TOLERANCE", "CALIBRATION_START_SPP", "CompareError", "DEFAULT_BUDGETS",
            "DEFAULT_INTEGRATORS", "DEFAULT_REFERENCE_FACTOR", "DEFAULT_REPEATS", "KernelWatch", "MAX_ATTEMPTS",
-           "MAX_SPP", "REFERENCE_INTEGRATOR", "REFERENCE_NOISE_WARNING", "REFERENCE_SEED_OFFSET", "SEED_STRIDE",
-           "TIME_TOLERANCE", "budget_warning", "cached_references", "calibrate", "compare", "equal_time_ratios",
-           "error_metrics", "jsonable", "labels_for", "load_integrator", "load_or_render_reference",
+           "MAX_SPP", "PathClock", "REFERENCE_INTEGRATOR", "REFERENCE_NOISE_WARNING", "REFERENCE_SEED_OFFSET",
+           "SEED_STRIDE", "TIME_TOLERANCE", "budget_warning", "cached_references", "calibrate", "compare",
+           "equal_time_ratios", "error_metrics", "jsonable", "labels_for", "load_integrator", "load_or_render_reference",
            "off_budget", "plan_spp", "plot_convergence", "plot_polar_grid", "reference_key", "reference_path",
            "render_reference", "scan_from_histogram", "scene_digest", "self_errors", "write_json"]

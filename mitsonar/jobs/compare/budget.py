@@ -30,6 +30,32 @@ CALIBRATION_TRIES = 3
 TIME_TOLERANCE = 0.2
 
 
+class PathClock:
+    """A deterministic clock: seconds are the paths traced so far over ``paths_per_second``.
+
+    `compare` with ``paths_per_second`` times its renders by this clock instead of the wall clock
+    (``mitsonar compare --paths-per-second``): a render of ``spp`` paths per ping over ``n_pings``
+    pings "takes" ``spp * n_pings / paths_per_second`` seconds, whatever the machine and its load.
+    The calibration, the spp search and every field of the results are the same as with the wall
+    clock, but a budget then fixes the spp (equal paths, not equal time), and a run is reproducible
+    on any machine: for tests, and for comparing integrators at equal work. Calling the clock
+    gives the seconds so far (as ``time.perf_counter`` does); `count` adds a render's paths.
+    """
+
+    def __init__(self, paths_per_second: float):
+        rate = float(paths_per_second)
+        if not (rate > 0 and math.isfinite(rate)):
+            raise ValueError(f"paths_per_second {paths_per_second!r}: need a positive number")
+        self.paths_per_second, self.paths = rate, 0
+
+    def count(self, spp: int, n_pings: int) -> None:
+        """Add a render of ``spp`` paths per ping over ``n_pings`` pings."""
+        self.paths += int(spp) * int(n_pings)
+
+    def __call__(self) -> float:
+        return self.paths / self.paths_per_second
+
+
 class KernelWatch:
     """Context manager counting the Dr.Jit kernels compiled inside its block.
 
@@ -220,5 +246,5 @@ def budget_warning(runs, tolerance=TIME_TOLERANCE):
             "integrator's settings); their errors are compared time-adjusted in equal_time")
 
 
-__all__ = ["BETA_RANGE", "BUDGET_TOLERANCE", "CALIBRATION_TRIES", "KernelWatch", "MAX_ATTEMPTS", "TIME_TOLERANCE",
-           "budget_warning", "calibrate", "off_budget", "plan_spp", "search_spp", "spp_floor_after"]
+__all__ = ["BETA_RANGE", "BUDGET_TOLERANCE", "CALIBRATION_TRIES", "KernelWatch", "MAX_ATTEMPTS", "PathClock",
+           "TIME_TOLERANCE", "budget_warning", "calibrate", "off_budget", "plan_spp", "search_spp", "spp_floor_after"]

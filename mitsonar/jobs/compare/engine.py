@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mitsonar.jobs.compare.budget import KernelWatch, budget_warning, calibrate, plan_spp, search_spp
+from mitsonar.jobs.compare.budget import KernelWatch, PathClock, budget_warning, calibrate, plan_spp, search_spp
 from mitsonar.jobs.compare.common import (CALIBRATION_START_SPP, DEFAULT_BUDGETS, DEFAULT_INTEGRATORS, DEFAULT_REFERENCE_FACTOR,
                      DEFAULT_REPEATS, MAX_SPP, REFERENCE_INTEGRATOR, REFERENCE_NOISE_WARNING, SEED_STRIDE, WARM_SEED,
                      CompareError, labels_for)
@@ -48,10 +48,12 @@ class Settings:
     calibration_seconds: float | None
     warm: bool
     plots: bool
+    paths_per_second: float | None = None
 
 
 def check_settings(scene_path, integrators, budgets, output_dir, reference_spp, seed, repeats, max_depth,
-                   integrator_params, regions, reference_factor, calibration_seconds, warm, plots) -> Settings:
+                   integrator_params, regions, reference_factor, calibration_seconds, warm, plots,
+                   paths_per_second=None) -> Settings:
     """`compare`'s arguments checked and normalised; `CompareError` (one line) for the first bad
     one. Reads and creates nothing but checks that the scene file exists and that the output
     folder can be made."""
@@ -75,6 +77,9 @@ def check_settings(scene_path, integrators, budgets, output_dir, reference_spp, 
         raise CompareError(f"--reference-factor {reference_factor!r}: need a positive number")
     if calibration_seconds is not None and not (calibration_seconds > 0 and math.isfinite(calibration_seconds)):
         raise CompareError(f"--calibration-seconds {calibration_seconds!r}: need a positive number")
+    if paths_per_second is not None and not (isinstance(paths_per_second, (int, float, np.integer, np.floating))
+                                             and paths_per_second > 0 and math.isfinite(paths_per_second)):
+        raise CompareError(f"--paths-per-second {paths_per_second!r}: need a positive number")
     if not (isinstance(seed, (int, np.integer)) and seed >= 0):
         raise CompareError(f"--seed {seed!r}: need a non-negative integer")
     scene_path = os.fspath(scene_path)
@@ -83,7 +88,8 @@ def check_settings(scene_path, integrators, budgets, output_dir, reference_spp, 
     output_dir = os.fspath(output_dir)
     check_output_folder(output_dir)
     return Settings(scene_path, names, labels, budgets, output_dir, reference_spp, int(seed), int(repeats),
-                    max_depth, params, regions, float(reference_factor), calibration_seconds, bool(warm), bool(plots))
+                    max_depth, params, regions, float(reference_factor), calibration_seconds, bool(warm), bool(plots),
+                    None if paths_per_second is None else float(paths_per_second))
 
 
 @dataclass
@@ -97,10 +103,16 @@ class Bench:
     integrators: dict  # label -> integrator object
     min_spp: dict  # label -> least spp it accepts
     calibration_seconds: float
+    #: What times the renders: ``time.perf_counter``, or a `PathClock` (seconds = paths traced / rate).
+    clock: object = time.perf_counter
 
     def render(self, integrator, spp, seed):
-        """One histogram (n_pings, n_bins) of ``integrator`` at ``spp`` with ``seed``."""
-        return integrator.render_histogram(self.scene, self.sensor, seed=seed, spp=int(spp), max_depth=self.max_depth)
+        """One histogram (n_pings, n_bins) of ``integrator`` at ``spp`` with ``seed`` (counted by a
+        `PathClock`)."""
+        hist = integrator.render_histogram(self.scene, self.sensor, seed=seed, spp=int(spp), max_depth=self.max_depth)
+        if isinstance(self.clock, PathClock):
+            self.clock.count(spp, self.sensor.n_pings)
+        return hist
 
 
 def load_bench(s: Settings) -> Bench:
@@ -116,8 +128,9 @@ def load_bench(s: Settings) -> Bench:
         max_depth = int(getattr(scene.integrator(), "max_depth", 5) or 5)
     objs = {lab: load_integrator(n, s.params.get(lab)) for lab, n in zip(s.labels, s.names)}
     cal = s.calibration_seconds if s.calibration_seconds is not None else min(0.5, s.budgets[0] / 2)
+    clock = time.perf_counter if s.paths_per_second is None else PathClock(s.paths_per_second)
     return Bench(scene, sensor, scene_bytes, int(max_depth), objs,
-                 {lab: min_spp(o, sensor.n_pings) for lab, o in objs.items()}, float(cal))
+                 {lab: min_spp(o, sensor.n_pings) for lab, o in objs.items()}, float(cal), clock)
 
 
 def calibrate_all(bench: Bench, s: Settings, say) -> dict:
@@ -127,7 +140,8 @@ def calibrate_all(bench: Bench, s: Settings, say) -> dict:
         say(f"{lab}: calibrating (longest timed render {bench.calibration_seconds:.3g} s)")
         obj = bench.integrators[lab]
         out[lab] = calibrate(lambda spp, o=obj: bench.render(o, spp, WARM_SEED), bench.calibration_seconds,
-                             start_spp=max(CALIBRATION_START_SPP, bench.min_spp[lab]), warm_each=s.warm)
+                             start_spp=max(CALIBRATION_START_SPP, bench.min_spp[lab]), warm_each=s.warm,
+                             clock=bench.clock)
     return out
 
 
@@ -148,9 +162,9 @@ def time_runs(bench: Bench, s: Settings, calibrations, say) -> list:
         def timed(spp, obj=obj, counter=counter):
             seed = (s.seed + next(counter)) & 0xFFFFFFFF
             with watch:
-                t0 = time.perf_counter()
+                t0 = bench.clock()
                 hist = bench.render(obj, spp, seed)
-                dt = time.perf_counter() - t0
+                dt = bench.clock() - t0
             return hist, dt, watch.compiled, watch.compile_seconds, seed
 
         def warm_up(spp, obj=obj):
@@ -196,7 +210,7 @@ def reference_spp_for(bench: Bench, s: Settings, pending) -> tuple:
         reached = max(p["spp"] for p in pending if p["integrator"] == plain[0])
     else:
         tof = load_integrator(REFERENCE_INTEGRATOR)
-        cal = calibrate(lambda spp: bench.render(tof, spp, WARM_SEED), bench.calibration_seconds)
+        cal = calibrate(lambda spp: bench.render(tof, spp, WARM_SEED), bench.calibration_seconds, clock=bench.clock)
         reached = plan_spp(cal["points"], s.budgets[-1])
     need = s.reference_factor * reached
     return int(min(MAX_SPP, 1 << max(1, math.ceil(math.log2(max(need, 2)))))), True
@@ -262,7 +276,8 @@ def build_result(s: Settings, bench: Bench, calibrations, ref_info, auto, runs, 
             "repeats": s.repeats, "seed": s.seed, "max_depth": bench.max_depth,
             "reference_spp": int(ref_info["spp"]), "reference_spp_auto": auto,
             "reference_factor": s.reference_factor, "calibration_seconds": bench.calibration_seconds,
-            "warm": s.warm, "regions": {k: list(v) for k, v in s.regions.items()}, "integrator_params": s.params,
+            "warm": s.warm, "paths_per_second": s.paths_per_second,
+            "regions": {k: list(v) for k, v in s.regions.items()}, "integrator_params": s.params,
             "seeds": f"render r (1, 2, ... over budgets, searches and repeats) of the k-th integrator (0, 1, ...) "
                      f"uses seed + k * {SEED_STRIDE} + r",
         },
@@ -308,7 +323,7 @@ def write_outputs(folder: OutputFolder, result, bench: Bench, ref, first_renders
 def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS, output_dir="cmp",
             reference_spp=None, seed=0, repeats=DEFAULT_REPEATS, max_depth=None, integrator_params=None,
             regions=None, reference_factor=DEFAULT_REFERENCE_FACTOR, calibration_seconds=None, warm=False,
-            plots=True, log=None) -> dict:
+            plots=True, log=None, paths_per_second=None) -> dict:
     """Compare sonar integrators at equal time against a cached ``sonar_tof`` reference.
 
     =================== =======================================================================
@@ -333,6 +348,11 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
                         included): steady-state speed of an integrator that compiles kernels
                         per spp. Off: wall-clock time, compilations included (and reported)
     plots               write ``convergence.png`` and ``polar.png``
+    paths_per_second    None: time renders by the wall clock. A number R: by a deterministic
+                        `PathClock` instead: a render of spp paths per ping over P pings takes
+                        spp * P / R seconds, so a budget B fixes spp = B * R / P (equal work,
+                        reproducible on any machine and load; for tests). Every field is as
+                        with the wall clock; ``seconds`` are then modelled, not measured
     log                 callable taking one line of progress, or None; with it, a progress bar
                         is drawn on stderr while the reference renders (on a terminal only)
     =================== =======================================================================
@@ -341,7 +361,8 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
     docstring). Raises `CompareError` (one line) for bad input, before anything is created.
     """
     s = check_settings(scene_path, integrators, budgets, output_dir, reference_spp, seed, repeats, max_depth,
-                       integrator_params, regions, reference_factor, calibration_seconds, warm, plots)
+                       integrator_params, regions, reference_factor, calibration_seconds, warm, plots,
+                       paths_per_second)
     say = log or (lambda line: None)
     bench = load_bench(s)
     calibrations = calibrate_all(bench, s, say)
