@@ -189,7 +189,7 @@ class Sediment:
         nu = _sound_speed_ratio(mz)
         delta = (_attenuation_per_khz(mz) * nu * (HANDBOOK_WATER_SOUND_SPEED / 1000.0)
                  * math.log(10.0) / (40.0 * math.pi))                        # Eq. 4
-        h = (2.03846 - 0.26923 * mz) / (1.0 + 0.076923 * mz) if mz < 5.0 else 0.5   # Eq. 10, cm
+        h = (2.03846 - 0.26923 * mz) / (1.0 + 0.076923 * mz) if mz < 5.0 else 0.5   # Eqs. 9-10, cm
         return cls(name=name or f"Mz {mz:g} phi", density_ratio=_density_ratio(mz), sound_speed_ratio=nu,
                    loss=delta, volume=0.002 if mz < 5.5 else 0.001,
                    spectral_strength=0.00207 * h * h * _H0 ** 2, spectral_exponent=_GAMMA, grain_size=mz)
@@ -262,7 +262,7 @@ def _interp(x):
 def apl_uw_backscatter(grazing, frequency, sediment, sound_speed=1500.0, extrapolate=False):
     """Seabed backscattering strength, dB: the APL-UW high-frequency bottom model (TR 9407 sec. IV.C).
 
-    :math:`S_b = 10\\log_{10}(\\sigma_r + \\sigma_v)` (Eq. 34), with
+    :math:`S_b = 10\\log_{10}(\\sigma_r + \\sigma_v)` (sec. IV.C, Eqs. 34-66), with
 
     * :math:`\\sigma_r = f_y \\sigma_m + (1 - f_y)\\sigma_{lr}` and
       :math:`\\sigma_m = f_x \\sigma_{kr} + (1 - f_x)\\sigma_{cr}` (Eqs. 57-64: logistic weights
@@ -350,7 +350,7 @@ def apl_uw_backscatter(grazing, frequency, sediment, sound_speed=1500.0, extrapo
     b = a ** ((1.0 + alpha) / (2.0 * alpha)) * g(1.0 / alpha) / (2.0 * alpha)
     sigma_kr = b * qc * r90 / (8.0 * np.pi * (np.cos(theta) ** (4.0 * alpha) + a * qc ** 2 * np.sin(theta) ** 4)
                                ** ((1.0 + alpha) / (2.0 * alpha)))
-    # composite roughness, Eqs. 41-52: rms slope of the relief larger than the cutoff scale (Eq. 42)
+    # composite roughness, Eqs. 41-52: rms slope of the relief larger than the small-roughness cutoff
     s = np.sqrt((2.0 * np.pi * w2 * _H0 ** (-gamma)) ** (1.0 / alpha) / (2.0 * (1.0 - alpha))
                 * (k ** 2 / alpha) ** ((1.0 - alpha) / alpha))
 
