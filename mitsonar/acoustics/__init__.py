@@ -9,11 +9,11 @@
 Every function refuses an input outside the range its source was fitted over, before any work,
 with one line naming the field and the range. Angles are grazing angles in radians.
 """
-from .interface import critical_angle, loss_parameter, reflection_coefficient
-from .materials import MATERIALS, Material, material
-from .seabed import (APL_UW_FREQUENCY_RANGE, SEDIMENTS, Sediment, apl_uw_backscatter, bistatic_mean_grazing,
+from mitsonar.acoustics.interface import critical_angle, loss_parameter, reflection_coefficient
+from mitsonar.acoustics.materials import MATERIALS, Material, material
+from mitsonar.acoustics.seabed import (APL_UW_FREQUENCY_RANGE, SEDIMENTS, Sediment, apl_uw_backscatter, bistatic_mean_grazing,
                      lambert, sediment)
-from .seawater import FRANCOIS_GARRISON_RANGE, MACKENZIE_RANGE, absorption, sound_speed
+from mitsonar.acoustics.seawater import FRANCOIS_GARRISON_RANGE, MACKENZIE_RANGE, absorption, sound_speed
 
 __all__ = ["APL_UW_FREQUENCY_RANGE", "FRANCOIS_GARRISON_RANGE", "MACKENZIE_RANGE", "MATERIALS", "Material",
            "SEDIMENTS", "Sediment", "absorption", "apl_uw_backscatter", "bistatic_mean_grazing", "critical_angle",

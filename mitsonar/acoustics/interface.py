@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._checks import as_array, at_least, grazing_angle
+from mitsonar.acoustics._checks import as_array, at_least, grazing_angle
 
 __all__ = ["reflection_coefficient", "critical_angle", "loss_parameter"]
 

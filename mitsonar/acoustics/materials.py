@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ._checks import at_least
-from .interface import DB_PER_WAVELENGTH_PER_DELTA, reflection_coefficient
-from .seabed import SEDIMENTS
+from mitsonar.acoustics._checks import at_least
+from mitsonar.acoustics.interface import DB_PER_WAVELENGTH_PER_DELTA, reflection_coefficient
+from mitsonar.acoustics.seabed import SEDIMENTS
 
 __all__ = ["Material", "MATERIALS", "material", "WATER_DENSITY", "WATER_SOUND_SPEED"]
 

@@ -25,8 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import erfc
 
-from ._checks import as_array, at_least, grazing_angle, in_range
-from .interface import DB_PER_WAVELENGTH_PER_DELTA
+from mitsonar.acoustics._checks import as_array, at_least, grazing_angle, in_range
+from mitsonar.acoustics.interface import DB_PER_WAVELENGTH_PER_DELTA
 
 __all__ = ["lambert", "bistatic_mean_grazing", "Sediment", "SEDIMENTS", "sediment", "apl_uw_backscatter",
            "APL_UW_FREQUENCY_RANGE"]

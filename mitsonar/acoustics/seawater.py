@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._checks import in_range
+from mitsonar.acoustics._checks import in_range
 
 __all__ = ["sound_speed", "absorption", "MACKENZIE_RANGE", "FRANCOIS_GARRISON_RANGE"]
 
