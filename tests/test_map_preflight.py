@@ -42,7 +42,8 @@ def test_default_mesh_step_too_fine_for_the_survey_is_coarsened_and_said(survey,
     captured = capsys.readouterr()
     assert rc == 0, captured.err
     assert all(p.exists() for p in out.values())
-    step = re.search(r"mesh grid step ([\d.]+) m \(the default 0.0375 m would need ([\d.e+]+) grid points", captured.out)
+    step = re.search(r"mesh grid step ([\d.]+) m \(the default 0.0375 m would need ([\d.e+]+) grid points",
+                     captured.out)
     assert step, captured.out
     res, points = float(step.group(1)), float(step.group(2))
     hm = IncrementalHilbertMap.load(out["o"])
