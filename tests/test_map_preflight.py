@@ -11,7 +11,8 @@ from hilbertmap import IncrementalHilbertMap
 from hilbertmap.surfaces import fitting_resolution, grid_shape
 from hilbertmap.testing import box_scan, moving_poses
 from mitsonar import Scan
-from mitsonar import cli, map_cli
+from mitsonar import cli
+from mitsonar.cli import map as map_cli
 
 DOWN = dict(boresight=(0.0, 0.0, -1.0), scan_axis=(0.0, 1.0, 0.0))
 

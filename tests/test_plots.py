@@ -9,8 +9,8 @@ import pytest
 from matplotlib import colormaps
 from matplotlib.collections import LineCollection
 
-from mitsonar import plots
-from mitsonar.electronics import Electronics
+from mitsonar.products import plots
+from mitsonar.receiver.electronics import Electronics
 from mitsonar.scan import Scan
 
 
@@ -116,7 +116,7 @@ def test_cartesian_is_world_x_east_y_north_like_the_track(tmp_path, tilt):
     """Level or tilted, the head's pings are drawn at their world x (east, to the right) and y
     (north, up), equal aspect, with the labels of the track picture (a tilted head was drawn in
     an in-plane basis 'world u, v', turned 90 deg against the track)."""
-    from mitsonar.trajectory import Trajectory
+    from mitsonar.geometry.trajectory import Trajectory
 
     # bearing 90 deg (world +y) bin 6 and bearing 0 (world +x, tilt down) bin 3
     scan = tilted(ring_scan(bright=[(9, 6), (0, 3)]), tilt, position=(3.0, -2.0, -1.0))
@@ -167,7 +167,7 @@ def test_track_frames_a_straight_run_and_draws_the_ground_truth_at_its_depth(tmp
     """A straight 25 m run at z = -2 beside a wall x = 20 (z from -5 to 1): the view holds the wall's
     cut, its short side is at least TRACK_MIN_ASPECT of the long one (it was a strip 0.1 as high as
     wide), and the track's end is drawn where it is, not under the legend."""
-    from mitsonar.trajectory import Trajectory
+    from mitsonar.geometry.trajectory import Trajectory
 
     t = np.linspace(0.0, 50.0, 51)
     poses = np.tile(np.eye(4), (len(t), 1, 1))
