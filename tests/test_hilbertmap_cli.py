@@ -105,10 +105,10 @@ def test_map_accepts_a_raw_seanet_log(tmp_path):
     # refused before the Gram matrix (75 GiB for 1e5 points) is allocated, or the map degenerates
     (["--inducing", "100000000"], r"--inducing must be at most the number of training samples \(\d+ from these "
                                   r"scans\), not 100000000"),
-    # a grid of 1e10 points would need terabytes: refused with a resolution that fits
+    # a grid of 1e10 points would need terabytes: refused before the fit, with a resolution that fits
     (["--inducing", "100", "--mesh", "m.ply", "--resolution", "0.0005"],
-     r"--resolution 0\.0005 m needs a grid of \d+ x \d+ x \d+ = [\d.e+]+ points over the region seen "
-     r"\(at most 2e\+08\); use --resolution [\d.]+ or coarser"),
+     r"--resolution 0\.0005 m: the scans reach [\d.]+ x [\d.]+ x [\d.]+ m \(their positions \+- range_max\), "
+     r"a grid of [\d.e+]+ points \(at most 2e\+08\); use --resolution [\d.]+ or coarser"),
 ])
 def test_map_refuses_sizes_it_cannot_fit(scan_files, tmp_path, args, expect):
     import re

@@ -37,7 +37,9 @@ def add_subcommands(subparsers) -> None:
     m.add_argument("--mesh", help="also write the surface as a triangle mesh (.ply or .obj)")
     m.add_argument("--surface", choices=("ridge", "level"), default="ridge",
                    help="surface of --mesh: the probability ridge (default) or the 0.5 level")
-    m.add_argument("--resolution", type=float, default=None, help="mesh grid step in metres (default auto)")
+    m.add_argument("--resolution", type=float, default=None,
+                   help="mesh grid step in metres (default: a quarter of the length-scale, coarser where the region "
+                        "seen would need more than 2e7 grid points; the step used is printed)")
     m.add_argument("--incremental", action="store_true",
                    help="map the scans one after another as a survey (IncrementalHilbertMap.partial_fit, every "
                         "row at its own pose, bounded memory); a folder argument stands for its scan_*.npz/.exr "
@@ -51,6 +53,12 @@ def add_subcommands(subparsers) -> None:
     m.add_argument("--elevation-resolution", type=float, default=0.25, help="elevation grid cell in metres")
     m.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
     m.set_defaults(func=cmd_map)
+
+
+#: With no --resolution the mesh's grid holds at most this many points (each one a map query, about
+#: a million a second on one core: the harbour survey's elevation grid is 2.6e7); the default step
+#: is coarsened until it fits, and the step used is printed.
+AUTO_MESH_POINTS = 20_000_000
 
 
 def _fail(msg: str, code: int = EXIT_ERROR) -> int:
@@ -137,7 +145,57 @@ def _read_scans(paths):
     return scans, None
 
 
+def _reach(scans):
+    """(lo, hi): the box every sample of these scans lies in, the pings' positions +- range_max
+    (a bound on the region the map will have seen, known before the fit)."""
+    import numpy as np
+
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for scan in scans:
+        p = np.asarray(scan.poses, dtype=np.float64).reshape(-1, 4, 4)[:, :3, 3]
+        r = float(scan.range_max)
+        lo, hi = np.minimum(lo, p.min(axis=0) - r), np.maximum(hi, p.max(axis=0) + r)
+    return lo, hi
+
+
+def _resolution_problem(resolution: float, scans) -> str | None:
+    """Why the mesh grid of ``--resolution`` cannot be made for these scans (None if it can),
+    decided before the fit on the box the survey can reach (`_reach`)."""
+    import math
+
+    from hilbertmap.surfaces import MAX_GRID_POINTS, fitting_resolution, grid_shape
+
+    lo, hi = _reach(scans)
+    n = grid_shape(resolution, lo, hi)
+    if math.prod(n) <= MAX_GRID_POINTS:
+        return None
+    ext = " x ".join(f"{e:.3g}" for e in hi - lo)
+    return (f"--resolution {resolution:g} m: the scans reach {ext} m (their positions +- range_max), a grid of "
+            f"{math.prod(n):.3g} points (at most {MAX_GRID_POINTS:.0e}); use --resolution "
+            f"{fitting_resolution(resolution, lo, hi):g} or coarser, or leave it out (map then picks the finest "
+            f"step that fits the region seen)")
+
+
+class _Stages:
+    """Wall-clock seconds of the command's stages, in order, from the moment it started."""
+
+    def __init__(self):
+        self.start = self.mark = time.perf_counter()
+        self.seconds = {}
+
+    def done(self, name: str) -> None:
+        now = time.perf_counter()
+        self.seconds[name] = self.seconds.get(name, 0.0) + now - self.mark
+        self.mark = now
+
+    def line(self) -> str:
+        parts = ", ".join(f"{name} {s:.1f}" for name, s in self.seconds.items())
+        return f"{time.perf_counter() - self.start:.1f} s ({parts})"
+
+
 def cmd_map(args) -> int:
+    stages = _Stages()
     if args.inducing is None or args.inducing < 1:
         return _fail("--inducing must be a positive integer", EXIT_USAGE)
     if args.passes is not None and args.passes < 1:
@@ -188,6 +246,12 @@ def cmd_map(args) -> int:
     scans, problem = _read_scans(args.scans)
     if problem:
         return _fail(problem)
+    # a mesh grid too fine for what the scans can reach: refused now, not after the fit
+    if args.mesh and args.resolution is not None:
+        problem = _resolution_problem(args.resolution, scans)
+        if problem:
+            return _fail(problem)
+    stages.done("read")
 
     from hilbertmap import HilbertMap, IncrementalHilbertMap
 
@@ -198,19 +262,19 @@ def cmd_map(args) -> int:
             params["partial_passes"] = args.passes
         hm = IncrementalHilbertMap(**params)
         try:
-            t0 = time.perf_counter()
             for path, scan in zip(args.scans, scans):
                 try:
                     hm.partial_fit(scan)
                 except ValueError as exc:
                     raise ValueError(f"{path}: {exc}") from None
-            hm.timings_ = dict(total_s=time.perf_counter() - t0)
             hm.n_schedule_ = hm.n_samples_seen_
+            stages.done("fit")
             args.elevation_grid = None
             if args.elevation or (args.plot and args.incremental):
                 from hilbertmap.elevation import elevation_grid
 
                 args.elevation_grid = elevation_grid(hm, resolution=args.elevation_resolution)
+                stages.done("elevation")
         except ValueError as exc:
             return _fail(_map_error(exc))
     else:
@@ -222,15 +286,28 @@ def cmd_map(args) -> int:
             hm.fit(scans)
         except ValueError as exc:
             return _fail(_map_error(exc))
+        stages.done("fit")
     V = F = None
-    if args.mesh:  # before anything is written: a grid too fine for the region fails here
+    note = None
+    if args.mesh:  # before anything is written
+        resolution = args.resolution
+        if resolution is None:   # the default step, or the finest coarser one the region seen allows
+            from hilbertmap.surfaces import mesh_resolution
+
+            resolution, default, points = mesh_resolution(hm, AUTO_MESH_POINTS)
+            lo, hi = hm.coverage_.bounds()
+            note = (f"mesh grid step {resolution:g} m" + ("" if resolution == default else
+                    f" (the default {default:g} m would need {points:.3g} grid points over the "
+                    f"{' x '.join(f'{e:.3g}' for e in hi - lo)} m seen, more than {AUTO_MESH_POINTS:.0e}; "
+                    "--resolution sets it)"))
         try:
-            V, F = hm.surface(args.surface, resolution=args.resolution)
+            V, F = hm.surface(args.surface, resolution=resolution)
         except ValueError as exc:
             return _fail(_map_error(exc))
+        stages.done("mesh")
     outputs = StagedFiles()
     try:
-        code = _write(args, hm, len(scans), V, F, outputs)
+        code = _write(args, hm, len(scans), V, F, outputs, stages)
         if code:
             return code
         try:
@@ -241,20 +318,27 @@ def cmd_map(args) -> int:
         outputs.discard()
     written = [args.output] + ([f"{args.mesh} ({len(F)} triangles)"] if args.mesh else []) + \
         ([args.plot] if args.plot else []) + ([args.elevation] if getattr(args, "elevation", None) else [])
+    stages.done("write")
     if not args.quiet:
-        t = hm.timings_
+        if note:
+            print(f"map: {note}")
         print(f"map: {len(scans)} scan(s), {hm.n_schedule_} training samples, "
               f"{len(hm.inducing_points_)} inducing points "
-              f"(length-scale {hm.lengthscale_:.3f} m), fit {t['total_s']:.1f} s; wrote {', '.join(written)}")
+              f"(length-scale {hm.lengthscale_:.3f} m), {stages.line()}; wrote {', '.join(written)}")
     return 0
 
 
-def _write(args, hm, n_scans: int, V, F, outputs: StagedFiles) -> int:
+def _write(args, hm, n_scans: int, V, F, outputs: StagedFiles, stages: _Stages) -> int:
     """Write the map, mesh and plot under temporary names; 0, or the exit code of a failure."""
     from hilbertmap import write_mesh
 
     option, path = "-o", args.output
     try:
+        if args.plot:   # timed on its own: the survey plan view samples the map
+            option, path = "--plot", args.plot
+            _plot(args, hm, n_scans, outputs)
+            stages.done("plot")
+        option, path = "-o", args.output
         hm.save(outputs.temporary(args.output))
         if args.mesh:
             option, path = "--mesh", args.mesh
@@ -264,19 +348,20 @@ def _write(args, hm, n_scans: int, V, F, outputs: StagedFiles) -> int:
 
             option, path = "--elevation", args.elevation
             write_elevation(outputs.temporary(args.elevation), args.elevation_grid)
-        if args.plot and args.incremental:
-            from hilbertmap.plots import plot_survey_map
-
-            option, path = "--plot", args.plot
-            plot_survey_map(hm, outputs.temporary(args.plot), elevation=args.elevation_grid,
-                            title=f"survey map of {n_scans} scan(s)")
-        elif args.plot:
-            from hilbertmap.plots import plot_slices
-
-            option, path = "--plot", args.plot
-            c = hm.sensor_positions_.mean(axis=0) if len(hm.sensor_positions_) else (0.0, 0.0, 0.0)
-            slices = (("z", float(c[2])), ("y", float(c[1])), ("x", float(c[0])))
-            plot_slices(hm, slices, path=outputs.temporary(args.plot), title=f"Hilbert map of {n_scans} scan(s)")
     except OSError as exc:
         return _fail(f"{option} {path}: {exc.strerror or exc}")
     return 0
+
+
+def _plot(args, hm, n_scans: int, outputs: StagedFiles) -> None:
+    if args.incremental:
+        from hilbertmap.plots import plot_survey_map
+
+        plot_survey_map(hm, outputs.temporary(args.plot), elevation=args.elevation_grid,
+                        title=f"survey map of {n_scans} scan(s)")
+    else:
+        from hilbertmap.plots import plot_slices
+
+        c = hm.sensor_positions_.mean(axis=0) if len(hm.sensor_positions_) else (0.0, 0.0, 0.0)
+        slices = (("z", float(c[2])), ("y", float(c[1])), ("x", float(c[0])))
+        plot_slices(hm, slices, path=outputs.temporary(args.plot), title=f"Hilbert map of {n_scans} scan(s)")

@@ -4,7 +4,8 @@ Writes, into the output folder: ``scan_00000.npz``, ``scan_00001.npz``, ... (one
 mechanical head, one per frame of a multibeam head, one per ``n_pings`` pings of a side-scan head),
 ``trajectory.tum`` (the trajectory used, drift included), ``track.png`` (the track and every ping's
 position) and ``scan_00000_world.png`` (the first scan drawn in world coordinates, each ping from
-its own pose: the motion distortion shows); for a side-scan head instead ``scan_00000_waterfall.png``
+its own pose: the motion distortion shows; both top views x east, y north, the scan's ground truth
+only inside its beams, `plots.plot_cartesian`); for a side-scan head instead ``scan_00000_waterfall.png``
 (the first scan's waterfall) and ``mosaic.png`` (+ ``mosaic.pgw``, ``mosaic.npz``: the survey's
 georeferenced mosaic, `mitsonar.products.mosaic`, in cells of a range bin (0.1 m at least, coarser for a
 grid of more than 2e7 cells), flat bottom at the measured altitude).

@@ -225,24 +225,31 @@ def plot_polar(scan, path=None, ax=None, db: bool = False, cmap: str = DEFAULT_C
     return fig
 
 
+#: Axis labels of the top views (`plot_cartesian`, `plot_track`): world x is east, y north (ENU).
+X_LABEL, Y_LABEL = "world x, east (m)", "world y, north (m)"
+
+
 def plot_cartesian(scan, mesh=None, path=None, ax=None, db: bool = False, cmap: str = DEFAULT_CMAP,
                    use: str = "data", ping_width: float | None = None, *, vmin=None, vmax=None,
                    dynamic_range=DEFAULT_DYNAMIC_RANGE, figsize=(7.0, 6.4), dpi: int = 150,
                    title: str | None = None) -> Figure:
-    """Top view in world coordinates, with the scene's ground truth cut through the sonar's plane.
+    """Top view in world coordinates (x east to the right, y north up, equal aspect, metres, as
+    `plot_track`), with the scene's ground truth inside the beams.
 
     Bin j of ping k sits at ``position_k + ranges[j] * boresight_k``, from the ping's own pose
-    (a scan rendered in motion shows its distortion, and the head's path); each ping is drawn as a
-    wedge ``ping_width`` wide about its scan axis, projected on the plane perpendicular to the
-    (mean) scan axis. When the scan axis is world +z or -z the plot axes are world x and y;
-    otherwise an orthonormal basis of that plane (named u, v).
+    (a scan rendered in motion shows its distortion, and the head's path), seen from above; each
+    ping is drawn as a wedge ``ping_width`` wide about its scan axis. A tilted head's wedges are
+    their beam-axis positions seen from above (slant range shortened by the tilt's cosine).
 
     Parameters
     ----------
     scan : Scan
     mesh : (vertices (V, 3), faces (F, 3)), optional
-        Ground-truth triangles (e.g. ``mitsonar.scene_mesh(scene)``); drawn as the segments where
-        they cut the plane through the mean sonar position perpendicular to the scan axis.
+        Ground-truth triangles (e.g. ``mitsonar.scene_mesh(scene)``), drawn only where an echo can
+        come from (`beam_ground_truth`): their horizontal cuts every few decimetres or metres of
+        depth, where a ping's beam holds them (between range_min and range_max, within the wedge
+        and the -3 dB vertical fan). Walls and piles in reach show as their outline, a sloping
+        seabed as contours inside the footprint, a flat seabed not at all.
     path, ax, db, cmap, use, ping_width, vmin, vmax, dynamic_range, figsize, dpi, title
         As in `plot_polar`.
 
@@ -253,7 +260,6 @@ def plot_cartesian(scan, mesh=None, path=None, ax=None, db: bool = False, cmap: 
     fig, ax = _new_figure(ax, figsize, dpi)
     values, lo, hi, label = _values(scan, use, db, dynamic_range, vmin, vmax)
     width = math.radians(scan.beamwidth_h if ping_width is None else ping_width)
-    origin, axis, e1, e2, names = _view_plane(scan)
 
     r_edges = scan.range_min + np.arange(scan.n_bins + 1) * scan.bin_width
     mesh_artist = None
@@ -265,36 +271,116 @@ def plot_cartesian(scan, mesh=None, path=None, ax=None, db: bool = False, cmap: 
         for phi in (-width / 2.0, width / 2.0):
             d = math.cos(phi) * zb + math.sin(phi) * xb
             p = pos[None, :] + r_edges[:, None] * d[None, :]
-            corners.append(np.stack([p @ e1, p @ e2], -1))
-        quad = np.stack(corners, 0)  # (2, n_bins + 1, 2)
+            corners.append(p[:, :2])
+        quad = np.stack(corners, 0)  # (2, n_bins + 1, 2): world x, y
         mesh_artist = ax.pcolormesh(quad[..., 0], quad[..., 1], values[k][None, :], cmap=cmap,
                                     vmin=lo, vmax=hi, shading="flat", rasterized=True)
-    pos2 = np.stack([scan.positions @ e1, scan.positions @ e2], -1)
+    pos2 = np.asarray(scan.positions)[:, :2]
     if np.ptp(pos2, axis=0).max() > 1e-6:   # a head that moved during the scan: its path, ping 0 marked
         ax.plot(pos2[:, 0], pos2[:, 1], "-", color="tab:cyan", lw=1.2, label="sonar (moving)")
         ax.plot(pos2[:1, 0], pos2[:1, 1], "o", color="tab:cyan", ms=4)
     else:
-        ax.plot(pos2[:, 0], pos2[:, 1], "+", color="tab:cyan", ms=8, label="sonar")
+        ax.plot(pos2[:1, 0], pos2[:1, 1], "+", color="tab:cyan", ms=8, label="sonar")
 
     if mesh is not None:
-        segments = mesh_section(mesh[0], mesh[1], origin, axis)
-        if len(segments):
-            seg2 = np.stack([segments @ e1, segments @ e2], -1)
-            ax.add_collection(LineCollection(seg2, colors="tab:green", linewidths=1.0, label="ground truth"))
+        segments, dz = beam_ground_truth(scan, mesh[0], mesh[1], ping_width)
+        ax.add_collection(LineCollection(
+            segments[..., :2], colors="tab:green", linewidths=1.4,
+            label=f"scene cut every {dz:g} m of depth, inside the beams ({scan.beamwidth_v:g}\N{DEGREE SIGN} fan)"))
     ax.set_aspect("equal")
     # Frame what the sonar covered; ground truth beyond its range would only shrink the scan.
     pad = 1.05 * scan.range_max
     ax.set_xlim(pos2[:, 0].min() - pad, pos2[:, 0].max() + pad)
     ax.set_ylim(pos2[:, 1].min() - pad, pos2[:, 1].max() + pad)
     ax.set_facecolor("0.85")
-    ax.set_xlabel(f"world {names[0]} (m)")
-    ax.set_ylabel(f"world {names[1]} (m)")
-    ax.legend(loc="upper right", fontsize=7)
+    ax.set_xlabel(X_LABEL)
+    ax.set_ylabel(Y_LABEL)
+    # below the axes, as in plot_track: inside, it covered the echoes
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, fontsize=7, frameon=False)
     if mesh_artist is not None:
         fig.colorbar(mesh_artist, ax=ax, label=label, shrink=0.85)
     ax.set_title(_settings_line(scan) if title is None else title, fontsize=7)
     _save(fig, path)
     return fig
+
+
+#: `beam_ground_truth` cuts the scene at most this many depths (round steps, see `_depth_step`).
+GROUND_TRUTH_LEVELS = 12
+
+
+def beam_ground_truth(scan, vertices, faces, ping_width: float | None = None, step: float | None = None):
+    """``(segments (S, 2, 3), dz)``: the scene cut by horizontal planes every ``dz`` metres of
+    depth (at ``(k + 1/2) dz``, at most `GROUND_TRUTH_LEVELS` of them over the heights of the
+    triangles in reach), kept in pieces at most ``step`` long (default 1/200 of the range window)
+    whose midpoint some ping's beam holds (`in_beams`: range, wedge, -3 dB vertical fan).
+
+    Seen from above, the cuts of a wall or a pile fall on one outline, drawn where the beams
+    reach it at any depth; a sloping seabed shows as its contours inside the footprint; a flat
+    one, which no plane between steps cuts, is not drawn. Nothing is drawn where no ping looks:
+    the plane of a tilted head's sweep, cut whole, draws a line across the seabed or a quay
+    beyond the range, where no echo can come from.
+    """
+    V = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    Fc = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    pos = np.asarray(scan.poses, dtype=np.float64)[:, :3, 3]
+    reach = float(scan.range_max)
+    lo, hi = pos.min(axis=0) - reach, pos.max(axis=0) + reach
+    if len(Fc):   # only the triangles whose box meets the box the pings reach
+        tri = V[Fc]
+        Fc = Fc[np.all((tri.max(axis=1) >= lo) & (tri.min(axis=1) <= hi), axis=1)]
+    empty = np.zeros((0, 2, 3))
+    if not len(Fc):
+        return empty, 0.0
+    z = V[Fc][..., 2]
+    z0, z1 = max(float(z.min()), lo[2]), min(float(z.max()), hi[2])
+    dz = _depth_step(max(z1 - z0, 1e-6) / GROUND_TRUTH_LEVELS)
+    levels = (np.arange(math.floor(z0 / dz), math.ceil(z1 / dz)) + 0.5) * dz
+    seg = [mesh_section(V, Fc, [0.0, 0.0, zl], [0.0, 0.0, 1.0]) for zl in levels if z0 < zl < z1]
+    seg = np.concatenate(seg) if seg else empty
+    if not len(seg):
+        return empty, dz
+    step = (scan.range_max - scan.range_min) / 200.0 if step is None else float(step)
+    # pieces of at most `step`: (P, 2, 3)
+    length = np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1)
+    n = np.maximum(1, np.ceil(length / step).astype(int))
+    which = np.repeat(np.arange(len(seg)), n)
+    i = np.arange(len(which)) - np.repeat(np.cumsum(n) - n, n)
+    t0, t1 = i / n[which], (i + 1) / n[which]
+    a, d = seg[which, 0], seg[which, 1] - seg[which, 0]
+    pieces = np.stack([a + t0[:, None] * d, a + t1[:, None] * d], 1)
+    return pieces[in_beams(scan, pieces.mean(axis=1), ping_width)], dz
+
+
+def _depth_step(at_least: float) -> float:
+    """The smallest round step (1, 2, 2.5 or 5 times a power of ten) of at least ``at_least``."""
+    e = 10.0 ** math.floor(math.log10(at_least))
+    for m in (1.0, 2.0, 2.5, 5.0, 10.0):
+        if m * e >= at_least * (1 - 1e-9):
+            return float(f"{m * e:.3g}")
+    return 10.0 * e
+
+
+def in_beams(scan, points, ping_width: float | None = None, chunk: int = 1 << 20) -> np.ndarray:
+    """Whether each (N, 3) world point lies inside some ping's beam: range within
+    [range_min, range_max], the angle about the scan axis within ``ping_width``/2 (default
+    ``beamwidth_h``/2) of the boresight, the elevation out of the sweep plane within
+    ``beamwidth_v``/2."""
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    half_h = 0.5 * math.radians(scan.beamwidth_h if ping_width is None else ping_width)
+    half_v = 0.5 * math.radians(scan.beamwidth_v)
+    poses = np.asarray(scan.poses, dtype=np.float64)
+    out = np.zeros(len(P), bool)
+    per = max(1, chunk // max(len(P), 1))
+    for k0 in range(0, len(poses), per):
+        T = poses[k0:k0 + per]
+        loc = np.einsum("kji,pkj->pki", T[:, :3, :3], P[:, None, :] - T[None, :, :3, 3])   # (N, K, 3) in the beam frame
+        r = np.linalg.norm(loc, axis=-1)
+        horiz = np.hypot(loc[..., 0], loc[..., 2])
+        ok = ((r >= scan.range_min) & (r <= scan.range_max)
+              & (np.abs(np.arctan2(loc[..., 0], loc[..., 2])) <= half_h)
+              & (np.abs(np.arctan2(loc[..., 1], horiz)) <= half_v))
+        out |= ok.any(axis=1)
+    return out
 
 
 #: `plot_track`: the shorter side of the top view is at least this share of the longer.
@@ -346,8 +432,8 @@ def plot_track(trajectory, path=None, ax=None, scans=(), mesh=None, *, figsize=(
     ax.set_xlim(centre[0] - half[0], centre[0] + half[0])
     ax.set_ylim(centre[1] - half[1], centre[1] + half[1])
     ax.set_aspect("equal")
-    ax.set_xlabel("world x (m)")
-    ax.set_ylabel("world y (m)")
+    ax.set_xlabel(X_LABEL)
+    ax.set_ylabel(Y_LABEL)
     # below the axes: inside, it covered the track's end on every straight run
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=5, fontsize=7, frameon=False)
     lo, hi = trajectory.span
@@ -449,25 +535,6 @@ def mesh_section(vertices, faces, origin, normal) -> np.ndarray:
     pts, crossed = pts[keep], crossed[keep]
     order = np.argsort(~crossed, axis=1, kind="stable")[:, :2]
     return np.take_along_axis(pts, order[:, :, None], axis=1)
-
-
-def _view_plane(scan):
-    """Origin, scan axis and an in-plane basis (with axis names) for the top view."""
-    axis = scan.poses[:, :3, 1].mean(axis=0)
-    norm = np.linalg.norm(axis)
-    axis = np.array([0.0, 0.0, 1.0]) if norm == 0 else axis / norm
-    origin = scan.positions.mean(axis=0)
-    if abs(axis[2]) > 0.999:
-        e1, e2 = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
-        if axis[2] < 0:  # looking from below: keep the view right-handed about the axis
-            e2 = -e2
-            return origin, axis, e1, e2, ("x", "-y")
-        return origin, axis, e1, e2, ("x", "y")
-    seed = np.eye(3)[int(np.argmin(np.abs(axis)))]
-    e1 = seed - axis * (seed @ axis)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(axis, e1)
-    return origin, axis, e1, e2, ("u", "v")
 
 
 def _nice_step(rmax: float) -> float:
