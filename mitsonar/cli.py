@@ -278,7 +278,7 @@ def build_parser():
 
     # Subcommands of other parts of the product register themselves when present.
     for mod in ("mitsonar.serial_cli", "mitsonar.map_cli", "mitsonar.compare_cli", "mitsonar.survey_cli", "mitsonar.export_cli",
-                "mitsonar.bathy_cli", "mitsonar.dataset.cli"):
+                "mitsonar.bathy_cli", "mitsonar.dataset.cli", "mitsonar.sonar_equation.report"):
         try:
             m = importlib.import_module(mod)
         except ImportError:
