@@ -68,7 +68,8 @@ def pulse_boxcar(length: float, bin_width: float) -> np.ndarray:
         return np.ones(1)
     m = int(math.ceil(length / bin_width + 0.5))
     lo = (np.arange(m + 1) - 0.5) * bin_width
-    return np.clip(np.minimum(lo + bin_width, length) - np.maximum(lo, 0.0), 0.0, None) / bin_width
+    w = np.clip(np.minimum(lo + bin_width, length) - np.maximum(lo, 0.0), 0.0, None) / bin_width
+    return np.trim_zeros(w, "b")
 
 
 def echo_level(intensity, ranges, source_level: float, pulse_length: float, sound_speed: float) -> np.ndarray:
