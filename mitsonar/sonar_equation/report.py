@@ -142,7 +142,7 @@ def plot_levels(report: SonarEquationReport, path=None, ping=None):
     ax.set_xlabel("range (m)")
     ax.set_ylabel("level (dB re 1 uPa)")
     top = max(report.noise_band_level, finite.max() if finite.size else report.noise_band_level) + 10.0
-    ax.set_ylim(max(floor, top - 120.0), top)
+    ax.set_ylim(min(report.noise_band_level - 10.0, max(floor, top - 100.0)), top)   # the noise line in view
     ax.set_title(f"Sonar equation: SL {report.source_level:.0f} dB, DI {report.directivity_index:.1f} dB")
     ax.legend(loc="upper right", fontsize=8)
     ax.grid(alpha=0.3)
