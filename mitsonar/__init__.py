@@ -15,6 +15,7 @@ from .scan import Scan  # noqa: E402
 from .groundtruth import scene_mesh  # noqa: E402
 from .render import render_scan, scan_parameters  # noqa: E402
 from .scene import SceneError, load_scene  # noqa: E402
+from .sonar_equation import sonar_equation_report  # noqa: E402
 from .survey import render_survey  # noqa: E402
 from .dataset.store import open_dataset  # noqa: E402
 from .trajectory import Trajectory, TrajectoryError  # noqa: E402
@@ -43,5 +44,5 @@ def __getattr__(name):
 
 
 __all__ = ["Scan", "SceneError", "Trajectory", "TrajectoryError", "VariantError", "load_scan", "load_scene",
-           "open_dataset", "render_scan", "render_survey", "scan_parameters", "scene_mesh",
+           "open_dataset", "render_scan", "render_survey", "scan_parameters", "scene_mesh", "sonar_equation_report",
            "set_variant", "variant", "__version__", *_LAZY]

@@ -273,11 +273,11 @@ def test_presets_carry_source_levels_and_keep_the_calibration(mitsonar_mod):
 # ----------------------------------------------------------------------------- the report
 
 def test_report_recovers_the_target_strength_and_draws(mitsonar_mod, tmp_path):
-    from mitsonar.sonar_equation import phong_sphere_cross_section, plot_levels, sonar_equation_report
+    from mitsonar.sonar_equation import phong_sphere_cross_section, plot_levels
 
     a, d = 0.05, 3.0
     scan = mitsonar_mod.render_scan(sphere_scene(mitsonar_mod, a, d, 0.0, 300.0), spp=1 << 15, seed=3)
-    rep = sonar_equation_report(scan)
+    rep = mitsonar_mod.sonar_equation_report(scan)
     row = rep.pings[0]
     assert d < row["range"] < d + 0.05
     # EL - SL + TL at the bin's centre range: TS up to the 40 log of where in the echo that bin lies
