@@ -52,6 +52,10 @@ def line_aperture(beamwidth_deg: float, frequency: float, sound_speed: float) ->
 _GAUSS_SUPPORT = 2.5
 
 
+#: Directivity indices by pattern parameters (`BeamPattern.directivity_index`).
+_DI_CACHE: dict = {}
+
+
 class BeamPatternError(ValueError):
     pass
 
@@ -270,7 +274,16 @@ class BeamPattern:
         ``sinc`` (not separable in these angles) on a 2D grid of at least 30 samples per main
         lobe width on each axis, side lobes included (checked against ``10 log10(4 pi a_h a_v /
         lambda^2)`` for a large piston)."""
-        return 10.0 * math.log10(4.0 * math.pi / self.beam_solid_angle())
+        if self.kind == "table":
+            return 10.0 * math.log10(4.0 * math.pi / self.beam_solid_angle())
+        # Renders record it every scan (surveys: every ping): computed once per pattern.
+        key = (self.kind, self.beamwidth_h, self.beamwidth_v, self.frequency, self.aperture_h, self.aperture_v,
+               self.sound_speed)
+        if key not in _DI_CACHE:
+            if len(_DI_CACHE) > 256:
+                _DI_CACHE.clear()
+            _DI_CACHE[key] = 10.0 * math.log10(4.0 * math.pi / self.beam_solid_angle())
+        return _DI_CACHE[key]
 
     def beam_solid_angle(self) -> float:
         """sr, the integral of B over the sphere (see `directivity_index`)."""
