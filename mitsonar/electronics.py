@@ -45,9 +45,9 @@ Default settings (Micron-like). The A/D window ``ad_low = 12.5 dB``, ``ad_span =
 version 0.3 the sum was one calibration constant called ``source_level``) puts a diffuse
 concrete wall at 4 m (about 1e-5 per bin, 42 dB) above the top of the window and grazing floor
 echoes (1e-7..1e-6, 22..32 dB at 4 m) inside it (`mitsonar.sonar_equation.levels` says where
-200 and -148 come from: the Micron's source level is not published). ``noise_level`` and
-``bandwidth`` are the receiver's acoustic noise that `Scan.snr` compares echoes with; a 100 us pulse (the Micron's short-range
-setting: 7.5 cm) and 2 cm jitter blur echoes over a few bins. The receiver's noise floor
+200 and -148 come from: the Micron's source level is not published; ``noise_level`` and
+``bandwidth`` are the receiver's acoustic noise, which `Scan.snr` compares echoes with, not the
+bytes' ``noise_floor`` below); a 100 us pulse (the Micron's short-range setting: 7.5 cm) and 2 cm jitter blur echoes over a few bins. The receiver's noise floor
 (15.5 dB, 3 dB above ``ad_low``) and the ring-down (40 dB at the transducer, fading to ``ad_low``
 at 0.55 m: an amplitude decay time ``tau = 2 x 0.55 m / c x 8.69 / 27.5 dB = 0.23 ms``) are fitted
 to the byte statistics of public recordings of a real Micron (200 bins, 10-20 m, harbour and tank
@@ -92,41 +92,41 @@ MIN_TVG_RANGE = 1e-3
 class Electronics:
     """Device-electronics settings of a sonar head (the ``sonar`` sensor's electronics fields).
 
-    ================ ========= ====================================================================
-    field            default   meaning
-    ================ ========= ====================================================================
-    source_level     200.0     dB re 1 uPa at 1 m: the head's on-axis source level (real heads
-                               180..230; ``intensity`` is normalised to this source, 1 W/sr on
-                               axis); 150..260 allowed
-    receiver_sensitivity -148.0 dB: the receiver's response referred to the A/D's dB scale
-                               (``SL + receiver_sensitivity`` = 52 dB, the calibration constant
-                               called ``source_level`` before version 0.3)
-    noise_level      42.0      dB re 1 uPa^2/Hz: ambient plus self noise at the receiver
-                               (thermal noise at 700 kHz: `sonar_equation.ambient_noise_level`)
-    bandwidth        0.0       Hz, the receiver's bandwidth; 0 means ``1 / pulse_length``
-    tvg              ``20log`` time-varying gain law: ``off``, ``20log``, ``30log``, ``40log``
-                               (each plus ``2 absorption r``)
-    tvg_cap          40.0      dB, the TVG saturates here (thesis 2.1.2: "around 40 dB")
-    gain             28.0      dB, receiver gain (SeaNet IGain 0x49)
-    ad_low           12.5      dB mapped to byte 0 (SeaNet ADLow)
-    ad_span          24.0      dB mapped onto 0..255 above ``ad_low`` (SeaNet ADSpan), > 0
-    bit_depth        8         8, or 4 (values 0..15 reported as multiples of 17)
-    pulse_length     100e-6    s, transmit pulse; spreads echoes over ``c pulse_length / 2`` in range
-    range_jitter     0.02      m, standard deviation of the Gaussian range jitter
-    speckle          rayleigh  ``off``, ``rayleigh`` (exponential intensity), ``weibull``
-    speckle_shape    1.2       Weibull shape k of the intensity speckle (``weibull`` only)
-    speckle_seed     0         the scene's speckle: which scatterers its surfaces hold
-                               (`mitsonar.speckle`); the same seed, pose and scene give the same
-                               pattern whatever the render's path and electronics seeds
-    noise_floor      15.5      dB on the A/D level scale (the scale of ``ad_low``): the receiver's
-                               noise power, stationary in range, not moved by ``gain`` or TVG;
-                               ``-inf`` for none
-    ringdown         0.55      m, range at which the transducer's ring-down fades to ``ad_low``;
-                               0 for none
-    ringdown_level   40.0      dB on the A/D level scale at range 0; falls linearly in dB (an
-                               exponentially damped ringing) to ``ad_low`` at ``ringdown``;
-                               must exceed ``ad_low`` when ``ringdown > 0``
-    ================ ========= ====================================================================
+    ==================== ========= ====================================================================
+    field                default   meaning
+    ==================== ========= ====================================================================
+    source_level         200.0     dB re 1 uPa at 1 m: the head's on-axis source level (real heads
+                                   180..230; ``intensity`` is normalised to this source, 1 W/sr on
+                                   axis); 150..260 allowed
+    receiver_sensitivity -148.0    dB: the receiver's response referred to the A/D's dB scale
+                                   (``SL + receiver_sensitivity`` = 52 dB, the calibration constant
+                                   called ``source_level`` before version 0.3)
+    noise_level          42.0      dB re 1 uPa^2/Hz: ambient plus self noise at the receiver
+                                   (thermal noise at 700 kHz: `sonar_equation.ambient_noise_level`)
+    bandwidth            0.0       Hz, the receiver's bandwidth; 0 means ``1 / pulse_length``
+    tvg                  ``20log`` time-varying gain law: ``off``, ``20log``, ``30log``, ``40log``
+                                   (each plus ``2 absorption r``)
+    tvg_cap              40.0      dB, the TVG saturates here (thesis 2.1.2: "around 40 dB")
+    gain                 28.0      dB, receiver gain (SeaNet IGain 0x49)
+    ad_low               12.5      dB mapped to byte 0 (SeaNet ADLow)
+    ad_span              24.0      dB mapped onto 0..255 above ``ad_low`` (SeaNet ADSpan), > 0
+    bit_depth            8         8, or 4 (values 0..15 reported as multiples of 17)
+    pulse_length         100e-6    s, transmit pulse; spreads echoes over ``c pulse_length / 2`` in range
+    range_jitter         0.02      m, standard deviation of the Gaussian range jitter
+    speckle              rayleigh  ``off``, ``rayleigh`` (exponential intensity), ``weibull``
+    speckle_shape        1.2       Weibull shape k of the intensity speckle (``weibull`` only)
+    speckle_seed         0         the scene's speckle: which scatterers its surfaces hold
+                                   (`mitsonar.speckle`); the same seed, pose and scene give the same
+                                   pattern whatever the render's path and electronics seeds
+    noise_floor          15.5      dB on the A/D level scale (the scale of ``ad_low``): the receiver's
+                                   noise power, stationary in range, not moved by ``gain`` or TVG;
+                                   ``-inf`` for none
+    ringdown             0.55      m, range at which the transducer's ring-down fades to ``ad_low``;
+                                   0 for none
+    ringdown_level       40.0      dB on the A/D level scale at range 0; falls linearly in dB (an
+                                   exponentially damped ringing) to ``ad_low`` at ``ringdown``;
+                                   must exceed ``ad_low`` when ``ringdown > 0``
+    ==================== ========= ====================================================================
 
     Invalid settings raise ``ValueError`` naming the field, the value and what is allowed. These are
     the simulator's ranges; what a user gives a head (XML, ``--set``, `render_scan` overrides) is
