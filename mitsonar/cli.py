@@ -11,7 +11,7 @@ import os
 import sys
 import time
 
-from . import _files
+from mitsonar import _files
 
 EXIT_USAGE = 2
 EXIT_ERROR = 1
@@ -83,7 +83,7 @@ def _render(scene_path, spp, seed, max_depth=None, electronics=None, quiet=False
 
 
 def _plot(scan, path, kind="polar", ping=0, db=False, use="data", mesh=None):
-    from . import plots
+    from mitsonar.products import plots
 
     if kind == "polar":
         plots.plot_polar(scan, path, db=db, use=use)
@@ -125,7 +125,7 @@ def cmd_render(args):
         _check_output(args.plot, (".png", ".pdf", ".svg"))
     settings = _parse_settings(args.set)
     if settings:  # name the option in the message, and before the render
-        from .electronics import Electronics, check_head_settings
+        from mitsonar.receiver.electronics import Electronics, check_head_settings
 
         try:
             check_head_settings(settings, "--set")
@@ -224,7 +224,7 @@ def cmd_demo(args):
         _plot(scan, cart, "cartesian", mesh=mesh)
         _plot(scan, ascan, "ascan", ping=scan.n_pings // 2 if scan.kind == "multibeam" else 0)  # the fan's centre row
         print(f"{name}: wrote {exr}, {polar}, {cart}, {ascan}")
-    from .survey_cli import demo_survey  # a survey scene with both heads along its track
+    from mitsonar.cli.survey import demo_survey  # a survey scene with both heads along its track
     print(f"harbour survey: wrote {', '.join(demo_survey(scenes, args.output, args.spp, args.seed, args.quiet))}")
     return 0
 
@@ -277,8 +277,8 @@ def build_parser():
     d.set_defaults(func=cmd_demo)
 
     # Subcommands of other parts of the product register themselves when present.
-    for mod in ("mitsonar.serial_cli", "mitsonar.map_cli", "mitsonar.compare_cli", "mitsonar.survey_cli", "mitsonar.export_cli",
-                "mitsonar.bathy_cli", "mitsonar.dataset.cli", "mitsonar.sonar_equation.report"):
+    for mod in ("mitsonar.cli.serial", "mitsonar.cli.map", "mitsonar.cli.compare", "mitsonar.cli.survey", "mitsonar.cli.export",
+                "mitsonar.cli.bathymetry", "mitsonar.cli.dataset", "mitsonar.sonar_equation.report"):
         try:
             m = importlib.import_module(mod)
         except ImportError:

@@ -14,7 +14,7 @@ import os
 import sys
 import time
 
-from ._files import StagedFiles
+from mitsonar._files import StagedFiles
 
 EXIT_ERROR = 1
 EXIT_USAGE = 2
@@ -107,9 +107,9 @@ def _expand_folders(paths) -> list:
 
 def _read_scans(paths):
     """(scans, None) or (None, the one-line reason) for the scan files and raw logs given."""
-    from mitsonar.io import load_scan  # lazily: reading scans needs no renderer
-    from mitsonar.rawlog import LOG_MAGIC
-    from mitsonar.recording import replay
+    from mitsonar.scan.io import load_scan  # lazily: reading scans needs no renderer
+    from mitsonar.devices.rawlog import LOG_MAGIC
+    from mitsonar.devices.recording import replay
 
     scans = []
     for path in paths:

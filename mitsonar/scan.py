@@ -13,11 +13,11 @@ from typing import Any
 
 import numpy as np
 
-from . import scanfile
+from mitsonar.scan import fileformat as scanfile
 
 # The frames' helpers live below the Scan (the sensor plugin uses them too); they stay
 # importable from here.
-from .frames import KINDS, SIDES, _not_rigid, bearing_rotation, check_rigid, check_rigid_stack  # noqa: F401
+from mitsonar.geometry.frames import KINDS, SIDES, _not_rigid, bearing_rotation, check_rigid, check_rigid_stack  # noqa: F401
 
 _RIGID = "only rigid transforms: rotation + translation, no scale, shear or mirror"
 
@@ -223,7 +223,7 @@ class Scan:
     @property
     def channel(self) -> np.ndarray | None:
         """(n_pings,) channel of each row of a side-scan scan, 0 port and 1 starboard (port rows
-        first); None for the other kinds. `mitsonar.sidescan.select_side` takes one side's rows."""
+        first); None for the other kinds. `mitsonar.products.sidescan.select_side` takes one side's rows."""
         if self.kind != "sidescan":
             return None
         return sidescan_channels(self.meta.get("side", "both"), self.n_pings)
@@ -253,7 +253,7 @@ class Scan:
         the transmit pulse as a boxcar of ones over ``c pulse_length / 2``, the source level and
         pulse from `electronics` (defaults where absent). Derived, not stored: it always agrees
         with the saved intensity and settings (`Electronics.echo_level`)."""
-        from .electronics import Electronics
+        from mitsonar.receiver.electronics import Electronics
 
         return Electronics.from_dict(self.electronics, "Scan 'electronics'").echo_level(
             self.intensity, self.ranges, self.sound_speed)
@@ -267,8 +267,8 @@ class Scan:
             return float(self.meta["directivity_index"])
         if self.beam_pattern == "table":
             raise ScanFieldError("meta", "a 'table' beam pattern's directivity_index is not recorded")
-        from .plugins.beam import BeamPattern
-        from .variant import ensure_variant
+        from mitsonar.plugins.beam import BeamPattern
+        from mitsonar.sim.variant import ensure_variant
 
         ensure_variant()
         sinc = self.beam_pattern == "sinc"
@@ -282,8 +282,8 @@ class Scan:
     def noise_band_level(self) -> float:
         """dB re 1 uPa: ``NL + 10 log10 B - DI``, the receiver's noise in its band after the
         beam's directivity (``noise_level`` and ``bandwidth`` from `electronics`)."""
-        from .electronics import Electronics
-        from .sonar_equation.levels import noise_band_level
+        from mitsonar.receiver.electronics import Electronics
+        from mitsonar.sonar_equation.levels import noise_band_level
 
         e = Electronics.from_dict(self.electronics, "Scan 'electronics'")
         return noise_band_level(e.noise_level, e.receiver_bandwidth(self.bin_width, self.sound_speed),
@@ -297,7 +297,7 @@ class Scan:
 
     def save(self, path) -> None:
         """Write the scan losslessly to ``.exr`` (range-intensity image, lossless header) or ``.npz``
-        (chosen by the extension), atomically; the format is described in `mitsonar.scanfile`.
+        (chosen by the extension), atomically; the format is described in `mitsonar.scan.fileformat`.
 
         Raises `ScanFileError` (a ValueError naming the file) for an unknown extension, a path
         that is a directory or in a missing folder, an empty scan, a field that `Scan` does not

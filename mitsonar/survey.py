@@ -16,9 +16,9 @@ import sys
 
 import numpy as np
 
-from .render import SEED_MAX, _integrator, _whole, moving_head_poses, render_scan
-from .scene import SceneError, sonar_of
-from .trajectory import Trajectory
+from mitsonar.sim.render import SEED_MAX, _integrator, _whole, moving_head_poses, render_scan
+from mitsonar.sim.scene import SceneError, sonar_of
+from mitsonar.geometry.trajectory import Trajectory
 
 SCAN_NAME = "scan_{:05d}{}"
 TRAJECTORY_NAME = "trajectory.tum"

@@ -179,7 +179,7 @@ def test_snr_is_echo_level_minus_noise_in_band(mitsonar_mod):
 # ----------------------------------------------------------------------------- electronics, files
 
 def test_default_bytes_keep_the_old_calibration(mitsonar_mod):
-    from mitsonar.electronics import Electronics, apply_to_scan
+    from mitsonar.receiver.electronics import Electronics, apply_to_scan
 
     e = Electronics()
     assert e.source_level + e.receiver_sensitivity == 52.0
@@ -200,7 +200,7 @@ def test_default_bytes_keep_the_old_calibration(mitsonar_mod):
 @pytest.mark.parametrize("name", ["old_levels_scan.npz", "old_levels_scan.exr"])
 def test_files_from_before_levels_load_with_the_old_constant_split(mitsonar_mod, name):
     # Written by mitsonar 0.2 (source_level = 52, the calibration constant; no receiver_sensitivity).
-    from mitsonar.electronics import apply_to_scan
+    from mitsonar.receiver.electronics import apply_to_scan
 
     scan = mitsonar_mod.load_scan(os.path.join(DATA, name))
     assert scan.electronics["source_level"] == 200.0
@@ -228,7 +228,7 @@ def test_echo_level_round_trips_and_is_derived(mitsonar_mod, tmp_path):
 
 
 def test_a_source_level_below_150_db_is_explained():
-    from mitsonar.electronics import Electronics
+    from mitsonar.receiver.electronics import Electronics
 
     with pytest.raises(ValueError) as err:
         Electronics(source_level=52.0)
@@ -256,7 +256,7 @@ def test_xml_and_set_source_level_below_150_db_give_one_line(mitsonar_mod, tmp_p
 
 
 def test_presets_carry_source_levels_and_keep_the_calibration(mitsonar_mod):
-    from mitsonar import echosounders
+    from mitsonar.scenes import echosounders
     from mitsonar.plugins.sidescan_heads import PRESETS
 
     for p in PRESETS.values():

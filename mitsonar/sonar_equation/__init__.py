@@ -3,10 +3,10 @@
 ``EL = SL - (40 log10 r + 2 alpha r) + TS``, ``SNR = EL - (NL + 10 log10 B - DI)``; see
 `mitsonar.sonar_equation.levels` for the conventions and `sonar_equation_report` for the table.
 """
-from .levels import (CALIBRATION_DB, DEFAULT_NOISE_LEVEL, DEFAULT_RECEIVER_SENSITIVITY, DEFAULT_SOURCE_LEVEL,
+from mitsonar.sonar_equation.levels import (CALIBRATION_DB, DEFAULT_NOISE_LEVEL, DEFAULT_RECEIVER_SENSITIVITY, DEFAULT_SOURCE_LEVEL,
                      SOURCE_LEVELS, ambient_noise_level, echo_level, migrate_settings, noise_band_level,
                      phong_sphere_cross_section, pulse_boxcar, transmission_loss)
-from .report import plot_levels, sonar_equation_report
+from mitsonar.sonar_equation.report import plot_levels, sonar_equation_report
 
 __all__ = ["CALIBRATION_DB", "DEFAULT_NOISE_LEVEL", "DEFAULT_RECEIVER_SENSITIVITY", "DEFAULT_SOURCE_LEVEL",
            "SOURCE_LEVELS", "ambient_noise_level", "echo_level", "migrate_settings", "noise_band_level",

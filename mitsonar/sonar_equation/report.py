@@ -16,7 +16,7 @@ import os
 
 import numpy as np
 
-from .levels import transmission_loss
+from mitsonar.sonar_equation.levels import transmission_loss
 
 #: Echoes nearer than this are left out of "the strongest echo" (TL -> -inf at r -> 0).
 MIN_RANGE = 0.05
@@ -73,7 +73,7 @@ def sonar_equation_report(scene_or_scan, *, spp: int = 256, seed: int = 0, senso
     ``sensor`` and other keywords) or for a `Scan` (or a scan file's path: ``.exr``/``.npz``; a
     scene XML path is loaded)."""
     scan = _scan_of(scene_or_scan, spp, seed, sensor, render_kw)
-    from ..electronics import Electronics
+    from mitsonar.receiver.electronics import Electronics
 
     e = Electronics.from_dict(scan.electronics, "Scan 'electronics'")
     el = scan.echo_level
@@ -100,7 +100,7 @@ def sonar_equation_report(scene_or_scan, *, spp: int = 256, seed: int = 0, senso
 
 
 def _scan_of(obj, spp, seed, sensor, render_kw):
-    from ..scan import Scan
+    from mitsonar.scan import Scan
 
     if isinstance(obj, Scan):
         return obj
@@ -108,10 +108,10 @@ def _scan_of(obj, spp, seed, sensor, render_kw):
         path = os.fspath(obj)
         if os.path.splitext(path)[1].lower() in (".exr", ".npz"):
             return Scan.load(path)
-        from ..scene import load_scene
+        from mitsonar.sim.scene import load_scene
 
         obj = load_scene(path)
-    from ..render import render_scan
+    from mitsonar.sim.render import render_scan
 
     return render_scan(obj, spp=spp, seed=seed, sensor=sensor, **render_kw)
 
@@ -122,7 +122,7 @@ def plot_levels(report: SonarEquationReport, path=None, ping=None):
     Written to ``path`` (``.png``/``.pdf``/``.svg``) when given; returns the matplotlib Figure."""
     from matplotlib.figure import Figure
 
-    from ..plots import _save
+    from mitsonar.products.plots import _save
 
     el = np.asarray(report.echo_level, dtype=np.float64)
     if ping is None:
