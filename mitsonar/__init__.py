@@ -22,6 +22,7 @@ from mitsonar.sim.scene import SceneError, load_scene  # noqa: E402
 from mitsonar.sim.survey import render_survey  # noqa: E402
 from mitsonar.jobs.dataset.store import open_dataset  # noqa: E402
 from mitsonar.scenes.examples import example_scene, example_scenes  # noqa: E402
+from mitsonar.sonar_equation import sonar_equation_report  # noqa: E402
 from mitsonar.geometry.trajectory import Trajectory, TrajectoryError  # noqa: E402
 from mitsonar.sim.variant import VariantError, init_on_import, set_variant, variant  # noqa: E402
 
@@ -55,4 +56,4 @@ def __getattr__(name):
 
 __all__ = ["Scan", "SceneError", "Trajectory", "TrajectoryError", "VariantError", "example_scene",
            "example_scenes", "load_scan", "load_scene", "open_dataset", "render_scan", "render_survey",
-           "scan_parameters", "scene_mesh", "set_variant", "variant", "__version__", *_LAZY]
+           "scan_parameters", "scene_mesh", "set_variant", "sonar_equation_report", "variant", "__version__", *_LAZY]

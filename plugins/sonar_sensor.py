@@ -91,7 +91,8 @@ class SonarSensor(mi.Sensor):
     tx_beamwidth_v   beamwidth_v  deg, full -3 dB width of the fan along the scan axis
     aperture_h/_v    derived      m (``sinc``); from the beam widths when absent
     electronics      see below    the fields of ``mitsonar.receiver.electronics.Electronics``
-                                  (``source_level``, ``tvg``, ``gain``, ``ad_low``, ...)
+                                  (``source_level`` in dB re 1 uPa at 1 m,
+                                  ``receiver_sensitivity``, ``noise_level``, ``tvg``, ``gain``, ...)
     ================ ============ ===============================================================
     """
 
@@ -153,6 +154,8 @@ class SonarSensor(mi.Sensor):
             if f.name in props:
                 kind = f.type if isinstance(f.type, str) else f.type.__name__
                 elec[f.name] = read[kind](props, f.name, None, "sonar")
+            elif f.name in preset:   # a side-scan preset's source level, sensitivity, noise
+                elec[f.name] = preset[f.name]
         self.electronics = elec
         self._check()
         check_head_settings(elec, "sonar")             # the head's ranges, then the model's checks

@@ -8,7 +8,9 @@ The chain follows thesis sections 2.1.2 and 2.4.1 and the Tritech Micron's conve
    echo marks the true range, the pulse trails behind it) and a Gaussian range jitter of standard
    deviation ``range_jitter``. The kernel sums to one, so energy is conserved except what is
    pushed past ``range_max`` (dropped, like any echo outside the window).
-2. **Level.** ``level_db = 10 log10(I) + source_level + gain + TVG(r)``, with
+2. **Level.** ``level_db = 10 log10(I) + source_level + receiver_sensitivity + gain + TVG(r)``
+   (``source_level`` in dB re 1 uPa at 1 m, ``receiver_sensitivity`` the receiver's response
+   referred to the A/D's dB scale; ``I`` the pulse-spread intensity of step 1), with
    ``TVG(r) = min(n log10 r + 2 absorption r, tvg_cap)`` for the ``20log``/``30log``/``40log``
    laws and 0 for ``off``.
 3. **Speckle.** The echo's amplitude is multiplied by the scene's complex speckle ``g`` (mean
@@ -39,10 +41,13 @@ The input intensity is never modified.
 Default settings (Micron-like). The A/D window ``ad_low = 12.5 dB``, ``ad_span = 24 dB`` and
 ``gain = 28 dB`` are the SeaNet typical values (ADLow byte 40, ADSpan byte 77, IGain 0x49 on the
 0..80 dB scale); TVG ``20log`` capped at 40 dB is the thesis's law (2.1.2) and compensates the
-1/r^2 of an extended echo; ``source_level`` is the calibration constant that puts a diffuse
+1/r^2 of an extended echo; ``source_level + receiver_sensitivity`` (200 - 148 = 52 dB; before
+version 0.3 the sum was one calibration constant called ``source_level``) puts a diffuse
 concrete wall at 4 m (about 1e-5 per bin, 42 dB) above the top of the window and grazing floor
-echoes (1e-7..1e-6, 22..32 dB at 4 m) inside it; a 100 us pulse (the Micron's short-range
-setting: 7.5 cm) and 2 cm jitter blur echoes over a few bins. The receiver's noise floor
+echoes (1e-7..1e-6, 22..32 dB at 4 m) inside it (`mitsonar.sonar_equation.levels` says where
+200 and -148 come from: the Micron's source level is not published; ``noise_level`` and
+``bandwidth`` are the receiver's acoustic noise, which `Scan.snr` compares echoes with, not the
+bytes' ``noise_floor`` below); a 100 us pulse (the Micron's short-range setting: 7.5 cm) and 2 cm jitter blur echoes over a few bins. The receiver's noise floor
 (15.5 dB, 3 dB above ``ad_low``) and the ring-down (40 dB at the transducer, fading to ``ad_low``
 at 0.55 m: an amplitude decay time ``tau = 2 x 0.55 m / c x 8.69 / 27.5 dB = 0.23 ms``) are fitted
 to the byte statistics of public recordings of a real Micron (200 bins, 10-20 m, harbour and tank
@@ -61,6 +66,8 @@ from typing import Any
 import numpy as np
 
 from mitsonar._checks import is_number, not_a, not_allowed
+from mitsonar.sonar_equation.levels import (DEFAULT_NOISE_LEVEL, DEFAULT_RECEIVER_SENSITIVITY, DEFAULT_SOURCE_LEVEL,
+                                    SOURCE_LEVELS, echo_level, source_level_error)
 
 TVG_LAWS = {"off": 0, "20log": 20, "30log": 30, "40log": 40}
 SPECKLE_MODELS = ("off", "rayleigh", "weibull")
@@ -85,42 +92,51 @@ MIN_TVG_RANGE = 1e-3
 class Electronics:
     """Device-electronics settings of a sonar head (the ``sonar`` sensor's electronics fields).
 
-    ================ ========= ====================================================================
-    field            default   meaning
-    ================ ========= ====================================================================
-    source_level     52.0      dB added to ``10 log10(intensity)``: source level plus receiver
-                               sensitivity, referred to the A/D's dB scale (a calibration constant;
-                               ``intensity`` is normalised to 1 W/sr on axis)
-    tvg              ``20log`` time-varying gain law: ``off``, ``20log``, ``30log``, ``40log``
-                               (each plus ``2 absorption r``)
-    tvg_cap          40.0      dB, the TVG saturates here (thesis 2.1.2: "around 40 dB")
-    gain             28.0      dB, receiver gain (SeaNet IGain 0x49)
-    ad_low           12.5      dB mapped to byte 0 (SeaNet ADLow)
-    ad_span          24.0      dB mapped onto 0..255 above ``ad_low`` (SeaNet ADSpan), > 0
-    bit_depth        8         8, or 4 (values 0..15 reported as multiples of 17)
-    pulse_length     100e-6    s, transmit pulse; spreads echoes over ``c pulse_length / 2`` in range
-    range_jitter     0.02      m, standard deviation of the Gaussian range jitter
-    speckle          rayleigh  ``off``, ``rayleigh`` (exponential intensity), ``weibull``
-    speckle_shape    1.2       Weibull shape k of the intensity speckle (``weibull`` only)
-    speckle_seed     0         the scene's speckle: which scatterers its surfaces hold
-                               (`mitsonar.receiver.speckle`); the same seed, pose and scene give the same
-                               pattern whatever the render's path and electronics seeds
-    noise_floor      15.5      dB on the A/D level scale (the scale of ``ad_low``): the receiver's
-                               noise power, stationary in range, not moved by ``gain`` or TVG;
-                               ``-inf`` for none
-    ringdown         0.55      m, range at which the transducer's ring-down fades to ``ad_low``;
-                               0 for none
-    ringdown_level   40.0      dB on the A/D level scale at range 0; falls linearly in dB (an
-                               exponentially damped ringing) to ``ad_low`` at ``ringdown``;
-                               must exceed ``ad_low`` when ``ringdown > 0``
-    ================ ========= ====================================================================
+    ==================== ========= ====================================================================
+    field                default   meaning
+    ==================== ========= ====================================================================
+    source_level         200.0     dB re 1 uPa at 1 m: the head's on-axis source level (real heads
+                                   180..230; ``intensity`` is normalised to this source, 1 W/sr on
+                                   axis); 150..260 allowed
+    receiver_sensitivity -148.0    dB: the receiver's response referred to the A/D's dB scale
+                                   (``SL + receiver_sensitivity`` = 52 dB, the calibration constant
+                                   called ``source_level`` before version 0.3)
+    noise_level          42.0      dB re 1 uPa^2/Hz: ambient plus self noise at the receiver
+                                   (thermal noise at 700 kHz: `sonar_equation.ambient_noise_level`)
+    bandwidth            0.0       Hz, the receiver's bandwidth; 0 means ``1 / pulse_length``
+    tvg                  ``20log`` time-varying gain law: ``off``, ``20log``, ``30log``, ``40log``
+                                   (each plus ``2 absorption r``)
+    tvg_cap              40.0      dB, the TVG saturates here (thesis 2.1.2: "around 40 dB")
+    gain                 28.0      dB, receiver gain (SeaNet IGain 0x49)
+    ad_low               12.5      dB mapped to byte 0 (SeaNet ADLow)
+    ad_span              24.0      dB mapped onto 0..255 above ``ad_low`` (SeaNet ADSpan), > 0
+    bit_depth            8         8, or 4 (values 0..15 reported as multiples of 17)
+    pulse_length         100e-6    s, transmit pulse; spreads echoes over ``c pulse_length / 2`` in range
+    range_jitter         0.02      m, standard deviation of the Gaussian range jitter
+    speckle              rayleigh  ``off``, ``rayleigh`` (exponential intensity), ``weibull``
+    speckle_shape        1.2       Weibull shape k of the intensity speckle (``weibull`` only)
+    speckle_seed         0         the scene's speckle: which scatterers its surfaces hold
+                                   (`mitsonar.receiver.speckle`); the same seed, pose and scene give the same
+                                   pattern whatever the render's path and electronics seeds
+    noise_floor          15.5      dB on the A/D level scale (the scale of ``ad_low``): the receiver's
+                                   noise power, stationary in range, not moved by ``gain`` or TVG;
+                                   ``-inf`` for none
+    ringdown             0.55      m, range at which the transducer's ring-down fades to ``ad_low``;
+                                   0 for none
+    ringdown_level       40.0      dB on the A/D level scale at range 0; falls linearly in dB (an
+                                   exponentially damped ringing) to ``ad_low`` at ``ringdown``;
+                                   must exceed ``ad_low`` when ``ringdown > 0``
+    ==================== ========= ====================================================================
 
     Invalid settings raise ``ValueError`` naming the field, the value and what is allowed. These are
     the simulator's ranges; what a user gives a head (XML, ``--set``, `render_scan` overrides) is
     also held to the head's own (`HEAD_LIMITS`: gain and A/D window within 0..80 dB).
     """
 
-    source_level: float = 52.0
+    source_level: float = DEFAULT_SOURCE_LEVEL
+    receiver_sensitivity: float = DEFAULT_RECEIVER_SENSITIVITY
+    noise_level: float = DEFAULT_NOISE_LEVEL
+    bandwidth: float = 0.0
     tvg: str = "20log"
     tvg_cap: float = 40.0
     gain: float = 28.0
@@ -181,8 +197,13 @@ class Electronics:
             if not math.isfinite(getattr(self, name)):
                 bad(name, getattr(self, name), "a finite number")
 
-        for name in ("source_level", "tvg_cap", "gain", "ad_low", "ringdown_level"):
+        for name in ("source_level", "receiver_sensitivity", "noise_level", "tvg_cap", "gain", "ad_low",
+                     "ringdown_level"):
             finite(name)
+        if not SOURCE_LEVELS[0] <= self.source_level <= SOURCE_LEVELS[1]:
+            raise ValueError(source_level_error(source, self.source_level))
+        if not (math.isfinite(self.bandwidth) and self.bandwidth >= 0):
+            bad("bandwidth", self.bandwidth, "a bandwidth >= 0 Hz (0: 1 / pulse_length)")
         if self.tvg not in TVG_LAWS:
             bad("tvg", self.tvg, "one of " + ", ".join(TVG_LAWS))
         if not (math.isfinite(self.ad_span) and self.ad_span > 0):
@@ -328,6 +349,24 @@ class Electronics:
             return inten
         kernel = self.range_kernel(bin_width, sound_speed)
         return _convolve_range(inten, kernel) if kernel.size > 1 else inten
+
+    def echo_level(self, intensity, ranges, sound_speed: float = 1500.0) -> np.ndarray:
+        """The noise-free echo level at the receiver, dB re 1 uPa, per bin (``Scan.echo_level``):
+        `mitsonar.sonar_equation.echo_level` with this head's ``source_level`` and
+        ``pulse_length`` (float32, ``-inf`` where no echo)."""
+        _bin_width(ranges)   # evenly spaced, or a clear error
+        return echo_level(intensity, ranges, self.source_level, self.pulse_length, sound_speed)
+
+    def receiver_bandwidth(self, bin_width: float = 0.0, sound_speed: float = 1500.0) -> float:
+        """Hz: ``bandwidth``, else ``1 / pulse_length`` (a matched CW pulse), else (no pulse) the
+        bandwidth ``c / (2 bin_width)`` of one range bin."""
+        if self.bandwidth > 0:
+            return self.bandwidth
+        if self.pulse_length > 0:
+            return 1.0 / self.pulse_length
+        if bin_width > 0:
+            return sound_speed / (2.0 * bin_width)
+        raise ValueError("electronics: no bandwidth (bandwidth 0, pulse_length 0 and no range bins)")
 
     def speckle_factors(self, shape, rng: np.random.Generator, corr_bins: np.ndarray | None = None) -> np.ndarray:
         """Mean-one multiplicative speckle of the given ``(n_pings, n_bins)`` shape.
@@ -475,7 +514,10 @@ class Electronics:
         corr = pulse if pulse.size > 1 else None
         inten = self.spread(inten, ranges, sound_speed)
 
-        chain = self.source_level + self.gain + self.tvg_db(ranges, absorption)  # dB, per bin
+        # SL + sensitivity first: with the defaults (200 - 148) it is exactly the old constant 52,
+        # so the same floating-point operations as before give the same bytes.
+        calibration = self.source_level + self.receiver_sensitivity
+        chain = calibration + self.gain + self.tvg_db(ranges, absorption)  # dB, per bin
         if self.speckle == "off":
             g = np.ones(inten.shape)
         else:
@@ -490,7 +532,7 @@ class Electronics:
         else:
             total = self._received_power(inten, g, chain, ranges, rng, corr)
         with np.errstate(divide="ignore"):
-            level = 10.0 * np.log10(total) + self.source_level + self.gain + self.tvg_db(ranges, absorption)
+            level = 10.0 * np.log10(total) + calibration + self.gain + self.tvg_db(ranges, absorption)
         data = self.quantise(level)
         return data[0] if one_ping else data
 
@@ -498,7 +540,7 @@ class Electronics:
         """``|sqrt(I) g + sqrt(R) + sqrt(N) n|^2`` referred back through ``chain`` (see `apply`)."""
         amplitude = np.sqrt(inten) * g
         # The background is referred back through the chain so that the noise-free path is exactly
-        # 10 log10(I) + source_level + gain + TVG.
+        # 10 log10(I) + source_level + receiver_sensitivity + gain + TVG.
         if self.ringdown > 0:
             amplitude = amplitude + np.sqrt(10.0 ** ((self.ringdown_db(ranges) - chain) / 10.0))
         if self.noise_floor > -math.inf:

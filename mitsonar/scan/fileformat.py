@@ -31,7 +31,10 @@ poses               ``n_pings`` x 4 x 4 nested lists (world transform of each pi
 times               list of floats: seconds of each ping from the scan start (absent in files
                     written before scans had times: they load with times None, i.e. zeros)
 range_min/max, beam_pattern, beamwidth_h, beamwidth_v, kind, sound_speed, absorption
-electronics, meta   the Scan's dicts (numpy arrays, numpy scalars and tuples are tagged and restored)
+electronics, meta   the Scan's dicts (numpy arrays, numpy scalars and tuples are tagged and restored);
+                    an ``electronics`` written before mitsonar 0.3 (a ``source_level`` below 150 dB
+                    and no ``receiver_sensitivity``: the old calibration constant) is read as
+                    source level 200 dB and the sensitivity that keeps their sum
 checksums           CRC-32 of the intensity (float32, little endian) and data (uint8) bytes
 =================== ====================================================================================
 
@@ -56,6 +59,7 @@ from typing import Any
 import numpy as np
 
 from mitsonar._files import replacing
+from mitsonar.sonar_equation.levels import migrate_settings
 
 FORMAT = "mitsonar-scan"
 FORMAT_VERSION = 1
@@ -257,7 +261,8 @@ def _build(path: str, head: dict[str, Any], intensity, data, arrays: dict[str, A
     try:
         n_pings, n_bins = head["n_pings"], head["n_bins"]
         scalars = {name: _decode(head[name]) for name in _SCALARS}
-        electronics = _decode(head["electronics"])
+        # Files from before mitsonar 0.3 hold the calibration constant as 'source_level'.
+        electronics = migrate_settings(_decode(head["electronics"]))
         meta = _decode(head["meta"])
         checks = head["checksums"]
     except (KeyError, TypeError, ValueError) as exc:

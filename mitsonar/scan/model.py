@@ -246,6 +246,55 @@ class Scan:
         """(n_pings, 3) world transducer position of each ping."""
         return self.poses[:, :3, 3]
 
+    @property
+    def echo_level(self) -> np.ndarray:
+        """float32 (n_pings, n_bins): the noise-free echo level at the receiver, dB re 1 uPa, per
+        bin (``-inf`` where no echo): ``source_level + 10 log10`` of `intensity` convolved with
+        the transmit pulse as a boxcar of ones over ``c pulse_length / 2``, the source level and
+        pulse from `electronics` (defaults where absent). Derived, not stored: it always agrees
+        with the saved intensity and settings (`Electronics.echo_level`)."""
+        from mitsonar.receiver.electronics import Electronics
+
+        return Electronics.from_dict(self.electronics, "Scan 'electronics'").echo_level(
+            self.intensity, self.ranges, self.sound_speed)
+
+    @property
+    def directivity_index(self) -> float:
+        """dB, the receive beam's ``10 log10(4 pi / Int B)``: recorded by `render_scan` in
+        ``meta['directivity_index']``, else computed from `beam_pattern` and its widths (and
+        ``meta['frequency']``, ``meta['aperture_h']`` for ``sinc``)."""
+        if "directivity_index" in self.meta:
+            return float(self.meta["directivity_index"])
+        if self.beam_pattern == "table":
+            raise ScanFieldError("meta", "a 'table' beam pattern's directivity_index is not recorded")
+        from mitsonar.plugins.beam import BeamPattern
+        from mitsonar.sim.variant import ensure_variant
+
+        ensure_variant()
+        sinc = self.beam_pattern == "sinc"
+        beam = BeamPattern(self.beam_pattern, self.beamwidth_h, self.beamwidth_v,
+                           float(self.meta.get("frequency", 700e3)),
+                           float(self.meta["aperture_h"]) if sinc and "aperture_h" in self.meta else None,
+                           None, self.sound_speed)
+        return beam.directivity_index()
+
+    @property
+    def noise_band_level(self) -> float:
+        """dB re 1 uPa: ``NL + 10 log10 B - DI``, the receiver's noise in its band after the
+        beam's directivity (``noise_level`` and ``bandwidth`` from `electronics`)."""
+        from mitsonar.receiver.electronics import Electronics
+        from mitsonar.sonar_equation.levels import noise_band_level
+
+        e = Electronics.from_dict(self.electronics, "Scan 'electronics'")
+        return noise_band_level(e.noise_level, e.receiver_bandwidth(self.bin_width, self.sound_speed),
+                                self.directivity_index)
+
+    @property
+    def snr(self) -> np.ndarray:
+        """float32 (n_pings, n_bins), dB: ``echo_level - (NL + 10 log10 B - DI)`` per bin (the
+        active sonar equation's signal-to-noise ratio, Urick 1983, eq. 2.2); ``-inf`` where no echo."""
+        return (self.echo_level - np.float32(self.noise_band_level)).astype(np.float32)
+
     def save(self, path) -> None:
         """Write the scan losslessly to ``.exr`` (range-intensity image, lossless header) or ``.npz``
         (chosen by the extension), atomically; the format is described in `mitsonar.scan.fileformat`.

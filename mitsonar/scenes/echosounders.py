@@ -30,6 +30,13 @@ Published figures (frequency, beam count, beam widths, swath), and where they co
 ``tritech_pa500`` Tritech PA500 altimeter: 500 kHz, 6 deg conical beam, 0.1 to 50 m, 1 mm
                   resolution (Tritech PA500 data sheet).
 
+Source levels (``source_level``, dB re 1 uPa at 1 m) are typical values, not found in the sheets
+cited above: 215 dB for the two multibeams (high-frequency MBES: 200..230 dB, Lurton, *An
+Introduction to Underwater Acoustics*, 2nd ed. 2010, sec. 8.3), 205 dB for the altimeter. Each
+preset's ``receiver_sensitivity`` is ``52 - source_level`` (the shared A/D calibration, so the
+bytes are as before levels had units) and its ``noise_level`` the ambient noise at its frequency
+(`mitsonar.sonar_equation.ambient_noise_level`, wind 5 m/s, rounded).
+
 Figures marked "data sheet" are as the makers publish them but were not re-checked against the
 sheet for this module. The range bin (``bin_width``) is a simulation choice near the heads' range
 resolution ``c / (2 bandwidth)`` (1.25 cm for a 60 kHz bandwidth), not a published figure. The
@@ -49,6 +56,7 @@ import math
 import numpy as np
 
 from mitsonar._checks import is_number, is_whole, not_allowed
+from mitsonar.sonar_equation.levels import CALIBRATION_DB
 
 WHERE = "echosounder"
 
@@ -77,6 +85,8 @@ class EchoSounder:
     range_max: float       # default end of the range window
     bin_width: float       # range bin (a simulation choice, see the module docstring)
     source: str
+    source_level: float = 215.0    # dB re 1 uPa at 1 m (typical: see the module docstring)
+    noise_level: float = 37.0      # dB re 1 uPa^2/Hz, ambient at the frequency
 
 
 PRESETS = {
@@ -88,7 +98,7 @@ PRESETS = {
         40.0, 0.0125, "Kongsberg Maritime EM 2040 product leaflet; EM 2040 data sheet"),
     "tritech_pa500": EchoSounder(
         "tritech_pa500", "Tritech PA500 altimeter", "altimeter", 500e3, 1, 6.0, 6.0, 0.0, (0.0, 0.0),
-        50.0, 0.001, "Tritech PA500 data sheet"),
+        50.0, 0.001, "Tritech PA500 data sheet", source_level=205.0, noise_level=39.0),
 }
 
 
@@ -181,7 +191,8 @@ def configure(name, *, swath=None, n_beams=None, range_min=None, range_max=None,
 
     check_rigid(mount, f"{WHERE} 'mount'")
     params = dict(range_min=float(range_min), range_max=float(range_max), n_bins=int(n_bins),
-                  sound_speed=float(sound_speed), beam_pattern="gaussian")
+                  sound_speed=float(sound_speed), beam_pattern="gaussian", source_level=s.source_level,
+                  receiver_sensitivity=CALIBRATION_DB - s.source_level, noise_level=s.noise_level)
     if multibeam:
         n = int(n_beams)
         params.update(kind="multibeam", n_pings=n, bearing_start=-swath / 2.0, bearing_step=swath / (n - 1),

@@ -219,6 +219,7 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
         "frequency": float(sonar.beam.frequency),
         "speckle": "scene",
         "aperture_h": float(sonar.beam.across_aperture()),
+        "directivity_index": float(sonar.beam.directivity_index()),   # the receive beam's, for Scan.snr
     }
     if trajectory is not None:
         meta["start_time"] = start_time
