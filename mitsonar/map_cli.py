@@ -50,6 +50,7 @@ def add_subcommands(subparsers) -> None:
                                        "rasterio, or .npz with 'elevation' and its 'transform')")
     m.add_argument("--elevation-resolution", type=float, default=0.25, help="elevation grid cell in metres")
     m.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    m.add_argument("--force", action="store_true", help="overwrite existing outputs")
     m.set_defaults(func=cmd_map)
 
 
@@ -253,6 +254,9 @@ def _write(args, hm, n_scans: int, V, F, outputs: StagedFiles) -> int:
     """Write the map, mesh and plot under temporary names; 0, or the exit code of a failure."""
     from hilbertmap import write_mesh
 
+    from ._cliutil import warn_overwrite
+
+    warn_overwrite([args.output, args.mesh, args.plot, getattr(args, "elevation", None)], args.force)
     option, path = "-o", args.output
     try:
         hm.save(outputs.temporary(args.output))
