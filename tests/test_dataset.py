@@ -271,7 +271,7 @@ def test_bad_config_on_the_command_line_writes_nothing(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["dataset", str(cfg), "-o", str(out), "-q"]) == 1
     err = capsys.readouterr().err.strip()
-    assert err.startswith("mitsonar: error: dataset config 'scenes[0].xml': scene file") and "\n" not in err
+    assert err.startswith(f"mitsonar: error: dataset config 'scenes[0].xml' ({cfg} line 2): scene file") and "\n" not in err
     assert not out.exists()
 
 
