@@ -111,7 +111,7 @@ def pick_sensor(scene, sensor=None, option="--sensor"):
     listing = sensor_list(scene)
     if sensor is None:
         if not sonars:
-            raise SceneError(f'{name}: needs a <sensor type="sonar"> (sensors: {listing})')
+            raise SceneError(f'{name}: needs a <sensor type="sonar"> (sensors found: {listing})')
         chosen = sonars[0]
         if len(sonars) > 1:
             warnings.warn(f"{name} has {len(sonars)} sonar sensors ({listing}); rendering "

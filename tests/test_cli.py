@@ -80,7 +80,7 @@ def test_render_plot_info_round_trip(tmp_path, mitsonar_mod):
     (["plot", "{tmp}/scan.npz", "-o", "{tmp}/a.png", "--kind", "ascan", "--ping", "999"], "--ping 999"),
     # Checked before the render: outputs, options, seeds.
     (["render", BOX, "-o", "{tmp}/dir.exr"], "output '{tmp}/dir.exr' is a directory"),
-    (["render", BOX, "-o", "{tmp}/a.exr", "--seed", "4294967296"], "'seed': 4294967296 is not allowed (a whole number from 0 to 4294967295)"),
+    (["render", BOX, "-o", "{tmp}/a.exr", "--seed", "4294967296"], "--seed 4294967296: not allowed (a whole number from 0 to 4294967295)"),
     (["render", BOX, "-o", "{tmp}/a.exr", "--set", "gian=3"], "--set 'gian' is not an electronics setting (known: source_level"),
     (["demo", "-o", "{tmp}/garbage.exr/out"], "cannot create the output folder"),
     (["compare", BOX, "-o", "{tmp}/garbage.exr/cmp"], "cannot create the output folder"),
