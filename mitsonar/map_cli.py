@@ -17,7 +17,9 @@ import time
 from ._files import StagedFiles
 
 EXIT_ERROR = 1
-EXIT_USAGE = 2
+# A value argparse accepted but this command refuses is a validation error, exit 1 like every other
+# command's (README, "Exit codes"); only argparse's own errors exit 2.
+EXIT_USAGE = EXIT_ERROR
 
 
 def add_subcommands(subparsers) -> None:

@@ -282,6 +282,8 @@ def test_overwriting_warns_for_one_release_and_force_silences_it(tmp_path, mitso
     (["render", BOX], 2),                                    # argparse: -o missing
     (["plot", "x.npz", "-o", "x.png", "--kind", "fan"], 2),  # argparse: not a choice
     (["render", BOX, "-o", "{tmp}/a.npz", "--spp", "0"], 1),  # validation
+    (["map", BOX, "-o", "{tmp}/m.npz", "--inducing", "0"], 1),
+    (["map", BOX, "-o", "{tmp}/m.txt"], 1),
     (["survey", BOX, "-o", "{tmp}/s", "--lawnmower", "0", "1", "0", "1", "--depth", "1", "--max-scans", "0"], 1),
     (["bathymetry", BOX, "-o", "{tmp}/b", "--lawnmower", "0", "1", "0", "1", "--depth", "1", "--sensor", "0",
       "--beams", "8"], 1),
