@@ -26,7 +26,8 @@ def warn_overwrite(paths, force) -> None:
     overwritten this release; from the next one the command will refuse them without ``--force``."""
     existing = [os.fspath(p) for p in paths if p and os.path.exists(p)]
     if existing and not force:
-        what = existing[0] if len(existing) == 1 else ", ".join(existing)
+        what = (existing[0] if len(existing) == 1 else " and ".join(existing) if len(existing) == 2
+                else f"{existing[0]} and {len(existing) - 1} more outputs")
         verb = "exists" if len(existing) == 1 else "exist"
         warnings.warn(f"{what} {verb}; overwriting; from the next release this needs --force", FutureWarning,
                       stacklevel=2)

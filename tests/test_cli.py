@@ -368,3 +368,21 @@ def test_failed_bathymetry_leaves_no_empty_folder(tmp_path):
                "-q", "-o", str(out))
     assert_one_line_error(proc, "no bottom in range")
     assert not (tmp_path / "new").exists()
+
+
+def test_overwrite_warning_is_one_line_for_many_outputs(tmp_path):
+    import warnings
+
+    from mitsonar._cliutil import warn_overwrite
+
+    paths = [tmp_path / f"{k}.png" for k in range(3)]
+    for p in paths[:3]:
+        p.write_bytes(b"")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        warn_overwrite(paths + [tmp_path / "new.png", None], force=False)
+        warn_overwrite(paths, force=True)
+        warn_overwrite([tmp_path / "new.png"], force=False)
+    assert [str(w.message) for w in caught] == [
+        f"{paths[0]} and 2 more outputs exist; overwriting; from the next release this needs --force"]
+    assert caught[0].category is FutureWarning
