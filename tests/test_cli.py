@@ -386,3 +386,18 @@ def test_overwrite_warning_is_one_line_for_many_outputs(tmp_path):
     assert [str(w.message) for w in caught] == [
         f"{paths[0]} and 2 more outputs exist; overwriting; from the next release this needs --force"]
     assert caught[0].category is FutureWarning
+
+
+def test_virtual_sonar_and_bathymetry_take_a_sensor(tmp_path):
+    import json
+
+    proc = run("virtual-sonar", HARBOUR, "--sensor", "multibeam", "--spp", "1", "--seconds", "1")
+    assert proc.returncode == 1, proc.stderr      # refused before the render: SeaNet heads are mechanical
+    assert "a SeaNet head is mechanically scanned; a 'multibeam' scan" in proc.stderr
+    assert "rendered" not in proc.stdout
+    out = tmp_path / "b"
+    proc = run("bathymetry", HARBOUR, "--trajectory", HARBOUR_TRACK, "--sensor", "multibeam", "--max-scans", "1",
+               "--spp", "2", "-q", "-o", str(out))
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((out / "errors.json").read_text())
+    assert summary["sensor"] == "multibeam" and summary["preset"] is None and summary["sonar"]["beams"] == 128
