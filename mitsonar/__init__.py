@@ -5,20 +5,20 @@ says otherwise) and registers the plugins ``sonar``, ``acoustic`` and ``sonar_to
 """
 from __future__ import annotations
 
-from .variant import prepare_llvm_environment
+from mitsonar.sim.variant import prepare_llvm_environment
 
 prepare_llvm_environment()
 
-from ._version import __version__  # noqa: E402
+from mitsonar._version import __version__  # noqa: E402
 
-from .scan import Scan  # noqa: E402
-from .groundtruth import scene_mesh  # noqa: E402
-from .render import render_scan, scan_parameters  # noqa: E402
-from .scene import SceneError, load_scene  # noqa: E402
-from .survey import render_survey  # noqa: E402
-from .dataset.store import open_dataset  # noqa: E402
-from .trajectory import Trajectory, TrajectoryError  # noqa: E402
-from .variant import VariantError, init_on_import, set_variant, variant  # noqa: E402
+from mitsonar.scan import Scan  # noqa: E402
+from mitsonar.sim.groundtruth import scene_mesh  # noqa: E402
+from mitsonar.sim.render import render_scan, scan_parameters  # noqa: E402
+from mitsonar.sim.scene import SceneError, load_scene  # noqa: E402
+from mitsonar.sim.survey import render_survey  # noqa: E402
+from mitsonar.jobs.dataset.store import open_dataset  # noqa: E402
+from mitsonar.geometry.trajectory import Trajectory, TrajectoryError  # noqa: E402
+from mitsonar.sim.variant import VariantError, init_on_import, set_variant, variant  # noqa: E402
 
 init_on_import()
 

@@ -34,7 +34,7 @@ def warn_overwrite(paths, force) -> None:
 
 
 def _max_depth():
-    from .plugins import module
+    from mitsonar.plugins import module
 
     return module("common").MAX_DEPTH
 
@@ -42,9 +42,9 @@ def _max_depth():
 def check_counts(args, error) -> None:
     """Refuse, with one line raised as ``error`` naming the flag, a count flag of ``args`` out of its
     range (the limits `render_scan` and `render_survey` hold), before any work."""
-    from ._checks import is_whole
-    from .render import SEED_ALLOWED, SEED_MAX, SPP_ALLOWED, SPP_MAX
-    from .survey import MAX_SCANS, MAX_SCANS_ALLOWED
+    from mitsonar._checks import is_whole
+    from mitsonar.sim.render import SEED_ALLOWED, SEED_MAX, SPP_ALLOWED, SPP_MAX
+    from mitsonar.sim.survey import MAX_SCANS, MAX_SCANS_ALLOWED
 
     for dest, lo, hi, allowed in (("spp", 1, SPP_MAX, SPP_ALLOWED), ("seed", 0, SEED_MAX, SEED_ALLOWED),
                                   ("max_scans", 1, MAX_SCANS, MAX_SCANS_ALLOWED), ("max_depth", 1, None, None)):
@@ -66,10 +66,10 @@ def add_sensor(parser):
 
 
 def sensor_of(scene, args, error=None):
-    """The sensor object ``--sensor`` names (`mitsonar.render.pick_sensor`), or the first sonar
+    """The sensor object ``--sensor`` names (`mitsonar.sim.render.pick_sensor`), or the first sonar
     sensor with at most one warning; ``error`` (a class) re-raises the refusal as that type."""
-    from .render import pick_sensor
-    from .scene import SceneError
+    from mitsonar.sim.render import pick_sensor
+    from mitsonar.sim.scene import SceneError
 
     try:
         return pick_sensor(scene, getattr(args, "sensor", None))

@@ -4,7 +4,7 @@ Bearings and poses in a `Scan` (contract shared with the renderer): wire bearing
 ``(3200 - b) * pi / 3200`` rad (sign flipped for an inverted head); bearings are unwrapped
 ``bearing_start + k * bearing_step``; ``poses[k] = pose @ R_y(bearings[k])`` where ``pose`` is
 the head's mounting (world from beam frame at bearing 0: +z boresight, +y scan axis) at the
-time the ping arrived. Used by the driver (`mitsonar.micron`) and by `mitsonar.recording.replay`,
+time the ping arrived. Used by the driver (`mitsonar.devices.micron.driver`) and by `mitsonar.devices.recording.replay`,
 so a log replays into the scans the driver returned. No I/O.
 """
 from __future__ import annotations
@@ -13,11 +13,11 @@ import math
 
 import numpy as np
 
-from .frames import bearing_rotation, check_rigid
-from .scan import Scan, reception_times
-from .seanet.constants import FULL_TURN, HdCtrl, bearing_to_radians
-from .seanet.messages import HeadData
-from .seanet.settings import HeadSettings, ad_db, gain_db
+from mitsonar.geometry.frames import bearing_rotation, check_rigid
+from mitsonar.scan import Scan, reception_times
+from mitsonar.devices.micron.seanet.constants import FULL_TURN, HdCtrl, bearing_to_radians
+from mitsonar.devices.micron.seanet.messages import HeadData
+from mitsonar.devices.micron.seanet.settings import HeadSettings, ad_db, gain_db
 
 __all__ = ["ScanAssembler", "beam_rotation", "check_pose"]
 

@@ -8,7 +8,7 @@ replaces the scene's sonar by the preset head looking down from the vehicle, ren
 detects the bottom in every beam and writes, into the output folder: ``soundings.ply`` (the point
 cloud, world frame), ``depth.npz`` (the gridded depth map: ``depth``, ``count``, ``transform``),
 ``depth.tif`` (the same as a GeoTIFF, when ``rasterio`` is installed), ``errors.json`` (depth error
-statistics per beam angle, `mitsonar.bathymetry.SurveyResult.summary`) and ``bathymetry.png`` (the
+statistics per beam angle, `mitsonar.products.bathymetry.SurveyResult.summary`) and ``bathymetry.png`` (the
 depth map over the track, and the depth error against beam angle with the centroid's predicted rms).
 Every option is checked before the first render; all files are written under temporary names and
 renamed together at the end.
@@ -31,12 +31,12 @@ class BathymetryCLIError(ValueError):
 
 def plot_bathymetry(result, grid, path, trajectory=None):
     """Two panels: the depth grid (with the track), and each sounding's depth error against its
-    beam angle with the rms per angle bin and `mitsonar.bathymetry.predicted_rms` for a flat
+    beam angle with the rms per angle bin and `mitsonar.products.bathymetry.predicted_rms` for a flat
     seabed at the survey's median altitude."""
     from matplotlib.figure import Figure
 
-    from .bathymetry import predicted_rms
-    from .plots import _save
+    from mitsonar.products.bathymetry import predicted_rms
+    from mitsonar.products.plots import _save
 
     fig = Figure(figsize=(12.0, 5.0), dpi=120)
     ax, bx = fig.subplots(1, 2)
@@ -82,12 +82,13 @@ DEFAULT_PRESET = "r2sonic_2024"
 
 
 def cmd_bathymetry(args):
-    from . import bathymetry, echosounders
-    from ._cliutil import check_counts, sensor_of
-    from ._files import StagedFiles, check_output_folder
-    from .sea_surface import load_survey_scene
-    from .soundings import grid_depths, write_ply
-    from .survey_cli import trajectory_from_args
+    from mitsonar.products import bathymetry
+    from mitsonar.scenes import echosounders
+    from mitsonar._cliutil import check_counts, sensor_of
+    from mitsonar._files import StagedFiles, check_output_folder
+    from mitsonar.scenes.sea_surface import load_survey_scene
+    from mitsonar.products.soundings import grid_depths, write_ply
+    from mitsonar.cli.survey import trajectory_from_args
 
     check_counts(args, BathymetryCLIError)
     head = None
@@ -119,7 +120,7 @@ def cmd_bathymetry(args):
 def _output_folder(folder):
     """Create ``folder`` (and its parents) for the block; if the block fails, remove the folders it
     created that are still empty (a failed run leaves no empty output folder behind)."""
-    from ._files import make_output_folder
+    from mitsonar._files import make_output_folder
 
     made, f = [], os.path.abspath(folder)
     while not os.path.exists(f):
@@ -176,9 +177,9 @@ def summary_line(summary, written, out) -> str:
 
 
 def add_subcommands(sub):
-    from .bathymetry import METHODS
-    from .echosounders import PRESETS
-    from .survey_cli import add_trajectory_options
+    from mitsonar.products.bathymetry import METHODS
+    from mitsonar.scenes.echosounders import PRESETS
+    from mitsonar.cli.survey import add_trajectory_options
 
     s = sub.add_parser("bathymetry", help="a bathymetric survey: soundings, depth grid, depth errors",
                        description="Survey a scene with a preset downward echo sounder (it replaces the "

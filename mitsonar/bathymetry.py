@@ -2,7 +2,9 @@
 and their errors against the scene's true seabed.
 
     import mitsonar
-    from mitsonar import bathymetry, echosounders, sea_surface
+    from mitsonar.products import bathymetry
+    from mitsonar.scenes import echosounders
+    from mitsonar.scenes import sea_surface
     scene = sea_surface.load_survey_scene("scenes_xml/rocky_slope.xml",
                                           sonar=echosounders.sonar_xml("r2sonic_2024", range_max=30))
     track = mitsonar.Trajectory.from_tum("scenes_xml/rocky_slope_survey.tum")
@@ -21,14 +23,14 @@ speed), so every sounding is in the world frame.
 
 Speckle (`speckled`): the rendered intensity is an expectation (noise-free but for Monte Carlo
 noise); real echoes fluctuate. Detection with speckle runs on ``intensity * |g|^2``, ``g`` the
-scene's own complex speckle of the scan (`mitsonar.speckle`, through
-`mitsonar.electronics.Electronics.scene_speckle` with the scan's recorded electronics, its
-``speckle_seed`` and geometry: what `mitsonar.render.render_scan` multiplied into the device
+scene's own complex speckle of the scan (`mitsonar.receiver.speckle`, through
+`mitsonar.receiver.electronics.Electronics.scene_speckle` with the scan's recorded electronics, its
+``speckle_seed`` and geometry: what `mitsonar.sim.render.render_scan` multiplied into the device
 bytes). So a still head sees the same speckle, and the same soundings, ping after ping; a moving
 or turning head sees it change at the physical rate; another ``speckle_seed`` (another set of
 scatterers) gives another pattern. The speckle's grains are one range resolution
 ``L = max(c pulse_length / 2, bin)`` long (the bathymetric presets' pulse gives ``L`` = 1.25 cm,
-`mitsonar.echosounders`). Detection does not use the device bytes: their TVG, noise floor and
+`mitsonar.scenes.echosounders`). Detection does not use the device bytes: their TVG, noise floor and
 8-bit A/D window clip a strong bottom echo's peak to 255 and flatten the centroid's weights; a
 bathymetric head detects on its beamformed power before any display scaling.
 
@@ -69,7 +71,7 @@ import math
 
 import numpy as np
 
-from ._checks import is_number, not_allowed
+from mitsonar._checks import is_number, not_allowed
 
 WHERE = "bathymetry"
 METHODS = ("centroid", "leading_edge")
@@ -100,12 +102,12 @@ def check_options(threshold_db=10.0, method="centroid"):
 
 def speckle_power(scan) -> np.ndarray:
     """The scene's speckle power ``|g|^2`` (mean 1) of every bin of ``scan`` (n_rows x n_bins):
-    the field `mitsonar.render.render_scan` multiplied into the scan's bytes, from the scan's
+    the field `mitsonar.sim.render.render_scan` multiplied into the scan's bytes, from the scan's
     recorded electronics (``speckle``, ``speckle_seed``, ``pulse_length``, ``speckle_shape``),
     poses, ranges, beam width and ``meta`` (``frequency``, ``aperture_h``). Ones for ``speckle``
     ``off``; ``weibull`` reshapes the power as the electronics do. A scan that does not say
     where its echoes come from (``meta['speckle'] != 'scene'``: a real head's) is refused."""
-    from .electronics import Electronics, has_scene_speckle
+    from mitsonar.receiver.electronics import Electronics, has_scene_speckle
 
     e = Electronics.from_dict(scan.electronics, source=f"{WHERE} scan.electronics")
     if e.speckle == "off":
@@ -124,7 +126,7 @@ def speckle_power(scan) -> np.ndarray:
 
 def speckle_resolution(scan) -> float:
     """The range length ``L`` (m) of the scan's speckle grains: ``max(c pulse_length / 2, bin)``."""
-    from .electronics import Electronics
+    from mitsonar.receiver.electronics import Electronics
 
     e = Electronics.from_dict(scan.electronics, source=f"{WHERE} scan.electronics")
     b = float(scan.ranges[1] - scan.ranges[0]) if len(scan.ranges) > 1 else 0.0
@@ -313,8 +315,8 @@ class SurveyResult:
         self.errors = error_table(soundings["angle"], self.error, -true_z, angle_step)
 
     def grid(self, cell=0.5, bounds=None):
-        """The soundings' depth map (`mitsonar.soundings.grid_depths`)."""
-        from .soundings import grid_depths
+        """The soundings' depth map (`mitsonar.products.soundings.grid_depths`)."""
+        from mitsonar.products.soundings import grid_depths
 
         return grid_depths(self.soundings, cell, bounds)
 
@@ -336,8 +338,8 @@ def survey(scene, trajectory, *, spp=256, seed=0, threshold_db=10.0, method=None
     the noise-free intensity (False).
     Every option is checked before the first render; a survey in which no beam finds the bottom
     is refused with one line (`NoBottomError`)."""
-    from .scene import sonar_of
-    from .survey import render_survey
+    from mitsonar.sim.scene import sonar_of
+    from mitsonar.sim.survey import render_survey
 
     sonar = sonar_of(scene, sensor)
     method = method or ("centroid" if sonar.kind == "multibeam" else "leading_edge")

@@ -11,7 +11,7 @@ import os
 import sys
 import time
 
-from . import _files
+from mitsonar import _files
 
 EXIT_USAGE = 2
 EXIT_ERROR = 1
@@ -72,7 +72,7 @@ def _render(scene_path, spp, seed, max_depth=None, electronics=None, quiet=False
     warning when the scene has several)."""
     import mitsonar
 
-    from .render import pick_sensor
+    from mitsonar.sim.render import pick_sensor
 
     scene = mitsonar.load_scene(scene_path)
     sonar = pick_sensor(scene, sensor)
@@ -106,7 +106,7 @@ def plot_kind(sonar_kind, kind=None):
 
 
 def _plot(scan, path, kind=None, ping=0, db=False, use="data", mesh=None):
-    from . import plots
+    from mitsonar.products import plots
 
     kind = plot_kind(scan.kind, kind)
     if kind == "polar":
@@ -114,7 +114,7 @@ def _plot(scan, path, kind=None, ping=0, db=False, use="data", mesh=None):
     elif kind == "cartesian":
         plots.plot_cartesian(scan, mesh=mesh, path=path, db=db, use=use)
     elif kind == "waterfall":
-        from .sidescan_plots import plot_waterfall
+        from mitsonar.products.sidescan_plots import plot_waterfall
 
         plot_waterfall(scan, path, use="intensity" if db else use)
     elif kind == "ascan":
@@ -146,7 +146,7 @@ def make_output_folder(path, option="-o"):
 
 # ----------------------------------------------------------------------------- commands
 def cmd_render(args):
-    from ._cliutil import check_counts, warn_overwrite
+    from mitsonar._cliutil import check_counts, warn_overwrite
 
     _check_output(args.output, (".exr", ".npz"))
     if args.plot:
@@ -154,7 +154,7 @@ def cmd_render(args):
     check_counts(args, CLIError)
     settings = _parse_settings(args.set)
     if settings:  # name the option in the message, and before the render
-        from .electronics import Electronics, check_head_settings
+        from mitsonar.receiver.electronics import Electronics, check_head_settings
 
         try:
             check_head_settings(settings, "--set")
@@ -173,7 +173,7 @@ def cmd_render(args):
     _, scan, mesh = _render(args.scene, args.spp, args.seed, args.max_depth, settings, args.quiet,
                             mesh=before_render, sensor=args.sensor)
     scan.save(args.output)
-    from .plots import rows_text
+    from mitsonar.products.plots import rows_text
 
     print(f"wrote {args.output} ({rows_text(scan)} x {scan.n_bins} bins)")
     if args.plot:
@@ -185,7 +185,7 @@ def cmd_render(args):
 def cmd_plot(args):
     import mitsonar
 
-    from ._cliutil import warn_overwrite
+    from mitsonar._cliutil import warn_overwrite
 
     _check_output(args.output, (".png", ".pdf", ".svg"))
     scan = mitsonar.load_scan(args.scan)
@@ -259,7 +259,7 @@ DEMO_FILES = tuple(f"{n}{x}" for n in DEMO_SCENES for x in (".exr", "_polar.png"
 
 
 def cmd_demo(args):
-    from ._cliutil import check_counts, warn_overwrite
+    from mitsonar._cliutil import check_counts, warn_overwrite
 
     check_counts(args, CLIError)
     scenes = _scenes_dir()
@@ -278,7 +278,7 @@ def cmd_demo(args):
         _plot(scan, cart, "cartesian", mesh=mesh)
         _plot(scan, ascan, "ascan", ping=scan.n_pings // 2 if scan.kind == "multibeam" else 0)  # the fan's centre row
         print(f"{name}: wrote {exr}, {polar}, {cart}, {ascan}")
-    from .survey_cli import demo_survey  # a survey scene with both heads along its track
+    from mitsonar.cli.survey import demo_survey  # a survey scene with both heads along its track
     print(f"harbour survey: wrote {', '.join(demo_survey(scenes, args.output, args.spp, args.seed, args.quiet))}")
     return 0
 
@@ -289,7 +289,7 @@ KIND_HELP = ("picture kind: polar (default), cartesian or ascan for a mechanical
 
 
 def build_parser():
-    from ._cliutil import add_force, add_sensor
+    from mitsonar._cliutil import add_force, add_sensor
 
     p = argparse.ArgumentParser(prog="mitsonar", description="Physically based imaging-sonar simulation.")
     p.add_argument("--variant", help="Mitsuba variant: llvm_ad_mono (default), cuda_ad_mono or auto "
@@ -341,8 +341,8 @@ def build_parser():
     d.set_defaults(func=cmd_demo)
 
     # Subcommands of other parts of the product register themselves when present.
-    for mod in ("mitsonar.serial_cli", "mitsonar.map_cli", "mitsonar.compare_cli", "mitsonar.survey_cli", "mitsonar.export_cli",
-                "mitsonar.bathy_cli", "mitsonar.dataset.cli"):
+    for mod in ("mitsonar.cli.serial", "mitsonar.cli.map", "mitsonar.cli.compare", "mitsonar.cli.survey", "mitsonar.cli.export",
+                "mitsonar.cli.bathymetry", "mitsonar.cli.dataset"):
         try:
             m = importlib.import_module(mod)
         except ImportError:

@@ -1,9 +1,9 @@
-"""``mitsonar compare``: integrators at equal time against a cached reference (see `mitsonar.compare`)."""
+"""``mitsonar compare``: integrators at equal time against a cached reference (see `mitsonar.jobs.compare`)."""
 from __future__ import annotations
 
 import sys
 
-from .compare import DEFAULT_REFERENCE_FACTOR, DEFAULT_REPEATS
+from mitsonar.jobs.compare import DEFAULT_REFERENCE_FACTOR, DEFAULT_REPEATS
 
 
 def add_subcommands(subparsers):
@@ -42,8 +42,8 @@ def add_subcommands(subparsers):
 
 
 def cmd_compare(args):
-    from .compare import compare
-    from .compare.parsing import parse_budgets, parse_integrators, parse_params, parse_regions
+    from mitsonar.jobs.compare import compare
+    from mitsonar.jobs.compare.parsing import parse_budgets, parse_integrators, parse_params, parse_regions
 
     # Parse everything before the slow part starts, so typos fail at once (compare checks the
     # rest, the scene, the integrators and the output folder, before it creates anything).
@@ -67,7 +67,7 @@ def report(result) -> str:
     """The printed summary of a `compare` result: the reference, one line per run with the asked
     and the achieved seconds (``*`` where they differ by more than `TIME_TOLERANCE`), warnings,
     files."""
-    from .compare import TIME_TOLERANCE, off_budget
+    from mitsonar.jobs.compare import TIME_TOLERANCE, off_budget
 
     ref = result["reference"]
     off = {(r["integrator"], r["budget_s"]) for r in off_budget(result["runs"])}

@@ -35,10 +35,10 @@ sheet for this module. The range bin (``bin_width``) is a simulation choice near
 resolution ``c / (2 bandwidth)`` (1.25 cm for a 60 kHz bandwidth), not a published figure. The
 multibeams' ``pulse_length`` (an electronics field of the sensor) is the matched pulse of that
 resolution, ``2 bin / c`` = 16.7 us at the preset's bin: the scene's speckle grains
-(`mitsonar.speckle`, ``max(c pulse_length / 2, bin)`` long) are then one range resolution long,
+(`mitsonar.receiver.speckle`, ``max(c pulse_length / 2, bin)`` long) are then one range resolution long,
 not the Micron default pulse's 7.5 cm. The altimeter keeps the default electronics.
 
-    from mitsonar.echosounders import sonar_xml
+    from mitsonar.scenes.echosounders import sonar_xml
     xml = sonar_xml("r2sonic_2024", swath=130, range_max=30)    # a <sensor type="sonar"> element
 """
 from __future__ import annotations
@@ -48,7 +48,7 @@ import math
 
 import numpy as np
 
-from ._checks import is_number, is_whole, not_allowed
+from mitsonar._checks import is_number, is_whole, not_allowed
 
 WHERE = "echosounder"
 
@@ -177,7 +177,7 @@ def configure(name, *, swath=None, n_beams=None, range_min=None, range_max=None,
     elif not (is_whole(n_bins) and 1 <= n_bins <= MAX_BINS):
         bad("n_bins", n_bins, f"a whole number of bins from 1 to {MAX_BINS}")
     mount = looking_down() if mount is None else np.asarray(mount, dtype=np.float64)
-    from .frames import check_rigid
+    from mitsonar.geometry.frames import check_rigid
 
     check_rigid(mount, f"{WHERE} 'mount'")
     params = dict(range_min=float(range_min), range_max=float(range_max), n_bins=int(n_bins),
@@ -196,7 +196,7 @@ def configure(name, *, swath=None, n_beams=None, range_min=None, range_max=None,
 
 def sonar_xml(name, sensor_id="echosounder", **overrides) -> str:
     """A ``<sensor type="sonar">`` element for preset ``name`` (`configure`'s overrides)."""
-    from .sensor_xml import sensor_xml
+    from mitsonar.sim.sensor_xml import sensor_xml
 
     head = name if isinstance(name, HeadSetup) else configure(name, **overrides)
     return sensor_xml(head.params, head.mount.ravel(), sensor_id)

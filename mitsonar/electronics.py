@@ -15,7 +15,7 @@ The chain follows thesis sections 2.1.2 and 2.4.1 and the Tritech Micron's conve
    power 1): fully developed speckle (``rayleigh``: exponential intensity) or its modulus
    reshaped to a Weibull intensity of shape ``speckle_shape`` (``weibull``), or 1 (``off``).
    Speckle belongs to the scene, not to the receiver: ``g`` is a function of where each bin's
-   echo comes from and of the head's pose (`mitsonar.speckle`, seeded by ``speckle_seed``), so a
+   echo comes from and of the head's pose (`mitsonar.receiver.speckle`, seeded by ``speckle_seed``), so a
    still head sees the same pattern ping after ping and a moving one sees it change at the
    physical rate. Without echo points (an intensity from elsewhere) it is drawn from the seed.
 4. **Background.** The transducer's near-field ring-down (a deterministic ringing, decaying
@@ -47,7 +47,7 @@ setting: 7.5 cm) and 2 cm jitter blur echoes over a few bins. The receiver's noi
 at 0.55 m: an amplitude decay time ``tau = 2 x 0.55 m / c x 8.69 / 27.5 dB = 0.23 ms``) are fitted
 to the byte statistics of public recordings of a real Micron (200 bins, 10-20 m, harbour and tank
 scenes): beyond 1.6 m, 14-51 % zero bytes and a Weibull shape of 1.05-1.54 for the non-zero
-ones; from 0.1 to 1.0 m a mean byte of 60-96 (`mitsonar.realism`, ``benchmarks/realism.py``).
+ones; from 0.1 to 1.0 m a mean byte of 60-96 (`mitsonar.receiver.realism`, ``benchmarks/realism.py``).
 The previous defaults (noise floor 1.5 dB below ``ad_low``, a 50 dB ring-down to 1.3 m) gave
 67 %, 0.88 and 184 on the default box scan.
 """
@@ -60,7 +60,7 @@ from typing import Any
 
 import numpy as np
 
-from ._checks import is_number, not_a, not_allowed
+from mitsonar._checks import is_number, not_a, not_allowed
 
 TVG_LAWS = {"off": 0, "20log": 20, "30log": 30, "40log": 40}
 SPECKLE_MODELS = ("off", "rayleigh", "weibull")
@@ -103,7 +103,7 @@ class Electronics:
     speckle          rayleigh  ``off``, ``rayleigh`` (exponential intensity), ``weibull``
     speckle_shape    1.2       Weibull shape k of the intensity speckle (``weibull`` only)
     speckle_seed     0         the scene's speckle: which scatterers its surfaces hold
-                               (`mitsonar.speckle`); the same seed, pose and scene give the same
+                               (`mitsonar.receiver.speckle`); the same seed, pose and scene give the same
                                pattern whatever the render's path and electronics seeds
     noise_floor      15.5      dB on the A/D level scale (the scale of ``ad_low``): the receiver's
                                noise power, stationary in range, not moved by ``gain`` or TVG;
@@ -361,11 +361,11 @@ class Electronics:
     def scene_speckle(self, poses, ranges, *, sound_speed: float, beamwidth_h: float,
                       aperture_h: float) -> np.ndarray:
         """The scene's complex speckle amplitude per bin for `apply`'s ``speckle``: the field of
-        the resolution cells the rows' ``poses`` see at ``ranges`` (`mitsonar.speckle.cell_speckle`),
+        the resolution cells the rows' ``poses`` see at ``ranges`` (`mitsonar.receiver.speckle.cell_speckle`),
         seeded by ``speckle_seed``; its range resolution is the pulse's ``c pulse_length / 2``
         (at least one bin), its aperture the head's across the narrow beam (``aperture_h``, m:
         the beam's ``across_aperture()``, recorded by `render_scan` in ``meta['aperture_h']``)."""
-        from .speckle import cell_speckle
+        from mitsonar.receiver.speckle import cell_speckle
 
         ranges = np.asarray(ranges, dtype=np.float64)
         resolution = max(sound_speed * self.pulse_length / 2.0, _bin_width(ranges))
@@ -436,7 +436,7 @@ class Electronics:
             when ``speckle`` is None); the same seed gives the same bytes (``None`` draws fresh
             entropy).
         speckle : complex array_like or None
-            The scene's complex speckle amplitude per bin (`mitsonar.speckle`, mean power 1),
+            The scene's complex speckle amplitude per bin (`mitsonar.receiver.speckle`, mean power 1),
             shaped like ``intensity``; ``speckle`` = ``weibull`` reshapes its modulus to the
             Weibull law, ``off`` ignores it. None: drawn from ``seed`` (independent per bin,
             correlated over the pulse), for intensities that do not say where their echoes come from.

@@ -1,13 +1,13 @@
 """``mitsonar export SCANS... --mcap OUT``: scans as an MCAP file of ROS 2 messages (Foxglove,
 ``ros2 bag``), written with ``mcap`` and ``mcap-ros2-support`` only; topics and frames in
-`mitsonar.ros.bag` and the README ("ROS 2 bags").
+`mitsonar.export.ros.bag` and the README ("ROS 2 bags").
 
 Every scan file (and the trajectory) is read and checked before the output is opened; the file is
 written under a temporary name and renamed at the end, so a failure leaves nothing behind.
 """
 from __future__ import annotations
 
-from .ros.bag import THRESHOLD, ExportError, McapBag, check_output, check_scan, scan_base
+from mitsonar.export.ros.bag import THRESHOLD, ExportError, McapBag, check_output, check_scan, scan_base
 
 
 def add_mcap_options(parser, *, scans_help=True, force_help="overwrite an existing MCAP file"):
@@ -21,8 +21,8 @@ def add_mcap_options(parser, *, scans_help=True, force_help="overwrite an existi
 
 
 def cmd_export(args):
-    from .io import load_scan
-    from .trajectory import Trajectory
+    from mitsonar.scan.io import load_scan
+    from mitsonar.geometry.trajectory import Trajectory
 
     if args.mcap is None:
         raise ExportError("export: give --mcap OUT.mcap (the only output format so far)")

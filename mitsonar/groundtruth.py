@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene import SceneError
+from mitsonar.sim.scene import SceneError
 
 
 def _sphere_mesh(n_lat=24, n_lon=48):

@@ -1,13 +1,13 @@
 """Reading and writing scans: `save_scan` and `load_scan` (``.exr`` and ``.npz``, lossless).
 
-The format is described in `mitsonar.scanfile`; these are the functional forms of `Scan.save`
+The format is described in `mitsonar.scan.fileformat`; these are the functional forms of `Scan.save`
 and `Scan.load`. Any problem with a file (missing, truncated, corrupt, foreign, wrong extension)
 raises `ScanFileError`, a ``ValueError`` whose message names the file and says what is wrong.
 """
 from __future__ import annotations
 
-from .scan import Scan
-from .scanfile import EXTENSIONS, FORMAT, FORMAT_VERSION, ScanFileError
+from mitsonar.scan import Scan
+from mitsonar.scan.fileformat import EXTENSIONS, FORMAT, FORMAT_VERSION, ScanFileError
 
 __all__ = ["EXTENSIONS", "FORMAT", "FORMAT_VERSION", "ScanFileError", "load_scan", "save_scan"]
 

@@ -14,7 +14,7 @@ import os
 import sys
 import time
 
-from ._files import StagedFiles
+from mitsonar._files import StagedFiles
 
 EXIT_ERROR = 1
 # A value argparse accepted but this command refuses is a validation error, exit 1 like every other
@@ -110,9 +110,9 @@ def _expand_folders(paths) -> list:
 
 def _read_scans(paths):
     """(scans, None) or (None, the one-line reason) for the scan files and raw logs given."""
-    from mitsonar.io import load_scan  # lazily: reading scans needs no renderer
-    from mitsonar.rawlog import LOG_MAGIC
-    from mitsonar.recording import replay
+    from mitsonar.scan.io import load_scan  # lazily: reading scans needs no renderer
+    from mitsonar.devices.rawlog import LOG_MAGIC
+    from mitsonar.devices.recording import replay
 
     scans = []
     for path in paths:
@@ -256,7 +256,7 @@ def _write(args, hm, n_scans: int, V, F, outputs: StagedFiles) -> int:
     """Write the map, mesh and plot under temporary names; 0, or the exit code of a failure."""
     from hilbertmap import write_mesh
 
-    from ._cliutil import warn_overwrite
+    from mitsonar._cliutil import warn_overwrite
 
     warn_overwrite([args.output, args.mesh, args.plot, getattr(args, "elevation", None)], args.force)
     option, path = "-o", args.output

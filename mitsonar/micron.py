@@ -3,7 +3,7 @@
 ``MicronSonar(port_or_url)`` opens the port (``serial.serial_for_url``: a device path,
 ``socket://host:port``, ``rfc2217://``, ``loop://`` ...), runs the SeaNet start-up sequence
 and then serves scanlines (`MicronSonar.pings`) and whole scans (`MicronSonar.scan`) as
-`mitsonar.scan.Scan` objects, assembled by `mitsonar.assembler.ScanAssembler` (bearing and
+`mitsonar.scan.Scan` objects, assembled by `mitsonar.devices.micron.assembler.ScanAssembler` (bearing and
 pose conventions there).
 
 Start-up (reference section 5): mtReBoot -> wait for mtAlive "centred, not motoring, no
@@ -12,26 +12,26 @@ send FPGA messages) -> wait for mtAlive "config sent" -> mtHeadCommand -> wait f
 with NoParams clear. Then one mtSendData per mtHeadData.
 
 Where the rest went (importable from here for one release, with a DeprecationWarning):
-`mitsonar.rawlog` (``RawLogWriter``, ``read_log``, ``LOG_MAGIC``, ``LogDamageWarning``, ``RX``,
-``TX``, ``POSE``), `mitsonar.assembler` (``ScanAssembler``, ``beam_rotation``),
-`mitsonar.recording` (``replay``).
+`mitsonar.devices.rawlog` (``RawLogWriter``, ``read_log``, ``LOG_MAGIC``, ``LogDamageWarning``, ``RX``,
+``TX``, ``POSE``), `mitsonar.devices.micron.assembler` (``ScanAssembler``, ``beam_rotation``),
+`mitsonar.devices.recording` (``replay``).
 """
 from __future__ import annotations
 
 import time
 from collections import Counter, deque
 
-from .assembler import ScanAssembler as _ScanAssembler, check_pose
-from .recording import record_driven, record_passive
-from .scan import Scan
-from .seanet.constants import DEFAULT_NIBBLE_ORDER
-from .seanet.messages import (Alive, BBUserData, HeadCommand, HeadData, ReBoot, SendBBUser, SendData,
+from mitsonar.devices.micron.assembler import ScanAssembler as _ScanAssembler, check_pose
+from mitsonar.devices.recording import record_driven, record_passive
+from mitsonar.scan import Scan
+from mitsonar.devices.micron.seanet.constants import DEFAULT_NIBBLE_ORDER
+from mitsonar.devices.micron.seanet.messages import (Alive, BBUserData, HeadCommand, HeadData, ReBoot, SendBBUser, SendData,
                               SendVersion, VersionData)
-from .seanet.settings import HeadSettings, ping_problem
-from .seanet.stream import StreamParser, encode
+from mitsonar.devices.micron.seanet.settings import HeadSettings, ping_problem
+from mitsonar.devices.micron.seanet.stream import StreamParser, encode
 # open_serial stays importable from here (it was, and tests patch it here); the line is opened
-# through it in mitsonar.transports.LineDriver.
-from .transports import LineDriver, SonarError, SonarTimeout, open_serial  # noqa: F401
+# through it in mitsonar.devices.transports.LineDriver.
+from mitsonar.devices.transports import LineDriver, SonarError, SonarTimeout, open_serial  # noqa: F401
 
 __all__ = ["SonarError", "SonarTimeout", "MicronSonar", "record"]
 
@@ -301,7 +301,7 @@ class MicronSonar(LineDriver):
 def record(port, path, seconds: float | None = None, *, scans: int | None = None,
            pings: int | None = None, baudrate: int = 115200, settings: HeadSettings | None = None,
            passive: bool = False, pose=None, **sonar_kwargs) -> dict:
-    """Record the raw byte stream of a head into a raw log (format: `mitsonar.rawlog`).
+    """Record the raw byte stream of a head into a raw log (format: `mitsonar.devices.rawlog`).
 
     Parameters
     ----------
@@ -324,7 +324,7 @@ def record(port, path, seconds: float | None = None, *, scans: int | None = None
     The log is written under a temporary name in the same folder and renamed to ``path`` at the
     end, also after Ctrl-C or an error once the head has sent a packet (the error then names the
     log). A recording without any packet from the head leaves no file and raises `SonarTimeout`
-    "no bytes from the head on PORT in N s" (`mitsonar.recording.finish_recording`).
+    "no bytes from the head on PORT in N s" (`mitsonar.devices.recording.finish_recording`).
     """
     if passive and seconds is None:
         raise ValueError("record: passive recording needs seconds")
@@ -350,9 +350,13 @@ def __getattr__(name):
     if name in _MOVED:
         import warnings
 
-        from . import assembler, rawlog, recording
+        from mitsonar.devices.micron import assembler
+
+        from mitsonar.devices import rawlog
+
+        from mitsonar.devices import recording
         home = {"rawlog": rawlog, "assembler": assembler, "recording": recording}[_MOVED[name]]
-        warnings.warn(f"mitsonar.micron.{name} moved to mitsonar.{_MOVED[name]}: import it from "
+        warnings.warn(f"mitsonar.devices.micron.driver.{name} moved to mitsonar.{_MOVED[name]}: import it from "
                       f"there (the old path goes in the next release)", DeprecationWarning, stacklevel=2)
         return getattr(home, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,7 +1,7 @@
 """Georeferenced mosaic of side-scan scans: ground-range pixels placed in world x-y from their ping
 poses, averaged where survey lines overlap.
 
-Each row of each scan is corrected to ground range (`mitsonar.sidescan.ground_range`: a flat bottom
+Each row of each scan is corrected to ground range (`mitsonar.products.sidescan.ground_range`: a flat bottom
 at the measured or given altitude, or a known seabed); its sample at ground range ``g`` lies at
 ``p + g u`` (``p`` the transducer, ``u`` the horizontal unit vector across the track to the row's
 side), and is spread along the track over half the distance to the neighbouring pings of its
@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import northup
-from .sidescan import across_track, ground_range
+from mitsonar.geometry import northup
+from mitsonar.products.sidescan import across_track, ground_range
 
 
 @dataclass
@@ -69,7 +69,7 @@ class Mosaic:
         from matplotlib import colormaps
         from matplotlib.image import imsave
 
-        from ._files import StagedFiles
+        from mitsonar._files import StagedFiles
 
         path = os.fspath(path)
         if not path.lower().endswith(".png"):
@@ -185,7 +185,7 @@ def mosaic(scans, resolution=0.1, bounds=None, *, use="data", altitude=None, sea
     """The mosaic of side-scan ``scans`` (a `Scan` or a list, e.g. a lawnmower survey's): grid of
     ``resolution`` m over ``bounds`` (default: every transducer position plus the swath,
     ``ground_max`` or ``range_max``); ``use``, ``altitude``, ``seabed``, ``threshold``: as in
-    `mitsonar.sidescan.ground_range`. Returns a `Mosaic` (``.save("m.png")`` writes PNG + array)."""
+    `mitsonar.products.sidescan.ground_range`. Returns a `Mosaic` (``.save("m.png")`` writes PNG + array)."""
     scans = [scans] if hasattr(scans, "intensity") else list(scans)
     if not scans:
         raise ValueError("mosaic: no scans given")

@@ -4,22 +4,22 @@
 head's UDP port (``udp://192.168.2.2:12345``), checks that a ping-protocol device answers
 (``general_request`` of ``protocol_version`` and ``device_information``), and then serves pings
 (`Ping360Sonar.pings`: ``device_data`` messages) and whole scans (`Ping360Sonar.scan`) as
-`mitsonar.scan.Scan` objects, assembled by `mitsonar.ping360_head.Ping360Assembler` (bearing,
+`mitsonar.scan.Scan` objects, assembled by `mitsonar.devices.ping360.head.Ping360Assembler` (bearing,
 range and pose conventions there). Each ping is one ``transducer`` message with ``transmit = 1``
 at the next angle of ``settings.angles`` and its ``device_data`` reply, as ``brping.Ping360
 .transmitAngle`` does (ping-protocol ``ping360.json``). Messages and framing:
-`mitsonar.ping_protocol`, on ``brping``'s own definitions.
+`mitsonar.devices.ping360.protocol`, on ``brping``'s own definitions.
 """
 from __future__ import annotations
 
 import time
 from collections import Counter, deque
 
-from .ping360_head import Ping360Assembler, Ping360Settings, check_pose, ping_problem
-from .ping_protocol import Message, StreamParser, encode, ids
-from .recording import record_driven
-from .scan import Scan
-from .transports import LineDriver, SonarError, SonarTimeout
+from mitsonar.devices.ping360.head import Ping360Assembler, Ping360Settings, check_pose, ping_problem
+from mitsonar.devices.ping360.protocol import Message, StreamParser, encode, ids
+from mitsonar.devices.recording import record_driven
+from mitsonar.scan import Scan
+from mitsonar.devices.transports import LineDriver, SonarError, SonarTimeout
 
 __all__ = ["Ping360Sonar", "record", "SonarError", "SonarTimeout"]
 
@@ -44,7 +44,7 @@ class Ping360Sonar(LineDriver):
     ==============  ==========================================================================
 
     ``stats`` counts requests, timeouts and refused pings; ``parser`` (a
-    `mitsonar.ping_protocol.StreamParser`) the bytes dropped and why; ``protocol_version`` and
+    `mitsonar.devices.ping360.protocol.StreamParser`) the bytes dropped and why; ``protocol_version`` and
     ``device_information`` what the head reported. A ``nack`` of the head raises `SonarError`
     with its text.
     """
@@ -179,12 +179,12 @@ class Ping360Sonar(LineDriver):
 def record(port, path, seconds: float | None = None, *, scans: int | None = None,
            pings: int | None = None, baudrate: int = 115200, settings: Ping360Settings | None = None,
            pose=None, **sonar_kwargs) -> dict:
-    """Drive a Ping360 and log every byte in and out (format `mitsonar.rawlog`, ``head: ping360``).
+    """Drive a Ping360 and log every byte in and out (format `mitsonar.devices.rawlog`, ``head: ping360``).
 
     Stops after ``seconds``, ``scans`` (`Ping360Sonar.scan` results) or ``pings``, whichever
     comes first, or on Ctrl-C. The log is written under a temporary name and renamed at the end,
     also after Ctrl-C or an error once the head sent a whole message; a recording without one
-    leaves no file and raises `SonarTimeout` (`mitsonar.recording.finish_recording`). Extra
+    leaves no file and raises `SonarTimeout` (`mitsonar.devices.recording.finish_recording`). Extra
     keyword arguments go to `Ping360Sonar`. Returns ``{"bytes_rx", "bytes_tx", "pings", "scans",
     "bytes_dropped"}``.
     """

@@ -1,7 +1,7 @@
 """What a Blue Robotics Ping360 is: its settings and their ranges, its geometry, and its scans.
 
-No I/O; shared by the driver (`mitsonar.ping360`), the virtual head (`mitsonar.virtual_ping360`)
-and `mitsonar.recording.replay`. Field ranges are those of ping-protocol's ``ping360.json``
+No I/O; shared by the driver (`mitsonar.devices.ping360.driver`), the virtual head (`mitsonar.devices.ping360.virtual`)
+and `mitsonar.devices.recording.replay`. Field ranges are those of ping-protocol's ``ping360.json``
 (also in ``brping/ping360.py``'s docstrings; ``reference/seanet.md`` section 6):
 
 ==================  ===========================  ==========================================
@@ -28,9 +28,9 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ._checks import in_range, is_whole, require
-from .frames import bearing_rotation, check_rigid
-from .scan import Scan, reception_times
+from mitsonar._checks import in_range, is_whole, require
+from mitsonar.geometry.frames import bearing_rotation, check_rigid
+from mitsonar.scan import Scan, reception_times
 
 __all__ = ["Ping360Settings", "Ping360Assembler", "GRADIANS", "TICK", "LIMITS", "GAIN_PRESETS",
            "BEAMWIDTH_H", "BEAMWIDTH_V", "angle_to_radians", "ping_problem", "check_pose"]

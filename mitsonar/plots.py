@@ -70,7 +70,7 @@ def _values(scan, use: str, db: bool, dynamic_range: float, vmin=None, vmax=None
 
 
 def _electronics(scan) -> dict[str, Any]:
-    from .electronics import Electronics
+    from mitsonar.receiver.electronics import Electronics
 
     defaults = Electronics().to_dict()
     return {**defaults, **{k: v for k, v in (scan.electronics or {}).items() if k in defaults}}
@@ -142,7 +142,7 @@ def _save(fig: Figure, path) -> None:
     if ext not in supported:
         raise ValueError(f"plot: cannot write {path!r}: the extension must be one of "
                          + ", ".join("." + e for e in ("png", "pdf", "svg")))
-    from ._files import replacing
+    from mitsonar._files import replacing
 
     with replacing(path) as tmp:  # a failed plot leaves no half-written file
         fig.savefig(tmp, dpi=fig.dpi, format=ext)

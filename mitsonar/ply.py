@@ -2,15 +2,15 @@
 MeshLab, CloudCompare and Open3D read): one ``vertex`` element of scalar properties, and optionally
 one ``face`` element of triangles (``property list uchar int vertex_indices``).
 
-The one writer and reader of mitsonar's PLY files: seabed meshes (`mitsonar.terrain`) and
-bathymetric point clouds (`mitsonar.soundings`). Files are written under a temporary name and
+The one writer and reader of mitsonar's PLY files: seabed meshes (`mitsonar.scenes.terrain`) and
+bathymetric point clouds (`mitsonar.products.soundings`). Files are written under a temporary name and
 renamed onto the path when complete (`mitsonar._files.replacing`).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ._files import replacing
+from mitsonar._files import replacing
 
 #: numpy type (little-endian) -> PLY scalar type name.
 TYPES = {"<f4": "float", "<f8": "double", "|u1": "uchar", "<u2": "ushort", "<u4": "uint", "<i4": "int"}

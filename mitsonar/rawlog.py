@@ -20,7 +20,7 @@ Format (little-endian)::
 A record cut short at the end (recorder killed) is not read; neither is a damaged stretch,
 after which reading picks up where whole records follow each other again. Both are reported
 (`read_log`: ``meta["skipped"]`` and a `LogDamageWarning`), as are bytes that
-`mitsonar.recording.replay` finds to be no SeaNet packet (or ping-protocol message). Nothing
+`mitsonar.devices.recording.replay` finds to be no SeaNet packet (or ping-protocol message). Nothing
 here knows either protocol.
 """
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Recording and replaying a head's raw byte stream: `replay`, and the passive part of recording.
 
-`mitsonar.micron.record` and `mitsonar.ping360.record` drive a head and log every byte
-(`mitsonar.rawlog` format; the header's ``head`` says which: ``ping360``, else a SeaNet head); a
+`mitsonar.devices.micron.driver.record` and `mitsonar.devices.ping360.driver.record` drive a head and log every byte
+(`mitsonar.devices.rawlog` format; the header's ``head`` says which: ``ping360``, else a SeaNet head); a
 passive recording (`record_passive`: a tap on the head's transmit line) needs no driver and
 lives here. `replay` turns a log back into the scans the driver returned while recording,
 with the same assembler and the same rule for usable pings (`ping_problem`: a Micron's
@@ -15,17 +15,17 @@ from pathlib import Path
 
 import numpy as np
 
-from .assembler import ScanAssembler, check_pose
-from .ping360_head import LIMITS as PING360_LIMITS, Ping360Assembler, Ping360Settings
-from .ping360_head import ping_problem as ping360_problem
-from .ping_protocol import StreamParser as PingStreamParser, ids as ping_ids
-from .rawlog import POSE, RX, TX, LogDamageWarning, RawLogWriter, read_log
-from .scan import Scan
-from .seanet.constants import DEFAULT_NIBBLE_ORDER
-from .seanet.messages import HeadCommand, HeadData
-from .seanet.settings import SOUND_SPEED_ALLOWED, HeadSettings, ping_problem, sound_speed_ok
-from .seanet.stream import StreamParser
-from .transports import SonarError, SonarTimeout, open_serial
+from mitsonar.devices.micron.assembler import ScanAssembler, check_pose
+from mitsonar.devices.ping360.head import LIMITS as PING360_LIMITS, Ping360Assembler, Ping360Settings
+from mitsonar.devices.ping360.head import ping_problem as ping360_problem
+from mitsonar.devices.ping360.protocol import StreamParser as PingStreamParser, ids as ping_ids
+from mitsonar.devices.rawlog import POSE, RX, TX, LogDamageWarning, RawLogWriter, read_log
+from mitsonar.scan import Scan
+from mitsonar.devices.micron.seanet.constants import DEFAULT_NIBBLE_ORDER
+from mitsonar.devices.micron.seanet.messages import HeadCommand, HeadData
+from mitsonar.devices.micron.seanet.settings import SOUND_SPEED_ALLOWED, HeadSettings, ping_problem, sound_speed_ok
+from mitsonar.devices.micron.seanet.stream import StreamParser
+from mitsonar.devices.transports import SonarError, SonarTimeout, open_serial
 
 __all__ = ["replay", "record_passive", "record_driven", "finish_recording"]
 
@@ -68,8 +68,8 @@ def record_driven(sonar, path, seconds: float | None, scans: int | None, pings: 
                   start, protocol: str = "SeaNet") -> dict:
     """The recording loop both drivers' ``record`` share: log every byte while driving ``sonar``.
 
-    ``sonar`` is a driver made with ``start=False`` (`mitsonar.micron.MicronSonar`,
-    `mitsonar.ping360.Ping360Sonar`: ``_log_meta``, ``scan``, ``read_ping``, ``stats``, ``parser``,
+    ``sonar`` is a driver made with ``start=False`` (`mitsonar.devices.micron.driver.MicronSonar`,
+    `mitsonar.devices.ping360.driver.Ping360Sonar`: ``_log_meta``, ``scan``, ``read_ping``, ``stats``, ``parser``,
     ``port``); ``start()`` starts the head. Stops after ``seconds``, ``scans`` scans or ``pings``
     pings (one of them, else only Ctrl-C). The log is written under a temporary name and renamed
     at the end, or removed (`finish_recording`). Returns ``{"bytes_rx", "bytes_tx", "pings",
@@ -169,7 +169,7 @@ def replay(path, *, sound_speed: float | None = None, pose=None, nibble_order: s
     the driver does), so a log recorded with ``record(..., scans=k)`` replays into the same
     scans the driver returned. A Ping360 log (``head: ping360``; ``nibble_order``, ``revisit``
     and ``max_turns`` do not apply) counts each ``device_data`` that answers the last
-    ``transducer`` sent, as `mitsonar.ping360.Ping360Sonar` does.
+    ``transducer`` sent, as `mitsonar.devices.ping360.driver.Ping360Sonar` does.
     """
     if sound_speed is not None and not sound_speed_ok(sound_speed):
         raise ValueError(f"replay: sound_speed = {sound_speed!r} is out of range: allowed {SOUND_SPEED_ALLOWED}")

@@ -6,13 +6,13 @@ import warnings
 
 import numpy as np
 
-from ._checks import is_whole
-from .frames import check_rigid
-from .plugins import PLUGINS, module
-from .scan import Scan
-from .scene import SceneError, mitsuba_error, scene_name, sonar_of
-from .trajectory import Trajectory
-from .variant import ensure_variant
+from mitsonar._checks import is_whole
+from mitsonar.geometry.frames import check_rigid
+from mitsonar.plugins import PLUGINS, module
+from mitsonar.scan import Scan
+from mitsonar.sim.scene import SceneError, mitsuba_error, scene_name, sonar_of
+from mitsonar.geometry.trajectory import Trajectory
+from mitsonar.sim.variant import ensure_variant
 
 DEFAULT_SPP = 4096
 
@@ -26,7 +26,7 @@ def __getattr__(name):
     if name in _MOVED:
         import importlib
 
-        warnings.warn(f"mitsonar.render.{name} is deprecated: import it from mitsonar.{_MOVED[name]} "
+        warnings.warn(f"mitsonar.sim.render.{name} is deprecated: import it from mitsonar.{_MOVED[name]} "
                       f"(or from mitsonar)", DeprecationWarning, stacklevel=2)
         return getattr(importlib.import_module(f"mitsonar.{_MOVED[name]}"), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
@@ -102,7 +102,7 @@ def pick_sensor(scene, sensor=None, option="--sensor"):
     warning naming it when the scene has several. Refused with one `SceneError` naming the
     scene, ``option`` and its sensors (index, id, kind). Returns the sensor object, which
     `render_scan` and `render_survey` take without warning again."""
-    from .plugins import module
+    from mitsonar.plugins import module
 
     common = module("common")
     name = scene_name(scene) or "the scene"
@@ -179,11 +179,11 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     sensor         sensor index, XML id (a string) or object
     max_depth      override of the integrator's surface bounces
     electronics    dict of electronics fields overriding the sensor's (the gain and the A/D window
-                   within the head's 0..80 dB: `mitsonar.electronics.HEAD_LIMITS`); its
-                   ``speckle_seed`` picks the scene's speckle (`mitsonar.speckle`)
+                   within the head's 0..80 dB: `mitsonar.receiver.electronics.HEAD_LIMITS`); its
+                   ``speckle_seed`` picks the scene's speckle (`mitsonar.receiver.speckle`)
     electronics_seed  seed of the receiver's noise only (default ``seed``): never the speckle,
                    which follows the scene, the ``speckle_seed`` and the head's pose
-    speckle_seed   the scene's speckle (which scatterers its surfaces hold, `mitsonar.speckle`);
+    speckle_seed   the scene's speckle (which scatterers its surfaces hold, `mitsonar.receiver.speckle`);
                    default the sensor's ``speckle_seed`` (XML), 0 unless given
     progress       optional callable ``progress(done_spp, spp)`` called after each render pass
     trajectory     a `Trajectory` of the vehicle carrying the head; ``to_world`` (or ``pose``) is
@@ -231,7 +231,7 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
         pose = moving_head_poses(sonar, trajectory, start_time, pose)
     integrator = _integrator(scene, integrator)
 
-    from .electronics import Electronics, check_head_settings
+    from mitsonar.receiver.electronics import Electronics, check_head_settings
 
     settings = dict(sonar.electronics)
     settings.update(electronics or {})
@@ -254,7 +254,7 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     speckle = None if model.speckle == "off" else model.scene_speckle(poses, ranges, **speckle_geometry(sonar))
     data = model.apply(intensity, ranges, absorption=sonar.absorption, sound_speed=sonar.sound_speed, seed=eseed,
                        speckle=speckle)
-    from ._version import __version__
+    from mitsonar._version import __version__
 
     meta = {
         "scene": scene_name(scene),
@@ -312,7 +312,7 @@ def scan_parameters(scene, keys=None):
     import drjit as dr
     import mitsuba as mi
 
-    from .plugins import module
+    from mitsonar.plugins import module
 
     ensure_variant()
     if not dr.is_diff_v(mi.Float):

@@ -13,11 +13,11 @@ from typing import Any
 
 import numpy as np
 
-from . import scanfile
+from mitsonar.scan import fileformat as scanfile
 
 # The frames' helpers live below the Scan (the sensor plugin uses them too); they stay
 # importable from here.
-from .frames import KINDS, SIDES, _not_rigid, bearing_rotation, check_rigid, check_rigid_stack  # noqa: F401
+from mitsonar.geometry.frames import KINDS, SIDES, _not_rigid, bearing_rotation, check_rigid, check_rigid_stack  # noqa: F401
 
 _RIGID = "only rigid transforms: rotation + translation, no scale, shear or mirror"
 
@@ -223,7 +223,7 @@ class Scan:
     @property
     def channel(self) -> np.ndarray | None:
         """(n_pings,) channel of each row of a side-scan scan, 0 port and 1 starboard (port rows
-        first); None for the other kinds. `mitsonar.sidescan.select_side` takes one side's rows."""
+        first); None for the other kinds. `mitsonar.products.sidescan.select_side` takes one side's rows."""
         if self.kind != "sidescan":
             return None
         return sidescan_channels(self.meta.get("side", "both"), self.n_pings)
@@ -248,7 +248,7 @@ class Scan:
 
     def save(self, path) -> None:
         """Write the scan losslessly to ``.exr`` (range-intensity image, lossless header) or ``.npz``
-        (chosen by the extension), atomically; the format is described in `mitsonar.scanfile`.
+        (chosen by the extension), atomically; the format is described in `mitsonar.scan.fileformat`.
 
         Raises `ScanFileError` (a ValueError naming the file) for an unknown extension, a path
         that is a directory or in a missing folder, an empty scan, a field that `Scan` does not

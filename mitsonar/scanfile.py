@@ -2,7 +2,7 @@
 
 This module knows the format, not the `Scan` class: `write` takes any object with the Scan's
 fields, `read` returns the fields a Scan is built from (``Scan.save``/``Scan.load``, and
-``mitsonar.io``, use it).
+``mitsonar.scan.io``, use it).
 
 EXR layout (one scanline part, ZIP compression, lossless)
 ---------------------------------------------------------
@@ -55,7 +55,7 @@ from typing import Any
 
 import numpy as np
 
-from ._files import replacing
+from mitsonar._files import replacing
 
 FORMAT = "mitsonar-scan"
 FORMAT_VERSION = 1
@@ -145,7 +145,7 @@ def extension(path: str) -> str:
 
 
 def _header(scan, with_arrays: bool, path: str) -> dict[str, Any]:
-    from ._version import __version__
+    from mitsonar._version import __version__
 
     head: dict[str, Any] = {"format": FORMAT, "version": FORMAT_VERSION, "mitsonar_version": __version__,
                             "n_pings": scan.n_pings, "n_bins": scan.n_bins}

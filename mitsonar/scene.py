@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import warnings
 
-from .variant import ensure_variant
+from mitsonar.sim.variant import ensure_variant
 
 
 class SceneError(ValueError):

@@ -1,6 +1,6 @@
 """Survey scenes with options: a flat specular sea surface at z = 0, and the sonar swapped.
 
-    from mitsonar.sea_surface import load_survey_scene
+    from mitsonar.scenes.sea_surface import load_survey_scene
     scene = load_survey_scene("scenes_xml/wreck.xml", surface=True)          # + the sea surface
     scene = load_survey_scene("scenes_xml/rocky_slope.xml", sonar=xml)      # another head
 
@@ -24,7 +24,7 @@ from __future__ import annotations
 import os
 import xml.etree.ElementTree as ET
 
-from .scene import SceneError, load_scene
+from mitsonar.sim.scene import SceneError, load_scene
 
 SURFACE_ID = "sea_surface"
 SURFACE_PRESET = "water_calm"

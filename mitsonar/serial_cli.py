@@ -67,7 +67,7 @@ def _positive(kind):
 
 def _sound_speed(text):
     """--sound-speed of record and replay: the bound a head accepts (seanet.HeadSettings)."""
-    from .seanet.settings import SOUND_SPEED_ALLOWED, sound_speed_ok
+    from mitsonar.devices.micron.seanet.settings import SOUND_SPEED_ALLOWED, sound_speed_ok
     try:
         v = float(text)
     except ValueError:
@@ -111,7 +111,7 @@ def _check_head_options(args) -> None:
 
 
 def _ping360_settings(args):
-    from .ping360_head import GAIN_PRESETS, Ping360Settings
+    from mitsonar.devices.ping360.head import GAIN_PRESETS, Ping360Settings
     kw = {}
     for dest, name in (("range", "range"), ("n_bins", "number_of_samples"), ("sound_speed", "sound_speed"),
                        ("step", "step"), ("frequency", "transmit_frequency"),
@@ -126,7 +126,7 @@ def _ping360_settings(args):
 def _settings(args):
     if getattr(args, "head", "micron") == "ping360":
         return _ping360_settings(args)
-    from .seanet.settings import HeadSettings
+    from mitsonar.devices.micron.seanet.settings import HeadSettings
     kw = {}
     if getattr(args, "range", None) is not None:
         kw["range"] = args.range
@@ -149,9 +149,9 @@ def _virtual_sonar(args) -> int:
         raise FileNotFoundError(f"scene file not found: {scene_path}")
     _check_head_options(args)
     import mitsonar
-    from ._cliutil import check_counts, sensor_of
-    from .transports import check_port
-    from .seanet.settings import require_mechanical
+    from mitsonar._cliutil import check_counts, sensor_of
+    from mitsonar.devices.transports import check_port
+    from mitsonar.devices.micron.seanet.settings import require_mechanical
     check_counts(args, ValueError)
     # A port that cannot be opened fails now, not after the render.
     check_port(args.port_url, args.baud)
@@ -168,7 +168,7 @@ def _virtual_sonar(args) -> int:
           f"{scan.range_min:g}..{scan.range_max:g} m", flush=True)
     if args.head == "ping360":
         return _virtual_ping360(args, scan)
-    from .virtual_sonar import serve
+    from mitsonar.devices.micron.virtual import serve
     return serve(scan, args.port_url, args.seconds, baudrate=args.baud, realtime=not args.fast,
                  dst=not args.no_dst)
 
@@ -176,7 +176,7 @@ def _virtual_sonar(args) -> int:
 def _virtual_ping360(args, scan) -> int:
     import math
 
-    from .virtual_ping360 import serve
+    from mitsonar.devices.ping360.virtual import serve
     step = abs(math.degrees(float(scan.bearings[1] - scan.bearings[0]))) if scan.n_pings > 1 else 0.0
     if abs(step - 0.9) > 1e-9:
         print(f"a Ping360 pings every 0.9 deg; the scene's {scan.n_pings} pings are {step:g} deg apart: "
@@ -193,17 +193,17 @@ def cmd_virtual_sonar(args) -> int:
 # ---- record ----
 
 def _record(args) -> int:
-    from ._cliutil import warn_overwrite
+    from mitsonar._cliutil import warn_overwrite
     _check_output(args.output)
     _check_head_options(args)
     settings = _settings(args)
     warn_overwrite([args.output], args.force)
     if args.head == "ping360":
-        from .ping360 import record as record_ping360
+        from mitsonar.devices.ping360.driver import record as record_ping360
         stats = record_ping360(args.port, args.output, args.seconds, scans=args.scans, pings=args.pings,
                                baudrate=args.baud, settings=settings, timeout=args.timeout)
         return _recorded(args, stats)
-    from .micron import record
+    from mitsonar.devices.micron.driver import record
     if args.passive:
         stats = record(args.port, args.output, args.seconds, baudrate=args.baud, settings=settings,
                        passive=True)
@@ -231,10 +231,10 @@ def cmd_record(args) -> int:
 # ---- replay ----
 
 def _replay(args) -> int:
-    from .io import EXTENSIONS
-    from ._files import StagedFiles
-    from .rawlog import LogDamageWarning
-    from .recording import replay
+    from mitsonar.scan.io import EXTENSIONS
+    from mitsonar._files import StagedFiles
+    from mitsonar.devices.rawlog import LogDamageWarning
+    from mitsonar.devices.recording import replay
     out = _check_output(args.output, EXTENSIONS)
     log = Path(args.log)
     if not log.is_file():
@@ -252,7 +252,7 @@ def _replay(args) -> int:
                     warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     if not scans:
         raise ValueError(f"{log}: no complete scan in the log")
-    from ._cliutil import warn_overwrite
+    from mitsonar._cliutil import warn_overwrite
     if args.all:
         # All or nothing: every scan under a temporary name first, renamed once all are written.
         paths = [out.with_name(f"{out.stem}_{k:03d}{out.suffix}") for k in range(len(scans))]
@@ -299,14 +299,14 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--fast", action="store_true", help="answer at once (no timing model)")
     p.add_argument("--no-dst", action="store_true", help="behave as a pre-DST Micron (--head micron)")
     p.add_argument("--seconds", type=_positive(float), default=None, help="stop after T seconds")
-    from ._cliutil import add_force, add_sensor
+    from mitsonar._cliutil import add_force, add_sensor
     add_sensor(p)
     p.set_defaults(func=cmd_virtual_sonar)
 
     p = subparsers.add_parser(
         "record", help="log the raw byte stream of a Micron (SeaNet) or Ping360 head",
         description="Start the head on PORT, request scanlines and write every byte in and out "
-                    "with timestamps to a raw log (format: mitsonar.rawlog). --passive only "
+                    "with timestamps to a raw log (format: mitsonar.devices.rawlog). --passive only "
                     "listens, e.g. on a tap of the head's transmit line. The log is written "
                     "under a temporary name in its folder and renamed at the end (also on "
                     "Ctrl-C); a recording without any packet from the head leaves no file.")

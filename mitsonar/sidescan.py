@@ -3,7 +3,7 @@ slant-range to ground-range correction, and the waterfall picture's array.
 
 A side-scan scan (``kind='sidescan'``) has one row per ping and channel: with ``side='both'`` the
 port pings, then the starboard pings (``scan.channel``: 0 port, 1 starboard). Row k's pose is its
-channel's beam frame (`mitsonar.frames.sidescan_rotation`): ``poses[k][:3, 3]`` the transducer,
+channel's beam frame (`mitsonar.geometry.frames.sidescan_rotation`): ``poses[k][:3, 3]`` the transducer,
 ``poses[k][:3, 2]`` the boresight, whose horizontal part points across the track to that side.
 
 Slant to ground range (the classic flat-bottom correction, e.g. Blondel, "The Handbook of
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .frames import PORT, SIDES, STARBOARD
+from mitsonar.geometry.frames import PORT, SIDES, STARBOARD
 
 USES = ("data", "intensity")
 
@@ -123,7 +123,7 @@ def ground_range(scan, resolution=None, ground_max=None, altitude=None, seabed=N
     altitude    m above a flat bottom: one number, or one per row; default the measured altitude,
                 `first_return` (``threshold``) of each row
     seabed      a known seabed instead of a flat one: ``seabed(x, y) -> z`` (world, vectorised;
-                a `mitsonar.terrain.Terrain`'s ``height`` or `seabed_from_mesh`)
+                a `mitsonar.scenes.terrain.Terrain`'s ``height`` or `seabed_from_mesh`)
     use         ``intensity`` (noise-free energy per bin) or ``data`` (device bytes)
     =========== ==================================================================================
 
@@ -148,7 +148,7 @@ def ground_range(scan, resolution=None, ground_max=None, altitude=None, seabed=N
             seabed = getattr(seabed, "height", None)
             if seabed is None:
                 raise ValueError("ground_range 'seabed': expected a callable seabed(x, y) -> z or an object "
-                                 "with .height(x, y), such as a mitsonar.terrain.Terrain")
+                                 "with .height(x, y), such as a mitsonar.scenes.terrain.Terrain")
         u = across_track(scan)
         q = pos[:, None, :] + g[None, :, None] * u[:, None, :]
         z = np.asarray(seabed(q[..., 0], q[..., 1]), dtype=np.float64).reshape(n_rows, len(g))
@@ -219,7 +219,7 @@ def seabed_from_mesh(vertices, faces=None):
 
 def seabed_of_scene(scene, shape_id="seabed"):
     """`seabed_from_mesh` of the mesh shape ``shape_id`` of a loaded scene (its vertices in world
-    coordinates): the scene's known seabed for `ground_range` and `mitsonar.mosaic.mosaic`."""
+    coordinates): the scene's known seabed for `ground_range` and `mitsonar.products.mosaic.mosaic`."""
     import mitsuba as mi
 
     for shape in scene.shapes():

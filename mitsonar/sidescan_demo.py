@@ -1,7 +1,7 @@
 """The side-scan demo: a lawnmower survey over the wreck (``scenes_xml/wreck_sidescan.xml`` along
 ``wreck_sidescan_survey.tum``), its waterfall and its georeferenced mosaic.
 
-``python -m mitsonar.sidescan_demo -o out`` (``scripts/demo.sh`` runs it) writes
+``python -m mitsonar.scenes.sidescan_demo -o out`` (``scripts/demo.sh`` runs it) writes
 ``wreck_sidescan_waterfall.png`` (the scan passing the wreck on the first line, slant range),
 ``wreck_sidescan_waterfall_ground.png`` (the same, ground range over a flat bottom at the
 measured altitude), ``wreck_sidescan_mosaic.png`` with ``.pgw`` and ``.npz`` (the bare
@@ -26,8 +26,8 @@ def demo_sidescan(scenes, output, spp=64, seed=0, resolution=0.05, quiet=True) -
 
     import mitsonar
 
-    from .mosaic import MosaicBuilder
-    from .sidescan_plots import plot_mosaic, plot_waterfall
+    from mitsonar.products.mosaic import MosaicBuilder
+    from mitsonar.products.sidescan_plots import plot_mosaic, plot_waterfall
 
     scene = mitsonar.load_scene(os.path.join(scenes, SCENE))
     track = mitsonar.Trajectory.from_tum(os.path.join(scenes, TRACK))
@@ -62,7 +62,7 @@ def _objects_only(scenes) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m mitsonar.sidescan_demo", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m mitsonar.scenes.sidescan_demo", description=__doc__.splitlines()[0])
     ap.add_argument("-o", "--output", default="out", help="output folder (default out)")
     ap.add_argument("--scenes", default=None, help="the scenes_xml folder (default: the repository's)")
     ap.add_argument("--spp", type=int, default=64, help="paths per ping and channel (default 64)")

@@ -1,5 +1,5 @@
 """Pictures of side-scan products: the waterfall (`plot_waterfall`) and a survey's mosaic
-(`plot_mosaic`), drawn like `mitsonar.plots` (a ``matplotlib`` Figure, no pyplot; PNG, PDF or SVG
+(`plot_mosaic`), drawn like `mitsonar.products.plots` (a ``matplotlib`` Figure, no pyplot; PNG, PDF or SVG
 by the extension; written under a temporary name and renamed)."""
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 
-from .plots import DEFAULT_CMAP, DEFAULT_DYNAMIC_RANGE, _new_figure, _save, _settings_line
-from .sidescan import ground_range, waterfall
+from mitsonar.products.plots import DEFAULT_CMAP, DEFAULT_DYNAMIC_RANGE, _new_figure, _save, _settings_line
+from mitsonar.products.sidescan import ground_range, waterfall
 
 
 def _db(v, dynamic_range):
@@ -25,7 +25,7 @@ def plot_waterfall(scan, path=None, ax=None, use: str = "data", ground: bool = F
     """The waterfall of a side-scan ``scan``: port mirrored left of starboard (range growing outwards
     from the centre line), the newest ping at the top, as side-scan viewers scroll. ``use``: ``data``
     (device bytes) or ``intensity`` (dB, the top ``dynamic_range`` dB); ``ground=True`` shows the
-    ground-range corrected rows (`mitsonar.sidescan.ground_range` with ``altitude``/``seabed``).
+    ground-range corrected rows (`mitsonar.products.sidescan.ground_range` with ``altitude``/``seabed``).
     Returns the figure."""
     gr = ground_range(scan, use=use, altitude=altitude, seabed=seabed) if ground else None
     img = waterfall(scan, use=use, ground=gr)
@@ -59,7 +59,7 @@ def plot_waterfall(scan, path=None, ax=None, use: str = "data", ground: bool = F
 
 def plot_mosaic(m, path=None, ax=None, mesh=None, cmap: str = DEFAULT_CMAP,
                 dynamic_range: float = DEFAULT_DYNAMIC_RANGE, track=None, figsize=(8.0, 6.0), dpi: int = 150):
-    """A `mitsonar.mosaic.Mosaic` in world x-y (metres, north up), optionally with the vehicle's
+    """A `mitsonar.products.mosaic.Mosaic` in world x-y (metres, north up), optionally with the vehicle's
     ``track`` (a `Trajectory`) and the outline of a ground-truth ``mesh`` (vertices, faces: its
     triangles' x-y edges above the seabed are not distinguished; pass the objects' mesh). Returns
     the figure. `Mosaic.save` writes the bare georeferenced PNG and array."""

@@ -1,7 +1,7 @@
 """Soundings as products: a point cloud (PLY, and ``sensor_msgs/PointCloud2``-ready arrays) and a
 gridded depth map (an array with its affine transform; GeoTIFF when ``rasterio`` is installed).
 
-    from mitsonar.soundings import write_ply, pointcloud2, grid_depths
+    from mitsonar.products.soundings import write_ply, pointcloud2, grid_depths
     write_ply("soundings.ply", run.soundings)            # binary PLY: x y z intensity beam
     cloud, fields = pointcloud2(run.soundings)            # float32 x y z intensity, uint16 beam
     grid = grid_depths(run.soundings, cell=0.5)            # grid.depth (rows, cols), grid.transform
@@ -20,9 +20,9 @@ import math
 
 import numpy as np
 
-from . import northup
-from ._checks import is_number, not_allowed
-from ._files import replacing
+from mitsonar.geometry import northup
+from mitsonar._checks import is_number, not_allowed
+from mitsonar._files import replacing
 
 WHERE = "soundings"
 
@@ -48,9 +48,9 @@ def pointcloud2(soundings):
 
 def write_ply(path, soundings):
     """Write the soundings as a binary little-endian PLY point cloud (``element vertex`` with double
-    x y z, float intensity, ushort beam, uint ping, float angle; `mitsonar.ply`), under a temporary
+    x y z, float intensity, ushort beam, uint ping, float angle; `mitsonar.geometry.ply`), under a temporary
     name renamed onto ``path`` when complete. Returns the number of points."""
-    from .ply import write_ply as write
+    from mitsonar.geometry.ply import write_ply as write
 
     rows = np.zeros(len(soundings), np.dtype(list(PLY_FIELDS)))
     for n, _ in PLY_FIELDS:
@@ -61,7 +61,7 @@ def write_ply(path, soundings):
 
 def read_ply(path) -> np.ndarray:
     """Read back a PLY written by `write_ply`: a structured array with its fields."""
-    from .ply import read_ply as read
+    from mitsonar.geometry.ply import read_ply as read
 
     return read(path)[0]
 

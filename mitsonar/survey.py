@@ -16,10 +16,10 @@ import sys
 
 import numpy as np
 
-from .render import (SEED_ALLOWED, SEED_MAX, SPP_ALLOWED, SPP_MAX, _integrator, _whole, moving_head_poses, pick_sensor,
+from mitsonar.sim.render import (SEED_ALLOWED, SEED_MAX, SPP_ALLOWED, SPP_MAX, _integrator, _whole, moving_head_poses, pick_sensor,
                      render_scan)
-from .scene import SceneError, sonar_of
-from .trajectory import Trajectory
+from mitsonar.sim.scene import SceneError, sonar_of
+from mitsonar.geometry.trajectory import Trajectory
 
 SCAN_NAME = "scan_{:05d}{}"
 MAX_SCANS = 10 ** 9

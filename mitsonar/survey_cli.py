@@ -6,7 +6,7 @@ mechanical head, one per frame of a multibeam head, one per ``n_pings`` pings of
 position) and ``scan_00000_world.png`` (the first scan drawn in world coordinates, each ping from
 its own pose: the motion distortion shows); for a side-scan head instead ``scan_00000_waterfall.png``
 (the first scan's waterfall) and ``mosaic.png`` (+ ``mosaic.pgw``, ``mosaic.npz``: the survey's
-georeferenced mosaic, `mitsonar.mosaic`, in cells of a range bin (0.1 m at least, coarser for a
+georeferenced mosaic, `mitsonar.products.mosaic`, in cells of a range bin (0.1 m at least, coarser for a
 grid of more than 2e7 cells), flat bottom at the measured altitude).
 Everything is checked (trajectory file, scene, folder, that a scan fits in the track) before the
 first file is written; each file is written under a temporary name and renamed.
@@ -43,7 +43,7 @@ def add_trajectory_options(parser):
 def trajectory_from_args(args, command="survey"):
     """The `Trajectory` the flags of `add_trajectory_options` give (a TUM file, or a lawnmower
     pattern; plus drift), or a `SurveyCLIError` of one line naming ``command`` and the flags."""
-    from .trajectory import Trajectory
+    from mitsonar.geometry.trajectory import Trajectory
 
     if (args.trajectory is None) == (args.lawnmower is None):
         raise CLIError(f"{command}: give exactly one of --trajectory FILE or --lawnmower X_MIN X_MAX Y_MIN Y_MAX")
@@ -63,13 +63,13 @@ def trajectory_from_args(args, command="survey"):
 def cmd_survey(args):
     import mitsonar
 
-    from ._cliutil import check_counts, sensor_of
-    from ._files import check_output_folder
+    from mitsonar._cliutil import check_counts, sensor_of
+    from mitsonar._files import check_output_folder
 
     check_counts(args, CLIError)
     traj = trajectory_from_args(args)               # a bad file: one line, nothing written
     if getattr(args, "surface", False):             # + a flat specular sea surface at z = 0
-        from .sea_surface import load_survey_scene
+        from mitsonar.scenes.sea_surface import load_survey_scene
 
         scene = load_survey_scene(args.scene, surface=True)
     else:
@@ -79,7 +79,7 @@ def cmd_survey(args):
     check_output_folder(out, CLIError, what="a survey's scans", force=True,
                         holds=None if args.force else lambda out: any(f.startswith("scan_") for f in os.listdir(out)))
     if args.mcap is not None:   # refused before any render (its folder may be the one -o makes)
-        from .ros.bag import check_output
+        from mitsonar.export.ros.bag import check_output
 
         check_output(args.mcap, args.force, folder_may_be=out)
     ext = "." + args.format
@@ -94,7 +94,7 @@ def cmd_survey(args):
             os.remove(os.path.join(out, name))
     bag = None
     if args.mcap is not None:   # the ROS 2 bag, written beside the scans, renamed into place at the end
-        from .ros.bag import McapBag
+        from mitsonar.export.ros.bag import McapBag
 
         bag = McapBag(args.mcap, start=args.start, trajectory=traj, threshold=args.threshold, force=args.force)
     try:
@@ -112,8 +112,8 @@ def cmd_survey(args):
 
 def _draw(args, scene, traj, out, scans, bag, mosaic=None):
     import mitsonar
-    from . import plots
-    from .survey import SCAN_NAME
+    from mitsonar.products import plots
+    from mitsonar.sim.survey import SCAN_NAME
 
     positions = []
     n = 0
@@ -152,8 +152,8 @@ def _mosaic_grid(scene, traj, sensor=0):
     """The empty mosaic of a side-scan survey (None for other heads): the track's extent plus the
     swath (``range_max``) each side, in cells of the sonar's range bin (0.1 m at least), coarser
     when that would exceed `MOSAIC_CELLS`; built before any render so a bad grid costs nothing."""
-    from .mosaic import MosaicBuilder
-    from .scene import sonar_of
+    from mitsonar.products.mosaic import MosaicBuilder
+    from mitsonar.sim.scene import sonar_of
 
     sonar = sonar_of(scene, sensor)
     if sonar.kind != "sidescan":
@@ -167,10 +167,10 @@ def _mosaic_grid(scene, traj, sensor=0):
 
 def _sidescan_products(scan, n, traj, out, mosaic):
     """A side-scan survey's pictures: the first scan's waterfall; every scan into the mosaic."""
-    from .survey import SCAN_NAME
+    from mitsonar.sim.survey import SCAN_NAME
 
     if n == 0:
-        from .sidescan_plots import plot_waterfall
+        from mitsonar.products.sidescan_plots import plot_waterfall
 
         plot_waterfall(scan, os.path.join(out, SCAN_NAME.format(0, "_waterfall.png")))
     return mosaic.add(scan)
@@ -185,7 +185,7 @@ def demo_survey(scenes, output, spp, seed, quiet=True):
     coordinates over the ground truth (``harbour_mechanical_<i>.png``, ``harbour_multibeam_<t>s.png``)
     and the track with every ping's position over the ground truth (``harbour_track.png``). Returns the files written."""
     import mitsonar
-    from . import plots
+    from mitsonar.products import plots
 
     scene = mitsonar.load_scene(os.path.join(scenes, DEMO_SCENE))
     track = mitsonar.Trajectory.from_tum(os.path.join(scenes, DEMO_TRACK))
@@ -218,13 +218,13 @@ def add_subcommands(sub):
     s.add_argument("--spp", type=int, default=1024, help="paths per ping (default 1024)")
     s.add_argument("--seed", type=int, default=0, help="survey seed (default 0)")
     s.add_argument("--max-scans", type=int, help="stop after this many scans")
-    from ._cliutil import add_sensor
+    from mitsonar._cliutil import add_sensor
 
     add_sensor(s)
     s.add_argument("--format", default="npz", choices=("npz", "exr"), help="scan file format (default npz)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.add_argument("--mcap", metavar="OUT", help="also write the survey as a ROS 2 bag (MCAP; see mitsonar export)")
-    from .export_cli import add_mcap_options
+    from mitsonar.cli.export import add_mcap_options
 
     add_mcap_options(s, force_help="replace a survey already in the output folder (its scan files are removed "
                                    "first) and an existing --mcap file")

@@ -1,12 +1,12 @@
 """Procedural seabed terrain: a seeded height field (slope, sand ripples, random roughness,
 scattered rocks) written as a binary PLY mesh that Mitsuba's ``ply`` shape loads.
 
-    from mitsonar.terrain import Terrain
+    from mitsonar.scenes.terrain import Terrain
     t = Terrain(size=(40, 40), resolution=0.05, depth=-10, slope=(0.05, 0), ripple_wavelength=0.6,
                 ripple_height=0.05, roughness=0.02, rocks=30, seed=1)
     t.write_ply("seabed.ply")
 
-or ``python -m mitsonar.terrain seabed.ply --size 40 40 --resolution 0.05 ...`` (``--help``).
+or ``python -m mitsonar.scenes.terrain seabed.ply --size 40 40 --resolution 0.05 ...`` (``--help``).
 
 The heights on a regular grid of spacing ``resolution`` are
 
@@ -40,7 +40,7 @@ import sys
 
 import numpy as np
 
-from ._checks import in_range, is_number, is_whole, require
+from mitsonar._checks import in_range, is_number, is_whole, require
 
 #: Most grid vertices a terrain may have: making and writing the mesh peaks at about 270 bytes
 #: each (heights and their parts, the roughness field's FFT, vertex and face arrays; measured on
@@ -187,9 +187,9 @@ class Terrain:
 
     def write_ply(self, path):
         """Write the mesh as a binary little-endian PLY (float x y z, uchar/int face lists;
-        `mitsonar.ply`) under a temporary name, renamed onto ``path`` when complete. Returns
+        `mitsonar.geometry.ply`) under a temporary name, renamed onto ``path`` when complete. Returns
         ``(n_vertices, n_faces)``."""
-        from .ply import write_ply
+        from mitsonar.geometry.ply import write_ply
 
         verts, faces = self.mesh()
         rows = np.empty(len(verts), [("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
@@ -200,14 +200,14 @@ class Terrain:
 
 def read_ply(path):
     """Read back a PLY written by :meth:`Terrain.write_ply`: ``(vertices, faces)``."""
-    from .ply import read_ply as read
+    from mitsonar.geometry.ply import read_ply as read
 
     rows, faces = read(path)
     return np.stack([rows["x"], rows["y"], rows["z"]], 1).astype(np.float64), faces
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(prog="python -m mitsonar.terrain", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m mitsonar.scenes.terrain", description=__doc__.split("\n\n")[0])
     p.add_argument("output", help="PLY file to write")
     p.add_argument("--size", nargs=2, type=float, default=(40.0, 40.0), metavar=("LX", "LY"), help="m (40 40)")
     p.add_argument("--resolution", type=float, default=0.05, help="grid spacing, m (0.05)")
@@ -232,7 +232,7 @@ def main(argv=None):
                     seed=a.seed, closed=a.closed)
         nv, nf = t.write_ply(a.output)
     except (ValueError, OSError) as exc:
-        print(f"mitsonar.terrain: {exc}", file=sys.stderr)
+        print(f"mitsonar.scenes.terrain: {exc}", file=sys.stderr)
         return 2
     print(f"wrote {a.output}: {nv} vertices, {nf} triangles of {t.resolution:g} m")
     return 0

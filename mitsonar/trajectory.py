@@ -25,8 +25,8 @@ import os
 
 import numpy as np
 
-from ._files import replacing
-from .frames import check_rigid, check_rigid_stack
+from mitsonar._files import replacing
+from mitsonar.geometry.frames import check_rigid, check_rigid_stack
 
 TUM_FIELDS = ("timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw")
 UNIT_TOLERANCE = 1e-3   # |q| of a TUM line may differ from 1 by this much (then it is normalised)

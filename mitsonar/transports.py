@@ -1,8 +1,8 @@
 """Byte transports of the serial devices: the driver's side of a port and the virtual head's.
 
-The driver (`mitsonar.micron.MicronSonar`) and the passive recorder open a port with
+The driver (`mitsonar.devices.micron.driver.MicronSonar`) and the passive recorder open a port with
 `open_serial` (``serial.serial_for_url``: a device path, ``socket://host:port``, ``rfc2217://``,
-``loop://`` ...) and read it with `read_available`. The virtual head (`mitsonar.virtual_sonar`)
+``loop://`` ...) and read it with `read_available`. The virtual head (`mitsonar.devices.micron.virtual`)
 serves on `open_transport`: a new pseudo-terminal, a TCP port that pyserial ``socket://``
 clients connect to, a UDP port (``udp://127.0.0.1:PORT``, loopback only: a virtual Ping360
 answers the sender of the last datagram, as the real head does on its Ethernet port), or any
@@ -133,9 +133,9 @@ def read_available(ser, fd, wait: float, port) -> bytes:
 
 
 class LineDriver:
-    """What every head driver does with its line (`mitsonar.micron.MicronSonar`,
-    `mitsonar.ping360.Ping360Sonar`): open it, send and receive bytes through the raw log
-    (``_log``, a `mitsonar.rawlog.RawLogWriter` or None), count what was sent (``stats``), hold
+    """What every head driver does with its line (`mitsonar.devices.micron.driver.MicronSonar`,
+    `mitsonar.devices.ping360.driver.Ping360Sonar`): open it, send and receive bytes through the raw log
+    (``_log``, a `mitsonar.devices.rawlog.RawLogWriter` or None), count what was sent (``stats``), hold
     the head's mounting (``pose``, checked by the subclass's ``_check_pose``), close.
 
     Subclasses call `_init_line`, set ``stats``, ``parser`` and ``_inbox`` (a deque), then call
@@ -174,7 +174,7 @@ class LineDriver:
         """Name the port, open the log (a path, or a `RawLogWriter` to share), open the line
         (`open_serial`, unless ``port_or_url`` is an open pyserial-like object) and call
         ``start()`` if given; on any failure close what was opened."""
-        from .rawlog import RawLogWriter
+        from mitsonar.devices.rawlog import RawLogWriter
         self.port = (port_or_url if isinstance(port_or_url, str)
                      else getattr(port_or_url, "port", repr(port_or_url)))
         if log is not None:
@@ -308,8 +308,8 @@ class LineDriver:
 # --------------------------------------------------------------------------------------------
 
 class ServedHead:
-    """What every virtual head does with its port (`mitsonar.virtual_sonar.VirtualMicron`,
-    `mitsonar.virtual_ping360.VirtualPing360`): open it (`open_transport` of ``port_url``) and
+    """What every virtual head does with its port (`mitsonar.devices.micron.virtual.VirtualMicron`,
+    `mitsonar.devices.ping360.virtual.VirtualPing360`): open it (`open_transport` of ``port_url``) and
     run its ``_tick`` in a thread until `stop`. Subclasses set ``port_url``, ``baudrate``, ``_stop``
     (a `threading.Event`), ``_thread = None``, ``_transport = None``, and may prepare the head
     in ``_power_on`` (called with the port open, before the thread starts)."""

@@ -2,7 +2,7 @@
 
 ``VirtualPing360(scan)`` opens a pseudo-terminal (or a UDP port on the loopback,
 ``udp://127.0.0.1:PORT``, or a ``socket://`` TCP port, or any pyserial URL) and behaves like the
-head on the other end, speaking what ``brping.Ping360`` speaks (`mitsonar.ping_protocol`, on
+head on the other end, speaking what ``brping.Ping360`` speaks (`mitsonar.devices.ping360.protocol`, on
 brping's own message definitions):
 
 ==================================  =====================================================
@@ -40,10 +40,10 @@ from collections import Counter, deque
 
 import numpy as np
 
-from .ping360_head import GRADIANS, TICK, angle_to_radians, check_setting
-from .ping_protocol import Message, StreamParser, encode, ids
-from .scan import Scan
-from .transports import ServedHead
+from mitsonar.devices.ping360.head import GRADIANS, TICK, angle_to_radians, check_setting
+from mitsonar.devices.ping360.protocol import Message, StreamParser, encode, ids
+from mitsonar.scan import Scan
+from mitsonar.devices.transports import ServedHead
 
 __all__ = ["VirtualPing360", "serve"]
 

@@ -10,7 +10,7 @@ The scanline sent at wire bearing ``b`` is the row of the scan whose bearing mat
 ``(3200 - b) * pi / 3200`` (sign flipped for an inverted head) within half a step, resampled
 by range onto the head's bins (ADInterval and sound speed: each head bin takes the scan bin
 that holds its centre, zero outside the scan's range window); bearings the scan does not cover
-send zeros. Together with `mitsonar.micron.MicronSonar`, which maps the other way, a scan
+send zeros. Together with `mitsonar.devices.micron.driver.MicronSonar`, which maps the other way, a scan
 survives the wire unchanged when the driver uses ``HeadSettings.from_scan(scan)``.
 
 Timing model (``realtime=True``): each scanline takes ``18*10/baud`` (the request) +
@@ -36,10 +36,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._checks import in_range
-from .scan import Scan
-from .transports import ServedHead, check_port
-from .seanet import (DEFAULT_NIBBLE_ORDER, FULL_TURN, Alive, BBUserData, FpgaCalibrationData,
+from mitsonar._checks import in_range
+from mitsonar.scan import Scan
+from mitsonar.devices.transports import ServedHead, check_port
+from mitsonar.devices.micron.seanet import (DEFAULT_NIBBLE_ORDER, FULL_TURN, Alive, BBUserData, FpgaCalibrationData,
                      FpgaVersionData, GainCommand, HeadCommand, HeadData, HeadInf, HeadSettings,
                      HeadStatus, HdCtrl, ReBoot, ScanReverse, SendBBUser, SendData, SendVersion,
                      StopAlives, StreamParser, VersionData, bearing_to_radians, encode, require_mechanical)

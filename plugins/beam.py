@@ -214,7 +214,7 @@ class BeamPattern:
     def across_aperture(self) -> float:
         """m, the aperture across the narrow beam: a ``sinc`` piston's own ``aperture_h``, else the
         line aperture whose one-way -3 dB width is ``beamwidth_h`` at ``frequency`` (what scene
-        speckle decorrelates over as the head moves, `mitsonar.speckle`)."""
+        speckle decorrelates over as the head moves, `mitsonar.receiver.speckle`)."""
         if self.aperture_h is not None:
             return self.aperture_h
         return line_aperture(self.beamwidth_h, self.frequency, self.sound_speed)

@@ -11,8 +11,8 @@ import math
 import os
 import sys
 
-from mitsonar.terrain import Terrain
-from mitsonar.trajectory import Trajectory, pose
+from mitsonar.scenes.terrain import Terrain
+from mitsonar.geometry.trajectory import Trajectory, pose
 
 HERE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes_xml")
 

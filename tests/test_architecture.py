@@ -98,9 +98,9 @@ def test_the_graph_sees_lazy_imports():
     """The checker itself: imports inside functions and a module __getattr__ are edges."""
     mods, edges = import_graph()
     # render.py imports the plugins inside functions only
-    assert "mitsonar.plugins" in edges["mitsonar.render"]
+    assert "mitsonar.plugins" in edges["mitsonar.sim.render"]
     # a submodule importing a sibling through its package (``from . import scanfile``) imports both
-    assert {"mitsonar", "mitsonar.scanfile"} <= edges["mitsonar.scan"]
+    assert {"mitsonar", "mitsonar.scan.fileformat"} <= edges["mitsonar.scan"]
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": set()}) == [["a", "b", "c"]]
 
 
@@ -150,14 +150,14 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     and the electronics' settings (the sensor reads and checks its electronics fields), nothing
     else of mitsonar (not the Scan, files, render or devices)."""
     _, edges = import_graph()
-    allowed = {"mitsonar._checks", "mitsonar.frames", "mitsonar.electronics"}
+    allowed = {"mitsonar._checks", "mitsonar.geometry.frames", "mitsonar.receiver.electronics"}
     for name, out in edges.items():
         if name.startswith("mitsonar.plugins"):
             above = {t for t in out if t.startswith("mitsonar") and not t.startswith("mitsonar.plugins")}
             assert above <= allowed, (name, above - allowed)
     # and those import nothing of mitsonar's above them (the electronics' scene speckle is a
     # numpy-only leaf beside them)
-    leaves = {"mitsonar._checks", "mitsonar.speckle"}
-    for low in allowed | {"mitsonar.speckle"}:
+    leaves = {"mitsonar._checks", "mitsonar.receiver.speckle"}
+    for low in allowed | {"mitsonar.receiver.speckle"}:
         assert not {t for t in edges[low] if t.startswith("mitsonar")} - leaves, low
-    assert not {t for t in edges["mitsonar.speckle"] if t.startswith("mitsonar")}
+    assert not {t for t in edges["mitsonar.receiver.speckle"] if t.startswith("mitsonar")}

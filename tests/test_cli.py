@@ -196,7 +196,7 @@ def test_plot_of_a_sidescan_scan_is_a_waterfall_and_refuses_fans(tmp_path, sides
 
 def test_sidescan_titles_count_pings_per_side(sidescan_npz):
     import mitsonar
-    from mitsonar.plots import _settings_line, plot_ascan, rows_text
+    from mitsonar.products.plots import _settings_line, plot_ascan, rows_text
 
     scan = mitsonar.load_scan(sidescan_npz)
     assert scan.n_pings == 500 and rows_text(scan) == "250 pings per side"
@@ -206,7 +206,7 @@ def test_sidescan_titles_count_pings_per_side(sidescan_npz):
 
 
 def test_title_numbers_have_sensible_precision(mitsonar_mod):
-    from mitsonar.plots import _settings_line, fmt, plot_ascan
+    from mitsonar.products.plots import _settings_line, fmt, plot_ascan
 
     scan = mitsonar_mod.render_scan(mitsonar_mod.load_scene(BOX), spp=1, electronics={"gain": 27.8095})
     scan.bearings[0] = np.radians(0.254899)
@@ -314,8 +314,8 @@ def test_render_scan_states_the_spp_limit(mitsonar_mod):
 
 
 def test_compare_names_every_sonar_integrator():
-    from mitsonar.compare import CompareError
-    from mitsonar.compare.integrators import load_integrator
+    from mitsonar.jobs.compare import CompareError
+    from mitsonar.jobs.compare.integrators import load_integrator
 
     with pytest.raises(CompareError, match="use one of sonar_tof, sonar_mlt, sonar_bdpt"):
         load_integrator("path")
@@ -334,7 +334,7 @@ def test_trajectory_errors_print_plain_numbers(tmp_path, mitsonar_mod):
 
 
 def test_dataset_config_errors_name_the_file_and_line(tmp_path):
-    from mitsonar.dataset import DatasetError, read_config
+    from mitsonar.jobs.dataset import DatasetError, read_config
 
     bad = tmp_path / "bad.yaml"
     bad.write_text("seed: 1\nsamples: [3\nspp: 4\n")
@@ -351,7 +351,7 @@ def test_dataset_config_errors_name_the_file_and_line(tmp_path):
 
 
 def test_survey_scene_errors_name_the_file_and_line(tmp_path):
-    from mitsonar.sea_surface import load_survey_scene
+    from mitsonar.scenes.sea_surface import load_survey_scene
 
     bad = tmp_path / "bad.xml"
     text = open(BOX).read()

@@ -1,4 +1,4 @@
-"""The integrator comparison (`mitsonar.compare`, ``mitsonar compare``) and the slot-chamber scene.
+"""The integrator comparison (`mitsonar.jobs.compare`, ``mitsonar compare``) and the slot-chamber scene.
 
 The comparisons run on a small scene written to tmp (a wall and a floor, 4 pings, 100 bins) with
 budgets of 10 and 100 ms, and compare sonar_tof with itself: the machinery does not depend on
@@ -42,7 +42,7 @@ def small_scene(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def first_run(small_scene, tmp_path_factory, mitsonar_mod):
-    from mitsonar.compare import compare
+    from mitsonar.jobs.compare import compare
 
     out = tmp_path_factory.mktemp("cmp")
     result = compare(small_scene, "sonar_tof,sonar_tof", BUDGETS, str(out), reference_spp=REF_SPP, seed=3,
@@ -108,7 +108,7 @@ def test_errors_decrease_with_budget(first_run):
 
 
 def test_reference_is_cached_and_reused(first_run, small_scene, monkeypatch):
-    from mitsonar.compare import engine as cmp
+    from mitsonar.jobs.compare import engine as cmp
 
     result, out = first_run
     path = result["reference"]["file"]
@@ -134,7 +134,7 @@ def test_reference_is_cached_and_reused(first_run, small_scene, monkeypatch):
 
 
 def test_error_metrics_closed_form():
-    from mitsonar.compare import error_metrics
+    from mitsonar.jobs.compare import error_metrics
 
     ref = np.array([[1.0, 2.0, 2.0], [0.0, 0.0, 0.0], [3.0, 0.0, 4.0]])
     est = ref * 1.1
@@ -150,7 +150,7 @@ def test_error_metrics_closed_form():
 
 
 def test_spp_planning_from_timings():
-    from mitsonar.compare import plan_spp
+    from mitsonar.jobs.compare import plan_spp
 
     assert plan_spp([[100, 0.01]], 0.1) == 1000
     assert plan_spp([[1000, 0.01], [10000, 0.1]], 0.05) == pytest.approx(5000, rel=1e-6)
@@ -177,8 +177,8 @@ def test_spp_planning_from_timings():
 def test_bad_input_raises_one_line(mitsonar_mod, call, message):
     import types
 
-    from mitsonar import compare as cmp
-    from mitsonar.compare import parsing
+    from mitsonar.jobs import compare as cmp
+    from mitsonar.jobs.compare import parsing
 
     api = types.SimpleNamespace(**{n: getattr(parsing, n) for n in dir(parsing) if n.startswith("parse_")},
                                 load_integrator=cmp.load_integrator)
@@ -188,8 +188,8 @@ def test_bad_input_raises_one_line(mitsonar_mod, call, message):
 
 
 def test_parsers_accept_good_input():
-    from mitsonar.compare import labels_for
-    from mitsonar.compare.parsing import parse_budgets, parse_params, parse_regions
+    from mitsonar.jobs.compare import labels_for
+    from mitsonar.jobs.compare.parsing import parse_budgets, parse_params, parse_regions
 
     assert parse_budgets("4, 2,8,2") == [2.0, 4.0, 8.0]
     assert labels_for(["sonar_tof", "sonar_mlt", "sonar_tof"]) == ["sonar_tof", "sonar_mlt", "sonar_tof#2"]
@@ -306,7 +306,7 @@ def test_explicit_mlt_settings_set_the_spp_floor(first_run, small_scene, mitsona
     """sonar_mlt refuses an spp its explicit chains do not fit; compare times it from there on."""
     import mitsuba as mi
 
-    from mitsonar.compare import compare
+    from mitsonar.jobs.compare import compare
 
     result, out = first_run
     mlt = mi.load_dict({"type": "sonar_mlt", "chains": 64})

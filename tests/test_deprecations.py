@@ -6,9 +6,9 @@ import pytest
 
 
 @pytest.mark.parametrize("module, name, home", [
-    ("mitsonar.render", "load_scene", "mitsonar.scene"),
-    ("mitsonar.render", "set_variant", "mitsonar.variant"),
-    ("mitsonar.render", "scene_mesh", "mitsonar.groundtruth"),
+    ("mitsonar.sim.render", "load_scene", "mitsonar.sim.scene"),
+    ("mitsonar.sim.render", "set_variant", "mitsonar.sim.variant"),
+    ("mitsonar.sim.render", "scene_mesh", "mitsonar.sim.groundtruth"),
     ("mitsonar.plugins.sonar_tof", "resolve_sensor", "mitsonar.plugins.common"),
     ("mitsonar.plugins.sonar_tof", "check_max_depth", "mitsonar.plugins.common"),
     ("mitsonar.plugins.echo_path", "HashSamples", "mitsonar.plugins.samples"),

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from mitsonar.electronics import Electronics, apply_to_scan
+from mitsonar.receiver.electronics import Electronics, apply_to_scan
 from mitsonar.scan import Scan
 
 # Everything random or spreading switched off: the level is the bare formula.

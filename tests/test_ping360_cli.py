@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import mitsonar
-from mitsonar.ping360_head import Ping360Settings
-from mitsonar.virtual_ping360 import VirtualPing360
+from mitsonar.devices.ping360.head import Ping360Settings
+from mitsonar.devices.ping360.virtual import VirtualPing360
 
 from test_ping360 import synthetic_scan
 from test_serial_cli import cli, one_error_line
@@ -106,7 +106,7 @@ def test_record_from_a_silent_port_says_so_and_leaves_no_file(tmp_path, capsys):
 
 
 def test_record_keeps_what_arrived_on_ctrl_c(tmp_path, capsys, monkeypatch):
-    from mitsonar import ping360
+    from mitsonar.devices.ping360 import driver as ping360
     scan = synthetic_scan(n_pings=40, step_deg=-9.0, seed=3)
     budget = iter(range(5))      # five pings, then the user presses Ctrl-C
     read = ping360.Ping360Sonar.read_ping

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from matplotlib import colormaps
 
-from mitsonar import plots
-from mitsonar.electronics import Electronics
+from mitsonar.products import plots
+from mitsonar.receiver.electronics import Electronics
 from mitsonar.scan import Scan
 
 
@@ -94,7 +94,7 @@ def test_track_frames_a_straight_run_and_draws_the_ground_truth_at_its_depth(tmp
     """A straight 25 m run at z = -2 beside a wall x = 20 (z from -5 to 1): the view holds the wall's
     cut, its short side is at least TRACK_MIN_ASPECT of the long one (it was a strip 0.1 as high as
     wide), and the track's end is drawn where it is, not under the legend."""
-    from mitsonar.trajectory import Trajectory
+    from mitsonar.geometry.trajectory import Trajectory
 
     t = np.linspace(0.0, 50.0, 51)
     poses = np.tile(np.eye(4), (len(t), 1, 1))

@@ -79,22 +79,22 @@ delete the cached reference.
 """
 from __future__ import annotations
 
-from .budget import (BETA_RANGE, BUDGET_TOLERANCE, MAX_ATTEMPTS, TIME_TOLERANCE, KernelWatch, budget_warning,
+from mitsonar.jobs.compare.budget import (BETA_RANGE, BUDGET_TOLERANCE, MAX_ATTEMPTS, TIME_TOLERANCE, KernelWatch, budget_warning,
                      calibrate, off_budget, plan_spp)
-from .common import (CALIBRATION_START_SPP, DEFAULT_BUDGETS, DEFAULT_INTEGRATORS, DEFAULT_REFERENCE_FACTOR,
+from mitsonar.jobs.compare.common import (CALIBRATION_START_SPP, DEFAULT_BUDGETS, DEFAULT_INTEGRATORS, DEFAULT_REFERENCE_FACTOR,
                      DEFAULT_REPEATS, MAX_SPP, REFERENCE_INTEGRATOR, REFERENCE_NOISE_WARNING, REFERENCE_SEED_OFFSET,
                      SEED_STRIDE, CompareError, jsonable, labels_for)
-from .engine import compare
-from .figures import plot_convergence, plot_polar_grid, scan_from_histogram
-from .integrators import load_integrator
-from .metrics import equal_time_ratios, error_metrics, self_errors
-from .output import write_json
-from .reference import (cached_references, load_or_render_reference, reference_key, reference_path,
+from mitsonar.jobs.compare.engine import compare
+from mitsonar.jobs.compare.figures import plot_convergence, plot_polar_grid, scan_from_histogram
+from mitsonar.jobs.compare.integrators import load_integrator
+from mitsonar.jobs.compare.metrics import equal_time_ratios, error_metrics, self_errors
+from mitsonar.jobs.compare.output import write_json
+from mitsonar.jobs.compare.reference import (cached_references, load_or_render_reference, reference_key, reference_path,
                         render_reference, scene_digest)
 
 #: Names that left this module, and their new home. Importing them from here still works for one
 #: release and warns (DeprecationWarning).
-MOVED = {name: "mitsonar.compare.parsing"
+MOVED = {name: "mitsonar.jobs.compare.parsing"
          for name in ("parse_budgets", "parse_integrators", "parse_params", "parse_regions")}
 
 
@@ -102,9 +102,9 @@ def __getattr__(name):
     if name in MOVED:
         import warnings
 
-        from . import parsing
+        from mitsonar.jobs.compare import parsing
 
-        warnings.warn(f"mitsonar.compare.{name} has moved to {MOVED[name]}.{name}; the old import path "
+        warnings.warn(f"mitsonar.jobs.compare.{name} has moved to {MOVED[name]}.{name}; the old import path "
                       "goes away in the next release", DeprecationWarning, stacklevel=2)
         return getattr(parsing, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from .common import CALIBRATION_START_SPP, MAX_SPP
+from mitsonar.jobs.compare.common import CALIBRATION_START_SPP, MAX_SPP
 
 #: A timed render within these fractions of its budget is accepted; otherwise its spp is chosen
 #: again from all timings so far (at most MAX_ATTEMPTS renders per budget). Same band as

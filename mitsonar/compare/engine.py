@@ -2,7 +2,7 @@
 integrators, calibrate, fill every time budget, get the reference, score, warn, write.
 
 Nothing is created before the settings, the scene and the integrators are known to be good; the
-output folder is made only for the reference and the results (`mitsonar.compare.output`).
+output folder is made only for the reference and the results (`mitsonar.jobs.compare.output`).
 """
 from __future__ import annotations
 
@@ -16,17 +16,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .budget import KernelWatch, budget_warning, calibrate, plan_spp, search_spp
-from .common import (CALIBRATION_START_SPP, DEFAULT_BUDGETS, DEFAULT_INTEGRATORS, DEFAULT_REFERENCE_FACTOR,
+from mitsonar.jobs.compare.budget import KernelWatch, budget_warning, calibrate, plan_spp, search_spp
+from mitsonar.jobs.compare.common import (CALIBRATION_START_SPP, DEFAULT_BUDGETS, DEFAULT_INTEGRATORS, DEFAULT_REFERENCE_FACTOR,
                      DEFAULT_REPEATS, MAX_SPP, REFERENCE_INTEGRATOR, REFERENCE_NOISE_WARNING, SEED_STRIDE, WARM_SEED,
                      CompareError, labels_for)
-from .figures import plot_convergence, plot_polar_grid
-from .integrators import describe, load_integrator, min_spp
-from .metrics import equal_time_ratios, region_mask, score, self_errors, summarise
-from .output import OutputFolder, check_output_folder, write_json
-from .parsing import parse_budgets, parse_integrators
-from .reference import load_or_render_reference, render_reference, scene_digest
-from ..scene import sonar_of
+from mitsonar.jobs.compare.figures import plot_convergence, plot_polar_grid
+from mitsonar.jobs.compare.integrators import describe, load_integrator, min_spp
+from mitsonar.jobs.compare.metrics import equal_time_ratios, region_mask, score, self_errors, summarise
+from mitsonar.jobs.compare.output import OutputFolder, check_output_folder, write_json
+from mitsonar.jobs.compare.parsing import parse_budgets, parse_integrators
+from mitsonar.jobs.compare.reference import load_or_render_reference, render_reference, scene_digest
+from mitsonar.sim.scene import sonar_of
 
 
 @dataclass
@@ -248,11 +248,11 @@ def collect_warnings(runs, labels, self_l2, warm) -> list:
 
 
 def build_result(s: Settings, bench: Bench, calibrations, ref_info, auto, runs, warnings) -> dict:
-    """The dict written to ``compare.json`` (fields in `mitsonar.compare`'s docstring)."""
+    """The dict written to ``compare.json`` (fields in `mitsonar.jobs.compare`'s docstring)."""
     import drjit as dr
     import mitsuba as mi
 
-    from .._version import __version__
+    from mitsonar._version import __version__
 
     sensor = bench.sensor
     return {
@@ -337,7 +337,7 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
                         is drawn on stderr while the reference renders (on a terminal only)
     =================== =======================================================================
 
-    Returns the dict written to ``output_dir/compare.json`` (fields in `mitsonar.compare`'s
+    Returns the dict written to ``output_dir/compare.json`` (fields in `mitsonar.jobs.compare`'s
     docstring). Raises `CompareError` (one line) for bad input, before anything is created.
     """
     s = check_settings(scene_path, integrators, budgets, output_dir, reference_spp, seed, repeats, max_depth,

@@ -64,7 +64,7 @@ def plot_convergence(result, path):
 
 def scan_from_histogram(sensor, hist, meta=None):
     """A `Scan` of a rendered histogram for pictures: intensity only (device bytes zero)."""
-    from ..scan import Scan
+    from mitsonar.scan import Scan
 
     hist = np.asarray(hist)
     return Scan(intensity=hist.astype(np.float32), data=np.zeros(hist.shape, np.uint8),
@@ -97,7 +97,7 @@ def plot_polar_grid(sensor, reference, renders, labels, budgets, runs, path, ref
     (the first repeat of each run). A narrow sector is framed tightly (plot_polar draws the
     whole disc). Returns the figure.
     """
-    from ..plots import plot_polar
+    from mitsonar.products.plots import plot_polar
 
     by = {(r["integrator"], r["budget_s"]): r for r in runs}
     positive = reference[reference > 0]

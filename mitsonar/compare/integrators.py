@@ -1,7 +1,7 @@
 """Loading the integrators to compare and describing them."""
 from __future__ import annotations
 
-from .common import CompareError
+from mitsonar.jobs.compare.common import CompareError
 
 
 def load_integrator(name, params=None):
@@ -12,9 +12,9 @@ def load_integrator(name, params=None):
     """
     import mitsuba as mi
 
-    from ..plugins import module
-    from ..render import SONAR_INTEGRATORS
-    from ..scene import mitsuba_error
+    from mitsonar.plugins import module
+    from mitsonar.sim.render import SONAR_INTEGRATORS
+    from mitsonar.sim.scene import mitsuba_error
 
     ours = ", ".join(SONAR_INTEGRATORS)
 

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from .common import CompareError
+from mitsonar.jobs.compare.common import CompareError
 
 
 def error_metrics(estimate, reference, reference_self_l2=0.0) -> dict:

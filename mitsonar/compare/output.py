@@ -7,8 +7,8 @@ import json
 import os
 import shutil
 
-from .._files import StagedFiles, replacing
-from .common import CompareError, jsonable
+from mitsonar._files import StagedFiles, replacing
+from mitsonar.jobs.compare.common import CompareError, jsonable
 
 
 def check_output_folder(path) -> None:

@@ -1,4 +1,4 @@
-"""Command-line text to the values `mitsonar.compare.compare` takes (``mitsonar compare``'s options).
+"""Command-line text to the values `mitsonar.jobs.compare.compare` takes (``mitsonar compare``'s options).
 
 Every parser raises `CompareError` with one line naming the option and an example of good input.
 """
@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import re
 
-from .common import CompareError
+from mitsonar.jobs.compare.common import CompareError
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 

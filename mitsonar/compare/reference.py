@@ -1,7 +1,7 @@
 """The high-sample ``sonar_tof`` reference: rendered as two independent halves, cached on disk.
 
 A reference is the mean of two halves rendered with different seeds; their difference estimates
-its own error (`mitsonar.compare.metrics.self_errors`). It is cached in the output folder as
+its own error (`mitsonar.jobs.compare.metrics.self_errors`). It is cached in the output folder as
 ``reference_<key>_spp<N>.npz`` (arrays ``hist``, ``half_difference`` and ``info``, JSON), where
 ``key`` hashes the scene file's bytes, seed, max_depth, reference integrator, mitsonar version
 and Mitsuba variant (`reference_key`). Files the scene refers to (meshes, beam tables) are not
@@ -18,10 +18,10 @@ import time
 
 import numpy as np
 
-from .._files import replacing
+from mitsonar._files import replacing
 
-from .common import REFERENCE_INTEGRATOR, REFERENCE_SEED_OFFSET
-from .metrics import self_errors
+from mitsonar.jobs.compare.common import REFERENCE_INTEGRATOR, REFERENCE_SEED_OFFSET
+from mitsonar.jobs.compare.metrics import self_errors
 
 
 def scene_digest(scene_bytes: bytes) -> str:
@@ -37,7 +37,7 @@ def reference_key(scene_bytes: bytes, seed: int, max_depth: int) -> str:
     """
     import mitsuba as mi
 
-    from .._version import __version__
+    from mitsonar._version import __version__
 
     h = hashlib.sha256()
     h.update(scene_bytes)

@@ -6,8 +6,8 @@ a manifest, resumably and identically for any number of workers; `open_dataset` 
 """
 from __future__ import annotations
 
-from .config import DatasetError, check_config, read_config
-from .runner import generate_dataset
-from .store import SonarDataset, open_dataset
+from mitsonar.jobs.dataset.config import DatasetError, check_config, read_config
+from mitsonar.jobs.dataset.runner import generate_dataset
+from mitsonar.jobs.dataset.store import SonarDataset, open_dataset
 
 __all__ = ["DatasetError", "SonarDataset", "check_config", "generate_dataset", "open_dataset", "read_config"]

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 
 def cmd_dataset(args):
-    from .runner import generate_dataset
+    from mitsonar.jobs.dataset.runner import generate_dataset
 
     result = generate_dataset(args.config, args.output, workers=args.workers, address=args.address,
                               threads=args.threads, progress=not args.quiet,

@@ -26,7 +26,7 @@ terrain, its material preset, the sonar settings) is drawn once per block of ``s
 samples from ``numpy.random.default_rng([seed, 0, block])``, so a worker loads a scene once for
 many samples; what a scene can take without being reloaded (pose, trajectory, material
 parameters, electronics, the path seed) is drawn per sample from ``default_rng([seed, 1, i])``.
-The scene's speckle (``speckle_seed``, `mitsonar.speckle`: which scatterers its surfaces hold)
+The scene's speckle (``speckle_seed``, `mitsonar.receiver.speckle`: which scatterers its surfaces hold)
 belongs to the scene, so it is drawn once per block, from ``default_rng([seed, 2, block])``: a
 whole number in 0 .. 2^32 - 1, or what ``electronics.speckle_seed`` gives (fixed, ``randint`` or
 ``choice``). Keys are drawn in sorted order. So a sample depends on the config and its index only: any number
@@ -44,7 +44,7 @@ import re
 
 import numpy as np
 
-from .._checks import is_number, is_whole
+from mitsonar._checks import is_number, is_whole
 
 FORMAT = "mitsonar-dataset/1"
 SPECS = ("uniform", "randint", "choice")
@@ -203,7 +203,7 @@ def _located(message, path, text) -> str:
 
 
 def _terrain_keys():
-    from ..terrain import Terrain
+    from mitsonar.scenes.terrain import Terrain
 
     return set(inspect.signature(Terrain.__init__).parameters) - {"self", "seed"}
 
@@ -327,14 +327,14 @@ def _check_scenes(cfg, base):
         else:
             t = s["terrain"]
             if not isinstance(t, dict):
-                _fail(f"{where}.terrain", t, "a mapping of mitsonar.terrain.Terrain arguments")
+                _fail(f"{where}.terrain", t, "a mapping of mitsonar.scenes.terrain.Terrain arguments")
             terrain_keys = terrain_keys or _terrain_keys()
             _unknown(f"{where}.terrain", t, terrain_keys)
             for k, v in t.items():
                 if is_spec(v):
                     check_value(f"{where}.terrain.{k}", v, kind="any")
             _check_terrain(where, t)
-            from ..plugins.materials import PRESETS
+            from mitsonar.plugins.materials import PRESETS
 
             s.setdefault("material", "seabed_sand")
             check_value(f"{where}.material", s["material"], choices=sorted(PRESETS))
@@ -342,7 +342,7 @@ def _check_scenes(cfg, base):
 
 def _check_terrain(where, spec):
     """The terrain's own checks at every end of every range (its heights are not made: zeros)."""
-    from ..terrain import Terrain
+    from mitsonar.scenes.terrain import Terrain
 
     class Shape(Terrain):
         def _heights(self):
@@ -358,7 +358,7 @@ def _check_terrain(where, spec):
 
 
 def _sonar_parameters():
-    from ..plugins import module
+    from mitsonar.plugins import module
 
     return module("sonar_sensor").SonarSensor.parameters()
 
@@ -375,7 +375,7 @@ def _check_sonar(sonar):
         if k == "mount":
             if not (isinstance(v, list) and len(v) == 16 and all(is_number(x) for x in v)):
                 _fail("sonar.mount", v, "16 numbers: the 4x4 mount in the vehicle frame, row by row")
-            from ..frames import check_rigid
+            from mitsonar.geometry.frames import check_rigid
 
             try:
                 check_rigid(np.reshape(np.asarray(v, float), (4, 4)), "dataset config 'sonar.mount'")
@@ -385,7 +385,7 @@ def _check_sonar(sonar):
         check_value(f"sonar.{k}", v, kind="any")
     # Every end of every range, through the sensor's own checks: a bad value costs a sentence now.
     for trial in _corners(sonar):
-        from ..scene import SceneError, load_scene
+        from mitsonar.sim.scene import SceneError, load_scene
 
         try:
             load_scene(f'<scene version="3.0.0">{sonar_xml(trial)}</scene>')
@@ -415,7 +415,7 @@ def _corners(spec):
 
 def sonar_xml(settings, sensor_id="dataset_sonar") -> str:
     """A ``<sensor type="sonar">`` element of ``settings`` (drawn values; ``mount`` is the to_world)."""
-    from ..sensor_xml import sensor_xml
+    from mitsonar.sim.sensor_xml import sensor_xml
 
     params = {k: (int(v) if k in INTEGER_SONAR and is_whole(v) else v if isinstance(v, str) else float(v))
               for k, v in sorted(settings.items()) if k != "mount"}
@@ -423,7 +423,7 @@ def sonar_xml(settings, sensor_id="dataset_sonar") -> str:
 
 
 def _check_electronics(elec):
-    from ..electronics import Electronics, check_head_settings
+    from mitsonar.receiver.electronics import Electronics, check_head_settings
 
     names = [f.name for f in __import__("dataclasses").fields(Electronics)]
     _unknown("electronics", elec, set(names))

@@ -33,7 +33,7 @@ def labelling_integrator(max_depth=5, sampling="sobol"):
     import drjit as dr
     import mitsuba as mi
 
-    from ..plugins import module
+    from mitsonar.plugins import module
 
     base = module("sonar_tof").SonarTOFIntegrator
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import os
 
-from .config import DatasetError, task
+from mitsonar.jobs.dataset.config import DatasetError, task
 
 ACTOR_RESTARTS = 3
 
@@ -32,7 +32,7 @@ class DatasetActor:
     def __init__(self, cfg, threads, variant):
         if variant:
             os.environ["MITSONAR_VARIANT"] = variant
-        from .worker import SampleRenderer
+        from mitsonar.jobs.dataset.worker import SampleRenderer
 
         import atexit
 

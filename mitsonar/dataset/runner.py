@@ -18,9 +18,9 @@ import time
 
 import numpy as np
 
-from .._files import check_output_folder, make_output_folder
-from .config import FORMAT, DatasetError, config_difference, config_hash, task
-from .store import MANIFEST, SHARD, RunLock, read_manifest, remove_partials, write_json, write_mesh, write_shard
+from mitsonar._files import check_output_folder, make_output_folder
+from mitsonar.jobs.dataset.config import FORMAT, DatasetError, config_difference, config_hash, task
+from mitsonar.jobs.dataset.store import MANIFEST, SHARD, RunLock, read_manifest, remove_partials, write_json, write_mesh, write_shard
 
 MAX_RESTARTS = 3   # a local pool whose worker died is started again this many times
 
@@ -152,7 +152,7 @@ def _inputs(cfg):
 
 
 def _version():
-    from .._version import __version__
+    from mitsonar._version import __version__
 
     return __version__
 
@@ -164,7 +164,7 @@ def _local(cfg, coord, todo, workers, threads, variant):
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
-    from .worker import init_process, render_in_process
+    from mitsonar.jobs.dataset.worker import init_process, render_in_process
 
     pending = list(todo)
     restarts = 0
@@ -199,7 +199,7 @@ def _local(cfg, coord, todo, workers, threads, variant):
 
 def _inline(cfg, coord, todo, threads):
     """Render ``todo`` in this process (``workers=0``: no process to start; tests, debugging)."""
-    from .worker import SampleRenderer
+    from mitsonar.jobs.dataset.worker import SampleRenderer
 
     renderer = SampleRenderer(cfg, threads)
     try:
@@ -230,7 +230,7 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
     Returns a dict: ``rendered`` (samples rendered by this call), ``samples`` (in the folder),
     ``seconds``. The same config gives the same folder contents for any workers, threads and engine.
     """
-    from .config import check_config, read_config
+    from mitsonar.jobs.dataset.config import check_config, read_config
 
     cfg = read_config(config) if isinstance(config, (str, os.PathLike)) else check_config(config)
     engine = engine or "auto"
@@ -250,7 +250,7 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
     if threads is None:
         threads = max(1, _cores() // max(1, workers))
     if engine == "ray":
-        from .ray_engine import check_ray
+        from mitsonar.jobs.dataset.ray_engine import check_ray
 
         check_ray()
     start = time.time()
@@ -270,7 +270,7 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
         variant = os.environ.get("MITSONAR_VARIANT")
         if todo:
             if engine == "ray":
-                from .ray_engine import run_ray
+                from mitsonar.jobs.dataset.ray_engine import run_ray
 
                 run_ray(cfg, coord, todo, workers, threads, address, variant)
             elif workers == 0:

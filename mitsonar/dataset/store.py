@@ -28,8 +28,8 @@ import tarfile
 
 import numpy as np
 
-from .._files import replacing
-from .config import FORMAT, DatasetError
+from mitsonar._files import replacing
+from mitsonar.jobs.dataset.config import FORMAT, DatasetError
 
 MANIFEST = "manifest.json"
 LOCK = ".lock"

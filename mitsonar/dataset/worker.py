@@ -49,7 +49,7 @@ class SampleRenderer:
 
     def __init__(self, cfg, threads=None):
         set_threads(threads)
-        from ..variant import ensure_variant
+        from mitsonar.sim.variant import ensure_variant
 
         ensure_variant()   # selects the variant (MITSONAR_VARIANT) and registers the plugins
 
@@ -67,9 +67,9 @@ class SampleRenderer:
     def _load(self, draw):
         import mitsuba as mi
 
-        from ..scene import load_scene
-        from .config import TERRAIN_BSDF, sonar_xml
-        from .labels import labelling_integrator, shape_names
+        from mitsonar.sim.scene import load_scene
+        from mitsonar.jobs.dataset.config import TERRAIN_BSDF, sonar_xml
+        from mitsonar.jobs.dataset.labels import labelling_integrator, shape_names
 
         entry = self.cfg["scenes"][draw["entry"]]
         sonar = dict(draw["sonar"])
@@ -77,7 +77,7 @@ class SampleRenderer:
             folder = os.path.dirname(os.path.abspath(entry["xml"]))
             body = f'<include filename={quoteattr(os.path.abspath(entry["xml"]))}/>'
         else:
-            from ..terrain import Terrain
+            from mitsonar.scenes.terrain import Terrain
 
             if self.tmp is None:
                 self.tmp = tempfile.mkdtemp(prefix="mitsonar-dataset-")
@@ -113,7 +113,7 @@ class SampleRenderer:
 
         sonars = [s for s in scene.sensors() if isinstance(s, module("common").SonarSensor)]
         if not sonars:
-            from .config import DatasetError
+            from mitsonar.jobs.dataset.config import DatasetError
 
             raise DatasetError(f"dataset config 'scenes[{draw['entry']}]': the scene has no sonar sensor; give 'sonar'")
         self.sensor = sonars[-1]   # ours comes last (after the included scene's)
@@ -149,10 +149,10 @@ class SampleRenderer:
         """Sample ``task['index']``: a dict of arrays (``data``, ``intensity``, ``poses``, ``times``,
         ``segmentation`` with this scene's labels, ``first_return``, ``ranges``, ``bearings``), its
         ``shape_names``, ``scene`` key and, when ``want_mesh``, the scene's ground-truth ``mesh``."""
-        from ..groundtruth import scene_mesh
-        from ..render import render_scan
-        from ..trajectory import Trajectory
-        from .labels import first_return, segmentation
+        from mitsonar.sim.groundtruth import scene_mesh
+        from mitsonar.sim.render import render_scan
+        from mitsonar.geometry.trajectory import Trajectory
+        from mitsonar.jobs.dataset.labels import first_return, segmentation
 
         if task["scene"]["key"] != self.key:
             self._load(task["scene"])

@@ -27,9 +27,9 @@ import os
 
 import numpy as np
 
-from .._files import StagedFiles
-from . import messages as M
-from . import msgdefs
+from mitsonar._files import StagedFiles
+from mitsonar.export.ros import messages as M
+from mitsonar.export.ros import msgdefs
 
 TOPICS = {"/sonar/image": M.PROJECTED, "/sonar/fan": M.IMAGE, "/sonar/waterfall": M.IMAGE,
           "/sonar/detections": M.CLOUD, "/tf": M.TF, "/odom": M.ODOMETRY}

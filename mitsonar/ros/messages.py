@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 
-from ..frames import bearing_rotation
-from ..trajectory import matrix_to_quat
+from mitsonar.geometry.frames import bearing_rotation
+from mitsonar.geometry.trajectory import matrix_to_quat
 
 WORLD_FRAME = "map"
 SONAR_FRAME = "sonar"

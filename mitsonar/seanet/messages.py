@@ -1,7 +1,7 @@
 """SeaNet messages: one dataclass per message type, each packing and unpacking its payload.
 
 Field layouts follow ``reference/seanet.md`` (sections 2-5, compiled from the Rock, UxVCtrl
-and McGill drivers). ``encode(msg)`` (`mitsonar.seanet.stream`) turns any of them into a
+and McGill drivers). ``encode(msg)`` (`mitsonar.devices.micron.seanet.stream`) turns any of them into a
 packet; ``decode``/`StreamParser` make them from bytes. No I/O.
 
 Commands (PC -> head): `ReBoot`, `SendVersion`, `SendBBUser`, `SendData`, `HeadCommand`,
@@ -17,7 +17,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .constants import (DEFAULT_NIBBLE_ORDER, FULL_TURN, PC_NODE, SONAR_NODE, HdCtrl, HeadInf,
+from mitsonar.devices.micron.seanet.constants import (DEFAULT_NIBBLE_ORDER, FULL_TURN, PC_NODE, SONAR_NODE, HdCtrl, HeadInf,
                         HeadStatus, MessageId, SeaNetError, pack_bins, unpack_bins)
 
 __all__ = [

@@ -24,9 +24,9 @@ from collections import Counter, deque
 
 import numpy as np
 
-from .constants import (DEFAULT_NIBBLE_ORDER, HEADER, MAX_PACKET, MIN_PACKET, TERMINATOR, MessageId,
+from mitsonar.devices.micron.seanet.constants import (DEFAULT_NIBBLE_ORDER, HEADER, MAX_PACKET, MIN_PACKET, TERMINATOR, MessageId,
                         SeaNetError, _check_nibble_order)
-from .messages import (_GAIN_LAYOUT, _REGISTRY, BBUSER_LENGTHS, V3B_GAIN_ONLY, V3B_SCAN_REVERSE,
+from mitsonar.devices.micron.seanet.messages import (_GAIN_LAYOUT, _REGISTRY, BBUSER_LENGTHS, V3B_GAIN_ONLY, V3B_SCAN_REVERSE,
                        GainCommand, HeadCommand, HeadData, Message, RawMessage, ScanReverse, _fmt_size)
 
 __all__ = ["encode", "decode", "StreamParser"]
