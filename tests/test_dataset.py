@@ -251,7 +251,7 @@ def test_segmentation_names_the_shape_in_each_bin(tmp_path):
     ({"pose": {"heading": 3}}, "'pose.heading': unknown key (allowed: pitch, roll, x, y, yaw, z)"),
     ({"electronics": {"gain": {"uniform": [10, 120]}}}, "'gain': 120 is not allowed"),
     ({"electronics": {"speckel": "off"}}, "'electronics.speckel': unknown key"),
-    ({"sonar": {"n_bins": 0}}, "'n_bins': 0 is not allowed"),
+    ({"sonar": {"n_bins": 0}}, "'sonar.n_bins': 0 is not allowed"),
     ({"scenes": [{"terrain": {"resolution": {"uniform": [-0.1, 0.2]}}}]},
      "'scenes[0].terrain': terrain 'resolution': -0.1 is not allowed (a number > 0)"),
     ({"scenes": [{"terrain": {"size": [10, 10]}, "material": "mud"}]}, "'scenes[0].material': 'mud' is not allowed (one of"),
@@ -271,7 +271,7 @@ def test_bad_config_on_the_command_line_writes_nothing(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["dataset", str(cfg), "-o", str(out), "-q"]) == 1
     err = capsys.readouterr().err.strip()
-    assert err.startswith("mitsonar: error: dataset config 'scenes[0].xml': scene file") and "\n" not in err
+    assert err.startswith(f"mitsonar: error: dataset config 'scenes[0].xml' ({cfg} line 2): scene file") and "\n" not in err
     assert not out.exists()
 
 

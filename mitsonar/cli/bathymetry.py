@@ -15,6 +15,7 @@ renamed together at the end.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 
@@ -74,29 +75,73 @@ def plot_bathymetry(result, grid, path, trajectory=None):
     _save(fig, path)
 
 
+#: The options that shape the preset head: refused beside ``--sensor`` (the scene's own head).
+HEAD_OPTIONS = (("preset", "--preset"), ("swath", "--swath"), ("beams", "--beams"), ("range_max", "--range-max"),
+                ("bin_width", "--bin-width"))
+DEFAULT_PRESET = "r2sonic_2024"
+
+
 def cmd_bathymetry(args):
     from mitsonar.products import bathymetry
     from mitsonar.scenes import echosounders
-    from mitsonar._files import StagedFiles, check_output_folder, make_output_folder
+    from mitsonar.cli.common import check_counts, sensor_of
+    from mitsonar._files import StagedFiles, check_output_folder
     from mitsonar.scenes.sea_surface import load_survey_scene
     from mitsonar.products.soundings import grid_depths, write_ply
     from mitsonar.cli.survey import trajectory_from_args
 
+    check_counts(args, BathymetryCLIError)
+    head = None
+    if args.sensor is not None:   # the scene's own head: the preset's options mean nothing
+        given = [flag for dest, flag in HEAD_OPTIONS if getattr(args, dest) is not None]
+        if given:
+            raise BathymetryCLIError(f"{given[0]} shapes the preset echo sounder; with --sensor the scene's own "
+                                     "sensor surveys: give one or the other")
     try:   # every option, before any file or render
-        head = echosounders.configure(args.preset, swath=args.swath, n_beams=args.beams, range_max=args.range_max,
-                                      bin_width=args.bin_width)
+        if args.sensor is None:
+            head = echosounders.configure(args.preset or DEFAULT_PRESET, swath=args.swath, n_beams=args.beams,
+                                          range_max=args.range_max, bin_width=args.bin_width)
         bathymetry.check_options(args.threshold_db, args.method or "centroid")
         grid_depths(np.zeros(1, bathymetry.SOUNDING_DTYPE), args.cell)
     except ValueError as exc:
         raise BathymetryCLIError(str(exc)) from None
     traj = trajectory_from_args(args, "bathymetry")
-    scene = load_survey_scene(args.scene, surface=args.surface, sonar=echosounders.sonar_xml(head))
-    check_output_folder(args.output, BathymetryCLIError, what="a bathymetry run",
-                        holds=lambda out: any(os.path.exists(os.path.join(out, f)) for f in OUTPUTS))
-    make_output_folder(args.output, BathymetryCLIError)
+    scene = load_survey_scene(args.scene, surface=args.surface,
+                              sonar=None if head is None else echosounders.sonar_xml(head))
+    sensor = sensor_of(scene, args, BathymetryCLIError)
+    check_output_folder(args.output, BathymetryCLIError, what="a bathymetry run", force=True,
+                        holds=None if args.force else
+                        lambda out: any(os.path.exists(os.path.join(out, f)) for f in OUTPUTS))
+    with _output_folder(args.output):   # made now; removed again if the run fails and leaves it empty
+        return _run(args, bathymetry, scene, traj, sensor, head, grid_depths, write_ply, StagedFiles)
+
+
+@contextlib.contextmanager
+def _output_folder(folder):
+    """Create ``folder`` (and its parents) for the block; if the block fails, remove the folders it
+    created that are still empty (a failed run leaves no empty output folder behind)."""
+    from mitsonar._files import make_output_folder
+
+    made, f = [], os.path.abspath(folder)
+    while not os.path.exists(f):
+        made.append(f)
+        f = os.path.dirname(f)
+    make_output_folder(folder, BathymetryCLIError)
+    try:
+        yield
+    except BaseException:
+        for f in made:                 # innermost first
+            try:
+                os.rmdir(f)
+            except OSError:
+                break
+        raise
+
+
+def _run(args, bathymetry, scene, traj, sensor, head, grid_depths, write_ply, StagedFiles):
     run = bathymetry.survey(scene, traj, spp=args.spp, seed=args.seed, threshold_db=args.threshold_db,
                             method=args.method, speckle=not args.no_speckle, max_scans=args.max_scans,
-                            max_depth=args.max_depth, progress=not args.quiet)
+                            max_depth=args.max_depth, progress=not args.quiet, sensor=sensor)
     grid = grid_depths(run.soundings, args.cell)
     out = args.output
     written = [f for f in OUTPUTS if f != "depth.tif"]
@@ -104,7 +149,8 @@ def cmd_bathymetry(args):
         write_ply(files.temporary(os.path.join(out, "soundings.ply")), run.soundings)
         grid.save_npz(files.temporary(os.path.join(out, "depth.npz")))
         summary = run.summary()
-        summary.update(preset=head.sounder.name, model=head.sounder.model, scene=args.scene, cell=args.cell,
+        summary.update(preset=head.sounder.name if head else None, model=head.sounder.model if head else None,
+                       sensor=sensor.id() if head is None else None, scene=args.scene, cell=args.cell,
                        surface=args.surface, transform=list(grid.transform))
         with open(files.temporary(os.path.join(out, "errors.json")), "w") as f:
             json.dump(summary, f, indent=1)
@@ -141,7 +187,9 @@ def add_subcommands(sub):
                                    "the soundings, the depth grid and the depth errors per beam angle.")
     s.add_argument("scene", help="scene XML file (its sonar is replaced by the preset)")
     s.add_argument("-o", "--output", required=True, help="output folder")
-    s.add_argument("--preset", default="r2sonic_2024", choices=sorted(PRESETS), help="echo sounder (default r2sonic_2024)")
+    s.add_argument("--preset", choices=sorted(PRESETS), help="echo sounder (default r2sonic_2024)")
+    s.add_argument("--sensor", metavar="ID|INDEX",
+                   help="survey with the scene's own sensor (its XML id or index) instead of a preset head")
     s.add_argument("--swath", type=float, help="deg between the outermost beams (default the preset's)")
     s.add_argument("--beams", type=int, help="receive beams (default the preset's)")
     s.add_argument("--range-max", type=float, help="m, end of the range window (default the preset's)")
@@ -158,4 +206,5 @@ def add_subcommands(sub):
     s.add_argument("--max-scans", type=int, help="stop after this many pings")
     s.add_argument("--max-depth", type=int, help="surface bounces (default: the scene's integrator)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--force", action="store_true", help="overwrite the outputs of a run already in the folder")
     s.set_defaults(func=cmd_bathymetry)

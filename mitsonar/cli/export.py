@@ -10,9 +10,9 @@ from __future__ import annotations
 from mitsonar.export.ros.bag import THRESHOLD, ExportError, McapBag, check_output, check_scan, scan_base
 
 
-def add_mcap_options(parser, *, scans_help=True):
+def add_mcap_options(parser, *, scans_help=True, force_help="overwrite an existing MCAP file"):
     """The options `mitsonar export` and `mitsonar survey --mcap` share."""
-    parser.add_argument("--force", action="store_true", help="overwrite an existing MCAP file")
+    parser.add_argument("--force", action="store_true", help=force_help)
     parser.add_argument("--start", type=float, default=0.0, metavar="S",
                         help="seconds added to every stamp (e.g. a Unix time); default 0")
     parser.add_argument("--threshold", type=int, default=THRESHOLD, metavar="LEVEL",

@@ -69,16 +69,21 @@ class _Progress:
             self.bar.close()
 
 
-def _render(scene_path, spp, seed, max_depth=None, electronics=None, quiet=False, mesh=False):
-    """Load and render a scene: ``(scene, scan, mesh)``, the ground-truth mesh (when ``mesh``)
-    made before the render, so a scene that cannot be triangulated costs no render."""
+def _render(scene_path, spp, seed, max_depth=None, electronics=None, quiet=False, mesh=False, sensor=None):
+    """Load and render a scene: ``(scene, scan, mesh)``, the ground-truth mesh (when ``mesh``, or
+    ``mesh(sonar)`` is true) made before the render, so a scene that cannot be triangulated costs
+    no render. ``sensor``: ``--sensor`` (an XML id or an index; None: the first sonar, with one
+    warning when the scene has several)."""
     import mitsonar
 
+    from mitsonar.sim.render import pick_sensor
+
     scene = mitsonar.load_scene(scene_path)
-    truth = mitsonar.scene_mesh(scene) if mesh else None
+    sonar = pick_sensor(scene, sensor)
+    truth = mitsonar.scene_mesh(scene) if (mesh(sonar) if callable(mesh) else mesh) else None
     progress = None if quiet else _Progress()
     try:
-        scan = mitsonar.render_scan(scene, spp=spp, seed=seed, max_depth=max_depth,
+        scan = mitsonar.render_scan(scene, spp=spp, seed=seed, max_depth=max_depth, sensor=sonar,
                                     electronics=electronics, progress=progress)
     finally:
         if progress is not None:
@@ -86,19 +91,40 @@ def _render(scene_path, spp, seed, max_depth=None, electronics=None, quiet=False
     return scene, scan, truth
 
 
-def _plot(scan, path, kind="polar", ping=0, db=False, use="data", mesh=None):
+#: The pictures that make sense for each sonar kind; the first is the default.
+PLOT_KINDS = {"mechanical": ("polar", "cartesian", "ascan"), "multibeam": ("polar", "cartesian", "ascan"),
+              "sidescan": ("waterfall", "ascan")}
+ALL_PLOT_KINDS = ("polar", "cartesian", "ascan", "waterfall")
+
+
+def plot_kind(sonar_kind, kind=None):
+    """The picture kind for a scan of ``sonar_kind``: ``kind``, or the kind's default (polar, or
+    waterfall for a side-scan); one line naming the allowed kinds for a kind that means nothing for
+    it (a side-scan's rows are not bearings: no polar or cartesian fan)."""
+    allowed = PLOT_KINDS.get(sonar_kind, ALL_PLOT_KINDS[:3])
+    if kind is None:
+        return allowed[0]
+    if kind not in allowed:
+        raise CLIError(f"--kind {kind}: not for a {sonar_kind} scan (allowed for {sonar_kind}: {', '.join(allowed)})")
+    return kind
+
+
+def _plot(scan, path, kind=None, ping=0, db=False, use="data", mesh=None):
     from mitsonar.products import plots
 
+    kind = plot_kind(scan.kind, kind)
     if kind == "polar":
         plots.plot_polar(scan, path, db=db, use=use)
     elif kind == "cartesian":
         plots.plot_cartesian(scan, mesh=mesh, path=path, db=db, use=use)
+    elif kind == "waterfall":
+        from mitsonar.products.sidescan_plots import plot_waterfall
+
+        plot_waterfall(scan, path, use="intensity" if db else use)
     elif kind == "ascan":
         if not 0 <= ping < scan.n_pings:
             raise CLIError(f"--ping {ping} is outside 0..{scan.n_pings - 1}")
         plots.plot_ascan(scan, ping, path, db=db)
-    else:
-        raise CLIError(f"--kind {kind!r} is not one of polar, cartesian, ascan")
 
 
 def _check_output(path, exts):
@@ -124,9 +150,12 @@ def make_output_folder(path, option="-o"):
 
 # ----------------------------------------------------------------------------- commands
 def cmd_render(args):
+    from mitsonar.cli.common import check_counts, warn_overwrite
+
     _check_output(args.output, (".exr", ".npz"))
     if args.plot:
         _check_output(args.plot, (".png", ".pdf", ".svg"))
+    check_counts(args, CLIError)
     settings = _parse_settings(args.set)
     if settings:  # name the option in the message, and before the render
         from mitsonar.receiver.electronics import Electronics, check_head_settings
@@ -136,12 +165,23 @@ def cmd_render(args):
             Electronics.from_dict(settings, source="--set")
         except ValueError as exc:
             raise CLIError(str(exc)) from None
+    kind = args.kind
+
+    def before_render(sonar):       # the picture's kind, checked against the head's; then the outputs
+        nonlocal kind
+        if args.plot:
+            kind = plot_kind(sonar.kind, kind)
+        warn_overwrite([args.output, args.plot], args.force)
+        return bool(args.plot) and kind == "cartesian"
+
     _, scan, mesh = _render(args.scene, args.spp, args.seed, args.max_depth, settings, args.quiet,
-                            mesh=bool(args.plot) and args.kind == "cartesian")
+                            mesh=before_render, sensor=args.sensor)
     scan.save(args.output)
-    print(f"wrote {args.output} ({scan.n_pings} {scan.row_name} x {scan.n_bins} bins)")
+    from mitsonar.products.plots import rows_text
+
+    print(f"wrote {args.output} ({rows_text(scan)} x {scan.n_bins} bins)")
     if args.plot:
-        _plot(scan, args.plot, args.kind, db=args.db, mesh=mesh)
+        _plot(scan, args.plot, kind, db=args.db, mesh=mesh)
         print(f"wrote {args.plot}")
     return 0
 
@@ -149,8 +189,12 @@ def cmd_render(args):
 def cmd_plot(args):
     import mitsonar
 
+    from mitsonar.cli.common import warn_overwrite
+
     _check_output(args.output, (".png", ".pdf", ".svg"))
     scan = mitsonar.load_scan(args.scan)
+    plot_kind(scan.kind, args.kind)      # before the scene's mesh is made
+    warn_overwrite([args.output], args.force)
     mesh = None
     if args.scene:
         mesh = mitsonar.scene_mesh(mitsonar.load_scene(args.scene))
@@ -213,10 +257,20 @@ def _scenes_dir():
     raise CLIError("cannot find the scenes_xml folder (run the demo from the repository root)")
 
 
+#: The files `mitsonar demo` writes (besides the harbour survey's pictures).
+DEMO_SCENES = ("box", "intake", "box_fls")
+DEMO_FILES = tuple(f"{n}{x}" for n in DEMO_SCENES for x in (".exr", "_polar.png", "_cartesian.png", "_ascan.png"))
+
+
 def cmd_demo(args):
-    make_output_folder(args.output)
+    from mitsonar.cli.common import check_counts, warn_overwrite
+
+    check_counts(args, CLIError)
     scenes = _scenes_dir()
-    for name in ("box", "intake", "box_fls"):
+    warn_overwrite([os.path.join(args.output, f) for f in DEMO_FILES] if os.path.isdir(args.output) else [],
+                   args.force)
+    make_output_folder(args.output)
+    for name in DEMO_SCENES:
         path = os.path.join(scenes, f"{name}.xml")
         _, scan, mesh = _render(path, args.spp, args.seed, quiet=args.quiet, mesh=True)
         exr = os.path.join(args.output, f"{name}.exr")
@@ -234,7 +288,13 @@ def cmd_demo(args):
 
 
 # ----------------------------------------------------------------------------- parser
+KIND_HELP = ("picture kind: polar (default), cartesian or ascan for a mechanical or multibeam scan; "
+             "waterfall (default) or ascan for a side-scan scan")
+
+
 def build_parser():
+    from mitsonar.cli.common import add_force, add_sensor
+
     p = argparse.ArgumentParser(prog="mitsonar", description="Physically based imaging-sonar simulation.")
     p.add_argument("--variant", help="Mitsuba variant: llvm_ad_mono (default), cuda_ad_mono or auto "
                                      "(same as MITSONAR_VARIANT)")
@@ -247,22 +307,25 @@ def build_parser():
     r.add_argument("--spp", type=int, default=4096, help="paths per ping (default 4096)")
     r.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     r.add_argument("--max-depth", type=int, help="surface bounces (default: the scene's integrator)")
+    add_sensor(r)
     r.add_argument("--set", action="append", metavar="NAME=VALUE",
                    help="override an electronics setting, e.g. --set gain=30 (repeatable)")
     r.add_argument("--plot", help="also write a picture (.png/.pdf/.svg)")
-    r.add_argument("--kind", default="polar", choices=("polar", "cartesian", "ascan"), help="picture kind")
+    r.add_argument("--kind", choices=ALL_PLOT_KINDS, help=KIND_HELP)
     r.add_argument("--db", action="store_true", help="plot in dB")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    add_force(r)
     r.set_defaults(func=cmd_render)
 
     pl = sub.add_parser("plot", help="draw a scan file", description="Draw a scan as a sonar display.")
     pl.add_argument("scan", help="scan file (.exr or .npz)")
     pl.add_argument("-o", "--output", required=True, help="picture to write (.png/.pdf/.svg)")
-    pl.add_argument("--kind", default="polar", choices=("polar", "cartesian", "ascan"))
+    pl.add_argument("--kind", choices=ALL_PLOT_KINDS, help=KIND_HELP)
     pl.add_argument("--ping", type=int, default=0, help="ping of the A-scan")
     pl.add_argument("--use", default="data", choices=("data", "intensity"))
     pl.add_argument("--db", action="store_true", help="dB scale")
     pl.add_argument("--scene", help="scene XML whose geometry is drawn over a cartesian plot")
+    add_force(pl)
     pl.set_defaults(func=cmd_plot)
 
     i = sub.add_parser("info", help="print a scan file's header", description="Print a scan's settings.")
@@ -278,6 +341,7 @@ def build_parser():
     d.add_argument("--spp", type=int, default=4096)
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("-q", "--quiet", action="store_true")
+    add_force(d)
     d.set_defaults(func=cmd_demo)
 
     # The other subcommands, one module each in this package. A module that fails to import is a

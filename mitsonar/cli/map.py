@@ -17,7 +17,9 @@ import time
 from mitsonar._files import StagedFiles
 
 EXIT_ERROR = 1
-EXIT_USAGE = 2
+# A value argparse accepted but this command refuses is a validation error, exit 1 like every other
+# command's (README, "Exit codes"); only argparse's own errors exit 2.
+EXIT_USAGE = EXIT_ERROR
 
 
 def add_subcommands(subparsers) -> None:
@@ -52,6 +54,7 @@ def add_subcommands(subparsers) -> None:
                                        "rasterio, or .npz with 'elevation' and its 'transform')")
     m.add_argument("--elevation-resolution", type=float, default=0.25, help="elevation grid cell in metres")
     m.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+    m.add_argument("--force", action="store_true", help="overwrite existing outputs")
     m.set_defaults(func=cmd_map)
 
 
@@ -332,6 +335,9 @@ def _write(args, hm, n_scans: int, V, F, outputs: StagedFiles, stages: _Stages) 
     """Write the map, mesh and plot under temporary names; 0, or the exit code of a failure."""
     from hilbertmap import write_mesh
 
+    from mitsonar.cli.common import warn_overwrite
+
+    warn_overwrite([args.output, args.mesh, args.plot, getattr(args, "elevation", None)], args.force)
     option, path = "-o", args.output
     try:
         if args.plot:   # timed on its own: the survey plan view samples the map

@@ -149,16 +149,18 @@ def _virtual_sonar(args) -> int:
         raise FileNotFoundError(f"scene file not found: {scene_path}")
     _check_head_options(args)
     import mitsonar
+    from mitsonar.cli.common import check_counts, sensor_of
     from mitsonar.devices.transports import check_port
-    from mitsonar.plugins.common import resolve_sensor
     from mitsonar.devices.micron.seanet.settings import require_mechanical
+    check_counts(args, ValueError)
     # A port that cannot be opened fails now, not after the render.
     check_port(args.port_url, args.baud)
     scene = mitsonar.load_scene(str(scene_path))
+    sensor = sensor_of(scene, args)      # --sensor, or the first sonar (one warning if several)
     # Refuse before the render, not after it: a multibeam scene can take a while to render.
     what = "no Ping360 pings to serve" if args.head == "ping360" else "no SeaNet scanlines to serve"
-    require_mechanical(resolve_sensor(scene, 0), f"virtual-sonar {scene_path.name}", what)
-    kw = {"seed": args.seed}
+    require_mechanical(sensor, f"virtual-sonar {scene_path.name}", what)
+    kw = {"seed": args.seed, "sensor": sensor}
     if args.spp is not None:
         kw["spp"] = args.spp
     scan = mitsonar.render_scan(scene, **kw)
@@ -191,9 +193,11 @@ def cmd_virtual_sonar(args) -> int:
 # ---- record ----
 
 def _record(args) -> int:
+    from mitsonar.cli.common import warn_overwrite
     _check_output(args.output)
     _check_head_options(args)
     settings = _settings(args)
+    warn_overwrite([args.output], args.force)
     if args.head == "ping360":
         from mitsonar.devices.ping360.driver import record as record_ping360
         stats = record_ping360(args.port, args.output, args.seconds, scans=args.scans, pings=args.pings,
@@ -248,9 +252,11 @@ def _replay(args) -> int:
                     warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     if not scans:
         raise ValueError(f"{log}: no complete scan in the log")
+    from mitsonar.cli.common import warn_overwrite
     if args.all:
         # All or nothing: every scan under a temporary name first, renamed once all are written.
         paths = [out.with_name(f"{out.stem}_{k:03d}{out.suffix}") for k in range(len(scans))]
+        warn_overwrite(paths, args.force)
         with StagedFiles() as files:
             for scan, path in zip(scans, paths):
                 scan.save(files.temporary(path))
@@ -258,6 +264,7 @@ def _replay(args) -> int:
         return 0
     if not -len(scans) <= args.index < len(scans):
         raise ValueError(f"{log}: --index {args.index} but the log holds {len(scans)} scan(s)")
+    warn_overwrite([out], args.force)
     scans[args.index].save(str(out))       # Scan.save writes a temporary file and renames it
     print(f"scan {args.index % len(scans)} of {len(scans)} from {log} written to {out}")
     return 0
@@ -292,6 +299,8 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--fast", action="store_true", help="answer at once (no timing model)")
     p.add_argument("--no-dst", action="store_true", help="behave as a pre-DST Micron (--head micron)")
     p.add_argument("--seconds", type=_positive(float), default=None, help="stop after T seconds")
+    from mitsonar.cli.common import add_force, add_sensor
+    add_sensor(p)
     p.set_defaults(func=cmd_virtual_sonar)
 
     p = subparsers.add_parser(
@@ -329,6 +338,7 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--frequency", type=_positive(int), default=None, help="Ping360 kHz, 500..1000 (default 750)")
     p.add_argument("--transmit-duration", type=_positive(int), default=None, metavar="US",
                    help="Ping360 us, 1..1000 (default: 8000 range / c, at least 2.5 sample periods, 5..500)")
+    add_force(p)
     p.set_defaults(func=cmd_record)
 
     p = subparsers.add_parser(
@@ -342,4 +352,5 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--sound-speed", type=_sound_speed, default=None,
                    help="m/s, 1300..1800 (default the log's)")
     p.add_argument("--partial", action="store_true", help="also the unfinished scan at the end")
+    add_force(p)
     p.set_defaults(func=cmd_replay)

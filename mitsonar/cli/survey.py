@@ -64,8 +64,10 @@ def trajectory_from_args(args, command="survey"):
 def cmd_survey(args):
     import mitsonar
 
+    from mitsonar.cli.common import check_counts, sensor_of
     from mitsonar._files import check_output_folder
 
+    check_counts(args, CLIError)
     traj = trajectory_from_args(args)               # a bad file: one line, nothing written
     if getattr(args, "surface", False):             # + a flat specular sea surface at z = 0
         from mitsonar.scenes.sea_surface import load_survey_scene
@@ -73,20 +75,24 @@ def cmd_survey(args):
         scene = load_survey_scene(args.scene, surface=True)
     else:
         scene = mitsonar.load_scene(args.scene)
+    sensor = sensor_of(scene, args)                 # --sensor, or the first sonar (one warning if several)
     out = args.output
-    check_output_folder(out, CLIError, what="a survey's scans",
-                        holds=lambda out: any(f.startswith("scan_") for f in os.listdir(out)))
+    check_output_folder(out, CLIError, what="a survey's scans", force=True,
+                        holds=None if args.force else lambda out: any(f.startswith("scan_") for f in os.listdir(out)))
     if args.mcap is not None:   # refused before any render (its folder may be the one -o makes)
         from mitsonar.export.ros.bag import check_output
 
         check_output(args.mcap, args.force, folder_may_be=out)
     ext = "." + args.format
-    mosaic = _mosaic_grid(scene, traj)              # a side-scan survey's mosaic, checked before any render
+    mosaic = _mosaic_grid(scene, traj, sensor)      # a side-scan survey's mosaic, checked before any render
     try:   # checks every argument and the plan, then makes the folder; renders nothing yet
         scans = mitsonar.render_survey(scene, traj, out, spp=args.spp, seed=args.seed, max_scans=args.max_scans,
-                                       ext=ext, progress=not args.quiet)
+                                       ext=ext, progress=not args.quiet, sensor=sensor)
     except OSError as exc:
         raise CLIError(f"-o {out!r}: cannot create the output folder ({exc.strerror})") from None
+    if args.force:                                  # --force: the folder holds this survey only
+        for name in _survey_files(out):
+            os.remove(os.path.join(out, name))
     bag = None
     if args.mcap is not None:   # the ROS 2 bag, written beside the scans, renamed into place at the end
         from mitsonar.export.ros.bag import McapBag
@@ -131,18 +137,26 @@ def _draw(args, scene, traj, out, scans, bag, mosaic=None):
     return n
 
 
+def _survey_files(folder) -> list:
+    """The files of a survey in ``folder``: its scans and the pictures named after them."""
+    import re
+
+    pattern = re.compile(r"scan_\d{5}(\.npz|\.exr|_world\.png|_waterfall\.png)$")
+    return [f for f in os.listdir(folder) if pattern.match(f)] if os.path.isdir(folder) else []
+
+
 #: Most cells of a survey's mosaic: its cell grows beyond the sonar's range bin to stay under this.
 MOSAIC_CELLS = 2 * 10 ** 7
 
 
-def _mosaic_grid(scene, traj):
+def _mosaic_grid(scene, traj, sensor=0):
     """The empty mosaic of a side-scan survey (None for other heads): the track's extent plus the
     swath (``range_max``) each side, in cells of the sonar's range bin (0.1 m at least), coarser
     when that would exceed `MOSAIC_CELLS`; built before any render so a bad grid costs nothing."""
     from mitsonar.products.mosaic import MosaicBuilder
     from mitsonar.sim.scene import sonar_of
 
-    sonar = sonar_of(scene)
+    sonar = sonar_of(scene, sensor)
     if sonar.kind != "sidescan":
         return None
     p, r = traj.positions, float(sonar.range_max)
@@ -205,10 +219,14 @@ def add_subcommands(sub):
     s.add_argument("--spp", type=int, default=1024, help="paths per ping (default 1024)")
     s.add_argument("--seed", type=int, default=0, help="survey seed (default 0)")
     s.add_argument("--max-scans", type=int, help="stop after this many scans")
+    from mitsonar.cli.common import add_sensor
+
+    add_sensor(s)
     s.add_argument("--format", default="npz", choices=("npz", "exr"), help="scan file format (default npz)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.add_argument("--mcap", metavar="OUT", help="also write the survey as a ROS 2 bag (MCAP; see mitsonar export)")
     from mitsonar.cli.export import add_mcap_options
 
-    add_mcap_options(s)
+    add_mcap_options(s, force_help="replace a survey already in the output folder (its scan files are removed "
+                                   "first) and an existing --mcap file")
     s.set_defaults(func=cmd_survey)

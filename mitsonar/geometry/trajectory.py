@@ -122,9 +122,9 @@ def _poses(positions, yaws) -> np.ndarray:
 
 def _sample_times(duration, dt, t0):
     if not (math.isfinite(duration) and duration > 0):
-        raise TrajectoryError(f"trajectory 'duration': {duration!r} is not allowed (a time > 0 s)")
+        raise TrajectoryError(f"trajectory 'duration': {_plain(duration)} is not allowed (a time > 0 s)")
     if not (math.isfinite(dt) and dt > 0):
-        raise TrajectoryError(f"trajectory 'dt': {dt!r} is not allowed (a sample interval > 0 s)")
+        raise TrajectoryError(f"trajectory 'dt': {_plain(dt)} is not allowed (a sample interval > 0 s)")
     n = max(1, int(math.ceil(duration / dt - 1e-9)))
     return t0 + np.linspace(0.0, duration, n + 1)
 
@@ -148,11 +148,11 @@ class Trajectory:
             raise TrajectoryError(f"{_source} 'poses': shape {p.shape} is not (N, 4, 4) = {(t.size, 4, 4)}")
         if not np.isfinite(t).all():
             k = int(np.argmin(np.isfinite(t)))
-            raise TrajectoryError(f"{_source} 'times': {t[k]} at index {k} is not allowed (finite values only)")
+            raise TrajectoryError(f"{_source} 'times': {_plain(t[k])} at index {k} is not allowed (finite values only)")
         steps = np.diff(t) <= 0
         if steps.any():
             k = int(np.argmax(steps)) + 1
-            raise TrajectoryError(f"{_source} 'times': {t[k]!r} at index {k} is not after {t[k - 1]!r} "
+            raise TrajectoryError(f"{_source} 'times': {_plain(t[k])} at index {k} is not after {_plain(t[k - 1])} "
                                   "(times must increase strictly)")
         try:
             check_rigid_stack(p, f"{_source} 'poses'")
@@ -268,7 +268,7 @@ class Trajectory:
                                      ("y_max", y_max, lambda v: v >= y_min, f">= y_min = {y_min}"),
                                      ("altitude/depth", z, lambda v: True, "a finite height")):
             if not (isinstance(v, (int, float, np.number)) and math.isfinite(v) and ok(v)):
-                raise TrajectoryError(f"lawnmower '{name}': {v!r} is not allowed ({allowed})")
+                raise TrajectoryError(f"lawnmower '{name}': {_plain(v)} is not allowed ({allowed})")
         width = y_max - y_min
         n_gaps = int(math.ceil(width / spacing - 1e-9))
         ys = y_min + np.arange(n_gaps + 1) * (width / n_gaps if n_gaps else 0.0)
@@ -369,14 +369,22 @@ class Trajectory:
         return out.reshape(t.shape + (4, 4))
 
 
+def _plain(value) -> str:
+    """A number as a user wrote it: ``1.0``, ``inf``, ``1700000000.25`` (never ``np.float64(1.0)``)."""
+    try:
+        return repr(float(value))
+    except (TypeError, ValueError):
+        return repr(value)
+
+
 def _check_row(row, previous, where):
     """One sample ``t tx ty tz qx qy qz qw``: finite, after ``previous`` (a time or None), unit q."""
     for name, value in zip(TUM_FIELDS, row):
         if not math.isfinite(value):
-            raise TrajectoryError(f"{where}: field '{name}': {value!r} is not allowed (finite numbers only)")
+            raise TrajectoryError(f"{where}: field '{name}': {_plain(value)} is not allowed (finite numbers only)")
     if previous is not None and not row[0] > previous:
-        raise TrajectoryError(f"{where}: field 'timestamp': {row[0]!r} is not after the previous "
-                              f"{previous!r} (times must increase strictly)")
+        raise TrajectoryError(f"{where}: field 'timestamp': {_plain(row[0])} is not after the previous "
+                              f"{_plain(previous)} (times must increase strictly)")
     norm = float(np.linalg.norm(row[4:8]))
     if abs(norm - 1.0) > UNIT_TOLERANCE:
         raise TrajectoryError(f"{where}: field 'qx qy qz qw': norm {norm:.6g} is not allowed "

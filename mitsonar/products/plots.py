@@ -76,21 +76,39 @@ def _electronics(scan) -> dict[str, Any]:
     return {**defaults, **{k: v for k, v in (scan.electronics or {}).items() if k in defaults}}
 
 
+def fmt(value, decimals: int = 2) -> str:
+    """A number for a title: at most ``decimals`` decimals, trailing zeros dropped (27.8095 -> 27.8
+    with 1, 0.254899 -> 0.25 with 2, 12.0 -> 12)."""
+    text = f"{float(value):.{decimals}f}"
+    if "." in text:
+        text = text.rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
+
+
+def rows_text(scan) -> str:
+    """What a scan's rows are, counted: ``200 pings``, ``64 beams``; a two-sided side-scan scan's
+    ``250 pings per side`` (its rows are both channels' pings)."""
+    channel = scan.channel
+    if channel is not None and len(np.unique(channel)) == 2:
+        return f"{int(np.sum(channel == channel[0]))} {scan.row_name} per side"
+    return f"{scan.n_pings} {scan.row_name}"
+
+
 def _settings_line(scan) -> str:
     """Key settings for a title: geometry, beam, electronics, provenance. Only the electronics
     settings the scan records are named (a real head's scan records its gain, A/D window and bit
     depth, not the simulator's TVG law or speckle model)."""
-    parts = [f"{scan.kind}, {scan.n_pings} {scan.row_name} x {scan.n_bins} bins, {scan.range_min:g}-{scan.range_max:g} m",
-             f"{scan.beam_pattern} {scan.beamwidth_h:g}x{scan.beamwidth_v:g} deg"]
+    parts = [f"{scan.kind}, {rows_text(scan)} x {scan.n_bins} bins, {fmt(scan.range_min)}-{fmt(scan.range_max)} m",
+             f"{scan.beam_pattern} {fmt(scan.beamwidth_h)}x{fmt(scan.beamwidth_v)} deg"]
     line2 = []
     e = scan.electronics or {}
     elec = []
     if "tvg" in e:
         elec.append(f"TVG {e['tvg']}")
     if "gain" in e:
-        elec.append(f"gain {e['gain']:g} dB")
+        elec.append(f"gain {fmt(e['gain'], 1)} dB")
     if "ad_low" in e:
-        elec.append(f"AD {e['ad_low']:g}" + (f"+{e['ad_span']:g} dB" if "ad_span" in e else " dB"))
+        elec.append(f"AD {fmt(e['ad_low'], 1)}" + (f"+{fmt(e['ad_span'], 1)} dB" if "ad_span" in e else " dB"))
     if "bit_depth" in e:
         elec.append(f"{e['bit_depth']}-bit")
     if "speckle" in e:
@@ -487,8 +505,13 @@ def plot_ascan(scan, ping: int, path=None, ax=None, db: bool = False, *,
     ax2.step(scan.ranges, scan.data[ping], where="mid", color="tab:orange", lw=0.7, alpha=0.8, label="data")
     ax2.set_ylim(0, 260)
     ax2.set_ylabel("device output (0..255)", color="tab:orange")
-    bearing = math.degrees(scan.bearings[ping])
-    ax.set_title((f"{scan.row_name[:-1]} {ping % scan.n_pings}, bearing {bearing:g} deg\n" + _settings_line(scan))
+    row = ping % scan.n_pings
+    if scan.channel is not None:      # a side-scan row: a ping of one channel, not a bearing
+        side = scan.channel[row]
+        where = f"ping {row - int(np.argmax(scan.channel == side))} of the {('port', 'starboard')[int(side)]} channel"
+    else:
+        where = f"{scan.row_name[:-1]} {row}, bearing {fmt(math.degrees(scan.bearings[ping]))} deg"
+    ax.set_title((where + "\n" + _settings_line(scan))
                  if title is None else title, fontsize=7)
     if own_figure:
         fig.tight_layout()  # a long settings line wraps the title to three lines: keep it on the page

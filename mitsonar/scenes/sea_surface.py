@@ -87,8 +87,22 @@ def edit_scene(path_or_xml, *, surface=False, sonar=None) -> str:
 def load_survey_scene(path_or_xml, *, surface=False, sonar=None, **params):
     """Load a scene with the options of `edit_scene` (``params``: the XML's ``$name`` defaults,
     as in `load_scene`). The scene keeps its file's name as its id."""
-    scene = load_scene(edit_scene(path_or_xml, surface=surface, sonar=sonar), **params)
     text = str(path_or_xml)
+    try:
+        scene = load_scene(edit_scene(path_or_xml, surface=surface, sonar=sonar), **params)
+    except SceneError as exc:
+        if text.lstrip().startswith("<"):
+            raise
+        # The edited scene is loaded from a string: Mitsuba's place in it ("At string (line 9, col 6)")
+        # is no line of the file. The file as written names its own line when the fault is its own;
+        # else the fault is in what the options added.
+        load_scene(text, **params)
+        import re
+
+        reason = re.sub(r"^(XML string: )?(At|Error while loading) string \(line \d+, col \d+\): ", "", str(exc))
+        added = " and ".join(x for x in ("the sea surface" if surface else "",
+                                         "the replacement sensor" if sonar is not None else "") if x)
+        raise SceneError(f"{text} with {added}: {reason}") from None
     if not text.lstrip().startswith("<"):
         scene.set_id(os.path.basename(text) + (" +surface" if surface else ""))
     return scene

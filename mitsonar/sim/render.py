@@ -32,10 +32,10 @@ def __getattr__(name):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def _whole(name, value, lo, hi, what):
+def _whole(name, value, lo, hi, what, where="render_scan"):
     """A count or seed argument: a whole number in [lo, hi] (4096.0 counts; 1.5, True, "8" do not)."""
     if not (is_whole(value) and lo <= value <= hi):
-        raise SceneError(f"render_scan '{name}': {value!r} is not allowed ({what})")
+        raise SceneError(f"{where} '{name}': {value!r} is not allowed ({what})")
     return int(value)
 
 
@@ -81,6 +81,56 @@ def moving_head_poses(sonar, trajectory, start_time, mount=None):
 
 SONAR_INTEGRATORS = tuple(name for kind, name, _, _ in PLUGINS if kind == "integrator")
 SEED_MAX = 2 ** 32 - 1   # the path seed is a 32-bit integer: larger seeds would repeat smaller ones
+SPP_MAX = 2 ** 31 - 1    # paths per ping: a signed 32-bit count
+SPP_ALLOWED = f"a whole number of paths per ping from 1 to {SPP_MAX}"
+SEED_ALLOWED = f"a whole number from 0 to {SEED_MAX}"
+
+
+def sensor_list(scene) -> str:
+    """The scene's sensors for a message: ``0 'sonar' (mechanical), 1 'cam' (PerspectiveCamera)``
+    (index, XML id, sonar kind or the sensor's class)."""
+    items = []
+    for i, s in enumerate(scene.sensors()):
+        kind = getattr(s, "kind", None) if hasattr(s, "ping_times") else None
+        items.append(f"{i} {s.id()!r} ({kind or type(s).__name__})")
+    return ", ".join(items) or "none"
+
+
+def pick_sensor(scene, sensor=None, option="--sensor"):
+    """The sonar sensor a command line names: ``sensor`` is its XML id or its index in the scene's
+    sensors (a string of digits counts as an index); None: the first sonar sensor, with one
+    warning naming it when the scene has several. Refused with one `SceneError` naming the
+    scene, ``option`` and its sensors (index, id, kind). Returns the sensor object, which
+    `render_scan` and `render_survey` take without warning again."""
+    from mitsonar.plugins import module
+
+    common = module("common")
+    name = scene_name(scene) or "the scene"
+    sensors = list(scene.sensors())
+    sonars = [s for s in sensors if isinstance(s, common.SonarSensor)]
+    listing = sensor_list(scene)
+    if sensor is None:
+        if not sonars:
+            raise SceneError(f'{name}: needs a <sensor type="sonar"> (sensors found: {listing})')
+        chosen = sonars[0]
+        if len(sonars) > 1:
+            warnings.warn(f"{name} has {len(sonars)} sonar sensors ({listing}); rendering "
+                          f"{sensors.index(chosen)} {chosen.id()!r} (choose with {option} ID|INDEX)", stacklevel=2)
+        return chosen
+    text = str(sensor).strip()
+    if text.isdigit():
+        index = int(text)
+        if index >= len(sensors):
+            raise SceneError(f"{name}: {option} {text}: no sensor of that index; its sensors: {listing}")
+        chosen = sensors[index]
+    else:
+        found = [s for s in sensors if s.id() == text]
+        if not found:
+            raise SceneError(f"{name}: {option} {text!r}: no sensor of that id; its sensors: {listing}")
+        chosen = found[0]
+    if not isinstance(chosen, common.SonarSensor):
+        raise SceneError(f"{name}: {option} {text}: not a sonar sensor; its sensors: {listing}")
+    return chosen
 
 
 def _integrator(scene, integrator):
@@ -126,7 +176,7 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
                    (with a ``trajectory``: the mount on the vehicle, in the vehicle frame)
     integrator     an integrator object or XML dict; default: the scene's if it is a sonar
                    integrator, else ``sonar_tof``
-    sensor         sensor index or object
+    sensor         sensor index, XML id (a string) or object
     max_depth      override of the integrator's surface bounces
     electronics    dict of electronics fields overriding the sensor's (the gain and the A/D window
                    within the head's 0..80 dB: `mitsonar.receiver.electronics.HEAD_LIMITS`); its
@@ -154,8 +204,8 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     import mitsuba as mi
 
     # Every argument is checked before the render: a mistake costs a sentence, not a render.
-    spp = _whole("spp", spp, 1, 2 ** 31 - 1, "a whole number of paths per ping, 1 or more")
-    seed = _whole("seed", seed, 0, SEED_MAX, f"a whole number from 0 to {SEED_MAX}")
+    spp = _whole("spp", spp, 1, SPP_MAX, SPP_ALLOWED)
+    seed = _whole("seed", seed, 0, SEED_MAX, SEED_ALLOWED)
     if electronics_seed is not None:
         electronics_seed = _whole("electronics_seed", electronics_seed, 0, SEED_MAX,
                                   f"a whole number from 0 to {SEED_MAX}, or None for seed")
@@ -174,6 +224,8 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     if speckle_seed is not None:
         speckle_seed = _whole("speckle_seed", speckle_seed, 0, SEED_MAX, f"a whole number from 0 to {SEED_MAX}")
         electronics = {**(electronics or {}), "speckle_seed": speckle_seed}
+    if isinstance(sensor, str):
+        sensor = pick_sensor(scene, sensor, "render_scan 'sensor':")
     sonar = sonar_of(scene, sensor)
     if trajectory is not None:
         pose = moving_head_poses(sonar, trajectory, start_time, pose)

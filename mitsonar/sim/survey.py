@@ -16,11 +16,14 @@ import sys
 
 import numpy as np
 
-from mitsonar.sim.render import SEED_MAX, _integrator, _whole, moving_head_poses, render_scan
+from mitsonar.sim.render import (SEED_ALLOWED, SEED_MAX, SPP_ALLOWED, SPP_MAX, _integrator, _whole, moving_head_poses, pick_sensor,
+                     render_scan)
 from mitsonar.sim.scene import SceneError, sonar_of
 from mitsonar.geometry.trajectory import Trajectory
 
 SCAN_NAME = "scan_{:05d}{}"
+MAX_SCANS = 10 ** 9
+MAX_SCANS_ALLOWED = f"a whole number of scans from 1 to {MAX_SCANS}"
 TRAJECTORY_NAME = "trajectory.tum"
 
 
@@ -78,12 +81,14 @@ def render_survey(scene, trajectory, output=None, *, spp=1024, seed=0, start_tim
     """
     if not isinstance(trajectory, Trajectory):
         raise SceneError(f"render_survey 'trajectory': expected a mitsonar.Trajectory, got {type(trajectory).__name__}")
-    spp = _whole("spp", spp, 1, 2 ** 31 - 1, "a whole number of paths per ping, 1 or more")
-    seed = _whole("seed", seed, 0, SEED_MAX, f"a whole number from 0 to {SEED_MAX}")
+    spp = _whole("spp", spp, 1, SPP_MAX, SPP_ALLOWED, "render_survey")
+    seed = _whole("seed", seed, 0, SEED_MAX, SEED_ALLOWED, "render_survey")
     if max_scans is not None:
-        max_scans = _whole("max_scans", max_scans, 1, 10 ** 9, "a whole number of scans, 1 or more")
+        max_scans = _whole("max_scans", max_scans, 1, MAX_SCANS, MAX_SCANS_ALLOWED, "render_survey")
     if ext not in (".npz", ".exr"):
         raise SceneError(f"render_survey 'ext': {ext!r} is not allowed (.npz or .exr)")
+    if isinstance(sensor, str):
+        sensor = pick_sensor(scene, sensor, "render_survey 'sensor':")
     sonar = sonar_of(scene, sensor)
     starts = survey_plan(sonar, trajectory, start_time, end_time, max_scans)
     moving_head_poses(sonar, trajectory, starts[-1])     # the last scan fits (refused here if not)

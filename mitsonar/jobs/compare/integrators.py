@@ -13,7 +13,10 @@ def load_integrator(name, params=None):
     import mitsuba as mi
 
     from mitsonar.plugins import module
+    from mitsonar.sim.render import SONAR_INTEGRATORS
     from mitsonar.sim.scene import mitsuba_error
+
+    ours = ", ".join(SONAR_INTEGRATORS)
 
     try:
         obj = mi.load_dict({"type": name, **(params or {})})
@@ -21,11 +24,10 @@ def load_integrator(name, params=None):
         text = str(exc)
         if "not found" in text and "Plugin" in text:
             raise CompareError(f"integrator {name!r} is not available (no Mitsuba plugin of that name is "
-                               "registered; mitsonar provides sonar_tof and sonar_mlt)") from None
+                               f"registered; mitsonar provides {ours})") from None
         raise CompareError(f"integrator {name!r}: {mitsuba_error(exc)}") from None
     if not isinstance(obj, module("common").SonarIntegrator):
-        raise CompareError(f"integrator {name!r} is not a sonar integrator; "
-                           "use sonar_tof or sonar_mlt")
+        raise CompareError(f"integrator {name!r} is not a sonar integrator; use one of {ours}")
     return obj
 
 

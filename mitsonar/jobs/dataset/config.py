@@ -40,6 +40,7 @@ import inspect
 import json
 import math
 import os
+import re
 
 import numpy as np
 
@@ -159,10 +160,46 @@ def read_config(path) -> dict:
             raise DatasetError(f"dataset config {path!r}: the extension must be .yaml, .yml or .toml")
     except DatasetError:
         raise
-    except Exception as exc:  # a syntax error of the file: its first line
+    except Exception as exc:  # a syntax error of the file: where (YAML's mark) and what
+        mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
+        problem = getattr(exc, "problem", None) or getattr(exc, "context", None)
+        if mark is not None and problem:
+            context = getattr(exc, "context", None) if getattr(exc, "problem", None) else None
+            start = getattr(exc, "context_mark", None)
+            if context and start is not None and start.line != mark.line:
+                context += f" started at line {start.line + 1}"
+            raise DatasetError(f"dataset config {path!r} line {mark.line + 1}, column {mark.column + 1}: {problem}"
+                               + (f" ({context})" if context else "")) from None
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise DatasetError(f"dataset config {path!r}: {first}") from None
-    return check_config(cfg, base=os.path.dirname(os.path.abspath(path)))
+    try:
+        return check_config(cfg, base=os.path.dirname(os.path.abspath(path)))
+    except DatasetError as exc:   # name the file and the key's line
+        raise DatasetError(_located(str(exc), path, raw.decode("utf-8", "replace"))) from None
+
+
+def _located(message, path, text) -> str:
+    """``dataset config 'a.b[0].c': ...`` with the file and the line of the key in ``text``:
+    ``dataset config 'a.b[0].c' (FILE line N): ...`` (the top-level key's line, or the first line
+    after it naming the innermost key); the message as is when the key is not found."""
+    m = re.match(r"dataset config '([^']+)'", message)
+    if not m:
+        return message
+    parts = [p for p in re.split(r"[.\[\]]", m.group(1)) if p and not p.isdigit()]
+    lines = text.splitlines()
+    found = None
+    for i, line in enumerate(lines):
+        if re.match(rf"\s*\[?{re.escape(parts[0])}\s*[:=\]]", line.split("#", 1)[0]):
+            found = i
+            break
+    if found is None:
+        return message
+    if len(parts) > 1:
+        for j in range(found, len(lines)):
+            if re.search(rf"(^|[\s{{,\[]){re.escape(parts[-1])}\s*[:=]", lines[j].split("#", 1)[0]):
+                found = j
+                break
+    return f"{m.group(0)} ({path} line {found + 1}){message[m.end():]}"
 
 
 def _terrain_keys():
@@ -353,7 +390,11 @@ def _check_sonar(sonar):
         try:
             load_scene(f'<scene version="3.0.0">{sonar_xml(trial)}</scene>')
         except SceneError as exc:
-            msg = str(exc).split(": ", 1)[-1]
+            # the sensor's own reason, without Mitsuba's place in the generated XML string
+            msg = re.sub(r"^(XML string: )?(At|Error while loading) string \(line \d+, col \d+\): ", "", str(exc))
+            key = re.match(r"sonar '(\w+)': ", msg)
+            if key:
+                raise DatasetError(f"dataset config 'sonar.{key.group(1)}': {msg[key.end():]}") from None
             raise DatasetError(f"dataset config 'sonar': {msg}") from None
 
 
