@@ -30,7 +30,8 @@ def load_scan(path) -> Scan:
 
 _LAZY = {"MicronSonar": "micron", "VirtualMicron": "virtual_sonar", "HeadSettings": "seanet.settings",
          "StreamParser": "seanet.stream", "record": "micron", "replay": "recording",
-         "Ping360Sonar": "ping360", "VirtualPing360": "virtual_ping360", "Ping360Settings": "ping360_head"}
+         "Ping360Sonar": "ping360", "VirtualPing360": "virtual_ping360", "Ping360Settings": "ping360_head",
+         "SoundSpeedProfile": "acoustics.profile"}
 
 
 def __getattr__(name):
