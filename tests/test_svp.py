@@ -296,3 +296,26 @@ def test_bad_arguments_are_one_line(call, message):
     with pytest.raises(ProfileError) as e:
         call()
     assert message in str(e.value) and "\n" not in str(e.value)
+
+
+def test_ray_diagram_draws_the_profile_and_the_fan_depth_down(tmp_path):
+    from mitsonar.acoustics.raydiagram import ray_diagram
+
+    path = tmp_path / "rays.png"
+    fig = ray_diagram(LAYERS, head_depth=2.0, seabed_depth=40.0, angles=[-60, 0, 30, 60], nominal_speed=1495.0,
+                      path=path)
+    assert path.stat().st_size > 10000
+    profile_ax, rays_ax = fig.axes[:2]
+    assert profile_ax.get_xlabel() == "sound speed [m/s]" and "depth [m]" in profile_ax.get_ylabel()
+    assert "across-track distance [m]" in rays_ax.get_xlabel()
+    lo, hi = rays_ax.get_ylim()
+    assert lo > hi == 0.0                                       # depth increasing downward
+    th = math.radians(90.0 - 30.0)                               # the 30 deg beam's grazing angle
+    x, z = LAYERS.locate(2.0, th, LAYERS.trace(2.0, th, to_depth=40.0).time[-1])
+    ray_lines = [ln for ln in rays_ax.get_lines() if ln.get_linestyle() == "-" and len(ln.get_xdata()) > 2]
+    assert len(ray_lines) == 4
+    end = [(ln.get_xdata()[-1], ln.get_ydata()[-1]) for ln in ray_lines][1:3]
+    assert end[0] == (pytest.approx(0.0, abs=1e-9), pytest.approx(40.0))          # nadir beam
+    assert end[1] == (pytest.approx(x, rel=1e-9), pytest.approx(40.0))             # 30 deg to port: +
+    with pytest.raises(ProfileError, match="give seabed_depth"):
+        ray_diagram(LAYERS)
