@@ -5,9 +5,11 @@ with the true profile are flat and those processed with a constant speed show th
 the closed form predicts, a constant profile at the nominal speed gives the straight-ray soundings,
 and bad profiles are refused in one line naming the file, the row and the field."""
 import math
+import os
 
 import numpy as np
 import pytest
+from conftest import SCENES
 
 from mitsonar.acoustics import ProfileError, SoundSpeedProfile
 
@@ -182,7 +184,8 @@ def test_soundings_processed_with_the_true_profile_are_flat():
         assert len(s) == 25 and np.abs(s["angle"]).max() == pytest.approx(60.0)
         np.testing.assert_allclose(-s["z"], D, rtol=0.002)
         straight = soundings(fan_scan(D, truth))                # without the profile they are not
-        assert np.abs(-straight["z"] - D).max() > 0.01 and np.abs(-straight["z"] - D).max() > 20 * np.abs(-s["z"] - D).max()
+        worst = np.abs(-straight["z"] - D).max()
+        assert worst > 0.01 and worst > 20 * np.abs(-s["z"] - D).max()
 
 
 def test_a_constant_speed_gives_the_refraction_error_of_the_closed_form():
@@ -319,3 +322,46 @@ def test_ray_diagram_draws_the_profile_and_the_fan_depth_down(tmp_path):
     assert end[1] == (pytest.approx(x, rel=1e-9), pytest.approx(40.0))             # 30 deg to port: +
     with pytest.raises(ProfileError, match="give seabed_depth"):
         ray_diagram(LAYERS)
+
+
+def test_cli_refuses_a_bad_processing_svp_before_any_render(tmp_path, capsys):
+    from mitsonar.cli import main
+
+    svp = tmp_path / "svp.csv"
+    svp.write_text("depth,sound_speed\n0,1500\n12,1490\n10,1495\n")
+    out = tmp_path / "run"
+    args = ["bathymetry", os.path.join(SCENES, "rocky_slope.xml"), "--trajectory",
+            os.path.join(SCENES, "rocky_slope_survey.tum"), "-q", "-o", str(out), "--processing-svp", str(svp)]
+    assert main(args) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and f"{svp}, row 4: depth 10.0 m is not greater than the previous 12.0 m" in err, err
+    assert not out.exists()
+    track = tmp_path / "high.tum"
+    track.write_text("0 0 0 1.5 0 0 0 1\n1 1 0 1.5 0 0 0 1\n")
+    svp.write_text("depth,sound_speed\n0,1500\n")
+    assert main(args[:3] + [str(track)] + args[4:]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "track rises 1.5 m above the sea surface" in err, err
+    assert not out.exists()
+
+
+def test_cli_processing_svp_at_the_nominal_speed_changes_nothing_and_is_recorded(tmp_path):
+    """End to end: the same survey processed with a constant profile at the head's nominal
+    1500 m/s gives the straight-ray depth errors, and errors.json names the profile."""
+    import json
+
+    from mitsonar.cli import main
+
+    svp = tmp_path / "svp.csv"
+    SoundSpeedProfile.constant(1500.0).to_csv(svp)
+    args = ["bathymetry", os.path.join(SCENES, "rocky_slope.xml"), "--trajectory",
+            os.path.join(SCENES, "rocky_slope_survey.tum"), "--beams", "16", "--max-scans", "2", "--spp", "16",
+            "--range-max", "20", "--bin-width", "0.025", "--max-depth", "1", "-q"]
+    assert main(args + ["-o", str(tmp_path / "a")]) == 0
+    assert main(args + ["-o", str(tmp_path / "b"), "--processing-svp", str(svp)]) == 0
+    a, b = (json.loads((tmp_path / d / "errors.json").read_text()) for d in "ab")
+    assert a["processing_svp"] is None and b["processing_svp"] == str(svp)
+    assert b["sonar"]["processing_svp"] == {"depth": [0.0], "sound_speed": [1500.0]}
+    assert a["n_soundings"] == b["n_soundings"] > 20
+    for ra, rb in zip(a["per_angle"], b["per_angle"]):
+        assert rb["angle"] == ra["angle"] and rb["mean"] == pytest.approx(ra["mean"], abs=1e-9)
