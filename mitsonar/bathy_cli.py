@@ -94,7 +94,7 @@ def cmd_bathymetry(args):
         grid_depths(np.zeros(1, bathymetry.SOUNDING_DTYPE), args.cell)
         svp = None
         if args.processing_svp is not None:
-            from .acoustics.profile import SoundSpeedProfile
+            from mitsonar.acoustics.profile import SoundSpeedProfile
 
             svp = SoundSpeedProfile.from_csv(args.processing_svp)
     except ValueError as exc:

@@ -194,7 +194,7 @@ def detect(intensity, ranges, threshold_db=10.0, method="centroid"):
 
 def check_profile(sound_speed_profile):
     """``sound_speed_profile``: None or a `mitsonar.acoustics.SoundSpeedProfile`, else one line."""
-    from .acoustics.profile import SoundSpeedProfile
+    from mitsonar.acoustics.profile import SoundSpeedProfile
 
     if sound_speed_profile is not None and not isinstance(sound_speed_profile, SoundSpeedProfile):
         raise not_allowed(WHERE, "sound_speed_profile", sound_speed_profile,

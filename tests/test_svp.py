@@ -176,7 +176,7 @@ def fan_scan(depth_seabed, profile, head_depth=2.0, angles=np.arange(-60, 61, 5.
 
 
 def test_soundings_processed_with_the_true_profile_are_flat():
-    from mitsonar.bathymetry import soundings
+    from mitsonar.products.bathymetry import soundings
 
     D = 20.0
     for truth in (LAYERS, LINEAR):
@@ -194,7 +194,7 @@ def test_a_constant_speed_gives_the_refraction_error_of_the_closed_form():
     (closed form) and is placed at depth d0 + c(d0) t cos(b). Nadir comes out too shallow (the
     water below is faster than the head's), the outer beams too deep (they bent towards the
     horizontal): the error rises with the beam angle on both sides, a smile."""
-    from mitsonar.bathymetry import soundings
+    from mitsonar.products.bathymetry import soundings
 
     c0, g, d0, D = 1480.0, 0.5, 2.0, 20.0
     truth = SoundSpeedProfile([0.0, 100.0], [c0, c0 + 100 * g])
@@ -215,7 +215,7 @@ def test_a_constant_speed_gives_the_refraction_error_of_the_closed_form():
 
 
 def test_a_constant_profile_at_the_nominal_speed_gives_the_straight_ray_soundings():
-    from mitsonar.bathymetry import soundings
+    from mitsonar.products.bathymetry import soundings
 
     scan = fan_scan(20.0, LAYERS, c_nominal=1493.0)
     a, b = soundings(scan), soundings(scan, sound_speed_profile=SoundSpeedProfile.constant(1493.0))
@@ -226,7 +226,7 @@ def test_a_constant_profile_at_the_nominal_speed_gives_the_straight_ray_sounding
 
 
 def test_a_head_above_the_surface_and_a_wrong_profile_type_are_one_line():
-    from mitsonar.bathymetry import soundings
+    from mitsonar.products.bathymetry import soundings
 
     scan = fan_scan(20.0, LAYERS, head_z=0.5)
     soundings(scan)                                         # straight rays do not need the surface

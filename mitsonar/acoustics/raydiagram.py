@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from .profile import ProfileError, SoundSpeedProfile
+from mitsonar.acoustics.profile import ProfileError, SoundSpeedProfile
 
 __all__ = ["ray_diagram"]
 
@@ -97,7 +97,7 @@ def ray_diagram(profile, *, head_depth=0.0, seabed_depth=None, angles=tuple(rang
     ax.set_ylim(z[-1], min(0.0, head_depth))        # depth increasing downward
     fig.tight_layout()
     if path is not None:
-        from ..plots import _save
+        from mitsonar.products.plots import _save
 
         _save(fig, path)
     return fig
