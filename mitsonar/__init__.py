@@ -38,7 +38,7 @@ _LAZY = {"MicronSonar": "devices.micron.driver", "VirtualMicron": "devices.micro
          "HeadSettings": "devices.micron.seanet.settings", "StreamParser": "devices.micron.seanet.stream",
          "record": "devices.micron.driver", "replay": "devices.recording",
          "Ping360Sonar": "devices.ping360.driver", "VirtualPing360": "devices.ping360.virtual",
-         "Ping360Settings": "devices.ping360.head"}
+         "Ping360Settings": "devices.ping360.head", "SoundSpeedProfile": "acoustics.profile"}
 
 
 def __getattr__(name):

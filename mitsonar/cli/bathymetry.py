@@ -10,6 +10,10 @@ cloud, world frame), ``depth.npz`` (the gridded depth map: ``depth``, ``count``,
 ``depth.tif`` (the same as a GeoTIFF, when ``rasterio`` is installed), ``errors.json`` (depth error
 statistics per beam angle, `mitsonar.products.bathymetry.SurveyResult.summary`) and ``bathymetry.png`` (the
 depth map over the track, and the depth error against beam angle with the centroid's predicted rms).
+``--processing-svp CSV`` places the soundings by ray tracing through that sound-speed profile
+(`mitsonar.acoustics.SoundSpeedProfile.from_csv`) instead of straight beams at the head's
+nominal speed: the rendered water itself is uniform at that nominal speed, so a profile that
+differs from it shows the refraction error a wrong profile gives (depth error against beam angle).
 Every option is checked before the first render; all files are written under temporary names and
 renamed together at the end.
 """
@@ -67,8 +71,9 @@ def plot_bathymetry(result, grid, path, trajectory=None):
         bx.text(0.5, 0.5, "no sounding has a seabed under it in the scene:\nno depth error to show",
                 ha="center", va="center", transform=bx.transAxes)
     lim = np.nanpercentile(np.abs(100 * err[ok]), 99.5) if ok.any() else 1.0
+    svp = ", ray-traced through the SVP" if info.get("processing_svp") else ""
     bx.set(xlabel="beam angle [deg] (port +)", ylabel="depth error [cm] (+: too deep)", ylim=(-1.2 * lim, 1.2 * lim),
-           title=f"depth error per beam angle ({len(s)} soundings)")
+           title=f"depth error per beam angle ({len(s)} soundings{svp})")
     bx.grid(True, alpha=0.3)
     if rows or ok.any():
         bx.legend(fontsize=8)
@@ -103,9 +108,17 @@ def cmd_bathymetry(args):
                                           range_max=args.range_max, bin_width=args.bin_width)
         bathymetry.check_options(args.threshold_db, args.method or "centroid")
         grid_depths(np.zeros(1, bathymetry.SOUNDING_DTYPE), args.cell)
+        svp = None
+        if args.processing_svp is not None:
+            from mitsonar.acoustics.profile import SoundSpeedProfile
+
+            svp = SoundSpeedProfile.from_csv(args.processing_svp)
     except ValueError as exc:
         raise BathymetryCLIError(str(exc)) from None
     traj = trajectory_from_args(args, "bathymetry")
+    if svp is not None and (traj.positions[:, 2] > 0).any():
+        raise BathymetryCLIError(f"bathymetry --processing-svp: the track rises {traj.positions[:, 2].max():g} m above "
+                                 "the sea surface (z = 0): a sound-speed profile needs the head in the water (z <= 0)")
     scene = load_survey_scene(args.scene, surface=args.surface,
                               sonar=None if head is None else echosounders.sonar_xml(head))
     sensor = sensor_of(scene, args, BathymetryCLIError)
@@ -113,7 +126,7 @@ def cmd_bathymetry(args):
                         holds=None if args.force else
                         lambda out: any(os.path.exists(os.path.join(out, f)) for f in OUTPUTS))
     with _output_folder(args.output):   # made now; removed again if the run fails and leaves it empty
-        return _run(args, bathymetry, scene, traj, sensor, head, grid_depths, write_ply, StagedFiles)
+        return _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_ply, StagedFiles)
 
 
 @contextlib.contextmanager
@@ -138,10 +151,11 @@ def _output_folder(folder):
         raise
 
 
-def _run(args, bathymetry, scene, traj, sensor, head, grid_depths, write_ply, StagedFiles):
+def _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_ply, StagedFiles):
     run = bathymetry.survey(scene, traj, spp=args.spp, seed=args.seed, threshold_db=args.threshold_db,
                             method=args.method, speckle=not args.no_speckle, max_scans=args.max_scans,
-                            max_depth=args.max_depth, progress=not args.quiet, sensor=sensor)
+                            max_depth=args.max_depth, progress=not args.quiet, sensor=sensor,
+                            sound_speed_profile=svp)
     grid = grid_depths(run.soundings, args.cell)
     out = args.output
     written = [f for f in OUTPUTS if f != "depth.tif"]
@@ -151,7 +165,7 @@ def _run(args, bathymetry, scene, traj, sensor, head, grid_depths, write_ply, St
         summary = run.summary()
         summary.update(preset=head.sounder.name if head else None, model=head.sounder.model if head else None,
                        sensor=sensor.id() if head is None else None, scene=args.scene, cell=args.cell,
-                       surface=args.surface, transform=list(grid.transform))
+                       surface=args.surface, transform=list(grid.transform), processing_svp=args.processing_svp)
         with open(files.temporary(os.path.join(out, "errors.json")), "w") as f:
             json.dump(summary, f, indent=1)
         plot_bathymetry(run, grid, files.temporary(os.path.join(out, "bathymetry.png")), traj)
@@ -199,6 +213,9 @@ def add_subcommands(sub):
     s.add_argument("--no-speckle", action="store_true", help="detect on the noise-free intensity")
     s.add_argument("--surface", action="store_true", help="add a flat specular sea surface at z = 0 (multipath)")
     s.add_argument("--cell", type=float, default=0.5, help="depth grid cell, m (default 0.5)")
+    s.add_argument("--processing-svp", metavar="CSV",
+                   help="sound-speed profile (header depth,sound_speed) the soundings are ray-traced through "
+                        "(default: straight beams at the head's nominal speed)")
     add_trajectory_options(s)
     s.add_argument("--spp", type=int, default=128, help="paths per beam (default 128)")
     s.add_argument("--seed", type=int, default=0,

@@ -19,7 +19,12 @@ the "weighted mean time" / centre-of-gravity detection of MBES, here weighted by
 not its amplitude), or (``leading_edge``, for the altimeter) the range where the intensity first
 rises through the threshold, interpolated linearly between bins. The sounding is
 ``transducer + range * boresight`` of the row's beam frame (straight rays in a constant sound
-speed), so every sounding is in the world frame.
+speed), so every sounding is in the world frame. With a sound-speed profile (`soundings`'s
+``sound_speed_profile``, a `mitsonar.acoustics.SoundSpeedProfile`) the sounding is placed as
+hydrographic processing does (`refracted`): the range is turned back into the one-way travel time
+``range / c`` (``c`` the scan's nominal sound speed: what the head used), and the beam is
+ray-traced through the profile from the head's depth (``-z`` of the transducer) at its launch
+angle for that time (`mitsonar.acoustics.SoundSpeedProfile.locate`).
 
 Speckle (`speckled`): the rendered intensity is an expectation (noise-free but for Monte Carlo
 noise); real echoes fluctuate. Detection with speckle runs on ``intensity * |g|^2``, ``g`` the
@@ -187,7 +192,40 @@ def detect(intensity, ranges, threshold_db=10.0, method="centroid"):
     return np.where(found, out, np.nan), np.where(found, energy, 0.0)
 
 
-def soundings(scan, threshold_db=10.0, method="centroid", speckle=False, ping=0, start_time=None):
+def check_profile(sound_speed_profile):
+    """``sound_speed_profile``: None or a `mitsonar.acoustics.SoundSpeedProfile`, else one line."""
+    from mitsonar.acoustics.profile import SoundSpeedProfile
+
+    if sound_speed_profile is not None and not isinstance(sound_speed_profile, SoundSpeedProfile):
+        raise not_allowed(WHERE, "sound_speed_profile", sound_speed_profile,
+                          "a mitsonar.acoustics.SoundSpeedProfile, or None for straight rays")
+    return sound_speed_profile
+
+
+def refracted(positions, boresights, ranges, sound_speed, sound_speed_profile):
+    """World positions (n, 3) of echoes at ``ranges`` (m) along beams launched from ``positions``
+    (n, 3; world, z up, the sea surface at z = 0) towards ``boresights`` (n, 3, unit), placed by
+    ray tracing through ``sound_speed_profile`` for the one-way time ``range / sound_speed``
+    (``sound_speed`` the head's nominal speed, m/s, which turned the two-way time into a range):
+    the launch grazing angle is ``atan2(-b_z, |b_xy|)``, the ray stays in the vertical plane of
+    the boresight, and its depth is ``-z``. A head above the sea surface (z > 0) is refused."""
+    pos = np.asarray(positions, np.float64).reshape(-1, 3)
+    bore = np.asarray(boresights, np.float64).reshape(-1, 3)
+    above = pos[:, 2] > 0
+    if above.any():
+        raise ValueError(f"{WHERE}: the head is {pos[above, 2][0]:g} m above the sea surface (z = 0): a "
+                         "sound-speed profile's rays start in the water (a transducer at z <= 0)")
+    horizontal = np.hypot(bore[:, 0], bore[:, 1])
+    grazing = np.arctan2(-bore[:, 2], horizontal)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = np.where(horizontal[:, None] > 0, bore[:, :2] / horizontal[:, None], 0.0)
+    t = np.asarray(ranges, np.float64).reshape(-1) / float(sound_speed)
+    x, depth = sound_speed_profile.locate(-pos[:, 2], grazing, t)
+    return np.column_stack([pos[:, 0] + x * u[:, 0], pos[:, 1] + x * u[:, 1], -depth])
+
+
+def soundings(scan, threshold_db=10.0, method="centroid", speckle=False, ping=0, start_time=None,
+              sound_speed_profile=None):
     """One sounding per beam of ``scan`` that found the bottom: a `SOUNDING_DTYPE` array.
 
     ``x, y, z`` world position (m), ``intensity`` the echo's energy in dB (10 log10 of the window's
@@ -197,9 +235,12 @@ def soundings(scan, threshold_db=10.0, method="centroid", speckle=False, ping=0,
     scan's ``meta['start_time']`` by default), ``range`` the detected range, ``head_z`` the
     transducer's height. ``speckle``: False detects on the noise-free intensity, True on
     `speckled` (the scene's speckle of the scan; pick another pattern with `render_scan`'s
-    ``speckle_seed``).
+    ``speckle_seed``). ``sound_speed_profile``: None places each sounding on the straight beam
+    (``transducer + range * boresight``); a `mitsonar.acoustics.SoundSpeedProfile` ray-traces it
+    through that water (`refracted`, from the one-way time ``range / scan.sound_speed``).
     """
     threshold_db, method = check_options(threshold_db, method)
+    check_profile(sound_speed_profile)
     if not isinstance(speckle, bool):
         raise not_allowed(WHERE, "speckle", speckle, "True (the scan's scene speckle) or False")
     spread = float(np.degrees(np.ptp(scan.bearings))) if scan.n_pings > 1 else 0.0
@@ -210,7 +251,10 @@ def soundings(scan, threshold_db=10.0, method="centroid", speckle=False, ping=0,
     ok = np.isfinite(rng)
     k = np.flatnonzero(ok)
     pos, bore = scan.poses[k, :3, 3], scan.poses[k, :3, 2]
-    p = pos + rng[k, None] * bore
+    if sound_speed_profile is None:
+        p = pos + rng[k, None] * bore
+    else:
+        p = refracted(pos, bore, rng[k], scan.sound_speed, sound_speed_profile)
     t0 = float(scan.meta.get("start_time", 0.0)) if start_time is None else float(start_time)
     out = np.zeros(len(k), SOUNDING_DTYPE)
     out["x"], out["y"], out["z"] = p[:, 0], p[:, 1], p[:, 2]
@@ -330,12 +374,14 @@ class SurveyResult:
 
 
 def survey(scene, trajectory, *, spp=256, seed=0, threshold_db=10.0, method=None, speckle=True, max_scans=None,
-           start_time=None, end_time=None, max_depth=None, sensor=0, angle_step=5.0, progress=None):
+           start_time=None, end_time=None, max_depth=None, sensor=0, angle_step=5.0, progress=None,
+           sound_speed_profile=None):
     """Render a survey of ``scene``'s echo sounder along ``trajectory`` and detect the bottom in
     every ping: a `SurveyResult`. ``method`` defaults to ``centroid`` for a multibeam and
     ``leading_edge`` for a single beam; ``speckle``: detect on each scan's scene speckle (True:
     `speckled`, the sensor's ``speckle_seed``, changing along the track as the head moves) or on
-    the noise-free intensity (False).
+    the noise-free intensity (False); ``sound_speed_profile``: the water the soundings are
+    processed with (`soundings`; None: straight rays at the head's nominal speed).
     Every option is checked before the first render; a survey in which no beam finds the bottom
     is refused with one line (`NoBottomError`)."""
     from mitsonar.sim.scene import sonar_of
@@ -347,12 +393,14 @@ def survey(scene, trajectory, *, spp=256, seed=0, threshold_db=10.0, method=None
     if not isinstance(speckle, bool):
         raise not_allowed(WHERE, "speckle", speckle, "True or False")
     error_table([], [], [], angle_step)     # the step, checked before any render
+    check_profile(sound_speed_profile)
     scans = render_survey(scene, trajectory, None, spp=spp, seed=seed, max_scans=max_scans, start_time=start_time,
                           end_time=end_time, sensor=sensor, max_depth=max_depth, progress=progress or False)
-    parts, n, resolution = [], 0, float(sonar.bin_width)
+    parts, n, resolution, scans_speed = [], 0, float(sonar.bin_width), float("nan")
     for i, scan in enumerate(scans):
-        parts.append(soundings(scan, threshold_db, method, speckle, ping=i))
+        parts.append(soundings(scan, threshold_db, method, speckle, ping=i, sound_speed_profile=sound_speed_profile))
         resolution = speckle_resolution(scan)
+        scans_speed = scan.sound_speed
         n += 1
     s = np.concatenate(parts) if parts else np.zeros(0, SOUNDING_DTYPE)
     if len(s) == 0:
@@ -362,5 +410,7 @@ def survey(scene, trajectory, *, spp=256, seed=0, threshold_db=10.0, method=None
                 beamwidth_v=float(sonar.beam.beamwidth_v), bin_width=float(sonar.bin_width),
                 range_min=float(sonar.range_min), range_max=float(sonar.range_max), method=method,
                 threshold_db=threshold_db, speckle=speckle, speckle_resolution=resolution, spp=int(spp),
-                seed=int(seed))
+                seed=int(seed), sound_speed=float(scans_speed),
+                processing_svp=None if sound_speed_profile is None else
+                dict(depth=sound_speed_profile.depths.tolist(), sound_speed=sound_speed_profile.speeds.tolist()))
     return SurveyResult(s, true_z, n, info, angle_step)
