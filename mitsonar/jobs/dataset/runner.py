@@ -157,6 +157,17 @@ def _version():
     return __version__
 
 
+def _init_local(parent, cfg, threads, variant):
+    """Initializer of a local worker process: it ends with the coordinator ``parent`` however that
+    ends (`lifetime.die_with_parent`; a SIGKILLed coordinator once left its workers and the
+    resource tracker running), then sets up its renderer (`worker.init_process`)."""
+    from mitsonar.jobs.dataset.lifetime import die_with_parent
+    from mitsonar.jobs.dataset.worker import init_process
+
+    die_with_parent(parent)
+    init_process(cfg, threads, variant)
+
+
 def _local(cfg, coord, todo, workers, threads, variant):
     """Render ``todo`` on ``workers`` spawned processes; a dead worker's pool is restarted and its
     samples handed out again (at most `MAX_RESTARTS` times)."""
@@ -164,13 +175,13 @@ def _local(cfg, coord, todo, workers, threads, variant):
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
-    from mitsonar.jobs.dataset.worker import init_process, render_in_process
+    from mitsonar.jobs.dataset.worker import render_in_process
 
     pending = list(todo)
     restarts = 0
     while pending:
-        pool = ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=init_process,
-                                   initargs=(cfg, threads, variant))
+        pool = ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=_init_local,
+                                   initargs=(os.getpid(), cfg, threads, variant))
         running = {}
         try:
             while pending or running:
