@@ -265,6 +265,22 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
 
         check_ray()
     start = time.time()
+    connected = False
+    if engine == "ray" and address:
+        from .ray_engine import connect
+
+        check_output_folder(output, DatasetError)
+        connected = connect(address)   # a cluster that cannot be reached: one line, before the folder is touched
+    try:
+        return _generate(cfg, output, workers, address, threads, progress, engine, start)
+    finally:
+        if connected:
+            import ray
+
+            ray.shutdown()
+
+
+def _generate(cfg, output, workers, address, threads, progress, engine, start):
     lock, manifest = prepare_folder(cfg, output)
     bar = None
     try:
