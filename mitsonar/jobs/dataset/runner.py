@@ -229,7 +229,8 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
     output       the dataset folder; a folder holding part of this config's dataset is resumed
     workers      worker processes or Ray actors (default: the number of cores); 0 renders in this
                  process
-    address      a Ray cluster's address (``ray://head:10001``, ``auto``): runs there, on Ray
+    address      a Ray cluster's address (``HEAD:6379``, ``auto``, ``ray://HEAD:10001``): runs there, on
+                 Ray (see `ray_engine`: token authentication, this machine a node of it)
     threads      Dr.Jit render threads per worker (default cores // workers, at least 1)
     progress     show a progress bar (samples, samples/s, time left) on stderr; or an object
                  whose ``update(1)`` is called as each sample comes back
