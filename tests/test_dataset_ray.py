@@ -17,7 +17,7 @@ import pytest
 import yaml
 from conftest import ROOT
 
-from mitsonar.dataset import generate_dataset
+from mitsonar.jobs.dataset import generate_dataset
 from test_dataset import folder_bytes, small_config
 from test_dataset_lifetime import GONE_WITHIN_S, children, process, still_running
 
@@ -202,7 +202,7 @@ def test_an_address_without_a_head_is_one_line_and_no_folder(head, tmp_path):
 
 @pytest.mark.parametrize("address", ["head", "head:port", "ray://:10001"])
 def test_a_malformed_address_is_one_line_and_no_folder(address, tmp_path):
-    from mitsonar.dataset import DatasetError
+    from mitsonar.jobs.dataset import DatasetError
 
     with pytest.raises(DatasetError, match=r"--address .* is not allowed \(HOST:PORT of a Ray head"):
         generate_dataset(small_config(), str(tmp_path / "ds"), address=address, workers=2, progress=False)

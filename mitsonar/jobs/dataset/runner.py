@@ -268,7 +268,7 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
     start = time.time()
     connected = False
     if engine == "ray" and address:
-        from .ray_engine import connect
+        from mitsonar.jobs.dataset.ray_engine import connect
 
         check_output_folder(output, DatasetError)
         connected = connect(address)   # a cluster that cannot be reached: one line, before the folder is touched
