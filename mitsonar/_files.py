@@ -18,14 +18,16 @@ def _umask() -> int:
 _UMASK = _umask()
 
 
-def check_output_folder(folder, error, *, holds=None, what="", option="-o") -> None:
+def check_output_folder(folder, error, *, holds=None, what="", option="-o", force=False) -> None:
     """Refuse, with one line raised as ``error``, an output folder that is a file, or one that
     already holds a run (``holds(folder)`` true; ``what`` names the run: "already holds {what};
-    choose a new or empty folder"). Creates nothing: `make_output_folder` does."""
+    choose a new or empty folder", and, when the command takes ``--force`` (``force`` True),
+    "or --force to replace it"). Creates nothing: `make_output_folder` does."""
     if os.path.exists(folder) and not os.path.isdir(folder):
         raise error(f"{option} {folder!r} is a file, not a folder")
     if holds is not None and os.path.isdir(folder) and holds(folder):
-        raise error(f"{option} {folder!r} already holds {what}; choose a new or empty folder")
+        raise error(f"{option} {folder!r} already holds {what}; choose a new or empty folder"
+                    + (", or --force to replace it" if force else ""))
 
 
 def make_output_folder(folder, error, option="-o") -> None:

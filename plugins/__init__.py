@@ -21,7 +21,7 @@ PLUGINS = (("BSDF", "acoustic", "acoustic_bsdf", "AcousticBSDF"),
 
 # The last exception raised by one of our plugins' constructors. Mitsuba turns it into a
 # RuntimeError holding its traceback as text; `take_failure` hands the original back to whoever
-# reports the error (mitsonar.scene), so no message has to be recovered from that text.
+# reports the error (mitsonar.sim.scene), so no message has to be recovered from that text.
 _failures: list = []
 
 

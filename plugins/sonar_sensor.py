@@ -11,7 +11,7 @@ import mitsuba as mi
 import numpy as np
 
 from mitsonar._checks import not_allowed, require
-from mitsonar.frames import KINDS, SIDES, STARBOARD, bearing_rotation, check_rigid, check_rigid_stack, sidescan_rotation
+from mitsonar.geometry.frames import KINDS, SIDES, STARBOARD, bearing_rotation, check_rigid, check_rigid_stack, sidescan_rotation
 
 from .beam import BeamPattern, read_beam_table
 from .jit_arrays import upload
@@ -43,7 +43,7 @@ class SonarSensor(mi.Sensor):
     gain of row k is ``B_tx(d) B_rx(d in row k's frame)``. All rows share one pose.
     ``kind='sidescan'``: ``to_world`` is the head frame (x along track, y port, z up); two
     channels, port (boresight +y) and starboard (-y), each turned down about +x by ``depression``
-    (`mitsonar.frames.sidescan_rotation`), each a monostatic beam like a mechanical head's
+    (`mitsonar.geometry.frames.sidescan_rotation`), each a monostatic beam like a mechanical head's
     (``beamwidth_h`` along track, the beam frame's azimuth; ``beamwidth_v`` the across-track fan, its
     elevation). ``side`` picks the channels: with ``both`` the rows are the ``n_pings`` port pings then
     the ``n_pings`` starboard pings (2 n_pings rows, `channels` says which is which), with one side
@@ -90,15 +90,16 @@ class SonarSensor(mi.Sensor):
                                   swath, ``|bearing_step| (n_pings - 1) + beamwidth_h``
     tx_beamwidth_v   beamwidth_v  deg, full -3 dB width of the fan along the scan axis
     aperture_h/_v    derived      m (``sinc``); from the beam widths when absent
-    electronics      see below    the fields of ``mitsonar.electronics.Electronics``
-                                  (``source_level``, ``tvg``, ``gain``, ``ad_low``, ...)
+    electronics      see below    the fields of ``mitsonar.receiver.electronics.Electronics``
+                                  (``source_level`` in dB re 1 uPa at 1 m,
+                                  ``receiver_sensitivity``, ``noise_level``, ``tvg``, ``gain``, ...)
     ================ ============ ===============================================================
     """
 
     @classmethod
     def parameters(cls) -> list:
         """The XML parameter names: the table above, with the electronics' fields by name."""
-        from mitsonar.electronics import Electronics
+        from mitsonar.receiver.electronics import Electronics
 
         from .props import table_parameters
 
@@ -146,13 +147,15 @@ class SonarSensor(mi.Sensor):
         if "tx_pattern" in props:
             tx["tx_pattern"] = text(props, "tx_pattern", None, "sonar")
 
-        from mitsonar.electronics import Electronics, check_head_settings
+        from mitsonar.receiver.electronics import Electronics, check_head_settings
         read = {"float": number, "int": count, "str": text}
         elec = {}
         for f in dataclasses.fields(Electronics):
             if f.name in props:
                 kind = f.type if isinstance(f.type, str) else f.type.__name__
                 elec[f.name] = read[kind](props, f.name, None, "sonar")
+            elif f.name in preset:   # a side-scan preset's source level, sensitivity, noise
+                elec[f.name] = preset[f.name]
         self.electronics = elec
         self._check()
         check_head_settings(elec, "sonar")             # the head's ranges, then the model's checks

@@ -9,8 +9,8 @@ import numpy as np
 import OpenEXR
 import pytest
 
-from mitsonar.electronics import Electronics
-from mitsonar.io import ScanFileError, load_scan, save_scan
+from mitsonar.receiver.electronics import Electronics
+from mitsonar.scan.io import ScanFileError, load_scan, save_scan
 from mitsonar.scan import Scan
 
 

@@ -1,0 +1,5 @@
+"""The `Scan` (`mitsonar.scan.model`), its file format (`fileformat`: EXR and NPZ) and
+`save_scan`/`load_scan` (`io`)."""
+from mitsonar.scan.model import Scan, ScanFieldError, bearing_rotation, reception_times, sidescan_channels
+
+__all__ = ["Scan", "ScanFieldError", "bearing_rotation", "reception_times", "sidescan_channels"]
