@@ -62,7 +62,7 @@ def main(only=()) -> None:
         plots.plot_cartesian(scan, mesh=mitsonar.scene_mesh(scene), path=tmp / "e.png", **small)
         save_small(tmp / "e.png", "box_moving.png")
     if want("wreck_waterfall.png"):
-        from mitsonar import sidescan_plots
+        from mitsonar.products import sidescan_plots
 
         scene = mitsonar.load_scene(str(SCENES / "wreck_sidescan.xml"))
         track = mitsonar.Trajectory.from_tum(SCENES / "wreck_sidescan_survey.tum")

@@ -11,7 +11,7 @@ import re
 from pathlib import Path
 
 import mitsonar
-from mitsonar.electronics import Electronics
+from mitsonar.receiver.electronics import Electronics
 from mitsonar.plugins import PLUGINS
 from mitsonar.plugins.props import table_parameters
 
@@ -32,7 +32,7 @@ def test_every_public_name_is_in_the_api_reference():
     assert not missing, f"docs/api.rst does not document: {', '.join(missing)}"
     for name in ("hilbertmap.HilbertMap", "hilbertmap.IncrementalHilbertMap", "mitsonar.plots",
                  "mitsonar.bathymetry", "mitsonar.echosounders", "mitsonar.sidescan",
-                 "mitsonar.electronics.Electronics"):
+                 "mitsonar.receiver.electronics.Electronics"):
         assert re.search(rf"^\.\. auto\w+:: {re.escape(name)}\s*$", page, flags=re.M), name
 
 

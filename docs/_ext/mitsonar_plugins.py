@@ -7,7 +7,7 @@ emits its docstring, which holds the RST parameter table the plugin validates it
 ``mitsonar.plugins.parameters(cls)``: every name the plugin accepts. The documentation and the
 validation therefore read one source and cannot disagree.
 
-``.. mitsonar-electronics::`` does the same for ``mitsonar.electronics.Electronics`` (the
+``.. mitsonar-electronics::`` does the same for ``mitsonar.receiver.electronics.Electronics`` (the
 electronics fields every ``sonar`` sensor accepts), and ``.. mitsonar-cli::`` prints the
 ``--help`` of every ``mitsonar`` command from the parser the command line itself uses.
 """
@@ -66,12 +66,12 @@ class PluginDirective(_RSTDirective):
 
 
 class ElectronicsDirective(_RSTDirective):
-    """``.. mitsonar-electronics::``: the fields of ``mitsonar.electronics.Electronics``."""
+    """``.. mitsonar-electronics::``: the fields of ``mitsonar.receiver.electronics.Electronics``."""
 
     has_content = False
 
     def run(self):
-        from mitsonar.electronics import Electronics
+        from mitsonar.receiver.electronics import Electronics
 
         lines = inspect.cleandoc(Electronics.__doc__ or "").splitlines()
         fields = [f.name for f in dataclasses.fields(Electronics)]
