@@ -54,3 +54,19 @@ def test_every_page_is_in_a_table_of_contents():
             for entry in re.findall(r"^[ \t]+([\w/]+)\s*$", block, flags=re.M):
                 listed.add((base / entry).as_posix())
     assert pages <= listed, f"pages outside every toctree: {sorted(pages - listed)}"
+
+
+def test_readme_is_a_short_front_page_whose_links_resolve():
+    root = DOCS.parent
+    readme = (root / "README.md").read_text()
+    assert len(readme.splitlines()) < 200
+    # the two commands, exactly as the setup documents them
+    assert "\nbash scripts/demo.sh\n" in readme and "\nbash scripts/test.sh\n" in readme
+    links = [link for link in re.findall(r"\]\(([^)\s]+)\)", readme) if "://" not in link]
+    assert links, "the README links to the documentation"
+    missing = [link for link in links if not (root / link).exists()]
+    assert not missing, f"README links to missing files: {missing}"
+    # every top-level page (the changelog page shows CHANGELOG.md, which the README links)
+    pages = {p.relative_to(root).as_posix() for p in DOCS.glob("*.rst")} - {"docs/index.rst", "docs/changelog.rst"}
+    assert "CHANGELOG.md" in links
+    assert pages <= set(links), f"top-level pages the README does not link: {sorted(pages - set(links))}"

@@ -1,9 +1,12 @@
-"""The example scenes ship with the package (`mitsonar.example_scene`), so the README's Python
-works from any folder once mitsonar is installed, not only from the repository's root."""
+"""The example scenes ship with the package (`mitsonar.example_scene`), so the Python of the README
+and of the documentation works from any folder once mitsonar is installed, not only from the
+repository's root."""
+import glob
 import os
 import re
 import subprocess
 import sys
+import textwrap
 from importlib import resources
 
 import pytest
@@ -11,19 +14,42 @@ import pytest
 from conftest import ROOT, SCENES
 
 README = os.path.join(ROOT, "README.md")
+DOCS = os.path.join(ROOT, "docs")
 
 
-def python_blocks(section):
-    """The ```python blocks of the README section headed ``section`` (up to the next heading)."""
-    text = open(README, encoding="utf-8").read()
-    start = text.index(f"\n{section}\n")
-    end = re.compile(r"\n#{1,6} ").search(text, start + 1)
-    body = text[start: end.start() if end else len(text)]
-    return re.findall(r"```python\n(.*?)```", body, re.S)
+def readme_python_blocks():
+    """The ```python blocks of the README."""
+    return re.findall(r"```python\n(.*?)```", open(README, encoding="utf-8").read(), re.S)
+
+
+def rst_python_blocks(text):
+    """The ``.. code-block:: python`` blocks of a reStructuredText page, dedented."""
+    blocks = []
+    for m in re.finditer(r"^([ \t]*)\.\. code-block:: python[ \t]*\n((?:[ \t]*\n|\1[ \t]+.*\n)+)", text, re.M):
+        blocks.append(textwrap.dedent(m.group(2)).strip("\n") + "\n")
+    return blocks
+
+
+def docs_python_blocks():
+    """Every Python example of the documentation's pages (docs/**/*.rst)."""
+    blocks = []
+    for path in sorted(glob.glob(os.path.join(DOCS, "**", "*.rst"), recursive=True)):
+        if "_build" not in path:
+            blocks += rst_python_blocks(open(path, encoding="utf-8").read())
+    return blocks
+
+
+def section(text, title):
+    """The part of an RST page from the section titled ``title`` to the next section title."""
+    start = text.index(f"\n{title}\n")
+    end = re.compile(r"\n[^\n]+\n([-=~^])\1{3,}\n").search(text, start + len(title) + 2 + len(title) + 1)
+    return text[start: end.start() if end else len(text)]
 
 
 def test_readme_quick_start_runs_from_another_folder(tmp_path):
-    blocks = python_blocks("## Use from Python")
+    blocks = readme_python_blocks()
+    scenes_page = open(os.path.join(DOCS, "tutorials", "scenes.rst"), encoding="utf-8").read()
+    blocks += rst_python_blocks(section(scenes_page, "From plain Mitsuba"))   # the plugins in plain Mitsuba
     assert len(blocks) == 2 and all("example_scene(" in b for b in blocks), blocks
     code = "\n".join(blocks) + "\nprint('shape', scan.intensity.shape, image.shape)\n"
     env = dict(os.environ)
@@ -36,13 +62,13 @@ def test_readme_quick_start_runs_from_another_folder(tmp_path):
 
 
 def test_readme_python_names_only_shipped_files():
-    """No snippet names a scene by a path relative to the repository, and every name it gives to
-    `example_scene` exists (a renamed scene breaks this test, not the reader)."""
+    """No snippet of the README or the documentation names a scene by a path relative to the
+    repository, and every name it gives to `example_scene` exists (a renamed scene breaks this
+    test, not the reader)."""
     import mitsonar
 
-    text = open(README, encoding="utf-8").read()
-    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
-    assert blocks
+    blocks = readme_python_blocks() + docs_python_blocks()
+    assert len(blocks) > 20
     for b in blocks:
         assert "scenes_xml/" not in b, b
     names = re.findall(r"example_scene\(\"([^\"]+)\"\)", "\n".join(blocks))
