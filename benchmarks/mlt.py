@@ -25,7 +25,7 @@ are counted in ``kernels_compiled``; ``--cold`` times wall-clock renders instead
 The references are cached in the output folder (default out/benchmark_mlt/<scene>/), so a second
 run only renders the comparisons (the JSON's ``seconds_total`` says how long a run took). Six
 repeats by default, because the errors are heavy-tailed (rare glossy paths): the ratio of a few
-repeats swings between runs (README, Benchmarks).
+repeats swings between runs (docs/benchmarks.rst).
 
 Usage: python benchmarks/mlt.py [--budget 0.25,0.5,1,2] [--repeats 6] [--integrators sonar_tof,sonar_mlt] [--split auto]
                                 [--scenes box,slot_chamber,glossy_corridor,hidden_target,quay_wall]

@@ -387,7 +387,7 @@ class BeamPattern:
         # The pdf is evaluated at the position the inversion returned, not taken from the
         # inversion: in float32 the cumulative sums of the far tail cells round to the same value
         # near 1, and there the inversion returns a position and a pdf that disagree by orders of
-        # magnitude (README, "Which references to trust"). Evaluated here, B / pdf stays within
+        # magnitude (docs/benchmarks.rst, "Which references to trust"). Evaluated here, B / pdf stays within
         # the interpolation error of the table's; what the inversion cannot resolve is the tail's
         # mass (< 1e-6 of the beam's).
         pdf = self._distr.eval(pos, active=active)

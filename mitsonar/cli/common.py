@@ -2,7 +2,7 @@
 count flags (``--spp``, ``--seed``, ``--max-scans``, ``--max-depth``) in the flags' own words, and
 ``--sensor``. Imports no command module, so each of them may use it.
 
-Existing outputs (README, "Existing outputs"): a command that writes a file refuses one that
+Existing outputs (docs/howto/command_line.rst, "Existing outputs"): a command that writes a file refuses one that
 exists unless ``--force``. Commands that overwrote silently before (``render``, ``plot``,
 ``demo``, ``record``, ``replay``, ``map``) still overwrite for one release, with one warning line
 (`warn_overwrite`); ``survey``, ``bathymetry`` and ``export`` refuse already. Folders that a

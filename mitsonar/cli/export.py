@@ -1,6 +1,6 @@
 """``mitsonar export SCANS... --mcap OUT``: scans as an MCAP file of ROS 2 messages (Foxglove,
 ``ros2 bag``), written with ``mcap`` and ``mcap-ros2-support`` only; topics and frames in
-`mitsonar.export.ros.bag` and the README ("ROS 2 bags").
+`mitsonar.export.ros.bag` and docs/howto/ros2_bags.rst.
 
 Every scan file (and the trajectory) is read and checked before the output is opened; the file is
 written under a temporary name and renamed at the end, so a failure leaves nothing behind.

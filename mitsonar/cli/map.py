@@ -18,7 +18,7 @@ from mitsonar._files import StagedFiles
 
 EXIT_ERROR = 1
 # A value argparse accepted but this command refuses is a validation error, exit 1 like every other
-# command's (README, "Exit codes"); only argparse's own errors exit 2.
+# command's (docs/howto/command_line.rst, "Exit codes"); only argparse's own errors exit 2.
 EXIT_USAGE = EXIT_ERROR
 
 

@@ -325,8 +325,8 @@ def scan_parameters(scene, keys=None):
     plugins differentiate: the sonar sensor's ``<id>.to_world``, ``<id>.absorption``,
     ``<id>.beamwidth_h``/``_v`` (gaussian beam) and the acoustic BSDF's ``<id>.diffuse``,
     ``.specular``, ``.shininess`` (a textured diffuse: its texture's ``<id>.diffuse.data``), and a
-    mesh's ``<id>.vertex_positions`` (single-bounce echoes, silhouettes ignored; see README,
-    "Inverse problems"). Returns ``mi.traverse(scene)`` kept to those keys. Refused in one line: a variant without
+    mesh's ``<id>.vertex_positions`` (single-bounce echoes, silhouettes ignored; see
+    docs/tutorials/gradients.rst). Returns ``mi.traverse(scene)`` kept to those keys. Refused in one line: a variant without
     automatic differentiation, or a key that is not one of these (the message lists them).
     """
     import re

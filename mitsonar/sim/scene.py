@@ -77,7 +77,7 @@ def load_scene(path_or_xml: str, **params):
     take_failure()  # forget failures of earlier loads
     try:
         # Serial loading: Mitsuba 3.9's parallel instantiation of Python plugins now and then
-        # fails with std::bad_alloc or a garbled string (README, "Use from Python").
+        # fails with std::bad_alloc or a garbled string (docs/tutorials/scenes.rst, "From plain Mitsuba").
         load = mi.load_string if is_xml else mi.load_file
         scene = load(text, parallel=False, **params)
     except Exception as exc:  # Mitsuba raises RuntimeError with a traceback inside the message

@@ -2,7 +2,7 @@
 ``mcap`` and ``mcap-ros2-support`` only (no ROS install): `write_mcap` for scans in hand, `McapBag`
 to add scans one at a time (a survey).
 
-Topics (see the README, "ROS 2 bags"):
+Topics (see docs/howto/ros2_bags.rst):
 
 =================== ========================================= =====================================
 ``/sonar/image``    marine_acoustic_msgs/ProjectedSonarImage  one per ping, frame ``sonar`` (side-scan:
