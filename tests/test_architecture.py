@@ -178,3 +178,47 @@ def test_every_subpackage_says_what_it_holds():
         if "__init__.py" in files:
             with open(os.path.join(root, "__init__.py"), encoding="utf-8") as fh:
                 assert ast.get_docstring(ast.parse(fh.read())), root
+
+
+def head_name_comparisons(path, names):
+    """``(line, name)`` of every comparison with a head's name (``== "ping360"``, ``in ("micron",
+    ...)``, ``case "micron":``) in one file: the if/else on head names the registry replaces."""
+    with open(path, encoding="utf-8") as fh:
+        tree = ast.parse(fh.read(), path)
+
+    def named(node):
+        consts = [node] if isinstance(node, ast.Constant) else \
+            node.elts if isinstance(node, (ast.Tuple, ast.List, ast.Set)) else []
+        return [c.value for c in consts if isinstance(c, ast.Constant) and c.value in names]
+
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Compare):
+            for operand in [node.left, *node.comparators]:
+                out += [(node.lineno, n) for n in named(operand)]
+        elif isinstance(node, ast.MatchValue):
+            out += [(node.lineno, n) for n in named(node.value)]
+    return out
+
+
+def test_the_checker_sees_head_name_comparisons(tmp_path):
+    f = tmp_path / "m.py"
+    f.write_text('if args.head == "ping360":\n    pass\nx = h in ("micron", "other")\n'
+                 'match h:\n    case "micron":\n        pass\nhelp = "--head ping360"\n')
+    assert head_name_comparisons(str(f), {"micron", "ping360"}) == [(1, "ping360"), (3, "micron"), (5, "micron")]
+
+
+def test_heads_are_chosen_only_through_the_registry():
+    """No code compares a head's name but the head's own folder (``mitsonar/devices/<head>/``)
+    and the registry: the command line, recording and replay ask `mitsonar.devices.registry`, so
+    adding a head is one folder plus one registry entry (help texts may name heads)."""
+    from mitsonar.devices.registry import BUILTIN
+    names = set(BUILTIN)
+    own = {os.path.join(ROOT, "mitsonar", "devices", n) for n in names}
+    bad = []
+    for name, path in sorted(modules().items()):
+        if path == os.path.join(ROOT, "mitsonar", "devices", "registry.py") or \
+                any(path.startswith(folder + os.sep) for folder in own):
+            continue
+        bad += [(name, line, n) for line, n in head_name_comparisons(path, names)]
+    assert bad == []
