@@ -17,6 +17,7 @@ from .beam import BeamPattern, read_beam_table
 from .jit_arrays import upload
 from .props import count, number, text
 from .sidescan_heads import PRESETS
+from .water import check_pose, number_or_auto, read_water, resolve
 
 TX_PATTERNS = ("gaussian", "sinc", "uniform")
 MAX_BINS, MAX_PINGS = 65536, 100000
@@ -82,9 +83,18 @@ class SonarSensor(mi.Sensor):
     beamwidth_v      35           deg, full -3 dB one-way width along the scan axis
                                   (sidescan: the across-track fan, default 50)
     beam_table       (none)       CSV (axis, angle_deg, gain_db) for ``table``
-    sound_speed      1500         m/s
-    absorption       0            dB/m, applied to the whole two-way path
-    frequency        700e3        Hz (``sinc``)
+    sound_speed      1500         m/s; or ``<string value="auto"/>``: Mackenzie (1981) at the
+                                  head's depth ``surface_z - z`` (z of ``to_world``'s origin)
+    absorption       0            dB/m, applied to the whole two-way path; or ``auto``: Francois
+                                  and Garrison (1982) at ``frequency`` and the head's depth
+    frequency        700e3        Hz (``sinc``; ``absorption`` ``auto``)
+    temperature      10           deg C, the water (only with ``auto``; F&G: -2 to 22,
+                                  Mackenzie: -2 to 30)
+    salinity         35           ppt, the water (only with ``auto``; F&G: 30 to 35,
+                                  Mackenzie: 25 to 40)
+    ph               8            pH of the water (``absorption`` ``auto``; 7.7 to 8.3)
+    surface_z        0            m, world z of the sea surface (only with ``auto``); a
+                                  render given a ``pose`` (trajectory) refuses ``auto``
     tx_pattern       gaussian     multibeam transmit fan: ``gaussian``, ``sinc`` or ``uniform``
     tx_beamwidth_h   swath        deg, full -3 dB width of the fan across the swath; default the
                                   swath, ``|bearing_step| (n_pings - 1) + beamwidth_h``
@@ -129,8 +139,11 @@ class SonarSensor(mi.Sensor):
         self.range_max = num("range_max", preset.get("range_max", 12.0))
         self.bearing_start = num("bearing_start", 0.0)
         self.bearing_step = num("bearing_step", 1.8)
-        self.sound_speed = num("sound_speed", 1500.0)
-        self.absorption = num("absorption", 0.0)
+        # A number, or 'auto': the water's equations at the head's depth (plugins/water.py).
+        self.sound_speed = number_or_auto(props, "sound_speed", 1500.0)
+        self.absorption = number_or_auto(props, "absorption", 0.0)
+        self.water = read_water(props, self.absorption, self.sound_speed)
+        self.water_auto = [n for n in ("absorption", "sound_speed") if getattr(self, n) == "auto"]
         self.ping_period = num("ping_period", None)
         pattern = text(props, "beam_pattern", preset.get("beam_pattern", "gaussian"), "sonar")
         # A side-scan head's beam is narrow along track and a wide fan across it.
@@ -143,6 +156,10 @@ class SonarSensor(mi.Sensor):
             frequency = preset.get("frequency")
         ap_h = num("aperture_h", None)
         ap_v = num("aperture_v", None)
+        head_z = float(np.array(self.world_transform().matrix, dtype=np.float64).reshape(4, 4)[2, 3])
+        self.absorption, self.sound_speed = resolve(
+            self.water, self.absorption, self.sound_speed,
+            frequency if frequency is not None else preset.get("frequency", DEFAULT_FREQUENCY), head_z)
         tx = {k: num(k, None) for k in ("tx_beamwidth_h", "tx_beamwidth_v") if k in props}
         if "tx_pattern" in props:
             tx["tx_pattern"] = text(props, "tx_pattern", None, "sonar")
@@ -167,7 +184,8 @@ class SonarSensor(mi.Sensor):
         self.beam = BeamPattern(pattern, bw_h, bw_v, DEFAULT_FREQUENCY if frequency is None else frequency,
                                 ap_h, ap_v, self.sound_speed, table)
         self.transmit = self._transmit(tx, bw_h, bw_v, self.beam.frequency)
-        if frequency is not None and "sinc" not in (pattern, getattr(self.transmit, "kind", None)):
+        if (frequency is not None and "sinc" not in (pattern, getattr(self.transmit, "kind", None))
+                and "absorption" not in self.water_auto):
             if self.transmit is None:
                 raise ValueError(f"sonar 'frequency' is only used with beam_pattern 'sinc' (got {pattern!r})")
             raise ValueError(f"sonar 'frequency' is only used with beam_pattern or tx_pattern 'sinc' "
@@ -287,6 +305,7 @@ class SonarSensor(mi.Sensor):
         one 4x4, or one per row, (n_pings, 4, 4), for a head on a moving platform."""
         if pose is None:
             return self.to_world_np
+        check_pose(self.water_auto, pose)
         m = np.asarray(pose, dtype=np.float64)
         if m.ndim == 3:
             if m.shape != (self.n_pings, 4, 4):
