@@ -46,9 +46,10 @@ when the BSDF is made, and renders interpolate ``ln f_mono`` linearly (below the
 grazing angle, 0.088 deg, the value there). The scattered fraction ``a(g_i) = 2 pi int f_d
 sin g_o cos g_o dg_o`` is integrated at construction; where the mean-grazing extension of a
 monostatic strength would scatter more than it receives (the handbook's rough rock and rock, whose
-large-roughness strengths are strongly retro-reflective: max ``a`` 8.75 and 1.67 at 100 kHz),
+large-roughness strengths are strongly retro-reflective: max ``a`` 8.77 and 1.67 at 100 kHz,
+at grazing incidence),
 ``k = 1 / max a`` scales the scattered lobe down (``backscatter_scale``, in ``to_string``: -9.4
-and -2.2 dB for those); otherwise ``k = 1``.
+and -2.2 dB for those; their specular lobe is then 0 where ``a`` reaches 1); otherwise ``k = 1``.
 
 Sampling picks the specular lobe with probability ``w / (w + a)`` at the incident angle (Phong
 sampling about the mirror direction), else a cosine-weighted direction.

@@ -35,12 +35,9 @@ _SOURCES = {"absorption": ("Francois and Garrison (1982)", FRANCOIS_GARRISON_RAN
 
 def number_or_auto(props, name: str, default):
     """A ``<float>`` property, or the string ``auto`` (returned as ``"auto"``)."""
-    if name in props and props.type(name).name == "String":
-        value = text(props, name, None, "sonar")
-        if value.strip().lower() != AUTO:
-            raise ValueError(f"sonar '{name}': {value!r} is not allowed (a <float> or <string value=\"auto\"/>)")
+    if name in props and props.type(name).name == "String" and text(props, name, None, "sonar").strip() == AUTO:
         return AUTO
-    return number(props, name, default, "sonar")
+    return number(props, name, default, "sonar", expected='<float> or <string value="auto"/>')
 
 
 def read_water(props, absorption_value, sound_speed_value) -> dict | None:

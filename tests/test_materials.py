@@ -295,8 +295,8 @@ def test_auto_sound_speed_is_mackenzie_at_the_heads_depth(mitsonar_mod):
                                              "200 to 1e+06 Hz"),
     (dict(absorption="auto", surface_z=-30.0), "sonar 'surface_z': -10 m deep (surface_z -30 - the head's z -20) "
                                                "is outside Francois and Garrison (1982)'s 0 to 3500 m"),
-    (dict(absorption="lots"), "sonar 'absorption': 'lots' is not allowed (a <float> or <string value=\"auto\"/>)"),
-    (dict(sound_speed="fast"), "sonar 'sound_speed': 'fast' is not allowed"),
+    (dict(absorption="lots"), "sonar 'absorption': 'lots' is not a number (expected <float> or <string value=\"auto\"/>)"),
+    (dict(sound_speed="1500"), "sonar 'sound_speed': expected <float> or <string value=\"auto\"/>, got <string> '1500'"),
     (dict(temperature=12.0), "sonar 'temperature': only used with absorption or sound_speed 'auto'"),
 ])
 def test_bad_water_is_refused_in_one_line(mitsonar_mod, params, message):
@@ -313,3 +313,18 @@ def test_auto_water_refuses_a_moving_head(mitsonar_mod):
     with pytest.raises(ValueError, match="sonar 'absorption': 'auto' is computed at the depth of the sensor's "
                                          "to_world"):
         mitsonar_mod.render_scan(scene, spp=4, pose=np.eye(4))
+
+
+def test_the_parameter_tables_list_the_new_fields(mitsonar_mod):
+    """The docstring tables are the documentation and the list of accepted names: a misspelling
+    is refused with the nearest one."""
+    from mitsonar.plugins import module, parameters
+
+    assert {"temperature", "salinity", "ph", "surface_z"} <= set(parameters(module("sonar_sensor").SonarSensor))
+    assert parameters(module("acoustic_material").AcousticMaterialBSDF) == [
+        "material", "density", "sound_speed", "attenuation", "water_density", "water_sound_speed", "backscatter",
+        "mu", "sediment", "frequency", "extrapolate", "shininess"]
+    bad = '<bsdf type="acoustic_material"><string name="material" value="sand"/><float name="densty" value="2"/></bsdf>'
+    sensor = sonar_xml(frame_matrix((0, 0, -1), (0, 1, 0), (0, 0, 1)), n_pings=1, n_bins=8)
+    with pytest.raises(Exception, match='has no parameter "densty" \\(did you mean "density"\\?\\)'):
+        mitsonar_mod.load_scene(scene_xml(sensor, rectangle_xml(np.eye(4), bad)))
