@@ -49,6 +49,8 @@ def read_water(props, absorption_value, sound_speed_value) -> dict | None:
             raise ValueError(f"sonar '{given[0]}': only used with absorption or sound_speed 'auto' "
                              f"(both are numbers here)")
         return None
+    if absorption_value != AUTO and "ph" in props:
+        raise ValueError("sonar 'ph': only used with absorption 'auto' (Mackenzie's sound speed has no pH)")
     water = {n: number(props, n, d, "sonar") for n, d in WATER_DEFAULTS.items()}
     for name, value in water.items():
         if not math.isfinite(value):
@@ -56,14 +58,14 @@ def read_water(props, absorption_value, sound_speed_value) -> dict | None:
     return water
 
 
-def _check(field: str, value: float, what: str, sensor_field: str, note: str = "") -> None:
+def _check(field: str, value: float, what: str, sensor_field: str, label: str = "", note: str = "") -> None:
     source, ranges = _SOURCES[what]
     lo, hi = ranges[field]
     if not (lo <= value <= hi):
         unit = _UNITS[field]
         u = f" {unit}" if unit else ""
-        raise ValueError(f"sonar '{sensor_field}': {value:g}{u}{note} is outside {source}'s {lo:g} to {hi:g}{u} "
-                         f"({what} 'auto')")
+        raise ValueError(f"sonar '{sensor_field}': {label}{value:g}{u}{note} is outside {source}'s {lo:g} to "
+                         f"{hi:g}{u} ({what} 'auto')")
 
 
 def resolve(water: dict | None, absorption_value, sound_speed_value, frequency: float, z: float):
@@ -72,17 +74,17 @@ def resolve(water: dict | None, absorption_value, sound_speed_value, frequency: 
     if water is None:
         return absorption_value, sound_speed_value
     depth = water["surface_z"] - z
-    note = f" deep (surface_z {water['surface_z']:g} - the head's z {z:g})"
+    where = dict(label="the head's depth ", note=f" (surface_z {water['surface_z']:g} - the head's z {z:g})")
     if sound_speed_value == AUTO:
         for f in ("temperature", "salinity"):
             _check(f, water[f], "sound_speed", f)
-        _check("depth", depth, "sound_speed", "surface_z", note)
+        _check("depth", depth, "sound_speed", "surface_z", **where)
         sound_speed_value = float(sound_speed(water["temperature"], water["salinity"], depth))
     if absorption_value == AUTO:
         for f in ("temperature", "salinity", "ph"):
             _check(f, water[f], "absorption", f)
         _check("frequency", frequency, "absorption", "frequency")
-        _check("depth", depth, "absorption", "surface_z", note)
+        _check("depth", depth, "absorption", "surface_z", **where)
         absorption_value = float(absorption(frequency, water["temperature"], water["salinity"], depth, water["ph"]))
     return absorption_value, sound_speed_value
 

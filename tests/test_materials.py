@@ -84,12 +84,21 @@ def test_every_material_conserves_energy(mi, name):
     scattered part leaves room for it) plus the scattered fraction, less what the horizon clips of
     the specular lobe (2 % at 5 deg grazing with n = 1000; 1 % where |R|^2 turns at sand's
     critical angle, 31.9 deg, inside the lobe)."""
+    from mitsonar.acoustics import reflection_coefficient
+    from mitsonar.plugins.acoustic_material import lerp_table
+
     b = bsdf(mi, **MATERIAL_CASES[name])
     for deg in ANGLES:
         g = math.radians(deg)
         e, err, wi, wo, w, pdf = furnace(mi, b, g)
         expect = expected_albedo(b, g)
         assert expect <= 1.0 + 1e-6
+        # ... which is |R|^2 of mitsonar.acoustics plus the scattered fraction, where they fit in 1
+        m = b.medium
+        r2 = abs(reflection_coefficient(g, m.density / m.water_density, m.sound_speed / m.water_sound_speed,
+                                        m.attenuation)) ** 2
+        a = expect - float(lerp_table(m.w, g))
+        assert expect == pytest.approx(min(r2 + a, 1.0), abs=2e-3), (name, deg)
         assert e <= 1.0 + 4 * err + 1e-4, (name, deg, e)
         # |R|^2 curves over the lobe's width: its average there may exceed its value at the centre
         # (measured: by 3e-4 at most, sand at 45 deg; mud near its angle of intromission)
@@ -262,7 +271,7 @@ def sensor_of(mitsonar_mod, xml):
 
 
 def test_auto_absorption_is_francois_garrison_at_the_heads_depth(mitsonar_mod):
-    from mitsonar.acoustics import absorption, sound_speed
+    from mitsonar.acoustics import absorption
 
     s = sensor_of(mitsonar_mod, water_sensor(-20.0, absorption="auto", frequency=200e3, temperature=12.0,
                                              salinity=34.0, ph=7.9, surface_z=5.0))
@@ -293,11 +302,14 @@ def test_auto_sound_speed_is_mackenzie_at_the_heads_depth(mitsonar_mod):
     (dict(absorption="auto", ph=9.0), "sonar 'ph': 9 is outside Francois and Garrison (1982)'s 7.7 to 8.3"),
     (dict(absorption="auto", frequency=2e6), "sonar 'frequency': 2e+06 Hz is outside Francois and Garrison (1982)'s "
                                              "200 to 1e+06 Hz"),
-    (dict(absorption="auto", surface_z=-30.0), "sonar 'surface_z': -10 m deep (surface_z -30 - the head's z -20) "
-                                               "is outside Francois and Garrison (1982)'s 0 to 3500 m"),
+    (dict(absorption="auto", surface_z=-30.0), "sonar 'surface_z': the head's depth -10 m (surface_z -30 - the "
+                                               "head's z -20) is outside Francois and Garrison (1982)'s 0 to 3500 m"),
+    (dict(sound_speed="auto", surface_z=9000.0), "sonar 'surface_z': the head's depth 9020 m (surface_z 9000 - the "
+                                                 "head's z -20) is outside Mackenzie (1981)'s 0 to 8000 m"),
     (dict(absorption="lots"), "sonar 'absorption': 'lots' is not a number (expected <float> or <string value=\"auto\"/>)"),
     (dict(sound_speed="1500"), "sonar 'sound_speed': expected <float> or <string value=\"auto\"/>, got <string> '1500'"),
     (dict(temperature=12.0), "sonar 'temperature': only used with absorption or sound_speed 'auto'"),
+    (dict(sound_speed="auto", ph=8.1), "sonar 'ph': only used with absorption 'auto'"),
 ])
 def test_bad_water_is_refused_in_one_line(mitsonar_mod, params, message):
     with pytest.raises(Exception) as err:
@@ -328,3 +340,18 @@ def test_the_parameter_tables_list_the_new_fields(mitsonar_mod):
     sensor = sonar_xml(frame_matrix((0, 0, -1), (0, 1, 0), (0, 0, 1)), n_pings=1, n_bins=8)
     with pytest.raises(Exception, match='has no parameter "densty" \\(did you mean "density"\\?\\)'):
         mitsonar_mod.load_scene(scene_xml(sensor, rectangle_xml(np.eye(4), bad)))
+
+
+def test_bistatic_pairs_take_the_mean_grazing_angle(mi):
+    """Off the backscatter direction (and far from the mirror one) the scattered lobe is the
+    monostatic f_mono = sigma / sin^2 at acoustics.bistatic_mean_grazing(incident, scattered)."""
+    from mitsonar.acoustics import apl_uw_backscatter, bistatic_mean_grazing
+
+    b = bsdf(mi, sediment="fine sand", frequency=40e3)
+    gi = np.radians([10.0, 25.0, 40.0, 70.0])
+    go = np.radians([50.0, 5.0, 80.0, 20.0])
+    wi, wo = local(gi, 0.0), local(go, 0.5 * np.pi)          # 90 deg apart in azimuth: no mirror lobe
+    f = evaluate(mi, b, wi, wo) / np.sin(go)
+    gm = bistatic_mean_grazing(gi, go)
+    ref = 10 ** (apl_uw_backscatter(gm, 40e3, "fine sand", 1528.0) / 10) / np.sin(gm) ** 2
+    np.testing.assert_allclose(f, ref, rtol=0.01)
