@@ -180,7 +180,8 @@ class SonarSensor(mi.Sensor):
         if not self.sonar_kind.sided:
             given = [n for n in names if n in props]
             if given:
-                raise ValueError(f"sonar '{given[0]}': only used with kind {kinds.which('sided')} (kind is {self.kind!r})")
+                raise ValueError(f"sonar '{given[0]}': only used with kind {kinds.which('sided')} "
+                                 f"(kind is {self.kind!r})")
             self.side, self.depression, self.preset = None, None, None
             return {}
         for name in ("bearing_start", "bearing_step"):

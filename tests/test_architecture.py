@@ -147,11 +147,12 @@ def test_submodules_take_only_submodules_from_their_package():
 
 def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     """Data flows scene -> paths -> histogram -> electronics -> Scan -> files, maps, devices: the
-    plugins (paths and histograms) may use mitsonar's helpers below them (value checks, frames)
-    and the electronics' settings (the sensor reads and checks its electronics fields), nothing
-    else of mitsonar (not the Scan, files, render or devices)."""
+    plugins (paths and histograms) may use mitsonar's helpers below them (value checks, frames,
+    the sonar kinds) and the electronics' settings (the sensor reads and checks its electronics
+    fields), nothing else of mitsonar (not the Scan, files, render or devices)."""
     _, edges = import_graph()
-    allowed = {"mitsonar._checks", "mitsonar.geometry.frames", "mitsonar.geometry.kinds", "mitsonar.receiver.electronics"}
+    allowed = {"mitsonar._checks", "mitsonar.geometry.frames", "mitsonar.geometry.kinds",
+               "mitsonar.receiver.electronics"}
     for name, out in edges.items():
         if name.startswith("mitsonar.plugins"):
             above = {t for t in out if t.startswith("mitsonar") and not t.startswith("mitsonar.plugins")}

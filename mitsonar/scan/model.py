@@ -124,7 +124,8 @@ class Scan:
         Full beam widths in degrees (-3 dB one way).
     kind : str
         ``mechanical``, ``multibeam`` or ``sidescan`` (then ``meta['side']``: ``port``,
-        ``starboard`` or ``both``, default ``both``; see `channel`).
+        ``starboard`` or ``both``, default ``both``; see `channel`). `sonar_kind` is its class
+        (`mitsonar.geometry.kinds`), which says what differs between kinds.
     sound_speed : float  (m/s)
     absorption : float  (dB/m)
     electronics : dict
