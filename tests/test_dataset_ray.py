@@ -149,8 +149,7 @@ def test_the_actors_of_a_killed_command_end(head, tmp_path):
 
 
 def test_the_actors_of_a_killed_command_on_its_own_ray_end(tmp_path):
-    """Without --address, ``--engine ray`` starts Ray for itself (``auto`` does so whenever Ray is
-    installed): SIGKILL the command once a shard is written, and its actors end with it. (Ray's
+    """Without --address, ``--engine ray`` starts Ray for itself: SIGKILL the command once a shard is written, and its actors end with it. (Ray's
     own dashboard and runtime-env agents outlive it by about a minute, their GCS timeout, before
     they exit: Ray's, not this command's; the test ends them.)"""
     cfg_path = tmp_path / "twelve.yaml"
@@ -164,11 +163,15 @@ def test_the_actors_of_a_killed_command_on_its_own_ray_end(tmp_path):
                             stderr=subprocess.PIPE)
     started = {}
     try:
+        # Wait for the first shard, then until both actors show under their names: on a busy
+        # machine a worker process takes its actor's title only a moment after it starts.
         deadline = time.monotonic() + 300
-        while time.monotonic() < deadline and proc.poll() is None and not (out / "shard-000000.tar").exists():
-            time.sleep(0.02)
-        started = descendants(proc.pid)
-        actors = {pid: info for pid, info in started.items() if "DatasetActor" in info[1]}
+        actors = {}
+        while time.monotonic() < deadline and proc.poll() is None and (
+                not (out / "shard-000000.tar").exists() or len(actors) < 2):
+            time.sleep(0.05)
+            started = descendants(proc.pid)
+            actors = {pid: info for pid, info in started.items() if "DatasetActor" in info[1]}
         assert proc.poll() is None, f"the command ended before it was killed: {proc.stderr.read().decode()[-500:]}"
         assert len(actors) == 2, started
         os.kill(proc.pid, signal.SIGKILL)

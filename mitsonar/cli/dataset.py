@@ -32,6 +32,6 @@ def add_subcommands(sub):
                         "cluster), auto, or ray://HEAD:10001 (needs ray[client]); needs mitsonar[cluster]")
     d.add_argument("--engine", choices=("auto", "ray", "local"), default="auto",
                    help="ray: Ray actors (ray.init() on this machine unless --address); local: spawned processes; "
-                        "auto (default): Ray when --address is given or Ray is installed, else local")
+                        "auto (default): Ray when --address is given, else local processes")
     d.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     d.set_defaults(func=cmd_dataset)

@@ -235,8 +235,9 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
     progress     show a progress bar (samples, samples/s, time left) on stderr; or an object
                  whose ``update(1)`` is called as each sample comes back
     engine       ``"ray"`` (actors; ``ray.init()`` on this machine without an address), ``"local"``
-                 (spawned processes), or ``"auto"`` (default): Ray when an address is given or Ray
-                 is installed (``mitsonar[cluster]``), local processes otherwise
+                 (spawned processes), or ``"auto"`` (default): Ray when an address is given, local
+                 processes otherwise (a Ray started on this machine costs seconds and opens ports
+                 beyond loopback; ``--engine ray`` asks for it)
     ============ ==================================================================================
 
     Returns a dict: ``rendered`` (samples rendered by this call), ``samples`` (in the folder),
@@ -253,10 +254,7 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
     if workers is None:
         workers = _cores()
     if engine == "auto":
-        import importlib.util
-
-        ray = address or (workers != 0 and importlib.util.find_spec("ray") is not None)
-        engine = "ray" if ray else "local"
+        engine = "ray" if address else "local"
     if not (isinstance(workers, int) and workers >= 0) or (engine == "ray" and workers < 1):
         raise DatasetError(f"--workers {workers!r} is not allowed (a whole number >= 1)")
     if threads is None:
