@@ -25,10 +25,11 @@ its own and per element the delay of its path (`synthesis`):
   interference is lost).
 
 The echo energy is the incoherent renderer's with the receive pattern divided out: an element is
-omnidirectional (aperture 1 m^2 in every direction), and the transmit directivity is the head's
-beam (mechanical, side-scan) or its transmit fan (multibeam). The mean over speckle seeds of the
-matched-filtered power is therefore the incoherent intensity convolved with the pulse's
-autocorrelation (`mitsonar.signals.processing.expected_power`). Amplitudes are in uPa:
+omnidirectional (aperture 1 m^2 in every direction) unless ``element_pattern='beam'``, and the
+transmit directivity is the head's beam (mechanical, side-scan) or its transmit fan (multibeam).
+With ``element_pattern='beam'`` (one element, the transducer) the mean over speckle seeds of the
+matched-filtered power is therefore the incoherent `render_scan` intensity convolved with the
+pulse's autocorrelation (`mitsonar.signals.processing.expected_power`). Amplitudes are in uPa:
 ``10^(source_level / 20) sqrt(E)`` (``source_level`` of the head's electronics, dB re 1 uPa at 1 m).
 
 Approximations, stated: a multi-bounce echo's Doppler uses its last leg's direction for both legs;
@@ -137,7 +138,7 @@ def _phase(cells, seed):
 
 def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_SPP, seed=0, speckle_seed=None,
                   pose=None, trajectory=None, start_time=None, sensor=0, max_depth=None,
-                  scatterer_spacing=None) -> Echoes:
+                  scatterer_spacing=None, element_pattern=None) -> Echoes:
     """Render the element data of one scan of ``scene`` for a transmitted ``pulse`` (module docstring).
 
     A row is one transmission: one per ping for a mechanical or side-scan head, one per frame for a
@@ -146,7 +147,10 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
     twice the pulse's bandwidth, ``4 / duration`` for a CW); ``spp`` paths per row; ``seed`` the
     paths'; ``speckle_seed`` the scene's scatterers (default the sensor's, 0); ``pose``,
     ``trajectory``, ``start_time``, ``sensor``, ``max_depth`` as `mitsonar.render_scan`;
-    ``scatterer_spacing`` m, the lattice of rough-surface scatterers (default ``c / (8 B)``).
+    ``scatterer_spacing`` m, the lattice of rough-surface scatterers (default ``c / (8 B)``);
+    ``element_pattern`` the elements' own directivity: None omnidirectional, ``beam`` the head's beam
+    (a mechanical or side-scan head's transducer used as its own receiver: its echoes then carry the
+    two-way pattern of `mitsonar.render_scan`, the setting in which the two agree on average).
     Refused in one line before any rendering: non-finite or overlapping elements, a sample rate
     below the pulse's bandwidth, a pulse longer than the two-way window ``2 range_max / c``, a
     carrier outside the head's band (`head_band`).
@@ -192,6 +196,9 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
     if not lo <= pulse.carrier <= hi:
         raise SceneError(f"{where} 'pulse': its carrier {pulse.carrier:g} Hz is not allowed (inside the head's band "
                          f"{lo:g} to {hi:g} Hz: frequency +- bandwidth / 2)")
+    if element_pattern not in (None, "beam") or (element_pattern == "beam" and sonar.kind == "multibeam"):
+        raise SceneError(f"{where} 'element_pattern': {element_pattern!r} is not allowed (None for omnidirectional "
+                         "elements, or 'beam' for the transducer's own beam on a mechanical or side-scan head)")
     h = pulse.range_resolution(c) / 4.0 if scatterer_spacing is None else scatterer_spacing
     if isinstance(h, bool) or not isinstance(h, (int, float, np.integer, np.floating)) or not (math.isfinite(h) and h > 0):
         raise SceneError(f"{where} 'scatterer_spacing': {h!r} is not allowed (a spacing > 0 m)")
@@ -213,7 +220,8 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
     velocity = _velocities(trajectory, (start_time or 0.0) + times, times.shape)
     n_samples = int(math.ceil((flight + pulse.duration) * fs))
 
-    scatterers = _trace(scene, sonar, row_poses, spp, seed, max_depth, h, pulse.range_resolution(c), speckle_seed)
+    scatterers = _trace(scene, sonar, row_poses, spp, seed, max_depth, h, pulse.range_resolution(c), speckle_seed,
+                        omni=element_pattern is None)
     scale = 10.0 ** (float(sonar.electronics_model.source_level) / 20.0)
     signal = np.zeros((n_rows, len(e), n_samples), dtype=np.complex64)
     for r in range(n_rows):
@@ -256,7 +264,7 @@ def _shape_tables(scene):
     return mi.UInt32(table), np.array(coherent + [False], dtype=bool)
 
 
-def _trace(scene, sonar, row_poses, spp, seed, max_depth, spacing, resolution, speckle_seed):
+def _trace(scene, sonar, row_poses, spp, seed, max_depth, spacing, resolution, speckle_seed, omni=True):
     """Per row, the scatterers (complex amplitude sqrt(E) e^{i phi}, position (n, 3), outbound length
     (n,)) from ``spp`` paths per row, streamed in passes of at most `PASS_SLOTS` echo slots."""
     import types
@@ -297,7 +305,7 @@ def _trace(scene, sonar, row_poses, spp, seed, max_depth, spacing, resolution, s
                 dist = dr.norm(d)
                 d = d / dist
                 gain = beam.eval_dir(mi.Vector3f(dr.dot(d, x_ax), dr.dot(d, y_ax), dr.dot(d, z_ax)))
-                e_tx = dr.select(gain > 0, energy / gain, 0.0)
+                e_tx = dr.select(gain > 0, energy / gain, 0.0) if omni else energy
                 ok = valid & (e_tx > 0)
                 slot = lane * depth_o + k
                 n_ = hit.n
