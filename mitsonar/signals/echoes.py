@@ -43,11 +43,14 @@ from typing import Any
 
 import numpy as np
 
-from mitsonar.signals.arrays import check_elements
+from mitsonar.signals.arrays import check_elements, interferometer, line_array
 from mitsonar.signals.pulses import Pulse
 from mitsonar.signals.synthesis import synthesize
 
 DEFAULT_SPP = 1024
+#: ``elements`` by name, built at the pulse's carrier and the head's sound speed (`mitsonar.signals.arrays`):
+#: a 64-element forward-looking line array at half a wavelength, a two-row interferometric side-scan.
+PRESETS = {"line_array": lambda **k: line_array(64, **k), "interferometer": lambda **k: interferometer(2, **k)}
 #: The head's band when its XML gives no ``bandwidth``: ``frequency`` +- this fraction of it / 2.
 DEFAULT_RELATIVE_BANDWIDTH = 0.5
 #: Lanes (paths x bounces slots) of one tracing pass: bounds the memory whatever the spp.
@@ -94,6 +97,23 @@ class Echoes:
     @property
     def wavelength(self) -> float:
         return self.sound_speed / self.carrier
+
+
+def _elements(elements, where):
+    """The ``elements`` argument as positions: None (one element at the origin), an (n, 3) array, or the
+    path of a CSV of x,y,z rows (`mitsonar.signals.arrays.read_elements`)."""
+    import os
+
+    if elements is None:
+        return np.zeros((1, 3))
+    if isinstance(elements, (str, os.PathLike)):
+        if not os.path.isfile(elements):
+            raise ValueError(f"{where} 'elements': {str(elements)!r} is not allowed (an (n, 3) array, the path of "
+                             f"a CSV of x,y,z rows in m, or a preset: {', '.join(PRESETS)})")
+        from mitsonar.signals.arrays import read_elements
+
+        return read_elements(elements, f"{where} (elements file {os.fspath(elements)})")
+    return check_elements(elements, where)
 
 
 def _check_pulse(pulse):
@@ -143,7 +163,8 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
 
     A row is one transmission: one per ping for a mechanical or side-scan head, one per frame for a
     multibeam head (its receive beams come from `mitsonar.signals.beamform`). ``elements`` (n, 3) m in
-    the beam frame (default one element at the transmitter, the origin); ``sample_rate`` Hz (default
+    the beam frame (default one element at the transmitter, the origin), the path of a CSV of x,y,z
+    rows, or a preset name (`PRESETS`: ``line_array``, ``interferometer``); ``sample_rate`` Hz (default
     twice the pulse's bandwidth, ``4 / duration`` for a CW); ``spp`` paths per row; ``seed`` the
     paths'; ``speckle_seed`` the scene's scatterers (default the sensor's, 0); ``pose``,
     ``trajectory``, ``start_time``, ``sensor``, ``max_depth`` as `mitsonar.render_scan`;
@@ -164,7 +185,7 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
     where = "render_echoes"
     try:
         _check_pulse(pulse)
-        e = check_elements(np.zeros((1, 3)) if elements is None else elements, where)
+        e = None if isinstance(elements, str) and elements in PRESETS else _elements(elements, where)
     except ValueError as exc:
         raise SceneError(str(exc)) from None
     spp = _whole("spp", spp, 1, SPP_MAX, SPP_ALLOWED, where)
@@ -179,6 +200,8 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
         sensor = pick_sensor(scene, sensor, f"{where} 'sensor':")
     sonar = sonar_of(scene, sensor)
     c = float(sonar.sound_speed)
+    if e is None:     # a preset at the pulse's carrier
+        e = PRESETS[elements](frequency=pulse.carrier, sound_speed=c)
     if speckle_seed is None:
         speckle_seed = int(sonar.electronics.get("speckle_seed", 0))
     speckle_seed = _whole("speckle_seed", speckle_seed, 0, SEED_MAX, SEED_ALLOWED, where)
