@@ -244,3 +244,33 @@ def test_elements_from_a_csv_file(mitsonar_mod, point_target, tmp_path):
         mitsonar_mod.render_echoes(point_target, S.lfm(690e3, 710e3, 1e-3), elements=str(path))
     with pytest.raises(mitsonar_mod.SceneError, match="render_echoes 'elements': 'nowhere.csv' is not allowed"):
         mitsonar_mod.render_echoes(point_target, S.lfm(690e3, 710e3, 1e-3), elements="nowhere.csv")
+
+
+def test_mirror_like_plate_echoes_coherently_with_the_travel_time_phase(mitsonar_mod):
+    """A mirror-like plate at normal incidence is a coherent glint: the same waveform for every speckle
+    seed, and its compressed peak has the phase ``-2 pi f_c tau`` of its travel time; a Lambert plate's
+    echo changes with the speckle seed."""
+    from mitsonar import signals as S
+
+    sensor = sonar_xml(FORWARD, n_pings=1, n_bins=100, range_max=6.0, beamwidth_h=3.0, beamwidth_v=3.0)
+    p = S.lfm(690e3, 710e3, 1e-3)
+    fs = 8 * p.bandwidth
+    D = 4.0
+    out = {}
+    for name, bsdf in (("mirror", acoustic_xml(0.0, 1.0, 2000.0)), ("lambert", acoustic_xml(0.5))):
+        scene = mitsonar_mod.load_scene(scene_xml(sensor, rectangle_xml(wall(D, 1.0), bsdf)))
+        out[name] = [mitsonar_mod.render_echoes(scene, p, spp=4096, speckle_seed=s, sample_rate=fs) for s in (0, 1)]
+    a, b = (e.signal[0, 0] for e in out["mirror"])
+    assert np.abs(a).max() > 0 and a.tobytes() == b.tobytes()
+    assert out["mirror"][0].meta["n_scatterers"] < 5                 # one glint (cells a range resolution wide)
+    y = S.matched_filter(a, p, fs)
+    tau = 2 * D / C
+    k = int(round(tau * fs))
+    assert abs(np.argmax(np.abs(y)) - k) <= 1
+    # the compressed echo at the sample nearest tau: R(k / fs - tau) exp(-i 2 pi f_c tau)
+    lags, r = S.compressed_autocorrelation(p, fs)
+    expected = np.interp(k / fs - tau, lags, r.real) + 1j * np.interp(k / fs - tau, lags, r.imag)
+    expected *= np.exp(-2j * np.pi * p.carrier * tau)
+    assert np.angle(y[k] / expected) == pytest.approx(0.0, abs=0.05)
+    c, d = (S.matched_filter(e.signal[0, 0], p, fs)[k] for e in out["lambert"])   # a sum of random phasors
+    assert abs(c - d) > 0.2 * abs(c)

@@ -363,8 +363,12 @@ class _Accumulator:
         self.spacing = spacing
         p, nrm, out, E = vals[:, 0:3], vals[:, 3:6], vals[:, 6], vals[:, 7]
         o = row_poses[rows, :3, 3]
-        excess = out - np.linalg.norm(p - o, axis=1)
-        cell = np.floor(p / np.where(coh, resolution, spacing)[:, None]).astype(np.int64)
+        dist = np.linalg.norm(p - o, axis=1)
+        excess = out - dist
+        cell = np.floor(p / spacing).astype(np.int64)
+        # a glint's key: its range-resolution cell (range = half the total path length)
+        cell[coh] = 0
+        cell[coh, 0] = np.floor(0.5 * (out[coh] + dist[coh]) / resolution).astype(np.int64)
         centre = (cell + 0.5) * spacing
         n_len = np.maximum(np.linalg.norm(nrm, axis=1), 1e-12)
         nrm = nrm / n_len[:, None]
