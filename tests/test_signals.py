@@ -174,3 +174,20 @@ def test_elements_read_from_csv(tmp_path):
     path.write_text("x,y,z\n0,0,0\n0,0,0\n")
     with pytest.raises(ValueError, match="array.csv 'elements': elements 0 and 1 overlap"):
         S.read_elements(path)
+
+
+@pytest.mark.parametrize("window", [None, "hann"])
+def test_drjit_and_numpy_synthesis_agree(window, monkeypatch):
+    from mitsonar.signals import synthesis
+
+    rng = np.random.default_rng(2)
+    pos = np.stack([rng.uniform(2, 4, 50), rng.uniform(-1, 1, 50), rng.uniform(-1, 1, 50)], axis=1)
+    a = rng.normal(size=50) + 1j * rng.normal(size=50)
+    p = S.lfm(95e3, 105e3, 1e-3, window=window)
+    e = S.line_array(8, frequency=100e3)
+    args = (a, pos, np.linalg.norm(pos, axis=1), e, np.zeros(3), p, 40e3, 400, C)
+    fast = S.synthesize(*args, velocity=(1.0, 0.5, 0.0))
+    monkeypatch.setattr(synthesis, "USE_DRJIT", False)
+    slow = S.synthesize(*args, velocity=(1.0, 0.5, 0.0))
+    assert np.abs(fast).max() > 1
+    np.testing.assert_allclose(fast, slow, atol=1e-5 * np.abs(slow).max())

@@ -92,11 +92,14 @@ class Pulse:
             w = np.ones_like(u)
         return np.where(inside, w, 0.0)
 
-    def baseband(self, t) -> np.ndarray:
-        """Complex baseband ``s(t)`` at times ``t`` (s) from the pulse's start (module docstring)."""
+    def phase(self, t) -> np.ndarray:
+        """rad: the baseband phase ``2 pi ((f_start - f_c) t + k t^2 / 2)`` at times ``t`` (s)."""
         t = np.asarray(t, dtype=np.float64)
-        phase = 2.0 * np.pi * ((self.f_start - self.carrier) * t + 0.5 * self.sweep_rate * t * t)
-        return self.envelope(t) * np.exp(1j * phase)
+        return 2.0 * np.pi * ((self.f_start - self.carrier) * t + 0.5 * self.sweep_rate * t * t)
+
+    def baseband(self, t) -> np.ndarray:
+        """Complex baseband ``s(t) = w(t / T) exp(i phase(t))`` at times ``t`` (s) from the pulse's start."""
+        return self.envelope(t) * np.exp(1j * self.phase(t))
 
     def samples(self, sample_rate: float) -> np.ndarray:
         """complex128 ``s(k / sample_rate)`` for the ``ceil(duration * sample_rate)`` samples of the pulse."""
