@@ -11,7 +11,6 @@ Presets:
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 

@@ -12,14 +12,14 @@ its own and per element the delay of its path (`synthesis`):
   on the surface, of energy the Monte-Carlo estimate of the energy its paths return
   (``sigma dA``: the render's energy in that cell) and of phase a hash of the cell and the
   ``speckle_seed`` (uniform in [0, 2 pi): fully developed speckle emerges from their interference,
-  Jackson and Richardson, *High-Frequency Seafloor Acoustics*, 2007, section 13.2, eq. 13.9;
+  Jackson and Richardson, *High-Frequency Seafloor Acoustics*, 2007, on seafloor speckle statistics;
   Goodman 1976). A still head sees the same scatterers at any path seed: only their energies carry
   Monte-Carlo noise, which falls with ``spp``; a moving head sees their delays change, hence the
   physical decorrelation;
 * **mirror-like surfaces** (BSDF with a specular part larger than the diffuse one and a lobe
   exponent of at least 100, `plugins.image_guide.MIN_EXPONENT`) are **coherent**: physical optics in
-  its stationary-phase limit (Kirchhoff integral; Jackson and Richardson 2007, section 10.2, eq.
-  10.13): the echoes of one shape, bounce order and range-resolution cell merge into one glint at
+  its stationary-phase limit (the Kirchhoff approximation; Jackson and Richardson
+  2007): the echoes of one shape, bounce order and range-resolution cell merge into one glint at
   their energy centroid, of amplitude ``sqrt(sum E)`` and deterministic phase ``-2 pi f_c tau`` from
   its travel time to each element. Glints closer than a resolution cell merge (their mutual
   interference is lost).

@@ -5,18 +5,19 @@ Everything here is numpy on complex baseband samples ``x[k] = s(k / fs)`` of
 ``(n_elements, n_samples)`` at a time, so it serves rendered `Echoes` and recorded data alike.
 
 * `matched_filter`: correlation with the transmitted replica, normalised so an echo ``a s(t - tau)``
-  compresses to a peak of ``a`` at ``tau`` (Lurton 2010, section 3.3, eq. 3.27: the output SNR is the
-  pulse energy over the noise density whatever the pulse shape).
+  compresses to a peak of ``a`` at ``tau`` (Lurton, *An Introduction to Underwater Acoustics*, 2nd ed.,
+  2010, ch. 3, matched filtering: the output SNR is the pulse energy over the noise density whatever
+  the pulse shape).
 * `delay_and_sum`: the wideband (true time delay) beamformer of Van Trees, *Optimum Array
-  Processing*, 2002, section 2.2, eqs. 2.27-2.31, applied in the frequency domain: an element at
+  Processing*, 2002, ch. 2 (delay-and-sum of a plane wave), applied in the frequency domain: an element at
   ``e`` hears a far source in direction ``u`` ``e . u / c`` earlier, so its spectrum is multiplied by
   ``exp(-i 2 pi (f_c + f) e . u / c)`` and summed. For a uniform line array of ``N`` elements at
   spacing ``d`` the narrowband beam is ``sin(N psi / 2) / (N sin(psi / 2))`` with
   ``psi = 2 pi d (sin phi - sin phi_0) / lambda``, -3 dB wide ``0.886 lambda / (N d cos phi_0)`` rad
-  (Van Trees eq. 2.100 and table 3.2).
+  (Van Trees 2002, ch. 2, the uniform line array's half-power beam width).
 * `arrival_angle`: two elements a baseline ``b`` apart hear an echo from angle ``psi`` off the
-  baseline's normal with phase difference ``2 pi b sin(psi) / lambda`` (Lurton 2010, section 8.3.3,
-  eq. 8.28, interferometric sonar); unambiguous for ``b <= lambda / 2``.
+  baseline's normal with phase difference ``2 pi b sin(psi) / lambda`` (Lurton 2010, ch. 8,
+  interferometric sonars); unambiguous for ``b <= lambda / 2``.
 
 Coherent or incoherent? `mitsonar.render_scan` estimates mean intensity per bin (what a display
 averages); use it for images, maps, training data and speed. Use `mitsonar.render_echoes` and these

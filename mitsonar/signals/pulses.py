@@ -10,7 +10,7 @@ A pulse is the complex envelope ``s(t)`` of the passband ``p(t) = Re{ s(t) exp(i
   with sweep rate ``k = (f1 - f0) / T`` and carrier ``f_c = (f0 + f1) / 2``; bandwidth
   ``B = |f1 - f0|``. After the matched filter its envelope is ``|sin(pi B tau) / (pi B tau)|`` for a
   large time-bandwidth product, -3 dB wide ``0.886 / B`` in time, ``0.886 c / (2 B)`` in range
-  (Lurton, *An Introduction to Underwater Acoustics*, 2nd ed., 2010, section 3.3, eqs. 3.27-3.31).
+  (Lurton, *An Introduction to Underwater Acoustics*, 2nd ed., 2010, ch. 3, pulse compression of a linear chirp).
 
 ``w`` is the window (None: rectangular; ``hann``, ``hamming``), evaluated in continuous time so a
 pulse can be sampled at any delay (`Pulse.baseband`), which is how the echo renderer places

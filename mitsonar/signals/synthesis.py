@@ -12,7 +12,7 @@ order in ``v / c``, arrival of the pulse's start at ``t0 = (L + R_e) / (c + u_e 
 (``R_e = |x - e|``, ``u_e = (x - e) / R_e``) and ``dtau/dt = -(u_o . v + u_e . v) / (c - u_o . v)``
 (``u_o = (x - o) / |x - o|``): the pulse leaves a moving source compressed and reaches a moving
 receiver compressed again, so a head closing on a wall at ``v`` hears its carrier shifted by
-``2 v f_c / (c - v)`` (the two-way Doppler shift; Lurton 2010, section 3.5, eq. 3.55, to first
+``2 v f_c / (c - v)`` (the two-way Doppler shift; Lurton 2010, ch. 3, to first
 order). The waveform is evaluated exactly at each sample (`Pulse.baseband`), no interpolation.
 The spreading ``1 / R`` is in ``a`` (the echo's energy at the transmitter); the elements' extra
 spreading over an array a few wavelengths wide is neglected (far field).
