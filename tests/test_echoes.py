@@ -101,7 +101,8 @@ def test_line_array_beamforms_two_targets_at_their_azimuths(mitsonar_mod):
                                         spp=1 << 14)
     assert echoes.signal.shape[:2] == (1, 64)              # one transmission per multibeam frame
     scan = S.beamform(echoes)
-    assert scan.kind == "multibeam" and scan.intensity.shape == (121, 100)
+    assert scan.kind == "multibeam" and scan.intensity.shape == (121, 100) and scan.data.shape == (121, 100)
+    assert scan.data.max() > scan.data.min()                       # the head's electronics made its bytes
     assert np.allclose(scan.bearings, np.radians(-15 + 0.25 * np.arange(121)))
     profile = scan.intensity.max(axis=1)
     from scipy.signal import find_peaks
@@ -274,3 +275,18 @@ def test_mirror_like_plate_echoes_coherently_with_the_travel_time_phase(mitsonar
     assert np.angle(y[k] / expected) == pytest.approx(0.0, abs=0.05)
     c, d = (S.matched_filter(e.signal[0, 0], p, fs)[k] for e in out["lambert"])   # a sum of random phasors
     assert abs(c - d) > 0.2 * abs(c)
+
+
+def test_rows_are_a_mechanical_heads_pings_with_their_times_and_poses(mitsonar_mod):
+    from mitsonar import signals as S
+
+    sensor = sonar_xml(FORWARD, n_pings=3, bearing_start=-4.0, bearing_step=4.0, n_bins=50, range_max=6.0,
+                       beamwidth_h=3.0, beamwidth_v=3.0)
+    scene = mitsonar_mod.load_scene(scene_xml(sensor, sphere_xml((4.0, 0, 0), 0.1, acoustic_xml(0.9))))
+    echoes = mitsonar_mod.render_echoes(scene, S.cw(700e3, 1e-4), spp=512, elements="line_array")
+    scan = mitsonar_mod.render_scan(scene, spp=16)
+    assert echoes.signal.shape[:2] == (3, 64) and echoes.elements.shape == (64, 3)
+    np.testing.assert_allclose(echoes.times, scan.times)
+    np.testing.assert_allclose(echoes.poses, scan.poses)
+    power = (np.abs(echoes.signal) ** 2).sum(axis=(1, 2))
+    assert power[1] > 5 * max(power[0], power[2])                  # the middle ping looks at the sphere (one-way: transmit pattern only)

@@ -254,7 +254,8 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
                                velocity=velocity[r]).astype(np.complex64)
     meta = {"spp": spp, "seed": seed, "speckle_seed": speckle_seed, "scatterer_spacing": float(h),
             "pressure_scale": scale, "n_scatterers": int(sum(len(s[0]) for s in scatterers)),
-            "band": (lo, hi), "bearing_start": float(sonar.bearing_start), "bearing_step": float(sonar.bearing_step)}
+            "band": (lo, hi), "electronics": sonar.electronics_model.to_dict(), "absorption": float(sonar.absorption),
+            "bearing_start": float(sonar.bearing_start), "bearing_step": float(sonar.bearing_step)}
     if sonar.kind == "sidescan":
         meta.update(side=sonar.side, depression=float(sonar.depression))
     return Echoes(signal=signal, elements=e, sample_rate=fs, carrier=pulse.carrier, pulse=pulse, times=times,

@@ -19,7 +19,9 @@ def beamform(echoes, bearings=None, *, row=0, n_bins=None, weights=None):
     ``range_min + [j, j + 1) (range_max - range_min) / n_bins`` (default the head's bins), range
     ``c t / 2``. ``intensity`` is energy per bin in the renderer's units: the beam's power
     ``|b|^2 / pressure_scale^2`` summed over the bin's samples over ``sample_rate * int |R|^2``
-    (a lone echo of energy E adds up to E); ``data`` is zeros (no electronics applied)."""
+    (a lone echo of energy E adds up to E); ``data`` the bytes of the head's electronics
+    (`mitsonar.receiver.electronics.Electronics.apply`, noise seeded by the render's ``seed``) without
+    their statistical speckle: the beams already hold the physical one."""
     from mitsonar.geometry.frames import bearing_rotation
     from mitsonar.scan import Scan
 
@@ -37,10 +39,20 @@ def beamform(echoes, bearings=None, *, row=0, n_bins=None, weights=None):
     intensity = np.stack([np.bincount(j[ok], weights=p[ok], minlength=n_bins) for p in power])
     ranges = echoes.range_min + (np.arange(n_bins) + 0.5) * width
     poses = echoes.poses[row] @ bearing_rotation(b)
-    return Scan(intensity=intensity.astype(np.float32), data=np.zeros(intensity.shape, np.uint8), ranges=ranges,
+    intensity = intensity.astype(np.float32)
+    data = np.zeros(intensity.shape, np.uint8)
+    settings = echoes.meta.get("electronics")
+    if settings is not None:
+        from mitsonar.receiver.electronics import Electronics
+
+        model = Electronics.from_dict(settings)
+        data = model.apply(intensity, ranges, absorption=echoes.meta.get("absorption", 0.0), sound_speed=c,
+                           seed=int(echoes.meta.get("seed", 0)), speckle=np.ones(intensity.shape, np.complex128))
+    return Scan(intensity=intensity, data=data, ranges=ranges,
                 bearings=b, poses=poses, range_min=echoes.range_min, range_max=echoes.range_max,
                 beam_pattern="delay_and_sum", beamwidth_h=_beamwidth_deg(echoes), beamwidth_v=180.0,
-                kind="multibeam", sound_speed=c, meta={"source": "beamformed echoes", **{
+                kind="multibeam", sound_speed=c, absorption=float(echoes.meta.get("absorption", 0.0)),
+                electronics=dict(settings or {}), meta={"source": "beamformed echoes", **{
                     k: v for k, v in echoes.meta.items() if k in ("spp", "seed", "speckle_seed")}})
 
 
