@@ -290,3 +290,20 @@ def test_rows_are_a_mechanical_heads_pings_with_their_times_and_poses(mitsonar_m
     np.testing.assert_allclose(echoes.poses, scan.poses)
     power = (np.abs(echoes.signal) ** 2).sum(axis=(1, 2))
     assert power[1] > 5 * max(power[0], power[2])                  # the middle ping looks at the sphere (one-way: transmit pattern only)
+
+
+def test_waveform_over_a_rough_plane_converges_with_spp(mitsonar_mod):
+    """The scatterers are frozen to the scene and only their energies are Monte-Carlo estimates: two
+    path seeds' waveforms agree better and better as spp grows (a convergent estimator of one field)."""
+    from mitsonar import signals as S
+
+    sensor = sonar_xml(FORWARD, n_pings=1, n_bins=100, range_max=6.0, beamwidth_h=3.0, beamwidth_v=3.0)
+    scene = mitsonar_mod.load_scene(scene_xml(sensor, rectangle_xml(tilted_plane(4.0, 40.0), acoustic_xml(0.8))))
+    p = S.lfm(680e3, 720e3, 1e-3)
+
+    def corr(spp):
+        a, b = (mitsonar_mod.render_echoes(scene, p, spp=spp, seed=s).signal.ravel() for s in (0, 1))
+        return abs(np.vdot(a, b)) / np.linalg.norm(a) / np.linalg.norm(b)
+
+    low, high = corr(2048), corr(65536)
+    assert low < 0.5 < 0.85 < high
