@@ -43,6 +43,8 @@ from typing import Any
 
 import numpy as np
 
+import mitsonar.geometry.kinds as kinds
+
 from mitsonar.signals.arrays import check_elements, interferometer, line_array
 from mitsonar.signals.pulses import Pulse
 from mitsonar.signals.synthesis import synthesize
@@ -78,7 +80,7 @@ class Echoes:
     times: np.ndarray
     poses: np.ndarray
     sound_speed: float
-    kind: str = "mechanical"
+    kind: str = kinds.DEFAULT
     range_min: float = 0.0
     range_max: float = 12.0
     bearings: np.ndarray | None = None
@@ -219,7 +221,7 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
     if not lo <= pulse.carrier <= hi:
         raise SceneError(f"{where} 'pulse': its carrier {pulse.carrier:g} Hz is not allowed (inside the head's band "
                          f"{lo:g} to {hi:g} Hz: frequency +- bandwidth / 2)")
-    if element_pattern not in (None, "beam") or (element_pattern == "beam" and sonar.kind == "multibeam"):
+    if element_pattern not in (None, "beam") or (element_pattern == "beam" and sonar.sonar_kind.transmit_fan):
         raise SceneError(f"{where} 'element_pattern': {element_pattern!r} is not allowed (None for omnidirectional "
                          "elements, or 'beam' for the transducer's own beam on a mechanical or side-scan head)")
     h = pulse.range_resolution(c) / 4.0 if scatterer_spacing is None else scatterer_spacing
@@ -231,7 +233,7 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
     if trajectory is not None:
         pose = moving_head_poses(sonar, trajectory, start_time, pose)
     try:
-        if sonar.kind == "multibeam":
+        if sonar.sonar_kind.transmit_fan:
             heads = sonar.head_pose(pose)
             row_poses = (heads[:1] if heads.ndim == 3 else heads[None]).copy()
             times = times[:1]
@@ -256,7 +258,7 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
             "pressure_scale": scale, "n_scatterers": int(sum(len(s[0]) for s in scatterers)),
             "band": (lo, hi), "electronics": sonar.electronics_model.to_dict(), "absorption": float(sonar.absorption),
             "bearing_start": float(sonar.bearing_start), "bearing_step": float(sonar.bearing_step)}
-    if sonar.kind == "sidescan":
+    if sonar.sonar_kind.sided:
         meta.update(side=sonar.side, depression=float(sonar.depression))
     return Echoes(signal=signal, elements=e, sample_rate=fs, carrier=pulse.carrier, pulse=pulse, times=times,
                   poses=row_poses, sound_speed=c, kind=sonar.kind, range_min=float(sonar.range_min),
@@ -303,7 +305,7 @@ def _trace(scene, sonar, row_poses, spp, seed, max_depth, spacing, resolution, s
     depth = int(max_depth) if max_depth is not None else int(getattr(integ, "max_depth", 5) or 5)
     integrator = mi.load_dict({"type": "sonar_tof", "max_depth": depth, "guide": "none"})
     setup = integrator.setup(scene, sonar)
-    beam = sonar.transmit if sonar.kind == "multibeam" else sonar.beam
+    beam = sonar.transmit if sonar.sonar_kind.transmit_fan else sonar.beam
     setup.frames = module("sonar_sensor").PingFrames(row_poses)
     setup.connect = None
     setup.sensor = types.SimpleNamespace(beam=beam)

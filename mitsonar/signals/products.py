@@ -5,6 +5,8 @@ import math
 
 import numpy as np
 
+import mitsonar.geometry.kinds as kinds
+
 from mitsonar.signals.processing import (arrival_angle, delay_and_sum, equivalent_duration, look_directions,
                                          matched_filter)
 
@@ -51,7 +53,7 @@ def beamform(echoes, bearings=None, *, row=0, n_bins=None, weights=None):
     return Scan(intensity=intensity, data=data, ranges=ranges,
                 bearings=b, poses=poses, range_min=echoes.range_min, range_max=echoes.range_max,
                 beam_pattern="delay_and_sum", beamwidth_h=_beamwidth_deg(echoes), beamwidth_v=180.0,
-                kind="multibeam", sound_speed=c, absorption=float(echoes.meta.get("absorption", 0.0)),
+                kind=kinds.MULTIBEAM.name, sound_speed=c, absorption=float(echoes.meta.get("absorption", 0.0)),
                 electronics=dict(settings or {}), meta={"source": "beamformed echoes", **{
                     k: v for k, v in echoes.meta.items() if k in ("spp", "seed", "speckle_seed")}})
 
