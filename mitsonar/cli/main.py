@@ -234,7 +234,8 @@ def cmd_info(args):
         ("bearings [deg]", f"{np.degrees(scan.bearings[0]):.6g} .. {np.degrees(scan.bearings[-1]):.6g}"
                            + (f" step {np.degrees(scan.bearings[1] - scan.bearings[0]):.6g}" if scan.n_pings > 1 else "")),
         ("ping times [s]", f"{scan.times[0]:.6g} .. {scan.times[-1]:.6g}"
-                           + (f" (start {scan.meta['start_time']:.9g} on the trajectory)" if "start_time" in scan.meta else "")),
+                           + ("" if scan.meta.start_time is None else f" (start {scan.meta.start_time:.9g} on "
+                              + ("the trajectory)" if scan.meta.source is None else "the head's clock)"))),
         ("beam", f"{scan.beam_pattern} {scan.beamwidth_h:g} x {scan.beamwidth_v:g} deg"),
         ("sound speed [m/s]", scan.sound_speed), ("absorption [dB/m]", scan.absorption),
         (f"position ({scan.row_name[:-1]} 0)", " ".join(f"{v:.6g}" for v in scan.positions[0])),

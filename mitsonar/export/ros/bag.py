@@ -17,19 +17,21 @@ Topics (see the README, "ROS 2 bags"):
 =================== ========================================= =====================================
 
 Stamps: ``start + base + scan.times[k]`` seconds, ``start`` given by the caller (default 0) and
-``base`` the scan's own start on its trajectory's clock (``meta['time_start']`` or
-``meta['start_time']``, 0 when it has none).
+``base`` the scan's own start on its clock (``meta.start_time``: a trajectory's for a rendered
+scan, the wall clock for a real head's; 0 when it has none).
 """
 from __future__ import annotations
 
 import math
 import os
+from collections.abc import Mapping
 
 import numpy as np
 
 from mitsonar._files import StagedFiles
 from mitsonar.export.ros import messages as M
 from mitsonar.export.ros import msgdefs
+from mitsonar.scan.meta import ScanMeta
 
 TOPICS = {"/sonar/image": M.PROJECTED, "/sonar/fan": M.IMAGE, "/sonar/waterfall": M.IMAGE,
           "/sonar/detections": M.CLOUD, "/tf": M.TF, "/odom": M.ODOMETRY}
@@ -52,13 +54,9 @@ def _require_mcap():
 
 
 def scan_base(scan) -> float:
-    """The scan's own start time in seconds (its meta ``time_start`` or ``start_time``, else 0)."""
-    meta = scan.meta if isinstance(getattr(scan, "meta", None), dict) else {}
-    for key in ("time_start", "start_time"):
-        v = meta.get(key)
-        if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v):
-            return float(v)
-    return 0.0
+    """The scan's own start time in seconds (its ``meta.start_time``, else 0)."""
+    v = ScanMeta.from_dict(scan.meta).start_time if isinstance(getattr(scan, "meta", None), Mapping) else None
+    return 0.0 if v is None else float(v)
 
 
 def check_scan(scan, name="scan") -> None:
