@@ -331,3 +331,10 @@ class Scan:
                 f"range=[{self.range_min:g}, {self.range_max:g}) m, beam={self.beam_pattern} "
                 f"{self.beamwidth_h:g}x{self.beamwidth_v:g} deg)")
 
+
+def as_scans(scans) -> list:
+    """A list of scans from one scan or an iterable of them (what "a `Scan` or a list" parameters
+    take). One scan is a `Scan` or a scan-like object: one with ``data``, ``intensity`` or ``poses``."""
+    if isinstance(scans, Scan) or any(hasattr(scans, a) for a in ("data", "intensity", "poses")):
+        return [scans]
+    return list(scans)
