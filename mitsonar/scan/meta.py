@@ -12,7 +12,7 @@ The mapping API (``meta["seed"]``, ``meta.get("side", "both")``, ``"key" in meta
 ``meta.update(...)``, ``{**meta}``, ``dict(meta)``, ``meta == {...}``) is kept for this release,
 silently: scans, files and user code of the dict era go on working. Attributes (``meta.seed``)
 are the typed way and the one mitsonar uses. A value of the wrong type for a field is refused when
-it is set, in one line: ``Scan 'meta': 'start_time': 'noon' is not allowed (seconds: a finite number)``.
+it is set, in one line: ``Scan 'meta': 'start_time': 'noon' is not allowed (a finite number, seconds)``.
 
 `ScanFieldError`, the one error of a bad `Scan` field, lives here (the leaf of `mitsonar.scan`);
 `mitsonar.scan.model` and `mitsonar.scan` export it. This module imports nothing from mitsonar.
