@@ -118,10 +118,10 @@ def speckle_power(scan) -> np.ndarray:
     if e.speckle == "off":
         return np.ones(np.shape(scan.intensity))
     if not has_scene_speckle(scan):
-        raise not_allowed(WHERE, "scan", f"speckle {scan.meta.get('speckle')!r}",
+        raise not_allowed(WHERE, "scan", f"speckle {scan.meta.speckle!r}",
                           "a rendered scan (meta['speckle'] == 'scene'), or speckle=False")
     g = e.scene_speckle(scan.poses, scan.ranges, sound_speed=scan.sound_speed, beamwidth_h=scan.beamwidth_h,
-                        aperture_h=float(scan.meta["aperture_h"]))
+                        aperture_h=float(scan.meta.aperture_h))
     power = g.real ** 2 + g.imag ** 2
     if e.speckle == "weibull":
         k = e.speckle_shape
@@ -232,7 +232,7 @@ def soundings(scan, threshold_db=10.0, method="centroid", speckle=False, ping=0,
     sum, the scan's intensity units), ``beam`` the row, ``angle`` its bearing (deg; for a downward
     multibeam the across-track beam angle, positive to port), ``ping`` (``ping``, e.g. the scan's
     index in a survey), ``time`` the row's ping time (``start_time`` + the scan's row time; the
-    scan's ``meta['start_time']`` by default), ``range`` the detected range, ``head_z`` the
+    scan's ``meta.start_time`` by default: 0 when it has none), ``range`` the detected range, ``head_z`` the
     transducer's height. ``speckle``: False detects on the noise-free intensity, True on
     `speckled` (the scene's speckle of the scan; pick another pattern with `render_scan`'s
     ``speckle_seed``). ``sound_speed_profile``: None places each sounding on the straight beam
@@ -256,7 +256,9 @@ def soundings(scan, threshold_db=10.0, method="centroid", speckle=False, ping=0,
         p = pos + rng[k, None] * bore
     else:
         p = refracted(pos, bore, rng[k], scan.sound_speed, sound_speed_profile)
-    t0 = float(scan.meta.get("start_time", 0.0)) if start_time is None else float(start_time)
+    if start_time is None:
+        start_time = scan.meta.start_time if scan.meta.start_time is not None else 0.0
+    t0 = float(start_time)
     out = np.zeros(len(k), SOUNDING_DTYPE)
     out["x"], out["y"], out["z"] = p[:, 0], p[:, 1], p[:, 2]
     with np.errstate(divide="ignore"):
