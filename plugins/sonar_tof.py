@@ -70,6 +70,12 @@ class SonarTOFIntegrator(SonarIntegrator):
                           time (hidden_target, periscope); scenes without mirror-like BSDFs
                           trace the unguided kernel (no cost), others pay up to 31 % more time per
                           path. ``none``: BSDF sampling only. Gradient renders are unguided
+    sound_speed_profile   a CSV file (``depth,sound_speed``; a path relative to the scene
+                 (none)   file): the water the paths refract through (`refraction`): arcs out,
+                          an eigenray back, range = sensor ``sound_speed`` x two-way travel
+                          time / 2. Unset, or constant at the sensor's speed: straight rays.
+                          Primal renders only; multibeam paths are then per row
+    svp_chords   4        chords per range window along which a refracted ray meets the scene
     ============ ======== ====================================================================
 
     Each pass runs as a Dr.Jit frozen function (`frozen_pass`): its kernel is traced once per
@@ -83,6 +89,7 @@ class SonarTOFIntegrator(SonarIntegrator):
     """
 
     name = "sonar_tof"
+    REFRACTS = True
     SAMPLERS = {"sobol": SobolSamples, "independent": HashSamples}
 
     def __init__(self, props: mi.Properties):
@@ -104,7 +111,10 @@ class SonarTOFIntegrator(SonarIntegrator):
         setup = self.setup(scene, sensor, pose, max_depth)
         n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
         shared = None
-        if self.share_beams is not False:
+        if setup.refraction is not None and self.share_beams:
+            raise ValueError(f"{self.name}: share_beams true cannot be used with a sound_speed_profile (a shared "
+                             "echo is scored by its straight direction); leave share_beams unset or false")
+        if self.share_beams is not False and setup.refraction is None:
             from .shared_beams import SharedFrame, can_share, same_pose, window
 
             if self.share_beams:

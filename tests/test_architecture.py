@@ -151,14 +151,17 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     and the electronics' settings (the sensor reads and checks its electronics fields), nothing
     else of mitsonar (not the Scan, files, render or devices)."""
     _, edges = import_graph()
-    allowed = {"mitsonar._checks", "mitsonar.geometry.frames", "mitsonar.receiver.electronics"}
+    # (and the sound-speed profile: the integrators read their XML sound_speed_profile with it)
+    allowed = {"mitsonar._checks", "mitsonar.geometry.frames", "mitsonar.receiver.electronics",
+               "mitsonar.acoustics.profile"}
     for name, out in edges.items():
         if name.startswith("mitsonar.plugins"):
             above = {t for t in out if t.startswith("mitsonar") and not t.startswith("mitsonar.plugins")}
             assert above <= allowed, (name, above - allowed)
     # and those import nothing of mitsonar's above them (the electronics' scene speckle and the
     # sonar equation's levels are numpy-only leaves beside them)
-    leaves = {"mitsonar._checks", "mitsonar.receiver.speckle", "mitsonar.sonar_equation.levels"}
+    leaves = {"mitsonar._checks", "mitsonar.receiver.speckle", "mitsonar.sonar_equation.levels",
+              "mitsonar.acoustics.seawater", "mitsonar.acoustics._checks"}
     for low in allowed | leaves - {"mitsonar._checks"}:
         assert not {t for t in edges[low] if t.startswith("mitsonar")} - leaves, low
     assert not {t for t in edges["mitsonar.receiver.speckle"] if t.startswith("mitsonar")}
