@@ -20,10 +20,12 @@ What a path does (`common.SonarIntegrator._sample_primal` calls these when a pro
   is ``range_max / (chords * c_sensor)``: ``chords`` (XML ``svp_chords``, default 4) chords per
   range window. A segment stops once its time leaves no echo inside the window.
 * **The way back** (`eigenray`): the ray joining a surface point to the transducer without a
-  turning point. With ``c_max`` the largest speed between the two depths and ``v = cot`` of the
-  grazing angle where the speed is ``c_max`` (``a = cos / c_max``), the horizontal distance
-  ``X(v)`` (a sum over the layers between the depths) is solved for the true distance by secant
-  steps from the straight-line guess ``v0 = X / dz`` (`EIGEN_STEPS`). A point that no direct ray
+  turning point. With ``c_max`` the largest speed between the two depths and ``sigma`` the sine
+  of the grazing angle where the speed is ``c_max`` (``a = cos / c_max``), the horizontal distance
+  ``X(sigma)`` (a sum over the layers between the depths, unrolled) is solved for the true
+  distance by `EIGEN_STEPS` secant steps: on ``1 / X(sigma) - 1 / X`` from the horizontal limit
+  ``sigma = 0`` and the straight-line guess for rays flatter than 45 deg, on ``X(v) - X`` with
+  ``v = cot`` of that angle from the straight guess ``v = X / dz`` for steeper ones. A point that no direct ray
   reaches within ``EIGEN_TOL`` (it would need a turn: a nearly horizontal path at the head's
   depth in a gradient) gives no echo. Visibility is tested along chords of that ray, with the
   same ``dt``.
@@ -39,7 +41,7 @@ import mitsuba as mi
 #: Depth standing for "no boundary" above the first sample and below the last one (m).
 FAR = 1.0e7
 #: Secant steps of the eigenray solve (after the two starting points).
-EIGEN_STEPS = 4
+EIGEN_STEPS = 5
 #: A direct eigenray is accepted when it misses the point by at most this fraction of ``X + dz``.
 EIGEN_TOL = 2e-4
 #: Layers one time step may cross, beyond those of the profile (turns re-enter a layer).
@@ -282,23 +284,36 @@ class Refraction:
         for dd, cc in self.samples:
             c_max = dr.select((dd > z_lo) & (dd < z_hi), dr.maximum(c_max, cc), c_max)
 
-        def at(v):
-            a = v * dr.rsqrt(1.0 + v * v) / c_max
-            return (a,) + self._sum(a, z_lo, z_hi)
+        # Two variables, chosen per lane by the straight guess, each making X (or 1/X) nearly
+        # linear where it is used: steep (dz >= X): v = cot of the grazing angle where the speed
+        # is c_max, X ~ v dz; flat: sigma = its sine, 1/X ~ sigma / dz in uniform water and
+        # a g / (s - sigma) in a gradient, finite at the horizontal limit sigma = 0.
+        steep = dz >= X
+        inv_X = dr.rcp(dr.maximum(X, 1e-30))
 
-        v0 = X / dr.maximum(dz, 1e-6)
-        a0, X0, T0, L0 = at(v0)
-        v1 = v0 * X / dr.maximum(X0, 1e-30)
-        v1 = dr.select(dr.isfinite(v1), v1, v0)
-        a1, X1, T1, L1 = at(v1)
+        def at(q):
+            cos_m = dr.select(steep, q * dr.rsqrt(1.0 + q * q), dr.safe_sqrt((1.0 - q) * (1.0 + q)))
+            a = cos_m / c_max
+            Xs, Ts, Ls = self._sum(a, z_lo, z_hi)
+            return a, Xs, Ts, Ls, dr.select(steep, Xs - X, dr.rcp(dr.maximum(Xs, 1e-30)) - inv_X)
+
+        q0 = dr.select(steep, X / dr.maximum(dz, 1e-30), 0.0)
+        a0, X0, T0, L0, F0 = at(q0)
+        q1 = dr.select(steep, q0 * X / dr.maximum(X0, 1e-30),
+                       dr.minimum(dz * dr.rsqrt(dr.square(X) + dr.square(dz)), 1.0 - 1e-7))
+        q1 = dr.select(dr.isfinite(q1), q1, q0)
+        a1, X1, T1, L1, F1 = at(q1)
+        top = dr.select(steep, dr.inf, 1.0 - 1e-7)
         for _ in range(EIGEN_STEPS):
-            den = X1 - X0
-            step = (X - X1) * (v1 - v0) / den
-            step = dr.select(dr.isfinite(step) & (den != 0), step, 0.0)
-            v2 = dr.maximum(v1 + step, 0.5 * v1)
-            v0, X0 = v1, X1
-            v1 = v2
-            a1, X1, T1, L1 = at(v1)
+            den = F1 - F0
+            q2 = q1 - F1 * (q1 - q0) / den
+            q2 = dr.select(dr.isfinite(q2) & (den != 0), dr.clip(q2, 0.0, top), q1)
+            q0, F0 = q1, F1
+            q1 = q2
+            a1, X1, T1, L1, F1 = at(q1)
+        vertical = X <= 1e-6 * (dz + 1.0)        # straight down or up: a = 0
+        a_v, X_v, T_v, L_v = (mi.Float(0.0),) + self._sum(mi.Float(0.0), z_lo, z_hi)
+        a1, X1, T1, L1 = (dr.select(vertical, u, v) for u, v in ((a_v, a1), (X_v, X1), (T_v, T1), (L_v, L1)))
         ok = mi.Bool(active) & (dr.abs(X1 - X) <= EIGEN_TOL * (X + dz) + 1e-5) & dr.isfinite(T1)
         # directions at both ends: cos = a c, the vertical sense from which end is deeper
         deeper = z1 > z2                       # the point below the transducer: the way back climbs

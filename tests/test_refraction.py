@@ -244,3 +244,73 @@ def test_gradients_refuse_a_profile_in_one_line(mitsonar_mod, tmp_path):
             s, p, dr.zeros(mi.TensorXf, (3, scene.sensors()[0].n_bins, 1)), spp=spp)):
         with pytest.raises(ValueError, match="gradients of a render through a sound_speed_profile are not implemented"):
             render(scene, params, spp=4)
+
+
+# ---------------------------------------------------------------------------------------------
+# the Dr.Jit ray functions against the float64 closed forms
+
+LAYERED = SoundSpeedProfile([0.0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 23, 26, 29, 32, 35, 40, 50, 70, 100],
+                            np.interp([0.0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 23, 26, 29, 32, 35, 40, 50, 70, 100],
+                                      [0, 10, 40, 100], [1520.0, 1519.0, 1490.0, 1491.0]))
+
+
+def refraction_of(profile):
+    import mitsonar  # noqa: F401  (the variant and the plugins)
+    from mitsonar.plugins import module
+
+    class Head:
+        sound_speed, range_max = C_SENSOR, 100.0
+
+    return module("refraction").from_profile(profile, Head())
+
+
+@pytest.mark.parametrize("profile", [LINEAR, LAYERED], ids=["linear", "20 layers"])
+def test_advance_is_locate_and_keeps_snell_invariant(profile):
+    """The ray state after a time ``tau`` (`Refraction.advance`, float32, layer by layer) is
+    `SoundSpeedProfile.locate`'s (float64), through turning points too, and cos(grazing) / c is
+    the launch's at every step."""
+    import mitsuba as mi
+
+    refr = refraction_of(profile)
+    grazing = np.radians([-40.0, -5.0, 3.0, 10.0, 30.0, 60.0, 85.0])
+    z0 = np.array([2.0, 15.0, 2.0, 6.0, 1.0, 33.0, 2.0])
+    c0 = profile.speed(z0)
+    a = np.cos(grazing) / c0
+    z, s, down, x = mi.Float(z0), mi.Float(np.sin(grazing)), mi.Bool(np.sin(grazing) >= 0), np.zeros_like(z0)
+    for k in range(1, 9):     # eight steps of 5 ms
+        dx, z, s, down, ok = refr.advance(z, s, down, mi.Float(a), mi.Float(0.005))
+        x += dx.numpy()
+        assert ok.numpy().all()
+        xe, ze = profile.locate(z0, grazing, 0.005 * k)
+        np.testing.assert_allclose(x, xe, rtol=2e-5, atol=2e-4)
+        np.testing.assert_allclose(z.numpy(), ze, rtol=2e-5, atol=2e-4)
+        # (not the 85 deg ray: a float32 sine of 0.996 holds its cosine to 1e-7 / cos^2 only)
+        cos = np.sqrt(1.0 - np.square(s.numpy().astype(float)))
+        inv = cos / profile.speed(z.numpy().astype(float))
+        np.testing.assert_allclose(inv[:-1], a[:-1], rtol=1e-5)
+
+
+def test_the_eigenray_joins_the_two_points_with_trace_s_time_and_angle():
+    """A ray traced (float64) from the head to a point: the eigenray solved back from that point
+    has the same one-way time, and its arrival at the head is the launch direction."""
+    import mitsuba as mi
+
+    refr = refraction_of(LAYERED)
+    head = 2.0
+    launch = np.radians([5.0, 20.0, 45.0, 70.0, 89.0])
+    ends = [LAYERED.trace(head, th, to_depth=60.0, samples=0) for th in launch]
+    X = np.array([r.x[-1] for r in ends])
+    T = np.array([r.time[-1] for r in ends])
+    p = mi.Point3f(X.astype(np.float32), np.zeros(len(X)), np.full(len(X), -60.0))
+    o = mi.Point3f(np.zeros(len(X)), np.zeros(len(X)), np.full(len(X), -head))
+    ok, t, length, back, rx = refr.eigenray(p, o, mi.Bool(True))
+    assert ok.numpy().all()
+    np.testing.assert_allclose(t.numpy(), T, rtol=1e-5)     # 0.25 s to a microsecond: float32
+    # from the head towards +x and down at the launch angle
+    np.testing.assert_allclose(np.arctan2(-rx.z.numpy(), rx.x.numpy()), launch, atol=2e-4)
+    assert (length.numpy() >= np.hypot(X, 58.0) - 1e-3).all()     # an arc is no shorter than its chord
+    # a point no direct ray reaches: 1 m below the head and 300 m away in c = 1450 + z, where the
+    # ray from it that arrives horizontally (an arc of radius c / g = 1460 m) has gone 54 m only
+    linear = refraction_of(LINEAR)
+    assert not linear.eigenray(mi.Point3f(300.0, 0.0, -10.0), mi.Point3f(0.0, 0.0, -9.0), mi.Bool(True))[0].numpy().any()
+    assert linear.eigenray(mi.Point3f(50.0, 0.0, -10.0), mi.Point3f(0.0, 0.0, -9.0), mi.Bool(True))[0].numpy().all()
