@@ -314,3 +314,37 @@ def test_the_eigenray_joins_the_two_points_with_trace_s_time_and_angle():
     linear = refraction_of(LINEAR)
     assert not linear.eigenray(mi.Point3f(300.0, 0.0, -10.0), mi.Point3f(0.0, 0.0, -9.0), mi.Bool(True))[0].numpy().any()
     assert linear.eigenray(mi.Point3f(50.0, 0.0, -10.0), mi.Point3f(0.0, 0.0, -9.0), mi.Bool(True))[0].numpy().all()
+
+
+# ---------------------------------------------------------------------------------------------
+# the bathymetry CLI: a survey rendered in one water, processed with another
+
+def test_cli_svp_renders_the_water_and_processing_with_it_corrects_the_soundings(tmp_path, capsys):
+    """``--svp`` renders the survey in c = 1450 + z: processed straight at the head's nominal
+    1500 m/s the soundings are ~20 cm too deep; ``--processing-svp`` with the same file brings
+    them to the uniform-water error. A bad ``--svp`` is one line before any render."""
+    import json
+
+    from conftest import SCENES
+
+    from mitsonar.cli import main
+
+    svp = tmp_path / "true.csv"
+    LINEAR.to_csv(svp)
+    args = ["bathymetry", os.path.join(SCENES, "rocky_slope.xml"), "--trajectory",
+            os.path.join(SCENES, "rocky_slope_survey.tum"), "--beams", "16", "--max-scans", "2", "--spp", "32",
+            "--range-max", "20", "--bin-width", "0.025", "--max-depth", "1", "-q", "--svp", str(svp)]
+    assert main(args + ["-o", str(tmp_path / "wrong")]) == 0
+    assert main(args + ["-o", str(tmp_path / "right"), "--processing-svp", str(svp)]) == 0
+    wrong, right = (json.loads((tmp_path / d / "errors.json").read_text()) for d in ("wrong", "right"))
+    assert wrong["svp"] == right["svp"] == str(svp)
+    assert wrong["n_soundings"] > 15 and right["n_soundings"] > 15
+    assert wrong["mean_error"] > 0.1 and wrong["rms_error"] > 0.1         # too deep (slower water, taken at 1500)
+    assert right["rms_error"] < 0.1 * wrong["rms_error"]
+    capsys.readouterr()
+    svp.write_text("depth,sound_speed\n0,1500\n12,1490\n10,1495\n")
+    out = tmp_path / "bad"
+    assert main(args + ["-o", str(out)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and f"{svp}, row 4: depth 10.0 m is not greater than the previous 12.0 m" in err, err
+    assert not out.exists()
