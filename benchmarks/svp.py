@@ -9,13 +9,16 @@ Prints one JSON object:
   * ``refracted``: per ``svp_chords`` (chords per range window, `plugins/refraction.py`), the same
     two numbers through the profile, the error against the closed form
     ``c_sensor * SoundSpeedProfile.trace(h, 90 deg - angle, to_depth=D).time`` (an exact arc per
-    layer), and ``time_ratio`` (refracted / straight seconds, same spp, same run);
+    layer), ``time_ratio`` (refracted / straight seconds, same spp, same run) and
+    ``ratio_at_equal_noise``: ``time_ratio * (noise / straight noise)^2``, the cost ratio at equal
+    Monte Carlo error (``noise``: the relative rms difference of two seeds' scans over the echo);
   * ``profile``: the 20 samples (a warm mixed layer over a thermocline, m and m/s).
 
-At equal spp the Monte Carlo error is that of the straight render (the same paths, the same
-beam and BSDF sampling): ``time_ratio`` is then the cost ratio at equal error, as long as the
-refracted median error stays within the straight one (the chord approximation adds nothing
-visible).
+The straight multibeam render shares each frame's paths between the beams (`shared_beams`); a
+refracted one traces per-row paths (a shared echo is scored by its straight direction), so its
+noise at equal spp differs: ``ratio_at_equal_noise`` compares them at equal error. The chord
+approximation is the only bias: its cost in accuracy is the refracted ``median_bins`` and
+``max_bins`` against the straight render's, per chord count.
 
 Usage: python benchmarks/svp.py [--spp 256] [--repeats 3] [--depth 40]
 """
@@ -59,13 +62,20 @@ def scene_for(head, depth, chords=None):
 
 
 def timed(scene, pose, spp, repeats, profile):
-    mitsonar.render_scan(scene, spp=spp, seed=0, pose=pose, sound_speed_profile=profile)    # compiles
+    """(best seconds of ``repeats`` warm renders, the last scan, the Monte Carlo noise): the noise
+    is the rms difference of two renders of other seeds over the rms of their mean, on the bins
+    holding the seabed echo (its relative standard error, times sqrt 2)."""
+    first = mitsonar.render_scan(scene, spp=spp, seed=0, pose=pose, sound_speed_profile=profile)    # compiles
     best, scan = math.inf, None
     for r in range(repeats):
         t0 = time.perf_counter()
         scan = mitsonar.render_scan(scene, spp=spp, seed=r + 1, pose=pose, sound_speed_profile=profile)
         best = min(best, time.perf_counter() - t0)
-    return best, scan
+    a, b = first.intensity.astype(float), scan.intensity.astype(float)
+    mean = 0.5 * (a + b)
+    echo = mean > 1e-2 * mean.max(axis=1, keepdims=True)
+    noise = float(np.sqrt(np.mean((a - b)[echo] ** 2)) / np.sqrt(np.mean(mean[echo] ** 2)))
+    return best, scan, noise
 
 
 def peak_errors(scan, expected):
@@ -87,15 +97,18 @@ def main(argv=None):
     svp = profile20()
     c_s = head.params["sound_speed"]
     scene = scene_for(head, args.depth)
-    t_straight, scan = timed(scene, pose, args.spp, args.repeats, None)
+    t_straight, scan, n_straight = timed(scene, pose, args.spp, args.repeats, None)
     bore = scan.poses[:, :3, 2]
     ang = np.arccos(np.clip(-bore[:, 2], -1.0, 1.0))
-    straight = dict(seconds=t_straight, **peak_errors(scan, (args.depth - HEAD) / np.cos(ang)))
+    straight = dict(seconds=t_straight, noise=n_straight, **peak_errors(scan, (args.depth - HEAD) / np.cos(ang)))
     exact = c_s * np.array([svp.trace(HEAD, math.pi / 2 - a, to_depth=args.depth, samples=0).time[-1] for a in ang])
     refracted = {}
     for chords in (1, 2, 4, 16):
-        t, scan = timed(scene_for(head, args.depth, chords), pose, args.spp, args.repeats, svp)
-        refracted[str(chords)] = dict(seconds=t, time_ratio=t / t_straight, **peak_errors(scan, exact))
+        t, scan, noise = timed(scene_for(head, args.depth, chords), pose, args.spp, args.repeats, svp)
+        # variance falls as 1/spp: the time to the straight render's noise is t (noise / n_straight)^2
+        refracted[str(chords)] = dict(seconds=t, noise=noise, time_ratio=t / t_straight,
+                                      ratio_at_equal_noise=t / t_straight * (noise / n_straight) ** 2,
+                                      **peak_errors(scan, exact))
     print(json.dumps(dict(spp=args.spp, beams=256, depth=args.depth, head_depth=HEAD, sound_speed=c_s,
                           machine=platform.machine(), python=sys.version.split()[0], cpus=os.cpu_count(),
                           straight=straight, refracted=refracted,

@@ -450,10 +450,17 @@ def sample_path(setup, ping, samples, record, active=True):
         echo = active & ok & (energy > 0)
         echo &= refr.visible(scene, si.spawn_ray(back).o, back, origin, t_back, echo)
         rng = half_c * (t_path + t_back)
-        if dr.hint(tag, mode="scalar"):
-            record(depth, rng, energy, echo, si, hard)
-        else:
-            record(depth, rng, energy, echo, si)
+        # While ``record`` runs, ``refr.arrival`` is the direction the echo reaches the head from
+        # (`shared_beams.SharedFrame.score` picks the receive beams by it); gone after, so that no
+        # traced variable outlives this loop on the setup a frozen pass walks.
+        refr.arrival = rx
+        try:
+            if dr.hint(tag, mode="scalar"):
+                record(depth, rng, energy, echo, si, hard)
+            else:
+                record(depth, rng, energy, echo, si)
+        finally:
+            del refr.arrival
 
         base = DIMS_EMIT + DIMS_PER_BOUNCE * depth
         if dr.hint(guide, mode="scalar"):

@@ -74,7 +74,7 @@ class SonarTOFIntegrator(SonarIntegrator):
                  (none)   file): the water the paths refract through (`refraction`): arcs out,
                           an eigenray back, range = sensor ``sound_speed`` x two-way travel
                           time / 2. Unset, or constant at the sensor's speed: straight rays.
-                          Primal renders only; multibeam paths are then per row
+                          Primal renders only
     svp_chords   4        chords per range window along which a refracted ray meets the scene
     ============ ======== ====================================================================
 
@@ -111,10 +111,7 @@ class SonarTOFIntegrator(SonarIntegrator):
         setup = self.setup(scene, sensor, pose, max_depth)
         n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
         shared = None
-        if setup.refraction is not None and self.share_beams:
-            raise ValueError(f"{self.name}: share_beams true cannot be used with a sound_speed_profile (a shared "
-                             "echo is scored by its straight direction); leave share_beams unset or false")
-        if self.share_beams is not False and setup.refraction is None:
+        if self.share_beams is not False:
             from .shared_beams import SharedFrame, can_share, same_pose, window
 
             if self.share_beams:
@@ -200,10 +197,13 @@ class SonarTOFIntegrator(SonarIntegrator):
         zero, index, samples = self._shared_lanes(n, seed_o, first_o)
         hist = dr.zeros(mi.Float64, shared.n_rows * shared.sensor.n_bins)
 
+        refraction = shared.path_setup.refraction
+
         def record(depth_k, rng, energy, valid, hit):
             # the roulette's number: a hash of (path, bounce, seed), apart from the path's samples
             u = mi.sample_tea_float32(index, seed_o ^ (mi.UInt32(depth_k) * 0x9E3779B9 + 0x51ED), 4)
-            shared.score(hist, rng, energy, valid, hit, u)
+            # a refracted echo arrives along its eigenray, not straight from its surface point
+            shared.score(hist, rng, energy, valid, hit, u, None if refraction is None else refraction.arrival)
 
         self.sample(_emitting(shared.path_setup, d, w), zero, samples, record)
         return hist
