@@ -11,7 +11,10 @@ Prints one JSON object:
     ``c_sensor * SoundSpeedProfile.trace(h, 90 deg - angle, to_depth=D).time`` (an exact arc per
     layer), ``time_ratio`` (refracted / straight seconds, same spp, same run) and
     ``ratio_at_equal_noise``: ``time_ratio * (noise / straight noise)^2``, the cost ratio at equal
-    Monte Carlo error (``noise``: the relative rms difference of two seeds' scans over the echo);
+    Monte Carlo error (``noise``: the relative rms difference of two seeds' scans over the echo),
+    and ``chord_shift_median_bins`` / ``_max_bins``: how far each beam's echo centroid moves
+    against 64 chords per window with the same seed (the same paths: the chord approximation's
+    own error, free of Monte Carlo noise);
   * ``profile``: the 20 samples (a warm mixed layer over a thermocline, m and m/s).
 
 The straight multibeam render shares each frame's paths between the beams (`shared_beams`); a
@@ -20,7 +23,7 @@ noise at equal spp differs: ``ratio_at_equal_noise`` compares them at equal erro
 approximation is the only bias: its cost in accuracy is the refracted ``median_bins`` and
 ``max_bins`` against the straight render's, per chord count.
 
-Usage: python benchmarks/svp.py [--spp 256] [--repeats 3] [--depth 40]
+Usage: python benchmarks/svp.py [--spp 1024] [--repeats 5] [--depth 40]
 """
 from __future__ import annotations
 
@@ -61,21 +64,33 @@ def scene_for(head, depth, chords=None):
     return mitsonar.load_scene(xml)
 
 
-def timed(scene, pose, spp, repeats, profile):
-    """(best seconds of ``repeats`` warm renders, the last scan, the Monte Carlo noise): the noise
-    is the rms difference of two renders of other seeds over the rms of their mean, on the bins
-    holding the seabed echo (its relative standard error, times sqrt 2)."""
-    first = mitsonar.render_scan(scene, spp=spp, seed=0, pose=pose, sound_speed_profile=profile)    # compiles
-    best, scan = math.inf, None
+def timed(configs, pose, spp, repeats):
+    """Per config (name -> (scene, profile)): (best seconds of ``repeats`` warm renders, the last
+    scan, the Monte Carlo noise). The configs' renders are interleaved, so that a busy machine
+    slows them alike. The noise is the rms difference of two renders of other seeds over the rms
+    of their mean, on the bins holding the seabed echo (the relative standard error times sqrt 2)."""
+    first = {k: mitsonar.render_scan(sc, spp=spp, seed=0, pose=pose, sound_speed_profile=pr)      # compiles
+             for k, (sc, pr) in configs.items()}
+    best, last = {k: math.inf for k in configs}, {}
     for r in range(repeats):
-        t0 = time.perf_counter()
-        scan = mitsonar.render_scan(scene, spp=spp, seed=r + 1, pose=pose, sound_speed_profile=profile)
-        best = min(best, time.perf_counter() - t0)
-    a, b = first.intensity.astype(float), scan.intensity.astype(float)
-    mean = 0.5 * (a + b)
-    echo = mean > 1e-2 * mean.max(axis=1, keepdims=True)
-    noise = float(np.sqrt(np.mean((a - b)[echo] ** 2)) / np.sqrt(np.mean(mean[echo] ** 2)))
-    return best, scan, noise
+        for k, (sc, pr) in configs.items():
+            t0 = time.perf_counter()
+            last[k] = mitsonar.render_scan(sc, spp=spp, seed=r + 1, pose=pose, sound_speed_profile=pr)
+            best[k] = min(best[k], time.perf_counter() - t0)
+    out = {}
+    for k in configs:
+        a, b = first[k].intensity.astype(float), last[k].intensity.astype(float)
+        mean = 0.5 * (a + b)
+        echo = mean > 1e-2 * mean.max(axis=1, keepdims=True)
+        noise = float(np.sqrt(np.mean((a - b)[echo] ** 2)) / np.sqrt(np.mean(mean[echo] ** 2)))
+        out[k] = (best[k], last[k], noise)
+    return out
+
+
+def centroids(scan):
+    w = scan.intensity.astype(float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (w * scan.ranges).sum(axis=1) / w.sum(axis=1)
 
 
 def peak_errors(scan, expected):
@@ -87,8 +102,8 @@ def peak_errors(scan, expected):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--spp", type=int, default=256)
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--spp", type=int, default=1024)
+    ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--depth", type=float, default=40.0)
     args = ap.parse_args(argv)
     head = echosounders.configure("r2sonic_2024", n_beams=256, range_max=100.0, bin_width=0.1)
@@ -96,19 +111,32 @@ def main(argv=None):
     pose[2, 3] = -HEAD
     svp = profile20()
     c_s = head.params["sound_speed"]
-    scene = scene_for(head, args.depth)
-    t_straight, scan, n_straight = timed(scene, pose, args.spp, args.repeats, None)
+    chord_counts = (1, 2, 4, 16, 64)
+    configs = {"straight": (scene_for(head, args.depth), None)}
+    configs.update({c: (scene_for(head, args.depth, c), svp) for c in chord_counts})
+    runs = timed(configs, pose, args.spp, args.repeats)
+    t_straight, scan, n_straight = runs["straight"]
     bore = scan.poses[:, :3, 2]
     ang = np.arccos(np.clip(-bore[:, 2], -1.0, 1.0))
     straight = dict(seconds=t_straight, noise=n_straight, **peak_errors(scan, (args.depth - HEAD) / np.cos(ang)))
     exact = c_s * np.array([svp.trace(HEAD, math.pi / 2 - a, to_depth=args.depth, samples=0).time[-1] for a in ang])
-    refracted = {}
-    for chords in (1, 2, 4, 16):
-        t, scan, noise = timed(scene_for(head, args.depth, chords), pose, args.spp, args.repeats, svp)
+    refracted, scans = {}, {}
+    for chords in chord_counts:
+        t, scan, noise = runs[chords]
+        scans[chords] = scan
         # variance falls as 1/spp: the time to the straight render's noise is t (noise / n_straight)^2
         refracted[str(chords)] = dict(seconds=t, noise=noise, time_ratio=t / t_straight,
                                       ratio_at_equal_noise=t / t_straight * (noise / n_straight) ** 2,
                                       **peak_errors(scan, exact))
+    # the chord approximation alone: the same seed's paths with 64 chords per window as the
+    # reference (same samples, so no Monte Carlo difference): echo centroid shift per beam
+    ref = centroids(scans[64])
+    bin_w = scans[64].ranges[1] - scans[64].ranges[0]
+    for chords, scan in scans.items():
+        shift = np.abs(centroids(scan) - ref) / bin_w
+        ok = np.isfinite(shift)
+        refracted[str(chords)].update(chord_shift_median_bins=float(np.median(shift[ok])),
+                                      chord_shift_max_bins=float(shift[ok].max()))
     print(json.dumps(dict(spp=args.spp, beams=256, depth=args.depth, head_depth=HEAD, sound_speed=c_s,
                           machine=platform.machine(), python=sys.version.split()[0], cpus=os.cpu_count(),
                           straight=straight, refracted=refracted,

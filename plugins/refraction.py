@@ -41,7 +41,7 @@ import mitsuba as mi
 #: Depth standing for "no boundary" above the first sample and below the last one (m).
 FAR = 1.0e7
 #: Secant steps of the eigenray solve (after the two starting points).
-EIGEN_STEPS = 5
+EIGEN_STEPS = 4
 #: A direct eigenray is accepted when it misses the point by at most this fraction of ``X + dz``.
 EIGEN_TOL = 2e-4
 #: Layers one time step may cross, beyond those of the profile (turns re-enter a layer).
@@ -148,16 +148,17 @@ class Refraction:
         inv_a = dr.rcp(a)
         gs = dr.select(flat, 1.0, g)
         z_turn = dr.select(down, zt, zb) + (inv_a - dr.select(down, ct, cb)) / gs
-        dx_d, dt_d = _piece(zb - z, c, sa, cb, sb, a, g)
-        dx_u, dt_u = _piece(z - zt, ct, st, c, sa, a, g)
+        # straight on: down to the bottom (z -> zb) or up to the top (zt <- z), one piece
+        dx_s, dt_s = _piece(dr.select(down, zb - z, z - zt), dr.select(down, c, ct), dr.select(down, sa, st),
+                            dr.select(down, cb, c), dr.select(down, sb, sa), a, g)
         zero = mi.Float(0.0)
         dx_a, dt_a = _piece(dr.select(down, z_turn - z, z - z_turn), dr.select(down, c, inv_a),
                             dr.select(down, sa, zero), dr.select(down, inv_a, c), dr.select(down, zero, sa), a, g)
         dx_b, dt_b = _piece(dr.select(down, z_turn - zt, zb - z_turn), dr.select(down, ct, inv_a),
                             dr.select(down, st, zero), dr.select(down, inv_a, cb), dr.select(down, zero, sb), a, g)
         straight = dr.select(down, reach_b, reach_t)
-        dx = dr.select(straight, dr.select(down, dx_d, dx_u), dx_a + dx_b)
-        dt = dr.select(straight, dr.select(down, dt_d, dt_u), dt_a + dt_b)
+        dx = dr.select(straight, dx_s, dx_a + dx_b)
+        dt = dr.select(straight, dt_s, dt_a + dt_b)
         down_exit = dr.select(straight, down, ~down)
         z_exit = dr.select(down_exit, zb, zt)
         s_exit = dr.select(down_exit, sb, -st)
@@ -186,18 +187,29 @@ class Refraction:
         z, s, down = mi.Float(z), mi.Float(s), mi.Bool(down)
         n = mi.UInt32(0)
         todo = mi.Bool(active) & (left > 0)
-        while todo:
+        done = mi.Bool(False)
+        while todo:      # whole layers (no cosh/sinh here: the rest of the step is done once, below)
             j, c, z_e, s_e, d_e, dt, dx = self._step(z, s, down, a)
             last = left <= dt
-            ddx, ddz, s2 = self._inside(j, c, s, a, left)
-            zt, zb = dr.gather(mi.Float, self.top, j), dr.gather(mi.Float, self.bot, j)
-            x += dr.select(last, ddx, dx)
-            z = dr.select(last, dr.clip(z + ddz, zt, zb), z_e)
-            down = dr.select(last, dr.select(s2 == 0, down, s2 > 0), d_e)
-            s = dr.select(last, s2, s_e)
-            left = dr.select(last, 0.0, left - dt)
+            x += dr.select(last, 0.0, dx)
+            z = dr.select(last, z, z_e)
+            s = dr.select(last, s, s_e)
+            down = dr.select(last, down, d_e)
+            left = dr.select(last, left, left - dt)
+            done |= last
             n += 1
             todo &= ~last & (n < self.max_crossings)
+        # the time left, inside the layer the ray is now in (closed form of `_inside`)
+        j = self.layer(z, down)
+        zt, zb = dr.gather(mi.Float, self.top, j), dr.gather(mi.Float, self.bot, j)
+        g = dr.gather(mi.Float, self.g, j)
+        c = dr.select(g == 0, dr.gather(mi.Float, self.ct, j), dr.gather(mi.Float, self.ct, j) + g * (z - zt))
+        ddx, ddz, s2 = self._inside(j, c, s, a, dr.select(done, left, 0.0))
+        x += dr.select(done, ddx, 0.0)
+        z = dr.select(done, dr.clip(z + ddz, zt, zb), z)
+        down = dr.select(done, dr.select(s2 == 0, down, s2 > 0), down)
+        s = dr.select(done, s2, s)
+        left = dr.select(done, 0.0, left)
         return x, z, s, down, (left == 0) | ~mi.Bool(active)
 
     # ------------------------------------------------------------------------- outgoing segments
@@ -252,9 +264,9 @@ class Refraction:
         return si, t_hit, l_hit
 
     # ----------------------------------------------------------------------------- the way back
-    def _sum(self, a, z_lo, z_hi):
+    def _sum(self, a, z_lo, z_hi, full=True):
         """Horizontal distance, time and arc length of the direct ray of invariant ``a`` between
-        depths ``z_lo < z_hi`` (layers unrolled)."""
+        depths ``z_lo < z_hi`` (layers unrolled); the distance alone unless ``full``."""
         X, T, L = mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)
         for top, bot, ct, g in self.layers:
             za = dr.maximum(z_lo, top)
@@ -263,6 +275,9 @@ class Refraction:
             c1 = ct + g * (za - top) if g else mi.Float(ct)
             c2 = ct + g * (zb - top) if g else mi.Float(ct)
             s1, s2 = _sin_at(a, c1), _sin_at(a, c2)
+            if not full:     # dx = a dz (c1 + c2) / (s1 + s2), `_piece`'s first half
+                X += dr.select(dz <= 0, 0.0, a * dz * (c1 + c2) / (s1 + s2))
+                continue
             dx, dt = _piece(dz, c1, s1, c2, s2, a, g)
             X += dx
             T += dt
@@ -294,15 +309,15 @@ class Refraction:
         def at(q):
             cos_m = dr.select(steep, q * dr.rsqrt(1.0 + q * q), dr.safe_sqrt((1.0 - q) * (1.0 + q)))
             a = cos_m / c_max
-            Xs, Ts, Ls = self._sum(a, z_lo, z_hi)
-            return a, Xs, Ts, Ls, dr.select(steep, Xs - X, dr.rcp(dr.maximum(Xs, 1e-30)) - inv_X)
+            Xs = self._sum(a, z_lo, z_hi, full=False)[0]
+            return a, Xs, dr.select(steep, Xs - X, dr.rcp(dr.maximum(Xs, 1e-30)) - inv_X)
 
         q0 = dr.select(steep, X / dr.maximum(dz, 1e-30), 0.0)
-        a0, X0, T0, L0, F0 = at(q0)
+        a0, X0, F0 = at(q0)
         q1 = dr.select(steep, q0 * X / dr.maximum(X0, 1e-30),
                        dr.minimum(dz * dr.rsqrt(dr.square(X) + dr.square(dz)), 1.0 - 1e-7))
         q1 = dr.select(dr.isfinite(q1), q1, q0)
-        a1, X1, T1, L1, F1 = at(q1)
+        a1, X1, F1 = at(q1)
         top = dr.select(steep, dr.inf, 1.0 - 1e-7)
         for _ in range(EIGEN_STEPS):
             den = F1 - F0
@@ -310,7 +325,8 @@ class Refraction:
             q2 = dr.select(dr.isfinite(q2) & (den != 0), dr.clip(q2, 0.0, top), q1)
             q0, F0 = q1, F1
             q1 = q2
-            a1, X1, T1, L1, F1 = at(q1)
+            a1, X1, F1 = at(q1)
+        X1, T1, L1 = self._sum(a1, z_lo, z_hi)
         vertical = X <= 1e-6 * (dz + 1.0)        # straight down or up: a = 0
         a_v, X_v, T_v, L_v = (mi.Float(0.0),) + self._sum(mi.Float(0.0), z_lo, z_hi)
         a1, X1, T1, L1 = (dr.select(vertical, u, v) for u, v in ((a_v, a1), (X_v, X1), (T_v, T1), (L_v, L1)))
