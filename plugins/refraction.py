@@ -132,9 +132,12 @@ class Refraction:
             j += mi.UInt32(dr.select(down, z >= d, z > d))
         return j
 
-    def _step(self, z, s, down, a):
-        """One layer traversal from ``(z, s)``: ``j, z_exit, s_exit, down_exit, dt, dx``."""
-        j = self.layer(z, down)
+    def _step(self, z, s, down, a, j=None):
+        """One layer traversal from ``(z, s)`` in layer ``j`` (default `layer`): ``j, c, z_exit,
+        s_exit, down_exit, dt, dx`` (``c`` the speed at ``z``; the next layer is ``j + 1`` where
+        ``down_exit``, else ``j - 1``)."""
+        if j is None:
+            j = self.layer(z, down)
         zt, zb = dr.gather(mi.Float, self.top, j), dr.gather(mi.Float, self.bot, j)
         ct, g = dr.gather(mi.Float, self.ct, j), dr.gather(mi.Float, self.g, j)
         cb = ct + g * (zb - zt)
@@ -145,20 +148,19 @@ class Refraction:
         flat = (g == 0) | (a == 0)
         reach_b = flat | (a * cb <= 1.0)
         reach_t = flat | (a * ct <= 1.0)
-        inv_a = dr.rcp(a)
-        gs = dr.select(flat, 1.0, g)
-        z_turn = dr.select(down, zt, zb) + (inv_a - dr.select(down, ct, cb)) / gs
         # straight on: down to the bottom (z -> zb) or up to the top (zt <- z), one piece
         dx_s, dt_s = _piece(dr.select(down, zb - z, z - zt), dr.select(down, c, ct), dr.select(down, sa, st),
                             dr.select(down, cb, c), dr.select(down, sb, sa), a, g)
-        zero = mi.Float(0.0)
-        dx_a, dt_a = _piece(dr.select(down, z_turn - z, z - z_turn), dr.select(down, c, inv_a),
-                            dr.select(down, sa, zero), dr.select(down, inv_a, c), dr.select(down, zero, sa), a, g)
-        dx_b, dt_b = _piece(dr.select(down, z_turn - zt, zb - z_turn), dr.select(down, ct, inv_a),
-                            dr.select(down, st, zero), dr.select(down, inv_a, cb), dr.select(down, zero, sb), a, g)
+        # a turn, out through the side it came in by with sine s_far: w = atanh(sin) falls at the
+        # rate g from atanh(s) to atanh(-s_far), dx = (s1 - s2) / (a g) (no cancellation: the two
+        # sines have opposite signs)
+        s_far = dr.select(down, st, sb)
+        inv_ag = dr.rcp(a * dr.abs(dr.select(flat, 1.0, g)))
+        dx_t = (sa + s_far) * inv_ag
+        dt_t = (dr.atanh(dr.minimum(sa, 1.0 - 1e-7)) + dr.atanh(s_far)) * a * inv_ag
         straight = dr.select(down, reach_b, reach_t)
-        dx = dr.select(straight, dx_s, dx_a + dx_b)
-        dt = dr.select(straight, dt_s, dt_a + dt_b)
+        dx = dr.select(straight, dx_s, dx_t)
+        dt = dr.select(straight, dt_s, dt_t)
         down_exit = dr.select(straight, down, ~down)
         z_exit = dr.select(down_exit, zb, zt)
         s_exit = dr.select(down_exit, sb, -st)
@@ -180,17 +182,20 @@ class Refraction:
 
     @dr.syntax
     def advance(self, z, s, down, a, tau, active=True):
-        """The ray state ``tau`` seconds later: ``(dx, z, s, down, ok)`` (``dx`` horizontal distance
-        gone); ``ok`` False where it crossed more layers than a ray can (a channel axis)."""
+        """The ray state ``tau`` seconds later: ``(dx, z, s, down, ok, c)`` (``dx`` horizontal
+        distance gone, ``c`` the speed there); ``ok`` False where it crossed more layers than a
+        ray can (a channel axis)."""
         x = mi.Float(0.0)
         left = mi.Float(tau)
         z, s, down = mi.Float(z), mi.Float(s), mi.Bool(down)
         n = mi.UInt32(0)
         todo = mi.Bool(active) & (left > 0)
         done = mi.Bool(False)
+        j = self.layer(z, down)
         while todo:      # whole layers (no cosh/sinh here: the rest of the step is done once, below)
-            j, c, z_e, s_e, d_e, dt, dx = self._step(z, s, down, a)
+            j, c, z_e, s_e, d_e, dt, dx = self._step(z, s, down, a, j)
             last = left <= dt
+            j = dr.select(last, j, dr.select(d_e, j + 1, j - 1))
             x += dr.select(last, 0.0, dx)
             z = dr.select(last, z, z_e)
             s = dr.select(last, s, s_e)
@@ -200,7 +205,6 @@ class Refraction:
             n += 1
             todo &= ~last & (n < self.max_crossings)
         # the time left, inside the layer the ray is now in (closed form of `_inside`)
-        j = self.layer(z, down)
         zt, zb = dr.gather(mi.Float, self.top, j), dr.gather(mi.Float, self.bot, j)
         g = dr.gather(mi.Float, self.g, j)
         c = dr.select(g == 0, dr.gather(mi.Float, self.ct, j), dr.gather(mi.Float, self.ct, j) + g * (z - zt))
@@ -210,7 +214,8 @@ class Refraction:
         down = dr.select(done, dr.select(s2 == 0, down, s2 > 0), down)
         s = dr.select(done, s2, s)
         left = dr.select(done, 0.0, left)
-        return x, z, s, down, (left == 0) | ~mi.Bool(active)
+        c_end = dr.select(done, c + g * ddz, c)
+        return x, z, s, down, (left == 0) | ~mi.Bool(active), c_end
 
     # ------------------------------------------------------------------------- outgoing segments
     @dr.syntax
@@ -222,8 +227,8 @@ class Refraction:
         h = dr.select(horiz > 0, mi.Vector3f(d.x, d.y, 0.0) / dr.maximum(horiz, 1e-30), mi.Vector3f(1.0, 0.0, 0.0))
         z = -p.z
         s = -d.z
-        c0 = self.speed(z)
-        a = horiz / c0
+        c1 = self.speed(z)
+        a = horiz / c1
         down = s >= 0
         x = mi.Float(0.0)
         t = mi.Float(0.0)
@@ -235,7 +240,7 @@ class Refraction:
         active = mi.Bool(active)
         while active:
             tau = dr.minimum(self.dt, t_budget - t)
-            dx, z2, s2, down2, ok = self.advance(z, s, down, a, tau, active)
+            dx, z2, s2, down2, ok, c2 = self.advance(z, s, down, a, tau, active)
             x2 = x + dx
             end = mi.Point3f(p.x + h.x * x2, p.y + h.y * x2, -z2)
             chord = end - start
@@ -245,7 +250,7 @@ class Refraction:
             pi = scene.ray_intersect_preliminary(ray, active & ok & (L > 0))
             hit = pi.is_valid() & active
             f = dr.clip(pi.t / dr.maximum(L, 1e-30), 0.0, 1.0)
-            r = self.speed(z2) / self.speed(z) - 1.0
+            r = c2 / c1 - 1.0
             frac = f * _log1p_over(r * f) / _log1p_over(r)
             hit_o = dr.select(hit, start, hit_o)
             hit_d = dr.select(hit, ray.d, hit_d)
@@ -253,7 +258,7 @@ class Refraction:
             t_hit = dr.select(hit, t + tau * frac, t_hit)
             l_hit = dr.select(hit, length + pi.t, l_hit)
             found |= hit
-            x, z, s, down = x2, z2, s2, down2
+            x, z, s, down, c1 = x2, z2, s2, down2, c2
             t += tau
             length += L
             start = mi.Point3f(end)
@@ -361,7 +366,7 @@ class Refraction:
         while active:
             tau = dr.minimum(self.dt, t_total - t)
             final = t + tau >= t_total
-            dx, z2, s2, down2, ok = self.advance(z, s, down, a, tau, active & ~final)
+            dx, z2, s2, down2, ok, _ = self.advance(z, s, down, a, tau, active & ~final)
             x2 = x + dx
             end = dr.select(final, p, mi.Point3f(o.x + h.x * x2, o.y + h.y * x2, -z2))
             chord = end - start
