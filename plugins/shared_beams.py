@@ -38,6 +38,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+import mitsonar.geometry.kinds as kinds
+
 from .range_bins import RangeBins
 from .sonar_sensor import PingFrames
 
@@ -60,8 +62,9 @@ def window(sensor):
     """(W radians, m beams either side of the nearest) of ``sensor``'s receive beams, or a
     ValueError naming ``share_beams`` when sharing cannot apply to this head."""
     beam = sensor.beam
-    if sensor.kind != "multibeam":
-        raise ValueError(f"sonar_tof 'share_beams': only for a sensor of kind 'multibeam' (kind is {sensor.kind!r})")
+    if not sensor.sonar_kind.transmit_fan:
+        raise ValueError(f"sonar_tof 'share_beams': only for a sensor of kind {kinds.which('transmit_fan')} "
+                         f"(kind is {sensor.kind!r})")
     if beam.kind == "sinc":
         raise ValueError("sonar_tof 'share_beams': a 'sinc' receive beam has side lobes over the whole half-space; "
                          "use beam_pattern 'gaussian', 'uniform' or 'table', or share_beams false")

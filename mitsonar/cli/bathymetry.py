@@ -43,6 +43,7 @@ def plot_bathymetry(result, grid, path, trajectory=None):
     seabed at the survey's median altitude."""
     from matplotlib.figure import Figure
 
+    from mitsonar.geometry import kinds
     from mitsonar.products.bathymetry import predicted_rms
     from mitsonar.products.plots import _save
 
@@ -67,7 +68,8 @@ def plot_bathymetry(result, grid, path, trajectory=None):
         bx.plot(ang, [100 * r["mean"] for r in rows], "s--", color="C0", ms=3, label="mean (bias)")
         altitude = float(np.nanmedian(s["head_z"] - result.true_z))
         a = np.linspace(ang.min(), ang.max(), 200)
-        if info.get("speckle") and info.get("method") == "centroid" and info.get("kind") == "multibeam":
+        fan = getattr(kinds.lookup(info.get("kind")), "transmit_fan", False)    # receive beams across a fan
+        if info.get("speckle") and info.get("method") == "centroid" and fan:
             pred = predicted_rms(altitude / np.cos(np.radians(a)), a, info["beamwidth_h"], info["bin_width"],
                                  resolution=info.get("speckle_resolution"))
             bx.plot(a, 100 * pred, "k:", label=f"predicted rms (flat, {altitude:.1f} m)")

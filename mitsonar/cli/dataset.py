@@ -28,9 +28,10 @@ def add_subcommands(sub):
     d.add_argument("--workers", type=int, default=None, help="worker processes or Ray actors (default: the cores)")
     d.add_argument("--threads", type=int, default=None, help="render threads per worker (default: cores / workers)")
     d.add_argument("--address", default=None, metavar="RAY_ADDRESS",
-                   help="run on this Ray cluster (e.g. ray://head:10001 or auto; needs mitsonar[cluster])")
+                   help="run on this Ray cluster: HEAD:PORT of `ray start --head --port PORT` (from a node of the "
+                        "cluster), auto, or ray://HEAD:10001 (needs ray[client]); needs mitsonar[cluster]")
     d.add_argument("--engine", choices=("auto", "ray", "local"), default="auto",
                    help="ray: Ray actors (ray.init() on this machine unless --address); local: spawned processes; "
-                        "auto (default): Ray when --address is given or Ray is installed, else local")
+                        "auto (default): Ray when --address is given, else local processes")
     d.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     d.set_defaults(func=cmd_dataset)

@@ -12,6 +12,7 @@ import sys
 import time
 
 from mitsonar import _files
+from mitsonar.geometry import kinds
 
 EXIT_USAGE = 2
 EXIT_ERROR = 1
@@ -91,9 +92,9 @@ def _render(scene_path, spp, seed, max_depth=None, electronics=None, quiet=False
     return scene, scan, truth
 
 
-#: The pictures that make sense for each sonar kind; the first is the default.
-PLOT_KINDS = {"mechanical": ("polar", "cartesian", "ascan"), "multibeam": ("polar", "cartesian", "ascan"),
-              "sidescan": ("waterfall", "ascan")}
+#: The pictures that make sense for each sonar kind; the first is the default (a live view of the
+#: kinds' ``plot_kinds``, `mitsonar.geometry.kinds`).
+PLOT_KINDS = kinds.by_name("plot_kinds")
 ALL_PLOT_KINDS = ("polar", "cartesian", "ascan", "waterfall")
 
 
@@ -101,7 +102,8 @@ def plot_kind(sonar_kind, kind=None):
     """The picture kind for a scan of ``sonar_kind``: ``kind``, or the kind's default (polar, or
     waterfall for a side-scan); one line naming the allowed kinds for a kind that means nothing for
     it (a side-scan's rows are not bearings: no polar or cartesian fan)."""
-    allowed = PLOT_KINDS.get(sonar_kind, ALL_PLOT_KINDS[:3])
+    known = kinds.lookup(sonar_kind)
+    allowed = ALL_PLOT_KINDS[:3] if known is None else known.plot_kinds
     if kind is None:
         return allowed[0]
     if kind not in allowed:
@@ -280,7 +282,7 @@ def cmd_demo(args):
         ascan = os.path.join(args.output, f"{name}_ascan.png")
         _plot(scan, polar, "polar")
         _plot(scan, cart, "cartesian", mesh=mesh)
-        _plot(scan, ascan, "ascan", ping=scan.n_pings // 2 if scan.kind == "multibeam" else 0)  # the fan's centre row
+        _plot(scan, ascan, "ascan", ping=scan.sonar_kind.ascan_row(scan.n_pings))  # a fan's centre row
         print(f"{name}: wrote {exr}, {polar}, {cart}, {ascan}")
     from mitsonar.cli.survey import demo_survey  # a survey scene with both heads along its track
     print(f"harbour survey: wrote {', '.join(demo_survey(scenes, args.output, args.spp, args.seed, args.quiet))}")

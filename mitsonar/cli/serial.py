@@ -2,6 +2,8 @@
 
 Two heads: a Tritech Micron (SeaNet, the default) and a Blue Robotics Ping360 (``--head
 ping360``: ping-protocol over a serial line or UDP). ``replay`` reads the head from the log.
+Which head does what is asked of `mitsonar.devices.registry` (``--head`` offers its names): this
+module knows no head by name.
 
 The main CLI calls `add_subcommands(subparsers)`; each subcommand sets ``func(args) -> int``.
 Every failure ends in one line on stderr and a non-zero exit code, never a traceback:
@@ -97,48 +99,19 @@ def _check_output(path, suffixes: tuple = ()) -> Path:
     return out
 
 
-_MICRON_ONLY = (("passive", "--passive"), ("no_reboot", "--no-reboot"), ("bit_depth", "--bit-depth"),
-                ("no_dst", "--no-dst"))
-_PING360_ONLY = (("gain", "--gain"), ("frequency", "--frequency"), ("transmit_duration", "--transmit-duration"))
-
-
-def _check_head_options(args) -> None:
-    """Options of the other head are refused in one line, not ignored."""
-    micron = getattr(args, "head", "micron") == "micron"
-    for dest, flag in (_PING360_ONLY if micron else _MICRON_ONLY):
-        if getattr(args, dest, None) not in (None, False):
-            raise ValueError(f"{flag} is for --head {'ping360' if micron else 'micron'}, not {args.head}")
-
-
-def _ping360_settings(args):
-    from mitsonar.devices.ping360.head import GAIN_PRESETS, Ping360Settings
-    kw = {}
-    for dest, name in (("range", "range"), ("n_bins", "number_of_samples"), ("sound_speed", "sound_speed"),
-                       ("step", "step"), ("frequency", "transmit_frequency"),
-                       ("transmit_duration", "transmit_duration")):
-        if getattr(args, dest, None) is not None:
-            kw[name] = getattr(args, dest)
-    if getattr(args, "gain", None) is not None:
-        kw["gain_setting"] = GAIN_PRESETS[args.gain]
-    return Ping360Settings(**kw)
-
-
-def _settings(args):
-    if getattr(args, "head", "micron") == "ping360":
-        return _ping360_settings(args)
-    from mitsonar.devices.micron.seanet.settings import HeadSettings
-    kw = {}
-    if getattr(args, "range", None) is not None:
-        kw["range"] = args.range
-    if getattr(args, "n_bins", None) is not None:
-        kw["n_bins"] = args.n_bins
-    if getattr(args, "sound_speed", None) is not None:
-        kw["sound_speed"] = args.sound_speed
-    if getattr(args, "step", None) is not None:
-        kw["step_size"] = args.step
-    if getattr(args, "bit_depth", None) is not None:
-        kw["bit_depth"] = args.bit_depth
-    return HeadSettings(**kw)
+def _head(args):
+    """The head of ``--head`` (`mitsonar.devices.registry`), once the options only other heads
+    take are refused in one line, not ignored. Fills in the head's default baud rate."""
+    from mitsonar.devices import registry
+    head = registry.get(getattr(args, "head", registry.DEFAULT))
+    own = {dest for dest, _ in head.options}
+    for other in registry.heads():
+        for dest, flag in () if other is head else other.options:
+            if dest not in own and getattr(args, dest, None) not in (None, False):
+                raise ValueError(f"{flag} is for --head {other.name}, not {head.name}")
+    if getattr(args, "baud", 0) is None:
+        args.baud = head.baudrate
+    return head
 
 
 # ---- virtual-sonar ----
@@ -147,7 +120,7 @@ def _virtual_sonar(args) -> int:
     scene_path = Path(args.scene)
     if not scene_path.is_file():
         raise FileNotFoundError(f"scene file not found: {scene_path}")
-    _check_head_options(args)
+    head = _head(args)
     import mitsonar
     from mitsonar.cli.common import check_counts, sensor_of
     from mitsonar.devices.transports import check_port
@@ -158,30 +131,14 @@ def _virtual_sonar(args) -> int:
     scene = mitsonar.load_scene(str(scene_path))
     sensor = sensor_of(scene, args)      # --sensor, or the first sonar (one warning if several)
     # Refuse before the render, not after it: a multibeam scene can take a while to render.
-    what = "no Ping360 pings to serve" if args.head == "ping360" else "no SeaNet scanlines to serve"
-    require_mechanical(sensor, f"virtual-sonar {scene_path.name}", what)
+    require_mechanical(sensor, f"virtual-sonar {scene_path.name}", f"no {head.serves} to serve")
     kw = {"seed": args.seed, "sensor": sensor}
     if args.spp is not None:
         kw["spp"] = args.spp
     scan = mitsonar.render_scan(scene, **kw)
     print(f"rendered {scene_path.name}: {scan.n_pings} pings x {scan.n_bins} bins, "
           f"{scan.range_min:g}..{scan.range_max:g} m", flush=True)
-    if args.head == "ping360":
-        return _virtual_ping360(args, scan)
-    from mitsonar.devices.micron.virtual import serve
-    return serve(scan, args.port_url, args.seconds, baudrate=args.baud, realtime=not args.fast,
-                 dst=not args.no_dst)
-
-
-def _virtual_ping360(args, scan) -> int:
-    import math
-
-    from mitsonar.devices.ping360.virtual import serve
-    step = abs(math.degrees(float(scan.bearings[1] - scan.bearings[0]))) if scan.n_pings > 1 else 0.0
-    if abs(step - 0.9) > 1e-9:
-        print(f"a Ping360 pings every 0.9 deg; the scene's {scan.n_pings} pings are {step:g} deg apart: "
-              f"each angle gets the nearest rendered bearing's ping within half a step, others zeros", flush=True)
-    return serve(scan, args.port_url, args.seconds, baudrate=args.baud, realtime=not args.fast)
+    return head.serve(scan, args)
 
 
 def cmd_virtual_sonar(args) -> int:
@@ -195,29 +152,15 @@ def cmd_virtual_sonar(args) -> int:
 def _record(args) -> int:
     from mitsonar.cli.common import warn_overwrite
     _check_output(args.output)
-    _check_head_options(args)
-    settings = _settings(args)
+    head = _head(args)
+    settings = head.settings(args)
     warn_overwrite([args.output], args.force)
-    if args.head == "ping360":
-        from mitsonar.devices.ping360.driver import record as record_ping360
-        stats = record_ping360(args.port, args.output, args.seconds, scans=args.scans, pings=args.pings,
-                               baudrate=args.baud, settings=settings, timeout=args.timeout)
-        return _recorded(args, stats)
-    from mitsonar.devices.micron.driver import record
-    if args.passive:
-        stats = record(args.port, args.output, args.seconds, baudrate=args.baud, settings=settings,
-                       passive=True)
-    else:
-        stats = record(args.port, args.output, args.seconds, scans=args.scans, pings=args.pings,
-                       baudrate=args.baud, settings=settings, reboot=not args.no_reboot,
-                       timeout=args.timeout, boot_timeout=args.timeout)
-    return _recorded(args, stats)
+    return _recorded(args, head.record(args, settings), head.ping_word)
 
 
-def _recorded(args, stats: dict) -> int:
+def _recorded(args, stats: dict, what: str) -> int:
     dropped = stats.get("bytes_dropped", 0)
     note = f"; {dropped} bytes in formed no whole packet (the log keeps them)" if dropped else ""
-    what = "pings" if args.head == "ping360" else "scanlines"
     print(f"recorded {stats['bytes_rx']} bytes in, {stats['bytes_tx']} out "
           f"({stats['pings']} {what}{note}) to {args.output}")
     return 0
@@ -278,7 +221,9 @@ def cmd_replay(args) -> int:
 # ---- registration ----
 
 def add_subcommands(subparsers) -> None:
-    """Add ``virtual-sonar``, ``record`` and ``replay`` to an argparse subparsers object."""
+    """Add ``virtual-sonar``, ``record`` and ``replay`` to an argparse subparsers object
+    (``--head`` offers the heads of `mitsonar.devices.registry` at this moment)."""
+    from mitsonar.devices import registry
     p = subparsers.add_parser(
         "virtual-sonar", help="serve a rendered scene as a Tritech Micron or a Ping360 on a pseudo-terminal",
         description="Render SCENE.xml once and answer the SeaNet protocol with its scan, like a "
@@ -286,7 +231,7 @@ def add_subcommands(subparsers) -> None:
                     "Ping360, on a pseudo-terminal or udp://127.0.0.1:PORT). Prints the port to "
                     "open (e.g. with `mitsonar record`), then serves until Ctrl-C.")
     p.add_argument("scene", metavar="SCENE.xml", help="Mitsuba scene with a `sonar` sensor")
-    p.add_argument("--head", choices=("micron", "ping360"), default="micron",
+    p.add_argument("--head", choices=registry.names(), default=registry.DEFAULT,
                    help="which head to be: a Tritech Micron (SeaNet, default) or a Blue Robotics "
                         "Ping360 (ping-protocol; prints 'virtual Ping360 on PORT')")
     p.add_argument("--port-url", default=None, metavar="URL",
@@ -295,7 +240,8 @@ def add_subcommands(subparsers) -> None:
                         "over UDP, loopback only), or a pyserial URL/device to sit on")
     p.add_argument("--spp", type=_positive(int), default=None, help="paths per ping (render_scan's default)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the render (default 0)")
-    p.add_argument("--baud", type=_positive(int), default=115200, help="baud rate of the timing model")
+    p.add_argument("--baud", type=_positive(int), default=None,
+                   help="baud rate of the timing model (default the head's, 115200)")
     p.add_argument("--fast", action="store_true", help="answer at once (no timing model)")
     p.add_argument("--no-dst", action="store_true", help="behave as a pre-DST Micron (--head micron)")
     p.add_argument("--seconds", type=_positive(float), default=None, help="stop after T seconds")
@@ -313,12 +259,12 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("port", metavar="PORT", help="serial device or pyserial URL (socket://HOST:PORT, ...); "
                                                 "a Ping360 also udp://HOST:PORT")
     p.add_argument("-o", "--output", required=True, metavar="LOG", help="raw log to write")
-    p.add_argument("--head", choices=("micron", "ping360"), default="micron",
+    p.add_argument("--head", choices=registry.names(), default=registry.DEFAULT,
                    help="the head on PORT: Tritech Micron (default) or Blue Robotics Ping360")
     p.add_argument("--seconds", type=_positive(float), default=None, help="stop after T seconds")
     p.add_argument("--scans", type=_positive(int), default=None, help="stop after N complete scans")
     p.add_argument("--pings", type=_positive(int), default=None, help="stop after N scanlines")
-    p.add_argument("--baud", type=_positive(int), default=115200)
+    p.add_argument("--baud", type=_positive(int), default=None, help="default the head's (115200)")
     p.add_argument("--passive", action="store_true", help="only listen (needs --seconds)")
     p.add_argument("--no-reboot", action="store_true", help="attach to a running head without mtReBoot")
     p.add_argument("--timeout", type=_positive(float), default=30.0, metavar="S",

@@ -122,10 +122,10 @@ def _draw(args, scene, traj, out, scans, bag, mosaic=None):
     for scan in scans:
         if bag is not None:
             bag.add(scan, SCAN_NAME.format(n, "." + args.format))
-        if n == 0 and scan.kind == "mechanical":
+        if n == 0 and scan.sonar_kind.world_picture:
             plots.plot_cartesian(scan, mesh=mesh,
                                  path=os.path.join(out, SCAN_NAME.format(0, "_world.png")))
-        if scan.kind == "sidescan":
+        if scan.sonar_kind.mosaic:
             mosaic = _sidescan_products(scan, n, traj, out, mosaic)
         positions.append(scan)
         n += 1
@@ -157,7 +157,7 @@ def _mosaic_grid(scene, traj, sensor=0):
     from mitsonar.sim.scene import sonar_of
 
     sonar = sonar_of(scene, sensor)
-    if sonar.kind != "sidescan":
+    if not sonar.sonar_kind.mosaic:
         return None
     p, r = traj.positions, float(sonar.range_max)
     bounds = (p[:, 0].min() - r, p[:, 0].max() + r, p[:, 1].min() - r, p[:, 1].max() + r)

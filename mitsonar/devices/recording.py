@@ -1,11 +1,11 @@
-"""Recording and replaying a head's raw byte stream: `replay`, and the passive part of recording.
+"""Recording and replaying a head's raw byte stream: the parts every head shares.
 
-`mitsonar.devices.micron.driver.record` and `mitsonar.devices.ping360.driver.record` drive a head and log every byte
-(`mitsonar.devices.rawlog` format; the header's ``head`` says which: ``ping360``, else a SeaNet head); a
-passive recording (`record_passive`: a tap on the head's transmit line) needs no driver and
-lives here. `replay` turns a log back into the scans the driver returned while recording,
-with the same assembler and the same rule for usable pings (`ping_problem`: a Micron's
-`ScanAssembler`, a Ping360's `Ping360Assembler`). This module does not import the drivers.
+A head's driver records (`record_driven`: log every byte while driving it; `finish_recording`:
+keep or remove the log) in the `mitsonar.devices.rawlog` format, whose header's ``head`` says
+which head wrote it (`mitsonar.devices.head.Head.log_tag`). `replay` turns a log back into
+the scans the driver returned while recording: the head that wrote it
+(`mitsonar.devices.registry.for_log`) replays its records, through `assemble_log` with its own
+codec, assembler and rule for usable pings. This module knows no head and imports no driver.
 """
 from __future__ import annotations
 
@@ -15,19 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from mitsonar.devices.micron.assembler import ScanAssembler, check_pose
-from mitsonar.devices.ping360.head import LIMITS as PING360_LIMITS, Ping360Assembler, Ping360Settings
-from mitsonar.devices.ping360.head import ping_problem as ping360_problem
-from mitsonar.devices.ping360.protocol import StreamParser as PingStreamParser, ids as ping_ids
 from mitsonar.devices.rawlog import POSE, RX, TX, LogDamageWarning, RawLogWriter, read_log
+from mitsonar.devices.registry import for_log
+from mitsonar.devices.micron.seanet.settings import SOUND_SPEED_ALLOWED, sound_speed_ok
+from mitsonar.devices.transports import SonarError, SonarTimeout
+from mitsonar.geometry.frames import check_rigid
 from mitsonar.scan import Scan
-from mitsonar.devices.micron.seanet.constants import DEFAULT_NIBBLE_ORDER
-from mitsonar.devices.micron.seanet.messages import HeadCommand, HeadData
-from mitsonar.devices.micron.seanet.settings import SOUND_SPEED_ALLOWED, HeadSettings, ping_problem, sound_speed_ok
-from mitsonar.devices.micron.seanet.stream import StreamParser
-from mitsonar.devices.transports import SonarError, SonarTimeout, open_serial
 
-__all__ = ["replay", "record_passive", "record_driven", "finish_recording"]
+__all__ = ["replay", "record_driven", "finish_recording", "assemble_log", "check_pose"]
 
 
 def finish_recording(log: RawLogWriter, port, started: float, packets: int,
@@ -105,48 +100,9 @@ def record_driven(sonar, path, seconds: float | None, scans: int | None, pings: 
     return out
 
 
-def record_passive(port, path, seconds: float, *, baudrate: int = 115200,
-                   settings: HeadSettings | None = None, pose=None) -> dict:
-    """Listen on ``port`` for ``seconds`` (or until Ctrl-C) and log every byte received.
-
-    For a tap on the head's transmit line: nothing is sent. ``settings`` and ``pose`` are
-    stored in the log's header for `replay`. The log is written under a temporary name and
-    renamed at the end (`finish_recording`: removed if no packet arrived). Returns
-    ``{"bytes_rx", "bytes_tx", "pings", "scans"}`` (only ``bytes_rx`` counts here).
-    """
-    settings = settings or HeadSettings()
-    out = {"bytes_rx": 0, "bytes_tx": 0, "pings": 0, "scans": 0}
-    meta = {"format": "mitsonar seanet raw log", "port": str(port), "baudrate": baudrate,
-            "sound_speed": settings.sound_speed, "nibble_order": DEFAULT_NIBBLE_ORDER,
-            "settings": settings.as_dict(), "pose": check_pose(pose).tolist(), "passive": True}
-    ser = open_serial(port, baudrate, timeout=0.1)
-    parser = StreamParser()      # only counts packets: the log keeps the bytes as they came
-    error = None
-    try:
-        log = RawLogWriter(path, meta, temporary=True)
-    except BaseException:
-        ser.close()
-        raise
-    started = time.monotonic()
-    end = started + seconds
-    try:
-        while time.monotonic() < end:
-            try:
-                data = ser.read(max(1, ser.in_waiting))
-            except Exception as e:
-                raise SonarError(f"{port}: read failed: {e}") from None
-            log.rx(data)
-            parser.feed(data)
-    except KeyboardInterrupt:
-        pass
-    except BaseException as e:      # noqa: BLE001 - finish_recording re-raises it
-        error = e
-    finally:
-        ser.close()
-    parser.flush()
-    out["bytes_rx"] = log.bytes_rx
-    finish_recording(log, port, started, parser.packets, error)
-    return out
+def check_pose(pose) -> np.ndarray:
+    """A head mounting as a float64 4x4 (identity for None); ValueError unless rigid and finite."""
+    return np.eye(4) if pose is None else check_rigid(np.array(pose, dtype=np.float64), "pose")
 
 
 def replay(path, *, sound_speed: float | None = None, pose=None, nibble_order: str | None = None,
@@ -169,45 +125,29 @@ def replay(path, *, sound_speed: float | None = None, pose=None, nibble_order: s
     the driver does), so a log recorded with ``record(..., scans=k)`` replays into the same
     scans the driver returned. A Ping360 log (``head: ping360``; ``nibble_order``, ``revisit``
     and ``max_turns`` do not apply) counts each ``device_data`` that answers the last
-    ``transducer`` sent, as `mitsonar.devices.ping360.driver.Ping360Sonar` does.
+    ``transducer`` sent, as `mitsonar.devices.ping360.driver.Ping360Sonar` does. The head is the
+    one whose `mitsonar.devices.head.Head.log_tag` the header holds (ValueError naming the
+    known heads if none does); its `~mitsonar.devices.head.Head.replay` does the rest.
     """
     if sound_speed is not None and not sound_speed_ok(sound_speed):
         raise ValueError(f"replay: sound_speed = {sound_speed!r} is out of range: allowed {SOUND_SPEED_ALLOWED}")
     meta, records = read_log(path)
-    if meta.get("head") == "ping360":
-        return _replay_ping360(path, meta, records, sound_speed, pose, partial)
-    c = sound_speed or meta.get("sound_speed") or 1500.0
-    if not sound_speed_ok(c):
-        raise ValueError(f"{path}: the log's sound_speed = {c!r} is out of range: allowed "
-                         f"{SOUND_SPEED_ALLOWED} (pass sound_speed)")
-    c = float(c)
-    nib = nibble_order or meta.get("nibble_order") or DEFAULT_NIBBLE_ORDER
+    options = {k: v for k, v in (("nibble_order", nibble_order), ("revisit", revisit), ("max_turns", max_turns))
+               if v is not None}
+    return for_log(meta, path).replay(path, meta, records, sound_speed=sound_speed, pose=pose, partial=partial,
+                                      **options)
+
+
+def assemble_log(path, meta: dict, records: list, asm, rx, tx, is_command, usable, pose, partial: bool,
+                 what: str, once: bool = False) -> list[Scan]:
+    """The scans the driver assembled (``asm``) while it recorded ``records`` (`read_log` of
+    ``path``, header ``meta``): what the head sent (``rx`` parser) counts when
+    ``usable(message, command)`` holds for the last message sent to it that ``is_command``
+    (``tx`` parser); ``once``: one reply per command, as the Ping360 driver takes it. ``pose``
+    (4x4) for every ping, else the log's pose records and header; ``LogDamageWarning`` for bytes
+    that form no ``what``."""
     fixed_pose = pose is not None
     T = check_pose(pose if fixed_pose else meta.get("pose"))
-    settings = None
-    if isinstance(meta.get("settings"), dict):
-        try:
-            settings = HeadSettings(**meta["settings"])
-        except (TypeError, ValueError):
-            settings = None
-    if settings is not None and sound_speed is not None:
-        settings = None    # a different sound speed changes the range window: no snapping
-    asm = ScanAssembler(c, revisit=meta.get("revisit", True) if revisit is None else revisit,
-                        max_turns=int(meta.get("max_turns", 3) if max_turns is None else max_turns),
-                        settings=settings)
-    return _assemble(path, meta, records, asm, StreamParser(nibble_order=nib), StreamParser(nibble_order=nib),
-                     lambda m: isinstance(m, HeadCommand),
-                     lambda m, c: isinstance(m, HeadData) and ping_problem(m, c) is None,
-                     T, fixed_pose, partial, "SeaNet packet")
-
-
-def _assemble(path, meta: dict, records: list, asm, rx, tx, is_command, usable, T, fixed_pose: bool,
-              partial: bool, what: str, once: bool = False) -> list[Scan]:
-    """The scans the driver assembled while it recorded ``records``: what the head sent (``rx``
-    parser) counts when ``usable(message, command)`` holds for the last message sent to it that
-    ``is_command`` (``tx`` parser); ``once``: one reply per command, as the Ping360 driver takes
-    it. Poses from the log unless ``fixed_pose``; ``LogDamageWarning`` for bytes that form no
-    ``what``."""
     command = None
     scans = []
     t0 = float(meta.get("start_time", 0.0))
@@ -239,7 +179,7 @@ def _assemble(path, meta: dict, records: list, asm, rx, tx, is_command, usable, 
             reasons = ", ".join(f"{r}: {n}" for r, n in parser.drop_reasons.most_common(3))
             warnings.warn(LogDamageWarning(
                 f"{Path(path).name}: dropped {parser.dropped} bytes {way} "
-                f"the head that form no whole {what} ({reasons})"), stacklevel=3)
+                f"the head that form no whole {what} ({reasons})"), stacklevel=4)
     if partial:
         s = asm.finish()
         if s is not None:
@@ -247,21 +187,3 @@ def _assemble(path, meta: dict, records: list, asm, rx, tx, is_command, usable, 
             s.meta["partial"] = True
             scans.append(s)
     return scans
-
-
-def _replay_ping360(path, meta: dict, records: list, sound_speed, pose, partial: bool) -> list[Scan]:
-    """`replay` of a Ping360 log: the `Ping360Sonar.scan` results, from the logged bytes."""
-    lo, hi = PING360_LIMITS["sound_speed"]
-    c = sound_speed or meta.get("sound_speed") or 1500.0
-    if not (isinstance(c, (int, float)) and lo <= c <= hi):
-        raise ValueError(f"{path}: sound_speed = {c!r} is out of range: allowed {lo:g}..{hi:g} m/s")
-    try:
-        settings = Ping360Settings(**{**meta.get("settings", {}), "sound_speed": float(c)})
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"{path}: the log's Ping360 settings are unusable ({e})") from None
-    fixed_pose = pose is not None
-    T = check_pose(pose if fixed_pose else meta.get("pose"))
-    return _assemble(path, meta, records, Ping360Assembler(settings), PingStreamParser(), PingStreamParser(),
-                     lambda m: m.message_id == ping_ids["transducer"] and bool(m.transmit),
-                     lambda m, c: m.message_id == ping_ids["device_data"] and ping360_problem(m, c) is None,
-                     T, fixed_pose, partial, "ping-protocol message", once=True)

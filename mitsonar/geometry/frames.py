@@ -1,4 +1,4 @@
-"""Sonar frames: the kinds of head, the bearing rotation of a beam frame, rigid-pose checks.
+"""Sonar frames: the bearing rotation of a beam frame, rigid-pose checks.
 
 The lowest layer of mitsonar's geometry: the sensor plugin, the `Scan`, the trajectories and the
 device drivers all build and check poses with these, and it imports nothing from mitsonar (numpy
@@ -8,9 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-#: The kinds of sonar head a scan can come from (a row is a ping of a mechanical head, a receive
-#: beam of a multibeam head, one channel's ping of a side-scan head).
-KINDS = ("mechanical", "multibeam", "sidescan")
+# The kinds of sonar head (the old ``KINDS``) are classes in `mitsonar.geometry.kinds`.
 
 #: A side-scan head's ``side`` values, and the channel number of each side (``scan.channel``).
 SIDES = ("port", "starboard", "both")

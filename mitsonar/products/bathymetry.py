@@ -244,8 +244,9 @@ def soundings(scan, threshold_db=10.0, method="centroid", speckle=False, ping=0,
     if not isinstance(speckle, bool):
         raise not_allowed(WHERE, "speckle", speckle, "True (the scan's scene speckle) or False")
     spread = float(np.degrees(np.ptp(scan.bearings))) if scan.n_pings > 1 else 0.0
-    if scan.kind == "multibeam" and spread > 180.0 + 1e-9:
-        raise not_allowed(WHERE, "scan", f"a fan of {spread:g} deg", "a bathymetric fan of at most 180 deg")
+    top = scan.sonar_kind.max_sounding_fan
+    if top is not None and spread > top + 1e-9:
+        raise not_allowed(WHERE, "scan", f"a fan of {spread:g} deg", f"a bathymetric fan of at most {top:g} deg")
     I = speckled(scan) if speckle else scan.intensity
     rng, energy = detect(I, scan.ranges, threshold_db, method)
     ok = np.isfinite(rng)
@@ -390,7 +391,7 @@ def survey(scene, trajectory, *, spp=256, seed=0, threshold_db=10.0, method=None
     from mitsonar.sim.survey import render_survey
 
     sonar = sonar_of(scene, sensor)
-    method = method or ("centroid" if sonar.kind == "multibeam" else "leading_edge")
+    method = method or sonar.sonar_kind.bathymetry_method
     threshold_db, method = check_options(threshold_db, method)
     if not isinstance(speckle, bool):
         raise not_allowed(WHERE, "speckle", speckle, "True or False")

@@ -20,14 +20,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mitsonar.geometry import kinds
 from mitsonar.geometry.frames import PORT, SIDES, STARBOARD
 
 USES = ("data", "intensity")
 
 
 def _check_sidescan(scan, where):
-    if getattr(scan, "kind", None) != "sidescan":
-        raise ValueError(f"{where}: needs a side-scan scan (kind 'sidescan'), got kind {getattr(scan, 'kind', None)!r}")
+    kind = kinds.kind_of(scan)
+    if kind is None or not kind.sided:
+        raise ValueError(f"{where}: needs a side-scan scan (kind {kinds.which('sided')}), "
+                         f"got kind {getattr(scan, 'kind', None)!r}")
 
 
 def _values(scan, use, where):

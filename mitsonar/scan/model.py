@@ -15,9 +15,10 @@ import numpy as np
 
 from mitsonar.scan import fileformat as scanfile
 
-# The frames' helpers live below the Scan (the sensor plugin uses them too); they stay
-# importable from here.
-from mitsonar.geometry.frames import KINDS, SIDES, _not_rigid, bearing_rotation, check_rigid, check_rigid_stack  # noqa: F401
+# The frames' helpers and the kinds live below the Scan (the sensor plugin uses them too); they
+# stay importable from here.
+from mitsonar.geometry import kinds
+from mitsonar.geometry.frames import SIDES, _not_rigid, bearing_rotation, check_rigid, check_rigid_stack  # noqa: F401
 
 _RIGID = "only rigid transforms: rotation + translation, no scale, shear or mirror"
 
@@ -123,7 +124,8 @@ class Scan:
         Full beam widths in degrees (-3 dB one way).
     kind : str
         ``mechanical``, ``multibeam`` or ``sidescan`` (then ``meta['side']``: ``port``,
-        ``starboard`` or ``both``, default ``both``; see `channel`).
+        ``starboard`` or ``both``, default ``both``; see `channel`). `sonar_kind` is its class
+        (`mitsonar.geometry.kinds`), which says what differs between kinds.
     sound_speed : float  (m/s)
     absorption : float  (dB/m)
     electronics : dict
@@ -149,7 +151,7 @@ class Scan:
     beam_pattern: str = "gaussian"
     beamwidth_h: float = 3.0
     beamwidth_v: float = 35.0
-    kind: str = "mechanical"
+    kind: str = kinds.DEFAULT
     sound_speed: float = 1500.0
     absorption: float = 0.0
     electronics: dict[str, Any] = field(default_factory=dict)
@@ -166,8 +168,8 @@ class Scan:
         _number("beamwidth_v", self.beamwidth_v, lambda v: 0 < v <= 180, "a width in (0, 180] deg")
         _number("sound_speed", self.sound_speed, lambda v: v > 0, "a speed > 0 m/s")
         _number("absorption", self.absorption, lambda v: v >= 0, "an attenuation >= 0 dB/m")
-        if not isinstance(self.kind, str) or self.kind not in KINDS:
-            raise ScanFieldError("kind", f"{self.kind!r} is not allowed (one of {', '.join(KINDS)})")
+        if kinds.lookup(self.kind) is None:
+            raise ScanFieldError("kind", f"{self.kind!r} is not allowed (one of {', '.join(kinds.names())})")
         if not isinstance(self.beam_pattern, str) or not self.beam_pattern:
             raise ScanFieldError("beam_pattern", f"{self.beam_pattern!r} is not a pattern name")
         for name in ("electronics", "meta"):
@@ -197,7 +199,7 @@ class Scan:
                                               f"{_first(self.intensity < 0)} is not allowed (echo energy >= 0)")
         # A two-sided side-scan scan's rows are two runs of pings (port, then starboard): each channel's
         # times do not decrease.
-        runs = np.diff(self.channel) == 0 if self.kind == "sidescan" else True
+        runs = np.diff(self.channel) == 0 if self.sonar_kind.sided else True
         back = (np.diff(self.times) < 0) & runs
         if back.any():
             k = int(np.argmax(back)) + 1
@@ -216,15 +218,20 @@ class Scan:
         return int(self.intensity.shape[0])
 
     @property
+    def sonar_kind(self) -> kinds.SonarKind:
+        """The `mitsonar.geometry.kinds.SonarKind` of `kind` (the string): what differs between kinds."""
+        return kinds.get(self.kind, "Scan 'kind'")
+
+    @property
     def row_name(self) -> str:
         """What the rows are: the pings of a rotating head, the receive beams of a multibeam one."""
-        return "beams" if self.kind == "multibeam" else "pings"
+        return self.sonar_kind.row_name
 
     @property
     def channel(self) -> np.ndarray | None:
         """(n_pings,) channel of each row of a side-scan scan, 0 port and 1 starboard (port rows
         first); None for the other kinds. `mitsonar.products.sidescan.select_side` takes one side's rows."""
-        if self.kind != "sidescan":
+        if not self.sonar_kind.sided:
             return None
         return sidescan_channels(self.meta.get("side", "both"), self.n_pings)
 

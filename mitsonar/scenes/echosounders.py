@@ -56,6 +56,7 @@ import math
 import numpy as np
 
 from mitsonar._checks import is_number, is_whole, not_allowed
+from mitsonar.geometry.kinds import MECHANICAL, MULTIBEAM, SonarKind
 from mitsonar.sonar_equation.levels import CALIBRATION_DB
 
 WHERE = "echosounder"
@@ -75,7 +76,7 @@ class EchoSounder:
 
     name: str
     model: str
-    kind: str              # "multibeam" (an MBES) or "altimeter" (a single-beam echo sounder)
+    kind: SonarKind        # MULTIBEAM (an MBES) or MECHANICAL, one fixed ping (an altimeter)
     frequency: float       # Hz
     n_beams: int
     rx_across: float       # receive beam width across track (altimeter: the cone's width)
@@ -91,13 +92,13 @@ class EchoSounder:
 
 PRESETS = {
     "r2sonic_2024": EchoSounder(
-        "r2sonic_2024", "R2Sonic Sonic 2024", "multibeam", 400e3, 256, 0.5, 1.0, 130.0, (10.0, 160.0),
+        "r2sonic_2024", "R2Sonic Sonic 2024", MULTIBEAM, 400e3, 256, 0.5, 1.0, 130.0, (10.0, 160.0),
         40.0, 0.0125, "R2Sonic Sonic 2024/2022 Operation Manual V5.0 (2014) sec. 1.1; Sonic 2024 data sheet"),
     "kongsberg_em2040": EchoSounder(
-        "kongsberg_em2040", "Kongsberg EM 2040", "multibeam", 400e3, 400, 1.0, 0.5, 140.0, (10.0, 140.0),
+        "kongsberg_em2040", "Kongsberg EM 2040", MULTIBEAM, 400e3, 400, 1.0, 0.5, 140.0, (10.0, 140.0),
         40.0, 0.0125, "Kongsberg Maritime EM 2040 product leaflet; EM 2040 data sheet"),
     "tritech_pa500": EchoSounder(
-        "tritech_pa500", "Tritech PA500 altimeter", "altimeter", 500e3, 1, 6.0, 6.0, 0.0, (0.0, 0.0),
+        "tritech_pa500", "Tritech PA500 altimeter", MECHANICAL, 500e3, 1, 6.0, 6.0, 0.0, (0.0, 0.0),
         50.0, 0.001, "Tritech PA500 data sheet", source_level=205.0, noise_level=39.0),
 }
 
@@ -156,7 +157,7 @@ def configure(name, *, swath=None, n_beams=None, range_min=None, range_max=None,
     def bad(field, value, allowed):
         raise not_allowed(WHERE, field, value, allowed)
 
-    multibeam = s.kind == "multibeam"
+    multibeam = s.kind.transmit_fan      # an MBES: receive beams across a transmit fan
     if not multibeam:
         for field, value in (("swath", swath), ("n_beams", n_beams)):
             if value is not None:
@@ -195,12 +196,12 @@ def configure(name, *, swath=None, n_beams=None, range_min=None, range_max=None,
                   receiver_sensitivity=CALIBRATION_DB - s.source_level, noise_level=s.noise_level)
     if multibeam:
         n = int(n_beams)
-        params.update(kind="multibeam", n_pings=n, bearing_start=-swath / 2.0, bearing_step=swath / (n - 1),
+        params.update(kind=s.kind.name, n_pings=n, bearing_start=-swath / 2.0, bearing_step=swath / (n - 1),
                       beamwidth_h=s.rx_across, beamwidth_v=RX_ALONG_FACTOR * s.tx_along,
                       tx_pattern="gaussian", tx_beamwidth_h=min(TX_ACROSS_FACTOR * swath, 360.0),
                       tx_beamwidth_v=s.tx_along, pulse_length=2.0 * s.bin_width / float(sound_speed))
     else:
-        params.update(kind="mechanical", n_pings=1, bearing_start=0.0, bearing_step=0.0,
+        params.update(kind=s.kind.name, n_pings=1, bearing_start=0.0, bearing_step=0.0,
                       beamwidth_h=s.rx_across, beamwidth_v=s.tx_along)
     return HeadSetup(s, params, mount)
 

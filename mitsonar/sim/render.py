@@ -291,10 +291,7 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     }
     if trajectory is not None:
         meta["start_time"] = start_time
-    if sonar.kind == "sidescan":     # which rows are which channel (scan.channel) and the channels' tilt
-        meta.update(side=sonar.side, depression=float(sonar.depression), pings_per_channel=int(sonar.pings))
-        if sonar.preset is not None:
-            meta["preset"] = sonar.preset
+    meta.update(sonar.sonar_kind.render_meta(sonar))   # a side-scan's channels and their tilt
     if getattr(sonar, "transmit", None) is not None:  # multibeam: the transmit fan beside the receive beams
         meta.update(tx_pattern=sonar.transmit.kind, tx_beamwidth_h=sonar.transmit.beamwidth_h,
                     tx_beamwidth_v=sonar.transmit.beamwidth_v)

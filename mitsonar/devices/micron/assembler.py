@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from mitsonar.geometry import kinds
 from mitsonar.geometry.frames import bearing_rotation, check_rigid
 from mitsonar.scan import Scan, reception_times
 from mitsonar.devices.micron.seanet.constants import FULL_TURN, HdCtrl, bearing_to_radians
@@ -271,7 +272,7 @@ class ScanAssembler:
         return Scan(intensity=np.zeros((n, nb), np.float32), data=data,
                     ranges=(np.arange(nb) + 0.5) * width, bearings=bearings, poses=poses,
                     range_min=0.0, range_max=float(range_max), beamwidth_h=3.0, beamwidth_v=35.0,
-                    kind="mechanical", sound_speed=c, times=reception_times(row_times),
+                    kind=kinds.MECHANICAL.name, sound_speed=c, times=reception_times(row_times),
                     electronics=_wire_electronics(ref), meta=meta)
 
     def finish(self) -> Scan | None:

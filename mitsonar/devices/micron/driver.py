@@ -22,7 +22,8 @@ import time
 from collections import Counter, deque
 
 from mitsonar.devices.micron.assembler import ScanAssembler as _ScanAssembler, check_pose
-from mitsonar.devices.recording import record_driven, record_passive
+from mitsonar.devices.micron.passive import record_passive
+from mitsonar.devices.recording import record_driven
 from mitsonar.scan import Scan
 from mitsonar.devices.micron.seanet.constants import DEFAULT_NIBBLE_ORDER
 from mitsonar.devices.micron.seanet.messages import (Alive, BBUserData, HeadCommand, HeadData, ReBoot, SendBBUser, SendData,

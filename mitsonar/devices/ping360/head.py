@@ -29,6 +29,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from mitsonar._checks import in_range, is_whole, require
+from mitsonar.geometry import kinds
 from mitsonar.geometry.frames import bearing_rotation, check_rigid
 from mitsonar.scan import Scan, reception_times
 
@@ -173,7 +174,7 @@ class Ping360Settings:
         """Settings under which a Ping360 reproduces ``scan``: range and samples from its range
         window (starting at 0 m), step, start and direction from its bearings (a sector when they
         do not cover a full turn). Keyword arguments override any field."""
-        require(scan.kind == "mechanical", "Ping360Settings.from_scan", "kind", scan.kind,
+        require(scan.sonar_kind.scanlines, "Ping360Settings.from_scan", "kind", scan.kind,
                 "a mechanical scan: a Ping360 has one beam")
         bw = float(scan.range_max - scan.range_min) / scan.n_bins
         n = int(round(scan.range_max / bw))
@@ -278,5 +279,5 @@ class Ping360Assembler:
         return Scan(intensity=np.zeros((n, nb), np.float32), data=data, ranges=(np.arange(nb) + 0.5) * w,
                     bearings=bearings, poses=poses @ bearing_rotation(bearings), range_min=0.0,
                     range_max=float(range_max), beamwidth_h=BEAMWIDTH_H, beamwidth_v=BEAMWIDTH_V,
-                    kind="mechanical", sound_speed=c, times=reception_times(row_times),
+                    kind=kinds.MECHANICAL.name, sound_speed=c, times=reception_times(row_times),
                     electronics={"bit_depth": 8}, meta=meta)

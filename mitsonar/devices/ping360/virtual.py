@@ -77,7 +77,7 @@ class VirtualPing360(ServedHead):
                  device_id: int = 2, corrupt_pings=(), cut_pings=()):
         if not isinstance(scan, Scan):
             raise TypeError(f"scan must be a Scan, got {type(scan).__name__}")
-        if scan.kind != "mechanical":
+        if not scan.sonar_kind.scanlines:
             raise ValueError(f"VirtualPing360: a {scan.kind} scan has no Ping360 pings to serve "
                              f"(a Ping360 is a mechanical head)")
         self.scan = scan

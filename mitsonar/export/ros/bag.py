@@ -149,7 +149,7 @@ class McapBag:
                 self._write("/odom", odom, ns)
             self._write("/sonar/image", M.projected_image(scan, rows, ns, frame), ns)
             if i == 0:
-                if scan.kind != "sidescan":   # a side-scan line has no fan to draw
+                if scan.sonar_kind.has_fan:   # a side-scan line has no fan to draw
                     self._write("/sonar/fan", M.fan_image(scan, ns), ns)
                 self._write("/sonar/waterfall", M.waterfall(scan, ns), ns)
         last = M.stamp_ns(self.start + base + groups[-1][0])

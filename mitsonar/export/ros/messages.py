@@ -53,7 +53,7 @@ def pings(scan) -> list:
     ping per row; a side-scan ping one group per channel, in ``sonar_port`` then
     ``sonar_starboard``, since the two channels look opposite ways)."""
     times = np.asarray(scan.times, dtype=np.float64)
-    channel = scan.channel if getattr(scan, "kind", None) == "sidescan" else None
+    channel = getattr(scan, "channel", None)     # None but for a side-scan's rows
     out = []
     for t in np.unique(times):
         rows = np.flatnonzero(times == t)

@@ -157,6 +157,17 @@ def _version():
     return __version__
 
 
+def _init_local(parent, cfg, threads, variant):
+    """Initializer of a local worker process: it ends with the coordinator ``parent`` however that
+    ends (`lifetime.die_with_parent`; a SIGKILLed coordinator once left its workers and the
+    resource tracker running), then sets up its renderer (`worker.init_process`)."""
+    from mitsonar.jobs.dataset.lifetime import die_with_parent
+    from mitsonar.jobs.dataset.worker import init_process
+
+    die_with_parent(parent)
+    init_process(cfg, threads, variant)
+
+
 def _local(cfg, coord, todo, workers, threads, variant):
     """Render ``todo`` on ``workers`` spawned processes; a dead worker's pool is restarted and its
     samples handed out again (at most `MAX_RESTARTS` times)."""
@@ -164,13 +175,13 @@ def _local(cfg, coord, todo, workers, threads, variant):
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
-    from mitsonar.jobs.dataset.worker import init_process, render_in_process
+    from mitsonar.jobs.dataset.worker import render_in_process
 
     pending = list(todo)
     restarts = 0
     while pending:
-        pool = ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=init_process,
-                                   initargs=(cfg, threads, variant))
+        pool = ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=_init_local,
+                                   initargs=(os.getpid(), cfg, threads, variant))
         running = {}
         try:
             while pending or running:
@@ -218,13 +229,15 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
     output       the dataset folder; a folder holding part of this config's dataset is resumed
     workers      worker processes or Ray actors (default: the number of cores); 0 renders in this
                  process
-    address      a Ray cluster's address (``ray://head:10001``, ``auto``): runs there, on Ray
+    address      a Ray cluster's address (``HEAD:6379``, ``auto``, ``ray://HEAD:10001``): runs there, on
+                 Ray (see `ray_engine`: token authentication, this machine a node of it)
     threads      Dr.Jit render threads per worker (default cores // workers, at least 1)
     progress     show a progress bar (samples, samples/s, time left) on stderr; or an object
                  whose ``update(1)`` is called as each sample comes back
     engine       ``"ray"`` (actors; ``ray.init()`` on this machine without an address), ``"local"``
-                 (spawned processes), or ``"auto"`` (default): Ray when an address is given or Ray
-                 is installed (``mitsonar[cluster]``), local processes otherwise
+                 (spawned processes), or ``"auto"`` (default): Ray when an address is given, local
+                 processes otherwise (a Ray started on this machine costs seconds and opens ports
+                 beyond loopback; ``--engine ray`` asks for it)
     ============ ==================================================================================
 
     Returns a dict: ``rendered`` (samples rendered by this call), ``samples`` (in the folder),
@@ -241,10 +254,7 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
     if workers is None:
         workers = _cores()
     if engine == "auto":
-        import importlib.util
-
-        ray = address or (workers != 0 and importlib.util.find_spec("ray") is not None)
-        engine = "ray" if ray else "local"
+        engine = "ray" if address else "local"
     if not (isinstance(workers, int) and workers >= 0) or (engine == "ray" and workers < 1):
         raise DatasetError(f"--workers {workers!r} is not allowed (a whole number >= 1)")
     if threads is None:
@@ -254,6 +264,22 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
 
         check_ray()
     start = time.time()
+    connected = False
+    if engine == "ray" and address:
+        from mitsonar.jobs.dataset.ray_engine import connect
+
+        check_output_folder(output, DatasetError)
+        connected = connect(address)   # a cluster that cannot be reached: one line, before the folder is touched
+    try:
+        return _generate(cfg, output, workers, address, threads, progress, engine, start)
+    finally:
+        if connected:
+            import ray
+
+            ray.shutdown()
+
+
+def _generate(cfg, output, workers, address, threads, progress, engine, start):
     lock, manifest = prepare_folder(cfg, output)
     bar = None
     try:

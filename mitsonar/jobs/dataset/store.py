@@ -6,7 +6,7 @@ Layout of ``DIR``::
     shard-000000.tar       samples 0 .. shard_size - 1, WebDataset style: for sample i the tar
     shard-000001.tar       members "<i:08d>.<field>.npy" (one .npy per array) and "<i:08d>.json"
     meshes/<scene>.npz     ground-truth mesh (vertices, faces) of each scene, named by samples
-    .lock                  held (flock) by the run writing into DIR
+    .lock                  held (flock) by the run writing into DIR; removed when it ends
 
 Why WebDataset (tar) and not Zarr: samples of one dataset differ in shape (a mechanical head's
 200 x 500 rows and bins beside a multibeam's 128 x 400), which tar members hold as they are while
@@ -86,19 +86,32 @@ def read_manifest(folder):
 
 class RunLock:
     """An exclusive lock on ``DIR/.lock`` for the run writing into ``DIR`` (released by the OS
-    when the process ends, killed or not); a second run is refused with one sentence."""
+    when the process ends, killed or not); a second run is refused with one sentence.
+
+    `release` removes the file (a finished run leaves no ``.lock`` behind): it is unlinked while
+    still locked, and a run that opened the old file just before, and got its lock once released,
+    sees that the path no longer names the file it locked and takes the lock again on the new one
+    (without that check two runs could each hold a lock: one on the removed file, one on a new)."""
 
     def __init__(self, folder):
         import fcntl   # POSIX only: imported here, so that `import mitsonar` works everywhere
 
         self.path = os.path.join(folder, LOCK)
-        self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            os.close(self.fd)
-            raise DatasetError(f"-o {folder!r}: another run is writing into this folder (it holds {self.path}); "
-                               "wait for it or stop it") from None
+        while True:
+            self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                os.close(self.fd)
+                raise DatasetError(f"-o {folder!r}: another run is writing into this folder (it holds {self.path}); "
+                                   "wait for it or stop it") from None
+            try:
+                same = os.path.samestat(os.fstat(self.fd), os.stat(self.path))
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            os.close(self.fd)   # locked a file the run before removed on release: try the new one
         os.ftruncate(self.fd, 0)
         os.write(self.fd, f"{os.getpid()}\n".encode())
 
@@ -106,6 +119,10 @@ class RunLock:
         if self.fd is not None:
             import fcntl
 
+            try:
+                os.remove(self.path)   # still locked: nobody can take it in between
+            except FileNotFoundError:
+                pass
             fcntl.flock(self.fd, fcntl.LOCK_UN)
             os.close(self.fd)
             self.fd = None

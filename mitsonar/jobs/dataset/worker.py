@@ -15,6 +15,8 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from mitsonar.geometry import kinds
+
 # The standard mount of a mechanical or multibeam head on the vehicle (REP-103: x forward, y port,
 # z up): boresight at bearing 0 forward, scan axis up (beam x = vehicle y, beam y = vehicle z,
 # beam z = vehicle x). A side-scan head's default mount is the identity.
@@ -89,7 +91,8 @@ class SampleRenderer:
                     f'</bsdf><shape type="ply" id="seabed"><string name="filename" value="{ply}"/>'
                     f'<ref id="{TERRAIN_BSDF}"/></shape>')
         if sonar:   # a side-scan head's to_world is the head frame itself (x forward, y port, z up)
-            mount = np.eye(4) if sonar.get("kind") == "sidescan" else DEFAULT_MOUNT
+            kind = kinds.lookup(sonar.get("kind"))
+            mount = np.eye(4) if kind is not None and kind.head_frame_mount else DEFAULT_MOUNT
             sonar.setdefault("mount", mount.ravel().tolist())
             body += sonar_xml(sonar)
         # The included scene's own files (PLY meshes, nested includes) resolve from its folder,

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from mitsonar._checks import in_range, is_number
+from mitsonar.geometry import kinds
 from mitsonar.receiver.electronics import HEAD_AD_BYTES, HEAD_DB_SCALE, HEAD_LIMITS
 from mitsonar.devices.micron.seanet.constants import FULL_TURN, STEP_SIZES, HdCtrl, radians_to_bearing
 from mitsonar.devices.micron.seanet.messages import V3B_BLOCK, V3B_NONE, HeadCommand, HeadData
@@ -54,10 +55,10 @@ def ad_db(byte: int) -> float:
 
 def require_mechanical(scan, who: str, lacks: str) -> None:
     """SeaNet speaks for mechanically scanned heads only: refuse other scan kinds in one sentence."""
-    kind = getattr(scan, "kind", "mechanical")
-    if kind != "mechanical":
+    kind = getattr(scan, "kind", kinds.DEFAULT)
+    if not getattr(kinds.lookup(kind), "scanlines", False):
         raise ValueError(f"{who}: a SeaNet head is mechanically scanned; a {kind!r} scan (kind must be "
-                         f"'mechanical') has {lacks}")
+                         f"{kinds.which('scanlines')}) has {lacks}")
 
 
 @dataclass
