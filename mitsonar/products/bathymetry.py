@@ -378,13 +378,15 @@ class SurveyResult:
 
 def survey(scene, trajectory, *, spp=256, seed=0, threshold_db=10.0, method=None, speckle=True, max_scans=None,
            start_time=None, end_time=None, max_depth=None, sensor=0, angle_step=5.0, progress=None,
-           sound_speed_profile=None):
+           sound_speed_profile=None, water_profile=None):
     """Render a survey of ``scene``'s echo sounder along ``trajectory`` and detect the bottom in
     every ping: a `SurveyResult`. ``method`` defaults to ``centroid`` for a multibeam and
     ``leading_edge`` for a single beam; ``speckle``: detect on each scan's scene speckle (True:
     `speckled`, the sensor's ``speckle_seed``, changing along the track as the head moves) or on
     the noise-free intensity (False); ``sound_speed_profile``: the water the soundings are
-    processed with (`soundings`; None: straight rays at the head's nominal speed).
+    processed with (`soundings`; None: straight rays at the head's nominal speed);
+    ``water_profile``: the water the survey is rendered in (refracted paths, `render_scan`'s
+    ``sound_speed_profile``; None: uniform at the head's nominal speed).
     Every option is checked before the first render; a survey in which no beam finds the bottom
     is refused with one line (`NoBottomError`)."""
     from mitsonar.sim.scene import sonar_of
@@ -397,8 +399,10 @@ def survey(scene, trajectory, *, spp=256, seed=0, threshold_db=10.0, method=None
         raise not_allowed(WHERE, "speckle", speckle, "True or False")
     error_table([], [], [], angle_step)     # the step, checked before any render
     check_profile(sound_speed_profile)
+    check_profile(water_profile)
     scans = render_survey(scene, trajectory, None, spp=spp, seed=seed, max_scans=max_scans, start_time=start_time,
-                          end_time=end_time, sensor=sensor, max_depth=max_depth, progress=progress or False)
+                          end_time=end_time, sensor=sensor, max_depth=max_depth, progress=progress or False,
+                          sound_speed_profile=water_profile)
     parts, n, resolution, scans_speed = [], 0, float(sonar.bin_width), float("nan")
     for i, scan in enumerate(scans):
         parts.append(soundings(scan, threshold_db, method, speckle, ping=i, sound_speed_profile=sound_speed_profile))
