@@ -38,11 +38,16 @@ _LAZY = {"MicronSonar": "devices.micron.driver", "VirtualMicron": "devices.micro
          "HeadSettings": "devices.micron.seanet.settings", "StreamParser": "devices.micron.seanet.stream",
          "record": "devices.micron.driver", "replay": "devices.recording",
          "Ping360Sonar": "devices.ping360.driver", "VirtualPing360": "devices.ping360.virtual",
-         "Ping360Settings": "devices.ping360.head", "SoundSpeedProfile": "acoustics.profile"}
+         "Ping360Settings": "devices.ping360.head", "SoundSpeedProfile": "acoustics.profile",
+         "render_echoes": "signals.echoes", "Echoes": "signals.echoes"}
 
 
 def __getattr__(name):
     # Serial devices load on first use: pyserial is not needed to render.
+    if name == "signals":     # the coherent signals (numpy and scipy.signal) load on first use
+        import importlib
+
+        return importlib.import_module("mitsonar.signals")
     if name in _LAZY:
         import importlib
 
@@ -56,4 +61,4 @@ def __getattr__(name):
 
 __all__ = ["Scan", "SceneError", "Trajectory", "TrajectoryError", "VariantError", "example_scene",
            "example_scenes", "load_scan", "load_scene", "open_dataset", "render_scan", "render_survey",
-           "scan_parameters", "scene_mesh", "set_variant", "sonar_equation_report", "variant", "__version__", *_LAZY]
+           "scan_parameters", "scene_mesh", "set_variant", "sonar_equation_report", "variant", "__version__", "signals", *_LAZY]

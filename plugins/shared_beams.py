@@ -139,7 +139,7 @@ class SharedFrame:
         self.path_setup = SimpleNamespace(scene=setup.scene, sensor=SimpleNamespace(beam=sensor.transmit),
                                           frames=frames, connect=(frames, gate), depth=setup.depth,
                                           depth_o=setup.depth_o, absorption=setup.absorption, bins=setup.bins,
-                                          guide=setup.guide)
+                                          guide=setup.guide, refraction=getattr(setup, "refraction", None))
         self.axes = [_opaque(mi.Vector3f, head[:3, c]) for c in range(3)]
         self.origin = _opaque(mi.Point3f, head[:3, 3])
         self.start = dr.opaque(mi.Float, bearings[0])
@@ -155,13 +155,15 @@ class SharedFrame:
         # read here, so that a frozen pass's key (`frozen_pass.Context`) holds them
         self.roulette, self.scatter_mode = float(ROULETTE_GAIN), SCATTER_MODE.name
 
-    def score(self, hist, rng, energy, valid, hit, u=None):
+    def score(self, hist, rng, energy, valid, hit, u=None, direction=None):
         """Add the echoes of one bounce (``energy`` without the receive gain) into ``hist`` (flat
         n_rows x n_bins, Float64) for every row within the window of the echo's direction.
         ``u``: a uniform number per echo for the roulette of faint beams (`ROULETTE_GAIN`); the
-        beams of one echo share it (each beam's expectation is its gain either way)."""
+        beams of one echo share it (each beam's expectation is its gain either way).
+        ``direction``: where the echo arrives from at the head (world, unit; a refracted path's
+        eigenray, `refraction.Refraction.arrival`); default straight from the head to ``hit.p``."""
         beam = self.sensor.beam
-        d = dr.normalize(hit.p - self.origin)
+        d = dr.normalize(hit.p - self.origin) if direction is None else direction
         x, y, z = (dr.dot(d, a) for a in self.axes)
         az, el = dr.atan2(x, z), dr.safe_asin(y)
         az = self.centre + _wrap(az - self.centre)

@@ -157,7 +157,9 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
                # erfc; nothing of mitsonar beyond each other): the sensor's absorption and sound
                # speed 'auto', the acoustic_material BSDF's reflection and backscatter tables
                "mitsonar.acoustics.seawater", "mitsonar.acoustics.interface", "mitsonar.acoustics.seabed",
-               "mitsonar.acoustics.materials"}
+               "mitsonar.acoustics.materials",
+               # the sound-speed profile: the integrators read their XML sound_speed_profile with it
+               "mitsonar.acoustics.profile"}
     for name, out in edges.items():
         if name.startswith("mitsonar.plugins"):
             above = {t for t in out if t.startswith("mitsonar") and not t.startswith("mitsonar.plugins")}

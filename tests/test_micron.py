@@ -586,7 +586,7 @@ def test_assembled_scan_has_its_ping_times():
     out = out or asm.finish()
     assert out.n_pings == 200 and 57 in out.meta["missing"]
     np.testing.assert_allclose(out.times, 0.05 * np.arange(200), atol=1e-9)
-    assert out.meta["time_start"] == pytest.approx(1000.0)
+    assert out.meta.start_time == pytest.approx(1000.0)
     asm = ScanAssembler()
     plain = None
     for k in range(200):

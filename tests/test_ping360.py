@@ -274,7 +274,7 @@ def test_record_then_replay_gives_the_same_scans(tmp_path):
     # the rows' reception times, from the first row's: rising through the turn, within its span
     for s in scans:
         assert s.times[0] == 0 and np.all(np.diff(s.times) >= 0) and s.times[-1] > 0
-        assert s.times[-1] == pytest.approx(s.meta["time_end"] - s.meta["time_start"])
+        assert s.times[-1] == pytest.approx(s.meta.end_time - s.meta.start_time)
 
 
 def test_replay_of_a_damaged_log_warns_and_keeps_the_rest(tmp_path):

@@ -14,6 +14,10 @@ depth map over the track, and the depth error against beam angle with the centro
 (`mitsonar.acoustics.SoundSpeedProfile.from_csv`) instead of straight beams at the head's
 nominal speed: the rendered water itself is uniform at that nominal speed, so a profile that
 differs from it shows the refraction error a wrong profile gives (depth error against beam angle).
+``--svp CSV`` renders the survey in that water instead (refracted echo paths, `mitsonar.sim.render_scan`'s
+``sound_speed_profile``): processed straight at the nominal speed its soundings bend up or down
+towards the outer beams (the smile, or frown, of a wrong profile); ``--processing-svp`` with the
+same file corrects them.
 Every option is checked before the first render; all files are written under temporary names and
 renamed together at the end.
 """
@@ -110,17 +114,17 @@ def cmd_bathymetry(args):
                                           range_max=args.range_max, bin_width=args.bin_width)
         bathymetry.check_options(args.threshold_db, args.method or "centroid")
         grid_depths(np.zeros(1, bathymetry.SOUNDING_DTYPE), args.cell)
-        svp = None
-        if args.processing_svp is not None:
-            from mitsonar.acoustics.profile import SoundSpeedProfile
+        from mitsonar.acoustics.profile import SoundSpeedProfile
 
-            svp = SoundSpeedProfile.from_csv(args.processing_svp)
+        svp = None if args.processing_svp is None else SoundSpeedProfile.from_csv(args.processing_svp)
+        water = None if args.svp is None else SoundSpeedProfile.from_csv(args.svp)
     except ValueError as exc:
         raise BathymetryCLIError(str(exc)) from None
     traj = trajectory_from_args(args, "bathymetry")
-    if svp is not None and (traj.positions[:, 2] > 0).any():
-        raise BathymetryCLIError(f"bathymetry --processing-svp: the track rises {traj.positions[:, 2].max():g} m above "
-                                 "the sea surface (z = 0): a sound-speed profile needs the head in the water (z <= 0)")
+    for flag, given in (("--processing-svp", svp), ("--svp", water)):
+        if given is not None and (traj.positions[:, 2] > 0).any():
+            raise BathymetryCLIError(f"bathymetry {flag}: the track rises {traj.positions[:, 2].max():g} m above "
+                                     "the sea surface (z = 0): a sound-speed profile needs the head in the water (z <= 0)")
     scene = load_survey_scene(args.scene, surface=args.surface,
                               sonar=None if head is None else echosounders.sonar_xml(head))
     sensor = sensor_of(scene, args, BathymetryCLIError)
@@ -128,7 +132,7 @@ def cmd_bathymetry(args):
                         holds=None if args.force else
                         lambda out: any(os.path.exists(os.path.join(out, f)) for f in OUTPUTS))
     with _output_folder(args.output):   # made now; removed again if the run fails and leaves it empty
-        return _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_ply, StagedFiles)
+        return _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_ply, StagedFiles, water)
 
 
 @contextlib.contextmanager
@@ -153,11 +157,11 @@ def _output_folder(folder):
         raise
 
 
-def _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_ply, StagedFiles):
+def _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_ply, StagedFiles, water=None):
     run = bathymetry.survey(scene, traj, spp=args.spp, seed=args.seed, threshold_db=args.threshold_db,
                             method=args.method, speckle=not args.no_speckle, max_scans=args.max_scans,
                             max_depth=args.max_depth, progress=not args.quiet, sensor=sensor,
-                            sound_speed_profile=svp)
+                            sound_speed_profile=svp, water_profile=water)
     grid = grid_depths(run.soundings, args.cell)
     out = args.output
     written = [f for f in OUTPUTS if f != "depth.tif"]
@@ -167,7 +171,8 @@ def _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_pl
         summary = run.summary()
         summary.update(preset=head.sounder.name if head else None, model=head.sounder.model if head else None,
                        sensor=sensor.id() if head is None else None, scene=args.scene, cell=args.cell,
-                       surface=args.surface, transform=list(grid.transform), processing_svp=args.processing_svp)
+                       surface=args.surface, transform=list(grid.transform), processing_svp=args.processing_svp,
+                       svp=args.svp)
         with open(files.temporary(os.path.join(out, "errors.json")), "w") as f:
             json.dump(summary, f, indent=1)
         plot_bathymetry(run, grid, files.temporary(os.path.join(out, "bathymetry.png")), traj)
@@ -218,6 +223,9 @@ def add_subcommands(sub):
     s.add_argument("--processing-svp", metavar="CSV",
                    help="sound-speed profile (header depth,sound_speed) the soundings are ray-traced through "
                         "(default: straight beams at the head's nominal speed)")
+    s.add_argument("--svp", metavar="CSV",
+                   help="sound-speed profile (header depth,sound_speed) of the water the survey is rendered in: "
+                        "refracted echo paths (default: uniform water at the head's nominal speed)")
     add_trajectory_options(s)
     s.add_argument("--spp", type=int, default=128, help="paths per beam (default 128)")
     s.add_argument("--seed", type=int, default=0,

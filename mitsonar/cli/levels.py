@@ -28,12 +28,13 @@ def add_subcommands(sub):
 
 def cmd_levels(args):
     if args.output is not None:
-        ext = os.path.splitext(args.output)[1].lower()
-        folder = os.path.dirname(os.path.abspath(args.output))
-        if ext not in (".png", ".pdf", ".svg"):
-            raise LevelsCLIError(f"-o {args.output!r}: the extension must be one of .png, .pdf, .svg")
-        if not os.path.isdir(folder) or os.path.isdir(args.output):
-            raise LevelsCLIError(f"-o {args.output!r}: not a file in an existing folder")
+        from mitsonar._files import check_output_file
+
+        check_output_file(args.output, LevelsCLIError, extensions=(".png", ".pdf", ".svg"), words={
+            "extension": "-o {path!r}: the extension must be one of {allowed_list}",
+            "directory": "-o {path!r}: not a file in an existing folder",
+            "no_folder": "-o {path!r}: not a file in an existing folder",
+            "not_writable": "-o {path!r}: folder {folder!r} is not writable"})
     if args.spp < 1 or args.rows < 0 or args.sensor < 0:
         raise LevelsCLIError("--spp must be >= 1, --rows and --sensor >= 0")
     if not os.path.isfile(args.scene):

@@ -13,6 +13,7 @@ import time
 
 from mitsonar import _files
 from mitsonar.geometry import kinds
+from mitsonar._checks import first_line
 
 EXIT_USAGE = 2
 EXIT_ERROR = 1
@@ -129,25 +130,21 @@ def _plot(scan, path, kind=None, ping=0, db=False, use="data", mesh=None):
         plots.plot_ascan(scan, ping, path, db=db)
 
 
+#: `_check_output`'s sentences (`mitsonar._files.check_output_file`).
+_OUTPUT_WORDS = {"directory": "output {path!r} is a directory",
+                 "extension": "output {path!r}: the extension must be one of {allowed_list}",
+                 "no_folder": "output {path!r}: folder {folder!r} does not exist",
+                 "not_writable": "output {path!r} is not writable"}
+
+
 def _check_output(path, exts):
     """Before any work: an output that cannot be written costs a sentence, not a render."""
-    ext = os.path.splitext(path)[1].lower()
-    if ext not in exts:
-        raise CLIError(f"output {path!r}: the extension must be one of {', '.join(exts)}")
-    if os.path.isdir(path):
-        raise CLIError(f"output {path!r} is a directory")
-    folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise CLIError(f"output {path!r}: folder {folder!r} does not exist")
-    if not os.access(folder, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
-        raise CLIError(f"output {path!r} is not writable")
+    _files.check_output_file(path, CLIError, extensions=exts, words=_OUTPUT_WORDS)
 
 
 def make_output_folder(path, option="-o"):
     """Create an output folder (and parents), or say in one sentence why it cannot be."""
     _files.make_output_folder(path, CLIError, option)
-    if not os.access(path, os.W_OK):
-        raise CLIError(f"{option} {path!r}: the output folder is not writable")
 
 
 # ----------------------------------------------------------------------------- commands
@@ -236,7 +233,8 @@ def cmd_info(args):
         ("bearings [deg]", f"{np.degrees(scan.bearings[0]):.6g} .. {np.degrees(scan.bearings[-1]):.6g}"
                            + (f" step {np.degrees(scan.bearings[1] - scan.bearings[0]):.6g}" if scan.n_pings > 1 else "")),
         ("ping times [s]", f"{scan.times[0]:.6g} .. {scan.times[-1]:.6g}"
-                           + (f" (start {scan.meta['start_time']:.9g} on the trajectory)" if "start_time" in scan.meta else "")),
+                           + ("" if scan.meta.start_time is None else f" (start {scan.meta.start_time:.9g} on "
+                              + ("the trajectory)" if scan.meta.source is None else "the head's clock)"))),
         ("beam", f"{scan.beam_pattern} {scan.beamwidth_h:g} x {scan.beamwidth_v:g} deg"),
         ("sound speed [m/s]", scan.sound_speed), ("absorption [dB/m]", scan.absorption),
         (f"position ({scan.row_name[:-1]} 0)", " ".join(f"{v:.6g}" for v in scan.positions[0])),
@@ -381,7 +379,7 @@ def main(argv=None):
     except Exception as exc:  # one line for the user, the traceback only on request
         if os.environ.get("MITSONAR_DEBUG"):
             raise
-        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        msg = first_line(exc)
         if isinstance(exc, (FileNotFoundError, IsADirectoryError, PermissionError)) and exc.filename:
             msg = f"{exc.filename}: {exc.strerror}"
         print(f"mitsonar: error: {msg}", file=sys.stderr)

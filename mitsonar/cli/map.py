@@ -14,7 +14,8 @@ import os
 import sys
 import time
 
-from mitsonar._files import StagedFiles
+from mitsonar._checks import first_line
+from mitsonar._files import StagedFiles, check_output_file
 
 EXIT_ERROR = 1
 # A value argparse accepted but this command refuses is a validation error, exit 1 like every other
@@ -87,19 +88,21 @@ LOG_EXTENSION = ".bin"
 ACCEPTED = ".exr or .npz scans, or .bin raw SeaNet logs"
 
 
+class _Unwritable(ValueError):
+    pass
+
+
 def _output_problem(option: str, path: str) -> str | None:
     """Why ``path`` cannot be written (None if it can): its folder exists, is a folder and is
-    writable, and the path itself is not a folder."""
-    folder = os.path.dirname(os.path.abspath(path))
-    shown = os.path.dirname(path) or "."
-    if os.path.isdir(path):
-        return f"{option} {path}: is a folder, not a file name"
-    if not os.path.exists(folder):
-        return f"{option} {path}: the folder {shown} does not exist"
-    if not os.path.isdir(folder):
-        return f"{option} {path}: {shown} is not a folder"
-    if not os.access(folder, os.W_OK | os.X_OK):
-        return f"{option} {path}: cannot write in the folder {shown} (permission denied)"
+    writable, and the path itself is not a folder (`mitsonar._files.check_output_file`)."""
+    try:
+        check_output_file(path, _Unwritable, words={
+            "directory": f"{option} {{path}}: is a folder, not a file name",
+            "no_folder": f"{option} {{path}}: the folder {{given_folder}} does not exist",
+            "not_a_folder": f"{option} {{path}}: {{given_folder}} is not a folder",
+            "not_writable": f"{option} {{path}}: cannot write in the folder {{given_folder}} (permission denied)"})
+    except _Unwritable as exc:
+        return str(exc)
     return None
 
 
@@ -143,8 +146,7 @@ def _read_scans(paths):
             else:
                 scans.append(load_scan(path))
         except Exception as exc:  # one line: which file, and why
-            reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            return None, f"{path}: cannot read the scan ({reason})"
+            return None, f"{path}: cannot read the scan ({first_line(exc)})"
     return scans, None
 
 

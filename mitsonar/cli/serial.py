@@ -27,20 +27,9 @@ import sys
 import warnings
 from pathlib import Path
 
+from mitsonar._checks import first_line
+
 __all__ = ["add_subcommands", "cmd_virtual_sonar", "cmd_record", "cmd_replay"]
-
-
-def _one_line(e: BaseException) -> str:
-    """The reason of an exception on one line.
-
-    Mitsuba wraps exceptions raised in Python plugins into a RuntimeError whose message holds
-    the whole traceback; the reason is its last line.
-    """
-    text = str(e).strip() or type(e).__name__
-    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
-    if "Traceback (most recent call last)" in text and lines:
-        return lines[-1]
-    return lines[0] if lines else type(e).__name__
 
 
 def _guard(name: str, fn, args) -> int:
@@ -51,7 +40,8 @@ def _guard(name: str, fn, args) -> int:
     except SystemExit as e:                       # argparse-like exits inside helpers
         return int(e.code or 0) if isinstance(e.code, int) else 1
     except BaseException as e:                    # noqa: BLE001 - the CLI must not show tracebacks
-        print(f"mitsonar {name}: error: {_one_line(e)}", file=sys.stderr)
+        # Mitsuba wraps an exception of a Python plugin into a traceback: its reason is the last line
+        print(f"mitsonar {name}: error: {first_line(e, traceback_reason=True)}", file=sys.stderr)
         return 1
 
 
@@ -80,23 +70,13 @@ def _sound_speed(text):
 
 
 def _check_output(path, suffixes: tuple = ()) -> Path:
-    """Refuse an output file that cannot be written, before any slow work, in one line naming it.
+    """Refuse an output file that cannot be written, before any slow work, in one line naming it
+    (`mitsonar._files.check_output_file`: not a folder, an extension of ``suffixes`` when given, in
+    a folder that exists and is writable). Outputs are then written under a temporary name and
+    renamed, so this is the only place a bad path shows up."""
+    from mitsonar._files import check_output_file
 
-    The folder must exist and be writable, the path must not be a folder, and its extension
-    must be one of ``suffixes`` when given. Outputs are then written under a temporary name and
-    renamed, so this is the only place a bad path shows up.
-    """
-    out = Path(path)
-    if out.is_dir():
-        raise IsADirectoryError(f"{out}: is a directory; give a file name")
-    if suffixes and out.suffix.lower() not in suffixes:
-        raise ValueError(f"{out}: unknown extension {out.suffix or '(none)'!r}; use {' or '.join(suffixes)}")
-    folder = out.absolute().parent
-    if not folder.is_dir():
-        raise FileNotFoundError(f"{out}: folder {folder} does not exist")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise PermissionError(f"{out}: folder {folder} is not writable")
-    return out
+    return Path(check_output_file(os.fspath(path), ValueError, extensions=suffixes))
 
 
 def _head(args):

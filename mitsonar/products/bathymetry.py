@@ -118,10 +118,10 @@ def speckle_power(scan) -> np.ndarray:
     if e.speckle == "off":
         return np.ones(np.shape(scan.intensity))
     if not has_scene_speckle(scan):
-        raise not_allowed(WHERE, "scan", f"speckle {scan.meta.get('speckle')!r}",
+        raise not_allowed(WHERE, "scan", f"speckle {scan.meta.speckle!r}",
                           "a rendered scan (meta['speckle'] == 'scene'), or speckle=False")
     g = e.scene_speckle(scan.poses, scan.ranges, sound_speed=scan.sound_speed, beamwidth_h=scan.beamwidth_h,
-                        aperture_h=float(scan.meta["aperture_h"]))
+                        aperture_h=float(scan.meta.aperture_h))
     power = g.real ** 2 + g.imag ** 2
     if e.speckle == "weibull":
         k = e.speckle_shape
@@ -232,7 +232,7 @@ def soundings(scan, threshold_db=10.0, method="centroid", speckle=False, ping=0,
     sum, the scan's intensity units), ``beam`` the row, ``angle`` its bearing (deg; for a downward
     multibeam the across-track beam angle, positive to port), ``ping`` (``ping``, e.g. the scan's
     index in a survey), ``time`` the row's ping time (``start_time`` + the scan's row time; the
-    scan's ``meta['start_time']`` by default), ``range`` the detected range, ``head_z`` the
+    scan's ``meta.start_time`` by default: 0 when it has none), ``range`` the detected range, ``head_z`` the
     transducer's height. ``speckle``: False detects on the noise-free intensity, True on
     `speckled` (the scene's speckle of the scan; pick another pattern with `render_scan`'s
     ``speckle_seed``). ``sound_speed_profile``: None places each sounding on the straight beam
@@ -256,7 +256,9 @@ def soundings(scan, threshold_db=10.0, method="centroid", speckle=False, ping=0,
         p = pos + rng[k, None] * bore
     else:
         p = refracted(pos, bore, rng[k], scan.sound_speed, sound_speed_profile)
-    t0 = float(scan.meta.get("start_time", 0.0)) if start_time is None else float(start_time)
+    if start_time is None:
+        start_time = scan.meta.start_time if scan.meta.start_time is not None else 0.0
+    t0 = float(start_time)
     out = np.zeros(len(k), SOUNDING_DTYPE)
     out["x"], out["y"], out["z"] = p[:, 0], p[:, 1], p[:, 2]
     with np.errstate(divide="ignore"):
@@ -376,13 +378,15 @@ class SurveyResult:
 
 def survey(scene, trajectory, *, spp=256, seed=0, threshold_db=10.0, method=None, speckle=True, max_scans=None,
            start_time=None, end_time=None, max_depth=None, sensor=0, angle_step=5.0, progress=None,
-           sound_speed_profile=None):
+           sound_speed_profile=None, water_profile=None):
     """Render a survey of ``scene``'s echo sounder along ``trajectory`` and detect the bottom in
     every ping: a `SurveyResult`. ``method`` defaults to ``centroid`` for a multibeam and
     ``leading_edge`` for a single beam; ``speckle``: detect on each scan's scene speckle (True:
     `speckled`, the sensor's ``speckle_seed``, changing along the track as the head moves) or on
     the noise-free intensity (False); ``sound_speed_profile``: the water the soundings are
-    processed with (`soundings`; None: straight rays at the head's nominal speed).
+    processed with (`soundings`; None: straight rays at the head's nominal speed);
+    ``water_profile``: the water the survey is rendered in (refracted paths, `render_scan`'s
+    ``sound_speed_profile``; None: uniform at the head's nominal speed).
     Every option is checked before the first render; a survey in which no beam finds the bottom
     is refused with one line (`NoBottomError`)."""
     from mitsonar.sim.scene import sonar_of
@@ -395,8 +399,10 @@ def survey(scene, trajectory, *, spp=256, seed=0, threshold_db=10.0, method=None
         raise not_allowed(WHERE, "speckle", speckle, "True or False")
     error_table([], [], [], angle_step)     # the step, checked before any render
     check_profile(sound_speed_profile)
+    check_profile(water_profile)
     scans = render_survey(scene, trajectory, None, spp=spp, seed=seed, max_scans=max_scans, start_time=start_time,
-                          end_time=end_time, sensor=sensor, max_depth=max_depth, progress=progress or False)
+                          end_time=end_time, sensor=sensor, max_depth=max_depth, progress=progress or False,
+                          sound_speed_profile=water_profile)
     parts, n, resolution, scans_speed = [], 0, float(sonar.bin_width), float("nan")
     for i, scan in enumerate(scans):
         parts.append(soundings(scan, threshold_db, method, speckle, ping=i, sound_speed_profile=sound_speed_profile))

@@ -23,6 +23,7 @@ import numpy as np
 
 from mitsonar.geometry import northup
 from mitsonar.products.sidescan import across_track, ground_range
+from mitsonar.scan.model import as_scans
 
 
 @dataclass
@@ -186,7 +187,7 @@ def mosaic(scans, resolution=0.1, bounds=None, *, use="data", altitude=None, sea
     ``resolution`` m over ``bounds`` (default: every transducer position plus the swath,
     ``ground_max`` or ``range_max``); ``use``, ``altitude``, ``seabed``, ``threshold``: as in
     `mitsonar.products.sidescan.ground_range`. Returns a `Mosaic` (``.save("m.png")`` writes PNG + array)."""
-    scans = [scans] if hasattr(scans, "intensity") else list(scans)
+    scans = as_scans(scans)
     if not scans:
         raise ValueError("mosaic: no scans given")
     top = max(s.range_max for s in scans) if ground_max is None else float(ground_max)

@@ -57,7 +57,7 @@ def select_side(scan, side):
     rows = channel_rows(scan, side)
     name = SIDES[int(scan.channel[rows[0]])] if len(rows) else str(side)
     if not len(rows):
-        raise ValueError(f"select_side: the scan has no {name} rows (its side is {scan.meta.get('side', 'both')!r})")
+        raise ValueError(f"select_side: the scan has no {name} rows (its side is {scan.meta.side or 'both'!r})")
     return dataclasses.replace(scan, intensity=scan.intensity[rows], data=scan.data[rows], bearings=scan.bearings[rows],
                                poses=scan.poses[rows], times=scan.times[rows], meta={**scan.meta, "side": name})
 

@@ -577,11 +577,12 @@ def apply_to_scan(scan, electronics: "Electronics | dict | None" = None, seed: i
     elif isinstance(electronics, dict):
         electronics = Electronics.from_dict(electronics)
     if seed is None:
-        seed = scan.electronics.get("seed", scan.meta.get("electronics_seed", scan.meta.get("seed", 0)))
+        seed = scan.electronics.get("seed", next((s for s in (scan.meta.electronics_seed, scan.meta.seed)
+                                                  if s is not None), 0))
     speckle = None
     if electronics.speckle != "off" and has_scene_speckle(scan):
         speckle = electronics.scene_speckle(scan.poses, scan.ranges, sound_speed=scan.sound_speed,
-                                            beamwidth_h=scan.beamwidth_h, aperture_h=float(scan.meta["aperture_h"]))
+                                            beamwidth_h=scan.beamwidth_h, aperture_h=float(scan.meta.aperture_h))
     data = electronics.apply(scan.intensity, scan.ranges, absorption=scan.absorption,
                              sound_speed=scan.sound_speed, seed=seed, speckle=speckle)
     out = copy.deepcopy(scan)
@@ -591,9 +592,9 @@ def apply_to_scan(scan, electronics: "Electronics | dict | None" = None, seed: i
 
 
 def has_scene_speckle(scan) -> bool:
-    """Whether ``scan`` says where its echoes come from: a rendered scan records ``meta['speckle']
-    == 'scene'`` and the head's ``meta['aperture_h']`` (a real head's scan does neither)."""
-    return scan.meta.get("speckle") == "scene" and "aperture_h" in scan.meta
+    """Whether ``scan`` says where its echoes come from: a rendered scan records ``meta.speckle
+    == 'scene'`` and the head's ``meta.aperture_h`` (a real head's scan does neither)."""
+    return scan.meta.speckle == "scene" and scan.meta.aperture_h is not None
 
 
 def _complex_gaussian(shape, rng: np.random.Generator, corr_bins=None) -> np.ndarray:

@@ -58,7 +58,8 @@ from typing import Any
 
 import numpy as np
 
-from mitsonar._files import replacing
+from mitsonar._checks import first_line
+from mitsonar._files import check_output_file, replacing
 from mitsonar.sonar_equation.levels import migrate_settings
 
 FORMAT = "mitsonar-scan"
@@ -95,12 +96,8 @@ def write(scan, path) -> None:
         raise ScanFileError(f"{path}: cannot save an empty scan ({scan.n_pings} pings x {scan.n_bins} bins)")
     header = _header(scan, with_arrays=(ext == ".exr"), path=path)
     text = json.dumps(header, allow_nan=True, separators=(",", ":"))
-    folder = os.path.dirname(os.path.abspath(path))
     # Checked here so that the message names the user's path, not the temporary file's.
-    if os.path.isdir(path):
-        raise ScanFileError(f"{path}: is a directory; give a file name ending in {ext}")
-    if not os.path.isdir(folder):
-        raise ScanFileError(f"{path}: folder {folder} does not exist")
+    check_output_file(path, ScanFileError, words={"directory": "{path}: is a directory; give a file name ending in {ext}"})
     try:
         with replacing(path) as tmp:
             if ext == ".exr":
@@ -306,8 +303,7 @@ def _read_exr(path: str) -> tuple[dict[str, Any], str]:
             header = dict(f.header())
             channels = {name: np.array(ch.pixels) for name, ch in f.channels().items()}
     except Exception as exc:  # the binding raises RuntimeError, ValueError, UnicodeDecodeError, ...
-        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise ScanFileError(f"{path}: unreadable OpenEXR file (truncated or corrupt: {reason})") from None
+        raise ScanFileError(f"{path}: unreadable OpenEXR file (truncated or corrupt: {first_line(exc)})") from None
     if HEADER_ATTRIBUTE not in header:
         raise ScanFileError(f"{path}: an OpenEXR image but not a mitsonar scan (no '{HEADER_ATTRIBUTE}' "
                             "header attribute)")
@@ -384,8 +380,7 @@ def _read_npz(path: str) -> tuple[dict[str, Any], str]:
     except ScanFileError:
         raise
     except Exception as exc:  # zipfile.BadZipFile, ValueError (pickled objects), EOFError, zlib.error, ...
-        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise ScanFileError(f"{path}: unreadable numpy archive (truncated or corrupt: {reason})") from None
+        raise ScanFileError(f"{path}: unreadable numpy archive (truncated or corrupt: {first_line(exc)})") from None
     header = arrays.pop("header")
     if header.shape != () or header.dtype.kind != "U":
         raise ScanFileError(f"{path}: the 'header' array is not a string")

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from mitsonar.scan import fileformat as scanfile
+from mitsonar.scan.meta import ScanFieldError, ScanMeta
 
 # The frames' helpers and the kinds live below the Scan (the sensor plugin uses them too); they
 # stay importable from here.
@@ -21,17 +22,6 @@ from mitsonar.geometry import kinds
 from mitsonar.geometry.frames import SIDES, _not_rigid, bearing_rotation, check_rigid, check_rigid_stack  # noqa: F401
 
 _RIGID = "only rigid transforms: rotation + translation, no scale, shear or mirror"
-
-
-class ScanFieldError(ValueError):
-    """A `Scan` field with a value that is not allowed; `field` names it, `reason` says why."""
-
-    def __init__(self, field: str, reason: str):
-        super().__init__(f"Scan '{field}': {reason}")
-        self.field, self.reason = field, reason
-
-    def __reduce__(self):  # pickles (multiprocessing) with both arguments
-        return type(self), (self.field, self.reason)
 
 
 def reception_times(row_times: np.ndarray):
@@ -130,8 +120,12 @@ class Scan:
     absorption : float  (dB/m)
     electronics : dict
         The device-electronics settings that turned `intensity` into `data`.
-    meta : dict
-        Provenance: scene, seed, spp, integrator, max_depth, mitsonar version, ...
+    meta : ScanMeta
+        Provenance and schedule, typed (`mitsonar.scan.meta`): scene, seed, spp, integrator,
+        max_depth, mitsonar_version, ..., ``start_time`` (s, the scan's start on its clock: a
+        trajectory's, or a real head's wall clock), a real head's source, log, settings, ...; other
+        keys in ``meta.extra``. A dict given here (or assigned later) becomes a `ScanMeta`; the
+        dict reading (``meta["seed"]``, ``meta.get(...)``) still works for this release.
     times : float64 (n_pings,)
         Seconds of each row's ping from the scan start, finite and non-decreasing: a mechanical
         head's ``k * ping_period``, zeros for the rows of one multibeam frame; a side-scan head's
@@ -155,8 +149,13 @@ class Scan:
     sound_speed: float = 1500.0
     absorption: float = 0.0
     electronics: dict[str, Any] = field(default_factory=dict)
-    meta: dict[str, Any] = field(default_factory=dict)
+    meta: ScanMeta = field(default_factory=ScanMeta)
     times: np.ndarray | None = None
+
+    def __setattr__(self, name, value):
+        if name == "meta" and isinstance(value, dict):   # a caller's or a file's dict: typed here
+            value = ScanMeta.from_dict(value)
+        object.__setattr__(self, name, value)
 
     def __post_init__(self) -> None:
         # The one place a Scan's fields are checked: the renderer, the SeaNet driver, load_scan
@@ -173,7 +172,7 @@ class Scan:
         if not isinstance(self.beam_pattern, str) or not self.beam_pattern:
             raise ScanFieldError("beam_pattern", f"{self.beam_pattern!r} is not a pattern name")
         for name in ("electronics", "meta"):
-            if not isinstance(getattr(self, name), dict):
+            if not isinstance(getattr(self, name), dict if name == "electronics" else ScanMeta):
                 raise ScanFieldError(name, f"a {type(getattr(self, name)).__name__} is not a dict")
         self.intensity = _array("intensity", self.intensity, np.float32)
         if self.intensity.ndim != 2:
@@ -233,7 +232,7 @@ class Scan:
         first); None for the other kinds. `mitsonar.products.sidescan.select_side` takes one side's rows."""
         if not self.sonar_kind.sided:
             return None
-        return sidescan_channels(self.meta.get("side", "both"), self.n_pings)
+        return sidescan_channels("both" if self.meta.side is None else self.meta.side, self.n_pings)
 
     @property
     def n_bins(self) -> int:
@@ -270,8 +269,8 @@ class Scan:
         """dB, the receive beam's ``10 log10(4 pi / Int B)``: recorded by `render_scan` in
         ``meta['directivity_index']``, else computed from `beam_pattern` and its widths (and
         ``meta['frequency']``, ``meta['aperture_h']`` for ``sinc``)."""
-        if "directivity_index" in self.meta:
-            return float(self.meta["directivity_index"])
+        if self.meta.directivity_index is not None:
+            return float(self.meta.directivity_index)
         if self.beam_pattern == "table":
             raise ScanFieldError("meta", "a 'table' beam pattern's directivity_index is not recorded")
         from mitsonar.plugins.beam import BeamPattern
@@ -280,8 +279,8 @@ class Scan:
         ensure_variant()
         sinc = self.beam_pattern == "sinc"
         beam = BeamPattern(self.beam_pattern, self.beamwidth_h, self.beamwidth_v,
-                           float(self.meta.get("frequency", 700e3)),
-                           float(self.meta["aperture_h"]) if sinc and "aperture_h" in self.meta else None,
+                           float(700e3 if self.meta.frequency is None else self.meta.frequency),
+                           float(self.meta.aperture_h) if sinc and self.meta.aperture_h is not None else None,
                            None, self.sound_speed)
         return beam.directivity_index()
 
@@ -338,3 +337,11 @@ class Scan:
         return (f"Scan(kind={self.kind!r}, n_pings={self.n_pings}, n_bins={self.n_bins}, "
                 f"range=[{self.range_min:g}, {self.range_max:g}) m, beam={self.beam_pattern} "
                 f"{self.beamwidth_h:g}x{self.beamwidth_v:g} deg)")
+
+
+def as_scans(scans) -> list:
+    """A list of scans from one scan or an iterable of them (what "a `Scan` or a list" parameters
+    take). One scan is a `Scan` or a scan-like object: one with ``data``, ``intensity`` or ``poses``."""
+    if isinstance(scans, Scan) or any(hasattr(scans, a) for a in ("data", "intensity", "poses")):
+        return [scans]
+    return list(scans)

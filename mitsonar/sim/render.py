@@ -1,6 +1,8 @@
 """`render_scan`: one scan of a scene through the sonar integrators and the head's electronics."""
 from __future__ import annotations
 
+import contextlib
+
 import math
 import warnings
 
@@ -165,7 +167,7 @@ def _integrator(scene, integrator):
 
 def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integrator=None, sensor=0,
                 max_depth=None, electronics=None, electronics_seed=None, progress=None, trajectory=None,
-                start_time=None, speckle_seed=None) -> Scan:
+                start_time=None, speckle_seed=None, sound_speed_profile=None) -> Scan:
     """Render one scan of ``scene`` and pass it through the head's electronics.
 
     Parameters
@@ -204,6 +206,10 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     speckle_seed : int, optional
         The scene's speckle (which scatterers its surfaces hold, `mitsonar.receiver.speckle`);
         default the sensor's ``speckle_seed`` (XML), 0 unless given.
+    sound_speed_profile : mitsonar.acoustics.SoundSpeedProfile, optional
+        The water the paths refract through (``sonar_tof`` only; replaces the integrator's XML
+        ``sound_speed_profile`` for this render). The sensor's ``sound_speed`` stays the head's
+        nominal speed: range = sound_speed x two-way travel time / 2.
 
     Returns
     -------
@@ -251,6 +257,15 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     if trajectory is not None:
         pose = moving_head_poses(sonar, trajectory, start_time, pose)
     integrator = _integrator(scene, integrator)
+    if sound_speed_profile is not None:
+        from mitsonar.acoustics.profile import SoundSpeedProfile
+
+        if not isinstance(sound_speed_profile, SoundSpeedProfile):
+            raise SceneError(f"render_scan 'sound_speed_profile': expected a mitsonar.acoustics.SoundSpeedProfile, "
+                             f"got {type(sound_speed_profile).__name__}")
+        if not getattr(integrator, "REFRACTS", False):
+            raise SceneError(f"render_scan 'sound_speed_profile': refracted paths are traced by the sonar_tof "
+                             f"integrator only, not {type(integrator).__name__}")
 
     from mitsonar.receiver.electronics import Electronics, check_head_settings
 
@@ -263,8 +278,9 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
         raise SceneError(str(exc)) from None
     try:
         sonar.head_pose(pose)
-        hist = integrator.render_histogram(scene, sonar, seed=seed, spp=spp, pose=pose, max_depth=max_depth,
-                                           progress=progress)
+        with _profile_of(integrator, sound_speed_profile):
+            hist = integrator.render_histogram(scene, sonar, seed=seed, spp=spp, pose=pose, max_depth=max_depth,
+                                               progress=progress)
     except ValueError as exc:
         raise SceneError(str(exc)) from None
 
@@ -307,6 +323,20 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
                 beamwidth_v=sonar.beam.beamwidth_v, kind=sonar.kind, sound_speed=sonar.sound_speed,
                 absorption=sonar.absorption, electronics={**model.to_dict(), "seed": int(eseed)},
                 meta=meta)
+
+
+@contextlib.contextmanager
+def _profile_of(integrator, profile):
+    """``integrator`` rendering through ``profile`` for the block (None: its own, unchanged)."""
+    if profile is None:
+        yield
+        return
+    before = integrator.sound_speed_profile
+    integrator.sound_speed_profile = profile
+    try:
+        yield
+    finally:
+        integrator.sound_speed_profile = before
 
 
 def speckle_geometry(sonar) -> dict:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import warnings
 
+from mitsonar._checks import first_line
 from mitsonar.sim.variant import ensure_variant
 
 
@@ -40,10 +41,9 @@ def mitsuba_error(exc: BaseException, where: str | None = None) -> str:
     """
     from mitsonar.plugins import take_failure
 
-    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
-    first = lines[0] if lines else type(exc).__name__
+    first = first_line(exc)
     failure = take_failure()
-    reason = str(failure).strip().splitlines()[0] if failure is not None and str(failure).strip() else None
+    reason = None if failure is None else first_line(failure, None)
     if reason is not None and reason in str(exc):
         place = _location(first) if "failed to instantiate" in first else ""
         if "dictionary node" in place:   # mi.load_dict: no file to name

@@ -56,7 +56,7 @@ def survey_plan(sonar, trajectory, start_time=None, end_time=None, max_scans=Non
 
 def render_survey(scene, trajectory, output=None, *, spp=1024, seed=0, start_time=None, end_time=None,
                   max_scans=None, sensor=0, integrator=None, max_depth=None, electronics=None, ext=".npz",
-                  progress=True):
+                  progress=True, sound_speed_profile=None):
     """Render the scans of a survey along ``trajectory``, one after another; returns an iterator
     of `Scan`, each saved before it is yielded when ``output`` is given.
 
@@ -93,11 +93,15 @@ def render_survey(scene, trajectory, output=None, *, spp=1024, seed=0, start_tim
     starts = survey_plan(sonar, trajectory, start_time, end_time, max_scans)
     moving_head_poses(sonar, trajectory, starts[-1])     # the last scan fits (refused here if not)
     integrator = _integrator(scene, integrator)
+    if sound_speed_profile is not None and not getattr(integrator, "REFRACTS", False):
+        raise SceneError(f"render_survey 'sound_speed_profile': refracted paths are traced by the sonar_tof "
+                         f"integrator only, not {type(integrator).__name__}")
     if output is not None:
         output = os.fspath(output)
         os.makedirs(output, exist_ok=True)
     return _scans(scene, trajectory, output, starts, sonar, dict(
-        spp=spp, sensor=sensor, integrator=integrator, max_depth=max_depth, electronics=electronics),
+        spp=spp, sensor=sensor, integrator=integrator, max_depth=max_depth, electronics=electronics,
+        sound_speed_profile=sound_speed_profile),
         seed, ext, progress)
 
 

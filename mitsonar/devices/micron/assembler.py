@@ -268,7 +268,7 @@ class ScanAssembler:
         if sweep == "sector":
             meta["left_lim"], meta["right_lim"] = int(ref.left_lim), int(ref.right_lim)
         if times:
-            meta["time_start"], meta["time_end"] = float(min(times)), float(max(times))
+            meta["start_time"], meta["end_time"] = float(min(times)), float(max(times))
         return Scan(intensity=np.zeros((n, nb), np.float32), data=data,
                     ranges=(np.arange(nb) + 0.5) * width, bearings=bearings, poses=poses,
                     range_min=0.0, range_max=float(range_max), beamwidth_h=3.0, beamwidth_v=35.0,

@@ -274,7 +274,7 @@ class Ping360Assembler:
                 "gain_setting": int(ref.gain_setting), "transmit_duration": int(ref.transmit_duration),
                 "sample_period": int(ref.sample_period), "transmit_frequency": int(ref.transmit_frequency)}
         if times:
-            meta["time_start"], meta["time_end"] = float(min(times)), float(max(times))
+            meta["start_time"], meta["end_time"] = float(min(times)), float(max(times))
         self.reset()
         return Scan(intensity=np.zeros((n, nb), np.float32), data=data, ranges=(np.arange(nb) + 0.5) * w,
                     bearings=bearings, poses=poses @ bearing_rotation(bearings), range_min=0.0,

@@ -17,19 +17,22 @@ Topics (see docs/howto/ros2_bags.rst):
 =================== ========================================= =====================================
 
 Stamps: ``start + base + scan.times[k]`` seconds, ``start`` given by the caller (default 0) and
-``base`` the scan's own start on its trajectory's clock (``meta['time_start']`` or
-``meta['start_time']``, 0 when it has none).
+``base`` the scan's own start on its clock (``meta.start_time``: a trajectory's for a rendered
+scan, the wall clock for a real head's; 0 when it has none).
 """
 from __future__ import annotations
 
 import math
 import os
+from collections.abc import Mapping
 
 import numpy as np
 
-from mitsonar._files import StagedFiles
+from mitsonar._files import StagedFiles, check_output_file
 from mitsonar.export.ros import messages as M
 from mitsonar.export.ros import msgdefs
+from mitsonar.scan.meta import ScanMeta
+from mitsonar.scan.model import as_scans
 
 TOPICS = {"/sonar/image": M.PROJECTED, "/sonar/fan": M.IMAGE, "/sonar/waterfall": M.IMAGE,
           "/sonar/detections": M.CLOUD, "/tf": M.TF, "/odom": M.ODOMETRY}
@@ -52,13 +55,9 @@ def _require_mcap():
 
 
 def scan_base(scan) -> float:
-    """The scan's own start time in seconds (its meta ``time_start`` or ``start_time``, else 0)."""
-    meta = scan.meta if isinstance(getattr(scan, "meta", None), dict) else {}
-    for key in ("time_start", "start_time"):
-        v = meta.get(key)
-        if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v):
-            return float(v)
-    return 0.0
+    """The scan's own start time in seconds (its ``meta.start_time``, else 0)."""
+    v = ScanMeta.from_dict(scan.meta).start_time if isinstance(getattr(scan, "meta", None), Mapping) else None
+    return 0.0 if v is None else float(v)
 
 
 def check_scan(scan, name="scan") -> None:
@@ -80,22 +79,18 @@ def check_scan(scan, name="scan") -> None:
             raise ExportError(f"{name}: '{field}' holds values that are not finite; allowed: finite numbers")
 
 
+#: `check_output`'s sentences (`mitsonar._files.check_output_file`).
+_OUTPUT_WORDS = {"directory": "{path}: is a folder; give an .mcap file name",
+                 "extension": "{path}: the file name must end in .mcap",
+                 "no_folder": "{path}: the folder {folder} does not exist"}
+
+
 def check_output(path, force=False, folder_may_be=None) -> str:
     """The output path as a string; an existing one is refused unless ``force``. Its folder must
     exist, unless it is ``folder_may_be`` (a folder the caller is about to make)."""
     _require_mcap()
-    path = os.fspath(path)
-    if os.path.isdir(path):
-        raise ExportError(f"{path}: is a folder; give an .mcap file name")
-    if os.path.exists(path) and not force:
-        raise ExportError(f"{path}: exists; refusing to overwrite it (use --force)")
-    folder = os.path.dirname(os.path.abspath(path))
-    made = folder_may_be is not None and folder == os.path.abspath(os.fspath(folder_may_be))
-    if not os.path.isdir(folder) and not made:
-        raise ExportError(f"{path}: the folder {folder} does not exist")
-    if not path.endswith(".mcap"):
-        raise ExportError(f"{path}: the file name must end in .mcap")
-    return path
+    return check_output_file(path, ExportError, extensions=(".mcap",), force=force, folder_may_be=folder_may_be,
+                             words=_OUTPUT_WORDS)
 
 
 class McapBag:
@@ -183,7 +178,7 @@ class McapBag:
 def write_mcap(path, scans, *, start=0.0, trajectory=None, threshold=THRESHOLD, force=False, names=None) -> dict:
     """Write ``scans`` (a `Scan` or a list) into the MCAP file ``path``; returns the message count
     per topic. Every scan is checked before the file is opened; ``names`` label them in errors."""
-    scans = [scans] if hasattr(scans, "data") else list(scans)
+    scans = as_scans(scans)
     names = names or [f"scan {i}" for i in range(len(scans))]
     if not scans:
         raise ExportError("no scans to export")

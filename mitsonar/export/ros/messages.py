@@ -10,6 +10,7 @@ it as ``x_sonar = y_beam``, ``y_sonar = -x_beam``, ``z_sonar = z_beam``; so azim
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -75,7 +76,7 @@ def sonar_pose(scan, row: int) -> np.ndarray:
 
 def frequency(scan) -> float:
     for src in (scan.meta, scan.electronics):
-        v = src.get("frequency") if isinstance(src, dict) else None
+        v = src.get("frequency") if isinstance(src, Mapping) else None
         if isinstance(v, (int, float)) and math.isfinite(v):
             return float(v)
     return 0.0          # PingInfo: "Set to 0 if unavailable"
@@ -84,7 +85,7 @@ def frequency(scan) -> float:
 def tx_beamwidth_v(scan) -> float:
     """The transmit beam's vertical width (deg): ``meta['tx_beamwidth_v']`` when the head has its
     own transmit pattern, else the scan's ``beamwidth_v`` (one pattern both ways)."""
-    v = scan.meta.get("tx_beamwidth_v") if isinstance(scan.meta, dict) else None
+    v = scan.meta.get("tx_beamwidth_v") if isinstance(scan.meta, Mapping) else None
     return float(v) if isinstance(v, (int, float)) and math.isfinite(v) and v > 0 else float(scan.beamwidth_v)
 
 

@@ -7,6 +7,7 @@ import json
 import os
 import shutil
 
+from mitsonar import _files
 from mitsonar._files import StagedFiles, replacing
 from mitsonar.jobs.compare.common import CompareError, jsonable
 
@@ -14,18 +15,7 @@ from mitsonar.jobs.compare.common import CompareError, jsonable
 def check_output_folder(path) -> None:
     """Raise `CompareError` (one line) unless ``path`` is a folder this process can write in or
     can create (its nearest existing ancestor is a folder it can write in). Creates nothing."""
-    path = os.fspath(path)
-    if os.path.exists(path) and not os.path.isdir(path):
-        raise CompareError(f"output folder {path!r} exists and is not a folder")
-    parent = os.path.abspath(path)
-    while not os.path.exists(parent):
-        parent = os.path.dirname(parent)
-    if not os.path.isdir(parent):
-        raise CompareError(f"-o {path!r}: cannot create the output folder ({parent!r} is a file, not a folder)")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise CompareError(f"-o {path!r}: cannot create the output folder ({parent!r}: permission denied)"
-                           if parent != os.path.abspath(path) else
-                           f"-o {path!r}: cannot write in the output folder (permission denied)")
+    _files.check_output_folder(path, CompareError, writable=True)
 
 
 class OutputFolder:

@@ -44,7 +44,7 @@ import re
 
 import numpy as np
 
-from mitsonar._checks import is_number, is_whole
+from mitsonar._checks import first_line, is_number, is_whole
 
 FORMAT = "mitsonar-dataset/1"
 SPECS = ("uniform", "randint", "choice")
@@ -170,8 +170,7 @@ def read_config(path) -> dict:
                 context += f" started at line {start.line + 1}"
             raise DatasetError(f"dataset config {path!r} line {mark.line + 1}, column {mark.column + 1}: {problem}"
                                + (f" ({context})" if context else "")) from None
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise DatasetError(f"dataset config {path!r}: {first}") from None
+        raise DatasetError(f"dataset config {path!r}: {first_line(exc)}") from None
     try:
         return check_config(cfg, base=os.path.dirname(os.path.abspath(path)))
     except DatasetError as exc:   # name the file and the key's line

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import os
 
+from mitsonar._checks import first_line
 from mitsonar.jobs.dataset.config import DatasetError, task
 
 ACTOR_RESTARTS = 3
@@ -107,8 +108,7 @@ def connect(address):
     try:
         ray.init(address=address, log_to_driver=False)
     except (ConnectionError, RuntimeError, ValueError) as e:
-        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-        raise DatasetError(f"--address {address!r}: {first}. Check that a Ray head runs there (ray start --head "
+        raise DatasetError(f"--address {address!r}: {first_line(e)}. Check that a Ray head runs there (ray start --head "
                            "--port PORT gives HOST:PORT; run this command on a node of the cluster), that this "
                            "Ray's version is the head's, and with token authentication that the head's token is "
                            "here (ray get-auth-token on the head; RAY_AUTH_TOKEN or ~/.ray/auth_token)") from None
