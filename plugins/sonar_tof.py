@@ -43,40 +43,40 @@ class SonarTOFIntegrator(SonarIntegrator):
     Echoes outside ``[range_min, range_max)`` are dropped. Bins hold energy per bin (not per
     metre), averaged over ``spp`` paths per ping; passes are summed in float64.
 
-    ============ ======== ====================================================================
-    Parameter    Default  Meaning
-    ============ ======== ====================================================================
-    max_depth    5        surface bounces per path (1 = single bounce; the thesis uses 5)
-    sampling     sobol    the emitted directions of a row: ``sobol`` (an Owen-scrambled Sobol
-                          sequence per row, `samples.SobolSamples`: the beam is covered evenly)
-                          or ``independent`` (uniform random, `samples.HashSamples`); both are
-                          unbiased, the bounces are sampled independently either way
-    share_beams  auto     multibeam: trace a frame's ``n_rows * spp`` paths from the transmit
-                          fan and score each echo into every receive beam that hears it,
-                          weighted by that beam's gain (`shared_beams`); ``sampling`` then
-                          draws the fan's directions as one sequence per frame. Same
-                          expectation, lower error per path. Unset (auto): on for a
-                          multibeam head that can share, else per-row paths, silently: a
-                          ``sinc`` receive beam (side lobes over the whole half-space, so
-                          every echo would be scored into every row), echoes reaching more
-                          than `shared_beams.MAX_BEAMS` beams, windows overlapping across a
-                          full turn, rows with their own poses (a moving head), other kinds.
-                          ``true``: share, and refuse in one line a head that cannot;
-                          ``false``: per-row paths. Gradients use the per-row paths
-    guide        image    ``image``: after a bounce on a mirror-like surface (a Phong lobe of
-                          exponent >= 100: steel plates, a calm sea surface), half of the next
-                          bounces aim at the transducer's image in its plane (`image_guide`):
-                          echoes seen only through such plates get 5-20x less noise at equal
-                          time (hidden_target, periscope); scenes without mirror-like BSDFs
-                          trace the unguided kernel (no cost), others pay up to 31 % more time per
-                          path. ``none``: BSDF sampling only. Gradient renders are unguided
-    sound_speed_profile   a CSV file (``depth,sound_speed``; a path relative to the scene
-                 (none)   file): the water the paths refract through (`refraction`): arcs out,
-                          an eigenray back, range = sensor ``sound_speed`` x two-way travel
-                          time / 2. Unset, or constant at the sensor's speed: straight rays.
-                          Primal renders only
-    svp_chords   4        chords per range window along which a refracted ray meets the scene
-    ============ ======== ====================================================================
+    =================== ======== ========================================================================
+    Parameter           Default  Meaning
+    =================== ======== ========================================================================
+    max_depth           5        surface bounces per path (1 = single bounce; the thesis uses 5)
+    sampling            sobol    the emitted directions of a row: ``sobol`` (an Owen-scrambled Sobol
+                                 sequence per row, `samples.SobolSamples`: the beam is covered evenly)
+                                 or ``independent`` (uniform random, `samples.HashSamples`); both are
+                                 unbiased, the bounces are sampled independently either way
+    share_beams         auto     multibeam: trace a frame's ``n_rows * spp`` paths from the transmit
+                                 fan and score each echo into every receive beam that hears it,
+                                 weighted by that beam's gain (`shared_beams`); ``sampling`` then
+                                 draws the fan's directions as one sequence per frame. Same
+                                 expectation, lower error per path. Unset (auto): on for a
+                                 multibeam head that can share, else per-row paths, silently: a
+                                 ``sinc`` receive beam (side lobes over the whole half-space, so
+                                 every echo would be scored into every row), echoes reaching more
+                                 than `shared_beams.MAX_BEAMS` beams, windows overlapping across a
+                                 full turn, rows with their own poses (a moving head), other kinds.
+                                 ``true``: share, and refuse in one line a head that cannot;
+                                 ``false``: per-row paths. Gradients use the per-row paths
+    guide               image    ``image``: after a bounce on a mirror-like surface (a Phong lobe of
+                                 exponent >= 100: steel plates, a calm sea surface), half of the next
+                                 bounces aim at the transducer's image in its plane (`image_guide`):
+                                 echoes seen only through such plates get 5-20x less noise at equal
+                                 time (hidden_target, periscope); scenes without mirror-like BSDFs
+                                 trace the unguided kernel (no cost), others pay up to 31 % more time per
+                                 path. ``none``: BSDF sampling only. Gradient renders are unguided
+    sound_speed_profile (none)   a CSV file (``depth,sound_speed``; a path relative to the scene
+                                 file): the water the paths refract through (`refraction`): arcs out,
+                                 an eigenray back, range = sensor ``sound_speed`` x two-way travel
+                                 time / 2. Unset, or constant at the sensor's speed: straight rays.
+                                 Primal renders only
+    svp_chords          4        chords per range window along which a refracted ray meets the scene
+    =================== ======== ========================================================================
 
     Each pass runs as a Dr.Jit frozen function (`frozen_pass`): its kernel is traced once per
     scene, sensor and pass size and replayed after, with the seed, pose, window and pass start as

@@ -70,3 +70,43 @@ def test_readme_is_a_short_front_page_whose_links_resolve():
     pages = {p.relative_to(root).as_posix() for p in DOCS.glob("*.rst")} - {"docs/index.rst", "docs/changelog.rst"}
     assert "CHANGELOG.md" in links
     assert pages <= set(links), f"top-level pages the README does not link: {sorted(pages - set(links))}"
+
+
+def _simple_table_margin_errors(doc: str) -> list:
+    """Rows of the RST simple tables in ``doc`` with text in a column margin (docutils then
+    fails the documentation build with "Malformed table"): the gaps between the ``====`` runs
+    of a table's rules must stay blank in every row, except past the last column."""
+    import inspect
+
+    errors, lines = [], inspect.cleandoc(doc or "").splitlines()
+    i = 0
+    while i < len(lines):
+        rule = lines[i]
+        if not re.fullmatch(r"=+( +=+)+", rule.strip()) or rule != rule.rstrip():
+            i += 1
+            continue
+        gaps = [m.span() for m in re.finditer(r" +", rule.strip())]
+        offset = len(rule) - len(rule.lstrip())
+        gaps = [(a + offset, b + offset) for a, b in gaps]
+        n_rules, j = 1, i + 1
+        while j < len(lines) and n_rules < 3:
+            row = lines[j]
+            if row.strip() == rule.strip():
+                n_rules += 1
+            elif row.strip():
+                for a, b in gaps:
+                    if row[a:b].strip():
+                        errors.append(row.strip()[:60])
+                        break
+            j += 1
+        i = j
+    return errors
+
+
+def test_parameter_tables_are_well_formed_rst():
+    from mitsonar import plugins
+
+    docs = {f"{entry[1]}": getattr(plugins.module(entry[2]), entry[3]).__doc__ for entry in PLUGINS}
+    docs["Electronics"] = Electronics.__doc__
+    bad = {name: rows for name, doc in docs.items() if (rows := _simple_table_margin_errors(doc))}
+    assert not bad, f"table rows with text in a column margin: {bad}"

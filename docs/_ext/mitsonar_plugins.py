@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import sys
 
 from docutils import nodes
 from docutils.statemachine import StringList
@@ -33,6 +34,13 @@ def _plugin_entry(name: str):
 
 
 class _RSTDirective(SphinxDirective):
+    def _depends_on(self, obj) -> None:
+        """Rebuild this page when the source file of ``obj`` changes (Sphinx tracks only .rst)."""
+        try:
+            self.env.note_dependency(inspect.getsourcefile(obj))
+        except TypeError:
+            pass
+
     def _parse(self, lines: list[str]) -> list[nodes.Node]:
         node = nodes.container()
         source = self.get_source_info()[0]
@@ -58,6 +66,7 @@ class PluginDirective(_RSTDirective):
         except ValueError as exc:
             raise self.error(str(exc)) from None
         names = plugins.parameters(cls)
+        self._depends_on(cls)
         lines = [f"*{kind}* ``{name}`` (class ``{cls.__module__}.{cls.__name__}``)", ""]
         lines += inspect.cleandoc(cls.__doc__ or "").splitlines()
         lines += ["", f"Every XML parameter ``{name}`` accepts (any other name is refused, naming the nearest "
@@ -73,13 +82,14 @@ class ElectronicsDirective(_RSTDirective):
     def run(self):
         from mitsonar.receiver.electronics import Electronics
 
+        self._depends_on(Electronics)
         lines = inspect.cleandoc(Electronics.__doc__ or "").splitlines()
         fields = [f.name for f in dataclasses.fields(Electronics)]
         lines += ["", "Fields: " + ", ".join(f"``{n}``" for n in fields) + ".", ""]
         return self._parse(lines)
 
 
-class CLIDirective(SphinxDirective):
+class CLIDirective(_RSTDirective):
     """``.. mitsonar-cli::``: one section per ``mitsonar`` command, its ``--help`` verbatim."""
 
     has_content = False
@@ -96,6 +106,8 @@ class CLIDirective(SphinxDirective):
             parser = build_parser()
             sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
             out = []
+            for module in {m for m in sys.modules if m.startswith("mitsonar.cli")}:
+                self._depends_on(sys.modules[module])
             for name, command in sub.choices.items():
                 section = nodes.section(ids=[f"cli-{name}"], names=[f"mitsonar {name}"])
                 section += nodes.title(text=f"mitsonar {name}")
