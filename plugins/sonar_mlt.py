@@ -10,6 +10,7 @@ import numpy as np
 from mitsonar._checks import require
 
 from .common import PathSetup, SonarIntegrator, tagging_hard
+from .exact_sum import ExactBins
 from .jit_arrays import upload
 from .mlt_split import MAX_SHARE, render_split
 from .props import count, number, text
