@@ -30,6 +30,7 @@ from mitsonar._checks import not_allowed, require
 
 from . import image_guide
 from .emission import DB_TO_LOG2, emit
+from .denormals import flushed
 from .exact_sum import ExactBins
 from .props import count, text
 from .range_bins import RangeBins
@@ -202,6 +203,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
         raise NotImplementedError(f"{type(self).__name__} must implement render_histogram")
 
     # ------------------------------------------------------------------ gradients (path replay)
+    @flushed   # the calling thread computes like the pool's threads (`denormals`)
     def render_forward(self, scene, params=None, sensor=0, seed=0, spp=0):
         """Forward-mode derivative of the scan ``mi.render`` returns, along the tangents set on the
         traversed parameters: a tensor (n_rows, n_bins, 1). The estimator and what its range
@@ -231,8 +233,11 @@ class SonarIntegrator(mi.SamplingIntegrator):
             with dr.suspend_grad():
                 self.sample(setup, ping, samples, record, mode=dr.ADMode.Forward)
             dr.eval(grad.words)
-        return mi.TensorXf(mi.Float(grad.total() * (1.0 / self._spp)), shape=(n_rows, n_bins, 1))
+        out = mi.Float(grad.total() * (1.0 / self._spp))
+        dr.eval(out)   # inside `flushed`
+        return mi.TensorXf(out, shape=(n_rows, n_bins, 1))
 
+    @flushed
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
         """Reverse-mode derivative: back-propagates ``grad_in`` (n_rows, n_bins, 1) into the traversed
         parameters with gradients enabled, by path replay (memory independent of ``spp``)."""

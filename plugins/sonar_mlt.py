@@ -10,6 +10,7 @@ import numpy as np
 from mitsonar._checks import require
 
 from .common import PathSetup, SonarIntegrator, tagging_hard
+from .denormals import flushed
 from .exact_sum import ExactBins
 from .jit_arrays import upload
 from .mlt_split import MAX_SHARE, render_split
@@ -173,6 +174,7 @@ class SonarMLTIntegrator(SonarIntegrator):
         return lo
 
     # ------------------------------------------------------------------ rendering
+    @flushed   # the calling thread computes like the pool's threads (`denormals`)
     def render_histogram(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None, progress=None):
         """Mean echo energy per bin, float64 ``(n_pings, n_bins)`` (same units as ``sonar_tof``):
         the split render (`mlt_split`) with the image guide, else chains over every echo."""

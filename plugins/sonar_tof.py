@@ -9,6 +9,7 @@ from mitsonar._checks import require
 
 from . import frozen_pass
 from .common import SonarIntegrator
+from .denormals import flushing
 from .exact_sum import ExactBins
 from .props import text
 from .samples import HashSamples, SobolSamples, opaque_u32, row_lanes
@@ -127,13 +128,15 @@ class SonarTOFIntegrator(SonarIntegrator):
         """The mean over ``spp`` samples per row of ``one_pass(start, count)`` (a float64 array:
         the summed energy of samples ``start .. start + count`` of every row), run in passes of at
         most ``max_per_row`` (and `MAX_SPP_PER_PASS`) samples per row with gradients off;
-        ``progress(done_spp, spp)`` after each pass. The pass loop of every histogram integrator."""
+        ``progress(done_spp, spp)`` after each pass. The pass loop of every histogram integrator.
+        Subnormals flush to zero on the calling thread as on Dr.Jit's pool threads (`denormals`)."""
         spp = int(spp)
         if spp < 1:
             raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
         spp_pass = max(1, min(spp, MAX_SPP_PER_PASS, int(max_per_row)))
         total, start = 0.0, 0
-        with dr.suspend_grad():
+        # flushing: the calling thread computes like the pool's threads (1 thread = 2 threads)
+        with dr.suspend_grad(), flushing():
             while start < spp:
                 count = min(spp_pass, spp - start)
                 total = total + one_pass(start, count)
