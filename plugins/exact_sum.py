@@ -22,7 +22,7 @@ float32 subnormals (< 1.2e-38) add nothing: Dr.Jit's pool threads flush subnorma
 the calling thread may not, so they would differ with the thread count.
 
 Cost: one or two integer atomics per echo instead of one float64 atomic (a compare-and-swap loop
-on x86); memory 80 bytes per bin instead of 8 (`benchmarks/render.py --exact-sum` measures it).
+on x86); memory 80 bytes per bin instead of 8 (`benchmarks/exact_sum.py` measures the time).
 """
 from __future__ import annotations
 
