@@ -5,7 +5,7 @@ bottom detection against the render.
 Prints one JSON object:
   * ``flat``: per preset, a static head 10 m over a flat sand plane, ``--pings`` pings, each with
     the scene's speckle of another ``speckle_seed`` (another set of scatterers): per 10 deg of beam
-    angle the measured rms depth error, the model's (`mitsonar.bathymetry.predicted_rms` at the
+    angle the measured rms depth error, the model's (`mitsonar.products.bathymetry.predicted_rms` at the
     scan's speckle grain ``speckle_resolution``) and their ratio, ``outer_over_inner`` (rms at
     |angle| >= 45 deg over rms at |angle| <= 15 deg), and ``still_head_error_correlation``: the
     correlation over the beams of ping 0's depth errors with those of the same still head pinged
@@ -31,8 +31,9 @@ import time
 import numpy as np
 
 import mitsonar
-from mitsonar import bathymetry, echosounders
-from mitsonar.sea_surface import load_survey_scene
+from mitsonar.products import bathymetry
+from mitsonar.scenes import echosounders
+from mitsonar.scenes.sea_surface import load_survey_scene
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENES = os.path.join(HERE, "..", "scenes_xml")
@@ -77,7 +78,7 @@ def slope(name, spp, scans):
     head = echosounders.configure(name, range_max=25.0)
     scene = load_survey_scene(os.path.join(SCENES, "rocky_slope.xml"), sonar=echosounders.sonar_xml(head))
     track = mitsonar.Trajectory.from_tum(os.path.join(SCENES, "rocky_slope_survey.tum"))
-    from mitsonar.survey import render_survey
+    from mitsonar.sim.survey import render_survey
 
     mitsonar.render_scan(scene, spp=spp, seed=0, trajectory=track)   # compile
     t_render = t_detect = 0.0
@@ -115,7 +116,7 @@ def main(argv=None):
     ap.add_argument("--scans", type=int, default=40)
     args = ap.parse_args(argv)
     multibeams = [n for n, p in echosounders.PRESETS.items() if p.kind == "multibeam"]
-    out = dict(spp=args.spp, machine=platform.machine(), python=sys.version.split()[0], variant=mitsonar.variant(),
+    out = dict(spp=args.spp, machine=platform.machine(), python=sys.version.split()[0], variant=mitsonar.sim.variant(),
                flat={n: flat(n, args.spp, args.pings) for n in multibeams},
                rocky_slope={n: slope(n, args.spp, args.scans) for n in multibeams},
                altimeter=altimeter(16 * args.spp))

@@ -36,7 +36,7 @@ class _Clock:
 
 
 def run(cfg, workers, threads, engine):
-    from mitsonar.dataset import generate_dataset
+    from mitsonar.jobs.dataset import generate_dataset
 
     clock = _Clock()
     with tempfile.TemporaryDirectory() as tmp:
@@ -59,8 +59,8 @@ def main(argv=None):
     ap.add_argument("--engine", choices=("local", "ray"), default="local", help="local processes (default) or Ray actors")
     args = ap.parse_args(argv)
 
-    from mitsonar.dataset import read_config
-    from mitsonar.dataset.runner import _cores
+    from mitsonar.jobs.dataset import read_config
+    from mitsonar.jobs.dataset.runner import _cores
 
     cfg = read_config(args.config)
     cfg.update(samples=args.samples, spp=args.spp)

@@ -38,7 +38,7 @@ def _scene_and_params(pings=200):
     import mitsuba as mi
 
     import mitsonar
-    from mitsonar.render import scan_parameters
+    from mitsonar.sim.render import scan_parameters
 
     scene = mitsonar.load_scene(BOX)
     keys = [k for k in scan_parameters(scene).keys() if k.endswith((".diffuse", ".specular"))] + ["sonar.to_world"]

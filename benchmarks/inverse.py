@@ -74,7 +74,7 @@ def geometry_bias(spp=8192, h=0.05, n_random=3):
     import mitsonar
     import recover_seabed as rs
     from _inverse import relative_l2
-    from mitsonar.render import scan_parameters
+    from mitsonar.sim.render import scan_parameters
 
     nx, ny = 9, 25
     z_true, x, y = rs.true_heights(nx, ny, 0.5)

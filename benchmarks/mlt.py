@@ -1,6 +1,6 @@
 """Metropolis versus path tracing at equal time, on an easy scene and a hard one.
 
-Runs `mitsonar.compare.compare` (the engine of ``mitsonar compare``) on scenes_xml/box.xml (easy:
+Runs `mitsonar.jobs.compare.compare` (the engine of ``mitsonar compare``) on scenes_xml/box.xml (easy:
 open walls, every echo is found by path tracing), scenes_xml/slot_chamber.xml (hard: a chamber
 seen through a slot), scenes_xml/glossy_corridor.xml (hard: glossy multipath) and
 scenes_xml/hidden_target.xml (diagnostic, no target: a boulder seen only in a glossy plate; see
@@ -89,8 +89,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     import mitsonar  # noqa: F401  (variant and plugins)
-    from mitsonar.compare import CompareError, compare, jsonable, load_integrator
-    from mitsonar.compare.parsing import parse_budgets, parse_integrators
+    from mitsonar.jobs.compare import CompareError, compare, jsonable, load_integrator
+    from mitsonar.jobs.compare.parsing import parse_budgets, parse_integrators
 
     try:
         names = parse_integrators(args.integrators)

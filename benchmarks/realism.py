@@ -2,7 +2,7 @@
 
 For each scene in ``scenes_xml/`` and each sonar of the scene (its own kind: mechanical or
 multibeam), the default scan (``--spp``, seeds ``--seeds``, the sensor's own electronics) is
-rendered and the statistics of `mitsonar.realism` are computed from its bytes: the Weibull shape of
+rendered and the statistics of `mitsonar.receiver.realism` are computed from its bytes: the Weibull shape of
 the non-zero bytes beyond 1.6 m, the fraction of zero bytes beyond 1.6 m, and the mean byte from
 0.1 to 1.0 m (the transducer's ring-down). Printed as one JSON object beside the real head's
 ranges (``real``), with ``inside`` per statistic (the mean over the seeds against the range).
@@ -32,7 +32,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
 import mitsonar  # noqa: E402
-from mitsonar.realism import FAR_FROM, REAL_RANGES, byte_statistics, inside  # noqa: E402
+from mitsonar.receiver.realism import FAR_FROM, REAL_RANGES, byte_statistics, inside  # noqa: E402
 
 
 def main(argv=None) -> int:

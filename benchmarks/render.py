@@ -358,7 +358,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     spps = [int(s) for s in args.spp.split(",")]
 
-    out = {"variant": mitsonar.variant(), "cores": os.cpu_count(), "python": platform.python_version()}
+    out = {"variant": mitsonar.sim.variant(), "cores": os.cpu_count(), "python": platform.python_version()}
     if not args.skip_box_sweep:
         out.update(box_sweep(spps, args.repeats, args.ref_factor))
     samplings = args.samplings.split(",")

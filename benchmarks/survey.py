@@ -41,7 +41,7 @@ def main(argv=None):
     sensor = scene.sensors()[0]
     sweep = sensor.scan_period
     traj = mitsonar.Trajectory.turn(sweep * (args.scans + 1), 0.5, 5.0, dt=0.1)
-    still = mitsonar.Trajectory([0.0, 2 * sweep], [mitsonar.trajectory.pose()] * 2)
+    still = mitsonar.Trajectory([0.0, 2 * sweep], [mitsonar.geometry.trajectory.pose()] * 2)
 
     def static():
         mitsonar.render_scan(scene, spp=args.spp, seed=1)
@@ -71,7 +71,7 @@ def main(argv=None):
     print(json.dumps({
         "benchmark": "survey",
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "python": sys.version.split()[0],
-                    "variant": mitsonar.variant()},
+                    "variant": mitsonar.sim.variant()},
         "scan": {"scene": "box.xml", "pings": sensor.n_pings, "bins": sensor.n_bins, "spp": args.spp,
                  "ping_period_s": sensor.ping_period, "repeats": args.repeats},
         "static_s": round(s, 4), "moving_s": round(m, 4), "still_s": round(h, 4),

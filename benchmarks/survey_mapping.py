@@ -63,8 +63,8 @@ MULTIBEAM_DENSE = dict(max_free_per_ping=400, near_free=32, occupied_samples=16)
 
 def render(sensor_id: str, spp: int, max_scans=None, seed: int = 1, scene_name: str = "harbour"):
     import mitsonar
-    from mitsonar.survey import render_survey
-    from mitsonar.trajectory import Trajectory
+    from mitsonar.sim.survey import render_survey
+    from mitsonar.geometry.trajectory import Trajectory
 
     scene = mitsonar.load_scene(os.path.join(ROOT, "scenes_xml", scene_name + ".xml"), spp=spp)
     traj = Trajectory.from_tum(os.path.join(ROOT, "scenes_xml", scene_name + "_survey.tum"))
@@ -303,7 +303,7 @@ def main(argv=None) -> int:
                     help="skip the mechanical survey (its map, scores, batch, speed, elevation and outputs)")
     args = ap.parse_args(argv)
 
-    from mitsonar.groundtruth import scene_mesh
+    from mitsonar.sim.groundtruth import scene_mesh
 
     report = {"command": "python benchmarks/survey_mapping.py " + " ".join(argv if argv is not None else sys.argv[1:])}
     report["render_s"], report["throughput"] = {}, {}

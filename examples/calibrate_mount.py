@@ -79,7 +79,7 @@ def calibrate(iterations=100, spp=1024, seed=7, target_seed=None, n_pings=24, n_
     import mitsuba as mi
 
     import mitsonar
-    from mitsonar.render import scan_parameters
+    from mitsonar.sim.render import scan_parameters
 
     iterations = positive_int("iterations", iterations, 1, 100000)
     spp = positive_int("spp", spp, 1, 1 << 24)

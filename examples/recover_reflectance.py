@@ -77,7 +77,7 @@ def recover(iterations=100, spp=1024, seed=5, n_pings=36, n_bins=160, blur=1.0, 
     import mitsuba as mi
 
     import mitsonar
-    from mitsonar.render import scan_parameters
+    from mitsonar.sim.render import scan_parameters
 
     iterations = positive_int("iterations", iterations, 1, 100000)
     spp = positive_int("spp", spp, 1, 1 << 24)

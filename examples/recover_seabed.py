@@ -149,7 +149,7 @@ def recover(iterations=30, spp=1024, seed=3, nx=9, ny=25, spacing=0.5, altitude=
     import mitsuba as mi
 
     import mitsonar
-    from mitsonar.render import scan_parameters
+    from mitsonar.sim.render import scan_parameters
 
     iterations = positive_int("iterations", iterations, 1, 100000)
     spp = positive_int("spp", spp, 1, 1 << 24)

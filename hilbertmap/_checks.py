@@ -165,21 +165,40 @@ def axis_index(axis) -> int:
     raise ValueError(f"HilbertMap: axis must be 'x', 'y', 'z' or 0-2, not {axis!r}")
 
 
+def grid_shape(res: float, lo, hi) -> list:
+    """Samples per axis of a grid every ``res`` metres from ``lo`` to ``hi`` (as `grid_axes` makes)."""
+    return [int(math.ceil(max(float(b) - float(a), 0.0) / res + 0.5)) for a, b in zip(lo, hi)]
+
+
+def _up2(x: float) -> float:
+    """``x`` rounded up to two significant digits."""
+    e = 10.0 ** (math.floor(math.log10(x)) - 1)
+    return float(f"{math.ceil(x / e - 1e-9) * e:.2g}")
+
+
+def fitting_resolution(res: float, lo, hi, max_points: int = MAX_GRID_POINTS) -> float:
+    """``res`` when a grid every ``res`` metres over ``lo``..``hi`` holds at most ``max_points``
+    points, else the finest step of two significant digits that does."""
+    def fits(r):
+        return math.prod(grid_shape(r, lo, hi)) <= max_points
+
+    if fits(res):
+        return float(res)
+    r = res
+    while not fits(r):   # coarser by 5 % at a time: r / 1.05 does not fit
+        r *= 1.05
+    r = _up2(r / 1.05)
+    while not fits(r):   # then up the two-digit steps: the first that fits
+        r = _up2(r + 10.0 ** (math.floor(math.log10(r)) - 1))
+    return r
+
+
 def grid_axes(name_res: str, res: float, lo, hi, names: str) -> list:
     """Sample axes from lo to hi every ``res``; refused when they would hold more than
     MAX_GRID_POINTS points, with the finest resolution that fits."""
-    ext = [max(float(b) - float(a), 0.0) for a, b in zip(lo, hi)]
-
-    def counts(r):
-        return [int(math.ceil(e / r + 0.5)) for e in ext]
-
-    n = counts(res)
+    n = grid_shape(res, lo, hi)
     if math.prod(n) > MAX_GRID_POINTS:
-        r = res
-        while math.prod(counts(r)) > MAX_GRID_POINTS:
-            r *= 1.05
-        e10 = 10.0 ** (math.floor(math.log10(r)) - 1)
-        r = math.ceil(r / e10) * e10  # two significant digits, rounded up
+        r = fitting_resolution(res, lo, hi)
         raise ValueError(
             f"HilbertMap: {name_res} {res:g} m needs a grid of {' x '.join(map(str, n))} = {math.prod(n):.3g} "
             f"points over {names} (at most {MAX_GRID_POINTS:.0e}); use {name_res} {r:.2g} or coarser")

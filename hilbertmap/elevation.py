@@ -104,6 +104,8 @@ def write_elevation(path, grid: ElevationGrid, crs=None) -> None:
             np.savez_compressed(fh, elevation=grid.elevation.astype(np.float32),
                                 transform=np.asarray(grid.transform, dtype=np.float64))
     else:
+        # mitsonar writes its GeoTIFF with mitsonar.products.soundings (DepthGrid.write_geotiff);
+        # hilbertmap keeps this writer of its own because it must not import mitsonar.
         try:
             import rasterio
             from rasterio.transform import Affine

@@ -102,6 +102,8 @@ def _field_rise(edges, flat, node_pos, level):
 
 def write_mesh(path, vertices: np.ndarray, faces: np.ndarray) -> None:
     """Write a triangle mesh as binary PLY (``.ply``) or Wavefront OBJ (``.obj``)."""
+    # mitsonar writes its PLY files with mitsonar.geometry.ply; hilbertmap keeps this writer of its
+    # own (the same binary_little_endian layout) because it must not import mitsonar.
     ext = os.path.splitext(str(path))[1].lower()
     V = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
     F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)

@@ -194,6 +194,8 @@ def check_map_arrays(arr: dict, k: int, bad) -> None:
 
 
 def _first_line(exc) -> str:
+    # mitsonar._checks.first_line does this for mitsonar; hilbertmap keeps its own copy because it
+    # must not import mitsonar (it maps any scan-like object, standing alone).
     text = str(exc).strip()
     return text.splitlines()[0] if text else type(exc).__name__
 

@@ -59,6 +59,7 @@ def required_attributes(source: str = "auto") -> tuple:
 
 def as_scan_list(scans, source: str = "auto") -> list:
     """A list of scans from one scan or an iterable of them; TypeError naming what is wrong."""
+    # mitsonar.scan.model.as_scans is mitsonar's; hilbertmap keeps its own (it must not import mitsonar).
     if hasattr(scans, "poses"):
         scans = [scans]
     elif isinstance(scans, (str, bytes)) or not hasattr(scans, "__iter__"):

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._checks import axis_index, check_bounds, grid_axes, need, num_param
+from ._checks import MAX_GRID_POINTS  # noqa: F401  (re-exported: the most points a grid may hold)
+from ._checks import axis_index, check_bounds, fitting_resolution, grid_axes, grid_shape, need, num_param
 from .mesh import marching_tetrahedra
 from .sgd import sigmoid
 
@@ -78,6 +79,26 @@ def cross_section(hm, axis="z", value: float = 0.0, extent=None, resolution: flo
                     axes=("xyz"[others[0]], "xyz"[others[1]]))
 
 
+def default_resolution(hm) -> float:
+    """The grid step `sample_grid` takes when given none: a quarter of the length-scale, at most
+    10 cm and at least 2 cm."""
+    return max(min(hm.lengthscale_ / 4.0, 0.1), 0.02)
+
+
+def mesh_resolution(hm, max_points: int, bounds=None) -> tuple:
+    """``(resolution, default, points)``: `default_resolution` when its grid over ``bounds``
+    (default the region seen) holds at most ``max_points`` points (`points`: how many it holds),
+    else the finest coarser step that does (`fitting_resolution`), for a mesh that a caller wants
+    made rather than refused."""
+    hm._check_fitted()
+    lo, hi = hm.coverage_.bounds() if bounds is None else check_bounds("bounds", bounds, none=False)
+    default = default_resolution(hm)
+    points = 1
+    for n in grid_shape(default, lo, hi):
+        points *= n
+    return fitting_resolution(default, lo, hi, max_points), default, points
+
+
 def sample_grid(hm, resolution: float | None = None, bounds=None) -> GridSample:
     """The map's probabilities on a grid of ``resolution`` metres over ``bounds``.
 
@@ -94,7 +115,7 @@ def sample_grid(hm, resolution: float | None = None, bounds=None) -> GridSample:
         where = "the bounds"
     num_param("resolution", resolution, 0, lo_open=True, special=(None,))
     if resolution is None:
-        resolution = max(min(hm.lengthscale_ / 4.0, 0.1), 0.02)
+        resolution = default_resolution(hm)
     axes = grid_axes("resolution", resolution, lo, hi, where)
     X, Y, Z = np.meshgrid(*axes, indexing="ij")
     pts = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)

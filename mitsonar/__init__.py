@@ -5,20 +5,26 @@ says otherwise) and registers the plugins ``sonar``, ``acoustic`` and ``sonar_to
 """
 from __future__ import annotations
 
-from .variant import prepare_llvm_environment
+from mitsonar import _aliases
+
+_aliases.install()  # the old flat module paths, for one release
+
+from mitsonar.sim.variant import prepare_llvm_environment  # noqa: E402
 
 prepare_llvm_environment()
 
-from ._version import __version__  # noqa: E402
+from mitsonar._version import __version__  # noqa: E402
 
-from .scan import Scan  # noqa: E402
-from .groundtruth import scene_mesh  # noqa: E402
-from .render import render_scan, scan_parameters  # noqa: E402
-from .scene import SceneError, load_scene  # noqa: E402
-from .survey import render_survey  # noqa: E402
-from .dataset.store import open_dataset  # noqa: E402
-from .trajectory import Trajectory, TrajectoryError  # noqa: E402
-from .variant import VariantError, init_on_import, set_variant, variant  # noqa: E402
+from mitsonar.scan import Scan  # noqa: E402
+from mitsonar.sim.groundtruth import scene_mesh  # noqa: E402
+from mitsonar.sim.render import render_scan, scan_parameters  # noqa: E402
+from mitsonar.sim.scene import SceneError, load_scene  # noqa: E402
+from mitsonar.sim.survey import render_survey  # noqa: E402
+from mitsonar.jobs.dataset.store import open_dataset  # noqa: E402
+from mitsonar.scenes.examples import example_scene, example_scenes  # noqa: E402
+from mitsonar.sonar_equation import sonar_equation_report  # noqa: E402
+from mitsonar.geometry.trajectory import Trajectory, TrajectoryError  # noqa: E402
+from mitsonar.sim.variant import VariantError, init_on_import, set_variant, variant  # noqa: E402
 
 init_on_import()
 
@@ -28,20 +34,31 @@ def load_scan(path) -> Scan:
     return Scan.load(path)
 
 
-_LAZY = {"MicronSonar": "micron", "VirtualMicron": "virtual_sonar", "HeadSettings": "seanet.settings",
-         "StreamParser": "seanet.stream", "record": "micron", "replay": "recording",
-         "Ping360Sonar": "ping360", "VirtualPing360": "virtual_ping360", "Ping360Settings": "ping360_head"}
+_LAZY = {"MicronSonar": "devices.micron.driver", "VirtualMicron": "devices.micron.virtual",
+         "HeadSettings": "devices.micron.seanet.settings", "StreamParser": "devices.micron.seanet.stream",
+         "record": "devices.micron.driver", "replay": "devices.recording",
+         "Ping360Sonar": "devices.ping360.driver", "VirtualPing360": "devices.ping360.virtual",
+         "Ping360Settings": "devices.ping360.head", "SoundSpeedProfile": "acoustics.profile",
+         "render_echoes": "signals.echoes", "Echoes": "signals.echoes"}
 
 
 def __getattr__(name):
     # Serial devices load on first use: pyserial is not needed to render.
+    if name == "signals":     # the coherent signals (numpy and scipy.signal) load on first use
+        import importlib
+
+        return importlib.import_module("mitsonar.signals")
     if name in _LAZY:
         import importlib
 
-        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+        return getattr(importlib.import_module(f"mitsonar.{_LAZY[name]}"), name)
+    # ``mitsonar.plots`` and the other modules that moved into packages by role
+    module = _aliases.attribute(name)
+    if module is not None:
+        return module
     raise AttributeError(f"module 'mitsonar' has no attribute {name!r}")
 
 
-__all__ = ["Scan", "SceneError", "Trajectory", "TrajectoryError", "VariantError", "load_scan", "load_scene",
-           "open_dataset", "render_scan", "render_survey", "scan_parameters", "scene_mesh",
-           "set_variant", "variant", "__version__", *_LAZY]
+__all__ = ["Scan", "SceneError", "Trajectory", "TrajectoryError", "VariantError", "example_scene",
+           "example_scenes", "load_scan", "load_scene", "open_dataset", "render_scan", "render_survey",
+           "scan_parameters", "scene_mesh", "set_variant", "sonar_equation_report", "variant", "__version__", "signals", *_LAZY]

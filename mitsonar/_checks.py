@@ -44,3 +44,18 @@ def is_whole(value) -> bool:
 def in_range(value, lo: float, hi: float) -> bool:
     """``lo <= value <= hi`` for a finite number, False for anything else."""
     return is_number(value) and lo <= float(value) <= hi
+
+
+_TYPE_NAME = object()
+
+
+def first_line(exc: BaseException, default=_TYPE_NAME, *, traceback_reason: bool = False):
+    """An exception's reason on one line, for a one-line error: its message's first non-blank
+    line, stripped. A message with no text gives ``default``, the exception's type name unless
+    given. ``traceback_reason``: when the message is a whole traceback (Mitsuba wraps an exception
+    raised in a Python plugin into a RuntimeError whose text is the traceback), its last line."""
+    text = str(exc).strip()
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    if not lines:
+        return type(exc).__name__ if default is _TYPE_NAME else default
+    return lines[-1] if traceback_reason and "Traceback (most recent call last)" in text else lines[0]

@@ -18,22 +18,92 @@ def _umask() -> int:
 _UMASK = _umask()
 
 
-def check_output_folder(folder, error, *, holds=None, what="", option="-o") -> None:
+def check_output_folder(folder, error, *, holds=None, what="", option="-o", force=False, writable=False) -> None:
     """Refuse, with one line raised as ``error``, an output folder that is a file, or one that
     already holds a run (``holds(folder)`` true; ``what`` names the run: "already holds {what};
-    choose a new or empty folder"). Creates nothing: `make_output_folder` does."""
+    choose a new or empty folder", and, when the command takes ``--force`` (``force`` True),
+    "or --force to replace it"); with ``writable``, also one this process could not create or
+    write in (its nearest existing ancestor is a file, or not writable). Creates nothing:
+    `make_output_folder` does."""
+    folder = os.fspath(folder)
     if os.path.exists(folder) and not os.path.isdir(folder):
         raise error(f"{option} {folder!r} is a file, not a folder")
     if holds is not None and os.path.isdir(folder) and holds(folder):
-        raise error(f"{option} {folder!r} already holds {what}; choose a new or empty folder")
+        raise error(f"{option} {folder!r} already holds {what}; choose a new or empty folder"
+                    + (", or --force to replace it" if force else ""))
+    if writable:
+        parent = os.path.abspath(folder)
+        while not os.path.exists(parent):
+            parent = os.path.dirname(parent)
+        if not os.path.isdir(parent):
+            raise error(f"{option} {folder!r}: cannot create the output folder ({parent!r} is a file, not a folder)")
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise error(f"{option} {folder!r}: cannot create the output folder ({parent!r}: permission denied)"
+                        if parent != os.path.abspath(folder) else
+                        f"{option} {folder!r}: cannot write in the output folder (permission denied)")
 
 
 def make_output_folder(folder, error, option="-o") -> None:
-    """Create an output folder (and its parents), or raise ``error`` saying in one line why not."""
+    """Create an output folder (and its parents), or raise ``error`` saying in one line why not
+    (it cannot be created, or this process cannot write in it)."""
     try:
         os.makedirs(folder, exist_ok=True)
     except OSError as exc:
         raise error(f"{option} {folder!r}: cannot create the output folder ({exc.strerror})") from None
+    if not os.access(folder, os.W_OK):
+        raise error(f"{option} {folder!r}: the output folder is not writable")
+
+
+#: The sentences of `check_output_file`, by problem. Fields: ``path`` (as given), ``folder`` (its
+#: absolute folder), ``given_folder`` (its folder as given, ``.`` for none), ``ext`` (its lower-case
+#: extension, ``(none)`` without one), ``allowed`` (``.exr or .npz``) and ``allowed_list``
+#: (``.exr, .npz``). ``not_a_folder`` None: said as ``no_folder``.
+OUTPUT_FILE_WORDS = {
+    "directory": "{path}: is a directory; give a file name",
+    "extension": "{path}: unknown extension {ext!r}; use {allowed}",
+    "exists": "{path}: exists; refusing to overwrite it (use --force)",
+    "no_folder": "{path}: folder {folder} does not exist",
+    "not_a_folder": None,
+    "not_writable": "{path}: folder {folder} is not writable",
+}
+
+
+def check_output_file(path, error, *, extensions=(), force=True, folder_may_be=None, words=None) -> str:
+    """Refuse, before any slow work, an output file that cannot be written, in one line raised as
+    ``error``: a path that is a folder; an extension not in ``extensions`` (when given; compared
+    in lower case); an existing file unless ``force``; a missing folder (unless it is
+    ``folder_may_be``, a folder the caller is about to make) or a file where the folder should be;
+    a folder this process cannot write in, or an existing file it cannot write. Checked in that
+    order. ``words`` replaces sentences
+    of `OUTPUT_FILE_WORDS` (a command keeps its own wording). Returns the path as a string.
+    Creates nothing: outputs are then written under a temporary name (`StagedFiles`)."""
+    path = os.fspath(path)
+    say = {**OUTPUT_FILE_WORDS, **(words or {})}
+    folder = os.path.dirname(os.path.abspath(path))
+    ext = os.path.splitext(path)[1].lower()
+    fields = dict(path=path, folder=folder, given_folder=os.path.dirname(path) or ".", ext=ext or "(none)",
+                  allowed=" or ".join(extensions), allowed_list=", ".join(extensions))
+
+    def refuse(problem):
+        raise error((say[problem] or say["no_folder"]).format(**fields))
+
+    if os.path.isdir(path):
+        refuse("directory")
+    if extensions and ext not in extensions:
+        refuse("extension")
+    exists = os.path.exists(path)
+    if exists and not force:
+        refuse("exists")
+    made = folder_may_be is not None and folder == os.path.abspath(os.fspath(folder_may_be))
+    if not os.path.isdir(folder):
+        if os.path.exists(folder):
+            refuse("not_a_folder")
+        if made:
+            return path
+        refuse("no_folder")
+    if not os.access(folder, os.W_OK | os.X_OK) or (exists and not os.access(path, os.W_OK)):
+        refuse("not_writable")
+    return path
 
 
 class StagedFiles:

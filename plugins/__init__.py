@@ -1,4 +1,4 @@
-"""mitsonar's Mitsuba plugins: sensor ``sonar``, BSDF ``acoustic``, integrators ``sonar_tof``, ``sonar_mlt``.
+"""mitsonar's Mitsuba plugins: sensor ``sonar``, BSDFs ``acoustic`` and ``acoustic_material``, integrators ``sonar_tof``, ``sonar_mlt``.
 
 The plugin classes derive from the classes of the active Mitsuba variant, so their modules are
 (re)loaded for each variant and the plugins registered again; `register()` does that and is
@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import importlib
 
-_MODULES = ("materials", "beam", "acoustic_bsdf", "sonar_sensor", "range_bins", "samples", "common", "sonar_tof",
+_MODULES = ("materials", "beam", "acoustic_bsdf", "acoustic_material", "sonar_sensor", "range_bins", "samples", "common", "sonar_tof",
             "sonar_mlt", "bdpt_paths", "sonar_bdpt")
 _current = None
 
 # (kind, XML plugin name, module, class) of every plugin registered with Mitsuba
 PLUGINS = (("BSDF", "acoustic", "acoustic_bsdf", "AcousticBSDF"),
+           ("BSDF", "acoustic_material", "acoustic_material", "AcousticMaterialBSDF"),
            ("sensor", "sonar", "sonar_sensor", "SonarSensor"),
            ("integrator", "sonar_tof", "sonar_tof", "SonarTOFIntegrator"),
            ("integrator", "sonar_mlt", "sonar_mlt", "SonarMLTIntegrator"),
@@ -21,7 +22,7 @@ PLUGINS = (("BSDF", "acoustic", "acoustic_bsdf", "AcousticBSDF"),
 
 # The last exception raised by one of our plugins' constructors. Mitsuba turns it into a
 # RuntimeError holding its traceback as text; `take_failure` hands the original back to whoever
-# reports the error (mitsonar.scene), so no message has to be recovered from that text.
+# reports the error (mitsonar.sim.scene), so no message has to be recovered from that text.
 _failures: list = []
 
 

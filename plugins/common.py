@@ -85,6 +85,8 @@ class PathSetup:
         self.guide = False
         self.tag_hard = False
         self.ad = None
+        # The water's sound-speed profile (`refraction.Refraction`); None: straight rays.
+        self.refraction = None
 
     def attach(self):
         """Make ``self.ad`` (`AttachedSetup`): the values the gradient passes differentiate."""
@@ -180,12 +182,18 @@ class SonarIntegrator(mi.SamplingIntegrator):
     name = "sonar"
     #: The ``guide`` values this integrator takes, the first its default (`image_guide`).
     GUIDES = ("image", "none")
+    #: Whether the integrator's paths refract through a ``sound_speed_profile`` (`refraction`).
+    REFRACTS = False
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
         self.max_depth = check_max_depth(count(props, "max_depth", 5, self.name), self.name)
         self.guide = text(props, "guide", self.GUIDES[0], self.name)
         require(self.guide in self.GUIDES, self.name, "guide", self.guide, "one of " + ", ".join(self.GUIDES))
+        from .refraction import DEFAULT_CHORDS, check_chords, read_profile
+
+        self.sound_speed_profile = read_profile(props, self.name, self.REFRACTS)
+        self.svp_chords = check_chords(count(props, "svp_chords", DEFAULT_CHORDS, self.name), self.name)
 
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
         import numpy as np
@@ -290,6 +298,9 @@ class SonarIntegrator(mi.SamplingIntegrator):
         self._spp = spp
         seed = int(seed[0]) if isinstance(seed, dr.ArrayBase) else int(seed)
         setup = self.setup(scene, sensor)
+        if setup.refraction is not None:
+            raise ValueError(f"{self.name}: gradients of a render through a sound_speed_profile are not "
+                             "implemented (refracted paths are primal only)")
         # The replayed path (`path_replay`) is the unguided one: a gradient render samples its own
         # paths, so it estimates the same derivative without the guide.
         setup.guide = False
@@ -307,6 +318,14 @@ class SonarIntegrator(mi.SamplingIntegrator):
         depth = check_max_depth(self.max_depth if max_depth is None else int(max_depth), self.name)
         setup = PathSetup(scene, resolve_sensor(scene, sensor), depth, pose)
         setup.guide = self.guide == "image" and image_guide.has_mirrors(scene)
+        profile = getattr(self, "sound_speed_profile", None)
+        if profile is not None:
+            from .refraction import from_profile
+
+            if not self.REFRACTS:
+                raise ValueError(f"{self.name}: a sound_speed_profile (refracted paths) is traced by the "
+                                 "sonar_tof integrator only")
+            setup.refraction = from_profile(profile, setup.sensor, getattr(self, "svp_chords", None))
         return setup
 
     def sample(self, setup: PathSetup, ping, samples, record=None, active=True, mode=None, δ=None,
@@ -320,6 +339,13 @@ class SonarIntegrator(mi.SamplingIntegrator):
         primal replay's output in ``dr.ADMode.Backward``; ``record`` gets the echoes' derivatives
         in ``dr.ADMode.Forward``).
         """
+        if getattr(setup, "refraction", None) is not None:
+            if not (mode is None or (mode == dr.ADMode.Primal and δ is None)):
+                raise ValueError("sonar_tof: gradients of a render through a sound_speed_profile are not "
+                                 "implemented (refracted paths are primal only)")
+            from .refraction import sample_path
+
+            return sample_path(setup, ping, samples, record, active)
         if mode is None or (mode == dr.ADMode.Primal and δ is None):
             # Called unbound too (``echo_path.trace_echoes`` passes self=None).
             return SonarIntegrator._sample_primal(self, setup, ping, samples, record, active)

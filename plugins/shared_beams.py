@@ -38,6 +38,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+import mitsonar.geometry.kinds as kinds
+
 from .range_bins import RangeBins
 from .sonar_sensor import PingFrames
 
@@ -60,8 +62,9 @@ def window(sensor):
     """(W radians, m beams either side of the nearest) of ``sensor``'s receive beams, or a
     ValueError naming ``share_beams`` when sharing cannot apply to this head."""
     beam = sensor.beam
-    if sensor.kind != "multibeam":
-        raise ValueError(f"sonar_tof 'share_beams': only for a sensor of kind 'multibeam' (kind is {sensor.kind!r})")
+    if not sensor.sonar_kind.transmit_fan:
+        raise ValueError(f"sonar_tof 'share_beams': only for a sensor of kind {kinds.which('transmit_fan')} "
+                         f"(kind is {sensor.kind!r})")
     if beam.kind == "sinc":
         raise ValueError("sonar_tof 'share_beams': a 'sinc' receive beam has side lobes over the whole half-space; "
                          "use beam_pattern 'gaussian', 'uniform' or 'table', or share_beams false")
@@ -136,7 +139,7 @@ class SharedFrame:
         self.path_setup = SimpleNamespace(scene=setup.scene, sensor=SimpleNamespace(beam=sensor.transmit),
                                           frames=frames, connect=(frames, gate), depth=setup.depth,
                                           depth_o=setup.depth_o, absorption=setup.absorption, bins=setup.bins,
-                                          guide=setup.guide)
+                                          guide=setup.guide, refraction=getattr(setup, "refraction", None))
         self.axes = [_opaque(mi.Vector3f, head[:3, c]) for c in range(3)]
         self.origin = _opaque(mi.Point3f, head[:3, 3])
         self.start = dr.opaque(mi.Float, bearings[0])
@@ -152,13 +155,15 @@ class SharedFrame:
         # read here, so that a frozen pass's key (`frozen_pass.Context`) holds them
         self.roulette, self.scatter_mode = float(ROULETTE_GAIN), SCATTER_MODE.name
 
-    def score(self, hist, rng, energy, valid, hit, u=None):
+    def score(self, hist, rng, energy, valid, hit, u=None, direction=None):
         """Add the echoes of one bounce (``energy`` without the receive gain) into ``hist`` (flat
         n_rows x n_bins, an `exact_sum.ExactBins`) for every row within the window of the echo's direction.
         ``u``: a uniform number per echo for the roulette of faint beams (`ROULETTE_GAIN`); the
-        beams of one echo share it (each beam's expectation is its gain either way)."""
+        beams of one echo share it (each beam's expectation is its gain either way).
+        ``direction``: where the echo arrives from at the head (world, unit; a refracted path's
+        eigenray, `refraction.Refraction.arrival`); default straight from the head to ``hit.p``."""
         beam = self.sensor.beam
-        d = dr.normalize(hit.p - self.origin)
+        d = dr.normalize(hit.p - self.origin) if direction is None else direction
         x, y, z = (dr.dot(d, a) for a in self.axes)
         az, el = dr.atan2(x, z), dr.safe_asin(y)
         az = self.centre + _wrap(az - self.centre)

@@ -20,6 +20,15 @@ Published values (manufacturers' datasheets):
   60 deg" (the preset's -3 dB across-track width); maximum range 100 m per side (product sheet).
   Preset ``starfish450``.
 
+Source levels (``source_level``, dB re 1 uPa at 1 m): neither Klein's System 3000 sheet nor
+Tritech's StarFish pages at hand publish one, so the presets take typical values, stated here:
+220 dB (Klein, 100 kHz), 215 dB (Klein, 500 kHz), 205 dB (StarFish 450, a small low-power head);
+towed side-scan heads lie in 200..230 dB (Lurton, *An Introduction to Underwater Acoustics*, 2nd
+ed. 2010, sec. 8.2). ``receiver_sensitivity`` is ``52 - source_level`` so that the bytes are
+those of the shared A/D calibration (as before levels had units), and ``noise_level`` is the
+ambient noise at the preset's frequency (`mitsonar.sonar_equation.ambient_noise_level`, wind
+5 m/s, rounded).
+
 The Klein figures and the StarFish's range are the datasheets' as recalled at the time of
 writing; check them against the current datasheet before relying on a preset for a procurement
 or a survey plan.
@@ -28,9 +37,12 @@ from __future__ import annotations
 
 PRESETS = {
     "klein3000_100k": dict(frequency=100e3, beam_pattern="sinc", beamwidth_h=1.0, beamwidth_v=40.0,
-                           range_max=600.0, depression=10.0),
+                           range_max=600.0, depression=10.0,
+                           source_level=220.0, receiver_sensitivity=-168.0, noise_level=29.0),
     "klein3000_500k": dict(frequency=500e3, beam_pattern="sinc", beamwidth_h=0.2, beamwidth_v=40.0,
-                           range_max=150.0, depression=10.0),
+                           range_max=150.0, depression=10.0,
+                           source_level=215.0, receiver_sensitivity=-163.0, noise_level=39.0),
     "starfish450": dict(frequency=450e3, beam_pattern="sinc", beamwidth_h=2.0, beamwidth_v=60.0,
-                        range_max=100.0, depression=30.0),
+                        range_max=100.0, depression=30.0,
+                        source_level=205.0, receiver_sensitivity=-153.0, noise_level=38.0),
 }

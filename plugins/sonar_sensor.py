@@ -11,20 +11,18 @@ import mitsuba as mi
 import numpy as np
 
 from mitsonar._checks import not_allowed, require
-from mitsonar.frames import KINDS, SIDES, STARBOARD, bearing_rotation, check_rigid, check_rigid_stack, sidescan_rotation
+import mitsonar.geometry.kinds as kinds
+from mitsonar.geometry.frames import SIDES, check_rigid, check_rigid_stack
 
 from .beam import BeamPattern, read_beam_table
 from .jit_arrays import upload
 from .props import count, number, text
 from .sidescan_heads import PRESETS
+from .water import check_pose, number_or_auto, read_water, resolve
 
 TX_PATTERNS = ("gaussian", "sinc", "uniform")
 MAX_BINS, MAX_PINGS = 65536, 100000
 DEFAULT_FREQUENCY = 700e3
-# Seconds a head spends per ping beyond the echo's two-way flight to range_max (stepping the
-# transducer and sending the data for a mechanical head; beamforming for a multibeam one). A
-# Micron then steps every 43 ms at 10 m and 46 ms at 12 m, within its observed 43 to 65 ms.
-HEAD_OVERHEAD = {"mechanical": 0.030, "multibeam": 0.050, "sidescan": 0.0}
 # A side-scan head's transducers are tilted down this much unless the XML (or a preset) says.
 DEFAULT_DEPRESSION = 15.0
 
@@ -43,7 +41,7 @@ class SonarSensor(mi.Sensor):
     gain of row k is ``B_tx(d) B_rx(d in row k's frame)``. All rows share one pose.
     ``kind='sidescan'``: ``to_world`` is the head frame (x along track, y port, z up); two
     channels, port (boresight +y) and starboard (-y), each turned down about +x by ``depression``
-    (`mitsonar.frames.sidescan_rotation`), each a monostatic beam like a mechanical head's
+    (`mitsonar.geometry.frames.sidescan_rotation`), each a monostatic beam like a mechanical head's
     (``beamwidth_h`` along track, the beam frame's azimuth; ``beamwidth_v`` the across-track fan, its
     elevation). ``side`` picks the channels: with ``both`` the rows are the ``n_pings`` port pings then
     the ``n_pings`` starboard pings (2 n_pings rows, `channels` says which is which), with one side
@@ -53,7 +51,8 @@ class SonarSensor(mi.Sensor):
     start; a multibeam head fires all rows of a frame at once, and frames ``ping_period`` apart;
     a side-scan head fires both channels of ping ``k`` together at ``k * ping_period``.
     The default period is the two-way flight to ``range_max``, ``2 range_max / sound_speed``, plus
-    the head's overhead (`HEAD_OVERHEAD`: 30 ms mechanical, 50 ms multibeam, none side-scan).
+    the head's overhead (its kind's ``head_overhead``, `mitsonar.geometry.kinds`: 30 ms mechanical,
+    50 ms multibeam, none side-scan).
 
     ================ ============ ===============================================================
     Parameter        Default      Meaning
@@ -82,23 +81,33 @@ class SonarSensor(mi.Sensor):
     beamwidth_v      35           deg, full -3 dB one-way width along the scan axis
                                   (sidescan: the across-track fan, default 50)
     beam_table       (none)       CSV (axis, angle_deg, gain_db) for ``table``
-    sound_speed      1500         m/s
-    absorption       0            dB/m, applied to the whole two-way path
-    frequency        700e3        Hz (``sinc``)
+    sound_speed      1500         m/s; or ``<string value="auto"/>``: Mackenzie (1981) at the
+                                  head's depth ``surface_z - z`` (z of ``to_world``'s origin)
+    absorption       0            dB/m, applied to the whole two-way path; or ``auto``: Francois
+                                  and Garrison (1982) at ``frequency`` and the head's depth
+    frequency        700e3        Hz (``sinc``; ``absorption`` ``auto``)
+    temperature      10           deg C, the water (only with ``auto``; F&G: -2 to 22,
+                                  Mackenzie: -2 to 30)
+    salinity         35           ppt, the water (only with ``auto``; F&G: 30 to 35,
+                                  Mackenzie: 25 to 40)
+    ph               8            pH of the water (``absorption`` ``auto``; 7.7 to 8.3)
+    surface_z        0            m, world z of the sea surface (only with ``auto``); a
+                                  render given a ``pose`` (trajectory) refuses ``auto``
     tx_pattern       gaussian     multibeam transmit fan: ``gaussian``, ``sinc`` or ``uniform``
     tx_beamwidth_h   swath        deg, full -3 dB width of the fan across the swath; default the
                                   swath, ``|bearing_step| (n_pings - 1) + beamwidth_h``
     tx_beamwidth_v   beamwidth_v  deg, full -3 dB width of the fan along the scan axis
     aperture_h/_v    derived      m (``sinc``); from the beam widths when absent
-    electronics      see below    the fields of ``mitsonar.electronics.Electronics``
-                                  (``source_level``, ``tvg``, ``gain``, ``ad_low``, ...)
+    electronics      see below    the fields of ``mitsonar.receiver.electronics.Electronics``
+                                  (``source_level`` in dB re 1 uPa at 1 m,
+                                  ``receiver_sensitivity``, ``noise_level``, ``tvg``, ``gain``, ...)
     ================ ============ ===============================================================
     """
 
     @classmethod
     def parameters(cls) -> list:
         """The XML parameter names: the table above, with the electronics' fields by name."""
-        from mitsonar.electronics import Electronics
+        from mitsonar.receiver.electronics import Electronics
 
         from .props import table_parameters
 
@@ -108,9 +117,10 @@ class SonarSensor(mi.Sensor):
     def __init__(self, props: mi.Properties):
         num = lambda name, default: number(props, name, default, "sonar")  # noqa: E731
         self.n_bins = count(props, "n_bins", 500, "sonar")
-        self.kind = text(props, "kind", "mechanical", "sonar")
-        if self.kind not in KINDS:
-            raise not_allowed("sonar", "kind", self.kind, "one of " + ", ".join(KINDS))
+        self.kind = text(props, "kind", kinds.DEFAULT, "sonar")
+        self.sonar_kind = kinds.lookup(self.kind)     # what differs between kinds is asked of it
+        if self.sonar_kind is None:
+            raise not_allowed("sonar", "kind", self.kind, "one of " + ", ".join(kinds.names()))
         preset = self._sidescan(props)
         self.pings = count(props, "n_pings", 200, "sonar")
         # Checked before the film is made: without one, Mitsuba makes its default RGB film and
@@ -128,12 +138,14 @@ class SonarSensor(mi.Sensor):
         self.range_max = num("range_max", preset.get("range_max", 12.0))
         self.bearing_start = num("bearing_start", 0.0)
         self.bearing_step = num("bearing_step", 1.8)
-        self.sound_speed = num("sound_speed", 1500.0)
-        self.absorption = num("absorption", 0.0)
+        # A number, or 'auto': the water's equations at the head's depth (plugins/water.py).
+        self.sound_speed = number_or_auto(props, "sound_speed", 1500.0)
+        self.absorption = number_or_auto(props, "absorption", 0.0)
+        self.water = read_water(props, self.absorption, self.sound_speed)
+        self.water_auto = [n for n in ("absorption", "sound_speed") if getattr(self, n) == "auto"]
         self.ping_period = num("ping_period", None)
         pattern = text(props, "beam_pattern", preset.get("beam_pattern", "gaussian"), "sonar")
-        # A side-scan head's beam is narrow along track and a wide fan across it.
-        beam = (1.0, 50.0) if self.kind == "sidescan" else (3.0, 35.0)
+        beam = self.sonar_kind.default_beamwidths
         bw_h = num("beamwidth_h", preset.get("beamwidth_h", beam[0]))
         bw_v = num("beamwidth_v", preset.get("beamwidth_v", beam[1]))
         table_path = text(props, "beam_table", "", "sonar")
@@ -142,17 +154,23 @@ class SonarSensor(mi.Sensor):
             frequency = preset.get("frequency")
         ap_h = num("aperture_h", None)
         ap_v = num("aperture_v", None)
+        head_z = float(np.array(self.world_transform().matrix, dtype=np.float64).reshape(4, 4)[2, 3])
+        self.absorption, self.sound_speed = resolve(
+            self.water, self.absorption, self.sound_speed,
+            frequency if frequency is not None else preset.get("frequency", DEFAULT_FREQUENCY), head_z)
         tx = {k: num(k, None) for k in ("tx_beamwidth_h", "tx_beamwidth_v") if k in props}
         if "tx_pattern" in props:
             tx["tx_pattern"] = text(props, "tx_pattern", None, "sonar")
 
-        from mitsonar.electronics import Electronics, check_head_settings
+        from mitsonar.receiver.electronics import Electronics, check_head_settings
         read = {"float": number, "int": count, "str": text}
         elec = {}
         for f in dataclasses.fields(Electronics):
             if f.name in props:
                 kind = f.type if isinstance(f.type, str) else f.type.__name__
                 elec[f.name] = read[kind](props, f.name, None, "sonar")
+            elif f.name in preset:   # a side-scan preset's source level, sensitivity, noise
+                elec[f.name] = preset[f.name]
         self.electronics = elec
         self._check()
         check_head_settings(elec, "sonar")             # the head's ranges, then the model's checks
@@ -164,7 +182,8 @@ class SonarSensor(mi.Sensor):
         self.beam = BeamPattern(pattern, bw_h, bw_v, DEFAULT_FREQUENCY if frequency is None else frequency,
                                 ap_h, ap_v, self.sound_speed, table)
         self.transmit = self._transmit(tx, bw_h, bw_v, self.beam.frequency)
-        if frequency is not None and "sinc" not in (pattern, getattr(self.transmit, "kind", None)):
+        if (frequency is not None and "sinc" not in (pattern, getattr(self.transmit, "kind", None))
+                and "absorption" not in self.water_auto):
             if self.transmit is None:
                 raise ValueError(f"sonar 'frequency' is only used with beam_pattern 'sinc' (got {pattern!r})")
             raise ValueError(f"sonar 'frequency' is only used with beam_pattern or tx_pattern 'sinc' "
@@ -176,15 +195,16 @@ class SonarSensor(mi.Sensor):
         """Read and check the side-scan parameters (``side``, ``depression``, ``preset``), refused
         with any other kind; returns the preset's defaults ({} without one)."""
         names = ("side", "depression", "preset")
-        if self.kind != "sidescan":
+        if not self.sonar_kind.sided:
             given = [n for n in names if n in props]
             if given:
-                raise ValueError(f"sonar '{given[0]}': only used with kind 'sidescan' (kind is {self.kind!r})")
+                raise ValueError(f"sonar '{given[0]}': only used with kind {kinds.which('sided')} "
+                                 f"(kind is {self.kind!r})")
             self.side, self.depression, self.preset = None, None, None
             return {}
         for name in ("bearing_start", "bearing_step"):
-            if name in props:
-                raise ValueError(f"sonar '{name}': not used with kind 'sidescan' (its channels look port and "
+            if name in props and not self.sonar_kind.steered:
+                raise ValueError(f"sonar '{name}': not used with kind {self.kind!r} (its channels look port and "
                                  "starboard: set 'side' and 'depression')")
         name = text(props, "preset", None, "sonar")
         if name is not None and name not in PRESETS:
@@ -211,25 +231,27 @@ class SonarSensor(mi.Sensor):
             if not (math.isfinite(getattr(self, name)) and abs(getattr(self, name)) <= 360.0):
                 bad(name, getattr(self, name), "an angle in [-360, 360] deg")
         swath = abs(self.bearing_step) * (self.n_pings - 1)
-        if self.kind == "multibeam" and swath > 360.0:
-            bad("bearing_step", self.bearing_step, f"for kind 'multibeam' the receive beams span |bearing_step| "
-                f"x (n_pings - 1) <= 360 deg, here {swath:g} deg")
+        top = self.sonar_kind.max_swath
+        if top is not None and swath > top:
+            bad("bearing_step", self.bearing_step, f"for kind {self.kind!r} the receive beams span |bearing_step| "
+                f"x (n_pings - 1) <= {top:g} deg, here {swath:g} deg")
         if not (math.isfinite(self.sound_speed) and 1000.0 <= self.sound_speed <= 2000.0):
             bad("sound_speed", self.sound_speed, "1000 to 2000 m/s for water")
         if not (math.isfinite(self.absorption) and self.absorption >= 0):
             bad("absorption", self.absorption, "a finite attenuation >= 0 dB/m")
         flight = 2.0 * self.range_max / self.sound_speed
         if self.ping_period is None:
-            self.ping_period = flight + HEAD_OVERHEAD[self.kind]
+            self.ping_period = flight + self.sonar_kind.head_overhead
         elif not (math.isfinite(self.ping_period) and flight <= self.ping_period <= 3600.0):
             bad("ping_period", self.ping_period, f"seconds from the two-way flight to range_max, "
                 f"2 range_max / sound_speed = {flight:.6g} s, to 3600 s")
 
     def _transmit(self, tx, bw_h, bw_v, frequency):
         """The multibeam transmit fan (None for a mechanical head, whose beam transmits itself)."""
-        if self.kind != "multibeam":
+        if not self.sonar_kind.transmit_fan:
             if tx:
-                raise ValueError(f"sonar '{sorted(tx)[0]}': only used with kind 'multibeam' (kind is {self.kind!r})")
+                raise ValueError(f"sonar '{sorted(tx)[0]}': only used with kind {kinds.which('transmit_fan')} "
+                                 f"(kind is {self.kind!r})")
             return None
         kind = tx.get("tx_pattern", "gaussian")
         if kind not in TX_PATTERNS:
@@ -251,39 +273,31 @@ class SonarSensor(mi.Sensor):
         return self.range_min + (np.arange(self.n_bins) + 0.5) * self.bin_width
 
     def bearings_deg(self) -> np.ndarray:
-        if self.kind == "sidescan":      # fixed channels: each row's direction is in its pose
-            return np.zeros(self.n_pings)
-        return self.bearing_start + np.arange(self.n_pings) * self.bearing_step
+        return self.sonar_kind.bearings_deg(self.bearing_start, self.bearing_step, self.n_pings)
 
     def channels(self) -> np.ndarray:
         """(n_pings,) channel of each row of a side-scan head (0 port, 1 starboard): the port pings,
         then the starboard pings with ``side='both'``. None for the other kinds."""
-        if self.kind != "sidescan":
-            return None
-        sides = {"port": [0], "starboard": [STARBOARD], "both": [0, STARBOARD]}[self.side]
-        return np.repeat(np.array(sides, dtype=np.int64), self.pings)
+        return self.sonar_kind.channels(self.side, self.pings)
 
     def ping_times(self) -> np.ndarray:
         """(n_pings,) seconds of each row's ping from the scan start: ``k * ping_period`` for a
         mechanical head and for each channel of a side-scan head (both channels of ping k fire
         together), zeros for the rows of a multibeam frame (fired together)."""
-        if self.kind == "multibeam":
-            return np.zeros(self.n_pings)
-        if self.kind == "sidescan":
-            return np.tile(np.arange(self.pings) * self.ping_period, self.n_pings // self.pings)
-        return np.arange(self.n_pings) * self.ping_period
+        return self.sonar_kind.ping_times(self.ping_period, self.pings, self.n_pings)
 
     @property
     def scan_period(self) -> float:
         """Seconds from one scan's start to the next one's: ``n_pings`` pings of a mechanical or a
         side-scan head (``n_pings`` per channel), one frame of a multibeam head."""
-        return self.ping_period * (1 if self.kind == "multibeam" else self.pings)
+        return self.sonar_kind.scan_period(self.ping_period, self.pings)
 
     def head_pose(self, pose=None) -> np.ndarray:
         """The head's beam frame at bearing 0: ``to_world``, or a render's ``pose`` (checked rigid):
         one 4x4, or one per row, (n_pings, 4, 4), for a head on a moving platform."""
         if pose is None:
             return self.to_world_np
+        check_pose(self.water_auto, pose)
         m = np.asarray(pose, dtype=np.float64)
         if m.ndim == 3:
             if m.shape != (self.n_pings, 4, 4):
@@ -295,9 +309,7 @@ class SonarSensor(mi.Sensor):
     def ping_poses(self, pose=None) -> np.ndarray:
         """(n_pings, 4, 4) world transform of each ping's beam frame (float64): the head pose (or
         row k's head pose) @ the rotation to row k's bearing (side-scan: to row k's channel)."""
-        if self.kind == "sidescan":
-            return self.head_pose(pose) @ sidescan_rotation(self.channels(), math.radians(self.depression))
-        return self.head_pose(pose) @ bearing_rotation(np.radians(self.bearings_deg()))
+        return self.head_pose(pose) @ self.sonar_kind.rotations(self.bearings_deg(), self.channels(), self.depression)
 
     def connection(self, pose=None):
         """What weights an echo's connection back to the transducer, for `SonarIntegrator.sample`.
@@ -365,7 +377,7 @@ class SonarSensor(mi.Sensor):
     def to_string(self):
         tx = "" if self.transmit is None else (f", tx={self.transmit.kind} "
                                                f"{self.transmit.beamwidth_h:g}x{self.transmit.beamwidth_v:g} deg")
-        if self.kind == "sidescan":
+        if self.sonar_kind.sided:
             tx = f", side={self.side}, depression={self.depression:g} deg"
         return (f"SonarSensor[kind={self.kind}, n_pings={self.n_pings}, n_bins={self.n_bins}, "
                 f"range=[{self.range_min:g}, {self.range_max:g}) m, beam={self.beam.kind} "

@@ -73,6 +73,12 @@ class SonarTOFIntegrator(SonarIntegrator):
                           time (hidden_target, periscope); scenes without mirror-like BSDFs
                           trace the unguided kernel (no cost), others pay up to 31 % more time per
                           path. ``none``: BSDF sampling only. Gradient renders are unguided
+    sound_speed_profile   a CSV file (``depth,sound_speed``; a path relative to the scene
+                 (none)   file): the water the paths refract through (`refraction`): arcs out,
+                          an eigenray back, range = sensor ``sound_speed`` x two-way travel
+                          time / 2. Unset, or constant at the sensor's speed: straight rays.
+                          Primal renders only
+    svp_chords   4        chords per range window along which a refracted ray meets the scene
     ============ ======== ====================================================================
 
     Each pass runs as a Dr.Jit frozen function (`frozen_pass`): its kernel is traced once per
@@ -86,6 +92,7 @@ class SonarTOFIntegrator(SonarIntegrator):
     """
 
     name = "sonar_tof"
+    REFRACTS = True
     SAMPLERS = {"sobol": SobolSamples, "independent": HashSamples}
 
     def __init__(self, props: mi.Properties):
@@ -194,10 +201,13 @@ class SonarTOFIntegrator(SonarIntegrator):
         zero, index, samples = self._shared_lanes(n, seed_o, first_o)
         hist = ExactBins(shared.n_rows * shared.sensor.n_bins)
 
+        refraction = shared.path_setup.refraction
+
         def record(depth_k, rng, energy, valid, hit):
             # the roulette's number: a hash of (path, bounce, seed), apart from the path's samples
             u = mi.sample_tea_float32(index, seed_o ^ (mi.UInt32(depth_k) * 0x9E3779B9 + 0x51ED), 4)
-            shared.score(hist, rng, energy, valid, hit, u)
+            # a refracted echo arrives along its eigenray, not straight from its surface point
+            shared.score(hist, rng, energy, valid, hit, u, None if refraction is None else refraction.arrival)
 
         self.sample(_emitting(shared.path_setup, d, w), zero, samples, record)
         return hist.total()

@@ -5,4 +5,4 @@ cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 .venv/bin/mitsonar demo -o out "$@"
 # Side-scan: a lawnmower survey over the wreck, its waterfall and georeferenced mosaic (out/wreck_sidescan_*).
-.venv/bin/python -m mitsonar.sidescan_demo -o out -q
+.venv/bin/python -m mitsonar.scenes.sidescan_demo -o out -q

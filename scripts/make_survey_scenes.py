@@ -5,14 +5,14 @@ committed; this script is how they were made, and remakes them byte for byte):
 
 The committed meshes are coarser than a 1000-bin side-scan ping's bins (file size: about 1 MB for
 the wreck's seabed); for renders at full resolution, write a finer one over them, e.g.
-``--fine`` (0.03 m cells: about 16 MB for the wreck) -- see mitsonar/terrain.py for the rule.
+``--fine`` (0.03 m cells: about 16 MB for the wreck) -- see mitsonar/scenes/terrain.py for the rule.
 """
 import math
 import os
 import sys
 
-from mitsonar.terrain import Terrain
-from mitsonar.trajectory import Trajectory, pose
+from mitsonar.scenes.terrain import Terrain
+from mitsonar.geometry.trajectory import Trajectory, pose
 
 HERE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes_xml")
 

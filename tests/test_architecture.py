@@ -98,9 +98,10 @@ def test_the_graph_sees_lazy_imports():
     """The checker itself: imports inside functions and a module __getattr__ are edges."""
     mods, edges = import_graph()
     # render.py imports the plugins inside functions only
-    assert "mitsonar.plugins" in edges["mitsonar.render"]
-    # a submodule importing a sibling through its package (``from . import scanfile``) imports both
-    assert {"mitsonar", "mitsonar.scanfile"} <= edges["mitsonar.scan"]
+    assert "mitsonar.plugins" in edges["mitsonar.sim.render"]
+    # a submodule importing a sibling through its package (``from mitsonar.scan import fileformat``)
+    # imports both
+    assert {"mitsonar.scan", "mitsonar.scan.fileformat"} <= edges["mitsonar.scan.model"]
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": set()}) == [["a", "b", "c"]]
 
 
@@ -146,18 +147,201 @@ def test_submodules_take_only_submodules_from_their_package():
 
 def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     """Data flows scene -> paths -> histogram -> electronics -> Scan -> files, maps, devices: the
-    plugins (paths and histograms) may use mitsonar's helpers below them (value checks, frames)
-    and the electronics' settings (the sensor reads and checks its electronics fields), nothing
-    else of mitsonar (not the Scan, files, render or devices)."""
+    plugins (paths and histograms) may use mitsonar's helpers below them (value checks, frames,
+    the sonar kinds) and the electronics' settings (the sensor reads and checks its electronics
+    fields), nothing else of mitsonar (not the Scan, files, render or devices)."""
     _, edges = import_graph()
-    allowed = {"mitsonar._checks", "mitsonar.frames", "mitsonar.electronics"}
+    allowed = {"mitsonar._checks", "mitsonar.geometry.frames", "mitsonar.geometry.kinds",
+               "mitsonar.receiver.electronics",
+               # the water and seabed acoustics (NumPy, and scipy.special for the APL-UW model's
+               # erfc; nothing of mitsonar beyond each other): the sensor's absorption and sound
+               # speed 'auto', the acoustic_material BSDF's reflection and backscatter tables
+               "mitsonar.acoustics.seawater", "mitsonar.acoustics.interface", "mitsonar.acoustics.seabed",
+               "mitsonar.acoustics.materials",
+               # the sound-speed profile: the integrators read their XML sound_speed_profile with it
+               "mitsonar.acoustics.profile"}
     for name, out in edges.items():
         if name.startswith("mitsonar.plugins"):
             above = {t for t in out if t.startswith("mitsonar") and not t.startswith("mitsonar.plugins")}
             assert above <= allowed, (name, above - allowed)
-    # and those import nothing of mitsonar's above them (the electronics' scene speckle is a
-    # numpy-only leaf beside them)
-    leaves = {"mitsonar._checks", "mitsonar.speckle"}
-    for low in allowed | {"mitsonar.speckle"}:
+    # and those import nothing of mitsonar's above them (the electronics' scene speckle and the
+    # sonar equation's levels are numpy-only leaves beside them)
+    leaves = {"mitsonar._checks", "mitsonar.receiver.speckle", "mitsonar.sonar_equation.levels",
+              "mitsonar.acoustics._checks", "mitsonar.acoustics.seawater", "mitsonar.acoustics.interface",
+              "mitsonar.acoustics.seabed", "mitsonar.acoustics.materials"}
+    for low in (allowed | leaves) - {"mitsonar._checks", "mitsonar.geometry.kinds"}:
         assert not {t for t in edges[low] if t.startswith("mitsonar")} - leaves, low
-    assert not {t for t in edges["mitsonar.speckle"] if t.startswith("mitsonar")}
+    # the kinds (numpy only) rotate rows with the frames' rotations
+    assert {t for t in edges["mitsonar.geometry.kinds"] if t.startswith("mitsonar")} == {"mitsonar.geometry.frames"}
+    assert not {t for t in edges["mitsonar.receiver.speckle"] if t.startswith("mitsonar")}
+
+
+def test_mitsonar_itself_holds_at_most_12_modules():
+    """Code lives in packages by role (sim, scan, receiver, geometry, scenes, products, export,
+    devices, jobs, cli, ...): the package's own folder keeps only its entry points and shared
+    helpers, so a newcomer finds a kind, a head or a format by its room."""
+    top = sorted(f for f in os.listdir(os.path.join(ROOT, "mitsonar")) if f.endswith(".py"))
+    assert len(top) <= 12, top
+
+
+def test_every_subpackage_says_what_it_holds():
+    """Each room has a docstring saying its role (what `help()` and the API reference show)."""
+    for root, _, files in os.walk(os.path.join(ROOT, "mitsonar")):
+        if "__init__.py" in files:
+            with open(os.path.join(root, "__init__.py"), encoding="utf-8") as fh:
+                assert ast.get_docstring(ast.parse(fh.read())), root
+
+
+def head_name_comparisons(path, names):
+    """``(line, name)`` of every comparison with a head's name (``== "ping360"``, ``in ("micron",
+    ...)``, ``case "micron":``) in one file: the if/else on head names the registry replaces."""
+    with open(path, encoding="utf-8") as fh:
+        tree = ast.parse(fh.read(), path)
+
+    def named(node):
+        consts = [node] if isinstance(node, ast.Constant) else \
+            node.elts if isinstance(node, (ast.Tuple, ast.List, ast.Set)) else []
+        return [c.value for c in consts if isinstance(c, ast.Constant) and c.value in names]
+
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Compare):
+            for operand in [node.left, *node.comparators]:
+                out += [(node.lineno, n) for n in named(operand)]
+        elif isinstance(node, ast.MatchValue):
+            out += [(node.lineno, n) for n in named(node.value)]
+    return out
+
+
+def test_the_checker_sees_head_name_comparisons(tmp_path):
+    f = tmp_path / "m.py"
+    f.write_text('if args.head == "ping360":\n    pass\nx = h in ("micron", "other")\n'
+                 'match h:\n    case "micron":\n        pass\nhelp = "--head ping360"\n')
+    assert head_name_comparisons(str(f), {"micron", "ping360"}) == [(1, "ping360"), (3, "micron"), (5, "micron")]
+
+
+def test_heads_are_chosen_only_through_the_registry():
+    """No code compares a head's name but the head's own folder (``mitsonar/devices/<head>/``)
+    and the registry: the command line, recording and replay ask `mitsonar.devices.registry`, so
+    adding a head is one folder plus one registry entry (help texts may name heads)."""
+    from mitsonar.devices.registry import BUILTIN
+    names = set(BUILTIN)
+    own = {os.path.join(ROOT, "mitsonar", "devices", n) for n in names}
+    bad = []
+    for name, path in sorted(modules().items()):
+        if path == os.path.join(ROOT, "mitsonar", "devices", "registry.py") or \
+                any(path.startswith(folder + os.sep) for folder in own):
+            continue
+        bad += [(name, line, n) for line, n in head_name_comparisons(path, names)]
+    assert bad == []
+
+
+# ----------------------------------------------------------------------------- sonar kinds
+KIND_NAMES = ("mechanical", "multibeam", "sidescan")
+KINDS_MODULE = os.path.join(ROOT, "mitsonar", "geometry", "kinds.py")
+# mitsonar.sidescan is the old flat path of the products.sidescan module: a module name, no kind.
+NOT_KINDS = {os.path.join(ROOT, "mitsonar", "_aliases.py")}
+
+
+def _docstrings(tree):
+    """The string constants that are docstrings (module, class, function)."""
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+                out.add(id(body[0].value))
+    return out
+
+
+def kind_strings(path):
+    """(line, text) of each string in the code at ``path`` that names a sonar kind: a constant equal
+    to a kind name, or quoting one (``"kind 'sidescan'"``), docstrings aside; and each comparison
+    with the kinds' instances (``kinds.MULTIBEAM.name == x``, ``k is kinds.SIDESCAN``)."""
+    with open(path, encoding="utf-8") as fh:
+        tree = ast.parse(fh.read(), path)
+    docs = _docstrings(tree)
+    bad = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docs:
+            v = node.value
+            if any(v == k or f"'{k}'" in v or f'"{k}"' in v for k in KIND_NAMES):
+                bad.append((node.lineno, v))
+        if isinstance(node, ast.Compare):
+            names = {n.attr if isinstance(n, ast.Attribute) else n.id for n in ast.walk(node)
+                     if isinstance(n, (ast.Attribute, ast.Name))}
+            if names & {k.upper() for k in KIND_NAMES}:
+                bad.append((node.lineno, ast.unparse(node)))
+    return sorted(bad)
+
+
+def test_the_checker_finds_kind_strings(tmp_path):
+    src = tmp_path / "m.py"
+    src.write_text('"""A mechanical head (docstring: fine)."""\n'
+                   'def f(scan, kinds):\n'
+                   '    """kind \'sidescan\' in a docstring is fine"""\n'
+                   '    a = scan.kind == "multibeam"\n'
+                   '    b = f"needs kind \'sidescan\', got {scan.kind}"\n'
+                   '    c = "a mechanical head"\n'
+                   '    return scan.kind == kinds.MECHANICAL.name\n')
+    assert [line for line, _ in kind_strings(str(src))] == [4, 5, 7]
+
+
+@pytest.mark.parametrize("name, path", sorted((n, p) for n, p in modules().items()
+                                              if not n.startswith("hilbertmap")))
+def test_only_the_kinds_module_names_the_kinds(name, path):
+    """Behaviour that differs between sonar kinds lives on the kind classes of
+    `mitsonar.geometry.kinds`: no other module of mitsonar or its plugins compares a kind string
+    (``scan.kind == "multibeam"``) or keeps a table keyed by kind names; they ask the kind."""
+    if path == KINDS_MODULE or path in NOT_KINDS:
+        return
+    assert kind_strings(path) == [], name
+
+
+def test_a_new_kind_is_accepted_without_editing_other_modules(tmp_path):
+    """A toy kind registered in the kinds' registry is a kind of Scan (checked, saved, loaded), with
+    its rows, channels and pictures asked of its class, and a kind of the ``sonar`` sensor."""
+    import numpy as np
+
+    import mitsonar
+    from mitsonar.cli.main import PLOT_KINDS, plot_kind
+    from mitsonar.geometry import kinds
+
+    class Toy(kinds.SonarKind):
+        name = "toy"
+        row_name = "staves"
+        head_overhead = 0.25
+        plot_kinds = ("ascan",)
+
+        def ping_times(self, ping_period, pings, n_rows):
+            return np.arange(n_rows) * ping_period * 2.0
+
+    def scan(kind):
+        n = 4
+        return mitsonar.Scan(intensity=np.ones((n, 3), np.float32), data=np.zeros((n, 3), np.uint8),
+                             ranges=np.array([1.0, 2.0, 3.0]), bearings=np.zeros(n),
+                             poses=np.broadcast_to(np.eye(4), (n, 4, 4)), range_min=0.5, range_max=3.5, kind=kind)
+
+    with pytest.raises(ValueError, match="'toy' is not allowed"):
+        scan("toy")
+    kinds.register(Toy)
+    try:
+        s = scan("toy")
+        assert s.sonar_kind.name == "toy" and s.row_name == "staves" and s.channel is None
+        s.save(str(tmp_path / "toy.npz"))
+        assert mitsonar.load_scan(str(tmp_path / "toy.npz")).kind == "toy"
+        assert plot_kind("toy") == "ascan" and PLOT_KINDS["toy"] == ("ascan",)
+        assert "toy" in kinds.names()
+        from mitsonar.sim.variant import ensure_variant
+
+        ensure_variant()
+        import mitsuba as mi
+
+        sensor = mi.load_dict({"type": "sonar", "kind": "toy", "n_pings": 3, "n_bins": 8, "range_max": 7.5})
+        assert sensor.sonar_kind.name == "toy"
+        assert sensor.ping_period == pytest.approx(2 * 7.5 / 1500.0 + 0.25)
+        assert np.allclose(sensor.ping_times(), [0.0, 2 * sensor.ping_period, 4 * sensor.ping_period])
+    finally:
+        kinds.unregister("toy")
+    with pytest.raises(ValueError, match="'toy' is not allowed"):
+        scan("toy")

@@ -16,7 +16,7 @@ DEPTH = 10.0         # its depth under the head (at y = 0)
 
 
 def plane_scene(mitsonar, head, slope=SLOPE, depth=DEPTH, max_depth=1):
-    from mitsonar import echosounders
+    from mitsonar.scenes import echosounders
 
     tilt = math.degrees(math.atan(slope))
     return mitsonar.load_scene(
@@ -28,8 +28,8 @@ def plane_scene(mitsonar, head, slope=SLOPE, depth=DEPTH, max_depth=1):
 
 
 def test_presets_are_downward_fans_with_published_figures(mitsonar_mod):
-    from mitsonar import echosounders
-    from mitsonar.scene import sonar_of
+    from mitsonar.scenes import echosounders
+    from mitsonar.sim.scene import sonar_of
 
     head = echosounders.configure("r2sonic_2024")
     assert head.params["n_pings"] == 256 and head.params["beamwidth_h"] == 0.5 and head.params["tx_beamwidth_v"] == 1.0
@@ -48,7 +48,7 @@ def test_presets_are_downward_fans_with_published_figures(mitsonar_mod):
 
 
 def test_detector_closed_forms():
-    from mitsonar.bathymetry import detect
+    from mitsonar.products.bathymetry import detect
 
     r = 5.0 + 0.01 * (np.arange(400) + 0.5)
     echo = np.maximum(0.0, 1.0 - np.abs(r - 6.1234) / 0.2)           # symmetric: centroid at its middle
@@ -65,13 +65,13 @@ def test_detector_closed_forms():
 @pytest.mark.parametrize("grain, spread", [(1.0, 6.0), (4.0, 6.0), (4.0, 1.5), (8.0, 3.0)])
 def test_predicted_rms_matches_the_centroid_under_the_scene_speckle(grain, spread):
     """`predicted_rms`'s correlated-speckle law against Monte Carlo: the centroid of a gaussian echo
-    (rms ``spread`` bins) times ``|g|^2`` of `mitsonar.speckle.cell_speckle` with grains ``grain``
+    (rms ``spread`` bins) times ``|g|^2`` of `mitsonar.receiver.speckle.cell_speckle` with grains ``grain``
     bins long, over 4000 beams two beam widths apart (independent patterns). Measured std over
     predicted 0.94 to 1.00 (the linearisation slightly overestimates); bounds 0.88 to 1.05
     (4000 samples: about 2 % sampling error). At nadir (no spread) the prediction is the
     quantisation's and the speckle's 0.31 b."""
-    from mitsonar import bathymetry
-    from mitsonar.speckle import cell_speckle
+    from mitsonar.products import bathymetry
+    from mitsonar.receiver.speckle import cell_speckle
 
     n, r = 4000, np.arange(-60.0, 61.0)
     poses = np.tile(np.eye(4), (n, 1, 1))
@@ -96,7 +96,8 @@ def test_sloped_plane_soundings_and_error_growth_with_beam_angle(mitsonar_mod):
     incidence on the tilted plane; measured 0.87 to 1.36, 64 soundings per bin), and it grows:
     the outer beams' (|angle| >= 45) rms is over 1.4 times the inner beams' (|angle| <= 15;
     measured 2.0), as the echo's range spread r tan(incidence) sigma_phi grows."""
-    from mitsonar import bathymetry, echosounders
+    from mitsonar.products import bathymetry
+    from mitsonar.scenes import echosounders
 
     head = echosounders.configure("r2sonic_2024", swath=120, n_beams=96, bin_width=0.025, range_max=30)
     scene = plane_scene(mitsonar_mod, head)
@@ -135,7 +136,9 @@ def test_speckle_follows_the_scene_a_still_head_does_not_sparkle(mitsonar_mod):
     that does not say where its echoes come from is refused in one line."""
     import dataclasses
 
-    from mitsonar import bathymetry, echosounders
+    from mitsonar.products import bathymetry
+
+    from mitsonar.scenes import echosounders
 
     head = echosounders.configure("r2sonic_2024", swath=120, n_beams=40, bin_width=0.025, range_max=30)
     scene = plane_scene(mitsonar_mod, head)
@@ -163,7 +166,8 @@ def test_altimeter_leading_edge_is_unbiased_where_the_centroid_is_long(mitsonar_
     """A 6 deg altimeter 10 m over a flat seabed: the echo starts at exactly 10 m (nadir) and trails
     off over the beam (ranges 10 / cos(phi)); its leading edge is at 10 m within 2 bins (1 mm
     each), its centroid later, by about 10 (1 / cos(phi) - 1) over the -10 dB footprint (> 2 mm)."""
-    from mitsonar import bathymetry, echosounders
+    from mitsonar.products import bathymetry
+    from mitsonar.scenes import echosounders
 
     head = echosounders.configure("tritech_pa500", range_max=12.0)
     scene = plane_scene(mitsonar_mod, head, slope=0.0)
@@ -176,8 +180,8 @@ def test_altimeter_leading_edge_is_unbiased_where_the_centroid_is_long(mitsonar_
 
 
 def test_products_round_trip(tmp_path):
-    from mitsonar.bathymetry import SOUNDING_DTYPE
-    from mitsonar.soundings import grid_depths, pointcloud2, read_ply, write_ply
+    from mitsonar.products.bathymetry import SOUNDING_DTYPE
+    from mitsonar.products.soundings import grid_depths, pointcloud2, read_ply, write_ply
 
     rng = np.random.default_rng(0)
     s = np.zeros(500, SOUNDING_DTYPE)
@@ -209,7 +213,7 @@ def test_products_round_trip(tmp_path):
 def test_geotiff_when_rasterio_is_present(tmp_path, monkeypatch):
     import sys
 
-    from mitsonar.soundings import DepthGrid
+    from mitsonar.products.soundings import DepthGrid
 
     g = DepthGrid(np.array([[1.0, np.nan], [3.0, 4.0]]), np.array([[1, 0], [2, 1]]), (0.5, 0.0, 10.0, 0.0, -0.5, 20.0))
     with monkeypatch.context() as m:
@@ -231,7 +235,7 @@ def test_geotiff_when_rasterio_is_present(tmp_path, monkeypatch):
     (dict(bin_width=1e-5), "at most 65536 bins"),
 ])
 def test_bad_head_options_are_one_line(call, message):
-    from mitsonar import echosounders
+    from mitsonar.scenes import echosounders
 
     with pytest.raises(ValueError, match=message) as exc:
         echosounders.configure("r2sonic_2024", **call)
@@ -239,7 +243,8 @@ def test_bad_head_options_are_one_line(call, message):
 
 
 def test_bad_detection_options_and_no_bottom_are_one_line(mitsonar_mod):
-    from mitsonar import bathymetry, echosounders
+    from mitsonar.products import bathymetry
+    from mitsonar.scenes import echosounders
 
     for bad in (0.5, 61, float("nan"), "10"):
         with pytest.raises(ValueError, match=r"bathymetry 'threshold_db': .* \(dB below the echo's peak, 1 to 60\)"):
@@ -286,8 +291,9 @@ def test_cli_summary_and_plot_without_any_ground_truth(tmp_path):
     """Soundings none of which has a seabed under it in the scene (true height NaN): the summary's
     errors are None, the printed line says so instead of failing on ``100 * None``, and the plot
     is drawn (no ``min()`` of an empty table). ``OUTPUTS`` names every file a run may write."""
-    from mitsonar import bathy_cli, bathymetry
-    from mitsonar.soundings import grid_depths
+    from mitsonar.cli import bathymetry as bathy_cli
+    from mitsonar.products import bathymetry
+    from mitsonar.products.soundings import grid_depths
 
     s = np.zeros(6, bathymetry.SOUNDING_DTYPE)
     s["x"], s["y"], s["z"], s["head_z"] = np.arange(6.0), np.arange(6.0) % 2, -10.0, 0.0

@@ -34,7 +34,7 @@ def test_surface_ghost_at_the_image_source_range_only_with_the_surface(mitsonar_
     and the mixed one, and the ghost's first bin where the image source puts it, after a gap.
     Without it: nothing beyond the sphere's limb (D, up to one bin). The ghost's paths need the
     mirror's narrow lobe twice (rare paths): four seeds of 2^18 paths are summed."""
-    from mitsonar.sea_surface import load_survey_scene
+    from mitsonar.scenes.sea_surface import load_survey_scene
 
     xml = target_scene(kind)
     out = {}
@@ -63,7 +63,7 @@ def test_surface_ghost_at_the_image_source_range_only_with_the_surface(mitsonar_
 
 
 def test_surface_option_is_off_by_default_and_adds_one_downward_mirror(mitsonar_mod, tmp_path, monkeypatch):
-    from mitsonar.sea_surface import SURFACE_HALF_SIZE, edit_scene, load_survey_scene
+    from mitsonar.scenes.sea_surface import SURFACE_HALF_SIZE, edit_scene, load_survey_scene
 
     path = os.path.join(SCENES, "rocky_slope.xml")
     plain = mitsonar_mod.scene_mesh(load_survey_scene(path))

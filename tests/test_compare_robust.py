@@ -68,7 +68,7 @@ QUICK = dict(reference_spp=4096, seed=5, repeats=1, calibration_seconds=0.01, pl
 
 
 def test_a_run_that_fails_removes_the_folder_it_created(small_scene, tmp_path, monkeypatch):
-    from mitsonar.compare import engine
+    from mitsonar.jobs.compare import engine
 
     def boom(*args, **kwargs):
         raise RuntimeError("boom")
@@ -80,7 +80,7 @@ def test_a_run_that_fails_removes_the_folder_it_created(small_scene, tmp_path, m
 
 
 def test_a_run_that_fails_in_an_existing_folder_leaves_no_partial_files(small_scene, tmp_path, monkeypatch):
-    from mitsonar.compare import engine
+    from mitsonar.jobs.compare import engine
 
     out = tmp_path / "cmp"
     out.mkdir()
@@ -100,8 +100,8 @@ def test_a_run_that_fails_in_an_existing_folder_leaves_no_partial_files(small_sc
 
 
 def test_results_are_written_under_temporary_names_then_renamed(small_scene, tmp_path, monkeypatch):
-    from mitsonar.compare import engine
-    from mitsonar.compare.output import OutputFolder
+    from mitsonar.jobs.compare import engine
+    from mitsonar.jobs.compare.output import OutputFolder
 
     seen = []
     real = OutputFolder.commit
@@ -137,7 +137,7 @@ class FakeMachine:
 
 
 def test_calibration_takes_the_median_of_several_timings(mitsonar_mod):
-    from mitsonar.compare import calibrate, plan_spp
+    from mitsonar.jobs.compare import calibrate, plan_spp
 
     clean = FakeMachine()
     largest = max(p[0] for p in calibrate(clean.render, 0.05, start_spp=256, clock=clean.clock)["points"])
@@ -155,7 +155,7 @@ def test_calibration_takes_the_median_of_several_timings(mitsonar_mod):
 
 
 def test_a_larger_budget_never_plans_about_the_same_spp(mitsonar_mod):
-    from mitsonar.compare.budget import BETA_RANGE, plan_spp, search_spp
+    from mitsonar.jobs.compare.budget import BETA_RANGE, plan_spp, search_spp
 
     # Timings where one slowed render at 20000 spp says it takes 1 s (it takes 0.2 s).
     timings = [[10000, 0.1], [20000, 1.0]]
@@ -177,7 +177,7 @@ def fake_run(label, budget, took):
 
 
 def test_runs_off_their_budget_get_one_warning_line():
-    from mitsonar.compare import budget_warning, off_budget
+    from mitsonar.jobs.compare import budget_warning, off_budget
 
     runs = [fake_run("sonar_tof", 1.0, 1.19), fake_run("sonar_tof", 2.0, 2.5), fake_run("sonar_mlt", 1.0, 0.75),
             fake_run("sonar_mlt", 2.0, 1.7)]
@@ -189,7 +189,7 @@ def test_runs_off_their_budget_get_one_warning_line():
 
 
 def test_printed_report_shows_asked_and_achieved_seconds():
-    from mitsonar.compare_cli import report
+    from mitsonar.cli.compare import report
 
     result = {"reference": {"integrator": "sonar_tof", "spp": 4096, "self_rel_l2": 0.01, "from_cache": True},
               "runs": [fake_run("sonar_tof", 1.0, 1.05), fake_run("sonar_mlt", 1.0, 1.6)],
@@ -204,7 +204,7 @@ def test_printed_report_shows_asked_and_achieved_seconds():
 
 
 def test_json_reports_asked_and_achieved_seconds(small_scene, tmp_path):
-    from mitsonar.compare import compare
+    from mitsonar.jobs.compare import compare
 
     result = compare(small_scene, "sonar_tof", (0.01,), str(tmp_path / "cmp"), **QUICK)
     run = json.loads((tmp_path / "cmp" / "compare.json").read_text())["runs"][0]
@@ -221,8 +221,8 @@ class Terminal(io.StringIO):
 
 
 def test_reference_progress_bar_only_on_a_terminal(small_scene, monkeypatch, mitsonar_mod):
-    from mitsonar.compare.reference import render_reference
-    from mitsonar.scene import sonar_of
+    from mitsonar.jobs.compare.reference import render_reference
+    from mitsonar.sim.scene import sonar_of
 
     scene = mitsonar_mod.load_scene(small_scene)
     sensor = sonar_of(scene, 0)
@@ -246,7 +246,7 @@ def test_cli_output_has_no_progress_bar_when_not_on_a_terminal(small_scene, tmp_
 def test_a_failed_run_keeps_the_reference_it_rendered_into_a_new_folder(small_scene, tmp_path, monkeypatch):
     """Nothing is lost: the reference took most of the run's time, so a failure after it was cached
     leaves the new folder holding only that reference (no results, no temporary files)."""
-    from mitsonar.compare import engine
+    from mitsonar.jobs.compare import engine
 
     def boom(result, path):
         raise RuntimeError("boom")

@@ -15,8 +15,8 @@ import pytest
 from conftest import ROOT, SCENES
 
 from mitsonar.cli import main
-from mitsonar.dataset import DatasetError, check_config, generate_dataset, open_dataset, read_config
-from mitsonar.dataset.config import config_hash
+from mitsonar.jobs.dataset import DatasetError, check_config, generate_dataset, open_dataset, read_config
+from mitsonar.jobs.dataset.config import config_hash
 
 BOX = os.path.join(SCENES, "box.xml")
 
@@ -99,7 +99,7 @@ def _same_as(reference, folder):
 
 
 def test_interrupted_run_resumes_to_the_same_dataset(reference, tmp_path, monkeypatch):
-    from mitsonar.dataset import worker
+    from mitsonar.jobs.dataset import worker
 
     render = worker.SampleRenderer.render
 
@@ -229,8 +229,8 @@ def test_segmentation_names_the_shape_in_each_bin(tmp_path):
     # the labelling pass is sonar_tof's: render_scan with the plain integrator, the same paths
     # (seed, spp, pose), gives the same intensity up to the order of the float64 sums
     import mitsonar
-    from mitsonar.dataset.config import sonar_xml
-    from mitsonar.dataset.worker import DEFAULT_MOUNT
+    from mitsonar.jobs.dataset.config import sonar_xml
+    from mitsonar.jobs.dataset.worker import DEFAULT_MOUNT
 
     text = xml.read_text().replace("</scene>", sonar_xml({**cfg["sonar"], "mount": DEFAULT_MOUNT.ravel()}) + "</scene>")
     scene = mitsonar.load_scene(text, optimize=False)
@@ -251,7 +251,7 @@ def test_segmentation_names_the_shape_in_each_bin(tmp_path):
     ({"pose": {"heading": 3}}, "'pose.heading': unknown key (allowed: pitch, roll, x, y, yaw, z)"),
     ({"electronics": {"gain": {"uniform": [10, 120]}}}, "'gain': 120 is not allowed"),
     ({"electronics": {"speckel": "off"}}, "'electronics.speckel': unknown key"),
-    ({"sonar": {"n_bins": 0}}, "'n_bins': 0 is not allowed"),
+    ({"sonar": {"n_bins": 0}}, "'sonar.n_bins': 0 is not allowed"),
     ({"scenes": [{"terrain": {"resolution": {"uniform": [-0.1, 0.2]}}}]},
      "'scenes[0].terrain': terrain 'resolution': -0.1 is not allowed (a number > 0)"),
     ({"scenes": [{"terrain": {"size": [10, 10]}, "material": "mud"}]}, "'scenes[0].material': 'mud' is not allowed (one of"),
@@ -271,7 +271,7 @@ def test_bad_config_on_the_command_line_writes_nothing(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["dataset", str(cfg), "-o", str(out), "-q"]) == 1
     err = capsys.readouterr().err.strip()
-    assert err.startswith("mitsonar: error: dataset config 'scenes[0].xml': scene file") and "\n" not in err
+    assert err.startswith(f"mitsonar: error: dataset config 'scenes[0].xml' ({cfg} line 2): scene file") and "\n" not in err
     assert not out.exists()
 
 
@@ -304,7 +304,7 @@ def test_a_folder_of_another_config_is_not_resumed(reference, tmp_path):
 
 
 def test_a_second_run_on_the_same_folder_is_refused(reference):
-    from mitsonar.dataset.store import RunLock
+    from mitsonar.jobs.dataset.store import RunLock
 
     lock = RunLock(str(reference))
     try:
@@ -345,8 +345,8 @@ def _scene_folder(root, name, shape_id, corner):
 def test_a_worker_loads_the_named_scene_whatever_it_loaded_before(tmp_path):
     """Scenes a/s.xml and b/s.xml (each with its own m.obj) loaded in the order a, b, a by one
     worker are a, b, a: neither the scene file nor its mesh is taken from the other folder."""
-    from mitsonar.dataset.worker import SampleRenderer
-    from mitsonar.groundtruth import scene_mesh
+    from mitsonar.jobs.dataset.worker import SampleRenderer
+    from mitsonar.sim.groundtruth import scene_mesh
 
     a = _scene_folder(tmp_path, "a", "alpha", 2.0)
     b = _scene_folder(tmp_path, "b", "beta", 5.0)
@@ -373,7 +373,7 @@ def test_an_open_dataset_pickles_and_a_forked_copy_opens_its_own_shard(reference
     (spawn), or use it in a forked process (a new pid: it must not read through the parent's file)."""
     import pickle
 
-    from mitsonar.dataset import store
+    from mitsonar.jobs.dataset import store
 
     ds = store.SonarDataset(reference)
     first = ds[1]
@@ -393,7 +393,7 @@ def test_the_torch_flavoured_dataset_pickles_by_name(reference, monkeypatch):
     import pickle
     import types
 
-    from mitsonar.dataset import store
+    from mitsonar.jobs.dataset import store
 
     class IterableDataset:   # torch's: a plain base class
         pass
@@ -405,7 +405,7 @@ def test_the_torch_flavoured_dataset_pickles_by_name(reference, monkeypatch):
     sys.modules["torch.utils.data"].IterableDataset = IterableDataset
     monkeypatch.setattr(store, "_TORCH_CLASS", None, raising=False)
     ds = open_dataset(reference)
-    assert isinstance(ds, IterableDataset) and type(ds).__module__ == "mitsonar.dataset.store"
+    assert isinstance(ds, IterableDataset) and type(ds).__module__ == "mitsonar.jobs.dataset.store"
     ds[0]
     copy = pickle.loads(pickle.dumps(ds))
     assert type(copy) is type(ds)
@@ -424,8 +424,8 @@ def test_the_manifest_is_read_under_the_lock(reference, tmp_path, monkeypatch):
     manifest (nothing to render), not the empty folder it saw before taking the lock."""
     import shutil
 
-    from mitsonar.dataset import runner
-    from mitsonar.dataset.store import RunLock
+    from mitsonar.jobs.dataset import runner
+    from mitsonar.jobs.dataset.store import RunLock
 
     out = tmp_path / "raced"
 
@@ -442,8 +442,8 @@ def test_the_manifest_is_read_under_the_lock(reference, tmp_path, monkeypatch):
 
 
 def test_the_lock_is_released_when_preparing_the_folder_fails(tmp_path, monkeypatch):
-    from mitsonar.dataset import runner
-    from mitsonar.dataset.store import RunLock
+    from mitsonar.jobs.dataset import runner
+    from mitsonar.jobs.dataset.store import RunLock
 
     def fail(folder):
         raise PermissionError(f"{folder}: cannot remove a partial file")
@@ -458,7 +458,7 @@ def test_each_scene_block_draws_its_own_speckle_seed(reference):
     """The scene's speckle belongs to the scene: the samples of a block (scene_samples = 3) share a
     speckle seed drawn from the config's seed and the block, the two blocks differ, the render used
     it (its electronics record it) and the draw is the task's, whatever worker rendered it."""
-    from mitsonar.dataset.config import task
+    from mitsonar.jobs.dataset.config import task
 
     ds = open_dataset(reference)
     meta = [json.loads(str(s["meta"])) for s in ds]
@@ -470,7 +470,7 @@ def test_each_scene_block_draws_its_own_speckle_seed(reference):
 
 
 def test_the_config_fixes_or_draws_the_speckle_seed():
-    from mitsonar.dataset.config import task
+    from mitsonar.jobs.dataset.config import task
 
     fixed = check_config(small_config(electronics={"speckle_seed": 7}))
     assert {task(fixed, i)["sample"]["speckle_seed"] for i in range(6)} == {7}

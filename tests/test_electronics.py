@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from mitsonar.electronics import Electronics, apply_to_scan
+from mitsonar.receiver.electronics import Electronics, apply_to_scan
 from mitsonar.scan import Scan
 
 # Everything random or spreading switched off: the level is the bare formula.
@@ -48,7 +48,8 @@ def test_apply_is_the_level_formula_when_quiet(law):
     rng = np.random.default_rng(1)
     inten = (10.0 ** rng.uniform(-9, -3, (4, RANGES.size))).astype(np.float32)
     inten[:, ::7] = 0.0  # open water
-    e = Electronics(tvg=law, source_level=50.0, gain=20.0, ad_low=0.0, ad_span=60.0, tvg_cap=30.0, **QUIET)
+    e = Electronics(tvg=law, source_level=210.0, receiver_sensitivity=-160.0, gain=20.0, ad_low=0.0, ad_span=60.0,
+                    tvg_cap=30.0, **QUIET)
     data = e.apply(inten, RANGES, absorption=0.02)
     with np.errstate(divide="ignore"):
         level = 10 * np.log10(inten.astype(np.float64)) + 50.0 + 20.0 + e.tvg_db(RANGES, 0.02)
@@ -78,11 +79,11 @@ def test_every_half_way_edge_rounds_up():
 
 
 def test_window_ends_through_apply():
-    # intensity 1e-3 -> -30 dB; source level 30 puts it exactly at 0 dB.
+    # intensity 1e-3 -> -30 dB; source level + sensitivity = 30 puts it exactly at 0 dB.
     inten = np.full((1, 3), 1e-3)
     ranges = [1.0, 2.0, 3.0]
-    at_low = Electronics(source_level=30.0, gain=0.0, tvg="off", ad_low=0.0, ad_span=24.0, **QUIET)
-    at_top = Electronics(source_level=30.0, gain=0.0, tvg="off", ad_low=-24.0, ad_span=24.0, **QUIET)
+    at_low = Electronics(source_level=200.0, receiver_sensitivity=-170.0, gain=0.0, tvg="off", ad_low=0.0, ad_span=24.0, **QUIET)
+    at_top = Electronics(source_level=200.0, receiver_sensitivity=-170.0, gain=0.0, tvg="off", ad_low=-24.0, ad_span=24.0, **QUIET)
     assert np.all(at_low.apply(inten, ranges) == 0)
     assert np.all(at_top.apply(inten, ranges) == 255)
 
@@ -239,7 +240,7 @@ def test_defaults_look_like_a_micron():
 
 def test_fields_are_the_xml_contract():
     types = {f.name: f.type for f in dataclasses.fields(Electronics)}
-    for name in ("source_level", "tvg", "tvg_cap", "gain", "ad_low", "ad_span", "bit_depth", "pulse_length",
+    for name in ("source_level", "receiver_sensitivity", "noise_level", "bandwidth", "tvg", "tvg_cap", "gain", "ad_low", "ad_span", "bit_depth", "pulse_length",
                  "range_jitter", "speckle", "speckle_shape", "noise_floor", "ringdown"):
         assert name in types
     for f in dataclasses.fields(Electronics):
@@ -262,6 +263,8 @@ def test_fields_are_the_xml_contract():
     ("ringdown", -1.0, "is not a range >= 0 m"),
     ("noise_floor", math.nan, "is not a finite level"),
     ("source_level", math.inf, "is not a finite number"),
+    ("receiver_sensitivity", math.nan, "is not a finite number"),
+    ("bandwidth", -1.0, "is not a bandwidth >= 0 Hz"),
     ("gain", "high", "is not a number"),
     ("tvg", 20, "is not a string"),
     ("ringdown_level", 0.0, "above ad_low"),

@@ -284,7 +284,7 @@ def test_primal_is_unchanged_by_gradient_tracking(mitsonar_mod):
 
 # ----------------------------------------------------------------------------- bad input
 def test_unknown_parameter_is_named_with_the_allowed_ones(mitsonar_mod):
-    from mitsonar.render import scan_parameters
+    from mitsonar.sim.render import scan_parameters
 
     sc = scene(mitsonar_mod, [plane(-2.0)])
     assert set(scan_parameters(sc).keys()) == {"head.to_world", "head.absorption", "head.beamwidth_h",
@@ -313,7 +313,7 @@ def test_non_ad_variant_is_refused_in_one_line(mitsonar_mod, monkeypatch):
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.render import scan_parameters
+    from mitsonar.sim.render import scan_parameters
 
     sc = scene(mitsonar_mod, [plane(-2.0)])
     monkeypatch.setattr(dr, "is_diff_v", lambda t: False)

@@ -86,9 +86,9 @@ def test_map_accepts_a_raw_seanet_log(tmp_path):
     import sys
 
     import mitsonar
-    from mitsonar.micron import record
-    from mitsonar.seanet import HeadSettings
-    from mitsonar.virtual_sonar import VirtualMicron
+    from mitsonar.devices.micron.driver import record
+    from mitsonar.devices.micron.seanet import HeadSettings
+    from mitsonar.devices.micron.virtual import VirtualMicron
 
     box = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes_xml", "box.xml")
     scan = mitsonar.render_scan(mitsonar.load_scene(box), spp=256, seed=1)
@@ -105,10 +105,10 @@ def test_map_accepts_a_raw_seanet_log(tmp_path):
     # refused before the Gram matrix (75 GiB for 1e5 points) is allocated, or the map degenerates
     (["--inducing", "100000000"], r"--inducing must be at most the number of training samples \(\d+ from these "
                                   r"scans\), not 100000000"),
-    # a grid of 1e10 points would need terabytes: refused with a resolution that fits
+    # a grid of 1e10 points would need terabytes: refused before the fit, with a resolution that fits
     (["--inducing", "100", "--mesh", "m.ply", "--resolution", "0.0005"],
-     r"--resolution 0\.0005 m needs a grid of \d+ x \d+ x \d+ = [\d.e+]+ points over the region seen "
-     r"\(at most 2e\+08\); use --resolution [\d.]+ or coarser"),
+     r"--resolution 0\.0005 m: the scans reach [\d.]+ x [\d.]+ x [\d.]+ m \(their positions \+- range_max\), "
+     r"a grid of [\d.e+]+ points \(at most 2e\+08\); use --resolution [\d.]+ or coarser"),
 ])
 def test_map_refuses_sizes_it_cannot_fit(scan_files, tmp_path, args, expect):
     import re
@@ -123,9 +123,9 @@ def test_map_refuses_sizes_it_cannot_fit(scan_files, tmp_path, args, expect):
 def test_map_names_a_log_without_a_complete_scan(tmp_path):
     """A log that stops before the head finished one sweep: the file is named, not `fit()`."""
     from mitsonar import Scan
-    from mitsonar.micron import record
-    from mitsonar.seanet import HeadSettings
-    from mitsonar.virtual_sonar import VirtualMicron
+    from mitsonar.devices.micron.driver import record
+    from mitsonar.devices.micron.seanet import HeadSettings
+    from mitsonar.devices.micron.virtual import VirtualMicron
 
     from hilbertmap.testing import box_scan, orthogonal_frames
 
@@ -184,7 +184,7 @@ def test_map_names_the_kinds_of_input_it_reads(tmp_path, name, content, expect):
 def _map_args(*argv):
     import argparse
 
-    from mitsonar.map_cli import add_subcommands
+    from mitsonar.cli.map import add_subcommands
 
     parser = argparse.ArgumentParser()
     add_subcommands(parser.add_subparsers())
@@ -220,7 +220,7 @@ def test_map_writes_all_outputs_or_none(scan_files, tmp_path, monkeypatch, capsy
 
 def test_map_output_check_reports_an_unwritable_folder(tmp_path, monkeypatch):
     """The same check in-process, for runs as root (who may write anywhere)."""
-    from mitsonar import map_cli
+    from mitsonar.cli import map as map_cli
 
     monkeypatch.setattr(map_cli.os, "access", lambda path, mode: False)
     assert map_cli._output_problem("--plot", str(tmp_path / "q.png")) == \

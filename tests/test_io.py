@@ -9,8 +9,8 @@ import numpy as np
 import OpenEXR
 import pytest
 
-from mitsonar.electronics import Electronics
-from mitsonar.io import ScanFileError, load_scan, save_scan
+from mitsonar.receiver.electronics import Electronics
+from mitsonar.scan.io import ScanFileError, load_scan, save_scan
 from mitsonar.scan import Scan
 
 
@@ -56,8 +56,8 @@ def assert_same_scan(a, b):
         x, y = getattr(a, f.name), getattr(b, f.name)
         if isinstance(x, np.ndarray):
             assert x.dtype == y.dtype and np.array_equal(x, y), f.name
-        elif f.name == "meta":  # holds numpy arrays, whose == is elementwise
-            assert deep_equal(x, y), f.name
+        elif f.name == "meta":  # a ScanMeta holding numpy arrays, whose == is elementwise
+            assert type(x) is type(y) and deep_equal(x.to_dict(), y.to_dict()), f.name
         else:
             assert x == y and deep_equal(x, y), f.name
 

@@ -13,13 +13,13 @@ import time
 import numpy as np
 import pytest
 
-from mitsonar.assembler import ScanAssembler, beam_rotation
-from mitsonar.micron import MicronSonar, SonarError, SonarTimeout, record
-from mitsonar.rawlog import read_log
-from mitsonar.recording import replay
+from mitsonar.devices.micron.assembler import ScanAssembler, beam_rotation
+from mitsonar.devices.micron.driver import MicronSonar, SonarError, SonarTimeout, record
+from mitsonar.devices.rawlog import read_log
+from mitsonar.devices.recording import replay
 from mitsonar.scan import Scan
-from mitsonar.seanet import HdCtrl, HeadData, HeadSettings, bearing_to_radians
-from mitsonar.virtual_sonar import Faults, VirtualMicron
+from mitsonar.devices.micron.seanet import HdCtrl, HeadData, HeadSettings, bearing_to_radians
+from mitsonar.devices.micron.virtual import Faults, VirtualMicron
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
 
@@ -218,7 +218,7 @@ def test_socket_url():
 # The head's faults (a reboot, dropped or garbled bytes, a recording stopped mid-packet) leave
 # bytes that form no packet, depending on timing: replay warns of them (checked in the damage
 # tests below); here only the scans matter.
-@pytest.mark.filterwarnings("ignore::mitsonar.rawlog.LogDamageWarning")
+@pytest.mark.filterwarnings("ignore::mitsonar.devices.rawlog.LogDamageWarning")
 def test_record_then_replay_gives_the_same_scan(tmp_path):
     log = tmp_path / "log.bin"
     with VirtualMicron(SCAN, realtime=False, faults=Faults(drop_pings=(7,), reboot_at=150)) as vm:
@@ -236,7 +236,7 @@ def test_record_then_replay_gives_the_same_scan(tmp_path):
 # The head's faults (a reboot, dropped or garbled bytes, a recording stopped mid-packet) leave
 # bytes that form no packet, depending on timing: replay warns of them (checked in the damage
 # tests below); here only the scans matter.
-@pytest.mark.filterwarnings("ignore::mitsonar.rawlog.LogDamageWarning")
+@pytest.mark.filterwarnings("ignore::mitsonar.devices.rawlog.LogDamageWarning")
 def test_replay_reproduces_the_driver_scans_under_faults(tmp_path):
     log = tmp_path / "log.bin"
     faults = Faults(drop_probability=0.03, garbage_probability=0.03, stall_at=260, stall_seconds=0.3)
@@ -268,14 +268,14 @@ def test_replay_uses_logged_pose_changes(tmp_path):
 # The head's faults (a reboot, dropped or garbled bytes, a recording stopped mid-packet) leave
 # bytes that form no packet, depending on timing: replay warns of them (checked in the damage
 # tests below); here only the scans matter.
-@pytest.mark.filterwarnings("ignore::mitsonar.rawlog.LogDamageWarning")
+@pytest.mark.filterwarnings("ignore::mitsonar.devices.rawlog.LogDamageWarning")
 def test_passive_record_logs_what_the_head_sends(tmp_path):
     log = tmp_path / "tap.bin"
     with VirtualMicron(SCAN, realtime=False, alive_interval=0.02) as vm:
         stats = record(vm.port, log, 0.3, passive=True)
     meta, records = read_log(log)
     assert meta["passive"] and stats["bytes_rx"] > 0 and {k for _, k, _ in records} == {0}
-    from mitsonar.seanet import Alive, StreamParser
+    from mitsonar.devices.micron.seanet import Alive, StreamParser
     msgs = StreamParser().feed(b"".join(d for _, _, d in records))
     assert msgs and all(isinstance(m, Alive) for m in msgs)
     assert replay(log) == []
@@ -296,7 +296,9 @@ def test_silent_port_times_out_without_hanging():
         t = time.monotonic()
         with pytest.raises(SonarTimeout, match="mtAlive"):
             MicronSonar(path, timeout=0.5, boot_timeout=0.3, ping_timeout=0.1)
-        assert time.monotonic() - t < 3.0
+        # the timeouts given were honoured, not the 30 s defaults (takes 0.3 s; the bound, half
+        # a default, is no speed test and no load reaches it)
+        assert time.monotonic() - t < 15
     finally:
         os.close(master)
         os.close(slave)
@@ -309,7 +311,9 @@ def test_stalled_for_good_raises_sonar_timeout():
         t = time.monotonic()
         with pytest.raises(SonarTimeout):
             sonar.scan()
-        assert time.monotonic() - t < 6.0
+        # timeout=1.0 was honoured, not the 30 s default nor the head's 60 s stall (takes 1 s;
+        # the bound, half the default, is no speed test)
+        assert time.monotonic() - t < 15
 
 
 def test_bad_port_and_closed_sonar():
@@ -320,11 +324,11 @@ def test_bad_port_and_closed_sonar():
         MicronSonar("loop://", timeout=0.5, boot_timeout=0.2, ping_timeout=0.1)
     with pytest.raises(TypeError, match="HeadSettings"):
         MicronSonar("loop://", settings={"range": 5})
-    import mitsonar.seanet
+    import mitsonar.devices.micron.seanet
     # The codec no longer re-exports the driver (that made seanet and micron import each other);
     # the old name says where the driver lives.
-    with pytest.raises(AttributeError, match="import MicronSonar from mitsonar.micron"):
-        mitsonar.seanet.MicronSonar
+    with pytest.raises(AttributeError, match="import MicronSonar from mitsonar.devices.micron.driver"):
+        mitsonar.devices.micron.seanet.MicronSonar
     with VirtualMicron(SCAN, realtime=False) as vm:
         sonar = MicronSonar(vm.port, settings=HeadSettings.from_scan(SCAN), **FAST)
         sonar.close()
@@ -437,7 +441,7 @@ def test_clean_log_reads_without_warnings(two_scan_log):
 
 
 def test_read_log_resyncs_after_zeroed_bytes_and_keeps_the_rest(two_scan_log, tmp_path):
-    from mitsonar.rawlog import LogDamageWarning
+    from mitsonar.devices.rawlog import LogDamageWarning
     log, live, spans = two_scan_log
     raw = log.read_bytes()
     a, b = 5000, 5000 + (len(raw) - 5000) // 2 - 3000      # most of the first turn, as in the audit
@@ -466,7 +470,7 @@ def _synthetic_log(path, n_pings=300):
     """A log as the driver writes it, with fixed times: the same bytes on every run."""
     import json
     import struct
-    from mitsonar.seanet import HeadData, SendData, encode
+    from mitsonar.devices.micron.seanet import HeadData, SendData, encode
     settings = HeadSettings.from_scan(SMALL)
     rng = np.random.default_rng(7)
     packets = [(1, encode(settings.head_command()))]
@@ -519,7 +523,7 @@ def test_read_log_loses_only_the_damaged_records(tmp_path, mode):
 
 
 def test_read_log_reports_a_record_cut_short_at_the_end(two_scan_log, tmp_path):
-    from mitsonar.rawlog import LogDamageWarning
+    from mitsonar.devices.rawlog import LogDamageWarning
     log, live, spans = two_scan_log
     raw = log.read_bytes()
     k = next(k for k in range(len(spans) // 2, len(spans)) if spans[k][1] - spans[k][0] > 120)
@@ -542,7 +546,7 @@ def test_read_log_header_only_and_empty_files(tmp_path):
 
 
 def test_raw_log_writer_only_writes_kinds_the_reader_knows(tmp_path):
-    from mitsonar.rawlog import RawLogWriter
+    from mitsonar.devices.rawlog import RawLogWriter
     with RawLogWriter(tmp_path / "x.bin") as w:
         with pytest.raises(ValueError, match=r"kind must be RX \(0\), TX \(1\) or POSE \(2\), got 7"):
             w.write(7, b"abc")
@@ -557,7 +561,7 @@ def test_replay_sound_speed_has_the_head_bounds(two_scan_log, tmp_path):
 
 
 def test_replay_reports_bytes_that_form_no_packet(two_scan_log, tmp_path):
-    from mitsonar.rawlog import LogDamageWarning, RawLogWriter
+    from mitsonar.devices.rawlog import LogDamageWarning, RawLogWriter
     log, live, spans = two_scan_log
     meta, records = read_log(log)
     meta.pop("start_time")
@@ -582,7 +586,7 @@ def test_assembled_scan_has_its_ping_times():
     out = out or asm.finish()
     assert out.n_pings == 200 and 57 in out.meta["missing"]
     np.testing.assert_allclose(out.times, 0.05 * np.arange(200), atol=1e-9)
-    assert out.meta["time_start"] == pytest.approx(1000.0)
+    assert out.meta.start_time == pytest.approx(1000.0)
     asm = ScanAssembler()
     plain = None
     for k in range(200):

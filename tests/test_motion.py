@@ -144,7 +144,7 @@ def test_survey_is_consecutive_scans_bit_for_bit_and_streams_to_disk(mitsonar_mo
         np.testing.assert_array_equal(x.intensity, y.intensity)
         np.testing.assert_array_equal(x.data, y.data)
     assert not np.array_equal(scans[0].intensity, scans[1].intensity)
-    from mitsonar.survey import survey_files
+    from mitsonar.sim.survey import survey_files
 
     files = survey_files(tmp_path / "a")
     assert [os.path.basename(f) for f in files] == ["scan_00000.npz", "scan_00001.npz"]

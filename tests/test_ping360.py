@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from mitsonar.ping360 import Ping360Sonar, SonarError, SonarTimeout, record
-from mitsonar.ping360_head import Ping360Assembler, Ping360Settings, angle_to_radians
-from mitsonar.ping_protocol import Message, ids
-from mitsonar.rawlog import read_log
-from mitsonar.recording import replay
+from mitsonar.devices.ping360.driver import Ping360Sonar, SonarError, SonarTimeout, record
+from mitsonar.devices.ping360.head import Ping360Assembler, Ping360Settings, angle_to_radians
+from mitsonar.devices.ping360.protocol import Message, ids
+from mitsonar.devices.rawlog import read_log
+from mitsonar.devices.recording import replay
 from mitsonar.scan import Scan, bearing_rotation
-from mitsonar.virtual_ping360 import VirtualPing360
+from mitsonar.devices.ping360.virtual import VirtualPing360
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
 
@@ -185,8 +185,8 @@ def test_brping_client_against_the_virtual_head():
 
 
 def test_auto_transmit_streams_auto_device_data():
-    from mitsonar.ping_protocol import StreamParser, encode
-    from mitsonar.transports import open_serial, read_available, serial_fileno
+    from mitsonar.devices.ping360.protocol import StreamParser, encode
+    from mitsonar.devices.transports import open_serial, read_available, serial_fileno
     import time
     with VirtualPing360(SCAN, realtime=False) as vm:
         ser = open_serial(vm.port, 115200, timeout=0.1)
@@ -194,7 +194,9 @@ def test_auto_transmit_streams_auto_device_data():
             ser.write(encode(Message("auto_transmit", mode=1, gain_setting=1, transmit_duration=10,
                                      sample_period=640, transmit_frequency=750, number_of_samples=200,
                                      start_angle=10, stop_angle=30, num_steps=10)))
-            p, got, end = StreamParser(), [], time.monotonic() + 5
+            # the loop ends when 5 messages are in; the deadline only ends a broken run (it was
+            # 5 s, which a loaded machine could reach)
+            p, got, end = StreamParser(), [], time.monotonic() + 60
             while len(got) < 5 and time.monotonic() < end:
                 got += p.feed(read_available(ser, serial_fileno(ser), 0.1, vm.port))
             ser.write(encode(Message("motor_off")))
@@ -272,11 +274,11 @@ def test_record_then_replay_gives_the_same_scans(tmp_path):
     # the rows' reception times, from the first row's: rising through the turn, within its span
     for s in scans:
         assert s.times[0] == 0 and np.all(np.diff(s.times) >= 0) and s.times[-1] > 0
-        assert s.times[-1] == pytest.approx(s.meta["time_end"] - s.meta["time_start"])
+        assert s.times[-1] == pytest.approx(s.meta.end_time - s.meta.start_time)
 
 
 def test_replay_of_a_damaged_log_warns_and_keeps_the_rest(tmp_path):
-    from mitsonar.rawlog import LogDamageWarning
+    from mitsonar.devices.rawlog import LogDamageWarning
     log = tmp_path / "p360.bin"
     sector = synthetic_scan(n_pings=11, step_deg=9.0, start_deg=-45.0, pose=MOUNT, seed=4)
     with VirtualPing360(sector, realtime=False, corrupt_pings=(2,)) as vm:
@@ -320,11 +322,11 @@ class _ScriptedLine:
     bytes and then the right reply (no file descriptor: the driver polls it)."""
 
     def __init__(self, before):
-        from mitsonar.ping_protocol import StreamParser
+        from mitsonar.devices.ping360.protocol import StreamParser
         self.before, self.parser, self.buf, self.timeout, self.port = before, StreamParser(), bytearray(), 0.0, "scripted"
 
     def write(self, data):
-        from mitsonar.ping_protocol import encode
+        from mitsonar.devices.ping360.protocol import encode
         for m in self.parser.feed(data):
             if m.message_id == ids["general_request"]:
                 name = {v: k for k, v in ids.items()}[m.requested_id]

@@ -1,4 +1,4 @@
-"""The ping-protocol codec (mitsonar.ping_protocol) against brping's own message definitions,
+"""The ping-protocol codec (mitsonar.devices.ping360.protocol) against brping's own message definitions,
 packer and parser: exact bytes, round trips of every message, and a resynchronising stream parser
 fuzzed with hypothesis (damaged and truncated frames are skipped and counted, every whole frame
 after them is recovered)."""
@@ -11,8 +11,8 @@ import pytest
 from brping import definitions as brdefs, pingmessage
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from mitsonar import ping_protocol as pp
-from mitsonar.ping_protocol import Message, ProtocolError, StreamParser, decode, encode, ids
+from mitsonar.devices.ping360 import protocol as pp
+from mitsonar.devices.ping360.protocol import Message, ProtocolError, StreamParser, decode, encode, ids
 
 # MITSONAR_FUZZ_EXAMPLES=5000 for a soak run; derandomized: the same examples every run.
 FUZZ = settings(max_examples=int(os.environ.get("MITSONAR_FUZZ_EXAMPLES", 60)), deadline=None,

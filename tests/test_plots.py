@@ -7,9 +7,10 @@ import matplotlib.image as mimage
 import numpy as np
 import pytest
 from matplotlib import colormaps
+from matplotlib.collections import LineCollection
 
-from mitsonar import plots
-from mitsonar.electronics import Electronics
+from mitsonar.products import plots
+from mitsonar.receiver.electronics import Electronics
 from mitsonar.scan import Scan
 
 
@@ -90,11 +91,83 @@ def test_cartesian_places_bins_in_world_coordinates_and_cuts_the_mesh(tmp_path):
     assert fig.axes[0].get_xlabel().startswith("world x")
 
 
+def tilted(scan, tilt_deg, position=(0.0, 0.0, 0.0)):
+    """The scan's head turned about world y so that bearing 0 (world +x) looks ``tilt_deg`` down
+    (its scan axis leans forward as the harbour heads' do), then moved to ``position``."""
+    a = math.radians(tilt_deg)
+    R = np.array([[math.cos(a), 0.0, math.sin(a)], [0.0, 1.0, 0.0], [-math.sin(a), 0.0, math.cos(a)]])
+    poses = scan.poses.copy()
+    poses[:, :3, :] = np.einsum("ij,kjl->kil", R, poses[:, :3, :])
+    poses[:, :3, 3] = position
+    scan.poses = poses
+    return scan
+
+
+def wall_and_seabed():
+    """A flat seabed z = -4 (100 m square) and a wall x = 6 from z = -4 to 2, y in [-20, 20]."""
+    v = np.array([[-50, -50, -4], [50, -50, -4], [50, 50, -4], [-50, 50, -4],
+                  [6, -20, -4], [6, 20, -4], [6, 20, 2], [6, -20, 2]], float)
+    f = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    return v, f
+
+
+@pytest.mark.parametrize("tilt", [0.0, 30.0])
+def test_cartesian_is_world_x_east_y_north_like_the_track(tmp_path, tilt):
+    """Level or tilted, the head's pings are drawn at their world x (east, to the right) and y
+    (north, up), equal aspect, with the labels of the track picture (a tilted head was drawn in
+    an in-plane basis 'world u, v', turned 90 deg against the track)."""
+    from mitsonar.geometry.trajectory import Trajectory
+
+    # bearing 90 deg (world +y) bin 6 and bearing 0 (world +x, tilt down) bin 3
+    scan = tilted(ring_scan(bright=[(9, 6), (0, 3)]), tilt, position=(3.0, -2.0, -1.0))
+    png = str(tmp_path / "cart.png")
+    fig = plots.plot_cartesian(scan, path=png, figsize=(6, 5), dpi=100)
+    ax = fig.axes[0]
+    hot, cold = colormaps[plots.DEFAULT_CMAP](1.0), colormaps[plots.DEFAULT_CMAP](0.0)
+    c = math.cos(math.radians(tilt))
+    assert close(pixel(fig, png, 3.0, -2.0 + 6.5), hot)            # 6.5 m north of the head
+    assert close(pixel(fig, png, 3.0 + 3.5 * c, -2.0), hot)        # 3.5 m east, seen from above
+    assert close(pixel(fig, png, 3.0, -2.0 - 6.5), cold) and close(pixel(fig, png, 3.0 - 3.5 * c, -2.0), cold)
+    sonar = [ln for ln in ax.get_lines() if ln.get_label() == "sonar"][0]
+    assert list(sonar.get_xdata()) == [3.0] and list(sonar.get_ydata()) == [-2.0]
+    assert ax.get_aspect() == 1.0
+    track = plots.plot_track(Trajectory(np.array([0.0, 1.0]), scan.poses[:2]), figsize=(6, 5), dpi=100)
+    assert (ax.get_xlabel(), ax.get_ylabel()) == (track.axes[0].get_xlabel(), track.axes[0].get_ylabel())
+    assert "east" in ax.get_xlabel() and "north" in ax.get_ylabel()
+    assert not ax.xaxis_inverted() and not ax.yaxis_inverted()
+
+
+def test_cartesian_ground_truth_only_where_the_beams_reach(tmp_path):
+    """A head 30 deg down (fan 35 deg, range 10 m) over a seabed 4 m below, a wall 6 m east: the
+    plane of its sweep cuts the seabed along x = 4 / tan 30 = 6.9 m, inside the range but where
+    no beam looks (it was drawn as a green line: a misplaced wall). Drawn now: the wall only,
+    where a beam holds it."""
+    scan = tilted(ring_scan(), 30.0)
+    v, f = wall_and_seabed()
+    naive = plots.mesh_section(v, f, scan.positions.mean(axis=0), scan.poses[:, :3, 1].mean(axis=0))
+    on_seabed = naive[np.isclose(naive[..., 2], -4.0).all(axis=1)]
+    assert len(on_seabed) and np.allclose(on_seabed[..., 0], 4.0 / math.tan(math.radians(30.0)))
+    fig = plots.plot_cartesian(scan, mesh=(v, f), path=str(tmp_path / "gt.png"), figsize=(6, 5), dpi=100)
+    ax = fig.axes[0]
+    truth = [c for c in ax.collections if isinstance(c, LineCollection)]
+    assert len(truth) == 1
+    seg = np.asarray(truth[0].get_segments())          # (S, 2, 2) world x, y
+    assert len(seg) > 10
+    assert np.allclose(seg[..., 0], 6.0)               # on the wall, nothing on the seabed
+    assert "inside the beams (35\N{DEGREE SIGN} fan)" in truth[0].get_label()
+    # every piece drawn is inside a beam at one of the depths cut, and the wall is drawn along
+    # the stretch the beams reach (|y| up to sqrt(10^2 - 6^2 - dz^2) at the depth of the sweep)
+    segments, dz = plots.beam_ground_truth(scan, v, f)
+    assert np.allclose(segments[..., :2], seg)
+    assert plots.in_beams(scan, segments.mean(axis=1)).all()
+    assert seg[..., 1].max() > 5.0 and seg[..., 1].min() < -5.0 and np.abs(seg[..., 1]).max() <= 8.0
+
+
 def test_track_frames_a_straight_run_and_draws_the_ground_truth_at_its_depth(tmp_path):
     """A straight 25 m run at z = -2 beside a wall x = 20 (z from -5 to 1): the view holds the wall's
     cut, its short side is at least TRACK_MIN_ASPECT of the long one (it was a strip 0.1 as high as
     wide), and the track's end is drawn where it is, not under the legend."""
-    from mitsonar.trajectory import Trajectory
+    from mitsonar.geometry.trajectory import Trajectory
 
     t = np.linspace(0.0, 50.0, 51)
     poses = np.tile(np.eye(4), (len(t), 1, 1))

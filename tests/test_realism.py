@@ -6,9 +6,9 @@ import os
 import numpy as np
 import pytest
 
-from mitsonar.electronics import Electronics
-from mitsonar.realism import REAL_RANGES, byte_statistics, inside, speckle_correlation
-from mitsonar.speckle import cell_speckle
+from mitsonar.receiver.electronics import Electronics
+from mitsonar.receiver.realism import REAL_RANGES, byte_statistics, inside, speckle_correlation
+from mitsonar.receiver.speckle import cell_speckle
 
 SCENES = os.path.join(os.path.dirname(__file__), "..", "scenes_xml")
 QUIET = dict(speckle="off", noise_floor=-math.inf, ringdown=0.0)
@@ -70,7 +70,7 @@ def test_still_head_keeps_its_speckle_whatever_the_noise_and_path_seeds(mitsonar
 def test_speckle_decorrelates_over_an_aperture_and_a_beam_width(mitsonar_mod, box):
     """A shift of one aperture across the beam, or a turn of one beam width, leaves byte
     correlation < 0.3; a quarter of either keeps more than the full step does."""
-    from mitsonar.frames import bearing_rotation
+    from mitsonar.geometry.frames import bearing_rotation
 
     base = box.sensors()[0].to_world_np
     d = box.sensors()[0].beam.across_aperture()   # 3 deg at 700 kHz: 3.6 cm
@@ -109,7 +109,7 @@ def test_cell_speckle_is_fully_developed_and_follows_the_gaussian_beam_law():
     """|g|^2 over a scan is exponential with mean 1 (mean 1 +- 0.05, P(>1) = e^-1 +- 0.03,
     P(>3) = e^-3 +- 0.012) before and after a move; the correlation of |g|^2 between two poses is
     exp(-8 ln2 (turn / beam width)^2) within 0.1."""
-    from mitsonar.frames import bearing_rotation
+    from mitsonar.geometry.frames import bearing_rotation
 
     bw, ap, res = 3.0, 0.036, 0.075
     bearings = np.radians(np.arange(400) * 1.8)

@@ -16,7 +16,7 @@ def box(mitsonar_mod):
 
 
 @pytest.mark.parametrize("kwargs, message", [
-    ({"spp": 1.5}, "'spp': 1.5 is not allowed (a whole number of paths per ping, 1 or more)"),
+    ({"spp": 1.5}, "'spp': 1.5 is not allowed (a whole number of paths per ping from 1 to 2147483647)"),
     ({"spp": 0}, "'spp': 0 is not allowed"),
     ({"spp": None}, "'spp': None is not allowed"),
     ({"spp": float("nan")}, "'spp': nan is not allowed"),

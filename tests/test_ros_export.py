@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from mitsonar import Scan
-from mitsonar.frames import bearing_rotation
-from mitsonar.ros import TOPICS, ExportError, write_mcap
-from mitsonar.ros import msgdefs
+from mitsonar.geometry.frames import bearing_rotation
+from mitsonar.export.ros import TOPICS, ExportError, write_mcap
+from mitsonar.export.ros import msgdefs
 
 pytest.importorskip("mcap_ros2")
 from mcap.reader import make_reader  # noqa: E402
@@ -172,8 +172,8 @@ def test_survey_mcap_has_the_vehicle_frames(tmp_path, capsys):
 
     import mitsonar
     from mitsonar.cli import main
-    from mitsonar.ros.messages import sonar_pose
-    from mitsonar.trajectory import quat_to_matrix
+    from mitsonar.export.ros.messages import sonar_pose
+    from mitsonar.geometry.trajectory import quat_to_matrix
 
     out = tmp_path / "survey"
     bag = out / "survey.mcap"
@@ -181,7 +181,7 @@ def test_survey_mcap_has_the_vehicle_frames(tmp_path, capsys):
                "--speed", "0.2", "--depth", "0", "--spp", "4", "--max-scans", "2", "-q", "-o", str(out),
                "--mcap", str(bag)])
     assert rc == 0 and f"and {bag}" in capsys.readouterr().out
-    scans = [mitsonar.load_scan(f) for f in mitsonar.survey.survey_files(out)]
+    scans = [mitsonar.load_scan(f) for f in mitsonar.sim.survey.survey_files(out)]
     msgs = _read(bag)
     images = [d for t, _, _, d in msgs if t == "/sonar/image"]
     assert len(images) == sum(len(np.unique(s.times)) for s in scans)
@@ -215,7 +215,7 @@ def test_sidescan_channels_each_in_their_own_frame(tmp_path):
     """A side-scan ping is two groups, one per channel, each in its own sonar frame whose z axis is
     that channel's boresight (port looks +y, starboard -y): the starboard rows are not drawn in
     the port channel's frame. One odometry per ping, no fan picture (a line has no fan)."""
-    from mitsonar.frames import sidescan_rotation
+    from mitsonar.geometry.frames import sidescan_rotation
 
     n, bins = 3, 16
     channel = np.repeat([0, 1], n)
@@ -233,7 +233,7 @@ def test_sidescan_channels_each_in_their_own_frame(tmp_path):
     tfs = {t.child_frame_id: t for topic, _, _, d in msgs if topic == "/tf" for t in d.transforms}
     for frame, sign in (("sonar_port", 1.0), ("sonar_starboard", -1.0)):
         q = tfs[frame].transform.rotation
-        from mitsonar.trajectory import quat_to_matrix
+        from mitsonar.geometry.trajectory import quat_to_matrix
         rot = quat_to_matrix(np.array([q.x, q.y, q.z, q.w]))
         assert np.sign(rot[1, 2]) == sign                 # the frame's z (boresight) looks to its side
     for im in images:                                     # every beam on its own frame's boresight

@@ -33,7 +33,7 @@ def test_xml_and_render_scan_electronics_get_the_heads_range(mitsonar_mod):
 
 
 def test_the_electronics_class_keeps_the_simulator_ranges():
-    from mitsonar.electronics import Electronics
+    from mitsonar.receiver.electronics import Electronics
 
     e = Electronics(ad_low=-24.0, ad_span=255.0)  # outside the head's window, allowed for studies
     assert e.ad_low == -24.0
@@ -73,7 +73,7 @@ def test_info_summarises_long_lists(tmp_path, mitsonar_mod):
 
 
 def test_real_scan_title_names_only_what_the_scan_records(mitsonar_mod):
-    from mitsonar.plots import _settings_line
+    from mitsonar.products.plots import _settings_line
 
     scan = mitsonar_mod.render_scan(mitsonar_mod.load_scene(BOX), spp=1)
     assert "speckle rayleigh" in _settings_line(scan) and "TVG 20log" in _settings_line(scan)
@@ -87,7 +87,7 @@ def test_real_scan_title_names_only_what_the_scan_records(mitsonar_mod):
 def test_a_failed_plot_leaves_no_file(tmp_path, mitsonar_mod, monkeypatch):
     from matplotlib.figure import Figure
 
-    from mitsonar import plots
+    from mitsonar.products import plots
 
     scan = mitsonar_mod.render_scan(mitsonar_mod.load_scene(BOX), spp=1)
 
@@ -113,7 +113,7 @@ def test_info_prints_a_ragged_list(tmp_path, mitsonar_mod):
 
 
 def test_a_plot_into_a_missing_folder_names_the_users_path(tmp_path, mitsonar_mod):
-    from mitsonar import plots
+    from mitsonar.products import plots
 
     scan = mitsonar_mod.render_scan(mitsonar_mod.load_scene(BOX), spp=1)
     with pytest.raises(OSError, match=r"missing/p\.png") as err:

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from mitsonar import seanet as sn
-from mitsonar.seanet import (Alive, AuxData, BBUserData, FpgaCalibrationData, FpgaVersionData,
+from mitsonar.devices.micron import seanet as sn
+from mitsonar.devices.micron.seanet import (Alive, AuxData, BBUserData, FpgaCalibrationData, FpgaVersionData,
                              GainCommand, HdCtrl, HeadCommand, HeadData, HeadSettings, RawMessage,
                              ReBoot, ResetToDefaults, ScanReverse, SendBBUser, SendData,
                              SendVersion, StopAlives, StreamParser, VersionData, decode, encode)

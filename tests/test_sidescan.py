@@ -66,7 +66,7 @@ def test_flat_lambert_seabed_matches_the_closed_form_with_a_nadir_gap_and_separa
     # nadir gap: nothing before the slant range h (the bin holding h is the first with energy)
     first = int(np.argmax(port > 0))
     assert edges[first] <= h < edges[first + 1] and np.all(port[:first] == 0)
-    from mitsonar.sidescan import first_return
+    from mitsonar.products.sidescan import first_return
     np.testing.assert_allclose(first_return(scan), (edges[first] + edges[first + 1]) / 2)   # the altitude's bin
     # grazing falloff: the closed form, within 3 % on groups of 5 bins, from the nadir to 20 m
     groups = slice(first - first % 5, n_bins)
@@ -89,7 +89,7 @@ def shadow_edges(values, start, step):
 
 
 def test_a_box_casts_the_shadow_the_geometry_gives_in_slant_and_ground_range(mitsonar_mod):
-    from mitsonar.sidescan import ground_range
+    from mitsonar.products.sidescan import ground_range
 
     h, y1, y2, H = 5.0, 4.0, 4.8, 1.2
     sonar = sonar_xml(kind="sidescan", side="port", n_pings=1, n_bins=400, range_max=16.0, beamwidth_h=1.0,
@@ -130,9 +130,9 @@ def target_scene(mitsonar_mod, target):
 
 
 def test_a_target_appears_at_its_pixel_of_the_waterfall_and_of_the_mosaic(mitsonar_mod, tmp_path):
-    from mitsonar.mosaic import Mosaic, mosaic
-    from mitsonar.sidescan import select_side, waterfall
-    from mitsonar.trajectory import pose
+    from mitsonar.products.mosaic import Mosaic, mosaic
+    from mitsonar.products.sidescan import select_side, waterfall
+    from mitsonar.geometry.trajectory import pose
 
     # a 0.5 m bright patch on a dim floor, 6 m to starboard of a straight track along +x at 2 m/s
     track = mitsonar_mod.Trajectory.straight(10.0, 2.0, start=pose((-2.0, 0.0, 0.0)))
@@ -166,7 +166,7 @@ def test_a_target_appears_at_its_pixel_of_the_waterfall_and_of_the_mosaic(mitson
 
 
 def test_rows_poses_times_and_the_file_round_trip(mitsonar_mod, tmp_path):
-    from mitsonar.frames import sidescan_rotation
+    from mitsonar.geometry.frames import sidescan_rotation
 
     sonar = sonar_xml(kind="sidescan", n_pings=4, n_bins=50, range_max=30.0, depression=12.0)
     scene = mitsonar_mod.load_scene(scene_xml(sonar, seabed(-5.0, 0.5), integrator=SINGLE))
@@ -252,7 +252,7 @@ def test_sidescan_parameters_are_refused_on_other_kinds(mitsonar_mod):
 
 def test_a_new_track_or_start_renders_without_compiling(mitsonar_mod):
     from conftest import jit_kernels
-    from mitsonar.trajectory import pose
+    from mitsonar.geometry.trajectory import pose
 
     sonar = sonar_xml(kind="sidescan", n_pings=20, n_bins=100, range_max=15.0)
     scene = mitsonar_mod.load_scene(scene_xml(sonar, seabed(-5.0, 0.5)))
@@ -283,7 +283,7 @@ def test_the_wreck_survey_shows_the_nadir_gap_and_the_deckhouse_shadow_its_heade
 
 def test_survey_command_writes_the_waterfall_and_the_mosaic(tmp_path, capsys):
     from mitsonar.cli import main
-    from mitsonar.mosaic import Mosaic
+    from mitsonar.products.mosaic import Mosaic
 
     scene = tmp_path / "ss.xml"
     scene.write_text(scene_xml(sonar_xml(kind="sidescan", n_pings=20, n_bins=60, range_max=12.0),
@@ -305,7 +305,7 @@ def test_survey_command_writes_the_waterfall_and_the_mosaic(tmp_path, capsys):
 def test_long_range_survey_mosaic_is_sized_before_any_render(mitsonar_mod):
     """A 600 m head over a 1 km line: the mosaic's cell grows from the range bin so that the grid
     fits (at most 2e7 cells), decided before the first render; a mechanical head gets none."""
-    from mitsonar.survey_cli import MOSAIC_CELLS, _mosaic_grid
+    from mitsonar.cli.survey import MOSAIC_CELLS, _mosaic_grid
 
     scene = mitsonar_mod.load_scene(scene_xml(sonar_xml(kind="sidescan", preset="klein3000_100k", n_bins=1000),
                                               seabed(-20.0, 0.5)))

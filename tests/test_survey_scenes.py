@@ -45,7 +45,7 @@ def test_scene_loads_with_its_ground_truth_and_a_track_above_the_seabed(mitsonar
 
 
 def test_committed_seabeds_and_tracks_are_what_the_generator_makes(tmp_path):
-    from mitsonar.terrain import Terrain
+    from mitsonar.scenes.terrain import Terrain
 
     mod = maker()
     for name, kw in mod.TERRAINS.items():
@@ -82,7 +82,7 @@ def test_wreck_pass_shows_the_hull_and_the_deckhouse_shadow(mitsonar_mod):
 def test_demo_survey_draws_both_heads_along_the_harbour_track(tmp_path):
     import warnings
 
-    from mitsonar.survey_cli import demo_survey
+    from mitsonar.cli.survey import demo_survey
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")   # both heads picked by object: no "2 sonar sensors" warning

@@ -1,4 +1,4 @@
-"""The seabed terrain generator (mitsonar/terrain.py): watertight meshes, seeded statistics,
+"""The seabed terrain generator (mitsonar/scenes/terrain.py): watertight meshes, seeded statistics,
 reproducibility, PLY that Mitsuba loads, one-line refusals."""
 import math
 import subprocess
@@ -11,7 +11,7 @@ from conftest import ROOT
 
 
 def terrain(**kw):
-    from mitsonar.terrain import Terrain
+    from mitsonar.scenes.terrain import Terrain
 
     args = dict(size=(12.0, 8.0), resolution=0.05, depth=-5.0, slope=(0.03, -0.02), ripple_wavelength=0.6,
                 ripple_height=0.04, ripple_direction=30.0, roughness=0.02, correlation_length=0.5,
@@ -103,7 +103,7 @@ def test_same_seed_same_mesh_and_file_other_seed_other_mesh(tmp_path):
 
 
 def test_ply_loads_in_a_scene_and_is_its_ground_truth(mitsonar_mod, tmp_path):
-    from mitsonar.terrain import read_ply
+    from mitsonar.scenes.terrain import read_ply
 
     t = terrain(resolution=0.1, closed=True)
     path = tmp_path / "seabed.ply"
@@ -140,11 +140,11 @@ def test_bad_input_is_one_line_naming_the_parameter(kw, message):
 
 def test_command_writes_a_ply_and_refuses_bad_input_in_one_line(tmp_path):
     out = tmp_path / "t.ply"
-    run = lambda *a: subprocess.run([sys.executable, "-m", "mitsonar.terrain", str(out), *a],  # noqa: E731
+    run = lambda *a: subprocess.run([sys.executable, "-m", "mitsonar.scenes.terrain", str(out), *a],  # noqa: E731
                                     capture_output=True, text=True, cwd=ROOT)
     ok = run("--size", "4", "3", "--resolution", "0.1", "--ripple-height", "0.05", "--seed", "2")
     assert ok.returncode == 0 and "1271 vertices, 2400 triangles" in ok.stdout
     assert out.read_bytes().startswith(b"ply\nformat binary_little_endian 1.0\n")
     bad = run("--resolution", "-1")
     assert bad.returncode == 2 and bad.stdout == ""
-    assert bad.stderr == "mitsonar.terrain: terrain 'resolution': -1.0 is not allowed (a number > 0)\n"
+    assert bad.stderr == "mitsonar.scenes.terrain: terrain 'resolution': -1.0 is not allowed (a number > 0)\n"

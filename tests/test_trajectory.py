@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from mitsonar.trajectory import Trajectory, TrajectoryError, pose
+from mitsonar.geometry.trajectory import Trajectory, TrajectoryError, pose
 
 
 def rot(axis, angle):

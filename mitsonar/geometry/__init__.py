@@ -1,0 +1,1 @@
+"""Geometry: sonar frames and kinds, trajectories, north-up grids, PLY meshes."""

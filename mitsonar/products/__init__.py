@@ -1,0 +1,1 @@
+"""Products of scans: side-scan channels and mosaics, bathymetry and soundings, pictures."""

@@ -1,0 +1,263 @@
+"""`ScanMeta`: a `Scan`'s metadata (provenance, schedule, the head's own words), typed.
+
+Every key mitsonar writes is a field with its type and unit below; a field that is None is absent
+(it is not written to files, ``"key" in meta`` is False). Keys mitsonar does not know (a user's
+notes, a newer version's) are kept apart in `ScanMeta.extra`, unchanged, and saved with the scan.
+
+One name for the scan's start: ``start_time`` (s). Real heads wrote ``time_start`` and
+``time_end`` before; files that hold them load with ``start_time`` and ``end_time``, and reading
+``meta["time_start"]`` still works, with a DeprecationWarning.
+
+The mapping API (``meta["seed"]``, ``meta.get("side", "both")``, ``"key" in meta``, ``meta.items()``,
+``meta.update(...)``, ``{**meta}``, ``dict(meta)``, ``meta == {...}``) is kept for this release,
+silently: scans, files and user code of the dict era go on working. Attributes (``meta.seed``)
+are the typed way and the one mitsonar uses. A value of the wrong type for a field is refused when
+it is set, in one line: ``Scan 'meta': 'start_time': 'noon' is not allowed (a finite number, seconds)``.
+
+`ScanFieldError`, the one error of a bad `Scan` field, lives here (the leaf of `mitsonar.scan`);
+`mitsonar.scan.model` and `mitsonar.scan` export it. This module imports nothing from mitsonar.
+"""
+from __future__ import annotations
+
+import math
+import numbers
+import warnings
+from collections.abc import Mapping, MutableMapping
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+#: Old names still read (with a DeprecationWarning) and renamed when a file or dict is loaded.
+RENAMED = {"time_start": "start_time", "time_end": "end_time"}
+
+# What each kind of field allows, as said in the refusal.
+_KINDS = {
+    "number": "a finite number",
+    "int": "a whole number",
+    "str": "a string",
+    "bool": "True or False",
+    "list": "a list",
+    "dict": "a dict",
+}
+
+
+class ScanFieldError(ValueError):
+    """A `Scan` field with a value that is not allowed; `field` names it, `reason` says why."""
+
+    def __init__(self, field: str, reason: str):
+        super().__init__(f"Scan '{field}': {reason}")
+        self.field, self.reason = field, reason
+
+    def __reduce__(self):  # pickles (multiprocessing) with both arguments
+        return type(self), (self.field, self.reason)
+
+
+def _f(kind: str, doc: str, *, positive: bool = False):
+    """A field of `ScanMeta`: absent (None) by default; ``kind`` one of `_KINDS`; ``doc`` its
+    meaning and unit (shown in a refusal)."""
+    return field(default=None, metadata={"kind": kind, "doc": doc, "positive": positive})
+
+
+def _ok(kind: str, value, positive: bool) -> bool:
+    if kind in ("number", "int"):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.integer, np.floating)):
+            return False
+        if kind == "int" and not isinstance(value, (numbers.Integral, np.integer)):
+            return False
+        return math.isfinite(value) and (not positive or value > 0)
+    if kind == "str":
+        return isinstance(value, str)
+    if kind == "bool":
+        return isinstance(value, (bool, np.bool_))
+    if kind == "list":
+        return isinstance(value, (list, tuple, np.ndarray))
+    return isinstance(value, dict)
+
+
+@dataclass(eq=False)
+class ScanMeta(MutableMapping):
+    """A `Scan`'s metadata. Fields (all optional; None: absent):
+
+    Rendered scans (`render_scan`): ``scene``, ``seed``, ``spp``, ``integrator``, ``max_depth``,
+    ``mitsonar_version``, ``variant``, ``electronics_seed`` (the receiver noise's), ``speckle``
+    (``"scene"``: the echoes' speckle comes from the scene), ``bearing_start``/``bearing_step``
+    (deg), ``ping_period`` (s), ``frequency`` (Hz), ``aperture_h`` (m), ``directivity_index`` (dB);
+    side-scan ``side``, ``depression`` (deg), ``pings_per_channel``, ``preset``; multibeam
+    ``tx_pattern``, ``tx_beamwidth_h``/``tx_beamwidth_v`` (deg); surveys ``survey_index``,
+    ``survey_seed``.
+
+    Time: ``start_time`` (s): the scan's start on its clock (a trajectory's for a rendered scan, the
+    wall clock of a real head's log or port); ``Scan.times`` count from it. ``end_time`` (s): a real
+    head's last row received.
+
+    Real heads: ``source`` (``seanet``, ``ping360``), ``sweep`` (``continuous``, ``sector``),
+    ``missing`` (rows never received), ``log`` (the raw log replayed), ``partial`` (cut short at
+    the log's end), ``port``, ``settings`` (the head settings, a dict), ``dst``, ``head_serial``,
+    ``head_software``, ``head_firmware``; SeaNet ``wire_bearings`` (1/16 gradian), ``ad_interval``,
+    ``step_size``, ``hd_ctrl``, ``device_type``, ``gain_byte``, ``ad_low_byte``, ``ad_span_byte``,
+    ``nibble_order``, ``left_lim``/``right_lim``; Ping360 ``angles`` (gradian), ``gain_setting``,
+    ``transmit_duration`` (us), ``sample_period`` (25 ns ticks), ``transmit_frequency`` (kHz).
+
+    ``extra``: every other key, as given.
+    """
+
+    # provenance of a rendered scan
+    scene: str | None = _f("str", "the scene's file name")
+    seed: int | None = _f("int", "the render's seed")
+    spp: int | None = _f("int", "samples per pixel")
+    integrator: str | None = _f("str", "the integrator's class name")
+    max_depth: int | None = _f("int", "path length limit")
+    mitsonar_version: str | None = _f("str", "the version that made the scan")
+    variant: str | None = _f("str", "the Mitsuba variant")
+    electronics_seed: int | None = _f("int", "the receiver noise's seed")
+    speckle: str | None = _f("str", "where the speckle comes from")
+    bearing_start: float | None = _f("number", "deg")
+    bearing_step: float | None = _f("number", "deg")
+    ping_period: float | None = _f("number", "s", positive=True)
+    frequency: float | None = _f("number", "Hz", positive=True)
+    aperture_h: float | None = _f("number", "m", positive=True)
+    directivity_index: float | None = _f("number", "dB")
+    # side-scan, multibeam
+    side: str | None = _f("str", "port, starboard or both")
+    depression: float | None = _f("number", "deg")
+    pings_per_channel: int | None = _f("int", "pings per side-scan channel")
+    preset: str | None = _f("str", "the head preset's name")
+    tx_pattern: str | None = _f("str", "the transmit beam's pattern")
+    tx_beamwidth_h: float | None = _f("number", "deg", positive=True)
+    tx_beamwidth_v: float | None = _f("number", "deg", positive=True)
+    # time and surveys
+    start_time: float | None = _f("number", "seconds")
+    end_time: float | None = _f("number", "seconds")
+    survey_index: int | None = _f("int", "the scan's index in its survey")
+    survey_seed: int | None = _f("int", "the survey scan's seed")
+    # real heads
+    source: str | None = _f("str", "the head's protocol: seanet or ping360")
+    sweep: str | None = _f("str", "continuous or sector")
+    missing: list | None = _f("list", "row indices")
+    log: str | None = _f("str", "the raw log's path")
+    partial: bool | None = _f("bool", "cut short at the log's end")
+    port: str | None = _f("str", "the head's port")
+    settings: dict | None = _f("dict", "the head settings")
+    dst: bool | None = _f("bool", "a DST head")
+    head_serial: int | None = _f("int", "the head's serial number")
+    head_software: int | None = _f("int", "the head's software version")
+    head_firmware: str | None = _f("str", "the head's firmware version")
+    wire_bearings: list | None = _f("list", "1/16 gradian")
+    ad_interval: int | None = _f("int", "640 ns units")
+    step_size: int | None = _f("int", "1/16 gradian")
+    hd_ctrl: int | None = _f("int", "HdCtrl bits")
+    device_type: int | None = _f("int", "SeaNet device type")
+    gain_byte: int | None = _f("int", "0..210")
+    ad_low_byte: int | None = _f("int", "0..255")
+    ad_span_byte: int | None = _f("int", "0..255")
+    nibble_order: str | None = _f("str", "low_first or high_first")
+    left_lim: int | None = _f("int", "1/16 gradian")
+    right_lim: int | None = _f("int", "1/16 gradian")
+    angles: list | None = _f("list", "gradian")
+    gain_setting: int | None = _f("int", "0..2")
+    transmit_duration: int | None = _f("int", "us")
+    sample_period: int | None = _f("int", "25 ns ticks")
+    transmit_frequency: int | None = _f("int", "kHz")
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:  # the fields were checked as __init__ set them (__setattr__)
+        if not isinstance(self.extra, dict):
+            raise _error(f"extra: a {type(self.extra).__name__} is not a dict")
+
+    @staticmethod
+    def _check(name: str, value) -> None:
+        if value is None:
+            return
+        kind, doc, positive = _SPEC[name]
+        if not _ok(kind, value, positive):
+            shown = value.item() if isinstance(value, np.generic) else value
+            raise _error(f"'{name}': {shown!r} is not allowed ({_KINDS[kind]}"
+                         + (" > 0" if positive else "") + f", {doc})")
+
+    def __setattr__(self, name, value):
+        if name in _SPEC:
+            self._check(name, value)
+        object.__setattr__(self, name, value)
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "ScanMeta":
+        """The metadata of a dict (a file's, a caller's): known keys to their fields, old names
+        (``time_start``, ``time_end``) to the new ones, every other key to `extra`."""
+        if isinstance(d, ScanMeta):
+            return d
+        known, extra = {}, {}
+        for key, value in d.items():
+            new = RENAMED.get(key) if isinstance(key, str) else None
+            if new is not None and new not in d:
+                key = new
+            (known if key in _SPEC else extra)[key] = value
+        return cls(**known, extra=extra)
+
+    def to_dict(self) -> dict:
+        """A plain dict: the fields that are set, then `extra` (what files hold)."""
+        return dict(self.items())
+
+    # ---- the mapping API (one release; see the module docstring) --------------------------------
+
+    def __getitem__(self, key):
+        if isinstance(key, str) and key in _SPEC:
+            value = getattr(self, key)
+            if value is None:
+                raise KeyError(key)
+            return value
+        if key in self.extra:
+            return self.extra[key]
+        if key in RENAMED:
+            value = self[RENAMED[key]]
+            warnings.warn(f"Scan meta '{key}' is now '{RENAMED[key]}'", DeprecationWarning, stacklevel=2)
+            return value
+        raise KeyError(key)
+
+    def __contains__(self, key) -> bool:
+        # not through __getitem__: ``"time_start" in meta`` is False (the name is gone), no warning
+        if isinstance(key, str) and key in _SPEC:
+            return getattr(self, key) is not None
+        return key in self.extra
+
+    def __setitem__(self, key, value) -> None:
+        if isinstance(key, str) and key in _SPEC:
+            setattr(self, key, value)
+        else:
+            self.extra[key] = value
+
+    def __delitem__(self, key) -> None:
+        if isinstance(key, str) and key in _SPEC:
+            if getattr(self, key) is None:
+                raise KeyError(key)
+            setattr(self, key, None)
+        else:
+            del self.extra[key]
+
+    def __iter__(self):
+        for name in _NAMES:
+            if getattr(self, name) is not None:
+                yield name
+        yield from self.extra
+
+    def __len__(self) -> int:
+        return sum(getattr(self, n) is not None for n in _NAMES) + len(self.extra)
+
+    def __eq__(self, other) -> bool:
+        if isinstance(other, Mapping):
+            return dict(self.items()) == dict(other.items())
+        return NotImplemented
+
+    __hash__ = None
+
+    def __repr__(self) -> str:
+        return f"ScanMeta({dict(self.items())!r})"
+
+
+def _error(reason: str) -> ScanFieldError:
+    return ScanFieldError("meta", reason)
+
+
+_SPEC = {f.name: (f.metadata["kind"], f.metadata["doc"], f.metadata["positive"])
+         for f in fields(ScanMeta) if f.name != "extra"}
+_NAMES = tuple(_SPEC)

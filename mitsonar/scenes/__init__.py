@@ -1,0 +1,2 @@
+"""Scenes beyond the XML files: procedural terrain, a sea surface, echo-sounder presets, the
+side-scan demo."""

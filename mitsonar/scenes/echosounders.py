@@ -1,0 +1,214 @@
+"""Echo-sounder presets: downward bathymetric multibeams and an altimeter, as ``sonar`` sensors.
+
+A bathymetric multibeam echo sounder (MBES) is the ``multibeam`` kind of the ``sonar`` sensor
+looking down: its beam frame's boresight (+z) points down, its scan axis (+y) along the track
+(vehicle +x), so the bearing of receive beam ``k`` is its across-track beam angle, positive to
+port (the beam frame's +x is the vehicle's +y). A Mills-cross head is modelled as
+
+* one transmit fan (``tx_*``): narrow along track (``tx_along``, the published along-track
+  width), wide across it (a gaussian 1.5 times the swath: -1.3 dB one way at the outer beams);
+* ``n_beams`` receive beams, narrow across track (``rx_across``, the published across-track
+  width) at equal angles from ``-swath / 2`` to ``+swath / 2`` (the swath is the angle between the
+  outermost beams' centres), and wide along track (``rx_along``: 4 times the transmit's along-track
+  width, a simulation choice; the two-way along-track -3 dB width is then
+  ``1 / sqrt(1 + 1/16) = 0.97`` of the transmit's, the published figure).
+
+The altimeter (single-beam echo sounder) is one ping of a ``mechanical`` head that does not
+rotate: one conical gaussian beam looking down.
+
+Published figures (frequency, beam count, beam widths, swath), and where they come from:
+
+``r2sonic_2024``  R2Sonic Sonic 2024: 200 to 400 kHz selectable, 256 beams over a selectable
+                  sector of 10 to 160 deg (R2Sonic, "Sonic 2024/2022 Broadband Multibeam
+                  Echosounders, Operation Manual" V5.0, 2014, section 1.1, checked); beam widths
+                  0.5 deg across x 1 deg along at 400 kHz (R2Sonic Sonic 2024 data sheet).
+``kongsberg_em2040``  Kongsberg EM 2040: 200 to 400 kHz, modular beam widths 0.5 x 1 deg or
+                  1 x 1 deg (transmit along x receive across; Kongsberg Maritime, "EM 2040
+                  multibeam echo sounder" product leaflet, checked); 400 soundings per ping
+                  (single swath) and a 140 deg swath for one receiver (Kongsberg EM 2040
+                  data sheet).
+``tritech_pa500`` Tritech PA500 altimeter: 500 kHz, 6 deg conical beam, 0.1 to 50 m, 1 mm
+                  resolution (Tritech PA500 data sheet).
+
+Source levels (``source_level``, dB re 1 uPa at 1 m) are typical values, not found in the sheets
+cited above: 215 dB for the two multibeams (high-frequency MBES: 200..230 dB, Lurton, *An
+Introduction to Underwater Acoustics*, 2nd ed. 2010, sec. 8.3), 205 dB for the altimeter. Each
+preset's ``receiver_sensitivity`` is ``52 - source_level`` (the shared A/D calibration, so the
+bytes are as before levels had units) and its ``noise_level`` the ambient noise at its frequency
+(`mitsonar.sonar_equation.ambient_noise_level`, wind 5 m/s, rounded).
+
+Figures marked "data sheet" are as the makers publish them but were not re-checked against the
+sheet for this module. The range bin (``bin_width``) is a simulation choice near the heads' range
+resolution ``c / (2 bandwidth)`` (1.25 cm for a 60 kHz bandwidth), not a published figure. The
+multibeams' ``pulse_length`` (an electronics field of the sensor) is the matched pulse of that
+resolution, ``2 bin / c`` = 16.7 us at the preset's bin: the scene's speckle grains
+(`mitsonar.receiver.speckle`, ``max(c pulse_length / 2, bin)`` long) are then one range resolution long,
+not the Micron default pulse's 7.5 cm. The altimeter keeps the default electronics.
+
+    from mitsonar.scenes.echosounders import sonar_xml
+    xml = sonar_xml("r2sonic_2024", swath=130, range_max=30)    # a <sensor type="sonar"> element
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from mitsonar._checks import is_number, is_whole, not_allowed
+from mitsonar.geometry.kinds import MECHANICAL, MULTIBEAM, SonarKind
+from mitsonar.sonar_equation.levels import CALIBRATION_DB
+
+WHERE = "echosounder"
+
+#: The widest fan a bathymetric head may have: beyond 180 deg its outer beams look up.
+MAX_SWATH = 180.0
+#: Receive beams' along-track width over the transmit's (see the module docstring).
+RX_ALONG_FACTOR = 4.0
+#: Transmit fan's across-track gaussian width over the swath.
+TX_ACROSS_FACTOR = 1.5
+MAX_BINS = 65536
+
+
+@dataclasses.dataclass(frozen=True)
+class EchoSounder:
+    """One echo sounder's published figures (angles in degrees, lengths in metres)."""
+
+    name: str
+    model: str
+    kind: SonarKind        # MULTIBEAM (an MBES) or MECHANICAL, one fixed ping (an altimeter)
+    frequency: float       # Hz
+    n_beams: int
+    rx_across: float       # receive beam width across track (altimeter: the cone's width)
+    tx_along: float        # transmit width along track (altimeter: the cone's width)
+    swath: float           # default angle between the outermost beams' centres (altimeter: 0)
+    swath_range: tuple     # (smallest, widest) swath the head allows
+    range_max: float       # default end of the range window
+    bin_width: float       # range bin (a simulation choice, see the module docstring)
+    source: str
+    source_level: float = 215.0    # dB re 1 uPa at 1 m (typical: see the module docstring)
+    noise_level: float = 37.0      # dB re 1 uPa^2/Hz, ambient at the frequency
+
+
+PRESETS = {
+    "r2sonic_2024": EchoSounder(
+        "r2sonic_2024", "R2Sonic Sonic 2024", MULTIBEAM, 400e3, 256, 0.5, 1.0, 130.0, (10.0, 160.0),
+        40.0, 0.0125, "R2Sonic Sonic 2024/2022 Operation Manual V5.0 (2014) sec. 1.1; Sonic 2024 data sheet"),
+    "kongsberg_em2040": EchoSounder(
+        "kongsberg_em2040", "Kongsberg EM 2040", MULTIBEAM, 400e3, 400, 1.0, 0.5, 140.0, (10.0, 140.0),
+        40.0, 0.0125, "Kongsberg Maritime EM 2040 product leaflet; EM 2040 data sheet"),
+    "tritech_pa500": EchoSounder(
+        "tritech_pa500", "Tritech PA500 altimeter", MECHANICAL, 500e3, 1, 6.0, 6.0, 0.0, (0.0, 0.0),
+        50.0, 0.001, "Tritech PA500 data sheet", source_level=205.0, noise_level=39.0),
+}
+
+
+def preset(name) -> EchoSounder:
+    """The `EchoSounder` called ``name`` (a key of `PRESETS`), or one line naming the choices."""
+    if isinstance(name, EchoSounder):
+        return name
+    if name not in PRESETS:
+        raise not_allowed(WHERE, "preset", name, "one of " + ", ".join(sorted(PRESETS)))
+    return PRESETS[name]
+
+
+def looking_down(position=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """The mount of a head looking straight down from ``position`` (vehicle frame, x forward,
+    y port, z up): boresight -z, scan axis +x (along track), beam frame +x = port."""
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2] = (0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, -1.0)
+    m[:3, 3] = position
+    return m
+
+
+@dataclasses.dataclass(frozen=True)
+class HeadSetup:
+    """What `configure` made of a preset and its overrides: the sensor's parameters."""
+
+    sounder: EchoSounder
+    params: dict
+    mount: np.ndarray
+
+    @property
+    def beam_angles(self) -> np.ndarray:
+        """(n_beams,) degrees: each beam's across-track angle from the vertical, positive to port."""
+        p = self.params
+        return p["bearing_start"] + np.arange(p["n_pings"]) * p["bearing_step"]
+
+
+def configure(name, *, swath=None, n_beams=None, range_min=None, range_max=None, bin_width=None,
+              n_bins=None, mount=None, sound_speed=1500.0) -> HeadSetup:
+    """The ``sonar`` sensor parameters of preset ``name`` with the given overrides.
+
+    ============ ===================================================================================
+    swath        deg between the outermost beams' centres, within the head's range and at most
+                 180 (multibeam only)
+    n_beams      receive beams (multibeam only; default the preset's)
+    range_min    m, start of the range window (default 0.1 for the altimeter, 0.5 else)
+    range_max    m, end of the window (default the preset's)
+    bin_width    m (default the preset's); or ``n_bins`` directly
+    mount        4x4 rigid mount in the vehicle frame (default `looking_down`)
+    ============ ===================================================================================
+
+    Every value is checked here, with one line naming it, before any scene is made.
+    """
+    s = preset(name)
+
+    def bad(field, value, allowed):
+        raise not_allowed(WHERE, field, value, allowed)
+
+    multibeam = s.kind.transmit_fan      # an MBES: receive beams across a transmit fan
+    if not multibeam:
+        for field, value in (("swath", swath), ("n_beams", n_beams)):
+            if value is not None:
+                bad(field, value, f"not used by the single-beam {s.model}")
+    swath = s.swath if swath is None else swath
+    lo, hi = s.swath_range
+    if multibeam and not (is_number(swath) and 0 < swath <= MAX_SWATH):
+        bad("swath", swath, f"a fan of at most {MAX_SWATH:g} deg across track; {s.model}: {lo:g} to {hi:g} deg")
+    if multibeam and not lo <= swath <= hi:
+        bad("swath", swath, f"{lo:g} to {hi:g} deg for the {s.model}")
+    n_beams = s.n_beams if n_beams is None else n_beams
+    if not (is_whole(n_beams) and 1 <= n_beams <= 4096) or (multibeam and n_beams < 2):
+        bad("n_beams", n_beams, "a whole number of receive beams from 2 to 4096")
+    range_min = (0.1 if not multibeam else 0.5) if range_min is None else range_min
+    range_max = s.range_max if range_max is None else range_max
+    if not (is_number(range_min) and range_min >= 0):
+        bad("range_min", range_min, "a range >= 0 m")
+    if not (is_number(range_max) and range_max > range_min):
+        bad("range_max", range_max, f"a range > range_min = {range_min:g} m")
+    if n_bins is None:
+        bin_width = s.bin_width if bin_width is None else bin_width
+        if not (is_number(bin_width) and bin_width > 0):
+            bad("bin_width", bin_width, "a bin width > 0 m")
+        n_bins = int(math.ceil((range_max - range_min) / bin_width - 1e-9))
+        if n_bins > MAX_BINS:
+            bad("bin_width", bin_width, f"at least {(range_max - range_min) / MAX_BINS:.3g} m for a "
+                f"{range_max - range_min:g} m window (at most {MAX_BINS} bins)")
+    elif not (is_whole(n_bins) and 1 <= n_bins <= MAX_BINS):
+        bad("n_bins", n_bins, f"a whole number of bins from 1 to {MAX_BINS}")
+    mount = looking_down() if mount is None else np.asarray(mount, dtype=np.float64)
+    from mitsonar.geometry.frames import check_rigid
+
+    check_rigid(mount, f"{WHERE} 'mount'")
+    params = dict(range_min=float(range_min), range_max=float(range_max), n_bins=int(n_bins),
+                  sound_speed=float(sound_speed), beam_pattern="gaussian", source_level=s.source_level,
+                  receiver_sensitivity=CALIBRATION_DB - s.source_level, noise_level=s.noise_level)
+    if multibeam:
+        n = int(n_beams)
+        params.update(kind=s.kind.name, n_pings=n, bearing_start=-swath / 2.0, bearing_step=swath / (n - 1),
+                      beamwidth_h=s.rx_across, beamwidth_v=RX_ALONG_FACTOR * s.tx_along,
+                      tx_pattern="gaussian", tx_beamwidth_h=min(TX_ACROSS_FACTOR * swath, 360.0),
+                      tx_beamwidth_v=s.tx_along, pulse_length=2.0 * s.bin_width / float(sound_speed))
+    else:
+        params.update(kind=s.kind.name, n_pings=1, bearing_start=0.0, bearing_step=0.0,
+                      beamwidth_h=s.rx_across, beamwidth_v=s.tx_along)
+    return HeadSetup(s, params, mount)
+
+
+def sonar_xml(name, sensor_id="echosounder", **overrides) -> str:
+    """A ``<sensor type="sonar">`` element for preset ``name`` (`configure`'s overrides)."""
+    from mitsonar.sim.sensor_xml import sensor_xml
+
+    head = name if isinstance(name, HeadSetup) else configure(name, **overrides)
+    return sensor_xml(head.params, head.mount.ravel(), sensor_id)

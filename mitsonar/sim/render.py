@@ -1,0 +1,357 @@
+"""`render_scan`: one scan of a scene through the sonar integrators and the head's electronics."""
+from __future__ import annotations
+
+import contextlib
+
+import math
+import warnings
+
+import numpy as np
+
+from mitsonar._checks import is_whole
+from mitsonar.geometry.frames import check_rigid
+from mitsonar.plugins import PLUGINS, module
+from mitsonar.scan import Scan
+from mitsonar.sim.scene import SceneError, mitsuba_error, scene_name, sonar_of
+from mitsonar.geometry.trajectory import Trajectory
+from mitsonar.sim.variant import ensure_variant
+
+DEFAULT_SPP = 4096
+
+# Names that lived here before the scene, variant and ground-truth modules; importable from here
+# for one release, with a DeprecationWarning.
+_MOVED = {"load_scene": "sim.scene", "set_variant": "sim.variant", "variant": "sim.variant",
+          "init_on_import": "sim.variant", "VariantError": "sim.variant", "scene_mesh": "sim.groundtruth"}
+
+
+def __getattr__(name):
+    if name in _MOVED:
+        import importlib
+
+        warnings.warn(f"mitsonar.sim.render.{name} is deprecated: import it from mitsonar.{_MOVED[name]} "
+                      f"(or from mitsonar)", DeprecationWarning, stacklevel=2)
+        return getattr(importlib.import_module(f"mitsonar.{_MOVED[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def _whole(name, value, lo, hi, what, where="render_scan"):
+    """A count or seed argument: a whole number in [lo, hi] (4096.0 counts; 1.5, True, "8" do not)."""
+    if not (is_whole(value) and lo <= value <= hi):
+        raise SceneError(f"{where} '{name}': {value!r} is not allowed ({what})")
+    return int(value)
+
+
+def _check_pose(pose):
+    """A render's pose in one sentence: array-like, 4x4, finite, rigid."""
+    try:
+        m = np.asarray(pose, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SceneError(f"render_scan 'pose': expected a 4x4 rigid transform (array-like), got "
+                         f"{type(pose).__name__} {pose!r:.40}") from None
+    try:
+        return check_rigid(m, "render_scan 'pose'")
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
+
+
+def _check_start_time(trajectory, start_time):
+    """A render's trajectory and start time in one sentence each (the span is checked later, with
+    the sensor's ping schedule)."""
+    if not isinstance(trajectory, Trajectory):
+        raise SceneError(f"render_scan 'trajectory': expected a mitsonar.Trajectory, got {type(trajectory).__name__}")
+    if start_time is None:
+        return float(trajectory.times[0])
+    if (isinstance(start_time, bool) or not isinstance(start_time, (int, float, np.integer, np.floating))
+            or not math.isfinite(start_time)):
+        raise SceneError(f"render_scan 'start_time': {start_time!r} is not allowed (a finite time in seconds, "
+                         "on the trajectory's clock)")
+    return float(start_time)
+
+
+def moving_head_poses(sonar, trajectory, start_time, mount=None):
+    """(n_pings, 4, 4) head pose of each row, ``trajectory.at(start_time + times[k]) @ mount``
+    (``mount``: the sensor's ``to_world`` unless given), refused with one sentence naming the
+    scan's ping times and the trajectory's span when the pings do not fit in it."""
+    t = start_time + sonar.ping_times()
+    if not trajectory.covers(t[0], t[-1]):
+        lo, hi = trajectory.span
+        raise SceneError(f"render_scan 'start_time': the scan's pings at {t[0]:.9g} .. {t[-1]:.9g} s "
+                         f"({sonar.n_pings} pings, ping_period {sonar.ping_period:.6g} s) do not fit in the "
+                         f"trajectory's span [{lo:.9g}, {hi:.9g}] s")
+    return trajectory.at(t) @ (sonar.to_world_np if mount is None else mount)
+
+
+SONAR_INTEGRATORS = tuple(name for kind, name, _, _ in PLUGINS if kind == "integrator")
+SEED_MAX = 2 ** 32 - 1   # the path seed is a 32-bit integer: larger seeds would repeat smaller ones
+SPP_MAX = 2 ** 31 - 1    # paths per ping: a signed 32-bit count
+SPP_ALLOWED = f"a whole number of paths per ping from 1 to {SPP_MAX}"
+SEED_ALLOWED = f"a whole number from 0 to {SEED_MAX}"
+
+
+def sensor_list(scene) -> str:
+    """The scene's sensors for a message: ``0 'sonar' (mechanical), 1 'cam' (PerspectiveCamera)``
+    (index, XML id, sonar kind or the sensor's class)."""
+    items = []
+    for i, s in enumerate(scene.sensors()):
+        kind = getattr(s, "kind", None) if hasattr(s, "ping_times") else None
+        items.append(f"{i} {s.id()!r} ({kind or type(s).__name__})")
+    return ", ".join(items) or "none"
+
+
+def pick_sensor(scene, sensor=None, option="--sensor"):
+    """The sonar sensor a command line names: ``sensor`` is its XML id or its index in the scene's
+    sensors (a string of digits counts as an index); None: the first sonar sensor, with one
+    warning naming it when the scene has several. Refused with one `SceneError` naming the
+    scene, ``option`` and its sensors (index, id, kind). Returns the sensor object, which
+    `render_scan` and `render_survey` take without warning again."""
+    from mitsonar.plugins import module
+
+    common = module("common")
+    name = scene_name(scene) or "the scene"
+    sensors = list(scene.sensors())
+    sonars = [s for s in sensors if isinstance(s, common.SonarSensor)]
+    listing = sensor_list(scene)
+    if sensor is None:
+        if not sonars:
+            raise SceneError(f'{name}: needs a <sensor type="sonar"> (sensors found: {listing})')
+        chosen = sonars[0]
+        if len(sonars) > 1:
+            warnings.warn(f"{name} has {len(sonars)} sonar sensors ({listing}); rendering "
+                          f"{sensors.index(chosen)} {chosen.id()!r} (choose with {option} ID|INDEX)", stacklevel=2)
+        return chosen
+    text = str(sensor).strip()
+    if text.isdigit():
+        index = int(text)
+        if index >= len(sensors):
+            raise SceneError(f"{name}: {option} {text}: no sensor of that index; its sensors: {listing}")
+        chosen = sensors[index]
+    else:
+        found = [s for s in sensors if s.id() == text]
+        if not found:
+            raise SceneError(f"{name}: {option} {text!r}: no sensor of that id; its sensors: {listing}")
+        chosen = found[0]
+    if not isinstance(chosen, common.SonarSensor):
+        raise SceneError(f"{name}: {option} {text}: not a sonar sensor; its sensors: {listing}")
+    return chosen
+
+
+def _integrator(scene, integrator):
+    import mitsuba as mi
+
+    base = module("common").SonarIntegrator
+    if integrator is None:
+        integrator = scene.integrator()
+        if not isinstance(integrator, base):
+            if integrator is not None:  # None: the XML names no integrator, sonar_tof is the default
+                name = integrator.class_name() if hasattr(integrator, "class_name") else type(integrator).__name__
+                warnings.warn(f"{scene_name(scene) or 'the scene'}: its integrator {name} is not a sonar "
+                              "integrator; rendering with sonar_tof", stacklevel=3)
+            return mi.load_dict({"type": "sonar_tof"})
+        return integrator
+    if isinstance(integrator, str):
+        integrator = {"type": integrator}
+    if isinstance(integrator, dict):
+        kind = integrator.get("type")
+        if kind not in SONAR_INTEGRATORS:
+            raise SceneError(f"render_scan 'integrator': {kind!r} is not a sonar integrator "
+                             f"(one of {', '.join(SONAR_INTEGRATORS)})")
+        try:
+            return mi.load_dict(integrator)
+        except Exception as exc:
+            raise SceneError(f"render_scan 'integrator': {mitsuba_error(exc)}") from None
+    if not isinstance(integrator, base):
+        raise SceneError(f"render_scan 'integrator': {type(integrator).__name__} is not a sonar integrator "
+                         f"(one of {', '.join(SONAR_INTEGRATORS)})")
+    return integrator
+
+
+def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integrator=None, sensor=0,
+                max_depth=None, electronics=None, electronics_seed=None, progress=None, trajectory=None,
+                start_time=None, speckle_seed=None, sound_speed_profile=None) -> Scan:
+    """Render one scan of ``scene`` and pass it through the head's electronics.
+
+    ============== ==============================================================================
+    scene          a scene from `load_scene` (or ``mi.load_*``) with a ``sonar`` sensor
+    spp            paths per ping (default 4096)
+    seed           seed of the paths (and of the receiver's noise unless ``electronics_seed``)
+    pose           4x4 world transform of the beam frame at bearing 0, replacing ``to_world``
+                   (with a ``trajectory``: the mount on the vehicle, in the vehicle frame)
+    integrator     an integrator object or XML dict; default: the scene's if it is a sonar
+                   integrator, else ``sonar_tof``
+    sensor         sensor index, XML id (a string) or object
+    max_depth      override of the integrator's surface bounces
+    electronics    dict of electronics fields overriding the sensor's (the gain and the A/D window
+                   within the head's 0..80 dB: `mitsonar.receiver.electronics.HEAD_LIMITS`); its
+                   ``speckle_seed`` picks the scene's speckle (`mitsonar.receiver.speckle`)
+    electronics_seed  seed of the receiver's noise only (default ``seed``): never the speckle,
+                   which follows the scene, the ``speckle_seed`` and the head's pose
+    speckle_seed   the scene's speckle (which scatterers its surfaces hold, `mitsonar.receiver.speckle`);
+                   default the sensor's ``speckle_seed`` (XML), 0 unless given
+    progress       optional callable ``progress(done_spp, spp)`` called after each render pass
+    trajectory     a `Trajectory` of the vehicle carrying the head; ``to_world`` (or ``pose``) is
+                   then the mount in the vehicle frame (x forward, y port, z up)
+    start_time     s on the trajectory's clock of the scan's first ping (default: the
+                   trajectory's first time)
+    sound_speed_profile  a `mitsonar.acoustics.SoundSpeedProfile`: the water the paths refract
+                   through (``sonar_tof`` only; replaces the integrator's XML
+                   ``sound_speed_profile`` for this render). The sensor's ``sound_speed`` stays
+                   the head's nominal speed: range = sound_speed x two-way travel time / 2
+    ============== ==============================================================================
+
+    With a trajectory, row k is pinged at ``start_time + scan.times[k]`` (the sensor's
+    ``ping_period`` schedule) from ``scan.poses[k] = trajectory.at(start_time + times[k]) @ mount
+    @ bearing_rotation(bearings[k])``, all rows in one wavefront as for a static head. The head
+    is taken as still during one ping's flight ``T = 2 range_max / sound_speed``: moving at ``v``,
+    an echo's range differs from the range measured at the ping's pose by at most ``v T / 2``
+    (1.6 cm at 2 m/s and 12 m, under one 2.4 cm bin of the default 500 bins).
+    The same arguments give the same scan, bit for bit.
+    """
+    ensure_variant()
+    import mitsuba as mi
+
+    # Every argument is checked before the render: a mistake costs a sentence, not a render.
+    spp = _whole("spp", spp, 1, SPP_MAX, SPP_ALLOWED)
+    seed = _whole("seed", seed, 0, SEED_MAX, SEED_ALLOWED)
+    if electronics_seed is not None:
+        electronics_seed = _whole("electronics_seed", electronics_seed, 0, SEED_MAX,
+                                  f"a whole number from 0 to {SEED_MAX}, or None for seed")
+    if max_depth is not None:
+        top = module("common").MAX_DEPTH
+        max_depth = _whole("max_depth", max_depth, 1, top, f"a whole number of surface bounces from 1 to {top}")
+    if pose is not None:
+        pose = _check_pose(pose)
+    if trajectory is not None:
+        start_time = _check_start_time(trajectory, start_time)
+    elif start_time is not None:
+        raise SceneError("render_scan 'start_time': only used with a 'trajectory'")
+    if electronics is not None and not isinstance(electronics, dict):
+        raise SceneError(f"render_scan 'electronics': expected a dict of electronics fields, got "
+                         f"{type(electronics).__name__}")
+    if speckle_seed is not None:
+        speckle_seed = _whole("speckle_seed", speckle_seed, 0, SEED_MAX, f"a whole number from 0 to {SEED_MAX}")
+        electronics = {**(electronics or {}), "speckle_seed": speckle_seed}
+    if isinstance(sensor, str):
+        sensor = pick_sensor(scene, sensor, "render_scan 'sensor':")
+    sonar = sonar_of(scene, sensor)
+    if trajectory is not None:
+        pose = moving_head_poses(sonar, trajectory, start_time, pose)
+    integrator = _integrator(scene, integrator)
+    if sound_speed_profile is not None:
+        from mitsonar.acoustics.profile import SoundSpeedProfile
+
+        if not isinstance(sound_speed_profile, SoundSpeedProfile):
+            raise SceneError(f"render_scan 'sound_speed_profile': expected a mitsonar.acoustics.SoundSpeedProfile, "
+                             f"got {type(sound_speed_profile).__name__}")
+        if not getattr(integrator, "REFRACTS", False):
+            raise SceneError(f"render_scan 'sound_speed_profile': refracted paths are traced by the sonar_tof "
+                             f"integrator only, not {type(integrator).__name__}")
+
+    from mitsonar.receiver.electronics import Electronics, check_head_settings
+
+    settings = dict(sonar.electronics)
+    settings.update(electronics or {})
+    try:
+        check_head_settings(electronics or {}, "render_scan electronics")
+        model = Electronics.from_dict(settings, source="render_scan electronics" if electronics else "sonar")
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
+    try:
+        sonar.head_pose(pose)
+        with _profile_of(integrator, sound_speed_profile):
+            hist = integrator.render_histogram(scene, sonar, seed=seed, spp=spp, pose=pose, max_depth=max_depth,
+                                               progress=progress)
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
+
+    intensity = hist.astype(np.float32)
+    ranges = sonar.bin_centres()
+    eseed = seed if electronics_seed is None else electronics_seed
+    poses = sonar.ping_poses(pose)
+    speckle = None if model.speckle == "off" else model.scene_speckle(poses, ranges, **speckle_geometry(sonar))
+    data = model.apply(intensity, ranges, absorption=sonar.absorption, sound_speed=sonar.sound_speed, seed=eseed,
+                       speckle=speckle)
+    from mitsonar._version import __version__
+
+    meta = {
+        "scene": scene_name(scene),
+        "seed": int(seed),
+        "spp": int(spp),
+        "integrator": type(integrator).__name__,
+        "max_depth": int(max_depth if max_depth is not None else getattr(integrator, "max_depth", 0)),
+        "mitsonar_version": __version__,
+        "variant": mi.variant(),
+        "bearing_start": sonar.bearing_start,
+        "bearing_step": sonar.bearing_step,
+        "electronics_seed": int(eseed),
+        "ping_period": float(sonar.ping_period),
+        "frequency": float(sonar.beam.frequency),
+        "speckle": "scene",
+        "aperture_h": float(sonar.beam.across_aperture()),
+        "directivity_index": float(sonar.beam.directivity_index()),   # the receive beam's, for Scan.snr
+    }
+    if trajectory is not None:
+        meta["start_time"] = start_time
+    meta.update(sonar.sonar_kind.render_meta(sonar))   # a side-scan's channels and their tilt
+    if getattr(sonar, "transmit", None) is not None:  # multibeam: the transmit fan beside the receive beams
+        meta.update(tx_pattern=sonar.transmit.kind, tx_beamwidth_h=sonar.transmit.beamwidth_h,
+                    tx_beamwidth_v=sonar.transmit.beamwidth_v)
+    return Scan(intensity=intensity, data=data, ranges=ranges,
+                bearings=np.radians(sonar.bearings_deg()), poses=poses, times=sonar.ping_times(),
+                range_min=sonar.range_min, range_max=sonar.range_max,
+                beam_pattern=sonar.beam.kind, beamwidth_h=sonar.beam.beamwidth_h,
+                beamwidth_v=sonar.beam.beamwidth_v, kind=sonar.kind, sound_speed=sonar.sound_speed,
+                absorption=sonar.absorption, electronics={**model.to_dict(), "seed": int(eseed)},
+                meta=meta)
+
+
+@contextlib.contextmanager
+def _profile_of(integrator, profile):
+    """``integrator`` rendering through ``profile`` for the block (None: its own, unchanged)."""
+    if profile is None:
+        yield
+        return
+    before = integrator.sound_speed_profile
+    integrator.sound_speed_profile = profile
+    try:
+        yield
+    finally:
+        integrator.sound_speed_profile = before
+
+
+def speckle_geometry(sonar) -> dict:
+    """The head's numbers that shape its scene speckle (`Electronics.scene_speckle`'s keywords)."""
+    return {"sound_speed": sonar.sound_speed, "beamwidth_h": sonar.beam.beamwidth_h,
+            "aperture_h": sonar.beam.across_aperture()}
+
+
+def scan_parameters(scene, keys=None):
+    """The scene's differentiable scan parameters, for ``mi.render(scene, params, ...)``.
+
+    ``keys``: a name or a list of names (None: all of them) among the parameters mitsonar's
+    plugins differentiate: the sonar sensor's ``<id>.to_world``, ``<id>.absorption``,
+    ``<id>.beamwidth_h``/``_v`` (gaussian beam) and the acoustic BSDF's ``<id>.diffuse``,
+    ``.specular``, ``.shininess`` (a textured diffuse: its texture's ``<id>.diffuse.data``), and a
+    mesh's ``<id>.vertex_positions`` (single-bounce echoes, silhouettes ignored; see README,
+    "Inverse problems"). Returns ``mi.traverse(scene)`` kept to those keys. Refused in one line: a variant without
+    automatic differentiation, or a key that is not one of these (the message lists them).
+    """
+    import re
+
+    import drjit as dr
+    import mitsuba as mi
+
+    from mitsonar.plugins import module
+
+    ensure_variant()
+    if not dr.is_diff_v(mi.Float):
+        raise SceneError(f"scan_parameters: gradients need a Mitsuba variant with automatic differentiation "
+                         f"(llvm_ad_mono, cuda_ad_mono); the active variant is {mi.variant()}")
+    params = mi.traverse(scene)
+    allowed = module("path_replay").differentiable_keys(params)
+    wanted = allowed if keys is None else [keys] if isinstance(keys, str) else list(keys)
+    for k in wanted:
+        if k not in allowed:
+            raise SceneError(f"scan_parameters: {k!r} is not a differentiable parameter of this scene; "
+                             f"allowed: {', '.join(allowed) or 'none'}")
+    params.keep([re.escape(k) + "$" for k in wanted])
+    return params

@@ -1,0 +1,14 @@
+"""The active sonar equation in physical units: levels (`levels`) and a per-scene report (`report`).
+
+``EL = SL - (40 log10 r + 2 alpha r) + TS``, ``SNR = EL - (NL + 10 log10 B - DI)``; see
+`mitsonar.sonar_equation.levels` for the conventions and `sonar_equation_report` for the table.
+"""
+from mitsonar.sonar_equation.levels import (CALIBRATION_DB, DEFAULT_NOISE_LEVEL, DEFAULT_RECEIVER_SENSITIVITY, DEFAULT_SOURCE_LEVEL,
+                     SOURCE_LEVELS, ambient_noise_level, echo_level, migrate_settings, noise_band_level,
+                     phong_sphere_cross_section, pulse_boxcar, transmission_loss)
+from mitsonar.sonar_equation.report import plot_levels, sonar_equation_report
+
+__all__ = ["CALIBRATION_DB", "DEFAULT_NOISE_LEVEL", "DEFAULT_RECEIVER_SENSITIVITY", "DEFAULT_SOURCE_LEVEL",
+           "SOURCE_LEVELS", "ambient_noise_level", "echo_level", "migrate_settings", "noise_band_level",
+           "phong_sphere_cross_section", "plot_levels", "pulse_boxcar", "sonar_equation_report",
+           "transmission_loss"]

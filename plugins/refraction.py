@@ -1,0 +1,502 @@
+"""Refracted transport: echo paths through a horizontally stratified sound-speed profile.
+
+The water is `mitsonar.acoustics.profile.SoundSpeedProfile`'s: speed against depth ``z = -world
+z`` (the sea surface at world z = 0), linear between samples, constant beyond. A ray keeps
+Snell's invariant ``a = cos(theta) / c`` and stays in its vertical launch plane; in a layer of
+constant gradient ``g`` it is an exact circular arc (Jensen, Kuperman, Porter & Schmidt,
+*Computational Ocean Acoustics*, 2nd ed. 2011, sec. 3.2; the closed forms are the ones of
+``mitsonar/acoustics/profile.py``'s docstring, ported to Dr.Jit here: `_piece` gives the time and
+horizontal distance through a layer, `_inside` the state after a time ``tau`` in it).
+
+What a path does (`common.SonarIntegrator._sample_primal` calls these when a profile is set):
+
+* **Outgoing segments** (`trace`): the exact ray state is advanced in time steps of ``dt``
+  (`advance`, arithmetic only: as many layers as the step crosses); the scene is intersected along
+  the straight *chord* between two successive exact points (``ray_intersect_preliminary`` with
+  ``t_max`` = chord length). The only approximation: between its end points the ray is taken as
+  that chord (sagitta ``l^2 kappa / 8`` for a chord ``l`` and curvature ``kappa = a |g|``: 3 mm
+  for a 10 m chord where ``g = 0.5 /s``) and the time along it grows as through a speed linear
+  along the chord (``t(f) = dt ln(1 + r f) / ln(1 + r)``, ``r = c_end / c_start - 1``). ``dt``
+  is ``range_max / (chords * c_sensor)``: ``chords`` (XML ``svp_chords``, default 4) chords per
+  range window. A segment stops once its time leaves no echo inside the window.
+* **The way back** (`eigenray`): the ray joining a surface point to the transducer without a
+  turning point. With ``c_max`` the largest speed between the two depths and ``sigma`` the sine
+  of the grazing angle where the speed is ``c_max`` (``a = cos / c_max``), the horizontal distance
+  ``X(sigma)`` (a sum over the layers between the depths, unrolled) is solved for the true
+  distance by `EIGEN_STEPS` secant steps: on ``1 / X(sigma) - 1 / X`` from the horizontal limit
+  ``sigma = 0`` and the straight-line guess for rays flatter than 45 deg, on ``X(v) - X`` with
+  ``v = cot`` of that angle from the straight guess ``v = X / dz`` for steeper ones. A point that no direct ray
+  reaches within ``EIGEN_TOL`` (it would need a turn: a nearly horizontal path at the head's
+  depth in a gradient) gives no echo. Visibility is tested along chords of that ray, with the
+  same ``dt``.
+* Travel times, not lengths, set the range: ``range = c_sensor (t_out + t_back) / 2``.
+  Absorption runs over the curved length (chord lengths out, the exact arc length back); the
+  spreading back is ``1 / L^2`` with ``L`` the eigenray's arc length (ray-tube focusing ignored).
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+#: Depth standing for "no boundary" above the first sample and below the last one (m).
+FAR = 1.0e7
+#: Secant steps of the eigenray solve (after the two starting points).
+EIGEN_STEPS = 4
+#: A direct eigenray is accepted when it misses the point by at most this fraction of ``X + dz``.
+EIGEN_TOL = 2e-4
+#: Layers one time step may cross, beyond those of the profile (turns re-enter a layer).
+EXTRA_CROSSINGS = 4
+#: Default chords per range window (XML ``svp_chords``).
+DEFAULT_CHORDS = 4
+
+
+def _log1p_over(y):
+    """``log1p(y) / y`` without cancellation (Goldberg's trick), 1 at 0."""
+    u = 1.0 + y
+    return dr.select(u == 1.0, 1.0, dr.log(u) / (u - 1.0))
+
+
+def _sinhc(x):
+    return dr.select(dr.abs(x) < 1e-2, 1.0 + x * x * (1.0 / 6.0), dr.sinh(x) / x)
+
+
+def _sin_at(a, c):
+    ac = a * c
+    return dr.safe_sqrt((1.0 - ac) * (1.0 + ac))
+
+
+def _piece(dz, c1, s1, c2, s2, a, g):
+    """Horizontal distance and time between depths ``z1 < z1 + dz`` on one side of a turn
+    (profile.py ``_piece``: ``dx = a dz (c1 + c2) / (s1 + s2)``, ``dt = (1/g) log1p(y)``)."""
+    ssum = s1 + s2
+    dx = a * dz * (c1 + c2) / ssum
+    K = (1.0 + s1) + c1 * a * a * (c1 + c2) / ssum
+    D = c1 * (1.0 + s2)
+    y = g * dz * K / D
+    dt = dz * K / D * _log1p_over(y)
+    zero = dz <= 0
+    return dr.select(zero, 0.0, dx), dr.select(zero, 0.0, dt)
+
+
+def _arc(dz, c1, s1, c2, s2, a, g):
+    """Arc length between the same two depths: ``(asin(a c2) - asin(a c1)) / (a g)`` written as
+    ``dz (c1 + c2) / (c2 s1 + c1 s2) * asin(w) / w``, ``w = a g dz (c1 + c2) / (c2 s1 + c1 s2)``."""
+    q = dz * (c1 + c2) / (c2 * s1 + c1 * s2)
+    w = a * g * q
+    ratio = dr.select(dr.abs(w) < 1e-3, 1.0 + w * w * (1.0 / 6.0), dr.safe_asin(w) / w)
+    return dr.select(dz <= 0, 0.0, q * ratio)
+
+
+def _opaque_array(values):
+    out = mi.Float(values)
+    dr.make_opaque(out)
+    return out
+
+
+class Refraction:
+    """A profile's layers as Dr.Jit arrays (the chord tracer gathers them) and as Python numbers
+    (the eigenray's layer sum is unrolled), with the chord time step of one render."""
+
+    def __init__(self, depths, speeds, sensor_speed, range_max, chords=DEFAULT_CHORDS):
+        d = [float(v) for v in depths]
+        c = [float(v) for v in speeds]
+        n = len(d)
+        self.samples = tuple(zip(d, c))
+        top = [-FAR] + d
+        bot = d + [FAR]
+        ct = [c[0]] + c
+        g = [0.0] + [(c[i + 1] - c[i]) / (d[i + 1] - d[i]) for i in range(n - 1)] + [0.0]
+        self.layers = tuple(zip(top, bot, ct, g))
+        self.n_layers = n + 1
+        self.max_crossings = 2 * (n + 1) + EXTRA_CROSSINGS
+        self.top, self.bot, self.ct, self.g = (_opaque_array(v) for v in (top, bot, ct, g))
+        self.depth_o = [dr.opaque(mi.Float, v) for v in d]
+        self.sensor_speed = float(sensor_speed)
+        self.chords = int(chords)
+        self.dt = dr.opaque(mi.Float, float(range_max) / (self.chords * self.sensor_speed))
+        self.t_window = dr.opaque(mi.Float, 2.0 * float(range_max) / self.sensor_speed)
+
+    # ------------------------------------------------------------------------------- the medium
+    def speed(self, z):
+        """Sound speed at depth ``z`` (m, positive down): linear between samples, constant beyond."""
+        (d0, c0) = self.samples[0]
+        out = mi.Float(c0)
+        for (da, ca), (db, cb) in zip(self.samples, self.samples[1:]):
+            out = dr.select(z > da, ca + (cb - ca) / (db - da) * (dr.minimum(z, db) - da), out)
+        return out
+
+    def layer(self, z, down):
+        """Index of the layer a ray at depth ``z`` heading ``down`` is in (profile.py ``_step``)."""
+        j = mi.UInt32(0)
+        for d in self.depth_o:
+            j += mi.UInt32(dr.select(down, z >= d, z > d))
+        return j
+
+    def _step(self, z, s, down, a, j=None):
+        """One layer traversal from ``(z, s)`` in layer ``j`` (default `layer`): ``j, c, z_exit,
+        s_exit, down_exit, dt, dx`` (``c`` the speed at ``z``; the next layer is ``j + 1`` where
+        ``down_exit``, else ``j - 1``)."""
+        if j is None:
+            j = self.layer(z, down)
+        zt, zb = dr.gather(mi.Float, self.top, j), dr.gather(mi.Float, self.bot, j)
+        ct, g = dr.gather(mi.Float, self.ct, j), dr.gather(mi.Float, self.g, j)
+        cb = ct + g * (zb - zt)
+        cb = dr.select(g == 0, ct, cb)
+        c = dr.select(g == 0, ct, ct + g * (z - zt))
+        sa = dr.abs(s)
+        st, sb = _sin_at(a, ct), _sin_at(a, cb)
+        flat = (g == 0) | (a == 0)
+        reach_b = flat | (a * cb <= 1.0)
+        reach_t = flat | (a * ct <= 1.0)
+        # straight on: down to the bottom (z -> zb) or up to the top (zt <- z), one piece
+        dx_s, dt_s = _piece(dr.select(down, zb - z, z - zt), dr.select(down, c, ct), dr.select(down, sa, st),
+                            dr.select(down, cb, c), dr.select(down, sb, sa), a, g)
+        # a turn, out through the side it came in by with sine s_far: w = atanh(sin) falls at the
+        # rate g from atanh(s) to atanh(-s_far), dx = (s1 - s2) / (a g) (no cancellation: the two
+        # sines have opposite signs)
+        s_far = dr.select(down, st, sb)
+        inv_ag = dr.rcp(a * dr.abs(dr.select(flat, 1.0, g)))
+        dx_t = (sa + s_far) * inv_ag
+        dt_t = (dr.atanh(dr.minimum(sa, 1.0 - 1e-7)) + dr.atanh(s_far)) * a * inv_ag
+        straight = dr.select(down, reach_b, reach_t)
+        dx = dr.select(straight, dx_s, dx_t)
+        dt = dr.select(straight, dt_s, dt_t)
+        down_exit = dr.select(straight, down, ~down)
+        z_exit = dr.select(down_exit, zb, zt)
+        s_exit = dr.select(down_exit, sb, -st)
+        endless = ~dr.isfinite(dt) | ~dr.isfinite(dx) | (dr.abs(z_exit) >= FAR)
+        dt = dr.select(endless, dr.inf, dt)
+        return j, c, z_exit, s_exit, down_exit, dt, dx
+
+    def _inside(self, j, c, s, a, tau):
+        """State after ``tau`` s in layer ``j`` from speed ``c``, sine ``s``: ``dx, dz, s2``
+        (profile.py ``_inside``: ``w2 = w1 - g tau``)."""
+        g = dr.gather(mi.Float, self.g, j)
+        phi = g * tau
+        ch, sh = dr.cosh(phi), dr.sinh(phi)
+        den = ch - s * sh
+        dz = c * tau * (s * _sinhc(phi) - 0.5 * phi * dr.square(_sinhc(0.5 * phi))) / den
+        dx = a * c * c * tau * _sinhc(phi) / den
+        s2 = dr.clip((s * ch - sh) / den, -1.0, 1.0)
+        return dx, dz, s2
+
+    @dr.syntax
+    def advance(self, z, s, down, a, tau, active=True):
+        """The ray state ``tau`` seconds later: ``(dx, z, s, down, ok, c)`` (``dx`` horizontal
+        distance gone, ``c`` the speed there); ``ok`` False where it crossed more layers than a
+        ray can (a channel axis)."""
+        x = mi.Float(0.0)
+        left = mi.Float(tau)
+        z, s, down = mi.Float(z), mi.Float(s), mi.Bool(down)
+        n = mi.UInt32(0)
+        todo = mi.Bool(active) & (left > 0)
+        done = mi.Bool(False)
+        j = self.layer(z, down)
+        while todo:      # whole layers (no cosh/sinh here: the rest of the step is done once, below)
+            j, c, z_e, s_e, d_e, dt, dx = self._step(z, s, down, a, j)
+            last = left <= dt
+            j = dr.select(last, j, dr.select(d_e, j + 1, j - 1))
+            x += dr.select(last, 0.0, dx)
+            z = dr.select(last, z, z_e)
+            s = dr.select(last, s, s_e)
+            down = dr.select(last, down, d_e)
+            left = dr.select(last, left, left - dt)
+            done |= last
+            n += 1
+            todo &= ~last & (n < self.max_crossings)
+        # the time left, inside the layer the ray is now in (closed form of `_inside`)
+        zt, zb = dr.gather(mi.Float, self.top, j), dr.gather(mi.Float, self.bot, j)
+        g = dr.gather(mi.Float, self.g, j)
+        c = dr.select(g == 0, dr.gather(mi.Float, self.ct, j), dr.gather(mi.Float, self.ct, j) + g * (z - zt))
+        ddx, ddz, s2 = self._inside(j, c, s, a, dr.select(done, left, 0.0))
+        x += dr.select(done, ddx, 0.0)
+        z = dr.select(done, dr.clip(z + ddz, zt, zb), z)
+        down = dr.select(done, dr.select(s2 == 0, down, s2 > 0), down)
+        s = dr.select(done, s2, s)
+        left = dr.select(done, 0.0, left)
+        c_end = dr.select(done, c + g * ddz, c)
+        return x, z, s, down, (left == 0) | ~mi.Bool(active), c_end
+
+    # ------------------------------------------------------------------------- outgoing segments
+    @dr.syntax
+    def trace(self, scene, p, d, t_budget, active):
+        """Follow the ray launched from ``p`` along unit ``d`` for at most ``t_budget`` s: the
+        first surface it meets, as ``(si, t, length)``: the interaction (``si.wi`` from the chord
+        that reached it), the one-way travel time (s) and the curved length (m) to it."""
+        horiz = dr.sqrt(dr.square(d.x) + dr.square(d.y))
+        h = dr.select(horiz > 0, mi.Vector3f(d.x, d.y, 0.0) / dr.maximum(horiz, 1e-30), mi.Vector3f(1.0, 0.0, 0.0))
+        z = -p.z
+        s = -d.z
+        c1 = self.speed(z)
+        a = horiz / c1
+        down = s >= 0
+        x = mi.Float(0.0)
+        t = mi.Float(0.0)
+        length = mi.Float(0.0)
+        start = mi.Point3f(p)
+        found = mi.Bool(False)
+        hit_o, hit_d, hit_t = mi.Point3f(p), mi.Vector3f(d), mi.Float(0.0)
+        t_hit, l_hit = mi.Float(0.0), mi.Float(0.0)
+        active = mi.Bool(active)
+        while active:
+            tau = dr.minimum(self.dt, t_budget - t)
+            dx, z2, s2, down2, ok, c2 = self.advance(z, s, down, a, tau, active)
+            x2 = x + dx
+            end = mi.Point3f(p.x + h.x * x2, p.y + h.y * x2, -z2)
+            chord = end - start
+            L = dr.norm(chord)
+            ray = mi.Ray3f(start, chord / dr.maximum(L, 1e-30))
+            ray.maxt = L
+            pi = scene.ray_intersect_preliminary(ray, active & ok & (L > 0))
+            hit = pi.is_valid() & active
+            f = dr.clip(pi.t / dr.maximum(L, 1e-30), 0.0, 1.0)
+            r = c2 / c1 - 1.0
+            frac = f * _log1p_over(r * f) / _log1p_over(r)
+            hit_o = dr.select(hit, start, hit_o)
+            hit_d = dr.select(hit, ray.d, hit_d)
+            hit_t = dr.select(hit, L, hit_t)
+            t_hit = dr.select(hit, t + tau * frac, t_hit)
+            l_hit = dr.select(hit, length + pi.t, l_hit)
+            found |= hit
+            x, z, s, down, c1 = x2, z2, s2, down2, c2
+            t += tau
+            length += L
+            start = mi.Point3f(end)
+            active &= ~hit & ok & (t < t_budget)
+        ray = mi.Ray3f(hit_o, hit_d)
+        ray.maxt = hit_t
+        si = scene.ray_intersect(ray, found)
+        return si, t_hit, l_hit
+
+    # ----------------------------------------------------------------------------- the way back
+    def _sum(self, a, z_lo, z_hi, full=True):
+        """Horizontal distance, time and arc length of the direct ray of invariant ``a`` between
+        depths ``z_lo < z_hi`` (layers unrolled); the distance alone unless ``full``."""
+        X, T, L = mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)
+        for top, bot, ct, g in self.layers:
+            za = dr.maximum(z_lo, top)
+            zb = dr.minimum(z_hi, bot)
+            dz = dr.maximum(zb - za, 0.0)
+            c1 = ct + g * (za - top) if g else mi.Float(ct)
+            c2 = ct + g * (zb - top) if g else mi.Float(ct)
+            s1, s2 = _sin_at(a, c1), _sin_at(a, c2)
+            if not full:     # dx = a dz (c1 + c2) / (s1 + s2), `_piece`'s first half
+                X += dr.select(dz <= 0, 0.0, a * dz * (c1 + c2) / (s1 + s2))
+                continue
+            dx, dt = _piece(dz, c1, s1, c2, s2, a, g)
+            X += dx
+            T += dt
+            L += _arc(dz, c1, s1, c2, s2, a, g)
+        return X, T, L
+
+    def eigenray(self, p, o, active):
+        """The direct ray between a point ``p`` and the transducer at ``o``: ``(ok, t, L, back,
+        rx)``: found, one-way time (s), arc length (m), unit direction leaving ``p`` towards the
+        transducer, unit direction leaving the transducer towards ``p`` (the arrival direction
+        the receive beam weighs)."""
+        z1, z2 = -p.z, -o.z
+        hv = mi.Vector3f(o.x - p.x, o.y - p.y, 0.0)
+        X = dr.norm(hv)
+        h_back = dr.select(X > 0, hv / dr.maximum(X, 1e-30), mi.Vector3f(1.0, 0.0, 0.0))
+        z_lo, z_hi = dr.minimum(z1, z2), dr.maximum(z1, z2)
+        dz = z_hi - z_lo
+        c_max = dr.maximum(self.speed(z_lo), self.speed(z_hi))
+        for dd, cc in self.samples:
+            c_max = dr.select((dd > z_lo) & (dd < z_hi), dr.maximum(c_max, cc), c_max)
+
+        # Two variables, chosen per lane by the straight guess, each making X (or 1/X) nearly
+        # linear where it is used: steep (dz >= X): v = cot of the grazing angle where the speed
+        # is c_max, X ~ v dz; flat: sigma = its sine, 1/X ~ sigma / dz in uniform water and
+        # a g / (s - sigma) in a gradient, finite at the horizontal limit sigma = 0.
+        steep = dz >= X
+        inv_X = dr.rcp(dr.maximum(X, 1e-30))
+
+        def at(q):
+            cos_m = dr.select(steep, q * dr.rsqrt(1.0 + q * q), dr.safe_sqrt((1.0 - q) * (1.0 + q)))
+            a = cos_m / c_max
+            Xs = self._sum(a, z_lo, z_hi, full=False)[0]
+            return a, Xs, dr.select(steep, Xs - X, dr.rcp(dr.maximum(Xs, 1e-30)) - inv_X)
+
+        q0 = dr.select(steep, X / dr.maximum(dz, 1e-30), 0.0)
+        a0, X0, F0 = at(q0)
+        q1 = dr.select(steep, q0 * X / dr.maximum(X0, 1e-30),
+                       dr.minimum(dz * dr.rsqrt(dr.square(X) + dr.square(dz)), 1.0 - 1e-7))
+        q1 = dr.select(dr.isfinite(q1), q1, q0)
+        a1, X1, F1 = at(q1)
+        top = dr.select(steep, dr.inf, 1.0 - 1e-7)
+        for _ in range(EIGEN_STEPS):
+            den = F1 - F0
+            q2 = q1 - F1 * (q1 - q0) / den
+            q2 = dr.select(dr.isfinite(q2) & (den != 0), dr.clip(q2, 0.0, top), q1)
+            q0, F0 = q1, F1
+            q1 = q2
+            a1, X1, F1 = at(q1)
+        X1, T1, L1 = self._sum(a1, z_lo, z_hi)
+        vertical = X <= 1e-6 * (dz + 1.0)        # straight down or up: a = 0
+        a_v, X_v, T_v, L_v = (mi.Float(0.0),) + self._sum(mi.Float(0.0), z_lo, z_hi)
+        a1, X1, T1, L1 = (dr.select(vertical, u, v) for u, v in ((a_v, a1), (X_v, X1), (T_v, T1), (L_v, L1)))
+        ok = mi.Bool(active) & (dr.abs(X1 - X) <= EIGEN_TOL * (X + dz) + 1e-5) & dr.isfinite(T1)
+        # directions at both ends: cos = a c, the vertical sense from which end is deeper
+        deeper = z1 > z2                       # the point below the transducer: the way back climbs
+        cos_p, cos_o = a1 * self.speed(z1), a1 * self.speed(z2)
+        sin_p = dr.safe_sqrt(1.0 - dr.square(cos_p))
+        sin_o = dr.safe_sqrt(1.0 - dr.square(cos_o))
+        up = dr.select(deeper, 1.0, -1.0)
+        back = mi.Vector3f(h_back.x * cos_p, h_back.y * cos_p, up * sin_p)
+        rx = mi.Vector3f(-h_back.x * cos_o, -h_back.y * cos_o, -up * sin_o)
+        return ok, T1, L1, dr.normalize(back), dr.normalize(rx)
+
+    @dr.syntax
+    def visible(self, scene, o, rx, p, t_total, active):
+        """No surface between ``o`` and ``p`` along the ray leaving ``o`` along ``rx`` that reaches
+        ``p`` after ``t_total`` s (chords of time step ``dt``; the last chord ends at ``p``, short
+        of it by Mitsuba's shadow epsilon). Called from the surface point (offset off its surface)
+        towards the transducer."""
+        horiz = dr.sqrt(dr.square(rx.x) + dr.square(rx.y))
+        h = dr.select(horiz > 0, mi.Vector3f(rx.x, rx.y, 0.0) / dr.maximum(horiz, 1e-30), mi.Vector3f(1.0, 0.0, 0.0))
+        z = -o.z
+        s = -rx.z
+        a = horiz / self.speed(z)
+        down = s >= 0
+        x = mi.Float(0.0)
+        t = mi.Float(0.0)
+        start = mi.Point3f(o)
+        blocked = mi.Bool(False)
+        active = mi.Bool(active)
+        while active:
+            tau = dr.minimum(self.dt, t_total - t)
+            final = t + tau >= t_total
+            dx, z2, s2, down2, ok, _ = self.advance(z, s, down, a, tau, active & ~final)
+            x2 = x + dx
+            end = dr.select(final, p, mi.Point3f(o.x + h.x * x2, o.y + h.y * x2, -z2))
+            chord = end - start
+            L = dr.norm(chord)
+            ray = mi.Ray3f(start, chord / dr.maximum(L, 1e-30))
+            ray.maxt = dr.select(final, L * (1.0 - 1e-4), L)
+            blocked |= scene.ray_test(ray, active & (L > 0))
+            x, z, s, down = x2, z2, s2, down2
+            t += tau
+            start = mi.Point3f(end)
+            active &= ~blocked & ~final
+        return ~blocked
+
+
+def from_profile(profile, sensor, chords=None):
+    """The `Refraction` of a profile (anything with ``depths`` and ``speeds``) for ``sensor``'s
+    window, or None where the profile is constant at the sensor's own speed (straight rays: the
+    straight path function runs, the same scan bit for bit)."""
+    if profile is None:
+        return None
+    speeds = [float(v) for v in profile.speeds]
+    if all(v == float(sensor.sound_speed) for v in speeds):
+        return None
+    chords = DEFAULT_CHORDS if chords is None else check_chords(chords, "sound_speed_profile")
+    return Refraction(profile.depths, speeds, sensor.sound_speed, sensor.range_max, chords)
+
+
+def check_chords(value, source):
+    """``value`` if it is a whole number of chords per range window, 1 to 1024."""
+    if not (isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 1024):
+        raise ValueError(f"{source} 'svp_chords': {value!r} is not allowed (chords per range window, "
+                         "a whole number from 1 to 1024)")
+    return value
+
+
+def read_profile(props, source, refracts):
+    """The XML ``<string name="sound_speed_profile" value="svp.csv"/>`` of an integrator: the CSV
+    file (a path relative to the scene file, resolved as Mitsuba resolves its other files) read by
+    `SoundSpeedProfile.from_csv` (its one-line errors name the file, the row and the field), or
+    None when absent. An integrator that does not refract refuses it in one line."""
+    if "sound_speed_profile" not in props:
+        return None
+    from mitsonar.acoustics.profile import SoundSpeedProfile
+
+    from .props import text
+
+    name = text(props, "sound_speed_profile", "", source)
+    if not refracts:
+        raise ValueError(f"{source} 'sound_speed_profile': refracted paths are traced by the sonar_tof "
+                         "integrator only")
+    if not name:
+        raise ValueError(f"{source} 'sound_speed_profile': an empty file name (a CSV file depth,sound_speed)")
+    path = str(mi.file_resolver().resolve(name))
+    return SoundSpeedProfile.from_csv(path)
+
+
+@dr.syntax
+def sample_path(setup, ping, samples, record, active=True):
+    """`common.SonarIntegrator._sample_primal` through the profile ``setup.refraction``: the same
+    echoes (``record(k, range, energy, valid, hit[, hard])``) with every segment refracted
+    (`Refraction.trace`), the way back an eigenray (`Refraction.eigenray`, visibility along it),
+    the range ``c_sensor * two-way time / 2``, absorption over the curved length and the beam
+    patterns at the launch and arrival directions."""
+    from . import image_guide
+    from .emission import DB_TO_LOG2, emit
+    from .samples import DIMS_EMIT, DIMS_PER_BOUNCE
+
+    refr = setup.refraction
+    scene = setup.scene
+    x_ax, y_ax, z_ax, origin, d_local, weight, ray = emit(setup, ping, samples, active)
+    if setup.connect is None:
+        cx, cy, cz, c_beam = x_ax, y_ax, z_ax, setup.sensor.beam
+    else:
+        cx, cy, cz, _ = setup.connect[0].gather(ping)
+        c_beam = setup.connect[1]
+    throughput = mi.Float(weight)
+    t_path = mi.Float(0.0)
+    l_path = mi.Float(0.0)
+    depth = mi.UInt32(0)
+    active = mi.Bool(active) & (weight > 0)
+    atten = setup.absorption * DB_TO_LOG2
+    half_c = dr.opaque(mi.Float, 0.5 * refr.sensor_speed)
+    max_depth = setup.depth_o
+    ctx = mi.BSDFContext(mi.TransportMode.Importance)
+    guide = setup.guide
+    chain = image_guide.start_chain(origin)
+    tag = getattr(setup, "tag_hard", False)
+    hard = mi.Bool(False)
+    ray_o, ray_d = mi.Point3f(ray.o), mi.Vector3f(ray.d)
+
+    while dr.hint(active, label="sonar_refracted_path"):
+        si, t_seg, l_seg = refr.trace(scene, ray_o, ray_d, refr.t_window - t_path, active)
+        active &= si.is_valid()
+        t_path += t_seg
+        l_path += l_seg
+
+        ok, t_back, l_back, back, rx = refr.eigenray(si.p, origin, active)
+        bsdf = si.bsdf()
+        f = bsdf.eval(ctx, si, si.to_local(back), active).x
+        gain = c_beam.eval_dir(mi.Vector3f(dr.dot(rx, cx), dr.dot(rx, cy), dr.dot(rx, cz)))
+        energy = throughput * f * gain / dr.square(l_back) * dr.exp2(-atten * (l_path + l_back))
+        echo = active & ok & (energy > 0)
+        echo &= refr.visible(scene, si.spawn_ray(back).o, back, origin, t_back, echo)
+        rng = half_c * (t_path + t_back)
+        # While ``record`` runs, ``refr.arrival`` is the direction the echo reaches the head from
+        # (`shared_beams.SharedFrame.score` picks the receive beams by it); gone after, so that no
+        # traced variable outlives this loop on the setup a frozen pass walks.
+        refr.arrival = rx
+        try:
+            if dr.hint(tag, mode="scalar"):
+                record(depth, rng, energy, echo, si, hard)
+            else:
+                record(depth, rng, energy, echo, si)
+        finally:
+            del refr.arrival
+
+        base = DIMS_EMIT + DIMS_PER_BOUNCE * depth
+        if dr.hint(guide, mode="scalar"):
+            hard |= active & image_guide.chained(chain)
+            wo, bounce_weight, chain = image_guide.bounce(
+                bsdf, ctx, si, chain, origin, l_seg, samples.get(base), samples.get2(base + 1), active)
+            throughput *= bounce_weight
+            nxt = si.spawn_ray(wo)
+        else:
+            bs, bsdf_weight = bsdf.sample(ctx, si, samples.get(base), samples.get2(base + 1), active)
+            throughput *= bsdf_weight.x
+            nxt = si.spawn_ray(si.to_world(bs.wo))
+        ray_o, ray_d = mi.Point3f(nxt.o), mi.Vector3f(nxt.d)
+        depth += 1
+        active &= (depth < max_depth) & (throughput > 0)
+
+
+__all__ = ["Refraction", "from_profile", "check_chords", "read_profile", "sample_path", "DEFAULT_CHORDS"]
