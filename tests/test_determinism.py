@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import SCENES
 
-from mitsonar.dataset import generate_dataset
+from mitsonar.jobs.dataset import generate_dataset
 
 from test_dataset import folder_bytes, small_config
 
@@ -89,7 +89,7 @@ def test_a_mesh_loaded_again_is_hit_at_the_same_points(mitsonar_mod, threads, tm
     scenes now load on one thread, so every load of a mesh traces the same."""
     import mitsuba as mi
 
-    from mitsonar.terrain import Terrain
+    from mitsonar.scenes.terrain import Terrain
 
     ply = tmp_path / "t.ply"
     Terrain(size=(16, 16), resolution=0.25, depth=-3, rock_radius=(0.2, 0.5), rocks=1, roughness=0.04,
