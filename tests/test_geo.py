@@ -1,0 +1,120 @@
+"""Georeferenced products: the origin and CRS (`mitsonar.geometry.geodesy`), soundings as LAS and
+CSV (`mitsonar.export.las`), the depth GeoTIFF with its CRS (`mitsonar.export.geotiff`), and the
+--origin/--crs refusals of the command line."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pyproj = pytest.importorskip("pyproj", reason="georeferencing needs pyproj (the geo extra)")
+
+from mitsonar.geometry.geodesy import GeoError, GeoFrame, utm_epsg  # noqa: E402
+
+
+def test_published_utm_example_round_trip():
+    """The CN Tower, 43.642567 N 79.387139 W: UTM 17N E 630084, N 4833439 (the worked example of
+    the Wikipedia article "Universal Transverse Mercator coordinate system"), to the metre."""
+    frame = GeoFrame.make((43.642567, -79.387139))
+    assert frame.crs == "EPSG:32617"
+    assert frame.e0 == pytest.approx(630084, abs=1.0) and frame.n0 == pytest.approx(4833439, abs=1.0)
+    x, y = frame.from_lonlat(-79.387139, 43.642567)
+    assert abs(x) < 1e-6 and abs(y) < 1e-6
+    lon, lat = frame.to_lonlat(np.array([100.0, -250.0]), np.array([30.0, 400.0]))
+    x2, y2 = frame.from_lonlat(lon, lat)
+    assert np.allclose(x2, [100.0, -250.0], atol=1e-6) and np.allclose(y2, [30.0, 400.0], atol=1e-6)
+    e, n = frame.to_grid(100.0, 30.0)
+    assert e == pytest.approx(frame.e0 + 100.0) and n == pytest.approx(frame.n0 + 30.0)
+
+
+def test_default_zone_north_south_and_the_antimeridian():
+    assert utm_epsg(52.0, 4.5) == "EPSG:32631" and utm_epsg(-33.9, 18.4) == "EPSG:32734"
+    assert utm_epsg(0.0, 180.0) == "EPSG:32660" and utm_epsg(0.0, -180.0) == "EPSG:32601"
+
+
+@pytest.mark.parametrize("origin, crs, message", [
+    ((91.0, 0.0), None, r"^--origin 91 0: off the Earth \(LAT LON \[HEIGHT\]: latitude in \[-90, 90\]"),
+    ((10.0, -181.0), None, r"^--origin 10 -181: off the Earth"),
+    ((10.0,), None, r"^--origin 10: not allowed \(LAT LON"),
+    ((10.0, 2.0), "EPSG:4326", r"^--crs EPSG:4326: WGS 84 is geographic, without a projection .*\(a projected CRS as EPSG:NNNN"),
+    ((10.0, 2.0), "EPSG:999999", r"^--crs EPSG:999999: unknown EPSG code \(a projected CRS"),
+    ((10.0, 2.0), "UTM31", r"^--crs UTM31: not allowed \(a projected CRS as EPSG:NNNN"),
+])
+def test_bad_origin_or_crs_is_one_line_naming_the_flag(origin, crs, message):
+    with pytest.raises(GeoError, match=message):
+        GeoFrame.make(origin, crs)
+
+
+def test_scan_meta_carries_origin_and_crs_through_files(tmp_path):
+    from mitsonar.scan.model import Scan
+
+    frame = GeoFrame.make((52.0, 4.5, -1.25), "EPSG:25831")
+    scan = Scan(intensity=np.zeros((2, 4), np.float32), data=np.zeros((2, 4), np.uint8), ranges=np.arange(4.0) + 0.5,
+                bearings=np.zeros(2), poses=np.tile(np.eye(4), (2, 1, 1)), range_min=0.0, range_max=4.0,
+                meta=frame.meta())
+    for ext in (".npz", ".exr"):
+        scan.save(tmp_path / f"s{ext}")
+        back = Scan.load(tmp_path / f"s{ext}")
+        assert back.meta.origin == [52.0, 4.5, -1.25] and back.meta.crs == "EPSG:25831"
+        assert GeoFrame.from_meta(back.meta) == frame
+
+
+def _soundings(n=50, seed=0):
+    from mitsonar.products.bathymetry import SOUNDING_DTYPE
+
+    rng = np.random.default_rng(seed)
+    s = np.zeros(n, SOUNDING_DTYPE)
+    s["x"], s["y"] = rng.uniform(-20, 20, n), rng.uniform(-10, 30, n)
+    s["z"] = -10.0 - rng.uniform(0, 2, n)
+    s["intensity"] = rng.uniform(0.1, 2.0, n)
+    s["beam"], s["ping"] = rng.integers(0, 256, n), rng.integers(0, 1000, n)
+    s["angle"] = rng.uniform(-60, 60, n)
+    return s
+
+
+def test_las_read_back_with_crs_and_attributes(tmp_path):
+    laspy = pytest.importorskip("laspy", reason="LAS needs laspy (the geo extra)")
+    from mitsonar.export.las import write_las
+
+    frame = GeoFrame.make((52.0, 4.5, 0.5))
+    s = _soundings()
+    sigma = np.linspace(0.01, 0.2, len(s))
+    assert write_las(tmp_path / "s.las", s, frame, uncertainty=sigma) == len(s)
+    las = laspy.read(tmp_path / "s.las")
+    assert las.header.parse_crs().to_epsg() == 32631
+    assert np.allclose(las.x, s["x"] + frame.e0, atol=0.0005) and np.allclose(las.y, s["y"] + frame.n0, atol=0.0005)
+    assert np.allclose(las.z, s["z"] + 0.5, atol=0.0005)       # elevation, positive up
+    assert np.array_equal(las.beam, s["beam"]) and np.array_equal(las.ping, s["ping"])
+    assert np.array_equal(np.asarray(las.angle), s["angle"])
+    assert np.array_equal(np.asarray(las.echo_intensity), s["intensity"])
+    assert np.allclose(las.depth_uncertainty, sigma.astype(np.float32))
+    assert las.intensity.max() == 65535
+
+
+def test_csv_easting_northing_depth(tmp_path):
+    from mitsonar.export.las import write_csv
+
+    frame = GeoFrame.make((52.0, 4.5))
+    s = _soundings(5)
+    write_csv(tmp_path / "s.csv", s, frame)
+    rows = np.loadtxt(tmp_path / "s.csv", delimiter=",", skiprows=1)
+    assert open(tmp_path / "s.csv").readline() == "easting,northing,depth\n"
+    assert np.allclose(rows, np.c_[s["x"] + frame.e0, s["y"] + frame.n0, -s["z"]], atol=0.0005)
+
+
+def test_depth_geotiff_has_the_crs_gdal_reads(tmp_path):
+    rasterio = pytest.importorskip("rasterio", reason="GeoTIFF needs rasterio (the geotiff extra)")
+    from mitsonar.export.geotiff import write_depth_geotiff
+    from mitsonar.products.soundings import grid_depths
+
+    frame = GeoFrame.make((-33.9, 18.4))
+    s = _soundings()
+    grid = grid_depths(s, 1.0)
+    write_depth_geotiff(tmp_path / "d.tif", grid, frame)
+    with rasterio.open(tmp_path / "d.tif") as src:      # GDAL underneath
+        assert src.crs.to_epsg() == 32734
+        assert src.transform.c == pytest.approx(grid.transform[2] + frame.e0)
+        assert src.transform.f == pytest.approx(grid.transform[5] + frame.n0)
+        assert src.units == ("metre",) and src.descriptions == ("depth",)
+        band = src.read(1)
+    assert np.array_equal(np.isnan(band), np.isnan(grid.depth))
+    assert np.allclose(band[~np.isnan(band)], grid.depth[~np.isnan(grid.depth)].astype(np.float32))
