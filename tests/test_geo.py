@@ -118,3 +118,36 @@ def test_depth_geotiff_has_the_crs_gdal_reads(tmp_path):
         band = src.read(1)
     assert np.array_equal(np.isnan(band), np.isnan(grid.depth))
     assert np.allclose(band[~np.isnan(band)], grid.depth[~np.isnan(grid.depth)].astype(np.float32))
+
+
+def test_bathymetry_with_origin_writes_las_csv_and_a_geotiff_with_its_crs(tmp_path, capsys):
+    laspy = pytest.importorskip("laspy", reason="LAS needs laspy (the geo extra)")
+    rasterio = pytest.importorskip("rasterio", reason="GeoTIFF needs rasterio (the geotiff extra)")
+    import json
+    import os
+
+    from conftest import SCENES
+    from mitsonar.cli import main
+    from mitsonar.products.soundings import read_ply
+
+    out = tmp_path / "run"
+    args = ["bathymetry", os.path.join(SCENES, "rocky_slope.xml"), "--trajectory",
+            os.path.join(SCENES, "rocky_slope_survey.tum"), "--beams", "16", "--max-scans", "2", "--spp", "16",
+            "--range-max", "20", "--bin-width", "0.025", "--max-depth", "1", "-q", "-o", str(out),
+            "--origin", "-33.9", "18.4", "--crs", "EPSG:32734"]
+    assert main(args) == 0, capsys.readouterr().err
+    assert {"soundings.las", "soundings.csv", "depth.tif"} <= set(os.listdir(out))
+    ply = read_ply(out / "soundings.ply")
+    frame = GeoFrame.make((-33.9, 18.4), "EPSG:32734")
+    las = laspy.read(out / "soundings.las")
+    assert las.header.parse_crs().to_epsg() == 32734 and len(las.x) == len(ply)
+    assert np.allclose(las.x, ply["x"] + frame.e0, atol=0.0005) and np.array_equal(las.beam, ply["beam"])
+    assert "depth_uncertainty" in las.point_format.extra_dimension_names
+    assert np.all(np.asarray(las.depth_uncertainty) > 0)
+    with rasterio.open(out / "depth.tif") as src:
+        assert src.crs.to_epsg() == 32734
+    assert json.loads((out / "errors.json").read_text())["crs"] == "EPSG:32734"
+    capsys.readouterr()
+    assert main(args[:-7] + ["-o", str(tmp_path / "bad"), "--origin", "-33.9", "18.4", "--crs", "EPSG:4326"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "--crs EPSG:4326: WGS 84 is geographic" in err and not (tmp_path / "bad").exists()

@@ -177,3 +177,85 @@ def test_xtf_refuses_a_scan_that_is_not_sidescan_and_leaves_nothing(tmp_path):
     with pytest.raises(XTFError, match=r"^b.npz: 'kind' 'multibeam' is not allowed in an XTF export"):
         write_xtf(path, [sidescan(), fan], frame, names=["a.npz", "b.npz"])
     assert list(tmp_path.iterdir()) == []
+
+
+# ---- the command line: survey --xtf, export --xtf, refusals ---------------------------------------
+
+def _sidescan_scene(tmp_path):
+    from conftest import acoustic_xml, rectangle_xml, scene_xml, sonar_xml
+
+    m = np.diag([200.0, 200.0, 1.0, 1.0])
+    m[2, 3] = -4.0
+    scene = tmp_path / "ss.xml"
+    scene.write_text(scene_xml(sonar_xml(kind="sidescan", n_pings=10, n_bins=60, range_max=12.0),
+                               rectangle_xml(m, acoustic_xml(diffuse=0.5)),
+                               integrator='<integrator type="sonar_tof"><integer name="max_depth" value="1"/>'
+                                          '</integrator>'))
+    return scene
+
+
+def test_survey_xtf_and_export_xtf_agree_with_the_scans(tmp_path, capsys):
+    """``survey --xtf --origin``: the scans carry the origin and CRS, the XTF holds every ping's
+    bytes with the transducer's lat/lon; ``export SCANS --xtf`` (origin from the scans' metadata)
+    writes the same pings."""
+    pyxtf = pytest.importorskip("pyxtf", reason="pyxtf (the test extra) reads XTF")
+    from mitsonar.cli import main
+    from mitsonar.scan.io import load_scan
+
+    scene, out = _sidescan_scene(tmp_path), tmp_path / "out"
+    xtf = tmp_path / "s.xtf"
+    rc = main(["survey", str(scene), "--lawnmower", "0", "3", "0", "0", "--speed", "1.5", "--depth", "0",
+               "--spp", "4", "--max-scans", "2", "-q", "-o", str(out), "--xtf", str(xtf),
+               "--origin", "52.0", "4.5", "--start", "1700000000"])
+    assert rc == 0, capsys.readouterr().err
+    scans = [load_scan(out / f"scan_0000{i}.npz") for i in range(2)]
+    assert all(s.meta.origin == [52.0, 4.5, 0.0] and s.meta.crs == "EPSG:32631" for s in scans)
+    frame = GeoFrame.make(ORIGIN)
+    lon, lat = _trajectory_nav(frame, scans)
+    _, packets = pyxtf.xtf_read(str(xtf))
+    sonar = packets[pyxtf.XTFHeaderType.sonar]
+    assert len(sonar) == 20
+    rows = [(s, i) for s in scans for i in range(10)]
+    for k, (p, (s, i)) in enumerate(zip(sonar, rows)):
+        assert np.array_equal(p.data[0], s.data[i]) and np.array_equal(p.data[1], s.data[10 + i])
+        assert abs(p.SensorXcoordinate - lon[k]) < 1e-7 and abs(p.SensorYcoordinate - lat[k]) < 1e-7
+    assert sonar[0].Year == 2023 and sonar[0].Month == 11
+    again = tmp_path / "again.xtf"
+    assert main(["export", str(out / "scan_00000.npz"), str(out / "scan_00001.npz"), "--xtf", str(again),
+                 "--trajectory", str(out / "trajectory.tum"), "--start", "1700000000"]) == 0
+    _, packets2 = pyxtf.xtf_read(str(again))
+    assert all(np.array_equal(a.data[0], b.data[0]) and a.SensorXcoordinate == b.SensorXcoordinate
+               for a, b in zip(sonar, packets2[pyxtf.XTFHeaderType.sonar]))
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--xtf", "{t}/s.xtf"], "survey --xtf: give --origin LAT LON"),
+    (["--xtf", "{t}/s.xtf", "--origin", "95", "4"], "--origin 95 4: off the Earth"),
+    (["--xtf", "{t}/s.xtf", "--origin", "52", "4", "--crs", "EPSG:4326"], "--crs EPSG:4326: WGS 84 is geographic"),
+    (["--xtf", "{t}/s.xtf", "--origin", "52", "4", "--crs", "EPSG:1"], "--crs EPSG:1: unknown EPSG code"),
+    (["--xtf", "{t}/s.xyz", "--origin", "52", "4"], "the file name must end in .xtf"),
+    (["--crs", "EPSG:32631"], "--crs EPSG:32631: needs --origin"),
+])
+def test_survey_refuses_bad_geo_flags_before_any_render(tmp_path, capsys, extra, message):
+    from mitsonar.cli import main
+
+    scene, out = _sidescan_scene(tmp_path), tmp_path / "out"
+    rc = main(["survey", str(scene), "--lawnmower", "0", "3", "0", "0", "--speed", "1.5", "--depth", "0",
+               "--spp", "4", "--max-scans", "1", "-q", "-o", str(out)] + [a.format(t=tmp_path) for a in extra])
+    err = capsys.readouterr().err.strip()
+    assert rc == 1 and err.count("\n") == 0 and message in err, err
+    assert not out.exists() and not list(tmp_path.glob("s.*"))
+
+
+def test_export_xtf_refuses_a_mechanical_scan(tmp_path, capsys):
+    from mitsonar.cli import main
+
+    fan = sidescan()
+    fan.kind = "mechanical"
+    fan.meta.side = None
+    fan.times = np.arange(10) * 0.1
+    fan.save(tmp_path / "m.npz")
+    rc = main(["export", str(tmp_path / "m.npz"), "--xtf", str(tmp_path / "m.xtf"), "--origin", "52", "4.5"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 1 and f"{tmp_path / 'm.npz'}: 'kind' 'mechanical' is not allowed in an XTF export" in err, err
+    assert not (tmp_path / "m.xtf").exists()

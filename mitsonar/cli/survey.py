@@ -83,11 +83,13 @@ def cmd_survey(args):
         from mitsonar.export.ros.bag import check_output
 
         check_output(args.mcap, args.force, folder_may_be=out)
+    frame, kept = _check_xtf(args, scene, sensor, out)   # --origin/--crs, --xtf: refused before any render
     ext = "." + args.format
     mosaic = _mosaic_grid(scene, traj, sensor)      # a side-scan survey's mosaic, checked before any render
     try:   # checks every argument and the plan, then makes the folder; renders nothing yet
         scans = mitsonar.render_survey(scene, traj, out, spp=args.spp, seed=args.seed, max_scans=args.max_scans,
-                                       ext=ext, progress=not args.quiet, sensor=sensor)
+                                       ext=ext, progress=not args.quiet, sensor=sensor,
+                                       meta=None if frame is None else frame.meta())
     except OSError as exc:
         raise CLIError(f"-o {out!r}: cannot create the output folder ({exc.strerror})") from None
     if args.force:                                  # --force: the folder holds this survey only
@@ -98,6 +100,8 @@ def cmd_survey(args):
         from mitsonar.export.ros.bag import McapBag
 
         bag = McapBag(args.mcap, start=args.start, trajectory=traj, threshold=args.threshold, force=args.force)
+    if kept is not None:
+        scans = _keeping(scans, kept)
     try:
         n = _draw(args, scene, traj, out, scans, bag, mosaic)
     except BaseException:
@@ -106,9 +110,40 @@ def cmd_survey(args):
         raise
     if bag is not None:
         bag.close()
+    if kept is not None:
+        from mitsonar.export.xtf import write_xtf
+
+        write_xtf(args.xtf, kept, frame, start=args.start, trajectory=traj)
     print(f"wrote {n} scans, trajectory.tum and track.png to {out}" + (f" and {args.mcap}" if bag else "") +
+          (f" and {args.xtf}" if kept is not None else "") +
           f" ({traj.span[1] - traj.span[0]:.6g} s of track)")
     return 0
+
+
+def _check_xtf(args, scene, sensor, out):
+    """The survey's `GeoFrame` (None without ``--origin``) and, with ``--xtf``, the list the scans
+    are kept in for it; a bad flag is refused here, before any render."""
+    from mitsonar.geometry.geodesy import frame_from_args
+
+    frame = frame_from_args(args)
+    if args.xtf is None:
+        return frame, None
+    from mitsonar.export.xtf import check_xtf_output
+    from mitsonar.sim.scene import sonar_of
+
+    check_xtf_output(args.xtf, args.force, folder_may_be=out)
+    kind = sonar_of(scene, sensor).sonar_kind
+    if not kind.sided:
+        raise CLIError(f"survey --xtf: the scene's sonar is a {kind.name} head; XTF holds side-scan pings only")
+    if frame is None:
+        raise CLIError("survey --xtf: give --origin LAT LON [HEIGHT] (XTF navigation is in latitude and longitude)")
+    return frame, []
+
+
+def _keeping(scans, kept):
+    for scan in scans:
+        kept.append(scan)
+        yield scan
 
 
 def _draw(args, scene, traj, out, scans, bag, mosaic=None):
@@ -228,5 +263,8 @@ def add_subcommands(sub):
     from mitsonar.cli.export import add_mcap_options
 
     add_mcap_options(s, force_help="replace a survey already in the output folder (its scan files are removed "
-                                   "first) and an existing --mcap file")
+                                   "first) and an existing --mcap or --xtf file")
+    from mitsonar.cli.export import add_xtf_options
+
+    add_xtf_options(s)
     s.set_defaults(func=cmd_survey)

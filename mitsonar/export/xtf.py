@@ -262,3 +262,29 @@ def _channel(scan, row, number) -> bytes:
     return head + data.tobytes()
 
 
+
+
+def check_xtf_output(path, force=False, folder_may_be=None) -> str:
+    """The ``--xtf`` path, refused (one line, before any work) if it is not an ``.xtf`` file name
+    that can be written, or exists without ``force``."""
+    from mitsonar._files import check_output_file
+
+    return check_output_file(path, XTFError, extensions=(".xtf",), force=force, folder_may_be=folder_may_be,
+                             words={"directory": "--xtf {path}: is a folder; give an .xtf file name",
+                                    "extension": "--xtf {path}: the file name must end in .xtf",
+                                    "no_folder": "--xtf {path}: the folder {folder} does not exist"})
+
+
+def frame_for(args, scans, names):
+    """The `GeoFrame` of ``--origin``/``--crs``, else the one the scans' metadata holds (all the
+    same), else an `XTFError` asking for ``--origin``."""
+    from mitsonar.geometry.geodesy import GeoFrame, frame_from_args
+
+    frame = frame_from_args(args)
+    if frame is not None:
+        return frame
+    frames = [GeoFrame.from_meta(s.meta, f"{n}: meta") for s, n in zip(scans, names)]
+    if frames and frames[0] is not None and all(f == frames[0] for f in frames):
+        return frames[0]
+    raise XTFError("--xtf: give --origin LAT LON [HEIGHT] (the scans' metadata hold no origin, or not the same "
+                   "one): XTF navigation is in latitude and longitude")

@@ -168,8 +168,8 @@ class GeoFrame:
 
 def add_geo_options(parser):
     """``--origin LAT LON [HEIGHT]`` and ``--crs EPSG:NNNN`` (read back by `frame_from_args`)."""
-    parser.add_argument("--origin", nargs="+", type=float, metavar="LAT LON [HEIGHT]",
-                        help="the geodetic origin of the world frame (WGS 84 deg, height m): world x, y are "
+    parser.add_argument("--origin", nargs="+", type=float, metavar="LAT/LON/HEIGHT",
+                        help="LAT LON [HEIGHT]: the geodetic origin of the world frame (WGS 84 deg, height m): world x, y are "
                              "grid offsets in --crs from it")
     parser.add_argument("--crs", metavar="EPSG:NNNN",
                         help="projected CRS of the grid (default: the origin's UTM zone)")
