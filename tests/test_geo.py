@@ -151,3 +151,17 @@ def test_bathymetry_with_origin_writes_las_csv_and_a_geotiff_with_its_crs(tmp_pa
     assert main(args[:-7] + ["-o", str(tmp_path / "bad"), "--origin", "-33.9", "18.4", "--crs", "EPSG:4326"]) == 1
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "--crs EPSG:4326: WGS 84 is geographic" in err and not (tmp_path / "bad").exists()
+
+
+def test_laz_is_compressed_and_reads_back_the_same(tmp_path):
+    laspy = pytest.importorskip("laspy", reason="LAS needs laspy (the geo extra)")
+    pytest.importorskip("lazrs", reason="LAZ needs the lazrs backend (laspy[lazrs])")
+    from mitsonar.export.las import write_las
+
+    frame = GeoFrame.make((52.0, 4.5))
+    s = _soundings(200)
+    write_las(tmp_path / "s.las", s, frame)
+    write_las(tmp_path / "s.laz", s, frame)
+    a, b = laspy.read(tmp_path / "s.las"), laspy.read(tmp_path / "s.laz")
+    assert b.header.are_points_compressed and not a.header.are_points_compressed
+    assert np.array_equal(a.X, b.X) and np.array_equal(a.beam, b.beam) and b.header.parse_crs().to_epsg() == 32631
