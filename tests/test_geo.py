@@ -146,6 +146,9 @@ def test_bathymetry_with_origin_writes_las_csv_and_a_geotiff_with_its_crs(tmp_pa
     assert np.all(np.asarray(las.depth_uncertainty) > 0)
     with rasterio.open(out / "depth.tif") as src:
         assert src.crs.to_epsg() == 32734
+    from mitsonar.export.bag import bag_available
+
+    assert (out / "depth.bag").exists() == bag_available()
     assert json.loads((out / "errors.json").read_text())["crs"] == "EPSG:32734"
     capsys.readouterr()
     assert main(args[:-7] + ["-o", str(tmp_path / "bad"), "--origin", "-33.9", "18.4", "--crs", "EPSG:4326"]) == 1
@@ -165,3 +168,33 @@ def test_laz_is_compressed_and_reads_back_the_same(tmp_path):
     a, b = laspy.read(tmp_path / "s.las"), laspy.read(tmp_path / "s.laz")
     assert b.header.are_points_compressed and not a.header.are_points_compressed
     assert np.array_equal(a.X, b.X) and np.array_equal(a.beam, b.beam) and b.header.parse_crs().to_epsg() == 32631
+
+
+def test_bag_read_back_by_gdal_with_crs_elevation_and_uncertainty(tmp_path):
+    pytest.importorskip("rasterio", reason="BAG goes through rasterio's GDAL (the geo extra)")
+    from mitsonar.export.bag import NODATA, bag_available, cell_uncertainty, write_bag
+    from mitsonar.products.soundings import grid_depths
+
+    if not bag_available():
+        pytest.skip("this rasterio's GDAL has no BAG driver (HDF5)")
+    import rasterio
+
+    frame = GeoFrame.make((52.0, 4.5))
+    s = _soundings(400)
+    grid = grid_depths(s, 4.0)
+    sigma = np.full(len(s), 0.07)
+    write_bag(tmp_path / "d.bag", grid, frame, s, sigma)
+    assert [p.name for p in tmp_path.iterdir()] == ["d.bag"]
+    with rasterio.open(tmp_path / "d.bag") as src:
+        assert src.driver == "BAG" and src.descriptions == ("elevation", "uncertainty")
+        assert src.crs.to_epsg() == 32631 or "UTM zone 31N" in src.crs.to_wkt()
+        assert src.transform.c == pytest.approx(grid.transform[2] + frame.e0)
+        elev, unc = src.read(1), src.read(2)
+    empty = np.isnan(grid.depth)
+    assert np.all(elev[empty] == NODATA) and np.allclose(elev[~empty], -grid.depth[~empty].astype(np.float32))
+    assert np.allclose(unc[~empty], 0.07)
+    # without sigma: the standard deviation of the cell's depths (one cell, two soundings 1 m apart: 0.5)
+    two = s[:2].copy()
+    two["x"], two["y"], two["z"] = [0.1, 0.2], [0.1, 0.2], [-10.0, -11.0]
+    g = grid_depths(two, 1.0)
+    assert cell_uncertainty(g, two)[0, 0] == pytest.approx(0.5)

@@ -18,6 +18,9 @@ differs from it shows the refraction error a wrong profile gives (depth error ag
 ``sound_speed_profile``): processed straight at the nominal speed its soundings bend up or down
 towards the outer beams (the smile, or frown, of a wrong profile); ``--processing-svp`` with the
 same file corrects them.
+With ``--origin LAT LON [HEIGHT]`` (and ``--crs EPSG:NNNN``, `mitsonar.geometry.geodesy`) the run is
+georeferenced: ``depth.tif`` carries the CRS, and ``soundings.las``, ``soundings.csv`` and (when GDAL
+has its BAG driver) ``depth.bag`` are written too (`mitsonar.export`).
 Every option is checked before the first render; all files are written under temporary names and
 renamed together at the end.
 """
@@ -29,10 +32,10 @@ import os
 
 import numpy as np
 
-#: Every file a run may write (``depth.tif`` only when ``rasterio`` is installed; ``soundings.las`` and
-#: ``soundings.csv`` only with ``--origin``).
+#: Every file a run may write (``depth.tif`` only when ``rasterio`` is installed; ``soundings.las``,
+#: ``soundings.csv`` and ``depth.bag`` (when GDAL has its BAG driver) only with ``--origin``).
 OUTPUTS = ("soundings.ply", "depth.npz", "depth.tif", "errors.json", "bathymetry.png")
-GEO_OUTPUTS = ("soundings.las", "soundings.csv")
+GEO_OUTPUTS = ("soundings.las", "soundings.csv", "depth.bag")
 
 
 class BathymetryCLIError(ValueError):
@@ -217,11 +220,16 @@ def _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_pl
             from mitsonar.export.geotiff import write_depth_geotiff
             from mitsonar.export.las import write_csv, write_las
 
+            from mitsonar.export.bag import bag_available, write_bag
+
+            sigma = _uncertainty(run)
             write_depth_geotiff(files.temporary(os.path.join(out, "depth.tif")), grid, frame)
-            write_las(files.temporary(os.path.join(out, "soundings.las")), run.soundings, frame,
-                      uncertainty=_uncertainty(run))
+            write_las(files.temporary(os.path.join(out, "soundings.las")), run.soundings, frame, uncertainty=sigma)
             write_csv(files.temporary(os.path.join(out, "soundings.csv")), run.soundings, frame)
-            written += ["depth.tif", *GEO_OUTPUTS]
+            written += ["depth.tif", "soundings.las", "soundings.csv"]
+            if bag_available():
+                write_bag(files.temporary(os.path.join(out, "depth.bag")), grid, frame, run.soundings, sigma)
+                written.append("depth.bag")
         else:
             try:
                 import rasterio  # noqa: F401
