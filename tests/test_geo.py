@@ -65,7 +65,7 @@ def _soundings(n=50, seed=0):
     s = np.zeros(n, SOUNDING_DTYPE)
     s["x"], s["y"] = rng.uniform(-20, 20, n), rng.uniform(-10, 30, n)
     s["z"] = -10.0 - rng.uniform(0, 2, n)
-    s["intensity"] = rng.uniform(0.1, 2.0, n)
+    s["intensity"] = rng.uniform(-60.0, -20.0, n)       # dB
     s["beam"], s["ping"] = rng.integers(0, 256, n), rng.integers(0, 1000, n)
     s["angle"] = rng.uniform(-60, 60, n)
     return s
@@ -87,7 +87,9 @@ def test_las_read_back_with_crs_and_attributes(tmp_path):
     assert np.array_equal(np.asarray(las.angle), s["angle"])
     assert np.array_equal(np.asarray(las.echo_intensity), s["intensity"])
     assert np.allclose(las.depth_uncertainty, sigma.astype(np.float32))
-    assert las.intensity.max() == 65535
+    assert las.intensity.max() == 65535 and las.intensity.min() == 0
+    i = np.argsort(s["intensity"])
+    assert np.all(np.diff(las.intensity[i].astype(int)) >= 0)       # in the order of the dB levels
 
 
 def test_csv_easting_northing_depth(tmp_path):

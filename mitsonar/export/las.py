@@ -7,10 +7,11 @@ in the projected CRS of a `mitsonar.geometry.geodesy.GeoFrame`.
 
 LAS: point format 6, X/Y the easting/northing (``x + E0``, ``y + N0``), Z the elevation (``z +
 height`` of the origin: positive up, the LAS convention), scaled by 1 mm; ``intensity`` the
-sounding's echo intensity scaled to 0..65535 (the survey's strongest = 65535; the float value is
-kept in the extra bytes); the CRS as OGC WKT in the header's WKT VLR (``global_encoding`` WKT bit
+sounding's echo level (dB) scaled linearly to 0..65535 (the survey's weakest 0, strongest 65535;
+the dB value is kept in the extra bytes); the CRS as OGC WKT in the header's WKT VLR (``global_encoding`` WKT bit
 set). Extra bytes per point: ``beam`` (uint16), ``ping`` (uint32), ``angle`` (float32, deg, port +),
-``echo_intensity`` (float32, linear) and, when given, ``depth_uncertainty`` (float32, m, one
+``echo_intensity`` (float32, dB: 10 log10 of
+the echo window's energy, `mitsonar.products.bathymetry.soundings`) and, when given, ``depth_uncertainty`` (float32, m, one
 sigma: the predicted depth error of the sounding, `mitsonar.products.bathymetry.predicted_rms`).
 
 CSV: a header line ``easting,northing,depth`` then one line per sounding, depth positive down
@@ -25,7 +26,7 @@ import numpy as np
 from mitsonar._files import replacing
 
 EXTRA = (("beam", np.uint16, "receive beam index"), ("ping", np.uint32, "ping index"),
-         ("angle", np.float32, "beam angle deg, port +"), ("echo_intensity", np.float32, "linear echo intensity"))
+         ("angle", np.float32, "beam angle deg, port +"), ("echo_intensity", np.float32, "echo level, dB"))
 
 
 def _laspy(what):
@@ -62,8 +63,10 @@ def write_las(path, soundings, frame, uncertainty=None) -> int:
     las = laspy.LasData(header)
     las.x, las.y, las.z = e, nn, z
     level = np.asarray(soundings["intensity"], np.float64)
-    top = level.max() if n and level.max() > 0 else 1.0
-    las.intensity = np.round(np.clip(level / top, 0, 1) * 65535).astype(np.uint16)
+    ok = np.isfinite(level)
+    lo, hi = (level[ok].min(), level[ok].max()) if ok.any() else (0.0, 0.0)
+    scaled = (level - lo) / (hi - lo) if hi > lo else np.ones(n)
+    las.intensity = np.round(np.clip(np.nan_to_num(scaled, nan=0.0), 0, 1) * 65535).astype(np.uint16)
     las.beam = soundings["beam"]
     las.ping = soundings["ping"]
     las.angle = soundings["angle"]
