@@ -138,7 +138,7 @@ def test_bathymetry_with_origin_writes_las_csv_and_a_geotiff_with_its_crs(tmp_pa
             "--range-max", "20", "--bin-width", "0.025", "--max-depth", "1", "-q", "-o", str(out),
             "--origin", "-33.9", "18.4", "--crs", "EPSG:32734"]
     assert main(args) == 0, capsys.readouterr().err
-    assert {"soundings.las", "soundings.csv", "depth.tif"} <= set(os.listdir(out))
+    assert {"soundings.las", "soundings.csv", "soundings.kmall", "depth.tif"} <= set(os.listdir(out))
     ply = read_ply(out / "soundings.ply")
     frame = GeoFrame.make((-33.9, 18.4), "EPSG:32734")
     las = laspy.read(out / "soundings.las")
@@ -152,6 +152,17 @@ def test_bathymetry_with_origin_writes_las_csv_and_a_geotiff_with_its_crs(tmp_pa
 
     assert (out / "depth.bag").exists() == bag_available()
     assert json.loads((out / "errors.json").read_text())["crs"] == "EPSG:32734"
+    try:
+        from KMALL import kmall
+    except ImportError:
+        pass
+    else:                                                   # one #MRZ per ping, 16 beams each
+        k = kmall.kmall(str(out / "soundings.kmall"))
+        k.index_file()
+        assert k.msgtype == [str(b"#MRZ")] * 2
+        k.FID.seek(k.msgoffset[0])
+        assert k.read_EMdgmMRZ()["rxInfo"]["numSoundingsMaxMain"] == 16
+        k.closeFile()
     capsys.readouterr()
     assert main(args[:-7] + ["-o", str(tmp_path / "bad"), "--origin", "-33.9", "18.4", "--crs", "EPSG:4326"]) == 1
     err = capsys.readouterr().err.strip()

@@ -19,8 +19,9 @@ differs from it shows the refraction error a wrong profile gives (depth error ag
 towards the outer beams (the smile, or frown, of a wrong profile); ``--processing-svp`` with the
 same file corrects them.
 With ``--origin LAT LON [HEIGHT]`` (and ``--crs EPSG:NNNN``, `mitsonar.geometry.geodesy`) the run is
-georeferenced: ``depth.tif`` carries the CRS, and ``soundings.las``, ``soundings.csv`` and (when GDAL
-has its BAG driver) ``depth.bag`` are written too (`mitsonar.export`).
+georeferenced: ``depth.tif`` carries the CRS, and ``soundings.las``, ``soundings.csv``,
+``soundings.kmall`` (#MRZ per ping) and (when GDAL has its BAG driver) ``depth.bag`` are written too
+(`mitsonar.export`).
 Every option is checked before the first render; all files are written under temporary names and
 renamed together at the end.
 """
@@ -33,9 +34,10 @@ import os
 import numpy as np
 
 #: Every file a run may write (``depth.tif`` only when ``rasterio`` is installed; ``soundings.las``,
-#: ``soundings.csv`` and ``depth.bag`` (when GDAL has its BAG driver) only with ``--origin``).
+#: ``soundings.csv``, ``soundings.kmall`` and ``depth.bag`` (when GDAL has its BAG driver) only with
+#: ``--origin``).
 OUTPUTS = ("soundings.ply", "depth.npz", "depth.tif", "errors.json", "bathymetry.png")
-GEO_OUTPUTS = ("soundings.las", "soundings.csv", "depth.bag")
+GEO_OUTPUTS = ("soundings.las", "soundings.csv", "soundings.kmall", "depth.bag")
 
 
 class BathymetryCLIError(ValueError):
@@ -226,7 +228,12 @@ def _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_pl
             write_depth_geotiff(files.temporary(os.path.join(out, "depth.tif")), grid, frame)
             write_las(files.temporary(os.path.join(out, "soundings.las")), run.soundings, frame, uncertainty=sigma)
             write_csv(files.temporary(os.path.join(out, "soundings.csv")), run.soundings, frame)
-            written += ["depth.tif", "soundings.las", "soundings.csv"]
+            from mitsonar.export.kmall import write_kmall
+
+            write_kmall(files.temporary(os.path.join(out, "soundings.kmall")), run.soundings, traj, frame,
+                        n_beams=int(run.sonar["beams"]), sound_speed=float(run.sonar["sound_speed"]),
+                        uncertainty=sigma)
+            written += ["depth.tif", "soundings.las", "soundings.csv", "soundings.kmall"]
             if bag_available():
                 write_bag(files.temporary(os.path.join(out, "depth.bag")), grid, frame, run.soundings, sigma)
                 written.append("depth.bag")
