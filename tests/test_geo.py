@@ -213,3 +213,42 @@ def test_bag_read_back_by_gdal_with_crs_elevation_and_uncertainty(tmp_path):
     two["x"], two["y"], two["z"] = [0.1, 0.2], [0.1, 0.2], [-10.0, -11.0]
     g = grid_depths(two, 1.0)
     assert cell_uncertainty(g, two)[0, 0] == pytest.approx(0.5)
+
+
+def test_a_target_at_a_known_lat_lon_is_there_in_the_mosaic_geotiff(tmp_path):
+    """A bright echo from a point at a chosen lat/lon (one ping, port, slant range over a flat
+    bottom at a known altitude) lands, in the mosaic GeoTIFF read back through GDAL, in the cell
+    whose centre is within one cell of pyproj's projection of that lat/lon."""
+    rasterio = pytest.importorskip("rasterio", reason="GeoTIFF needs rasterio (the geotiff extra)")
+    import math
+
+    from mitsonar.export.geotiff import write_mosaic_geotiff
+    from mitsonar.geometry.frames import sidescan_rotation
+    from mitsonar.products.mosaic import mosaic
+    from mitsonar.scan.model import Scan
+
+    frame = GeoFrame.make((43.642567, -79.387139))
+    target_lat, target_lon = 43.6427, -79.3870
+    tx, ty = frame.from_lonlat(target_lon, target_lat)
+    altitude, ground = 5.0, 8.0                                 # the target 8 m to port of ping 10
+    n, bins, r0, r1 = 21, 200, 0.0, 20.0
+    channel = np.repeat([0, 1], n)
+    poses = sidescan_rotation(channel, math.radians(10.0))     # head along +x (grid east), port +y
+    xs = float(tx) + (np.arange(n) - 10) * 0.2
+    poses[:, 0, 3], poses[:, 1, 3], poses[:, 2, 3] = np.tile(xs, 2), float(ty) - ground, -10.0
+    ranges = r0 + (np.arange(bins) + 0.5) * (r1 - r0) / bins
+    data = np.full((2 * n, bins), 10, np.uint8)
+    data[10, np.argmin(np.abs(ranges - math.hypot(ground, altitude)))] = 250
+    scan = Scan(intensity=np.zeros((2 * n, bins), np.float32), data=data, ranges=ranges, bearings=np.zeros(2 * n),
+                poses=poses, range_min=r0, range_max=r1, kind="sidescan", beamwidth_h=1.0, beamwidth_v=50.0,
+                times=np.tile(np.arange(n) * 0.1, 2), meta={"side": "both"})
+    m = mosaic(scan, resolution=0.2, use="data", altitude=altitude)
+    write_mosaic_geotiff(tmp_path / "m.tif", m, frame)
+    with rasterio.open(tmp_path / "m.tif") as src:
+        assert src.crs.to_epsg() == 32617 and src.units == ("device level 0-255 (the scans' data bytes)",)
+        band = src.read(1)
+        row, col = np.unravel_index(np.nanargmax(band), band.shape)
+        e, nn = src.xy(row, col)                                # the cell's centre, in the CRS
+    te, tn = pyproj.Transformer.from_crs("EPSG:4326", "EPSG:32617", always_xy=True).transform(target_lon, target_lat)
+    assert abs(e - te) <= 0.2 + 1e-9 and abs(nn - tn) <= 0.2 + 1e-9
+    assert np.isnan(band).any() and np.nanmax(band) > 3 * 10        # the echo stands out of the background

@@ -220,6 +220,9 @@ def test_survey_xtf_and_export_xtf_agree_with_the_scans(tmp_path, capsys):
         assert np.array_equal(p.data[0], s.data[i]) and np.array_equal(p.data[1], s.data[10 + i])
         assert abs(p.SensorXcoordinate - lon[k]) < 1e-7 and abs(p.SensorYcoordinate - lat[k]) < 1e-7
     assert sonar[0].Year == 2023 and sonar[0].Month == 11
+    rasterio = pytest.importorskip("rasterio", reason="the mosaic GeoTIFF needs rasterio")
+    with rasterio.open(out / "mosaic.tif") as src:          # the survey's mosaic, in the CRS
+        assert src.crs.to_epsg() == 32631 and src.transform.c > 600000
     again = tmp_path / "again.xtf"
     assert main(["export", str(out / "scan_00000.npz"), str(out / "scan_00001.npz"), "--xtf", str(again),
                  "--trajectory", str(out / "trajectory.tum"), "--start", "1700000000"]) == 0

@@ -9,6 +9,9 @@ only inside its beams, `plots.plot_cartesian`); for a side-scan head instead ``s
 (the first scan's waterfall) and ``mosaic.png`` (+ ``mosaic.pgw``, ``mosaic.npz``: the survey's
 georeferenced mosaic, `mitsonar.products.mosaic`, in cells of a range bin (0.1 m at least, coarser for a
 grid of more than 2e7 cells), flat bottom at the measured altitude).
+With ``--origin LAT LON [HEIGHT]`` (``--crs``; `mitsonar.geometry.geodesy`) every scan carries the
+origin and CRS in its metadata, a side-scan survey also writes ``mosaic.tif`` (the mosaic in the
+CRS), and ``--xtf OUT`` writes its pings as XTF (`mitsonar.export.xtf`).
 Everything is checked (trajectory file, scene, folder, that a scan fits in the track) before the
 first file is written; each file is written under a temporary name and renamed.
 """
@@ -125,14 +128,21 @@ def _check_xtf(args, scene, sensor, out):
     are kept in for it; a bad flag is refused here, before any render."""
     from mitsonar.geometry.geodesy import frame_from_args
 
+    from mitsonar.sim.scene import sonar_of
+
     frame = frame_from_args(args)
+    kind = sonar_of(scene, sensor).sonar_kind
+    if frame is not None and kind.mosaic:          # mosaic.tif with its CRS
+        try:
+            import rasterio  # noqa: F401
+        except ImportError:
+            raise CLIError("survey --origin: a side-scan survey writes mosaic.tif with its CRS, which needs "
+                           "rasterio: pip install 'mitsonar[geo]'") from None
     if args.xtf is None:
         return frame, None
     from mitsonar.export.xtf import check_xtf_output
-    from mitsonar.sim.scene import sonar_of
 
     check_xtf_output(args.xtf, args.force, folder_may_be=out)
-    kind = sonar_of(scene, sensor).sonar_kind
     if not kind.sided:
         raise CLIError(f"survey --xtf: the scene's sonar is a {kind.name} head; XTF holds side-scan pings only")
     if frame is None:
@@ -169,6 +179,11 @@ def _draw(args, scene, traj, out, scans, bag, mosaic=None):
     plots.plot_track(traj, os.path.join(out, "track.png"), scans=positions, mesh=mesh)
     if mosaic is not None:
         mosaic.result().save(os.path.join(out, "mosaic.png"))
+        if getattr(args, "origin", None) is not None:      # georeferenced: + mosaic.tif in the CRS
+            from mitsonar.export.geotiff import write_mosaic_geotiff
+            from mitsonar.geometry.geodesy import frame_from_args
+
+            write_mosaic_geotiff(os.path.join(out, "mosaic.tif"), mosaic.result(), frame_from_args(args))
     return n
 
 
