@@ -287,3 +287,15 @@ def test_bad_pose_urls_are_one_line_before_the_scene_loads(capsys):
         assert "expected udp://127.0.0.1:PORT" in one_error_line(capsys, "live")
     assert cli("live", BOX, "--pose-url", "udp://127.0.0.1:0", "--trajectory", "x.tum") == 1
     assert "give one" in one_error_line(capsys, "live")
+
+
+def test_a_trajectory_replays_in_real_time_and_holds_its_last_pose():
+    from mitsonar.devices.poses import TrajectoryReplay
+    from mitsonar.geometry.trajectory import Trajectory
+
+    traj = Trajectory.straight(duration=4.0, speed=0.5, t0=100.0)
+    replay = TrajectoryReplay(traj, start=20.0)
+    np.testing.assert_allclose(replay.at(21.0), traj.at(101.0), atol=1e-12)
+    assert not replay.ended
+    np.testing.assert_allclose(replay.at(90.0), traj.at(traj.span[1]), atol=1e-12)
+    assert replay.ended

@@ -46,7 +46,7 @@ def _live(args) -> int:
         buffer = PoseBuffer() if sock is not None else None
         renderer = PingRenderer(scene, sonar, buffer, spp=args.spp, seed=args.seed)
         kw = {"baudrate": args.baud, "realtime": not args.fast}
-        if head.name == "micron":
+        if "no_dst" in {dest for dest, _ in head.options}:     # a head that can be a pre-DST Micron
             kw["dst"] = not args.no_dst
         live = LIVE_HEADS[head.name]()(renderer, args.port_url, **kw)
     except BaseException:
