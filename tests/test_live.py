@@ -299,3 +299,23 @@ def test_a_trajectory_replays_in_real_time_and_holds_its_last_pose():
     assert not replay.ended
     np.testing.assert_allclose(replay.at(90.0), traj.at(traj.span[1]), atol=1e-12)
     assert replay.ended
+
+
+def test_an_object_datagram_moves_a_shape_and_its_echo(box):
+    from mitsonar.devices.live import PoseReceiver, SceneObjects
+
+    objects = SceneObjects(box.scene, box.lock)
+    assert "wall_xpos" in objects.names and "sonar" not in objects.names
+    box.poses = PoseBuffer()
+    receiver = PoseReceiver(socket.socket(socket.AF_INET, socket.SOCK_DGRAM), box.poses, objects=objects.move,
+                            out=io.StringIO())
+    try:
+        assert receiver.handle(dgram(object="wall_xpos", position=[-1.5, 0, 0], orientation=[0, 0, 0, 1]), 0.0)
+        assert abs(peak_range(box.render(0.0)) - 3.5) <= 12.0 / 500
+        assert not receiver.handle(dgram(object="no_such", position=[0, 0, 0], orientation=[0, 0, 0, 1]), 0.0)
+        assert receiver.drops.counts == {"unknown object": 1}
+        assert receiver.handle(dgram(object="wall_xpos", position=[0, 0, 0], orientation=[0, 0, 0, 1]), 0.0)
+        assert abs(peak_range(box.render(0.0)) - 5.0) <= 12.0 / 500
+        assert receiver.stats["objects"] == 2
+    finally:
+        receiver.sock.close()

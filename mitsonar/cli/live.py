@@ -23,7 +23,7 @@ def _live(args) -> int:
     if not scene_path.is_file():
         raise FileNotFoundError(f"scene file not found: {scene_path}")
     head = _head(args)
-    from mitsonar.devices.live import LIVE_HEADS, PingRenderer, PoseReceiver, live_scene, pose_socket
+    from mitsonar.devices.live import LIVE_HEADS, PingRenderer, PoseReceiver, SceneObjects, live_scene, pose_socket
     from mitsonar.devices.poses import PoseBuffer, TrajectoryReplay
     if head.name not in LIVE_HEADS:
         raise ValueError(f"--head {head.name}: no live version (live heads: {', '.join(LIVE_HEADS)})")
@@ -53,7 +53,9 @@ def _live(args) -> int:
         if sock is not None:
             sock.close()
         raise
-    receiver = PoseReceiver(sock, buffer).start() if sock is not None else None
+    receiver = None
+    if sock is not None:
+        receiver = PoseReceiver(sock, buffer, objects=SceneObjects(scene, renderer.lock).move).start()
     if trajectory is not None:
         renderer.poses = TrajectoryReplay(trajectory)
     stop = threading.Event()
@@ -76,7 +78,8 @@ def _live(args) -> int:
     if receiver is not None:
         st = receiver.stats
         reasons = ", ".join(f"{n} {r}" for r, n in sorted(receiver.drops.counts.items()))
-        line += f"; {st['poses']} poses applied, {st['dropped']} datagrams dropped" + (f" ({reasons})" if reasons else "")
+        moved = f", {st['objects']} object moves" if st["objects"] else ""
+        line += f"; {st['poses']} poses applied{moved}, {st['dropped']} datagrams dropped" + (f" ({reasons})" if reasons else "")
     print(line, flush=True)
     return 0
 
@@ -94,6 +97,7 @@ def add_subcommands(subparsers) -> None:
         description="Serve the scene's sonar as a Micron or a Ping360 (as virtual-sonar) but render each "
                     "ping the client asks for when it fires, from the vehicle pose at that time: poses "
                     "arrive as JSON datagrams {\"t\", \"position\", \"orientation\"} on --pose-url "
+                    "({\"object\": ID, ...} moves the scene's shape ID) "
                     "(the sensor's to_world is the mount on the vehicle: x forward, y port, z up), or "
                     "from a --trajectory replayed in real time. Prints 'poses on URL' and 'live HEAD on "
                     "PORT', serves until --seconds or SIGINT/SIGTERM, then a summary line.")

@@ -37,7 +37,7 @@ import numpy as np
 from mitsonar.devices.poses import DatagramError, DropLog, PoseBuffer, parse_datagram
 from mitsonar.geometry.frames import bearing_rotation
 
-__all__ = ["live_scene", "PingRenderer", "LiveMicron", "LivePing360", "LIVE_HEADS", "PoseReceiver",
+__all__ = ["live_scene", "SceneObjects", "PingRenderer", "LiveMicron", "LivePing360", "LIVE_HEADS", "PoseReceiver",
            "pose_socket"]
 
 _SEED_MAX = 2**31 - 1
@@ -69,9 +69,54 @@ def live_scene(path: str):
     resolver = mi.file_resolver() if hasattr(mi, "file_resolver") else mi.Thread.thread().file_resolver()
     if folder not in [str(p) for p in resolver]:
         resolver.prepend(folder)
-    scene = load_scene(ET.tostring(root, encoding="unicode"))
+    # optimize=False: shapes keep their ids (no merging of those sharing a BSDF), so that an
+    # ``object`` datagram can move one
+    scene = load_scene(ET.tostring(root, encoding="unicode"), optimize=False)
     scene.set_id(os.path.basename(path))
     return scene
+
+
+class SceneObjects:
+    """Moves shapes of a scene by XML id without reloading it: ``move(id, T)`` puts the shape at
+    ``T @`` (its placement in the scene file), through ``mi.traverse`` (the shape's ``to_world``,
+    or a mesh's ``vertex_positions``). ``lock``: held while changing the scene (the renders')."""
+
+    def __init__(self, scene, lock=None):
+        import mitsuba as mi
+
+        self.params = mi.traverse(scene)
+        self.lock = lock if lock is not None else threading.Lock()
+        self._original: dict = {}
+        for key in self.params.keys():
+            name, _, field = key.rpartition(".")
+            if field == "to_world" and name and not self._is_sensor(scene, name):
+                self._original[name] = ("to_world", np.array(self.params[key].matrix, np.float64).reshape(4, 4))
+            elif field == "vertex_positions" and name and name not in self._original:
+                self._original[name] = ("vertex_positions", np.array(self.params[key], np.float64).reshape(-1, 3))
+
+    @staticmethod
+    def _is_sensor(scene, name) -> bool:
+        return any(s.id() == name for s in scene.sensors())
+
+    @property
+    def names(self) -> list:
+        return sorted(self._original)
+
+    def move(self, name: str, matrix) -> None:
+        import mitsuba as mi
+
+        if name not in self._original:
+            shown = ", ".join(self.names[:8]) + (" ..." if len(self.names) > 8 else "")
+            raise KeyError(f"no movable shape {name!r} in the scene (shapes: {shown or 'none'})")
+        field, original = self._original[name]
+        m = np.asarray(matrix, np.float64)
+        with self.lock:
+            if field == "to_world":
+                self.params[f"{name}.to_world"] = mi.Transform4f(mi.Matrix4f(m @ original))
+            else:
+                moved = original @ m[:3, :3].T + m[:3, 3]
+                self.params[f"{name}.vertex_positions"] = mi.Float(moved.ravel().astype(np.float32))
+            self.params.update()
 
 
 class PingRenderer:
