@@ -319,3 +319,77 @@ def test_an_object_datagram_moves_a_shape_and_its_echo(box):
         assert receiver.stats["objects"] == 2
     finally:
         receiver.sock.close()
+
+
+# ---------------------------------------------------------------- MAVLink (ArduSub)
+
+def _mav():
+    pytest.importorskip("pymavlink")
+    from pymavlink.dialects.v20 import common
+
+    return common
+
+
+def _encoded(mav, msg) -> bytes:
+    return msg.pack(mav)
+
+
+def test_ned_frd_to_enu_flu():
+    """A level vehicle facing north: forward is world +y, port is west (-x); facing east
+    (yaw 90 deg in NED): forward is +x. Positions: (north, east, down) -> (east, north, up)."""
+    from mitsonar.devices.mavlink import ned_to_enu
+
+    p, q = ned_to_enu([10.0, 3.0, 2.0], [1.0, 0.0, 0.0, 0.0])
+    np.testing.assert_allclose(p, [3.0, 10.0, -2.0])
+    r = quat_to_matrix(q)
+    np.testing.assert_allclose(r @ [1, 0, 0], [0, 1, 0], atol=1e-12)
+    np.testing.assert_allclose(r @ [0, 1, 0], [-1, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(r @ [0, 0, 1], [0, 0, 1], atol=1e-12)
+    h = math.radians(90) / 2                               # yaw about NED's down axis: north -> east
+    _, q = ned_to_enu([0, 0, 0], [math.cos(h), 0.0, 0.0, math.sin(h)])
+    np.testing.assert_allclose(quat_to_matrix(q) @ [1, 0, 0], [1, 0, 0], atol=1e-12)
+    h = math.radians(30) / 2                               # pitch nose up 30 deg (FRD +y is right)
+    _, q = ned_to_enu([0, 0, 0], [math.cos(h), 0.0, math.sin(h), 0.0])
+    np.testing.assert_allclose(quat_to_matrix(q) @ [1, 0, 0], [0, math.cos(math.radians(30)),
+                                                               math.sin(math.radians(30))], atol=1e-12)
+
+
+def test_mavlink_messages_encoded_by_pymavlink_become_poses():
+    common = _mav()
+    from mitsonar.devices.mavlink import MavlinkReceiver
+
+    buf = PoseBuffer()
+    rx = MavlinkReceiver("udpin:127.0.0.1:0", buf, out=io.StringIO())
+    try:
+        port = int(rx.address.rsplit(":", 1)[1])
+        enc = common.MAVLink(None, srcSystem=1, srcComponent=1)
+        dec = common.MAVLink(None)
+        h = math.radians(90) / 2
+        msgs = [enc.local_position_ned_encode(1000, 4.0, -1.0, 2.5, 0, 0, 0),
+                enc.attitude_quaternion_encode(1000, math.cos(h), 0.0, 0.0, math.sin(h), 0, 0, 0),
+                enc.attitude_quaternion_encode(1100, float("nan"), 0.0, 0.0, 1.0, 0, 0, 0)]
+        wires = [_encoded(enc, m) for m in msgs]
+        got = [rx.handle(dec.decode(bytearray(w)), 50.0) for w in wires]
+        assert got == [False, True, False] and rx.stats["bad messages"] == 1
+        pose = buf.at(50.0)
+        np.testing.assert_allclose(pose[:3, 3], [-1.0, 4.0, -2.5])
+        np.testing.assert_allclose(pose[:3, :3] @ [1, 0, 0], [1, 0, 0], atol=1e-6)
+        # and through the socket, read by the receiver's thread
+        rx.start()
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        tx.sendto(_encoded(enc, enc.local_position_ned_encode(2000, 7.0, 0.0, 0.0, 0, 0, 0)), ("127.0.0.1", port))
+        for _ in range(200):
+            if rx.stats["poses"] >= 2:
+                break
+            threading_event_wait(0.05)
+        tx.close()
+        assert rx.stats["poses"] == 2
+        np.testing.assert_allclose(buf.at(1e9)[:3, 3], [0.0, 7.0, 0.0])
+    finally:
+        rx.stop()
+
+
+def threading_event_wait(seconds):
+    import threading
+
+    threading.Event().wait(seconds)

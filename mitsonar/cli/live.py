@@ -27,12 +27,18 @@ def _live(args) -> int:
     from mitsonar.devices.poses import PoseBuffer, TrajectoryReplay
     if head.name not in LIVE_HEADS:
         raise ValueError(f"--head {head.name}: no live version (live heads: {', '.join(LIVE_HEADS)})")
-    if args.pose_url and args.trajectory:
-        raise ValueError("--pose-url and --trajectory are two sources of poses: give one")
+    sources = [f for f, v in (("--pose-url", args.pose_url), ("--trajectory", args.trajectory),
+                              ("--mavlink", args.mavlink)) if v]
+    if len(sources) > 1:
+        raise ValueError(f"{' and '.join(sources)} are {len(sources)} sources of poses: give one")
     from mitsonar.cli.common import check_counts, sensor_of
     from mitsonar.devices.micron.seanet.settings import require_mechanical
     from mitsonar.devices.transports import check_port
     check_counts(args, ValueError)
+    if args.mavlink:
+        import importlib.util
+        if importlib.util.find_spec("pymavlink") is None:
+            raise ValueError("--mavlink needs the pymavlink package (pip install 'mitsonar[live]')")
     trajectory = None
     if args.trajectory:
         from mitsonar.geometry.trajectory import Trajectory
@@ -43,7 +49,7 @@ def _live(args) -> int:
         scene = live_scene(str(scene_path))
         sonar = sensor_of(scene, args)
         require_mechanical(sonar, f"live {scene_path.name}", f"no {head.serves} to serve")
-        buffer = PoseBuffer() if sock is not None else None
+        buffer = PoseBuffer() if (sock is not None or args.mavlink) else None
         renderer = PingRenderer(scene, sonar, buffer, spp=args.spp, seed=args.seed)
         kw = {"baudrate": args.baud, "realtime": not args.fast}
         if "no_dst" in {dest for dest, _ in head.options}:     # a head that can be a pre-DST Micron
@@ -58,12 +64,23 @@ def _live(args) -> int:
         receiver = PoseReceiver(sock, buffer, objects=SceneObjects(scene, renderer.lock).move).start()
     if trajectory is not None:
         renderer.poses = TrajectoryReplay(trajectory)
+    mav = None
+    if args.mavlink:
+        from mitsonar.devices.mavlink import MavlinkReceiver
+        try:
+            mav = MavlinkReceiver(args.mavlink, buffer).start()
+        except BaseException:
+            if receiver is not None:
+                receiver.stop()
+            raise
     stop = threading.Event()
     previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         with live:
             if receiver is not None:
                 print(f"poses on {receiver.url}", flush=True)
+            if mav is not None:
+                print(f"MAVLink poses on {mav.address}", flush=True)
             label = head.description.split(" (")[0].split()[-1]
             print(f"live {label} on {live.port}", flush=True)
             end = None if args.seconds is None else time.monotonic() + args.seconds
@@ -74,12 +91,16 @@ def _live(args) -> int:
             signal.signal(s, h)
         if receiver is not None:
             receiver.stop()
+        if mav is not None:
+            mav.stop()
     line = renderer.summary()
     if receiver is not None:
         st = receiver.stats
         reasons = ", ".join(f"{n} {r}" for r, n in sorted(receiver.drops.counts.items()))
         moved = f", {st['objects']} object moves" if st["objects"] else ""
         line += f"; {st['poses']} poses applied{moved}, {st['dropped']} datagrams dropped" + (f" ({reasons})" if reasons else "")
+    if mav is not None:
+        line += f"; {mav.stats['poses']} MAVLink poses"
     print(line, flush=True)
     return 0
 
@@ -111,6 +132,10 @@ def add_subcommands(subparsers) -> None:
                    help="read vehicle poses here: udp://127.0.0.1:PORT (loopback only; port 0 picks one)")
     p.add_argument("--trajectory", default=None, metavar="FILE.tum",
                    help="replay this trajectory in real time as the vehicle's poses (a demo without a vehicle)")
+    p.add_argument("--mavlink", default=None, metavar="URL",
+                   help="read the vehicle's LOCAL_POSITION_NED and ATTITUDE_QUATERNION from this pymavlink "
+                        "connection (udpin:127.0.0.1:14550, a serial port; NED/FRD turned to ENU/FLU); "
+                        "needs pymavlink (the live extra)")
     p.add_argument("--spp", type=_positive(int), default=64, help="paths per ping (default 64)")
     p.add_argument("--seed", type=int, default=0, help="seed of ping 0; ping k uses seed + k (default 0)")
     p.add_argument("--baud", type=_positive(int), default=None, help="baud rate of the timing model")
