@@ -393,3 +393,33 @@ def threading_event_wait(seconds):
     import threading
 
     threading.Event().wait(seconds)
+
+
+def test_stale_ping360_requests_are_coalesced_to_the_newest(box):
+    """Requests that wait while a ping renders: only the newest is answered."""
+    from mitsonar.devices.live import LivePing360
+    from mitsonar.devices.ping360.protocol import Message, StreamParser, encode
+
+    box.poses = PoseBuffer()
+    with LivePing360(box, "udp://127.0.0.1:0", realtime=False) as head:
+        port = int(head.port.rsplit(":", 1)[1])
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        tx.settimeout(30)
+        angles = [10, 20, 30, 40, 50]
+        with box.lock:              # the head is busy rendering: the requests wait on the line
+            for a in angles:
+                tx.sendto(encode(Message("transducer", mode=1, gain_setting=1, angle=a, transmit_duration=32,
+                                         sample_period=80, transmit_frequency=740, number_of_samples=200,
+                                         transmit=1)), ("127.0.0.1", port))
+            threading_event_wait(0.2)
+        parser, replies = StreamParser(), []
+        while not replies or replies[-1] != angles[-1]:
+            for m in parser.feed(tx.recv(65536)):
+                if m.name == "device_data":
+                    replies.append(m.angle)
+        tx.close()
+        # the head may have taken one request before the others arrived (it then renders it,
+        # held by the lock); all that waited together get one answer, the newest's
+        assert len(replies) <= 2 and replies[-1] == angles[-1], replies
+        assert head.stats["stale requests skipped"] == len(angles) - len(replies)
+        assert head.stats["pings"] == len(replies)

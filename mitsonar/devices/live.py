@@ -204,10 +204,33 @@ def _micron():
 
 def _ping360():
     from mitsonar.devices.ping360.head import angle_to_radians
+    from mitsonar.devices.ping360.protocol import ids
     from mitsonar.devices.ping360.virtual import VirtualPing360
 
     class LivePing360(VirtualPing360):
-        """A `VirtualPing360` whose samples at ``angle`` are rendered when it pings."""
+        """A `VirtualPing360` whose samples at ``angle`` are rendered when it pings.
+
+        Stale requests are coalesced: of the ping requests (``transducer`` with ``transmit``)
+        waiting on the line together (a client that timed out and asked again while a ping
+        rendered), only the newest is answered; the others are counted
+        (``stats["stale requests skipped"]``), never answered late, where a client would take an
+        old angle's reply for the new request's.
+        """
+
+        def _tick(self) -> None:
+            msgs = []
+            for _ in range(64):
+                data = self._transport.read(0.0)
+                if not data:
+                    break
+                msgs += self.parser.feed(data)
+            pings = [i for i, m in enumerate(msgs) if m.message_id == ids["transducer"] and m.transmit]
+            for i, m in enumerate(msgs):
+                if pings and i in pings and i != pings[-1]:
+                    self.stats["stale requests skipped"] += 1
+                    continue
+                self._on_message(m, time.monotonic())
+            super()._tick()
 
         def __init__(self, renderer: PingRenderer, port_url=None, **kwargs):
             self.renderer = renderer
