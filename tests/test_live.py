@@ -253,7 +253,7 @@ def test_live_ping360_over_udp_follows_pose_datagrams_and_survives_garbage():
             proc.communicate()
 
 
-def test_live_stops_after_seconds_and_on_sigterm():
+def test_live_stops_after_seconds_and_on_sigterm_and_sums_up_on_sigusr1():
     proc, text = _start_live("--head", "ping360", "--port-url", "udp://127.0.0.1:0", "--seconds", "0.5")
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 0 and "live Ping360 on" in text and "0 pings rendered" in out, (text, out, err)
@@ -261,6 +261,9 @@ def test_live_stops_after_seconds_and_on_sigterm():
                              "--pose-url", "udp://127.0.0.1:0")
     try:
         assert "live Ping360 on" in text, text
+        proc.send_signal(signal.SIGUSR1)            # the summary so far, and it goes on
+        assert "0 pings rendered; 0 poses applied, 0 datagrams dropped" in proc.stdout.readline()
+        assert proc.poll() is None
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=60)
         assert proc.returncode == 0 and "Traceback" not in err, err

@@ -75,6 +75,9 @@ def _live(args) -> int:
             raise
     stop = threading.Event()
     previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    if hasattr(signal, "SIGUSR1"):        # the summary so far, on demand (kill -USR1 PID)
+        previous[signal.SIGUSR1] = signal.signal(
+            signal.SIGUSR1, lambda *_: print(_summary(renderer, receiver, mav), flush=True))
     try:
         with live:
             if receiver is not None:
@@ -93,6 +96,12 @@ def _live(args) -> int:
             receiver.stop()
         if mav is not None:
             mav.stop()
+    print(_summary(renderer, receiver, mav), flush=True)
+    return 0
+
+
+def _summary(renderer, receiver, mav) -> str:
+    """One line: pings rendered, render time percentiles, poses applied and dropped by reason."""
     line = renderer.summary()
     if receiver is not None:
         st = receiver.stats
@@ -101,8 +110,7 @@ def _live(args) -> int:
         line += f"; {st['poses']} poses applied{moved}, {st['dropped']} datagrams dropped" + (f" ({reasons})" if reasons else "")
     if mav is not None:
         line += f"; {mav.stats['poses']} MAVLink poses"
-    print(line, flush=True)
-    return 0
+    return line
 
 
 def cmd_live(args) -> int:
