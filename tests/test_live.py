@@ -426,3 +426,32 @@ def test_stale_ping360_requests_are_coalesced_to_the_newest(box):
         assert len(replies) <= 2 and replies[-1] == angles[-1], replies
         assert head.stats["stale requests skipped"] == len(angles) - len(replies)
         assert head.stats["pings"] == len(replies)
+
+
+def test_drops_are_reported_at_most_every_two_seconds_and_a_silent_stream_is_said_once():
+    import time
+
+    from mitsonar.devices.live import PoseReceiver
+
+    out = io.StringIO()
+    rx = PoseReceiver(socket.socket(socket.AF_INET, socket.SOCK_DGRAM), PoseBuffer(), out=out)
+    try:
+        for k in range(5):
+            assert not rx.handle(b"garbage", 100.0 + 0.1 * k)
+        assert not rx.handle(dgram(position=[0, 0, 0], orientation=[0, 0, 0, 3]), 102.5)
+        lines = out.getvalue().splitlines()
+        assert len(lines) == 2 and "not a UTF-8 JSON text" in lines[0]
+        assert "norm 3" in lines[1] and "(4 more dropped since the last report)" in lines[1], lines
+        assert rx.drops.counts == {"not JSON": 5, "bad quaternion": 1} and rx.stats["dropped"] == 6
+        # the pose stream stops: one warning, until poses come again
+        out.truncate(0), out.seek(0)
+        assert rx.handle(dgram(position=[1, 2, 3], orientation=[0, 0, 0, 1]), time.monotonic() - 10)
+        rx._check_stale()
+        rx._check_stale()
+        assert out.getvalue().count("holding the last one") == 1
+        np.testing.assert_allclose(rx.buffer.at()[:3, 3], [1, 2, 3])
+        assert rx.handle(dgram(position=[1, 2, 3], orientation=[0, 0, 0, 1]), time.monotonic() - 10)
+        rx._check_stale()
+        assert out.getvalue().count("holding the last one") == 2
+    finally:
+        rx.sock.close()
