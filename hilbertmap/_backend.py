@@ -22,6 +22,7 @@ import numpy as np
 
 import drjit as dr
 
+from ._exact import ExactSum
 from .inducing import sorted_unique
 
 CELL_DIV = 2  # cells per cut radius; 2 visits 125 cells of (r/2)^3: measured fastest of 1, 2, 3
@@ -142,7 +143,7 @@ class KernelGrid:
             if out is None:
                 acc = acc + dr.select(m, kv * dr.gather(Float, coef, j, m), 0.0)
             else:
-                dr.scatter_add(out, g * kv, j, m, mode=dr.ReduceMode.Local)
+                out.add(g * kv, j, m)
             load = ~has
             qi = Int32(q)
             ix = cx + qi // (W * W) - R
@@ -175,8 +176,13 @@ class KernelGrid:
         return res
 
     def kernel_scatter(self, x, y, z, g, out):
-        """``out[j] += g * k(x, nu_j)`` for every lane (grid order), through atomics."""
-        self._loop(x, y, z, g=g, out=out)
+        """``out[j] += g * k(x, nu_j)`` for every lane (grid order), through integer atomics whose
+        sums do not depend on the threads' order (`_exact`); ``out`` is written and returned."""
+        acc = ExactSum(self.mod, self.n)
+        self._loop(x, y, z, g=g, out=acc)
+        new = out + self.Float(acc.total())
+        dr.eval(new)
+        dr.scatter(out, new, dr.arange(self.UInt32, self.n))
         return out
 
     def gram(self) -> np.ndarray:
@@ -388,7 +394,7 @@ class LatticeGrid:
                     if out is None:
                         acc = dr.fma(kv, dr.gather(Float, coef_pool, k, m), acc)
                     else:  # into the column store; kernel_scatter reads the nodes' entries back
-                        dr.scatter_add(out, g * kv, k, m, mode=dr.ReduceMode.Local)
+                        out.add(g * kv, k, m)
                 return i + 1, acc
 
             i = dr.zeros(UInt32, dr.width(x))
@@ -415,10 +421,11 @@ class LatticeGrid:
     def kernel_scatter(self, x, y, z, g, out):
         """``out + (sum over lanes of g k(x, nu_j))_j`` (a new array; ``out`` is not written):
         atomic additions into a zeroed copy of the column store (no node index to look up per
-        neighbour), then each node's entry."""
-        buf = dr.zeros(self.Float, self.pool_size)
+        neighbour), then each node's entry. The additions are integer (`_exact`): the same sums
+        whatever the threads' order."""
+        buf = ExactSum(self.mod, self.pool_size)
         self._columns(x, y, z, g=g, out=buf)
-        return out + dr.gather(self.Float, buf, self.pos)
+        return out + dr.gather(self.Float, self.Float(buf.total()), self.pos)
 
     def brick_keys(self, pts: np.ndarray) -> np.ndarray:
         """The linear index of each point's brick, clamped into the box (uint16 when the box has

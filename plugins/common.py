@@ -30,6 +30,8 @@ from mitsonar._checks import not_allowed, require
 
 from . import image_guide
 from .emission import DB_TO_LOG2, emit
+from .denormals import flushed
+from .exact_sum import ExactBins
 from .props import count, text
 from .range_bins import RangeBins
 from .samples import DIMS_EMIT, DIMS_PER_BOUNCE
@@ -209,6 +211,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
         raise NotImplementedError(f"{type(self).__name__} must implement render_histogram")
 
     # ------------------------------------------------------------------ gradients (path replay)
+    @flushed   # the calling thread computes like the pool's threads (`denormals`)
     def render_forward(self, scene, params=None, sensor=0, seed=0, spp=0):
         """Forward-mode derivative of the scan ``mi.render`` returns, along the tangents set on the
         traversed parameters: a tensor (n_rows, n_bins, 1). The estimator and what its range
@@ -221,23 +224,28 @@ class SonarIntegrator(mi.SamplingIntegrator):
         self._check_forward(params, setup)
         with dr.resume_grad():
             setup.ad.seal_forward()
-        grad = dr.zeros(mi.Float, n_rows * n_bins)
+        # Integer words per bin (`exact_sum`): the same derivative image whatever the threads.
+        grad = ExactBins(n_rows * n_bins)
         for start, count in passes:
             ping, samples = self.lanes(n_rows, seed, start, count)
 
             def record(k, rng, energy, valid, hit, d_energy, d_range):
                 b, inside = bins.index(rng, valid)
-                dr.scatter_add(grad, d_energy, bins.flat(ping, b), inside)
+                grad.add(d_energy, bins.flat(ping, b), inside)
                 up, lo, e = edge_bins(bins, rng, valid)
                 flow = energy * d_range * bins.inv_width
-                dr.scatter_add(grad, flow, bins.flat(ping, e), up)
-                dr.scatter_add(grad, -flow, bins.flat(ping, e - 1), lo)
+                grad.add(flow, bins.flat(ping, e), up)
+                grad.add(-flow, bins.flat(ping, e - 1), lo)
 
+            grad.reserve(3 * count * setup.depth)
             with dr.suspend_grad():
                 self.sample(setup, ping, samples, record, mode=dr.ADMode.Forward)
-            dr.eval(grad)
-        return mi.TensorXf(grad * (1.0 / self._spp), shape=(n_rows, n_bins, 1))
+            dr.eval(grad.words)
+        out = mi.Float(grad.total() * (1.0 / self._spp))
+        dr.eval(out)   # inside `flushed`
+        return mi.TensorXf(out, shape=(n_rows, n_bins, 1))
 
+    @flushed
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
         """Reverse-mode derivative: back-propagates ``grad_in`` (n_rows, n_bins, 1) into the traversed
         parameters with gradients enabled, by path replay (memory independent of ``spp``)."""

@@ -32,6 +32,7 @@ import mitsuba as mi
 import numpy as np
 
 from .common import tagging_hard
+from .exact_sum import ExactBins
 from .samples import SobolSamples, row_lanes
 from .sonar_tof import MAX_LANES_PER_PASS, SonarTOFIntegrator
 
@@ -49,20 +50,22 @@ def traced(integrator, setup, seed, start, count, moments=False):
     ``moments`` their summed squares (per echo: a path's echoes rarely share a bin)."""
     n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
     ping, samples = row_lanes(SobolSamples, n_rows, seed, start, count)
-    sums = [dr.zeros(mi.Float64, n_rows * n_bins) for _ in range(4 if moments else 2)]
+    # order-independent sums (`exact_sum`); the squares are float32, which is plenty for a variance
+    sums = [ExactBins(n_rows * n_bins) for _ in range(4 if moments else 2)]
     bins = setup.bins
 
     def record(k, rng, energy, valid, hit, hard):
         b, valid = bins.index(rng, valid)
-        at, e = bins.flat(ping, b), mi.Float64(energy)
+        at = bins.flat(ping, b)
         for i, keep in enumerate((valid & ~hard, valid & hard)):
-            dr.scatter_add(sums[i], e, at, keep)
+            sums[i].add(energy, at, keep)
             if moments:
-                dr.scatter_add(sums[2 + i], e * e, at, keep)
+                sums[2 + i].add(energy * energy, at, keep)
 
     integrator.sample(tagging_hard(setup), ping, samples, record)
-    dr.eval(sums)
-    return [s.numpy() for s in sums]
+    totals = [s.total() for s in sums]
+    dr.eval(totals)
+    return [t.numpy() for t in totals]
 
 
 def share(easy, hard, easy2, hard2, n):

@@ -157,7 +157,7 @@ class SharedFrame:
 
     def score(self, hist, rng, energy, valid, hit, u=None, direction=None):
         """Add the echoes of one bounce (``energy`` without the receive gain) into ``hist`` (flat
-        n_rows x n_bins, Float64) for every row within the window of the echo's direction.
+        n_rows x n_bins, an `exact_sum.ExactBins`) for every row within the window of the echo's direction.
         ``u``: a uniform number per echo for the roulette of faint beams (`ROULETTE_GAIN`); the
         beams of one echo share it (each beam's expectation is its gain either way).
         ``direction``: where the echo arrives from at the head (world, unit; a refracted path's
@@ -183,8 +183,7 @@ class SharedFrame:
                 use &= ~faint | (u * self.roulette < gain)
                 gain = dr.select(faint, self.roulette, gain)
             row = mi.UInt32(dr.maximum(k, 0.0))
-            dr.scatter_add(hist, mi.Float64(energy * gain), self.bins.flat(row, b), use,
-                           mode=getattr(dr.ReduceMode, self.scatter_mode))
+            hist.add(energy * gain, self.bins.flat(row, b), use, mode=getattr(dr.ReduceMode, self.scatter_mode))
 
 
 def _opaque(cls, values):

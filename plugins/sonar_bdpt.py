@@ -9,6 +9,7 @@ from mitsonar._checks import not_allowed, require
 
 from .bdpt_paths import HEURISTICS, trace_bidirectional
 from .props import count, text
+from .exact_sum import ExactBins
 from .sonar_tof import SonarTOFIntegrator
 
 # Subpath B vertices kept in one pass (~80 bytes each: 320 MiB).
@@ -88,12 +89,12 @@ class SonarBDPTIntegrator(SonarTOFIntegrator):
         n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
         ping, samples_a = self.lanes(n_pings, seed, start, count)
         _, samples_b = self.lanes(n_pings, (int(seed) ^ _SEED_B) & 0xFFFFFFFF, start, count)
-        hist = dr.zeros(mi.Float64, n_pings * n_bins)
+        hist = ExactBins(n_pings * n_bins)   # the same sums whatever the threads (`exact_sum`)
         bins = setup.bins
 
         def record(s, t, rng, energy, valid):
             b, valid = bins.index(rng, valid)
-            dr.scatter_add(hist, mi.Float64(energy), bins.flat(ping, b), valid)
+            hist.add(energy, bins.flat(ping, b), valid)
 
         trace_bidirectional(setup, ping, samples_a, samples_b, record, power=HEURISTICS[self.mis],
                             only_s=self.strategy)

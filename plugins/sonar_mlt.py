@@ -10,6 +10,8 @@ import numpy as np
 from mitsonar._checks import require
 
 from .common import PathSetup, SonarIntegrator, tagging_hard
+from .denormals import flushed
+from .exact_sum import ExactBins
 from .jit_arrays import upload
 from .mlt_split import MAX_SHARE, render_split
 from .props import count, number, text
@@ -172,6 +174,7 @@ class SonarMLTIntegrator(SonarIntegrator):
         return lo
 
     # ------------------------------------------------------------------ rendering
+    @flushed   # the calling thread computes like the pool's threads (`denormals`)
     def render_histogram(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None, progress=None):
         """Mean echo energy per bin, float64 ``(n_pings, n_bins)`` (same units as ``sonar_tof``):
         the split render (`mlt_split`) with the image guide, else chains over every echo."""
@@ -248,14 +251,14 @@ class SonarMLTIntegrator(SonarIntegrator):
             pu_norm = upload(mi.Float, p_uni * norm, np.float32)   # p_uni b per ping
             pu_b = dr.gather(mi.Float, pu_norm, ping_c)    # scan: the same for every ping, so it
                                                             # need not follow a chain's ping
-            hist = dr.zeros(mi.Float64, n_pings * n_bins)
+            hist = ExactBins(n_pings * n_bins)   # order-independent (`exact_sum`)
             d_b = f_boot + dr.gather(mi.Float, pu_norm, ping)
             ctx.splat(hist, bins_boot, vals_boot, dr.select(d_b > 0, 1.0 / d_b, 0.0), ping,
                       dr.gather(mi.Bool, upload(mi.Bool, live, np.bool_), ping))
             # The weight the current state has gathered, not yet splatted (opaque: a literal zero
             # would give the first mutation a kernel of its own).
             w_cur = dr.opaque(mi.Float, 0.0, n)
-            dr.eval(mutate.U, f_cur, bins_cur, vals_cur, hist, w_cur)
+            dr.eval(mutate.U, f_cur, bins_cur, vals_cur, hist.words, w_cur)
 
             # 3-4. Mutations, one wavefront per step.
             for m in range(mutations):
@@ -280,7 +283,7 @@ class SonarMLTIntegrator(SonarIntegrator):
                 bins_cur = dr.select(rec_accept, bins_new, bins_cur)
                 vals_cur = dr.select(rec_accept, vals_new, vals_cur)
                 f_cur = dr.select(accept, f_new, f_cur)
-                dr.eval(mutate.U, f_cur, bins_cur, vals_cur, hist, w_cur, ping_c)
+                dr.eval(mutate.U, f_cur, bins_cur, vals_cur, hist.words, w_cur, ping_c)
                 if progress is not None:
                     progress(boot + (m + 1) * chains, boot + mutations * chains)
             ctx.splat(hist, bins_cur, vals_cur, w_cur, ping_c, active)
@@ -429,4 +432,5 @@ class _Context:
         w = dr.gather(mi.Float, weight, rec_lane)
         p = dr.gather(mi.UInt32, ping, rec_lane)
         ok = (vals > 0) & dr.gather(mi.Bool, active, rec_lane)
-        dr.scatter_add(hist, mi.Float64(vals * w), self.bins.flat(p, bins), ok)
+        hist.reserve(dr.width(bins))
+        hist.add(vals * w, self.bins.flat(p, bins), ok)

@@ -9,11 +9,13 @@ from mitsonar._checks import require
 
 from . import frozen_pass
 from .common import SonarIntegrator
+from .denormals import flushing
+from .exact_sum import ExactBins
 from .props import text
 from .samples import HashSamples, SobolSamples, opaque_u32, row_lanes
 
-# Lanes in one kernel launch. Larger launches keep both cores busy; the cap bounds the number
-# of float32 atomic adds a bin receives before its pass is summed in float64.
+# Lanes in one kernel launch. Larger launches keep both cores busy; the cap bounds the adds a
+# bin's integer words receive in one pass (`exact_sum.MAX_ADDS`: 2^22 lanes x 64 bounces < 2^30).
 MAX_LANES_PER_PASS = 1 << 22
 MAX_SPP_PER_PASS = 1 << 16
 
@@ -41,7 +43,8 @@ class SonarTOFIntegrator(SonarIntegrator):
     it connects back to the transducer (visibility tested) and its echo energy is added to the
     bin of range = total path length / 2; the path then continues by sampling the BSDF.
     Echoes outside ``[range_min, range_max)`` are dropped. Bins hold energy per bin (not per
-    metre), averaged over ``spp`` paths per ping; passes are summed in float64.
+    metre), averaged over ``spp`` paths per ping; each pass sums its echoes exactly, whatever the
+    order of the threads (`exact_sum`), and the passes are summed in float64 in order.
 
     ============ ======== ====================================================================
     Parameter    Default  Meaning
@@ -132,13 +135,15 @@ class SonarTOFIntegrator(SonarIntegrator):
         """The mean over ``spp`` samples per row of ``one_pass(start, count)`` (a float64 array:
         the summed energy of samples ``start .. start + count`` of every row), run in passes of at
         most ``max_per_row`` (and `MAX_SPP_PER_PASS`) samples per row with gradients off;
-        ``progress(done_spp, spp)`` after each pass. The pass loop of every histogram integrator."""
+        ``progress(done_spp, spp)`` after each pass. The pass loop of every histogram integrator.
+        Subnormals flush to zero on the calling thread as on Dr.Jit's pool threads (`denormals`)."""
         spp = int(spp)
         if spp < 1:
             raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
         spp_pass = max(1, min(spp, MAX_SPP_PER_PASS, int(max_per_row)))
         total, start = 0.0, 0
-        with dr.suspend_grad():
+        # flushing: the calling thread computes like the pool's threads (1 thread = 2 threads)
+        with dr.suspend_grad(), flushing():
             while start < spp:
                 count = min(spp_pass, spp - start)
                 total = total + one_pass(start, count)
@@ -162,20 +167,19 @@ class SonarTOFIntegrator(SonarIntegrator):
     def _pass_body(self, setup, seed_o, start_o, d, w, count):
         n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
         ping, samples = self.lanes(n_pings, seed_o, start_o, count)
-        # Float64 bins: sums of many small echoes keep their precision, and the order in which
-        # threads add them no longer shows in the float32 result (same seed, same scan). Atomic
-        # adds straight to memory: the default (per-thread copies and a block reduction) needs
-        # Dr.Jit to dry-run a frozen pass before replaying it, and costs as much (box, spp 256,
-        # 15 interleaved renders: 0.139 s median against 0.133 s).
-        hist = dr.zeros(mi.Float64, n_pings * n_bins)
+        # Integer words per bin (`exact_sum`): the sums do not depend on the order in which the
+        # threads add the echoes, so the same seed gives the same bytes with 1 thread or 16.
+        # Atomic adds straight to memory: the default (per-thread copies and a block reduction)
+        # needs Dr.Jit to dry-run a frozen pass before replaying it, and costs as much.
+        hist = ExactBins(n_pings * n_bins)
         bins = setup.bins
 
         def record(depth_k, rng, energy, valid, hit):
             b, valid = bins.index(rng, valid)
-            dr.scatter_add(hist, mi.Float64(energy), bins.flat(ping, b), valid, mode=dr.ReduceMode.Direct)
+            hist.add(energy, bins.flat(ping, b), valid)
 
         self.sample(_emitting(setup, d, w), ping, samples, record)
-        return hist
+        return hist.total()
 
     def _shared_pass(self, shared, seed, start, count):
         """One pass of a frame's shared paths: paths ``start * n_rows .. (start + count) * n_rows``
@@ -195,7 +199,7 @@ class SonarTOFIntegrator(SonarIntegrator):
     def _shared_body(self, shared, seed_o, first_o, d, w, count):
         n = shared.n_rows * count
         zero, index, samples = self._shared_lanes(n, seed_o, first_o)
-        hist = dr.zeros(mi.Float64, shared.n_rows * shared.sensor.n_bins)
+        hist = ExactBins(shared.n_rows * shared.sensor.n_bins)
 
         refraction = shared.path_setup.refraction
 
@@ -206,7 +210,7 @@ class SonarTOFIntegrator(SonarIntegrator):
             shared.score(hist, rng, energy, valid, hit, u, None if refraction is None else refraction.arrival)
 
         self.sample(_emitting(shared.path_setup, d, w), zero, samples, record)
-        return hist
+        return hist.total()
 
     def to_string(self):
         return (f"SonarTOFIntegrator[max_depth={self.max_depth}, sampling={self.sampling}, "
