@@ -252,3 +252,58 @@ def test_a_target_at_a_known_lat_lon_is_there_in_the_mosaic_geotiff(tmp_path):
     te, tn = pyproj.Transformer.from_crs("EPSG:4326", "EPSG:32617", always_xy=True).transform(target_lon, target_lat)
     assert abs(e - te) <= 0.2 + 1e-9 and abs(nn - tn) <= 0.2 + 1e-9
     assert np.isnan(band).any() and np.nanmax(band) > 3 * 10        # the echo stands out of the background
+
+
+def _nmea(body):
+    c = 0
+    for ch in body:
+        c ^= ord(ch)
+    return f"${body}*{c:02X}\n"
+
+
+def _ddmm(value, width, pos, neg):
+    a = abs(value)
+    d = int(a)
+    return f"{d:0{width}d}{(a - d) * 60:09.6f}", pos if value >= 0 else neg
+
+
+def test_lat_lon_trajectories_from_csv_and_nmea(tmp_path):
+    from mitsonar.geometry.geotrack import read_geo_trajectory
+
+    frame = GeoFrame.make((52.0, 4.5, 0.0))
+    x = np.array([0.0, 30.0, 60.0, 90.0])
+    y = np.array([0.0, 10.0, 20.0, 30.0])
+    lon, lat = frame.to_lonlat(x, y)
+    with open(tmp_path / "t.csv", "w") as f:
+        f.write("time,lat,lon,depth,heading\n")
+        for i in range(4):
+            f.write(f"{10.0 * i},{lat[i]:.10f},{lon[i]:.10f},5.0,{45.0}\n")
+    track = read_geo_trajectory(tmp_path / "t.csv", frame)
+    assert np.allclose(track.positions[:, :2], np.c_[x, y], atol=1e-4) and np.allclose(track.positions[:, 2], -5.0)
+    # true heading 45 deg: the grid direction differs from grid north-east by the meridian convergence
+    conv = pyproj.Proj(frame.crs).get_factors(float(lon[0]), float(lat[0])).meridian_convergence
+    fwd = track.poses[0, :3, 0]
+    grid_azimuth = np.degrees(np.arctan2(fwd[0], fwd[1]))
+    assert grid_azimuth == pytest.approx(45.0 - conv, abs=1e-3) and abs(conv) > 1.0
+    lines = []
+    for i in range(4):
+        (la, ns), (lo, ew) = _ddmm(lat[i], 2, "N", "S"), _ddmm(lon[i], 3, "E", "W")
+        lines.append(_nmea(f"GPGGA,1200{10 * i:02d}.00,{la},{ns},{lo},{ew},1,08,0.9,-5.0,M,0.0,M,,"))
+        lines.append(_nmea("GPVTG,90.0,T,,M,1.0,N,1.9,K,A"))
+    (tmp_path / "t.nmea").write_text("".join(lines))
+    track = read_geo_trajectory(tmp_path / "t.nmea", frame)
+    assert np.allclose(track.times, 43200.0 + 10.0 * np.arange(4))
+    assert np.allclose(track.positions[:, :2], np.c_[x, y], atol=0.005)    # 1e-6 minute: under 2 mm
+    assert np.allclose(track.positions[:, 2], -5.0)
+    fwd = track.poses[2, :3, 0]
+    assert np.degrees(np.arctan2(fwd[0], fwd[1])) == pytest.approx(90.0 - conv, abs=1e-3)
+    bad = lines[0][:-3] + ("00" if not lines[0].endswith("*00\n") else "01") + "\n"
+    (tmp_path / "bad.nmea").write_text(bad)
+    with pytest.raises(GeoError, match=r"bad.nmea: line 1: checksum '00' is wrong"):
+        read_geo_trajectory(tmp_path / "bad.nmea", frame)
+    (tmp_path / "bad.csv").write_text("time,lat,lon\n0,52,4.5\n")
+    with pytest.raises(GeoError, match=r"bad.csv: line 1: no column 'depth'"):
+        read_geo_trajectory(tmp_path / "bad.csv", frame)
+    (tmp_path / "far.csv").write_text("time,lat,lon,depth\n0,95,4.5,1\n")
+    with pytest.raises(GeoError, match=r"far.csv: line 2: lat lon 95 4.5: off the Earth"):
+        read_geo_trajectory(tmp_path / "far.csv", frame)

@@ -262,3 +262,22 @@ def test_export_xtf_refuses_a_mechanical_scan(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert rc == 1 and f"{tmp_path / 'm.npz'}: 'kind' 'mechanical' is not allowed in an XTF export" in err, err
     assert not (tmp_path / "m.xtf").exists()
+
+
+def test_survey_along_a_lat_lon_csv_track(tmp_path, capsys):
+    """``--trajectory track.csv`` (lat/lon) with ``--origin``: the survey's trajectory.tum holds the
+    fixes in the grid; without ``--origin`` one line asks for it, nothing written."""
+    from mitsonar.cli import main
+    from mitsonar.geometry.trajectory import Trajectory
+
+    scene, frame = _sidescan_scene(tmp_path), GeoFrame.make(ORIGIN)
+    lon, lat = frame.to_lonlat(np.array([0.0, 15.0]), np.array([0.0, 0.0]))
+    csv = tmp_path / "track.csv"
+    csv.write_text(f"time,lat,lon,depth\n0,{lat[0]:.10f},{lon[0]:.10f},0\n10,{lat[1]:.10f},{lon[1]:.10f},0\n")
+    base = ["survey", str(scene), "--trajectory", str(csv), "--spp", "4", "--max-scans", "1", "-q"]
+    assert main(base + ["-o", str(tmp_path / "no")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "a lat/lon trajectory needs --origin" in err and not (tmp_path / "no").exists()
+    assert main(base + ["-o", str(tmp_path / "out"), "--origin", "52", "4.5"]) == 0, capsys.readouterr().err
+    track = Trajectory.from_tum(tmp_path / "out" / "trajectory.tum")
+    assert np.allclose(track.positions[:, :2], [[0.0, 0.0], [15.0, 0.0]], atol=1e-4)

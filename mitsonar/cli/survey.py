@@ -33,7 +33,9 @@ def add_trajectory_options(parser):
     """The trajectory flags a survey-like command takes: ``--trajectory TUM`` or ``--lawnmower
     X_MIN X_MAX Y_MIN Y_MAX`` with ``--spacing``, ``--speed``, ``--depth``/``--altitude``,
     ``--yaw-rate``, and ``--drift SEED`` (read back by `trajectory_from_args`)."""
-    parser.add_argument("--trajectory", metavar="TUM", help="trajectory file: 'timestamp tx ty tz qx qy qz qw' per line")
+    parser.add_argument("--trajectory", metavar="TUM", help="trajectory file: 'timestamp tx ty tz qx qy qz qw' per line "
+                                                             "(TUM), or lat/lon as .csv (time,lat,lon,depth[,heading]) "
+                                                             "or .nmea (GGA/VTG) with --origin")
     parser.add_argument("--lawnmower", nargs=4, type=float, metavar=("X_MIN", "X_MAX", "Y_MIN", "Y_MAX"),
                         help="a lawnmower survey of this world rectangle (lines along x)")
     parser.add_argument("--spacing", type=float, default=10.0, help="lawnmower line spacing, m (default 10)")
@@ -52,7 +54,18 @@ def trajectory_from_args(args, command="survey"):
     if (args.trajectory is None) == (args.lawnmower is None):
         raise CLIError(f"{command}: give exactly one of --trajectory FILE or --lawnmower X_MIN X_MAX Y_MIN Y_MAX")
     if args.trajectory is not None:
-        traj = Trajectory.from_tum(args.trajectory)
+        from mitsonar.geometry import geotrack
+
+        if geotrack.is_geo_trajectory(args.trajectory):   # lat/lon (CSV, NMEA): into the --origin grid
+            from mitsonar.geometry.geodesy import frame_from_args
+
+            frame = frame_from_args(args)
+            if frame is None:
+                raise CLIError(f"{command} --trajectory {args.trajectory}: a lat/lon trajectory needs "
+                               "--origin LAT LON [HEIGHT] (the world grid's origin)")
+            traj = geotrack.read_geo_trajectory(args.trajectory, frame)
+        else:
+            traj = Trajectory.from_tum(args.trajectory)
     else:
         if (args.depth is None) == (args.altitude is None):
             raise CLIError(f"{command} --lawnmower: give exactly one of --depth or --altitude")
