@@ -29,7 +29,6 @@ two-way time to ``range_min``, ``TimeDuration`` the two-way time of the window, 
 from __future__ import annotations
 
 import datetime
-import math
 import os
 import struct
 
