@@ -53,8 +53,6 @@ DEFAULT_SPP = 1024
 #: ``elements`` by name, built at the pulse's carrier and the head's sound speed (`mitsonar.signals.arrays`):
 #: a 64-element forward-looking line array at half a wavelength, a two-row interferometric side-scan.
 PRESETS = {"line_array": lambda **k: line_array(64, **k), "interferometer": lambda **k: interferometer(2, **k)}
-#: The head's band when its XML gives no ``bandwidth``: ``frequency`` +- this fraction of it / 2.
-DEFAULT_RELATIVE_BANDWIDTH = 0.5
 #: Lanes (paths x bounces slots) of one tracing pass: bounds the memory whatever the spp.
 PASS_SLOTS = 1 << 21
 
@@ -125,11 +123,10 @@ def _check_pulse(pulse):
 
 
 def head_band(sonar) -> tuple[float, float]:
-    """(low, high) Hz: the head's band, ``frequency`` +- half its ``bandwidth`` (the XML's, else
-    `DEFAULT_RELATIVE_BANDWIDTH` of the frequency)."""
+    """(low, high) Hz: the head's band, the sensor's ``frequency`` +- half its ``bandwidth`` (the
+    XML's, else a preset's published band, else ``frequency / 2``: `plugins.sonar_sensor.DEFAULT_Q`)."""
     f = float(sonar.beam.frequency)
-    bw = getattr(sonar, "bandwidth", None)
-    bw = DEFAULT_RELATIVE_BANDWIDTH * f if bw is None else float(bw)
+    bw = float(sonar.bandwidth)
     return f - 0.5 * bw, f + 0.5 * bw
 
 
@@ -165,8 +162,8 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
 
     A row is one transmission: one per ping for a mechanical or side-scan head, one per frame for a
     multibeam head (its receive beams come from `mitsonar.signals.beamform`). ``elements`` (n, 3) m in
-    the beam frame (default one element at the transmitter, the origin), the path of a CSV of x,y,z
-    rows, or a preset name (`PRESETS`: ``line_array``, ``interferometer``); ``sample_rate`` Hz (default
+    the beam frame (default the sensor's XML ``elements``, else one element at the transmitter, the
+    origin), the path of a CSV of x,y,z rows, or a preset name (`PRESETS`: ``line_array``, ``interferometer``); ``sample_rate`` Hz (default
     twice the pulse's bandwidth, ``4 / duration`` for a CW); ``spp`` paths per row; ``seed`` the
     paths'; ``speckle_seed`` the scene's scatterers (default the sensor's, 0); ``pose``,
     ``trajectory``, ``start_time``, ``sensor``, ``max_depth`` as `mitsonar.render_scan`;
@@ -202,7 +199,9 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
         sensor = pick_sensor(scene, sensor, f"{where} 'sensor':")
     sonar = sonar_of(scene, sensor)
     c = float(sonar.sound_speed)
-    if e is None:     # a preset at the pulse's carrier
+    if elements is None and getattr(sonar, "elements", None) is not None:
+        e = np.array(sonar.elements, dtype=np.float64)     # the sensor's XML elements (checked on load)
+    elif e is None:   # a preset at the pulse's carrier
         e = PRESETS[elements](frequency=pulse.carrier, sound_speed=c)
     if speckle_seed is None:
         speckle_seed = int(sonar.electronics.get("speckle_seed", 0))
