@@ -1,6 +1,7 @@
 """The head's band (``frequency`` +- ``bandwidth`` / 2) and receive elements (an ``elements`` CSV)
 in a scene's XML, used by `render_echoes`, and the example scenes that carry them: a forward-looking
-line array (``fls_array``) and an interferometric side-scan (``interferometric_sidescan``)."""
+line array (``fls_array``) and an interferometric side-scan (``interferometric_sidescan``); moving
+objects' Doppler (`render_echoes`'s ``velocities``)."""
 import os
 
 import numpy as np
@@ -161,3 +162,53 @@ def test_interferometric_sidescan_scene_maps_its_flat_seabed_flat(mitsonar_mod):
     assert np.percentile(np.abs(z[ok]), 95) < 0.01 * H
     assert abs(np.mean(z[ok])) < 0.002 * H
     assert np.all(b["points"][0, grazing, 1][ok] > 0)            # the port side: world +y
+
+
+def moving_wall_scene(mitsonar_mod):
+    from conftest import matrix_attr
+
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = (0, 0, 5.0), (0, 5.0, 0), (-1, 0, 0), (8.0, 0, 0)
+    wall = (f'<shape type="rectangle" id="wall"><transform name="to_world"><matrix value="{matrix_attr(m)}"/>'
+            f"</transform>{acoustic_xml(0.5)}</shape>")
+    sensor = sonar_xml(FORWARD, n_pings=1, n_bins=100, range_max=10.0, beamwidth_h=2.0, beamwidth_v=2.0)
+    return mitsonar_mod.load_scene(scene_xml(sensor, wall, sphere_xml((3.0, 3.0, 0), 0.1, acoustic_xml(0.5))))
+
+
+def test_a_wall_closing_on_a_still_head_shifts_the_carrier_by_2vf_over_c(mitsonar_mod):
+    """Objects' velocities: a Lambert wall moving at v towards (away from) a still head returns the
+    carrier shifted by +2 v f / c (-2 v f / c), within 3 %; still, by nothing."""
+    from mitsonar import signals as S
+
+    scene = moving_wall_scene(mitsonar_mod)
+    f, v, fs = 700e3, 2.0, 20e3
+    p = S.cw(f, 2e-3)
+
+    def shift(velocities):
+        x = mitsonar_mod.render_echoes(scene, p, spp=1024, sample_rate=fs, velocities=velocities).signal[0, 0]
+        on = np.abs(x) > 0.5 * np.abs(x).max()
+        pairs = (x[1:] * np.conj(x[:-1]))[on[1:] & on[:-1]]
+        return np.angle(pairs.sum()) * fs / (2 * np.pi)
+
+    assert shift({"wall": (-v, 0, 0)}) == pytest.approx(2 * v * f / C, rel=0.03)
+    assert shift({"wall": (v, 0, 0)}) == pytest.approx(-2 * v * f / C, rel=0.03)
+    assert abs(shift(None)) < 0.01 * 2 * v * f / C
+    assert abs(shift({"wall": (0, v, 0)})) < 0.05 * 2 * v * f / C        # across the line of sight: none
+
+
+@pytest.mark.parametrize("velocities, message", [
+    ({"ship": (1, 0, 0)}, r"render_echoes 'velocities': 'ship' is not allowed \(a shape id of the scene: 'wall'\)$"),
+    ({"wall": (1, 0)}, r"render_echoes 'velocities': 'wall': \(1, 0\) is not allowed \(a finite \(vx, vy, vz\)"),
+    ({"wall": (np.nan, 0, 0)}, r"render_echoes 'velocities': 'wall': .* is not allowed"),
+    ({"wall": (200.0, 0, 0)}, r"slower than a tenth of the sound speed, 150 m/s"),
+    ([(1, 0, 0)], r"render_echoes 'velocities': list is not allowed \(a dict of shape id"),
+])
+def test_bad_velocities_are_refused_before_rendering(mitsonar_mod, monkeypatch, velocities, message):
+    from mitsonar import signals as S
+    from mitsonar.signals import echoes as E
+
+    scene = moving_wall_scene(mitsonar_mod)
+    monkeypatch.setattr(E, "_trace", lambda *a, **k: pytest.fail("rendered before refusing"))
+    with pytest.raises(mitsonar_mod.SceneError, match=message) as err:
+        mitsonar_mod.render_echoes(scene, S.cw(700e3, 2e-3), velocities=velocities)
+    assert "\n" not in str(err.value)
