@@ -30,11 +30,6 @@ Published figures (frequency, beam count, beam widths, swath), and where they co
 ``tritech_pa500`` Tritech PA500 altimeter: 500 kHz, 6 deg conical beam, 0.1 to 50 m, 1 mm
                   resolution (Tritech PA500 data sheet).
 
-The transducer's band (the sensor's ``frequency`` and ``bandwidth``, which `mitsonar.render_echoes`
-holds a pulse's carrier to): the R2Sonic's 60 kHz signal bandwidth around its operating frequency
-(Sonic 2024 data sheet); the EM 2040's and the PA500's sheets give none, so they take the sensor's
-rule ``frequency / 2`` (`plugins.sonar_sensor.DEFAULT_Q`).
-
 Source levels (``source_level``, dB re 1 uPa at 1 m) are typical values, not found in the sheets
 cited above: 215 dB for the two multibeams (high-frequency MBES: 200..230 dB, Lurton, *An
 Introduction to Underwater Acoustics*, 2nd ed. 2010, sec. 8.3), 205 dB for the altimeter. Each
@@ -93,14 +88,12 @@ class EchoSounder:
     source: str
     source_level: float = 215.0    # dB re 1 uPa at 1 m (typical: see the module docstring)
     noise_level: float = 37.0      # dB re 1 uPa^2/Hz, ambient at the frequency
-    bandwidth: float | None = None  # Hz, the transducer's band around frequency (None: the sensor's rule)
 
 
 PRESETS = {
     "r2sonic_2024": EchoSounder(
         "r2sonic_2024", "R2Sonic Sonic 2024", MULTIBEAM, 400e3, 256, 0.5, 1.0, 130.0, (10.0, 160.0),
-        40.0, 0.0125, "R2Sonic Sonic 2024/2022 Operation Manual V5.0 (2014) sec. 1.1; Sonic 2024 data sheet",
-        bandwidth=60e3),
+        40.0, 0.0125, "R2Sonic Sonic 2024/2022 Operation Manual V5.0 (2014) sec. 1.1; Sonic 2024 data sheet"),
     "kongsberg_em2040": EchoSounder(
         "kongsberg_em2040", "Kongsberg EM 2040", MULTIBEAM, 400e3, 400, 1.0, 0.5, 140.0, (10.0, 140.0),
         40.0, 0.0125, "Kongsberg Maritime EM 2040 product leaflet; EM 2040 data sheet"),
@@ -199,8 +192,7 @@ def configure(name, *, swath=None, n_beams=None, range_min=None, range_max=None,
 
     check_rigid(mount, f"{WHERE} 'mount'")
     params = dict(range_min=float(range_min), range_max=float(range_max), n_bins=int(n_bins),
-                  sound_speed=float(sound_speed), frequency=float(s.frequency), beam_pattern="gaussian",
-                  source_level=s.source_level,
+                  sound_speed=float(sound_speed), beam_pattern="gaussian", source_level=s.source_level,
                   receiver_sensitivity=CALIBRATION_DB - s.source_level, noise_level=s.noise_level)
     if multibeam:
         n = int(n_beams)
@@ -211,8 +203,6 @@ def configure(name, *, swath=None, n_beams=None, range_min=None, range_max=None,
     else:
         params.update(kind=s.kind.name, n_pings=1, bearing_start=0.0, bearing_step=0.0,
                       beamwidth_h=s.rx_across, beamwidth_v=s.tx_along)
-    if s.bandwidth is not None:
-        params["bandwidth"] = float(s.bandwidth)
     return HeadSetup(s, params, mount)
 
 
