@@ -72,6 +72,17 @@ def test_misspelled_parameter_names_the_nearest_parameter(mitsonar_mod):
         mitsonar_mod.load_scene(bad)
 
 
+def test_a_mitsuba_parse_error_is_one_line_naming_the_file(mitsonar_mod, tmp_path):
+    """Mitsuba's own refusal (here a duplicate id: no plugin of ours raised) comes back as one
+    line naming the file and both places; reducing it once failed with a NameError."""
+    path = tmp_path / "dup.xml"
+    path.write_text('<scene version="3.0.0"><integrator type="sonar_tof"/><sensor type="sonar"/>\n'
+                    '<shape type="rectangle" id="a"/>\n<shape type="rectangle" id="a"/></scene>\n')
+    with pytest.raises(mitsonar_mod.SceneError, match=r'duplicate ID: "a"') as info:
+        mitsonar_mod.load_scene(str(path))
+    assert "\n" not in str(info.value) and str(path) in str(info.value)
+
+
 @pytest.mark.parametrize("params, message", [
     (dict(n_bins=0), r"sonar 'n_bins': 0 is not allowed \(1 to 65536\)"),
     (dict(range_min=5.0, range_max=2.0), r"sonar 'range_max'.*range_min"),
