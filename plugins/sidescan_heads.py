@@ -18,7 +18,10 @@ Published values (manufacturers' datasheets):
   in the lower fins are angled 30 deg down from the horizontal and transmit a fan 2 deg wide
   (along track) by 100 deg vertically, "most of the acoustic energy confined to the centre
   60 deg" (the preset's -3 dB across-track width); maximum range 100 m per side (product sheet).
-  Preset ``starfish450``.
+  Preset ``starfish450``, its ``bandwidth`` the published CHIRP band, 50 kHz.
+
+The transducers' band (``bandwidth``): published for the StarFish (above); Klein's sheet gives none,
+so the Klein presets take the sensor's rule, ``frequency / DEFAULT_Q`` (`sonar_sensor.DEFAULT_Q`).
 
 Source levels (``source_level``, dB re 1 uPa at 1 m): neither Klein's System 3000 sheet nor
 Tritech's StarFish pages at hand publish one, so the presets take typical values, stated here:
@@ -43,6 +46,6 @@ PRESETS = {
                            range_max=150.0, depression=10.0,
                            source_level=215.0, receiver_sensitivity=-163.0, noise_level=39.0),
     "starfish450": dict(frequency=450e3, beam_pattern="sinc", beamwidth_h=2.0, beamwidth_v=60.0,
-                        range_max=100.0, depression=30.0,
+                        range_max=100.0, depression=30.0, bandwidth=50e3,
                         source_level=205.0, receiver_sensitivity=-153.0, noise_level=38.0),
 }

@@ -14,7 +14,7 @@ from mitsonar._checks import not_allowed, require
 import mitsonar.geometry.kinds as kinds
 from mitsonar.geometry.frames import SIDES, check_rigid, check_rigid_stack
 
-from .beam import BeamPattern, read_beam_table
+from .beam import BeamPattern, read_beam_table, resolve_path
 from .jit_arrays import upload
 from .props import count, number, text
 from .sidescan_heads import PRESETS
@@ -25,6 +25,14 @@ MAX_BINS, MAX_PINGS = 65536, 100000
 DEFAULT_FREQUENCY = 700e3
 # A side-scan head's transducers are tilted down this much unless the XML (or a preset) says.
 DEFAULT_DEPRESSION = 15.0
+#: The transducer's quality factor when neither the XML nor a preset gives a ``bandwidth``: the band is
+#: ``frequency / DEFAULT_Q`` wide (+-25 %). Stansfield's optimum mechanical Q of a broadband projector,
+#: ``Q_opt = 1.2 sqrt(1 - k_eff^2) / k_eff`` (Stansfield, *Underwater Electroacoustic Transducers*, 1991,
+#: as used by Moffett et al., J. Acoust. Soc. Am. 121(5), 2007, doi:10.1121/1.2717496, whose
+#: fractional bandwidth is about 1 / Q), is 2.1 for an effective coupling k_eff = 0.5, a PZT
+#: transducer's (material k33 about 0.7, the effective coupling below it); single-crystal heads reach
+#: Q = 1, narrowband resonant ones are higher: give their ``bandwidth``.
+DEFAULT_Q = 2.0
 
 
 class SonarSensor(mi.Sensor):
@@ -85,7 +93,16 @@ class SonarSensor(mi.Sensor):
                                   head's depth ``surface_z - z`` (z of ``to_world``'s origin)
     absorption       0            dB/m, applied to the whole two-way path; or ``auto``: Francois
                                   and Garrison (1982) at ``frequency`` and the head's depth
-    frequency        700e3        Hz (``sinc``; ``absorption`` ``auto``)
+    frequency        700e3        Hz, the head's carrier: the centre of its band (``bandwidth``),
+                                  the ``sinc`` pattern's and ``absorption`` ``auto``'s frequency
+    bandwidth        frequency/Q  Hz, the transducer's band ``frequency +- bandwidth / 2``: the
+                                  carriers `mitsonar.render_echoes` accepts; default a preset's
+                                  published band, else ``frequency / DEFAULT_Q`` (Q = 2)
+    elements         (none)       CSV of the receive elements' ``x,y,z`` rows (m, beam frame; a
+                                  header line allowed), relative to the scene file; read and
+                                  checked when the scene loads; `mitsonar.render_echoes` uses
+                                  them when its ``elements`` is None (default: one element at
+                                  the transmitter)
     temperature      10           deg C, the water (only with ``auto``; F&G: -2 to 22,
                                   Mackenzie: -2 to 30)
     salinity         35           ppt, the water (only with ``auto``; F&G: 30 to 35,
@@ -150,7 +167,7 @@ class SonarSensor(mi.Sensor):
         bw_v = num("beamwidth_v", preset.get("beamwidth_v", beam[1]))
         table_path = text(props, "beam_table", "", "sonar")
         frequency = num("frequency", None)
-        if frequency is None and pattern == "sinc":
+        if frequency is None:
             frequency = preset.get("frequency")
         ap_h = num("aperture_h", None)
         ap_v = num("aperture_v", None)
@@ -182,12 +199,12 @@ class SonarSensor(mi.Sensor):
         self.beam = BeamPattern(pattern, bw_h, bw_v, DEFAULT_FREQUENCY if frequency is None else frequency,
                                 ap_h, ap_v, self.sound_speed, table)
         self.transmit = self._transmit(tx, bw_h, bw_v, self.beam.frequency)
-        if (frequency is not None and "sinc" not in (pattern, getattr(self.transmit, "kind", None))
-                and "absorption" not in self.water_auto):
-            if self.transmit is None:
-                raise ValueError(f"sonar 'frequency' is only used with beam_pattern 'sinc' (got {pattern!r})")
-            raise ValueError(f"sonar 'frequency' is only used with beam_pattern or tx_pattern 'sinc' "
-                             f"(got {pattern!r} and {self.transmit.kind!r})")
+        self.bandwidth = num("bandwidth", preset.get("bandwidth", self.beam.frequency / DEFAULT_Q))
+        if not (math.isfinite(self.bandwidth) and 0.0 < self.bandwidth < 2.0 * self.beam.frequency):
+            raise not_allowed("sonar", "bandwidth", self.bandwidth, f"a band > 0 Hz and below 2 frequency = "
+                              f"{2.0 * self.beam.frequency:.0f} Hz: the band is frequency +- bandwidth / 2")
+        self.elements_file = text(props, "elements", None, "sonar")
+        self.elements = None if self.elements_file is None else read_head_elements(self.elements_file)
         self.beam_table = table_path
         self.to_world_np = check_rigid(np.array(self.world_transform().matrix, dtype=np.float64).reshape(4, 4))
 
@@ -382,6 +399,20 @@ class SonarSensor(mi.Sensor):
         return (f"SonarSensor[kind={self.kind}, n_pings={self.n_pings}, n_bins={self.n_bins}, "
                 f"range=[{self.range_min:g}, {self.range_max:g}) m, beam={self.beam.kind} "
                 f"{self.beam.beamwidth_h:g}x{self.beam.beamwidth_v:g} deg{tx}]")
+
+
+def read_head_elements(path: str) -> np.ndarray:
+    """(n, 3) m: the XML ``elements`` CSV (a relative path from the scene file's folder first, as
+    ``beam_table``), read and checked by `mitsonar.geometry.elements.read_elements`."""
+    import os
+
+    from mitsonar.geometry.elements import read_elements
+
+    found, tried = resolve_path(path)
+    if found is None or os.path.isdir(found):
+        raise ValueError(f"sonar 'elements': {path!r} is not allowed (a CSV file of x,y,z rows in m; tried "
+                         f"{', '.join(tried)})")
+    return read_elements(found, f"sonar (elements file {found})")
 
 
 class PingFrames:

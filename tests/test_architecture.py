@@ -159,7 +159,9 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
                "mitsonar.acoustics.seawater", "mitsonar.acoustics.interface", "mitsonar.acoustics.seabed",
                "mitsonar.acoustics.materials",
                # the sound-speed profile: the integrators read their XML sound_speed_profile with it
-               "mitsonar.acoustics.profile"}
+               "mitsonar.acoustics.profile",
+               # the receive elements' layout: the sensor reads its XML elements CSV with it (numpy)
+               "mitsonar.geometry.elements"}
     for name, out in edges.items():
         if name.startswith("mitsonar.plugins"):
             above = {t for t in out if t.startswith("mitsonar") and not t.startswith("mitsonar.plugins")}
@@ -168,7 +170,7 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     # sonar equation's levels are numpy-only leaves beside them)
     leaves = {"mitsonar._checks", "mitsonar.receiver.speckle", "mitsonar.sonar_equation.levels",
               "mitsonar.acoustics._checks", "mitsonar.acoustics.seawater", "mitsonar.acoustics.interface",
-              "mitsonar.acoustics.seabed", "mitsonar.acoustics.materials"}
+              "mitsonar.acoustics.seabed", "mitsonar.acoustics.materials", "mitsonar.geometry.elements"}
     for low in (allowed | leaves) - {"mitsonar._checks", "mitsonar.geometry.kinds"}:
         assert not {t for t in edges[low] if t.startswith("mitsonar")} - leaves, low
     # the kinds (numpy only) rotate rows with the frames' rotations

@@ -240,7 +240,7 @@ def test_defaults_look_like_a_micron():
 
 def test_fields_are_the_xml_contract():
     types = {f.name: f.type for f in dataclasses.fields(Electronics)}
-    for name in ("source_level", "receiver_sensitivity", "noise_level", "bandwidth", "tvg", "tvg_cap", "gain", "ad_low", "ad_span", "bit_depth", "pulse_length",
+    for name in ("source_level", "receiver_sensitivity", "noise_level", "receiver_bandwidth", "tvg", "tvg_cap", "gain", "ad_low", "ad_span", "bit_depth", "pulse_length",
                  "range_jitter", "speckle", "speckle_shape", "noise_floor", "ringdown"):
         assert name in types
     for f in dataclasses.fields(Electronics):
@@ -264,7 +264,7 @@ def test_fields_are_the_xml_contract():
     ("noise_floor", math.nan, "is not a finite level"),
     ("source_level", math.inf, "is not a finite number"),
     ("receiver_sensitivity", math.nan, "is not a finite number"),
-    ("bandwidth", -1.0, "is not a bandwidth >= 0 Hz"),
+    ("receiver_bandwidth", -1.0, "is not a bandwidth >= 0 Hz"),
     ("gain", "high", "is not a number"),
     ("tvg", 20, "is not a string"),
     ("ringdown_level", 0.0, "above ad_low"),

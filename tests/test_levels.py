@@ -170,10 +170,29 @@ def test_snr_is_echo_level_minus_noise_in_band(mitsonar_mod):
     noise = 42.0 + 10 * math.log10(1 / tau) - di
     assert scan.noise_band_level == pytest.approx(noise, abs=1e-3)
     np.testing.assert_allclose(scan.snr, scan.echo_level - np.float32(noise), atol=1e-3)
-    # an explicit bandwidth and noise level, and DI recomputed from the fields without the record
-    scan.electronics.update(bandwidth=1e4, noise_level=50.0)
+    # an explicit receiver bandwidth and noise level, and DI recomputed from the fields without the record
+    scan.electronics.update(receiver_bandwidth=1e4, noise_level=50.0)
     del scan.meta["directivity_index"]
     assert scan.noise_band_level == pytest.approx(50.0 + 40.0 - di, abs=1e-3)
+
+
+def test_receiver_bandwidth_is_the_noise_band_and_files_saved_as_bandwidth_still_load(mitsonar_mod, tmp_path):
+    """The receiver's noise bandwidth is the electronics field ``receiver_bandwidth`` (the sensor's
+    ``bandwidth`` is the transducer's band); scans saved while it was called ``bandwidth`` load with
+    it under the new name, and settings dicts with the old key still build."""
+    from mitsonar.receiver.electronics import Electronics
+
+    e = Electronics(receiver_bandwidth=1e4, pulse_length=1e-4)
+    assert e.noise_bandwidth() == 1e4 and Electronics(pulse_length=1e-4).noise_bandwidth() == pytest.approx(1e4)
+    assert Electronics.from_dict({"bandwidth": 2e4}).receiver_bandwidth == 2e4
+    scan = mitsonar_mod.render_scan(sphere_scene(mitsonar_mod, 0.05, 3.0, 0.0, 300.0), spp=64, seed=0)
+    old = {k: v for k, v in scan.electronics.items() if k != "receiver_bandwidth"}
+    scan.electronics = {**old, "bandwidth": 1e4, "noise_level": 50.0}          # as saved this morning
+    for suffix in ("npz", "exr"):
+        scan.save(tmp_path / f"old.{suffix}")
+        back = mitsonar_mod.load_scan(tmp_path / f"old.{suffix}")
+        assert back.electronics["receiver_bandwidth"] == 1e4 and "bandwidth" not in back.electronics
+        assert back.noise_band_level == pytest.approx(50.0 + 40.0 - back.directivity_index, abs=1e-3)
 
 
 # ----------------------------------------------------------------------------- electronics, files

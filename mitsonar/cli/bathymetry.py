@@ -18,6 +18,10 @@ differs from it shows the refraction error a wrong profile gives (depth error ag
 ``sound_speed_profile``): processed straight at the nominal speed its soundings bend up or down
 towards the outer beams (the smile, or frown, of a wrong profile); ``--processing-svp`` with the
 same file corrects them.
+With ``--origin LAT LON [HEIGHT]`` (and ``--crs EPSG:NNNN``, `mitsonar.geometry.geodesy`) the run is
+georeferenced: ``depth.tif`` carries the CRS, and ``soundings.las``, ``soundings.csv``,
+``soundings.kmall`` (#MRZ per ping) and (when GDAL has its BAG driver) ``depth.bag`` are written too
+(`mitsonar.export`).
 Every option is checked before the first render; all files are written under temporary names and
 renamed together at the end.
 """
@@ -29,8 +33,11 @@ import os
 
 import numpy as np
 
-#: Every file a run may write (``depth.tif`` only when ``rasterio`` is installed).
+#: Every file a run may write (``depth.tif`` only when ``rasterio`` is installed; ``soundings.las``,
+#: ``soundings.csv``, ``soundings.kmall`` and ``depth.bag`` (when GDAL has its BAG driver) only with
+#: ``--origin``).
 OUTPUTS = ("soundings.ply", "depth.npz", "depth.tif", "errors.json", "bathymetry.png")
+GEO_OUTPUTS = ("soundings.las", "soundings.csv", "soundings.kmall", "depth.bag")
 
 
 class BathymetryCLIError(ValueError):
@@ -121,6 +128,7 @@ def cmd_bathymetry(args):
     except ValueError as exc:
         raise BathymetryCLIError(str(exc)) from None
     traj = trajectory_from_args(args, "bathymetry")
+    frame = _geo_frame(args)
     for flag, given in (("--processing-svp", svp), ("--svp", water)):
         if given is not None and (traj.positions[:, 2] > 0).any():
             raise BathymetryCLIError(f"bathymetry {flag}: the track rises {traj.positions[:, 2].max():g} m above "
@@ -130,9 +138,40 @@ def cmd_bathymetry(args):
     sensor = sensor_of(scene, args, BathymetryCLIError)
     check_output_folder(args.output, BathymetryCLIError, what="a bathymetry run", force=True,
                         holds=None if args.force else
-                        lambda out: any(os.path.exists(os.path.join(out, f)) for f in OUTPUTS))
+                        lambda out: any(os.path.exists(os.path.join(out, f)) for f in OUTPUTS + GEO_OUTPUTS))
     with _output_folder(args.output):   # made now; removed again if the run fails and leaves it empty
-        return _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_ply, StagedFiles, water)
+        return _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_ply, StagedFiles, water,
+                    frame)
+
+
+def _geo_frame(args):
+    """The `GeoFrame` of ``--origin``/``--crs`` (None without); with one, laspy and rasterio are
+    needed (soundings.las, depth.tif with its CRS): refused here, before any render, if missing."""
+    from mitsonar.geometry.geodesy import frame_from_args
+
+    frame = frame_from_args(args)
+    if frame is not None:
+        for module, extra in (("laspy", "geo"), ("rasterio", "geotiff")):
+            try:
+                __import__(module)
+            except ImportError:
+                raise BathymetryCLIError(f"bathymetry --origin: writes soundings.las and depth.tif with their CRS, "
+                                         f"which needs {module}: pip install 'mitsonar[{extra}]'") from None
+    return frame
+
+
+def _uncertainty(run):
+    """Each sounding's predicted depth sigma (m, `predicted_rms` at its range and angle) where the
+    model holds (speckled centroid detection across a transmit fan), else None."""
+    from mitsonar.geometry import kinds
+    from mitsonar.products.bathymetry import predicted_rms
+
+    info, s = run.sonar, run.soundings
+    fan = getattr(kinds.lookup(info.get("kind")), "transmit_fan", False)
+    if not (info.get("speckle") and info.get("method") == "centroid" and fan):
+        return None
+    return predicted_rms(s["range"], s["angle"], info["beamwidth_h"], info["bin_width"],
+                         resolution=info.get("speckle_resolution"))
 
 
 @contextlib.contextmanager
@@ -157,7 +196,8 @@ def _output_folder(folder):
         raise
 
 
-def _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_ply, StagedFiles, water=None):
+def _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_ply, StagedFiles, water=None,
+         frame=None):
     run = bathymetry.survey(scene, traj, spp=args.spp, seed=args.seed, threshold_db=args.threshold_db,
                             method=args.method, speckle=not args.no_speckle, max_scans=args.max_scans,
                             max_depth=args.max_depth, progress=not args.quiet, sensor=sensor,
@@ -173,16 +213,38 @@ def _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_pl
                        sensor=sensor.id() if head is None else None, scene=args.scene, cell=args.cell,
                        surface=args.surface, transform=list(grid.transform), processing_svp=args.processing_svp,
                        svp=args.svp)
+        if frame is not None:
+            summary.update(origin=[frame.lat, frame.lon, frame.height], crs=frame.crs)
         with open(files.temporary(os.path.join(out, "errors.json")), "w") as f:
             json.dump(summary, f, indent=1)
         plot_bathymetry(run, grid, files.temporary(os.path.join(out, "bathymetry.png")), traj)
-        try:
-            import rasterio  # noqa: F401
-        except ImportError:
-            pass
+        if frame is not None:   # georeferenced: the grid in the CRS, the soundings as LAS and CSV
+            from mitsonar.export.geotiff import write_depth_geotiff
+            from mitsonar.export.las import write_csv, write_las
+
+            from mitsonar.export.bag import bag_available, write_bag
+
+            sigma = _uncertainty(run)
+            write_depth_geotiff(files.temporary(os.path.join(out, "depth.tif")), grid, frame)
+            write_las(files.temporary(os.path.join(out, "soundings.las")), run.soundings, frame, uncertainty=sigma)
+            write_csv(files.temporary(os.path.join(out, "soundings.csv")), run.soundings, frame)
+            from mitsonar.export.kmall import write_kmall
+
+            write_kmall(files.temporary(os.path.join(out, "soundings.kmall")), run.soundings, traj, frame,
+                        n_beams=int(run.sonar["beams"]), sound_speed=float(run.sonar["sound_speed"]),
+                        uncertainty=sigma)
+            written += ["depth.tif", "soundings.las", "soundings.csv", "soundings.kmall"]
+            if bag_available():
+                write_bag(files.temporary(os.path.join(out, "depth.bag")), grid, frame, run.soundings, sigma)
+                written.append("depth.bag")
         else:
-            grid.write_geotiff(files.temporary(os.path.join(out, "depth.tif")))
-            written.append("depth.tif")
+            try:
+                import rasterio  # noqa: F401
+            except ImportError:
+                pass
+            else:
+                grid.write_geotiff(files.temporary(os.path.join(out, "depth.tif")))
+                written.append("depth.tif")
     print(summary_line(summary, written, out))
     return 0
 
@@ -234,4 +296,7 @@ def add_subcommands(sub):
     s.add_argument("--max-depth", type=int, help="surface bounces (default: the scene's integrator)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.add_argument("--force", action="store_true", help="overwrite the outputs of a run already in the folder")
+    from mitsonar.geometry.geodesy import add_geo_options
+
+    add_geo_options(s)   # with --origin: depth.tif in the CRS, soundings.las and soundings.csv
     s.set_defaults(func=cmd_bathymetry)

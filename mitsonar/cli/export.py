@@ -1,4 +1,5 @@
-"""``mitsonar export SCANS... --mcap OUT``: scans as an MCAP file of ROS 2 messages (Foxglove,
+"""``mitsonar export SCANS... --mcap OUT`` (and/or ``--xtf OUT --origin LAT LON``: side-scan
+pings as XTF, `mitsonar.export.xtf`): scans as an MCAP file of ROS 2 messages (Foxglove,
 ``ros2 bag``), written with ``mcap`` and ``mcap-ros2-support`` only; topics and frames in
 `mitsonar.export.ros.bag` and docs/howto/ros2_bags.rst.
 
@@ -24,9 +25,16 @@ def cmd_export(args):
     from mitsonar.scan.io import load_scan
     from mitsonar.geometry.trajectory import Trajectory
 
-    if args.mcap is None:
-        raise ExportError("export: give --mcap OUT.mcap (the only output format so far)")
-    check_output(args.mcap, args.force)
+    if args.mcap is None and args.xtf is None:
+        raise ExportError("export: give --mcap OUT.mcap and/or --xtf OUT.xtf")
+    if args.mcap is not None:
+        check_output(args.mcap, args.force)
+    if args.xtf is not None:
+        from mitsonar.export.xtf import check_xtf_output
+        from mitsonar.geometry.geodesy import frame_from_args
+
+        check_xtf_output(args.xtf, args.force)
+        frame_from_args(args)                     # a bad --origin/--crs: refused before reading scans
     traj = Trajectory.from_tum(args.trajectory) if args.trajectory else None
     scans = []
     for path in args.scans:                       # every input read and checked before any output
@@ -38,12 +46,35 @@ def cmd_export(args):
             raise ExportError(f"{path}: 'times' (+ meta start_time) span [{t0:.9g}, {t1:.9g}] s; allowed: "
                               f"within the trajectory's span [{lo:.9g}, {hi:.9g}] s")
         scans.append(scan)
+    if args.xtf is not None:
+        _export_xtf(args, scans, traj)
+    if args.mcap is None:
+        return 0
     with McapBag(args.mcap, start=args.start, trajectory=traj, threshold=args.threshold, force=args.force) as bag:
         for scan, path in zip(scans, args.scans):
             bag.add(scan, path)
     summary = ", ".join(f"{n} on {t}" for t, n in bag.counts.items())
     print(f"wrote {args.mcap}: {summary}")
     return 0
+
+
+def _export_xtf(args, scans, traj):
+    from mitsonar.export.xtf import check_scan as check_xtf_scan, frame_for, write_xtf
+
+    for scan, path in zip(scans, args.scans):
+        check_xtf_scan(scan, path)
+    frame = frame_for(args, scans, args.scans)
+    n = write_xtf(args.xtf, scans, frame, names=args.scans, start=args.start, trajectory=traj)
+    print(f"wrote {args.xtf}: {n} side-scan pings, navigation in lat/lon ({frame.crs} grid)")
+
+
+def add_xtf_options(parser):
+    """``--xtf OUT`` and the georeference flags (``--origin``, ``--crs``)."""
+    from mitsonar.geometry.geodesy import add_geo_options
+
+    parser.add_argument("--xtf", metavar="OUT", help="also write the side-scan pings as an XTF file (needs --origin, "
+                                                     "or scans whose metadata hold one)")
+    add_geo_options(parser)
 
 
 def add_subcommands(sub):
@@ -56,4 +87,5 @@ def add_subcommands(sub):
     e.add_argument("--trajectory", metavar="TUM", help="the vehicle's trajectory (a survey's trajectory.tum): "
                                                        "/tf gets map -> base_link -> sonar and /odom the vehicle")
     add_mcap_options(e)
+    add_xtf_options(e)
     e.set_defaults(func=cmd_export)

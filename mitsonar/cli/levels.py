@@ -13,7 +13,7 @@ class LevelsCLIError(ValueError):
 def add_subcommands(sub):
     s = sub.add_parser("levels", help="the sonar equation of a scene's head: SL, TL, EL, NL, DI, SNR",
                        description="Render a scene (or read a scan file) and print the sonar equation: the "
-                                   "head's source level, noise, bandwidth and directivity index, and per ping "
+                                   "head's source level, noise, receiver bandwidth and directivity index, and per ping "
                                    "the strongest echo's range, echo level, transmission loss, implied target "
                                    "strength (or S_b + 10 log A) and SNR; optionally a figure of echo level "
                                    "and noise against range.")

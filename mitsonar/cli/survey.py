@@ -9,6 +9,9 @@ only inside its beams, `plots.plot_cartesian`); for a side-scan head instead ``s
 (the first scan's waterfall) and ``mosaic.png`` (+ ``mosaic.pgw``, ``mosaic.npz``: the survey's
 georeferenced mosaic, `mitsonar.products.mosaic`, in cells of a range bin (0.1 m at least, coarser for a
 grid of more than 2e7 cells), flat bottom at the measured altitude).
+With ``--origin LAT LON [HEIGHT]`` (``--crs``; `mitsonar.geometry.geodesy`) every scan carries the
+origin and CRS in its metadata, a side-scan survey also writes ``mosaic.tif`` (the mosaic in the
+CRS), and ``--xtf OUT`` writes its pings as XTF (`mitsonar.export.xtf`).
 Everything is checked (trajectory file, scene, folder, that a scan fits in the track) before the
 first file is written; each file is written under a temporary name and renamed.
 """
@@ -30,7 +33,9 @@ def add_trajectory_options(parser):
     """The trajectory flags a survey-like command takes: ``--trajectory TUM`` or ``--lawnmower
     X_MIN X_MAX Y_MIN Y_MAX`` with ``--spacing``, ``--speed``, ``--depth``/``--altitude``,
     ``--yaw-rate``, and ``--drift SEED`` (read back by `trajectory_from_args`)."""
-    parser.add_argument("--trajectory", metavar="TUM", help="trajectory file: 'timestamp tx ty tz qx qy qz qw' per line")
+    parser.add_argument("--trajectory", metavar="TUM", help="trajectory file: 'timestamp tx ty tz qx qy qz qw' per line "
+                                                             "(TUM), or lat/lon as .csv (time,lat,lon,depth[,heading]) "
+                                                             "or .nmea (GGA/VTG) with --origin")
     parser.add_argument("--lawnmower", nargs=4, type=float, metavar=("X_MIN", "X_MAX", "Y_MIN", "Y_MAX"),
                         help="a lawnmower survey of this world rectangle (lines along x)")
     parser.add_argument("--spacing", type=float, default=10.0, help="lawnmower line spacing, m (default 10)")
@@ -49,7 +54,18 @@ def trajectory_from_args(args, command="survey"):
     if (args.trajectory is None) == (args.lawnmower is None):
         raise CLIError(f"{command}: give exactly one of --trajectory FILE or --lawnmower X_MIN X_MAX Y_MIN Y_MAX")
     if args.trajectory is not None:
-        traj = Trajectory.from_tum(args.trajectory)
+        from mitsonar.geometry import geotrack
+
+        if geotrack.is_geo_trajectory(args.trajectory):   # lat/lon (CSV, NMEA): into the --origin grid
+            from mitsonar.geometry.geodesy import frame_from_args
+
+            frame = frame_from_args(args)
+            if frame is None:
+                raise CLIError(f"{command} --trajectory {args.trajectory}: a lat/lon trajectory needs "
+                               "--origin LAT LON [HEIGHT] (the world grid's origin)")
+            traj = geotrack.read_geo_trajectory(args.trajectory, frame)
+        else:
+            traj = Trajectory.from_tum(args.trajectory)
     else:
         if (args.depth is None) == (args.altitude is None):
             raise CLIError(f"{command} --lawnmower: give exactly one of --depth or --altitude")
@@ -83,11 +99,13 @@ def cmd_survey(args):
         from mitsonar.export.ros.bag import check_output
 
         check_output(args.mcap, args.force, folder_may_be=out)
+    frame, kept = _check_xtf(args, scene, sensor, out)   # --origin/--crs, --xtf: refused before any render
     ext = "." + args.format
     mosaic = _mosaic_grid(scene, traj, sensor)      # a side-scan survey's mosaic, checked before any render
     try:   # checks every argument and the plan, then makes the folder; renders nothing yet
         scans = mitsonar.render_survey(scene, traj, out, spp=args.spp, seed=args.seed, max_scans=args.max_scans,
-                                       ext=ext, progress=not args.quiet, sensor=sensor)
+                                       ext=ext, progress=not args.quiet, sensor=sensor,
+                                       meta=None if frame is None else frame.meta())
     except OSError as exc:
         raise CLIError(f"-o {out!r}: cannot create the output folder ({exc.strerror})") from None
     if args.force:                                  # --force: the folder holds this survey only
@@ -98,6 +116,8 @@ def cmd_survey(args):
         from mitsonar.export.ros.bag import McapBag
 
         bag = McapBag(args.mcap, start=args.start, trajectory=traj, threshold=args.threshold, force=args.force)
+    if kept is not None:
+        scans = _keeping(scans, kept)
     try:
         n = _draw(args, scene, traj, out, scans, bag, mosaic)
     except BaseException:
@@ -106,9 +126,47 @@ def cmd_survey(args):
         raise
     if bag is not None:
         bag.close()
+    if kept is not None:
+        from mitsonar.export.xtf import write_xtf
+
+        write_xtf(args.xtf, kept, frame, start=args.start, trajectory=traj)
     print(f"wrote {n} scans, trajectory.tum and track.png to {out}" + (f" and {args.mcap}" if bag else "") +
+          (f" and {args.xtf}" if kept is not None else "") +
           f" ({traj.span[1] - traj.span[0]:.6g} s of track)")
     return 0
+
+
+def _check_xtf(args, scene, sensor, out):
+    """The survey's `GeoFrame` (None without ``--origin``) and, with ``--xtf``, the list the scans
+    are kept in for it; a bad flag is refused here, before any render."""
+    from mitsonar.geometry.geodesy import frame_from_args
+
+    from mitsonar.sim.scene import sonar_of
+
+    frame = frame_from_args(args)
+    kind = sonar_of(scene, sensor).sonar_kind
+    if frame is not None and kind.mosaic:          # mosaic.tif with its CRS
+        try:
+            import rasterio  # noqa: F401
+        except ImportError:
+            raise CLIError("survey --origin: a side-scan survey writes mosaic.tif with its CRS, which needs "
+                           "rasterio: pip install 'mitsonar[geo]'") from None
+    if args.xtf is None:
+        return frame, None
+    from mitsonar.export.xtf import check_xtf_output
+
+    check_xtf_output(args.xtf, args.force, folder_may_be=out)
+    if not kind.sided:
+        raise CLIError(f"survey --xtf: the scene's sonar is a {kind.name} head; XTF holds side-scan pings only")
+    if frame is None:
+        raise CLIError("survey --xtf: give --origin LAT LON [HEIGHT] (XTF navigation is in latitude and longitude)")
+    return frame, []
+
+
+def _keeping(scans, kept):
+    for scan in scans:
+        kept.append(scan)
+        yield scan
 
 
 def _draw(args, scene, traj, out, scans, bag, mosaic=None):
@@ -134,6 +192,11 @@ def _draw(args, scene, traj, out, scans, bag, mosaic=None):
     plots.plot_track(traj, os.path.join(out, "track.png"), scans=positions, mesh=mesh)
     if mosaic is not None:
         mosaic.result().save(os.path.join(out, "mosaic.png"))
+        if getattr(args, "origin", None) is not None:      # georeferenced: + mosaic.tif in the CRS
+            from mitsonar.export.geotiff import write_mosaic_geotiff
+            from mitsonar.geometry.geodesy import frame_from_args
+
+            write_mosaic_geotiff(os.path.join(out, "mosaic.tif"), mosaic.result(), frame_from_args(args))
     return n
 
 
@@ -228,5 +291,8 @@ def add_subcommands(sub):
     from mitsonar.cli.export import add_mcap_options
 
     add_mcap_options(s, force_help="replace a survey already in the output folder (its scan files are removed "
-                                   "first) and an existing --mcap file")
+                                   "first) and an existing --mcap or --xtf file")
+    from mitsonar.cli.export import add_xtf_options
+
+    add_xtf_options(s)
     s.set_defaults(func=cmd_survey)

@@ -46,7 +46,7 @@ version 0.3 the sum was one calibration constant called ``source_level``) puts a
 concrete wall at 4 m (about 1e-5 per bin, 42 dB) above the top of the window and grazing floor
 echoes (1e-7..1e-6, 22..32 dB at 4 m) inside it (`mitsonar.sonar_equation.levels` says where
 200 and -148 come from: the Micron's source level is not published; ``noise_level`` and
-``bandwidth`` are the receiver's acoustic noise, which `Scan.snr` compares echoes with, not the
+``receiver_bandwidth`` are the receiver's acoustic noise, which `Scan.snr` compares echoes with, not the
 bytes' ``noise_floor`` below); a 100 us pulse (the Micron's short-range setting: 7.5 cm) and 2 cm jitter blur echoes over a few bins. The receiver's noise floor
 (15.5 dB, 3 dB above ``ad_low``) and the ring-down (40 dB at the transducer, fading to ``ad_low``
 at 0.55 m: an amplitude decay time ``tau = 2 x 0.55 m / c x 8.69 / 27.5 dB = 0.23 ms``) are fitted
@@ -67,7 +67,7 @@ import numpy as np
 
 from mitsonar._checks import is_number, not_a, not_allowed
 from mitsonar.sonar_equation.levels import (DEFAULT_NOISE_LEVEL, DEFAULT_RECEIVER_SENSITIVITY, DEFAULT_SOURCE_LEVEL,
-                                    SOURCE_LEVELS, echo_level, source_level_error)
+                                    SOURCE_LEVELS, echo_level, rename_settings, source_level_error)
 
 TVG_LAWS = {"off": 0, "20log": 20, "30log": 30, "40log": 40}
 SPECKLE_MODELS = ("off", "rayleigh", "weibull")
@@ -103,7 +103,9 @@ class Electronics:
                                    called ``source_level`` before version 0.3)
     noise_level          42.0      dB re 1 uPa^2/Hz: ambient plus self noise at the receiver
                                    (thermal noise at 700 kHz: `sonar_equation.ambient_noise_level`)
-    bandwidth            0.0       Hz, the receiver's bandwidth; 0 means ``1 / pulse_length``
+    receiver_bandwidth   0.0       Hz, the receiver's noise bandwidth; 0 means ``1 / pulse_length``
+                                   (not the sensor's ``bandwidth``, the transducer's band; saved
+                                   before the rename as ``bandwidth``, still read as this)
     tvg                  ``20log`` time-varying gain law: ``off``, ``20log``, ``30log``, ``40log``
                                    (each plus ``2 absorption r``)
     tvg_cap              40.0      dB, the TVG saturates here (thesis 2.1.2: "around 40 dB")
@@ -136,7 +138,7 @@ class Electronics:
     source_level: float = DEFAULT_SOURCE_LEVEL
     receiver_sensitivity: float = DEFAULT_RECEIVER_SENSITIVITY
     noise_level: float = DEFAULT_NOISE_LEVEL
-    bandwidth: float = 0.0
+    receiver_bandwidth: float = 0.0
     tvg: str = "20log"
     tvg_cap: float = 40.0
     gain: float = 28.0
@@ -202,8 +204,8 @@ class Electronics:
             finite(name)
         if not SOURCE_LEVELS[0] <= self.source_level <= SOURCE_LEVELS[1]:
             raise ValueError(source_level_error(source, self.source_level))
-        if not (math.isfinite(self.bandwidth) and self.bandwidth >= 0):
-            bad("bandwidth", self.bandwidth, "a bandwidth >= 0 Hz (0: 1 / pulse_length)")
+        if not (math.isfinite(self.receiver_bandwidth) and self.receiver_bandwidth >= 0):
+            bad("receiver_bandwidth", self.receiver_bandwidth, "a bandwidth >= 0 Hz (0: 1 / pulse_length)")
         if self.tvg not in TVG_LAWS:
             bad("tvg", self.tvg, "one of " + ", ".join(TVG_LAWS))
         if not (math.isfinite(self.ad_span) and self.ad_span > 0):
@@ -238,7 +240,8 @@ class Electronics:
         Parameters
         ----------
         settings : dict or None
-            Field values. The key ``seed`` (recorded by `apply_to_scan`) is ignored.
+            Field values. The key ``seed`` (recorded by `apply_to_scan`) is ignored; ``bandwidth`` (the
+            name before ``receiver_bandwidth``) is read as ``receiver_bandwidth``.
         source : str
             Prefix of error messages.
 
@@ -247,7 +250,7 @@ class Electronics:
         ValueError
             On an unknown key or a bad value.
         """
-        settings = dict(settings or {})
+        settings = rename_settings(dict(settings or {}))     # fields saved under an earlier name
         settings.pop("seed", None)
         names = [f.name for f in dataclasses.fields(cls)]
         for key in settings:
@@ -357,16 +360,16 @@ class Electronics:
         _bin_width(ranges)   # evenly spaced, or a clear error
         return echo_level(intensity, ranges, self.source_level, self.pulse_length, sound_speed)
 
-    def receiver_bandwidth(self, bin_width: float = 0.0, sound_speed: float = 1500.0) -> float:
-        """Hz: ``bandwidth``, else ``1 / pulse_length`` (a matched CW pulse), else (no pulse) the
+    def noise_bandwidth(self, bin_width: float = 0.0, sound_speed: float = 1500.0) -> float:
+        """Hz: ``receiver_bandwidth``, else ``1 / pulse_length`` (a matched CW pulse), else (no pulse) the
         bandwidth ``c / (2 bin_width)`` of one range bin."""
-        if self.bandwidth > 0:
-            return self.bandwidth
+        if self.receiver_bandwidth > 0:
+            return self.receiver_bandwidth
         if self.pulse_length > 0:
             return 1.0 / self.pulse_length
         if bin_width > 0:
             return sound_speed / (2.0 * bin_width)
-        raise ValueError("electronics: no bandwidth (bandwidth 0, pulse_length 0 and no range bins)")
+        raise ValueError("electronics: no bandwidth (receiver_bandwidth 0, pulse_length 0 and no range bins)")
 
     def speckle_factors(self, shape, rng: np.random.Generator, corr_bins: np.ndarray | None = None) -> np.ndarray:
         """Mean-one multiplicative speckle of the given ``(n_pings, n_bins)`` shape.

@@ -87,6 +87,10 @@ class ScanMeta(MutableMapping):
     ``tx_pattern``, ``tx_beamwidth_h``/``tx_beamwidth_v`` (deg); surveys ``survey_index``,
     ``survey_seed``.
 
+    Georeference (`mitsonar.geometry.geodesy`): ``origin`` ([lat, lon, height], WGS 84 deg and m)
+    and ``crs`` (``"EPSG:NNNN"``, projected): world x, y are grid offsets in that CRS from the
+    origin's easting and northing; the poses stay in these local metres.
+
     Time: ``start_time`` (s): the scan's start on its clock (a trajectory's for a rendered scan, the
     wall clock of a real head's log or port); ``Scan.times`` count from it. ``end_time`` (s): a real
     head's last row received.
@@ -131,6 +135,9 @@ class ScanMeta(MutableMapping):
     end_time: float | None = _f("number", "seconds")
     survey_index: int | None = _f("int", "the scan's index in its survey")
     survey_seed: int | None = _f("int", "the survey scan's seed")
+    # georeference (`mitsonar.geometry.geodesy`): poses stay in local metres, x = E - E0, y = N - N0
+    origin: list | None = _f("list", "[lat deg, lon deg, height m] of the world frame's origin, WGS 84")
+    crs: str | None = _f("str", "the projected CRS of the world grid, 'EPSG:NNNN'")
     # real heads
     source: str | None = _f("str", "the head's protocol: seanet or ping360")
     sweep: str | None = _f("str", "continuous or sector")

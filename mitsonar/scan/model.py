@@ -287,12 +287,12 @@ class Scan:
     @property
     def noise_band_level(self) -> float:
         """dB re 1 uPa: ``NL + 10 log10 B - DI``, the receiver's noise in its band after the
-        beam's directivity (``noise_level`` and ``bandwidth`` from `electronics`)."""
+        beam's directivity (``noise_level`` and ``receiver_bandwidth`` from `electronics`)."""
         from mitsonar.receiver.electronics import Electronics
         from mitsonar.sonar_equation.levels import noise_band_level
 
         e = Electronics.from_dict(self.electronics, "Scan 'electronics'")
-        return noise_band_level(e.noise_level, e.receiver_bandwidth(self.bin_width, self.sound_speed),
+        return noise_band_level(e.noise_level, e.noise_bandwidth(self.bin_width, self.sound_speed),
                                 self.directivity_index)
 
     @property

@@ -32,8 +32,15 @@ matched-filtered power is therefore the incoherent `render_scan` intensity convo
 pulse's autocorrelation (`mitsonar.signals.processing.expected_power`). Amplitudes are in uPa:
 ``10^(source_level / 20) sqrt(E)`` (``source_level`` of the head's electronics, dB re 1 uPa at 1 m).
 
-Approximations, stated: a multi-bounce echo's Doppler uses its last leg's direction for both legs;
-objects do not move (only the platform, from the ``trajectory``); elements are omnidirectional.
+Moving objects (``velocities``: a shape's world velocity by its XML id): each scatterer on a moving
+shape carries its shape's velocity into the delays (`synthesis`: the head's velocity relative to the
+scatterer), so its echo has the Doppler shift of the closing speed; a moving shape's scatterers are
+kept apart from other shapes' in a shared lattice cell.
+
+Approximations, stated: a multi-bounce echo's Doppler uses its last leg's direction for both legs
+and the velocity of the last shape it met; a moving object's geometry is the scene's at every
+ping (its velocity moves the echoes' delays during a ping, not the shape between pings); elements
+are omnidirectional.
 """
 from __future__ import annotations
 
@@ -53,8 +60,6 @@ DEFAULT_SPP = 1024
 #: ``elements`` by name, built at the pulse's carrier and the head's sound speed (`mitsonar.signals.arrays`):
 #: a 64-element forward-looking line array at half a wavelength, a two-row interferometric side-scan.
 PRESETS = {"line_array": lambda **k: line_array(64, **k), "interferometer": lambda **k: interferometer(2, **k)}
-#: The head's band when its XML gives no ``bandwidth``: ``frequency`` +- this fraction of it / 2.
-DEFAULT_RELATIVE_BANDWIDTH = 0.5
 #: Lanes (paths x bounces slots) of one tracing pass: bounds the memory whatever the spp.
 PASS_SLOTS = 1 << 21
 
@@ -125,11 +130,10 @@ def _check_pulse(pulse):
 
 
 def head_band(sonar) -> tuple[float, float]:
-    """(low, high) Hz: the head's band, ``frequency`` +- half its ``bandwidth`` (the XML's, else
-    `DEFAULT_RELATIVE_BANDWIDTH` of the frequency)."""
+    """(low, high) Hz: the head's band, the sensor's ``frequency`` +- half its ``bandwidth`` (the
+    XML's, else a preset's published band, else ``frequency / 2``: `plugins.sonar_sensor.DEFAULT_Q`)."""
     f = float(sonar.beam.frequency)
-    bw = getattr(sonar, "bandwidth", None)
-    bw = DEFAULT_RELATIVE_BANDWIDTH * f if bw is None else float(bw)
+    bw = float(sonar.bandwidth)
     return f - 0.5 * bw, f + 0.5 * bw
 
 
@@ -160,20 +164,22 @@ def _phase(cells, seed):
 
 def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_SPP, seed=0, speckle_seed=None,
                   pose=None, trajectory=None, start_time=None, sensor=0, max_depth=None,
-                  scatterer_spacing=None, element_pattern=None) -> Echoes:
+                  scatterer_spacing=None, element_pattern=None, velocities=None) -> Echoes:
     """Render the element data of one scan of ``scene`` for a transmitted ``pulse`` (module docstring).
 
     A row is one transmission: one per ping for a mechanical or side-scan head, one per frame for a
     multibeam head (its receive beams come from `mitsonar.signals.beamform`). ``elements`` (n, 3) m in
-    the beam frame (default one element at the transmitter, the origin), the path of a CSV of x,y,z
-    rows, or a preset name (`PRESETS`: ``line_array``, ``interferometer``); ``sample_rate`` Hz (default
+    the beam frame (default the sensor's XML ``elements``, else one element at the transmitter, the
+    origin), the path of a CSV of x,y,z rows, or a preset name (`PRESETS`: ``line_array``, ``interferometer``); ``sample_rate`` Hz (default
     twice the pulse's bandwidth, ``4 / duration`` for a CW); ``spp`` paths per row; ``seed`` the
     paths'; ``speckle_seed`` the scene's scatterers (default the sensor's, 0); ``pose``,
     ``trajectory``, ``start_time``, ``sensor``, ``max_depth`` as `mitsonar.render_scan`;
     ``scatterer_spacing`` m, the lattice of rough-surface scatterers (default ``c / (8 B)``);
     ``element_pattern`` the elements' own directivity: None omnidirectional, ``beam`` the head's beam
     (a mechanical or side-scan head's transducer used as its own receiver: its echoes then carry the
-    two-way pattern of `mitsonar.render_scan`, the setting in which the two agree on average).
+    two-way pattern of `mitsonar.render_scan`, the setting in which the two agree on average);
+    ``velocities`` {shape id: (vx, vy, vz)} m/s in the world, the shapes that move (their echoes'
+    Doppler shift; module docstring), each finite and slower than a tenth of the sound speed.
     Refused in one line before any rendering: non-finite or overlapping elements, a sample rate
     below the pulse's bandwidth, a pulse longer than the two-way window ``2 range_max / c``, a
     carrier outside the head's band (`head_band`).
@@ -202,7 +208,9 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
         sensor = pick_sensor(scene, sensor, f"{where} 'sensor':")
     sonar = sonar_of(scene, sensor)
     c = float(sonar.sound_speed)
-    if e is None:     # a preset at the pulse's carrier
+    if elements is None and getattr(sonar, "elements", None) is not None:
+        e = np.array(sonar.elements, dtype=np.float64)     # the sensor's XML elements (checked on load)
+    elif e is None:   # a preset at the pulse's carrier
         e = PRESETS[elements](frequency=pulse.carrier, sound_speed=c)
     if speckle_seed is None:
         speckle_seed = int(sonar.electronics.get("speckle_seed", 0))
@@ -224,6 +232,7 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
     if element_pattern not in (None, "beam") or (element_pattern == "beam" and sonar.sonar_kind.transmit_fan):
         raise SceneError(f"{where} 'element_pattern': {element_pattern!r} is not allowed (None for omnidirectional "
                          "elements, or 'beam' for the transducer's own beam on a mechanical or side-scan head)")
+    moving = _velocity_table(scene, velocities, c, where)
     h = pulse.range_resolution(c) / 4.0 if scatterer_spacing is None else scatterer_spacing
     if isinstance(h, bool) or not isinstance(h, (int, float, np.integer, np.floating)) or not (math.isfinite(h) and h > 0):
         raise SceneError(f"{where} 'scatterer_spacing': {h!r} is not allowed (a spacing > 0 m)")
@@ -246,14 +255,15 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
     n_samples = int(math.ceil((flight + pulse.duration) * fs))
 
     scatterers = _trace(scene, sonar, row_poses, spp, seed, max_depth, h, pulse.range_resolution(c), speckle_seed,
-                        omni=element_pattern is None)
+                        omni=element_pattern is None, moving=None if moving is None else moving.any(axis=1))
     scale = 10.0 ** (float(sonar.electronics_model.source_level) / 20.0)
     signal = np.zeros((n_rows, len(e), n_samples), dtype=np.complex64)
     for r in range(n_rows):
-        amp, pos, out = scatterers[r]
+        amp, pos, out, shape = scatterers[r]
         R, o = row_poses[r, :3, :3], row_poses[r, :3, 3]
+        w = None if moving is None else moving[shape]
         signal[r] = synthesize(amp * scale, pos, out, e @ R.T + o, o, pulse, fs, n_samples, c,
-                               velocity=velocity[r]).astype(np.complex64)
+                               velocity=velocity[r], scatterer_velocity=w).astype(np.complex64)
     meta = {"spp": spp, "seed": seed, "speckle_seed": speckle_seed, "scatterer_spacing": float(h),
             "pressure_scale": scale, "n_scatterers": int(sum(len(s[0]) for s in scatterers)),
             "band": (lo, hi), "electronics": sonar.electronics_model.to_dict(), "absorption": float(sonar.absorption),
@@ -290,9 +300,36 @@ def _shape_tables(scene):
     return mi.UInt32(table), np.array(coherent + [False], dtype=bool)
 
 
-def _trace(scene, sonar, row_poses, spp, seed, max_depth, spacing, resolution, speckle_seed, omni=True):
+def _velocity_table(scene, velocities, c, where):
+    """(n_shapes + 1, 3) m/s of each shape (the last row: no shape), None when nothing moves; or a
+    SceneError naming ``velocities`` in one line."""
+    from mitsonar.sim.scene import SceneError
+
+    if velocities is None or (isinstance(velocities, dict) and not velocities):
+        return None
+    ids = [s.id() for s in scene.shapes()]
+    if not isinstance(velocities, dict):
+        raise SceneError(f"{where} 'velocities': {type(velocities).__name__} is not allowed (a dict of shape id: "
+                         "(vx, vy, vz) m/s)")
+    table = np.zeros((len(ids) + 1, 3))
+    for name, value in velocities.items():
+        if not name or name not in ids:
+            named = ", ".join(repr(i) for i in ids if i) or "none has an id"
+            raise SceneError(f"{where} 'velocities': {name!r} is not allowed (a shape id of the scene: {named})")
+        try:
+            v = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            v = np.full(1, np.nan)
+        if v.shape != (3,) or not np.isfinite(v).all() or np.linalg.norm(v) >= 0.1 * c:
+            raise SceneError(f"{where} 'velocities': {name!r}: {value!r} is not allowed (a finite (vx, vy, vz) in "
+                             f"m/s, slower than a tenth of the sound speed, {0.1 * c:g} m/s)")
+        table[ids.index(name)] = v
+    return table
+
+
+def _trace(scene, sonar, row_poses, spp, seed, max_depth, spacing, resolution, speckle_seed, omni=True, moving=None):
     """Per row, the scatterers (complex amplitude sqrt(E) e^{i phi}, position (n, 3), outbound length
-    (n,)) from ``spp`` paths per row, streamed in passes of at most `PASS_SLOTS` echo slots."""
+    (n,), shape index (n,): the last index for a still shape's rough scatterers) from ``spp`` paths per row, streamed in passes of at most `PASS_SLOTS` echo slots."""
     import types
 
     import drjit as dr
@@ -311,6 +348,7 @@ def _trace(scene, sonar, row_poses, spp, seed, max_depth, spacing, resolution, s
     setup.sensor = types.SimpleNamespace(beam=beam)
     setup.guide = False
     table, coherent = _shape_tables(scene)
+    moving = np.zeros(len(coherent), bool) if moving is None else moving
     n_rows = len(row_poses)
     count_max = max(1, PASS_SLOTS // (n_rows * depth))
     acc = _Accumulator(n_rows)
@@ -349,7 +387,8 @@ def _trace(scene, sonar, row_poses, spp, seed, max_depth, spacing, resolution, s
             energy = vals[:, 7]
             energy[np.abs(energy) < np.finfo(np.float32).tiny] = 0.0
             keep = energy > 0
-            acc.add(rows[keep], ks[keep], shp[keep], vals[keep], coherent[shp[keep]], row_poses, spacing, resolution)
+            acc.add(rows[keep], ks[keep], shp[keep], vals[keep], coherent[shp[keep]], row_poses, spacing, resolution,
+                    moving[shp[keep]])
             start += count
     return acc.scatterers(spp, row_poses, speckle_seed)
 
@@ -362,7 +401,7 @@ class _Accumulator:
         self.sums = np.zeros((0, 5))              # E, E x, E y, E z, E excess
         self.spacing = None
 
-    def add(self, rows, ks, shapes, vals, coh, row_poses, spacing, resolution):
+    def add(self, rows, ks, shapes, vals, coh, row_poses, spacing, resolution, moving=None):
         self.spacing = spacing
         p, nrm, out, E = vals[:, 0:3], vals[:, 3:6], vals[:, 6], vals[:, 7]
         o = row_poses[rows, :3, 3]
@@ -377,7 +416,8 @@ class _Accumulator:
         nrm = nrm / n_len[:, None]
         proj = centre + (np.sum((p - centre) * nrm, axis=1))[:, None] * nrm
         pos = np.where(coh[:, None], p, proj)
-        keys = np.column_stack([rows, ks, coh.astype(np.int64), np.where(coh, shapes, -1), cell])
+        apart = coh if moving is None else coh | moving      # scatterers that keep their shape
+        keys = np.column_stack([rows, ks, coh.astype(np.int64), np.where(apart, shapes, -1), cell])
         sums = np.column_stack([E, E[:, None] * pos, E * excess])
         allk = np.concatenate([self.keys, keys])
         alls = np.concatenate([self.sums, sums])
@@ -395,5 +435,5 @@ class _Accumulator:
             pos = s[:, 1:4] / E[:, None]
             outbound = np.linalg.norm(pos - row_poses[r, :3, 3], axis=1) + s[:, 4] / E
             phase = np.where(k[:, 2] == 1, 0.0, _phase(k[:, 4:7], speckle_seed))
-            out.append((np.sqrt(E / spp) * np.exp(1j * phase), pos, outbound))
+            out.append((np.sqrt(E / spp) * np.exp(1j * phase), pos, outbound, k[:, 3]))
         return out

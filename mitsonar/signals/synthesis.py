@@ -13,7 +13,9 @@ order in ``v / c``, arrival of the pulse's start at ``t0 = (L + R_e) / (c + u_e 
 (``u_o = (x - o) / |x - o|``): the pulse leaves a moving source compressed and reaches a moving
 receiver compressed again, so a head closing on a wall at ``v`` hears its carrier shifted by
 ``2 v f_c / (c - v)`` (the two-way Doppler shift; Lurton 2010, ch. 3, to first
-order). The waveform is evaluated exactly at each sample (`Pulse.baseband`), no interpolation.
+order). A scatterer moving at ``w`` (a moving object) enters through the relative velocity: ``v - w``
+in place of ``v``, which to first order in ``v / c`` gives the delay at the ping's start and the
+shift ``f_c (u_o + u_e) . (v - w) / c``. The waveform is evaluated exactly at each sample (`Pulse.baseband`), no interpolation.
 The spreading ``1 / R`` is in ``a`` (the echo's energy at the transmitter); the elements' extra
 spreading over an array a few wavelengths wide is neglected (far field).
 """
@@ -28,19 +30,23 @@ CHUNK_VALUES = 1 << 22
 
 
 def synthesize(amplitudes, positions, outbound, elements, origin, pulse, sample_rate, n_samples, sound_speed,
-               velocity=None, carrier=None, t_start=0.0) -> np.ndarray:
+               velocity=None, carrier=None, t_start=0.0, scatterer_velocity=None) -> np.ndarray:
     """complex128 (n_elements, n_samples): the sum of the scatterers' echoes (module docstring).
 
     ``amplitudes`` (n,) complex; ``positions`` (n, 3) world; ``outbound`` (n,) m from the transmitter
     to each scatterer; ``elements`` (n_elements, 3) world positions at t = 0; ``origin`` (3,) the
     transmitter at t = 0; ``velocity`` (3,) m/s of the platform (None: still); ``carrier`` Hz
-    (default the pulse's); sample k is at ``t_start + k / sample_rate``."""
+    (default the pulse's); sample k is at ``t_start + k / sample_rate``; ``scatterer_velocity`` (n, 3)
+    m/s of each scatterer (None: still): to first order in ``v / c`` only the velocity of the head
+    relative to the scatterer counts, ``v - w`` in place of ``v`` above (positions are the
+    scatterers' at the ping's start)."""
     a = np.asarray(amplitudes, dtype=np.complex128).reshape(-1)
     x = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     L = np.asarray(outbound, dtype=np.float64).reshape(-1)
     e = np.asarray(elements, dtype=np.float64).reshape(-1, 3)
     o = np.asarray(origin, dtype=np.float64).reshape(3)
     v = np.zeros(3) if velocity is None else np.asarray(velocity, dtype=np.float64).reshape(3)
+    w = None if scatterer_velocity is None else np.asarray(scatterer_velocity, dtype=np.float64).reshape(-1, 3)
     fc = pulse.carrier if carrier is None else float(carrier)
     c, fs, T = float(sound_speed), float(sample_rate), pulse.duration
     n_el = len(e)
@@ -48,7 +54,7 @@ def synthesize(amplitudes, positions, outbound, elements, origin, pulse, sample_
     out_im = np.zeros(n_el * n_samples)
     if not len(a):
         return (out_re + 1j * out_im).reshape(n_el, n_samples)
-    speed = float(np.linalg.norm(v))
+    speed = float(np.linalg.norm(v)) if w is None else float(np.linalg.norm(v[None, :] - w, axis=1).max(initial=0.0))
     n_p = int(math.ceil(T * fs / max(1.0 - 2.0 * speed / c, 0.5))) + 2
     step = max(1, CHUNK_VALUES // (n_el * n_p))
     kernel = _drjit_kernel() if USE_DRJIT else None
@@ -59,8 +65,13 @@ def synthesize(amplitudes, positions, outbound, elements, origin, pulse, sample_
         d = xs[:, None, :] - e[None, :, :]                                 # (c, n_el, 3)
         r_e = np.linalg.norm(d, axis=2)
         u_e = d / np.maximum(r_e, 1e-12)[:, :, None]
-        uev = u_e @ v                                                      # (c, n_el)
-        uov = (u_o @ v)[:, None]
+        if w is None:
+            uev = u_e @ v                                                  # (c, n_el)
+            uov = (u_o @ v)[:, None]
+        else:                                                              # the head relative to each scatterer
+            rel = v[None, :] - w[i:i + step]
+            uev = np.einsum("cej,cj->ce", u_e, rel)
+            uov = np.sum(u_o * rel, axis=1)[:, None]
         t0 = (ls[:, None] + r_e) / (c + uev)
         beta = -(uov + uev) / (c - uov)
         k0 = np.ceil((t0 - t_start) * fs)

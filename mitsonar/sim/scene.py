@@ -43,6 +43,7 @@ def mitsuba_error(exc: BaseException, where: str | None = None) -> str:
     """
     from mitsonar.plugins import take_failure
 
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
     first = first_line(exc)
     failure = take_failure()
     reason = None if failure is None else first_line(failure, None)

@@ -56,7 +56,7 @@ def survey_plan(sonar, trajectory, start_time=None, end_time=None, max_scans=Non
 
 def render_survey(scene, trajectory, output=None, *, spp=1024, seed=0, start_time=None, end_time=None,
                   max_scans=None, sensor=0, integrator=None, max_depth=None, electronics=None, ext=".npz",
-                  progress=True, sound_speed_profile=None):
+                  progress=True, sound_speed_profile=None, meta=None):
     """Render the scans of a survey along ``trajectory``, one after another; returns an iterator
     of `Scan`, each saved before it is yielded when ``output`` is given.
 
@@ -72,6 +72,7 @@ def render_survey(scene, trajectory, output=None, *, spp=1024, seed=0, start_tim
     ext            ``.npz`` or ``.exr``
     progress       True: a progress bar in pings on stderr; a callable ``progress(done, total)``
                    (pings); False or None: silent
+    meta           more metadata for every scan (e.g. a `GeoFrame`'s ``origin`` and ``crs``)
     others         as in `render_scan`
     ============== ==============================================================================
 
@@ -102,10 +103,10 @@ def render_survey(scene, trajectory, output=None, *, spp=1024, seed=0, start_tim
     return _scans(scene, trajectory, output, starts, sonar, dict(
         spp=spp, sensor=sensor, integrator=integrator, max_depth=max_depth, electronics=electronics,
         sound_speed_profile=sound_speed_profile),
-        seed, ext, progress)
+        seed, ext, progress, dict(meta or {}))
 
 
-def _scans(scene, trajectory, output, starts, sonar, kwargs, seed, ext, progress):
+def _scans(scene, trajectory, output, starts, sonar, kwargs, seed, ext, progress, meta=None):
     bar = None
     total = len(starts) * sonar.n_pings
     if progress is True:
@@ -118,7 +119,7 @@ def _scans(scene, trajectory, output, starts, sonar, kwargs, seed, ext, progress
             trajectory.to_tum(os.path.join(output, TRAJECTORY_NAME))
         for i, t in enumerate(starts):
             scan = render_scan(scene, seed=scan_seed(seed, i), trajectory=trajectory, start_time=float(t), **kwargs)
-            scan.meta.update(survey_index=i, survey_seed=seed)
+            scan.meta.update(survey_index=i, survey_seed=seed, **(meta or {}))
             if output is not None:
                 scan.save(os.path.join(output, SCAN_NAME.format(i, ext)))
             if progress:

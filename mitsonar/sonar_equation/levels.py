@@ -46,11 +46,31 @@ def source_level_error(source: str, value) -> str:
             f"(e.g. source_level={DEFAULT_SOURCE_LEVEL:g}, receiver_sensitivity={value - DEFAULT_SOURCE_LEVEL:g})")
 
 
+#: Electronics fields saved under an earlier name: old name -> today's. ``bandwidth`` (the receiver's
+#: noise bandwidth) became ``receiver_bandwidth`` when the sensor's ``bandwidth`` came to mean the
+#: transducer's band.
+RENAMED_SETTINGS = {"bandwidth": "receiver_bandwidth"}
+
+
+def rename_settings(settings: dict) -> dict:
+    """``settings`` with the fields of `RENAMED_SETTINGS` under today's names (an old key is dropped
+    when today's is also there)."""
+    if not any(k in settings for k in RENAMED_SETTINGS):
+        return settings
+    out = {k: v for k, v in settings.items() if k not in RENAMED_SETTINGS}
+    for old, new in RENAMED_SETTINGS.items():
+        if old in settings and new not in settings:
+            out[new] = settings[old]
+    return out
+
+
 def migrate_settings(settings: dict) -> dict:
     """Electronics settings recorded before `SOURCE_LEVEL_SINCE` (a scan file's), in today's
     meaning: a number ``source_level`` below `SOURCE_LEVELS` with no ``receiver_sensitivity``
     was the calibration constant; it becomes `DEFAULT_SOURCE_LEVEL` plus the sensitivity that
-    keeps the sum, so re-applying the electronics gives the same bytes. Others pass unchanged."""
+    keeps the sum, so re-applying the electronics gives the same bytes; renamed fields take their
+    new names (`rename_settings`). Others pass unchanged."""
+    settings = rename_settings(settings)
     old = settings.get("source_level")
     if ("receiver_sensitivity" in settings or isinstance(old, bool)
             or not isinstance(old, (int, float, np.integer, np.floating)) or not math.isfinite(old)

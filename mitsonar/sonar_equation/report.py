@@ -2,7 +2,7 @@
 
 `sonar_equation_report` renders a scene (or takes a scan) and lists the terms of the active sonar
 equation (Urick 1983, eqs. 2.1, 2.2) in dB: the head's source level SL, noise spectrum level NL,
-bandwidth B and directivity index DI, the noise in band ``NL + 10 log10 B - DI``; per ping the
+receiver bandwidth B and directivity index DI, the noise in band ``NL + 10 log10 B - DI``; per ping the
 strongest echo's range r, its echo level EL (`Scan.echo_level`), the two-way transmission loss
 ``TL = 40 log10 r + 2 alpha r``, the target term it implies (``TS`` of a point target, or
 ``S_b + 10 log10 A`` of a seabed patch: ``EL - SL + TL``) and the SNR. `plot_levels` draws echo
@@ -32,7 +32,7 @@ class SonarEquationReport:
 
     source_level: float
     noise_level: float
-    bandwidth: float
+    receiver_bandwidth: float
     directivity_index: float
     noise_band_level: float
     absorption: float
@@ -45,7 +45,8 @@ class SonarEquationReport:
         with their strongest echo."""
         head = [f"source level        SL  {self.source_level:8.1f} dB re 1 uPa at 1 m",
                 f"noise level         NL  {self.noise_level:8.1f} dB re 1 uPa^2/Hz",
-                f"bandwidth           B   {self.bandwidth:8.0f} Hz  (10 log B = {10 * math.log10(self.bandwidth):.1f} dB)",
+                f"receiver bandwidth  B   {self.receiver_bandwidth:8.0f} Hz  (10 log B = "
+                f"{10 * math.log10(self.receiver_bandwidth):.1f} dB)",
                 f"directivity index   DI  {self.directivity_index:8.1f} dB",
                 f"noise in band  NL + 10 log B - DI = {self.noise_band_level:.1f} dB re 1 uPa",
                 f"absorption          alpha {self.absorption:g} dB/m;  TL = 40 log r + 2 alpha r (two-way)",
@@ -95,7 +96,7 @@ def sonar_equation_report(scene_or_scan, *, spp: int = 256, seed: int = 0, senso
                           transmission_loss=tl, target=float(row[j] - e.source_level + tl),
                           snr=float(row[j] - noise)))
     return SonarEquationReport(source_level=e.source_level, noise_level=e.noise_level,
-                               bandwidth=e.receiver_bandwidth(scan.bin_width, scan.sound_speed),
+                               receiver_bandwidth=e.noise_bandwidth(scan.bin_width, scan.sound_speed),
                                directivity_index=scan.directivity_index, noise_band_level=noise,
                                absorption=scan.absorption, ranges=ranges, echo_level=el, pings=pings)
 

@@ -1,0 +1,154 @@
+"""``mitsonar live SCENE.xml``: a head in a loop with a vehicle (`mitsonar.devices.live`).
+
+Each ping the client asks for is rendered when it fires, from the vehicle's pose at that time:
+poses arrive as UDP datagrams on ``--pose-url`` (`mitsonar.devices.poses`), or come from a
+``--trajectory`` replayed in real time. Runs until ``--seconds`` or SIGINT/SIGTERM (exit 0,
+ports closed), then prints what it did. Writes no file. Exit codes as `mitsonar.cli.serial`.
+"""
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+from mitsonar.cli.serial import _guard, _head, _positive
+
+__all__ = ["add_subcommands", "cmd_live"]
+
+
+def _live(args) -> int:
+    scene_path = Path(args.scene)
+    if not scene_path.is_file():
+        raise FileNotFoundError(f"scene file not found: {scene_path}")
+    head = _head(args)
+    from mitsonar.devices.live import LIVE_HEADS, PingRenderer, PoseReceiver, SceneObjects, live_scene, pose_socket
+    from mitsonar.devices.poses import PoseBuffer, TrajectoryReplay
+    if head.name not in LIVE_HEADS:
+        raise ValueError(f"--head {head.name}: no live version (live heads: {', '.join(LIVE_HEADS)})")
+    sources = [f for f, v in (("--pose-url", args.pose_url), ("--trajectory", args.trajectory),
+                              ("--mavlink", args.mavlink)) if v]
+    if len(sources) > 1:
+        raise ValueError(f"{' and '.join(sources)} are {len(sources)} sources of poses: give one")
+    from mitsonar.cli.common import check_counts, sensor_of
+    from mitsonar.devices.micron.seanet.settings import require_mechanical
+    from mitsonar.devices.transports import check_port
+    check_counts(args, ValueError)
+    if args.mavlink:
+        import importlib.util
+        if importlib.util.find_spec("pymavlink") is None:
+            raise ValueError("--mavlink needs the pymavlink package (pip install 'mitsonar[live]')")
+    trajectory = None
+    if args.trajectory:
+        from mitsonar.geometry.trajectory import Trajectory
+        trajectory = Trajectory.from_tum(args.trajectory)
+    sock = pose_socket(args.pose_url) if args.pose_url else None     # a bad URL fails before the load
+    try:
+        check_port(args.port_url, args.baud)
+        scene = live_scene(str(scene_path))
+        sonar = sensor_of(scene, args)
+        require_mechanical(sonar, f"live {scene_path.name}", f"no {head.serves} to serve")
+        buffer = PoseBuffer() if (sock is not None or args.mavlink) else None
+        renderer = PingRenderer(scene, sonar, buffer, spp=args.spp, seed=args.seed)
+        kw = {"baudrate": args.baud, "realtime": not args.fast}
+        if "no_dst" in {dest for dest, _ in head.options}:     # a head that can be a pre-DST Micron
+            kw["dst"] = not args.no_dst
+        live = LIVE_HEADS[head.name]()(renderer, args.port_url, **kw)
+    except BaseException:
+        if sock is not None:
+            sock.close()
+        raise
+    receiver = None
+    if sock is not None:
+        receiver = PoseReceiver(sock, buffer, objects=SceneObjects(scene, renderer.lock).move).start()
+    if trajectory is not None:
+        renderer.poses = TrajectoryReplay(trajectory)
+    mav = None
+    if args.mavlink:
+        from mitsonar.devices.mavlink import MavlinkReceiver
+        try:
+            mav = MavlinkReceiver(args.mavlink, buffer).start()
+        except BaseException:
+            if receiver is not None:
+                receiver.stop()
+            raise
+    stop = threading.Event()
+    previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
+    if hasattr(signal, "SIGUSR1"):        # the summary so far, on demand (kill -USR1 PID)
+        previous[signal.SIGUSR1] = signal.signal(
+            signal.SIGUSR1, lambda *_: print(_summary(renderer, receiver, mav), flush=True))
+    try:
+        with live:
+            if receiver is not None:
+                print(f"poses on {receiver.url}", flush=True)
+            if mav is not None:
+                print(f"MAVLink poses on {mav.address}", flush=True)
+            label = head.description.split(" (")[0].split()[-1]
+            print(f"live {label} on {live.port}", flush=True)
+            end = None if args.seconds is None else time.monotonic() + args.seconds
+            while not stop.is_set() and (end is None or time.monotonic() < end):
+                stop.wait(0.05 if end is None else max(0.0, min(0.05, end - time.monotonic())))
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+        if receiver is not None:
+            receiver.stop()
+        if mav is not None:
+            mav.stop()
+    print(_summary(renderer, receiver, mav), flush=True)
+    return 0
+
+
+def _summary(renderer, receiver, mav) -> str:
+    """One line: pings rendered, render time percentiles, poses applied and dropped by reason."""
+    line = renderer.summary()
+    if receiver is not None:
+        st = receiver.stats
+        reasons = ", ".join(f"{n} {r}" for r, n in sorted(receiver.drops.counts.items()))
+        moved = f", {st['objects']} object moves" if st["objects"] else ""
+        line += f"; {st['poses']} poses applied{moved}, {st['dropped']} datagrams dropped" + (f" ({reasons})" if reasons else "")
+    if mav is not None:
+        line += f"; {mav.stats['poses']} MAVLink poses"
+    return line
+
+
+def cmd_live(args) -> int:
+    """``mitsonar live SCENE.xml --head micron|ping360 [--pose-url udp://127.0.0.1:PORT]``."""
+    return _guard("live", _live, args)
+
+
+def add_subcommands(subparsers) -> None:
+    from mitsonar.cli.common import add_sensor
+    from mitsonar.devices import registry
+    p = subparsers.add_parser(
+        "live", help="a live head: pings rendered when asked, from the vehicle's pose at that time",
+        description="Serve the scene's sonar as a Micron or a Ping360 (as virtual-sonar) but render each "
+                    "ping the client asks for when it fires, from the vehicle pose at that time: poses "
+                    "arrive as JSON datagrams {\"t\", \"position\", \"orientation\"} on --pose-url "
+                    "({\"object\": ID, ...} moves the scene's shape ID) "
+                    "(the sensor's to_world is the mount on the vehicle: x forward, y port, z up), or "
+                    "from a --trajectory replayed in real time. Prints 'poses on URL' and 'live HEAD on "
+                    "PORT', serves until --seconds or SIGINT/SIGTERM, then a summary line.")
+    p.add_argument("scene", metavar="SCENE.xml", help="Mitsuba scene with a mechanical `sonar` sensor")
+    p.add_argument("--head", choices=registry.names(), default=registry.DEFAULT,
+                   help="which head to be: micron (SeaNet, default) or ping360 (ping-protocol)")
+    p.add_argument("--port-url", default=None, metavar="URL",
+                   help="where to serve, as virtual-sonar: a pseudo-terminal (default), socket://HOST:PORT, "
+                        "udp://127.0.0.1:PORT (Ping360)")
+    p.add_argument("--pose-url", default=None, metavar="URL",
+                   help="read vehicle poses here: udp://127.0.0.1:PORT (loopback only; port 0 picks one)")
+    p.add_argument("--trajectory", default=None, metavar="FILE.tum",
+                   help="replay this trajectory in real time as the vehicle's poses (a demo without a vehicle)")
+    p.add_argument("--mavlink", default=None, metavar="URL",
+                   help="read the vehicle's LOCAL_POSITION_NED and ATTITUDE_QUATERNION from this pymavlink "
+                        "connection (udpin:127.0.0.1:14550, a serial port; NED/FRD turned to ENU/FLU); "
+                        "needs pymavlink (the live extra)")
+    p.add_argument("--spp", type=_positive(int), default=64, help="paths per ping (default 64)")
+    p.add_argument("--seed", type=int, default=0, help="seed of ping 0; ping k uses seed + k (default 0)")
+    p.add_argument("--baud", type=_positive(int), default=None, help="baud rate of the timing model")
+    p.add_argument("--fast", action="store_true", help="answer as soon as rendered (no timing model)")
+    p.add_argument("--no-dst", action="store_true", help="behave as a pre-DST Micron (--head micron)")
+    p.add_argument("--seconds", type=_positive(float), default=None, help="stop after T seconds")
+    add_sensor(p)
+    p.set_defaults(func=cmd_live)

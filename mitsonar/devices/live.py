@@ -1,0 +1,364 @@
+"""A live head (``mitsonar live``): each ping a client asks for is rendered at its own time, from
+the vehicle's pose at that time, and answered in the head's protocol.
+
+Pieces:
+
+* `live_scene`: the scene file loaded with its sonar reduced to one ping at bearing 0
+  (``n_pings`` 1, ``bearing_start`` 0), so that a ping costs one row's paths; its ``to_world`` is
+  the mount on the vehicle (x forward, y port, z up).
+* `PingRenderer`: ``render(bearing)`` renders that one row with `mitsonar.render_scan` at the
+  pose ``vehicle(t) @ mount @ bearing_rotation(bearing)`` (`mitsonar.geometry.frames`), the
+  vehicle's pose coming from a pose source's ``at(t)`` (`mitsonar.devices.poses.PoseBuffer` or
+  `mitsonar.devices.poses.TrajectoryReplay`); before any pose, the mount at the origin (said
+  once). The pose enters the kernels as data, not as a literal: after the first ping, later
+  pings launch the same compiled kernels (no recompilation; tests/test_live.py checks it).
+  Ping ``k`` renders with seed ``seed + k``, so a session is reproducible given its poses.
+* `LiveMicron`, `LivePing360`: the virtual heads (`mitsonar.devices.micron.virtual`,
+  `mitsonar.devices.ping360.virtual`) with their ``row`` rendering the requested bearing anew
+  instead of looking it up in a pre-rendered scan; everything else (protocol, timing model,
+  range resampling) is theirs.
+* `PoseReceiver`: a thread reading pose datagrams (`mitsonar.devices.poses.parse_datagram`) on a
+  loopback UDP port into a `PoseBuffer`; a bad datagram is counted and dropped, never fatal.
+"""
+from __future__ import annotations
+
+import math
+import os
+import select
+import socket
+import sys
+import threading
+import time
+import xml.etree.ElementTree as ET
+from collections import Counter, deque
+
+import numpy as np
+
+from mitsonar.devices.poses import DatagramError, DropLog, PoseBuffer, parse_datagram
+from mitsonar.geometry.frames import bearing_rotation
+
+__all__ = ["live_scene", "SceneObjects", "PingRenderer", "LiveMicron", "LivePing360", "LIVE_HEADS", "PoseReceiver",
+           "pose_socket"]
+
+_SEED_MAX = 2**31 - 1
+
+
+def live_scene(path: str):
+    """The scene of ``path`` with every ``sonar`` sensor reduced to one ping at bearing 0
+    (`mitsonar.sim.scene.load_scene` of the edited XML, relative paths resolved from the file's
+    folder)."""
+    import mitsuba as mi
+
+    from mitsonar.sim.scene import SceneError, load_scene
+    from mitsonar.sim.variant import ensure_variant
+
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as e:
+        raise SceneError(f"{path}: cannot read the scene XML ({e})") from None
+    for sensor in root.iter("sensor"):
+        if sensor.get("type") != "sonar":
+            continue
+        for name, tag, value in (("n_pings", "integer", "1"), ("bearing_start", "float", "0")):
+            el = next((c for c in sensor if c.get("name") == name), None)
+            if el is None:
+                el = ET.SubElement(sensor, tag, name=name)
+            el.set("value", value)
+    ensure_variant()
+    folder = os.path.dirname(os.path.abspath(path))
+    resolver = mi.file_resolver() if hasattr(mi, "file_resolver") else mi.Thread.thread().file_resolver()
+    if folder not in [str(p) for p in resolver]:
+        resolver.prepend(folder)
+    # optimize=False: shapes keep their ids (no merging of those sharing a BSDF), so that an
+    # ``object`` datagram can move one
+    scene = load_scene(ET.tostring(root, encoding="unicode"), optimize=False)
+    scene.set_id(os.path.basename(path))
+    return scene
+
+
+class SceneObjects:
+    """Moves shapes of a scene by XML id without reloading it: ``move(id, T)`` puts the shape at
+    ``T @`` (its placement in the scene file), through ``mi.traverse`` (the shape's ``to_world``,
+    or a mesh's ``vertex_positions``). ``lock``: held while changing the scene (the renders')."""
+
+    def __init__(self, scene, lock=None):
+        import mitsuba as mi
+
+        self.params = mi.traverse(scene)
+        self.lock = lock if lock is not None else threading.Lock()
+        self._original: dict = {}
+        for key in self.params.keys():
+            name, _, field = key.rpartition(".")
+            if field == "to_world" and name and not self._is_sensor(scene, name):
+                self._original[name] = ("to_world", np.array(self.params[key].matrix, np.float64).reshape(4, 4))
+            elif field == "vertex_positions" and name and name not in self._original:
+                self._original[name] = ("vertex_positions", np.array(self.params[key], np.float64).reshape(-1, 3))
+
+    @staticmethod
+    def _is_sensor(scene, name) -> bool:
+        return any(s.id() == name for s in scene.sensors())
+
+    @property
+    def names(self) -> list:
+        return sorted(self._original)
+
+    def move(self, name: str, matrix) -> None:
+        import mitsuba as mi
+
+        if name not in self._original:
+            shown = ", ".join(self.names[:8]) + (" ..." if len(self.names) > 8 else "")
+            raise KeyError(f"no movable shape {name!r} in the scene (shapes: {shown or 'none'})")
+        field, original = self._original[name]
+        m = np.asarray(matrix, np.float64)
+        with self.lock:
+            if field == "to_world":
+                self.params[f"{name}.to_world"] = mi.Transform4f(mi.Matrix4f(m @ original))
+            else:
+                moved = original @ m[:3, :3].T + m[:3, 3]
+                self.params[f"{name}.vertex_positions"] = mi.Float(moved.ravel().astype(np.float32))
+            self.params.update()
+
+
+class PingRenderer:
+    """Renders one ping at a bearing from the pose source's pose at the ping's time (module doc).
+
+    ``stats``: pings rendered; ``latencies``: seconds of the last 1000 renders; ``last_pose``:
+    the 4x4 pose (beam frame) of the last ping.
+    """
+
+    def __init__(self, scene, sonar, poses=None, *, spp: int = 64, seed: int = 0, out=None):
+        self.scene, self.sonar = scene, sonar
+        self.mount = np.array(sonar.to_world_np, dtype=np.float64)
+        self.poses = poses
+        self.spp, self.seed = int(spp), int(seed)
+        self.out = sys.stderr if out is None else out
+        self.stats: Counter = Counter()
+        self.latencies: deque = deque(maxlen=1000)
+        self.last_pose = None
+        self.lock = threading.Lock()
+        self._said_no_pose = False
+
+    def vehicle(self, now: float) -> np.ndarray:
+        pose = None if self.poses is None else self.poses.at(now)
+        if pose is None:
+            if not self._said_no_pose:
+                self._said_no_pose = True
+                print("mitsonar live: no vehicle pose yet: pinging from the mount at the origin",
+                      file=self.out, flush=True)
+            return np.eye(4)
+        return pose
+
+    def warm(self):
+        """Render one ping from the mount at the origin, uncounted: compiles the kernels before a
+        client asks; returns the one-row `Scan` (bearing 0)."""
+        from mitsonar.sim.render import render_scan
+
+        with self.lock:
+            return render_scan(self.scene, spp=self.spp, seed=self.seed, pose=self.mount, sensor=self.sonar)
+
+    def render(self, bearing: float, now: float | None = None):
+        """A one-row `Scan` of the ping at ``bearing`` (radians, the simulator's convention) fired
+        at ``now`` (``time.monotonic``, default now); its ``bearings`` is ``[bearing]``."""
+        from mitsonar.sim.render import render_scan
+
+        t0 = time.monotonic()
+        now = t0 if now is None else now
+        pose = self.vehicle(now) @ self.mount @ bearing_rotation(float(bearing))
+        k = self.stats["pings"]
+        with self.lock:
+            scan = render_scan(self.scene, spp=self.spp, seed=(self.seed + k) % _SEED_MAX, pose=pose,
+                               sensor=self.sonar)
+        scan.bearings = np.array([float(bearing)])
+        self.stats["pings"] += 1
+        self.last_pose = pose
+        self.latencies.append(time.monotonic() - t0)
+        return scan
+
+    def summary(self) -> str:
+        n = self.stats["pings"]
+        if not self.latencies:
+            return f"{n} pings rendered"
+        lat = np.array(self.latencies) * 1e3
+        return (f"{n} pings rendered; render ms p50 {np.percentile(lat, 50):.1f}, "
+                f"p95 {np.percentile(lat, 95):.1f}, max {lat.max():.1f}")
+
+
+def _micron():
+    from mitsonar.devices.micron.seanet import bearing_to_radians
+    from mitsonar.devices.micron.virtual import VirtualMicron
+
+    class LiveMicron(VirtualMicron):
+        """A `VirtualMicron` whose scanline at wire bearing ``b`` is rendered when it fires."""
+
+        def __init__(self, renderer: PingRenderer, port_url=None, **kwargs):
+            self.renderer = renderer
+            super().__init__(renderer.warm(), port_url, **kwargs)
+
+        def row(self, bearing: int) -> np.ndarray:
+            self.scan = self.renderer.render(bearing_to_radians(bearing, self.settings.invert))
+            self._prepare_rows()
+            return super().row(bearing)
+
+    return LiveMicron
+
+
+def _ping360():
+    from mitsonar.devices.ping360.head import angle_to_radians
+    from mitsonar.devices.ping360.protocol import ids
+    from mitsonar.devices.ping360.virtual import VirtualPing360
+
+    class LivePing360(VirtualPing360):
+        """A `VirtualPing360` whose samples at ``angle`` are rendered when it pings.
+
+        Stale requests are coalesced: of the ping requests (``transducer`` with ``transmit``)
+        waiting on the line together (a client that timed out and asked again while a ping
+        rendered), only the newest is answered; the others are counted
+        (``stats["stale requests skipped"]``), never answered late, where a client would take an
+        old angle's reply for the new request's.
+        """
+
+        def _tick(self) -> None:
+            msgs = []
+            for _ in range(64):
+                data = self._transport.read(0.0)
+                if not data:
+                    break
+                msgs += self.parser.feed(data)
+            pings = [i for i, m in enumerate(msgs) if m.message_id == ids["transducer"] and m.transmit]
+            for i, m in enumerate(msgs):
+                if pings and i in pings and i != pings[-1]:
+                    self.stats["stale requests skipped"] += 1
+                    continue
+                self._on_message(m, time.monotonic())
+            super()._tick()
+
+        def __init__(self, renderer: PingRenderer, port_url=None, **kwargs):
+            self.renderer = renderer
+            super().__init__(renderer.warm(), port_url, **kwargs)
+
+        def row(self, angle: int, sample_period: int, n: int, step: int = 1) -> bytes:
+            rad = angle_to_radians(angle)
+            self.scan = self.renderer.render(rad)
+            self._b = np.array([rad % (2 * math.pi)])
+            self._scan_step = 0.0
+            return super().row(angle, sample_period, n, step)
+
+    return LivePing360
+
+
+#: head name -> function returning its live class ``cls(renderer, port_url, **virtual kwargs)``
+LIVE_HEADS = {"micron": _micron, "ping360": _ping360}
+
+
+def LiveMicron(*args, **kwargs):  # noqa: N802 - a class made on first use (imports the codec)
+    return _micron()(*args, **kwargs)
+
+
+def LivePing360(*args, **kwargs):  # noqa: N802
+    return _ping360()(*args, **kwargs)
+
+
+def pose_socket(url: str) -> socket.socket:
+    """A non-blocking UDP socket bound to ``udp://127.0.0.1:PORT`` (``udp://localhost:PORT``;
+    port 0 picks one); ValueError naming the URL for anything else: poses come from this machine."""
+    from urllib.parse import urlparse
+
+    u = urlparse(url)
+    try:
+        port = u.port
+    except ValueError:
+        port = None
+    if u.scheme != "udp" or port is None or u.hostname not in ("127.0.0.1", "localhost"):
+        raise ValueError(f"--pose-url {url!r}: expected udp://127.0.0.1:PORT (poses are read on the loopback only)")
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sock.bind(("127.0.0.1", port))
+    except OSError as e:
+        sock.close()
+        raise ValueError(f"--pose-url {url}: cannot bind ({e.strerror or e})") from None
+    sock.setblocking(False)
+    return sock
+
+
+class PoseReceiver:
+    """Reads pose datagrams on ``sock`` into ``buffer`` in a thread until `stop` (module doc).
+
+    ``stats``: ``poses`` applied, ``objects`` moved, ``dropped`` in all; ``drops.counts`` by reason.
+    ``objects``: callable ``(id, 4x4)`` moving a scene shape (None: object datagrams are dropped).
+    """
+
+    def __init__(self, sock, buffer: PoseBuffer, *, objects=None, out=None, stale_after: float = 2.0):
+        self.sock, self.buffer, self.objects = sock, buffer, objects
+        self.out = sys.stderr if out is None else out
+        self.drops = DropLog(self.out)
+        self.stats: Counter = Counter()
+        self.stale_after = float(stale_after)
+        self._stop = threading.Event()
+        self._stale_said = False
+        self._thread = threading.Thread(target=self._run, name="PoseReceiver", daemon=True)
+
+    @property
+    def url(self) -> str:
+        return f"udp://127.0.0.1:{self.sock.getsockname()[1]}"
+
+    def start(self):
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(5.0)
+        self.sock.close()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                r, _, _ = select.select([self.sock], [], [], 0.1)
+                if r:
+                    self._read()
+                self._check_stale()
+            except Exception as e:          # noqa: BLE001 - never let the receiver die
+                self.stats["internal errors"] += 1
+                print(f"mitsonar live: warning: pose receiver: {e}", file=self.out, flush=True)
+                time.sleep(0.05)
+
+    def _read(self) -> None:
+        for _ in range(256):
+            try:
+                data, _ = self.sock.recvfrom(65536)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                continue
+            self.handle(data, time.monotonic())
+
+    def handle(self, data: bytes, arrival: float) -> bool:
+        """Apply one datagram that arrived at ``arrival``; False (counted, logged) if dropped."""
+        try:
+            d = parse_datagram(data)
+            if d["object"] is not None:
+                if self.objects is None:
+                    raise DatagramError("unknown field", "'object' datagrams are not supported here")
+                from mitsonar.devices.poses import pose_matrix
+                try:
+                    self.objects(d["object"], pose_matrix(d["position"], d["orientation"]))
+                except (KeyError, ValueError) as e:
+                    raise DatagramError("unknown object", str(e)) from None
+                self.stats["objects"] += 1
+                return True
+        except DatagramError as e:
+            self.stats["dropped"] += 1
+            self.drops.drop(e, arrival)
+            return False
+        self.buffer.add(d["position"], d["orientation"], d["t"], arrival)
+        self.stats["poses"] += 1
+        self._stale_said = False
+        return True
+
+    def _check_stale(self) -> None:
+        last = self.buffer.last_arrival
+        if last is not None and not self._stale_said and time.monotonic() - last > self.stale_after:
+            self._stale_said = True
+            print(f"mitsonar live: warning: no pose for {self.stale_after:g} s: holding the last one",
+                  file=self.out, flush=True)
