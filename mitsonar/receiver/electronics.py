@@ -86,6 +86,9 @@ HEAD_LIMITS = {"gain": (0.0, HEAD_DB_SCALE), "ad_low": (0.0, HEAD_DB_SCALE),
 
 #: Ranges below this are clamped in the TVG so that a bin centre at r = 0 stays finite.
 MIN_TVG_RANGE = 1e-3
+# `Electronics.apply` on float64 parts in reused buffers (the same bytes as the straightforward
+# chain kept for tests and benchmarks/frame_profile.py, which ``FAST = False`` runs).
+FAST = True
 
 
 @dataclass
@@ -507,10 +510,15 @@ class Electronics:
         if not (math.isfinite(sound_speed) and sound_speed > 0):
             raise ValueError(f"electronics: sound_speed {sound_speed!r} is not a speed > 0 m/s")
         if speckle is not None:
-            speckle = np.array(speckle, dtype=np.complex128, ndmin=2)
+            # read, never written: no copy in the vectorised chain
+            speckle = (np.asarray if FAST else np.array)(speckle, dtype=np.complex128)
+            speckle = speckle[None] if speckle.ndim == 1 else speckle
             if speckle.shape != inten.shape:
                 raise ValueError(f"electronics: speckle {speckle.shape} does not match intensity {inten.shape}")
         rng = np.random.default_rng(seed)
+        if FAST and self.speckle != "off":
+            data = self._apply_fast(inten, ranges, absorption, sound_speed, rng, speckle)
+            return data[0] if one_ping else data
 
         bin_width = _bin_width(ranges)
         pulse = _spread_kernel(sound_speed * self.pulse_length / 2.0, 0.0, bin_width) if bin_width > 0 else np.ones(1)
@@ -538,6 +546,68 @@ class Electronics:
             level = 10.0 * np.log10(total) + calibration + self.gain + self.tvg_db(ranges, absorption)
         data = self.quantise(level)
         return data[0] if one_ping else data
+
+    def _apply_fast(self, inten, ranges, absorption, sound_speed, rng, speckle):
+        """`apply`'s chain (speckle on) on float64 parts in reused buffers: the same floating-point
+        operations in the same order as the reference chain (``FAST = False``), so the same bytes;
+        a complex number times a real one is computed as two real products (the reference's
+        complex product adds ``0 x imag``, which changes at most the sign of a zero, and every
+        amplitude is squared). ``inten`` (a private copy) is overwritten."""
+        bin_width = _bin_width(ranges)
+        pulse = _spread_kernel(sound_speed * self.pulse_length / 2.0, 0.0, bin_width) if bin_width > 0 else np.ones(1)
+        corr = pulse if pulse.size > 1 else None
+        if bin_width > 0:
+            kernel = self.range_kernel(bin_width, sound_speed)
+            if kernel.size > 1:
+                inten = _convolve_range(inten, kernel)
+        calibration = self.source_level + self.receiver_sensitivity
+        tvg = self.tvg_db(ranges, absorption)
+        chain = calibration + self.gain + tvg
+        if speckle is not None:
+            g = speckle
+        else:
+            g = _complex_gaussian(inten.shape, rng, corr)
+        if self.speckle == "weibull":
+            power = np.abs(g) ** 2
+            k = self.speckle_shape
+            with np.errstate(divide="ignore", invalid="ignore"):
+                g = g * np.where(power > 0, power ** (0.5 / k - 0.5), 0.0) / math.sqrt(math.gamma(1.0 + 1.0 / k))
+        if self.ringdown <= 0 and self.noise_floor == -math.inf:
+            total = np.abs(g) ** 2
+            total *= inten
+        else:
+            np.sqrt(inten, out=inten)
+            re = np.multiply(inten, g.real)
+            im = np.multiply(inten, g.imag, out=inten)
+            if self.ringdown > 0:
+                re += np.sqrt(10.0 ** ((self.ringdown_db(ranges) - chain) / 10.0))
+            if self.noise_floor > -math.inf:
+                n_re, n_im = _gaussian_parts(inten.shape, rng, corr)
+                f = math.sqrt(10.0 ** (self.noise_floor / 10.0)) * 10.0 ** (-chain / 20.0)
+                n_re *= f
+                re += n_re
+                n_im *= f
+                im += n_im
+            total = np.multiply(re, re, out=re)
+            total += np.multiply(im, im, out=im)
+        with np.errstate(divide="ignore"):
+            level = np.log10(total, out=total)
+        level *= 10.0
+        level += calibration
+        level += self.gain
+        level += tvg
+        # quantise, in place
+        level -= self.ad_low
+        level /= self.ad_span
+        np.clip(level, 0.0, 1.0, out=level)
+        level[np.isnan(level)] = 0.0
+        level *= 15.0 if self.bit_depth == 4 else 255.0
+        q = np.floor(level)
+        level -= q
+        q += level >= 0.5
+        if self.bit_depth == 4:
+            q *= 17.0
+        return q.astype(np.uint8)
 
     def _received_power(self, inten, g, chain, ranges, rng, corr):
         """``|sqrt(I) g + sqrt(R) + sqrt(N) n|^2`` referred back through ``chain`` (see `apply`)."""
@@ -619,6 +689,25 @@ def _complex_gaussian(shape, rng: np.random.Generator, corr_bins=None) -> np.nda
     return zf
 
 
+def _gaussian_parts(shape, rng: np.random.Generator, corr_bins=None):
+    """`_complex_gaussian`'s samples (the same draws, the same numbers) as (real, imaginary)
+    float64 arrays, filtered in place with one scratch buffer."""
+    n_bins = shape[-1]
+    h = np.ones(1) if corr_bins is None else np.asarray(corr_bins, dtype=np.float64)
+    h = h[h > 0]
+    h = h / math.sqrt(float(np.sum(h * h)))
+    k = h.size
+    z = rng.standard_normal(tuple(shape[:-1]) + (n_bins + k - 1, 2))
+    z *= math.sqrt(0.5)
+    if k == 1:
+        return z[..., 0], z[..., 1]
+    zf = np.zeros(tuple(shape) + (2,))
+    tmp = np.empty_like(zf)
+    for j in range(k):
+        zf += np.multiply(z[..., j:j + n_bins, :], h[j], out=tmp)
+    return zf[..., 0], zf[..., 1]
+
+
 def _round_half_up(v: np.ndarray) -> np.ndarray:
     """Round to the nearest integer, halves up (v >= 0). ``floor(v + 0.5)`` would round the
     largest double below 0.5 up, because the addition itself rounds."""
@@ -641,6 +730,25 @@ def _bin_width(ranges) -> float:
 
 def _convolve_range(inten: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     """Convolve along the last axis with a centred kernel; energy pushed off the ends is dropped."""
+    if not FAST:
+        return _convolve_range_reference(inten, kernel)
+    m = (kernel.size - 1) // 2
+    n = inten.shape[-1]
+    out = np.zeros_like(inten)
+    tmp = np.empty_like(inten)   # one scratch buffer for every tap (same products, same sums)
+    for j, w in enumerate(kernel):
+        shift = j - m
+        if w == 0.0 or abs(shift) >= n:
+            continue
+        if shift >= 0:
+            out[..., shift:] += np.multiply(w, inten[..., :n - shift], out=tmp[..., :n - shift])
+        else:
+            out[..., :n + shift] += np.multiply(w, inten[..., -shift:], out=tmp[..., :n + shift])
+    return out
+
+
+def _convolve_range_reference(inten: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """`_convolve_range` with a new temporary per tap (the straightforward form, for tests)."""
     m = (kernel.size - 1) // 2
     n = inten.shape[-1]
     out = np.zeros_like(inten)
