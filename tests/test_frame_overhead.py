@@ -127,3 +127,30 @@ def test_frames_replay_without_compiling(mitsonar_mod):
         assert compiled == []
         assert hashes == runs[0][0]
     assert 1 <= len(runs[0][0]) <= 4
+
+
+def test_pass_sums_in_place_equal_the_straightforward_mean(mitsonar_mod):
+    """`SonarTOFIntegrator.accumulate` sums its passes in place: the same bits as
+    ``total = 0.0; total = total + pass ...; total / spp``, signed zeros included."""
+    from mitsonar.plugins import module
+
+    acc = module("sonar_tof").SonarTOFIntegrator.accumulate
+    rng = np.random.default_rng(5)
+    parts = {s: rng.exponential(1.0, 50) * (rng.random(50) < 0.5) for s in range(0, 10, 3)}
+    for p in parts.values():
+        p[:3] = (-0.0, 0.0, 1e-300)
+    calls = []
+
+    def one_pass(start, count):
+        calls.append((start, count))
+        return parts[start].copy()
+
+    got = acc(10, 3, one_pass)
+    want = 0.0
+    for s in range(0, 10, 3):
+        want = want + parts[s]
+    want = want / 10
+    assert calls == [(0, 3), (3, 3), (6, 3), (9, 1)]
+    assert got.tobytes() == want.tobytes()
+    one = acc(1, 3, lambda s, c: parts[0].copy())   # one pass: its -0.0 becomes +0.0 as 0.0 + x did
+    assert one.tobytes() == ((0.0 + parts[0]) / 1).tobytes()

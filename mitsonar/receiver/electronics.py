@@ -332,7 +332,7 @@ class Electronics:
         ndarray float64 (2 m + 1,)
             Weights summing to 1 (to rounding); index ``m`` is offset 0.
         """
-        return _spread_kernel(sound_speed * self.pulse_length / 2.0, self.range_jitter, bin_width)
+        return np.array(_spread_kernel(sound_speed * self.pulse_length / 2.0, self.range_jitter, bin_width))
 
     def spread(self, intensity, ranges, sound_speed: float = 1500.0) -> np.ndarray:
         """Spread echo energy along range by the pulse and the range jitter (step 1 of the chain).
@@ -779,7 +779,24 @@ def _convolve_range_reference(inten: np.ndarray, kernel: np.ndarray) -> np.ndarr
 
 
 def _spread_kernel(length: float, sigma: float, bin_width: float) -> np.ndarray:
-    """Bin weights of U[0, length) + N(0, sigma^2) for an echo at a bin centre (see range_kernel)."""
+    """Bin weights of U[0, length) + N(0, sigma^2) for an echo at a bin centre (see range_kernel);
+    computed once per (length, sigma, bin_width) when `FAST` (a Python loop of erf per edge)."""
+    if not FAST:
+        return _spread_kernel_computed(length, sigma, bin_width)
+    key = (float(length), float(sigma), float(bin_width))
+    w = _kernels.get(key)
+    if w is None:
+        if len(_kernels) >= 64:
+            _kernels.clear()
+        w = _kernels[key] = _spread_kernel_computed(*key)
+        w.setflags(write=False)
+    return w
+
+
+_kernels: dict = {}
+
+
+def _spread_kernel_computed(length: float, sigma: float, bin_width: float) -> np.ndarray:
     if length <= 0 and sigma <= 0:
         return np.ones(1)
     m = int(math.ceil((length + 6.0 * sigma) / bin_width)) + 1
