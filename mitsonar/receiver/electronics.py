@@ -60,6 +60,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 from dataclasses import dataclass
 from typing import Any
 
@@ -501,7 +502,7 @@ class Electronics:
         intensity = np.asarray(intensity)
         ranges = np.asarray(ranges, dtype=np.float64)
         one_ping = intensity.ndim == 1
-        inten = np.array(intensity, dtype=np.float64, ndmin=2)  # a copy: the input stays untouched
+        inten = np.array(intensity, dtype=np.float64, ndmin=2) if not FAST else _scratch_copy(intensity)
         if inten.ndim != 2 or inten.shape[-1] != ranges.shape[0] or ranges.ndim != 1:
             raise ValueError(f"electronics: intensity {np.shape(intensity)} and ranges {ranges.shape} do not match "
                              "(expected (n_pings, n_bins) and (n_bins,))")
@@ -699,6 +700,25 @@ def _complex_gaussian(shape, rng: np.random.Generator, corr_bins=None) -> np.nda
     return zf
 
 
+_scratch = threading.local()
+
+
+def _scratch_copy(values) -> np.ndarray:
+    """``np.array(values, dtype=float64, ndmin=2)`` (a copy: the input stays untouched) in a
+    buffer kept per thread and shape, overwritten by the next call: `apply`'s working copy."""
+    src = np.asarray(values)
+    if src.dtype == object or src.dtype.kind in "USV":
+        return np.array(values, dtype=np.float64, ndmin=2)
+    shape = (1,) * max(0, 2 - src.ndim) + src.shape
+    buffers = _scratch.__dict__.setdefault("inten", {})
+    buf = buffers.get(shape)
+    if buf is None:
+        buffers.clear()
+        buf = buffers[shape] = np.empty(shape)
+    np.copyto(buf, src.reshape(shape), casting="unsafe")
+    return buf
+
+
 def _gaussian_draws(shape, rng: np.random.Generator, corr_bins=None):
     """`_complex_gaussian`'s draws (the same numbers from ``rng``), unfiltered, as float64
     (..., n_bins + k - 1, 2) (real, imaginary), and its normalised taps; `_filtered` filters them."""
@@ -706,7 +726,16 @@ def _gaussian_draws(shape, rng: np.random.Generator, corr_bins=None):
     h = np.ones(1) if corr_bins is None else np.asarray(corr_bins, dtype=np.float64)
     h = h[h > 0]
     h = h / math.sqrt(float(np.sum(h * h)))
-    z = rng.standard_normal(tuple(shape[:-1]) + (n_bins + h.size - 1, 2))
+    size = tuple(shape[:-1]) + (n_bins + h.size - 1, 2)
+    # Drawn into a buffer kept per thread and shape (the same numbers as a new array): a new 4 MB
+    # array per frame was mapped afresh by the allocator, its page faults most of a frame's
+    # system time (benchmarks/frame_profile.py, "system_time").
+    buffers = _scratch.__dict__.setdefault("draws", {})
+    z = buffers.get(size)
+    if z is None:
+        buffers.clear()
+        z = buffers[size] = np.empty(size)
+    rng.standard_normal(out=z)
     z *= math.sqrt(0.5)
     return z, h
 
