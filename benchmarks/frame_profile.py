@@ -2,7 +2,7 @@
 
 Prints one JSON object. Per case (the 512-beam quay-wall frame, the 200-ping box scan, a
 side-scan ping pair, a one-ping mechanical "Ping360-like" head) and per chain (``fast``: the
-vectorised receiver chain and the speckle field cache, the default; ``reference``: the
+vectorised receiver chain (`mitsonar.receiver.fastchain`) and the speckle field cache, the default; ``reference``: the
 straightforward chain, ``electronics.FAST = False`` and ``speckle.CACHE_SIZE = 0``), frames are
 rendered interleaved (reference, fast, reference, ...; the machine is shared) and each stage is
 timed by wrapping the function that does it:

@@ -44,10 +44,10 @@ def chain(model, inten, ranges, poses, fast, monkeypatch, drawn=False):
 def test_fast_chain_gives_the_reference_bytes(mitsonar_mod, monkeypatch, settings, drawn):
     """Every setting, scene speckle or speckle drawn from the seed, a row count that is not a
     multiple of the block (several blocks): the same bytes as the straightforward chain."""
-    from mitsonar.receiver import electronics
+    from mitsonar.receiver import fastchain
     from mitsonar.receiver.electronics import Electronics
 
-    monkeypatch.setattr(electronics, "ROW_BLOCK", 8)
+    monkeypatch.setattr(fastchain, "ROW_BLOCK", 8)
     model = Electronics.from_dict(settings)
     inten, ranges, poses = chain_inputs()
     ref = chain(model, inten, ranges, poses, False, monkeypatch, drawn)

@@ -60,13 +60,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import threading
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from mitsonar._checks import is_number, not_a, not_allowed
+import mitsonar.receiver.fastchain as fastchain
 from mitsonar.sonar_equation.levels import (DEFAULT_NOISE_LEVEL, DEFAULT_RECEIVER_SENSITIVITY, DEFAULT_SOURCE_LEVEL,
                                     SOURCE_LEVELS, echo_level, rename_settings, source_level_error)
 
@@ -90,8 +90,6 @@ MIN_TVG_RANGE = 1e-3
 # `Electronics.apply` on float64 parts in reused buffers (the same bytes as the straightforward
 # chain kept for tests and benchmarks/frame_profile.py, which ``FAST = False`` runs).
 FAST = True
-# Rows the fast chain takes at a time: its float64 blocks (32 x 500 bins: 128 KB) stay in cache.
-ROW_BLOCK = 32
 
 
 @dataclass
@@ -502,7 +500,7 @@ class Electronics:
         intensity = np.asarray(intensity)
         ranges = np.asarray(ranges, dtype=np.float64)
         one_ping = intensity.ndim == 1
-        inten = np.array(intensity, dtype=np.float64, ndmin=2) if not FAST else _scratch_copy(intensity)
+        inten = np.array(intensity, dtype=np.float64, ndmin=2) if not FAST else fastchain.scratch_copy(intensity)
         if inten.ndim != 2 or inten.shape[-1] != ranges.shape[0] or ranges.ndim != 1:
             raise ValueError(f"electronics: intensity {np.shape(intensity)} and ranges {ranges.shape} do not match "
                              "(expected (n_pings, n_bins) and (n_bins,))")
@@ -535,12 +533,7 @@ class Electronics:
         if self.speckle == "off":
             g = np.ones(inten.shape)
         else:
-            g = speckle if speckle is not None else _complex_gaussian(inten.shape, rng, corr)
-            if self.speckle == "weibull":
-                power = np.abs(g) ** 2
-                k = self.speckle_shape
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    g = g * np.where(power > 0, power ** (0.5 / k - 0.5), 0.0) / math.sqrt(math.gamma(1.0 + 1.0 / k))
+            g = self._speckle(speckle if speckle is not None else _complex_gaussian(inten.shape, rng, corr))
         if self.ringdown <= 0 and self.noise_floor == -math.inf:
             total = inten * (np.abs(g) ** 2 if np.iscomplexobj(g) else g)
         else:
@@ -551,13 +544,8 @@ class Electronics:
         return data[0] if one_ping else data
 
     def _apply_fast(self, inten, ranges, absorption, sound_speed, rng, speckle):
-        """`apply`'s chain (speckle on) on float64 parts, a block of `ROW_BLOCK` rows at a time
-        (the block's arrays stay in the CPU's cache): the same floating-point operations in the
-        same order as the reference chain (``FAST = False``) on each bin, so the same bytes. A
-        complex number times a real one is computed as two real products (the reference's
-        complex product adds ``0 x imag``, which changes at most the sign of a zero, and every
-        amplitude is squared). The random draws are made first, for the whole scan, in the
-        reference's order. ``inten`` (a private copy) is overwritten."""
+        """`apply`'s chain (speckle on) in `mitsonar.receiver.fastchain`: the same bytes as the
+        straightforward chain; the random draws first, for the whole scan, in its order."""
         bin_width = _bin_width(ranges)
         pulse = _spread_kernel(sound_speed * self.pulse_length / 2.0, 0.0, bin_width) if bin_width > 0 else np.ones(1)
         corr = pulse if pulse.size > 1 else None
@@ -565,60 +553,24 @@ class Electronics:
         calibration = self.source_level + self.receiver_sensitivity
         tvg = self.tvg_db(ranges, absorption)
         chain = calibration + self.gain + tvg
-        g = speckle if speckle is not None else _complex_gaussian(inten.shape, rng, corr)
-        if self.speckle == "weibull":
-            power = np.abs(g) ** 2
-            k = self.speckle_shape
-            with np.errstate(divide="ignore", invalid="ignore"):
-                g = g * np.where(power > 0, power ** (0.5 / k - 0.5), 0.0) / math.sqrt(math.gamma(1.0 + 1.0 / k))
+        g = self._speckle(speckle if speckle is not None else _complex_gaussian(inten.shape, rng, corr))
         quiet = self.ringdown <= 0 and self.noise_floor == -math.inf
         ring = np.sqrt(10.0 ** ((self.ringdown_db(ranges) - chain) / 10.0)) if self.ringdown > 0 else None
-        noisy = not quiet and self.noise_floor > -math.inf
-        if noisy:
-            z, taps = _gaussian_draws(inten.shape, rng, corr)
+        z, taps, f = None, None, None
+        if not quiet and self.noise_floor > -math.inf:
+            z, taps = fastchain.gaussian_draws(inten.shape, rng, corr)
             f = math.sqrt(10.0 ** (self.noise_floor / 10.0)) * 10.0 ** (-chain / 20.0)
-        scale = 15.0 if self.bit_depth == 4 else 255.0
-        out = np.empty(inten.shape, dtype=np.uint8)
-        for r0 in range(0, inten.shape[0], ROW_BLOCK):
-            rows = slice(r0, r0 + ROW_BLOCK)
-            x = _convolve_range(inten[rows], kernel) if kernel.size > 1 else inten[rows]
-            gb = g[rows]
-            if quiet:
-                total = np.abs(gb) ** 2
-                total *= x
-            else:
-                np.sqrt(x, out=x)
-                re = np.multiply(x, gb.real)
-                im = np.multiply(x, gb.imag, out=x)
-                if ring is not None:
-                    re += ring
-                if noisy:
-                    n_re, n_im = _filtered(z[rows], taps, x.shape[-1])
-                    n_re *= f
-                    re += n_re
-                    n_im *= f
-                    im += n_im
-                total = np.multiply(re, re, out=re)
-                total += np.multiply(im, im, out=im)
-            with np.errstate(divide="ignore"):
-                level = np.log10(total, out=total)
-            level *= 10.0
-            level += calibration
-            level += self.gain
-            level += tvg
-            # `quantise`, in place
-            level -= self.ad_low
-            level /= self.ad_span
-            np.clip(level, 0.0, 1.0, out=level)
-            level[np.isnan(level)] = 0.0
-            level *= scale
-            q = np.floor(level)
-            level -= q
-            q += level >= 0.5
-            if self.bit_depth == 4:
-                q *= 17.0
-            out[rows] = q
-        return out
+        return fastchain.received_bytes(inten, g, kernel, quiet, ring, z, taps, f, (calibration, self.gain, tvg),
+                                        (self.ad_low, self.ad_span, self.bit_depth))
+
+    def _speckle(self, g):
+        """The complex speckle ``g`` with its modulus reshaped to the Weibull law (``weibull``)."""
+        if self.speckle != "weibull":
+            return g
+        power = np.abs(g) ** 2
+        k = self.speckle_shape
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return g * np.where(power > 0, power ** (0.5 / k - 0.5), 0.0) / math.sqrt(math.gamma(1.0 + 1.0 / k))
 
     def _received_power(self, inten, g, chain, ranges, rng, corr):
         """``|sqrt(I) g + sqrt(R) + sqrt(N) n|^2`` referred back through ``chain`` (see `apply`)."""
@@ -681,75 +633,7 @@ def has_scene_speckle(scan) -> bool:
     return scan.meta.speckle == "scene" and scan.meta.aperture_h is not None
 
 
-def _complex_gaussian(shape, rng: np.random.Generator, corr_bins=None) -> np.ndarray:
-    """Unit circular complex Gaussian samples of ``shape`` (mean power 1), filtered along the last
-    axis with the amplitude weights ``corr_bins`` (normalised), so that neighbouring bins within
-    one pulse are correlated like the matched filter's output; the marginal law is unchanged."""
-    n_bins = shape[-1]
-    h = np.ones(1) if corr_bins is None else np.asarray(corr_bins, dtype=np.float64)
-    h = h[h > 0]
-    h = h / math.sqrt(float(np.sum(h * h)))
-    k = h.size
-    z = rng.standard_normal(tuple(shape[:-1]) + (n_bins + k - 1, 2)).view(np.complex128)[..., 0]
-    z *= math.sqrt(0.5)
-    if k == 1:
-        return z
-    zf = np.zeros(shape, dtype=np.complex128)
-    for j in range(k):
-        zf += h[j] * z[..., j:j + n_bins]
-    return zf
-
-
-_scratch = threading.local()
-
-
-def _scratch_copy(values) -> np.ndarray:
-    """``np.array(values, dtype=float64, ndmin=2)`` (a copy: the input stays untouched) in a
-    buffer kept per thread and shape, overwritten by the next call: `apply`'s working copy."""
-    src = np.asarray(values)
-    if src.dtype == object or src.dtype.kind in "USV":
-        return np.array(values, dtype=np.float64, ndmin=2)
-    shape = (1,) * max(0, 2 - src.ndim) + src.shape
-    buffers = _scratch.__dict__.setdefault("inten", {})
-    buf = buffers.get(shape)
-    if buf is None:
-        buffers.clear()
-        buf = buffers[shape] = np.empty(shape)
-    np.copyto(buf, src.reshape(shape), casting="unsafe")
-    return buf
-
-
-def _gaussian_draws(shape, rng: np.random.Generator, corr_bins=None):
-    """`_complex_gaussian`'s draws (the same numbers from ``rng``), unfiltered, as float64
-    (..., n_bins + k - 1, 2) (real, imaginary), and its normalised taps; `_filtered` filters them."""
-    n_bins = shape[-1]
-    h = np.ones(1) if corr_bins is None else np.asarray(corr_bins, dtype=np.float64)
-    h = h[h > 0]
-    h = h / math.sqrt(float(np.sum(h * h)))
-    size = tuple(shape[:-1]) + (n_bins + h.size - 1, 2)
-    # Drawn into a buffer kept per thread and shape (the same numbers as a new array): a new 4 MB
-    # array per frame was mapped afresh by the allocator, its page faults most of a frame's
-    # system time (benchmarks/frame_profile.py, "system_time").
-    buffers = _scratch.__dict__.setdefault("draws", {})
-    z = buffers.get(size)
-    if z is None:
-        buffers.clear()
-        z = buffers[size] = np.empty(size)
-    rng.standard_normal(out=z)
-    z *= math.sqrt(0.5)
-    return z, h
-
-
-def _filtered(z, h, n_bins):
-    """(real, imaginary) of `_complex_gaussian`'s filtered samples from `_gaussian_draws`' ``z``
-    (the same sums in the same order, without complex temporaries)."""
-    if h.size == 1:
-        return z[..., 0].copy(), z[..., 1].copy()
-    zf = np.zeros(z.shape[:-2] + (n_bins, 2))
-    tmp = np.empty_like(zf)
-    for j in range(h.size):
-        zf += np.multiply(z[..., j:j + n_bins, :], h[j], out=tmp)
-    return zf[..., 0], zf[..., 1]
+_complex_gaussian = fastchain.complex_gaussian
 
 
 def _round_half_up(v: np.ndarray) -> np.ndarray:
@@ -774,55 +658,14 @@ def _bin_width(ranges) -> float:
 
 def _convolve_range(inten: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     """Convolve along the last axis with a centred kernel; energy pushed off the ends is dropped."""
-    if not FAST:
-        return _convolve_range_reference(inten, kernel)
-    m = (kernel.size - 1) // 2
-    n = inten.shape[-1]
-    out = np.zeros_like(inten)
-    tmp = np.empty_like(inten)   # one scratch buffer for every tap (same products, same sums)
-    for j, w in enumerate(kernel):
-        shift = j - m
-        if w == 0.0 or abs(shift) >= n:
-            continue
-        if shift >= 0:
-            out[..., shift:] += np.multiply(w, inten[..., :n - shift], out=tmp[..., :n - shift])
-        else:
-            out[..., :n + shift] += np.multiply(w, inten[..., -shift:], out=tmp[..., :n + shift])
-    return out
-
-
-def _convolve_range_reference(inten: np.ndarray, kernel: np.ndarray) -> np.ndarray:
-    """`_convolve_range` with a new temporary per tap (the straightforward form, for tests)."""
-    m = (kernel.size - 1) // 2
-    n = inten.shape[-1]
-    out = np.zeros_like(inten)
-    for j, w in enumerate(kernel):
-        shift = j - m
-        if w == 0.0 or abs(shift) >= n:
-            continue
-        if shift >= 0:
-            out[..., shift:] += w * inten[..., :n - shift]
-        else:
-            out[..., :n + shift] += w * inten[..., -shift:]
-    return out
+    return (fastchain.convolve_range if FAST else fastchain.convolve_range_reference)(inten, kernel)
 
 
 def _spread_kernel(length: float, sigma: float, bin_width: float) -> np.ndarray:
-    """Bin weights of U[0, length) + N(0, sigma^2) for an echo at a bin centre (see range_kernel);
-    computed once per (length, sigma, bin_width) when `FAST` (a Python loop of erf per edge)."""
-    if not FAST:
-        return _spread_kernel_computed(length, sigma, bin_width)
+    """Bin weights of U[0, length) + N(0, sigma^2) for an echo at a bin centre (see range_kernel),
+    computed once per setting when `FAST` (read-only)."""
     key = (float(length), float(sigma), float(bin_width))
-    w = _kernels.get(key)
-    if w is None:
-        if len(_kernels) >= 64:
-            _kernels.clear()
-        w = _kernels[key] = _spread_kernel_computed(*key)
-        w.setflags(write=False)
-    return w
-
-
-_kernels: dict = {}
+    return fastchain.cached(key, _spread_kernel_computed) if FAST else _spread_kernel_computed(*key)
 
 
 def _spread_kernel_computed(length: float, sigma: float, bin_width: float) -> np.ndarray:
