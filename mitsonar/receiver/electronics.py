@@ -87,9 +87,7 @@ HEAD_LIMITS = {"gain": (0.0, HEAD_DB_SCALE), "ad_low": (0.0, HEAD_DB_SCALE),
 
 #: Ranges below this are clamped in the TVG so that a bin centre at r = 0 stays finite.
 MIN_TVG_RANGE = 1e-3
-# `Electronics.apply` on float64 parts in reused buffers (the same bytes as the straightforward
-# chain kept for tests and benchmarks/frame_profile.py, which ``FAST = False`` runs).
-FAST = True
+FAST = True   # `apply` through `mitsonar.receiver.fastchain` (False: the straightforward chain, same bytes)
 
 
 @dataclass
@@ -511,8 +509,7 @@ class Electronics:
         if not (math.isfinite(sound_speed) and sound_speed > 0):
             raise ValueError(f"electronics: sound_speed {sound_speed!r} is not a speed > 0 m/s")
         if speckle is not None:
-            # read, never written: no copy in the vectorised chain
-            speckle = (np.asarray if FAST else np.array)(speckle, dtype=np.complex128)
+            speckle = (np.asarray if FAST else np.array)(speckle, dtype=np.complex128)   # read only
             speckle = speckle[None] if speckle.ndim == 1 else speckle
             if speckle.shape != inten.shape:
                 raise ValueError(f"electronics: speckle {speckle.shape} does not match intensity {inten.shape}")
