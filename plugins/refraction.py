@@ -18,8 +18,25 @@ What a path does (`common.SonarIntegrator._sample_primal` calls these when a pro
   for a 10 m chord where ``g = 0.5 /s``) and the time along it grows as through a speed linear
   along the chord (``t(f) = dt ln(1 + r f) / ln(1 + r)``, ``r = c_end / c_start - 1``). ``dt``
   is ``range_max / (chords * c_sensor)``: ``chords`` (XML ``svp_chords``, default 4) chords per
-  range window. A segment stops once its time leaves no echo inside the window.
-* **The way back** (`eigenray`): the ray joining a surface point to the transducer without a
+  range window. A segment stops once its time leaves no echo inside the window. The time to the
+  hit itself is one Newton step on the exact arc: the arc's state at the interpolated time
+  (`advance` from the hit chord's start), moved along its tangent to the surface's tangent plane
+  at the hit (exact for a plane up to the square of the interpolation's error times the
+  curvature; the interpolation alone erred by 0.7 bins where a long chord crosses a change of
+  gradient). Echo ranges then no longer depend on ``chords``; the chords still set where a ray
+  meets the scene (within the sagitta).
+* **Merged layers** (`merge_layers`): samples within `MERGE_TOL` (0.01 m/s) of the line between
+  their kept neighbours are dropped, so a ray crosses fewer layers; the merged profile is within
+  the tolerance everywhere, a travel time within ``tol / c_min`` of itself (Fermat: the path's
+  change is of second order), 0.7 mm at 100 m. A profile resampled from a few knots (collinear
+  samples) merges exactly to its knots.
+* **The first bounce's way back** is the outgoing ray reversed (reciprocity: the segment left the
+  transducer itself, and the same ray, time and length bring the echo back; its arrival
+  direction is the launch direction, its direction at the surface the exact tangent
+  `Refraction.reversed_at`); `trace` has already cleared it of obstacles, so it needs neither an
+  eigenray nor visibility chords. Unlike an eigenray it also brings back echoes whose outgoing
+  ray turned.
+* **The way back from a later bounce** (`eigenray`): the ray joining a surface point to the transducer without a
   turning point. With ``c_max`` the largest speed between the two depths and ``sigma`` the sine
   of the grazing angle where the speed is ``c_max`` (``a = cos / c_max``), the horizontal distance
   ``X(sigma)`` (a sum over the layers between the depths, unrolled) is solved for the true
