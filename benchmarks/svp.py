@@ -15,15 +15,29 @@ Prints one JSON object:
     and ``chord_shift_median_bins`` / ``_max_bins``: how far each beam's echo centroid moves
     against 64 chords per window with the same seed (the same paths: the chord approximation's
     own error, free of Monte Carlo noise);
-  * ``profile``: the 20 samples (a warm mixed layer over a thermocline, m and m/s).
+  * ``profile``: the 20 samples (m and m/s) and ``merged_samples``, how many the render keeps
+    (`refraction.merge_layers`). ``--profile thermocline`` (default): a warm mixed layer over a
+    linear thermocline, three linear pieces sampled at 20 depths, which merge exactly to their 4
+    knots; ``--profile smooth``: a tanh thermocline at the same depths, 20 distinct gradients,
+    nothing merges (the cost of crossing 20 layers).
 
 The straight multibeam render shares each frame's paths between the beams (`shared_beams`); a
 refracted one traces per-row paths (a shared echo is scored by its straight direction), so its
-noise at equal spp differs: ``ratio_at_equal_noise`` compares them at equal error. The chord
-approximation is the only bias: its cost in accuracy is the refracted ``median_bins`` and
-``max_bins`` against the straight render's, per chord count.
+noise at equal spp differs: ``ratio_at_equal_noise`` compares them at equal error. The chords
+and the merged layers are the only biases: their cost in accuracy is the refracted
+``median_bins`` and ``max_bins`` against the straight render's, per chord count, and the
+``chord_shift``.
 
-Usage: python benchmarks/svp.py [--spp 1024] [--repeats 5] [--depth 40]
+Measured on 26 Nov 2026 (2 cores shared with other jobs, so seconds wander by 2x between runs; the ratios come
+from interleaved renders of one run), default 4 chords, ``ratio_at_equal_noise``:
+  thermocline: spp 1024 1.5x (time 1.5x); spp 4096 2.1x (time 2.2x);
+  smooth:      spp 1024 1.7x (time 1.7x); spp 4096 2.9x (time 3.0x).
+Echo peaks within 0.004 bins of the 64-chord render at every chord count (1 to 64), and the
+error against the exact-arc closed form is the straight render's (median 0.25 bins, the bin
+quantisation). The refracted path costs more per sample than the straight one (about 6x, the
+straight render's fixed cost per ping hides it at low spp), so the ratio grows with spp.
+
+Usage: python benchmarks/svp.py [--spp 1024] [--repeats 5] [--depth 40] [--profile thermocline|smooth]
 """
 from __future__ import annotations
 
@@ -50,6 +64,17 @@ def profile20():
     d = np.array([0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 23, 26, 29, 32, 35, 40, 50, 70, 100], float)
     c = np.interp(d, [0, 10, 40, 100], [1520.0, 1519.0, 1490.0, 1491.0])
     return SoundSpeedProfile(d, c)
+
+
+def profile20_smooth():
+    """The same 20 depths through a smooth thermocline (a tanh step plus the pressure term), so
+    that no two layers share a gradient and none merge (`refraction.merge_layers`)."""
+    d = profile20().depths
+    c = 1490.0 + 14.5 * (1.0 - np.tanh((d - 22.0) / 9.0)) + 0.017 * d
+    return SoundSpeedProfile(d, c)
+
+
+PROFILES = {"thermocline": profile20, "smooth": profile20_smooth}
 
 
 def scene_for(head, depth, chords=None):
@@ -105,11 +130,12 @@ def main(argv=None):
     ap.add_argument("--spp", type=int, default=1024)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--depth", type=float, default=40.0)
+    ap.add_argument("--profile", choices=sorted(PROFILES), default="thermocline")
     args = ap.parse_args(argv)
     head = echosounders.configure("r2sonic_2024", n_beams=256, range_max=100.0, bin_width=0.1)
     pose = np.array(head.mount, float)
     pose[2, 3] = -HEAD
-    svp = profile20()
+    svp = PROFILES[args.profile]()
     c_s = head.params["sound_speed"]
     chord_counts = (1, 2, 4, 16, 64)
     configs = {"straight": (scene_for(head, args.depth), None)}
@@ -140,7 +166,17 @@ def main(argv=None):
     print(json.dumps(dict(spp=args.spp, beams=256, depth=args.depth, head_depth=HEAD, sound_speed=c_s,
                           machine=platform.machine(), python=sys.version.split()[0], cpus=os.cpu_count(),
                           straight=straight, refracted=refracted,
-                          profile=dict(depth=svp.depths.tolist(), sound_speed=svp.speeds.tolist())), indent=1))
+                          profile=dict(name=args.profile, depth=svp.depths.tolist(), sound_speed=svp.speeds.tolist(),
+                                       merged_samples=merged_samples(svp))), indent=1))
+
+
+def merged_samples(svp):
+    """How many of the profile's samples the render keeps (`refraction.merge_layers`); None with
+    a renderer that does not merge."""
+    from mitsonar.plugins import module
+
+    merge = getattr(module("refraction"), "merge_layers", None)
+    return None if merge is None else len(merge([float(v) for v in svp.depths], [float(v) for v in svp.speeds])[0])
 
 
 if __name__ == "__main__":

@@ -13,6 +13,33 @@ from .props import number, text
 _EXPECTED = {"diffuse": "a <float> in [0, 1]", "specular": "a <float> in [0, 1]", "shininess": "a <float> >= 0"}
 
 
+
+def lobe_direction(si, pick_spec, shininess, sample2):
+    """An outgoing direction of a Phong-plus-Lambert BSDF (local frame): the Phong lobe about the
+    mirror direction (``cos(alpha) = u^(1/(n+1))``) where ``pick_spec``, else cosine-weighted."""
+    mirror = mi.Vector3f(-si.wi.x, -si.wi.y, si.wi.z)
+    cos_a = dr.power(sample2.x, 1.0 / (shininess + 1))
+    sin_a = dr.safe_sqrt(1 - cos_a * cos_a)
+    s, c = dr.sincos(2 * dr.pi * sample2.y)
+    wo_spec = mi.Frame3f(mirror).to_world(mi.Vector3f(sin_a * c, sin_a * s, cos_a))
+    wo_diff = mi.warp.square_to_cosine_hemisphere(sample2)
+    return dr.select(pick_spec, wo_spec, wo_diff)
+
+
+def lobe_sample(wo, value, pdf, valid, pick_spec, active):
+    """``(BSDFSample3f, weight)`` of a direction drawn by `lobe_direction`: ``value`` is ``f cos``
+    there, ``pdf`` the mixture's density; the lobe picked is the sample's type and component."""
+    bs = mi.BSDFSample3f()
+    bs.wo = wo
+    bs.pdf = pdf
+    bs.eta = 1.0
+    bs.sampled_type = mi.UInt32(dr.select(pick_spec, mi.UInt32(+mi.BSDFFlags.GlossyReflection),
+                                          mi.UInt32(+mi.BSDFFlags.DiffuseReflection)))
+    bs.sampled_component = dr.select(pick_spec, mi.UInt32(1), mi.UInt32(0))
+    ok = active & valid & (pdf > 0)
+    weight = dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0)
+    return bs, mi.Spectrum(weight)
+
 class AcousticBSDF(mi.BSDF):
     r"""Acoustic reflection of a surface: diffuse scatter plus a Phong lobe about the mirror direction.
 
@@ -98,29 +125,11 @@ class AcousticBSDF(mi.BSDF):
 
     # ------------------------------------------------------------------ BSDF interface
     def sample(self, ctx, si, sample1, sample2, active=True):
-        p_s = self._spec_prob(si)
-        pick_spec = sample1 < p_s
-        # Phong lobe about the mirror direction: cos(alpha) = u^(1/(n+1)).
-        mirror = mi.Vector3f(-si.wi.x, -si.wi.y, si.wi.z)
-        cos_a = dr.power(sample2.x, 1.0 / (self.shininess + 1))
-        sin_a = dr.safe_sqrt(1 - cos_a * cos_a)
-        s, c = dr.sincos(2 * dr.pi * sample2.y)
-        wo_spec = mi.Frame3f(mirror).to_world(mi.Vector3f(sin_a * c, sin_a * s, cos_a))
-        wo_diff = mi.warp.square_to_cosine_hemisphere(sample2)
-        wo = dr.select(pick_spec, wo_spec, wo_diff)
-
+        pick_spec = sample1 < self._spec_prob(si)
+        wo = lobe_direction(si, pick_spec, self.shininess, sample2)
         value, cos_o, phong, valid = self._eval(si, wo)
         pdf = self._pdf(si, cos_o, phong, valid)
-        bs = mi.BSDFSample3f()
-        bs.wo = wo
-        bs.pdf = pdf
-        bs.eta = 1.0
-        bs.sampled_type = mi.UInt32(dr.select(pick_spec, mi.UInt32(+mi.BSDFFlags.GlossyReflection),
-                                              mi.UInt32(+mi.BSDFFlags.DiffuseReflection)))
-        bs.sampled_component = dr.select(pick_spec, mi.UInt32(1), mi.UInt32(0))
-        ok = active & valid & (pdf > 0)
-        weight = dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0)
-        return bs, mi.Spectrum(weight)
+        return lobe_sample(wo, value, pdf, valid, pick_spec, active)
 
     def eval(self, ctx, si, wo, active=True):
         value, _, _, _ = self._eval(si, wo)

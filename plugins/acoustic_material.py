@@ -94,6 +94,7 @@ from mitsonar.acoustics.materials import MATERIALS, WATER_DENSITY, WATER_SOUND_S
 from mitsonar.acoustics.seabed import APL_UW_FREQUENCY_RANGE, SEDIMENTS, apl_uw_backscatter
 from mitsonar.acoustics.seabed import sediment as find_sediment
 
+from .acoustic_bsdf import lobe_direction, lobe_sample
 from .props import number, text
 
 NAME = "acoustic_material"
@@ -313,26 +314,10 @@ class AcousticMaterialBSDF(mi.BSDF):
 
     # ------------------------------------------------------------------ BSDF interface
     def sample(self, ctx, si, sample1, sample2, active=True):
-        p_s = self._spec_prob(self._grazing(mi.Frame3f.cos_theta(si.wi)))
-        pick_spec = sample1 < p_s
-        mirror = mi.Vector3f(-si.wi.x, -si.wi.y, si.wi.z)
-        cos_a = dr.power(sample2.x, 1.0 / (self.shininess + 1))
-        sin_a = dr.safe_sqrt(1 - cos_a * cos_a)
-        s, c = dr.sincos(2 * dr.pi * sample2.y)
-        wo_spec = mi.Frame3f(mirror).to_world(mi.Vector3f(sin_a * c, sin_a * s, cos_a))
-        wo_diff = mi.warp.square_to_cosine_hemisphere(sample2)
-        wo = dr.select(pick_spec, wo_spec, wo_diff)
+        pick_spec = sample1 < self._spec_prob(self._grazing(mi.Frame3f.cos_theta(si.wi)))
+        wo = lobe_direction(si, pick_spec, self.shininess, sample2)
         value, pdf, valid = self._terms(si, wo)
-        bs = mi.BSDFSample3f()
-        bs.wo = wo
-        bs.pdf = pdf
-        bs.eta = 1.0
-        bs.sampled_type = mi.UInt32(dr.select(pick_spec, mi.UInt32(+mi.BSDFFlags.GlossyReflection),
-                                              mi.UInt32(+mi.BSDFFlags.DiffuseReflection)))
-        bs.sampled_component = dr.select(pick_spec, mi.UInt32(1), mi.UInt32(0))
-        ok = active & valid & (pdf > 0)
-        weight = dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0)
-        return bs, mi.Spectrum(weight)
+        return lobe_sample(wo, value, pdf, valid, pick_spec, active)
 
     def eval(self, ctx, si, wo, active=True):
         value, _, _ = self._terms(si, wo)

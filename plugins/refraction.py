@@ -18,8 +18,25 @@ What a path does (`common.SonarIntegrator._sample_primal` calls these when a pro
   for a 10 m chord where ``g = 0.5 /s``) and the time along it grows as through a speed linear
   along the chord (``t(f) = dt ln(1 + r f) / ln(1 + r)``, ``r = c_end / c_start - 1``). ``dt``
   is ``range_max / (chords * c_sensor)``: ``chords`` (XML ``svp_chords``, default 4) chords per
-  range window. A segment stops once its time leaves no echo inside the window.
-* **The way back** (`eigenray`): the ray joining a surface point to the transducer without a
+  range window. A segment stops once its time leaves no echo inside the window. The time to the
+  hit itself is one Newton step on the exact arc: the arc's state at the interpolated time
+  (`advance` from the hit chord's start), moved along its tangent to the surface's tangent plane
+  at the hit (exact for a plane up to the square of the interpolation's error times the
+  curvature; the interpolation alone erred by 0.7 bins where a long chord crosses a change of
+  gradient). Echo ranges then no longer depend on ``chords``; the chords still set where a ray
+  meets the scene (within the sagitta).
+* **Merged layers** (`merge_layers`): samples within `MERGE_TOL` (0.01 m/s) of the line between
+  their kept neighbours are dropped, so a ray crosses fewer layers; the merged profile is within
+  the tolerance everywhere, a travel time within ``tol / c_min`` of itself (Fermat: the path's
+  change is of second order), 0.7 mm at 100 m. A profile resampled from a few knots (collinear
+  samples) merges exactly to its knots.
+* **The first bounce's way back** is the outgoing ray reversed (reciprocity: the segment left the
+  transducer itself, and the same ray, time and length bring the echo back; its arrival
+  direction is the launch direction, its direction at the surface the exact tangent
+  `Refraction.reversed_at`); `trace` has already cleared it of obstacles, so it needs neither an
+  eigenray nor visibility chords. Unlike an eigenray it also brings back echoes whose outgoing
+  ray turned.
+* **The way back from a later bounce** (`eigenray`): the ray joining a surface point to the transducer without a
   turning point. With ``c_max`` the largest speed between the two depths and ``sigma`` the sine
   of the grazing angle where the speed is ``c_max`` (``a = cos / c_max``), the horizontal distance
   ``X(sigma)`` (a sum over the layers between the depths, unrolled) is solved for the true
@@ -46,6 +63,8 @@ EIGEN_STEPS = 4
 EIGEN_TOL = 2e-4
 #: Layers one time step may cross, beyond those of the profile (turns re-enter a layer).
 EXTRA_CROSSINGS = 4
+#: Samples within this many m/s of the line between their kept neighbours are merged (`merge_layers`).
+MERGE_TOL = 0.01
 #: Default chords per range window (XML ``svp_chords``).
 DEFAULT_CHORDS = 4
 
@@ -219,7 +238,7 @@ class Refraction:
 
     # ------------------------------------------------------------------------- outgoing segments
     @dr.syntax
-    def trace(self, scene, p, d, t_budget, active):
+    def trace(self, scene, p, d, t_budget, active, exact=True):
         """Follow the ray launched from ``p`` along unit ``d`` for at most ``t_budget`` s: the
         first surface it meets, as ``(si, t, length)``: the interaction (``si.wi`` from the chord
         that reached it), the one-way travel time (s) and the curved length (m) to it."""
@@ -237,6 +256,8 @@ class Refraction:
         found = mi.Bool(False)
         hit_o, hit_d, hit_t = mi.Point3f(p), mi.Vector3f(d), mi.Float(0.0)
         t_hit, l_hit = mi.Float(0.0), mi.Float(0.0)
+        t0_hit, x0_hit, z0_hit, s0_hit, dn0_hit = (mi.Float(0.0), mi.Float(0.0), mi.Float(0.0), mi.Float(0.0),
+                                                   mi.Bool(False))
         active = mi.Bool(active)
         while active:
             tau = dr.minimum(self.dt, t_budget - t)
@@ -257,6 +278,12 @@ class Refraction:
             hit_t = dr.select(hit, L, hit_t)
             t_hit = dr.select(hit, t + tau * frac, t_hit)
             l_hit = dr.select(hit, length + pi.t, l_hit)
+            # the hit chord's start state, for the exact time to the hit (below)
+            t0_hit = dr.select(hit, t, t0_hit)
+            x0_hit = dr.select(hit, x, x0_hit)
+            z0_hit = dr.select(hit, z, z0_hit)
+            s0_hit = dr.select(hit, s, s0_hit)
+            dn0_hit = dr.select(hit, down, dn0_hit)
             found |= hit
             x, z, s, down, c1 = x2, z2, s2, down2, c2
             t += tau
@@ -266,9 +293,43 @@ class Refraction:
         ray = mi.Ray3f(hit_o, hit_d)
         ray.maxt = hit_t
         si = scene.ray_intersect(ray, found)
+        if exact:
+            # The chord's time interpolation assumes a speed linear along the chord, wrong where
+            # it crosses a change of gradient (a 25 m chord across a thermocline's foot: 0.3
+            # bins). One Newton step on the exact arc instead: its state at the interpolated time
+            # (`advance` from the hit chord's start), then the time along its tangent to the
+            # surface's tangent plane at the hit (exact for a plane up to the square of the
+            # interpolation's error times the curvature). Kept where the tangent meets the plane
+            # at more than 6 deg and the step stays inside the chord.
+            tau_g = t_hit - t0_hit
+            dx, z1, s1, _, ok1, c1 = self.advance(z0_hit, s0_hit, dn0_hit, a, tau_g, found)
+            xa = x0_hit + dx
+            pa = mi.Point3f(p.x + h.x * xa, p.y + h.y * xa, -z1)
+            cos1 = a * c1
+            tan1 = mi.Vector3f(h.x * cos1, h.y * cos1, -s1)
+            n = si.n
+            tn = dr.dot(tan1, n)
+            corr = dr.dot(si.p - pa, n) / (c1 * tn)
+            use = found & ok1 & (dr.abs(tn) > 0.1) & (dr.abs(corr) < self.dt) & dr.isfinite(corr)
+            t_hit = dr.select(use, t0_hit + tau_g + corr, t_hit)
         return si, t_hit, l_hit
 
     # ----------------------------------------------------------------------------- the way back
+    def reversed_at(self, si, o, launch):
+        """Unit direction leaving the surface point of ``si`` back along the ray launched from
+        ``o`` along unit ``launch`` that reached it (`trace`): the exact tangent there by Snell,
+        ``cos = a c(z)`` with ``a`` the launch's invariant, the vertical sense that of the chord
+        that met the surface (``-si.wi`` in world)."""
+        horiz = dr.sqrt(dr.square(launch.x) + dr.square(launch.y))
+        h = dr.select(horiz > 0, mi.Vector3f(launch.x, launch.y, 0.0) / dr.maximum(horiz, 1e-30),
+                      mi.Vector3f(1.0, 0.0, 0.0))
+        a = horiz / self.speed(-o.z)
+        cos_p = dr.minimum(a * self.speed(-si.p.z), 1.0)
+        sin_p = dr.safe_sqrt((1.0 - cos_p) * (1.0 + cos_p))
+        chord = si.to_world(si.wi)              # towards where the chord came from
+        up = dr.select(chord.z >= 0, 1.0, -1.0)
+        return dr.normalize(mi.Vector3f(-h.x * cos_p, -h.y * cos_p, up * sin_p))
+
     def _sum(self, a, z_lo, z_hi, full=True):
         """Horizontal distance, time and arc length of the direct ray of invariant ``a`` between
         depths ``z_lo < z_hi`` (layers unrolled); the distance alone unless ``full``."""
@@ -391,7 +452,34 @@ def from_profile(profile, sensor, chords=None):
     if all(v == float(sensor.sound_speed) for v in speeds):
         return None
     chords = DEFAULT_CHORDS if chords is None else check_chords(chords, "sound_speed_profile")
-    return Refraction(profile.depths, speeds, sensor.sound_speed, sensor.range_max, chords)
+    depths, speeds = merge_layers([float(v) for v in profile.depths], speeds)
+    return Refraction(depths, speeds, sensor.sound_speed, sensor.range_max, chords)
+
+
+def merge_layers(depths, speeds, tol=MERGE_TOL):
+    """The profile's samples less those within ``tol`` m/s of the straight line between the kept
+    samples around them (greedy from the top): runs of layers of nearly equal gradient become one
+    layer, so that a ray crosses fewer. The merged profile is within ``tol`` of the given one at
+    every depth (both are linear between samples), so a travel time changes by at most
+    ``tol / c_min`` of itself (the path's own change is of second order by Fermat's principle):
+    0.7 mm of range at 100 m for the default 0.01 m/s."""
+    keep = [0]
+    n = len(depths)
+    while keep[-1] < n - 1:
+        i = keep[-1]
+        d0, c0 = depths[i], speeds[i]
+        lo, hi = -float("inf"), float("inf")      # the slopes from sample i that fit those passed
+        k = i + 1
+        while k + 1 < n:
+            dd = depths[k] - d0
+            lo = max(lo, (speeds[k] - tol - c0) / dd)
+            hi = min(hi, (speeds[k] + tol - c0) / dd)
+            slope = (speeds[k + 1] - c0) / (depths[k + 1] - d0)
+            if not lo <= slope <= hi:
+                break
+            k += 1
+        keep.append(k)
+    return [depths[i] for i in keep], [speeds[i] for i in keep]
 
 
 def check_chords(value, source):
@@ -463,13 +551,23 @@ def sample_path(setup, ping, samples, record, active=True):
         t_path += t_seg
         l_path += l_seg
 
-        ok, t_back, l_back, back, rx = refr.eigenray(si.p, origin, active)
+        # The way back. First bounce (monostatic: the segment left the transducer itself): the
+        # outgoing ray reversed (reciprocity: the same ray, the same time and length), already
+        # cleared of obstacles by `trace` itself, so neither an eigenray nor visibility chords.
+        # Later bounces: the eigenray, tested along its chords.
+        first = depth == 0
+        if first:
+            ok, t_back, l_back = mi.Bool(active), mi.Float(t_seg), mi.Float(l_seg)
+            back, rx = refr.reversed_at(si, origin, ray_d), mi.Vector3f(ray_d)
+        else:
+            ok, t_back, l_back, back, rx = refr.eigenray(si.p, origin, active)
         bsdf = si.bsdf()
         f = bsdf.eval(ctx, si, si.to_local(back), active).x
         gain = c_beam.eval_dir(mi.Vector3f(dr.dot(rx, cx), dr.dot(rx, cy), dr.dot(rx, cz)))
         energy = throughput * f * gain / dr.square(l_back) * dr.exp2(-atten * (l_path + l_back))
         echo = active & ok & (energy > 0)
-        echo &= refr.visible(scene, si.spawn_ray(back).o, back, origin, t_back, echo)
+        if ~first:
+            echo &= refr.visible(scene, si.spawn_ray(back).o, back, origin, t_back, echo)
         rng = half_c * (t_path + t_back)
         # While ``record`` runs, ``refr.arrival`` is the direction the echo reaches the head from
         # (`shared_beams.SharedFrame.score` picks the receive beams by it); gone after, so that no
@@ -499,4 +597,4 @@ def sample_path(setup, ping, samples, record, active=True):
         active &= (depth < max_depth) & (throughput > 0)
 
 
-__all__ = ["Refraction", "from_profile", "check_chords", "read_profile", "sample_path", "DEFAULT_CHORDS"]
+__all__ = ["Refraction", "from_profile", "merge_layers", "MERGE_TOL", "check_chords", "read_profile", "sample_path", "DEFAULT_CHORDS"]

@@ -141,16 +141,23 @@ class SonarTOFIntegrator(SonarIntegrator):
         if spp < 1:
             raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
         spp_pass = max(1, min(spp, MAX_SPP_PER_PASS, int(max_per_row)))
-        total, start = 0.0, 0
+        total, start = None, 0
         # flushing: the calling thread computes like the pool's threads (1 thread = 2 threads)
         with dr.suspend_grad(), flushing():
             while start < spp:
                 count = min(spp_pass, spp - start)
-                total = total + one_pass(start, count)
+                part = one_pass(start, count)
+                # 0.0 + x as before (x + 0.0: the same bits), then sums in place: no new array
+                # per pass nor for the mean
+                if total is None:
+                    total = np.add(part, 0.0)
+                else:
+                    total += part
                 start += count
                 if progress is not None:
                     progress(start, spp)
-        return total / spp
+        total /= spp
+        return total
 
     def lanes(self, n_rows, seed, start, count):
         """The lanes of one pass (`samples.row_lanes`) with this integrator's sampling."""

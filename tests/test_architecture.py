@@ -168,7 +168,8 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
             assert above <= allowed, (name, above - allowed)
     # and those import nothing of mitsonar's above them (the electronics' scene speckle and the
     # sonar equation's levels are numpy-only leaves beside them)
-    leaves = {"mitsonar._checks", "mitsonar.receiver.speckle", "mitsonar.sonar_equation.levels",
+    leaves = {"mitsonar._checks", "mitsonar.receiver.speckle", "mitsonar.receiver.fastchain",
+              "mitsonar.sonar_equation.levels",
               "mitsonar.acoustics._checks", "mitsonar.acoustics.seawater", "mitsonar.acoustics.interface",
               "mitsonar.acoustics.seabed", "mitsonar.acoustics.materials", "mitsonar.geometry.elements"}
     for low in (allowed | leaves) - {"mitsonar._checks", "mitsonar.geometry.kinds"}:
@@ -176,6 +177,7 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     # the kinds (numpy only) rotate rows with the frames' rotations
     assert {t for t in edges["mitsonar.geometry.kinds"] if t.startswith("mitsonar")} == {"mitsonar.geometry.frames"}
     assert not {t for t in edges["mitsonar.receiver.speckle"] if t.startswith("mitsonar")}
+    assert not {t for t in edges["mitsonar.receiver.fastchain"] if t.startswith("mitsonar")}
 
 
 def test_mitsonar_itself_holds_at_most_12_modules():

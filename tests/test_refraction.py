@@ -358,3 +358,51 @@ def test_cli_svp_renders_the_water_and_processing_with_it_corrects_the_soundings
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and f"{svp}, row 4: depth 10.0 m is not greater than the previous 12.0 m" in err, err
     assert not out.exists()
+
+
+# ---------------------------------------------------------------------------------------------
+# the approximations that make refracted renders fast, against their stated bounds
+
+def test_merged_layers_stay_within_the_tolerance_and_move_travel_times_by_at_most_tol_over_c():
+    """`merge_layers` drops samples within MERGE_TOL of the line between their kept neighbours:
+    the merged profile is within the tolerance at every given depth, and a ray's travel time to
+    the seabed moves by at most tol / c_min of itself (Fermat: the path's change is second order)."""
+    from mitsonar.plugins import module
+
+    refraction = module("refraction")
+    tol = refraction.MERGE_TOL
+    rng = np.random.default_rng(5)
+    depths = np.linspace(0.0, 80.0, 41)
+    base = np.interp(depths, [0, 15, 45, 80], [1515.0, 1512.0, 1488.0, 1490.0])
+    speeds = base + rng.uniform(-0.4, 0.4, depths.size) * tol          # rounding-level wiggles: merged
+    speeds[20] += 3 * tol                                                # a real feature: kept
+    md, ms = refraction.merge_layers(list(depths), list(speeds))
+    assert len(md) < 12                                                  # merged: fewer layers to cross
+    assert np.max(np.abs(np.interp(depths, md, ms) - speeds)) <= tol + 1e-9
+    full, merged = SoundSpeedProfile(depths, speeds), SoundSpeedProfile(md, ms)
+    for grazing in np.radians([20.0, 45.0, 70.0, 90.0]):
+        t_full = full.trace(2.0, grazing, to_depth=75.0, samples=0).time[-1]
+        t_merged = merged.trace(2.0, grazing, to_depth=75.0, samples=0).time[-1]
+        assert abs(t_merged - t_full) <= tol / speeds.min() * t_full
+    # exact collinear runs (a profile resampled from a few knots) are single layers
+    assert refraction.merge_layers(list(LAYERED.depths), list(LAYERED.speeds))[0] == [0.0, 10.0, 40.0, 100.0]
+
+
+def test_one_chord_per_window_gives_the_echo_ranges_of_sixty_four(mitsonar_mod):
+    """The hit's time is one Newton step on the exact arc to the surface's plane, not the chord's
+    linear-speed interpolation: the same seed's echoes land in the same place with 1 chord per
+    window as with 64, through a thermocline whose kink the long chords cross (the interpolation
+    alone moved them by 0.7 bins)."""
+    head, sensor, pose = echo_sounder(bin_width=0.05, range_max=60.0)
+
+    scene = flat_seabed_scene(mitsonar_mod, sensor)
+
+    def scan(chords):
+        return mitsonar_mod.render_scan(scene, spp=256, seed=3, pose=pose, sound_speed_profile=LAYERED,
+                                        integrator=dict(PER_ROW, svp_chords=chords))
+
+    one, many = scan(1), scan(64)
+    bin_w = one.ranges[1] - one.ranges[0]
+    np.testing.assert_array_less(np.abs(centroids(one) - centroids(many)), 0.05 * bin_w)
+    expected = np.array([refracted_range(LAYERED, a) for a in beam_angles(one)])
+    np.testing.assert_array_less(np.abs(peak_ranges(one) - expected), 1.5 * bin_w)

@@ -66,6 +66,7 @@ from typing import Any
 import numpy as np
 
 from mitsonar._checks import is_number, not_a, not_allowed
+import mitsonar.receiver.fastchain as fastchain
 from mitsonar.sonar_equation.levels import (DEFAULT_NOISE_LEVEL, DEFAULT_RECEIVER_SENSITIVITY, DEFAULT_SOURCE_LEVEL,
                                     SOURCE_LEVELS, echo_level, rename_settings, source_level_error)
 
@@ -86,6 +87,7 @@ HEAD_LIMITS = {"gain": (0.0, HEAD_DB_SCALE), "ad_low": (0.0, HEAD_DB_SCALE),
 
 #: Ranges below this are clamped in the TVG so that a bin centre at r = 0 stays finite.
 MIN_TVG_RANGE = 1e-3
+FAST = True   # `apply` through `mitsonar.receiver.fastchain` (False: the straightforward chain, same bytes)
 
 
 @dataclass
@@ -327,7 +329,7 @@ class Electronics:
         ndarray float64 (2 m + 1,)
             Weights summing to 1 (to rounding); index ``m`` is offset 0.
         """
-        return _spread_kernel(sound_speed * self.pulse_length / 2.0, self.range_jitter, bin_width)
+        return np.array(_spread_kernel(sound_speed * self.pulse_length / 2.0, self.range_jitter, bin_width))
 
     def spread(self, intensity, ranges, sound_speed: float = 1500.0) -> np.ndarray:
         """Spread echo energy along range by the pulse and the range jitter (step 1 of the chain).
@@ -496,7 +498,7 @@ class Electronics:
         intensity = np.asarray(intensity)
         ranges = np.asarray(ranges, dtype=np.float64)
         one_ping = intensity.ndim == 1
-        inten = np.array(intensity, dtype=np.float64, ndmin=2)  # a copy: the input stays untouched
+        inten = np.array(intensity, dtype=np.float64, ndmin=2) if not FAST else fastchain.scratch_copy(intensity)
         if inten.ndim != 2 or inten.shape[-1] != ranges.shape[0] or ranges.ndim != 1:
             raise ValueError(f"electronics: intensity {np.shape(intensity)} and ranges {ranges.shape} do not match "
                              "(expected (n_pings, n_bins) and (n_bins,))")
@@ -507,10 +509,14 @@ class Electronics:
         if not (math.isfinite(sound_speed) and sound_speed > 0):
             raise ValueError(f"electronics: sound_speed {sound_speed!r} is not a speed > 0 m/s")
         if speckle is not None:
-            speckle = np.array(speckle, dtype=np.complex128, ndmin=2)
+            speckle = (np.asarray if FAST else np.array)(speckle, dtype=np.complex128)   # read only
+            speckle = speckle[None] if speckle.ndim == 1 else speckle
             if speckle.shape != inten.shape:
                 raise ValueError(f"electronics: speckle {speckle.shape} does not match intensity {inten.shape}")
         rng = np.random.default_rng(seed)
+        if FAST and self.speckle != "off":
+            data = self._apply_fast(inten, ranges, absorption, sound_speed, rng, speckle)
+            return data[0] if one_ping else data
 
         bin_width = _bin_width(ranges)
         pulse = _spread_kernel(sound_speed * self.pulse_length / 2.0, 0.0, bin_width) if bin_width > 0 else np.ones(1)
@@ -524,12 +530,7 @@ class Electronics:
         if self.speckle == "off":
             g = np.ones(inten.shape)
         else:
-            g = speckle if speckle is not None else _complex_gaussian(inten.shape, rng, corr)
-            if self.speckle == "weibull":
-                power = np.abs(g) ** 2
-                k = self.speckle_shape
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    g = g * np.where(power > 0, power ** (0.5 / k - 0.5), 0.0) / math.sqrt(math.gamma(1.0 + 1.0 / k))
+            g = self._speckle(speckle if speckle is not None else _complex_gaussian(inten.shape, rng, corr))
         if self.ringdown <= 0 and self.noise_floor == -math.inf:
             total = inten * (np.abs(g) ** 2 if np.iscomplexobj(g) else g)
         else:
@@ -538,6 +539,35 @@ class Electronics:
             level = 10.0 * np.log10(total) + calibration + self.gain + self.tvg_db(ranges, absorption)
         data = self.quantise(level)
         return data[0] if one_ping else data
+
+    def _apply_fast(self, inten, ranges, absorption, sound_speed, rng, speckle):
+        """`apply`'s chain (speckle on) in `mitsonar.receiver.fastchain`: the same bytes as the
+        straightforward chain; the random draws first, for the whole scan, in its order."""
+        bin_width = _bin_width(ranges)
+        pulse = _spread_kernel(sound_speed * self.pulse_length / 2.0, 0.0, bin_width) if bin_width > 0 else np.ones(1)
+        corr = pulse if pulse.size > 1 else None
+        kernel = self.range_kernel(bin_width, sound_speed) if bin_width > 0 else np.ones(1)
+        calibration = self.source_level + self.receiver_sensitivity
+        tvg = self.tvg_db(ranges, absorption)
+        chain = calibration + self.gain + tvg
+        g = self._speckle(speckle if speckle is not None else _complex_gaussian(inten.shape, rng, corr))
+        quiet = self.ringdown <= 0 and self.noise_floor == -math.inf
+        ring = np.sqrt(10.0 ** ((self.ringdown_db(ranges) - chain) / 10.0)) if self.ringdown > 0 else None
+        z, taps, f = None, None, None
+        if not quiet and self.noise_floor > -math.inf:
+            z, taps = fastchain.gaussian_draws(inten.shape, rng, corr)
+            f = math.sqrt(10.0 ** (self.noise_floor / 10.0)) * 10.0 ** (-chain / 20.0)
+        return fastchain.received_bytes(inten, g, kernel, quiet, ring, z, taps, f, (calibration, self.gain, tvg),
+                                        (self.ad_low, self.ad_span, self.bit_depth))
+
+    def _speckle(self, g):
+        """The complex speckle ``g`` with its modulus reshaped to the Weibull law (``weibull``)."""
+        if self.speckle != "weibull":
+            return g
+        power = np.abs(g) ** 2
+        k = self.speckle_shape
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return g * np.where(power > 0, power ** (0.5 / k - 0.5), 0.0) / math.sqrt(math.gamma(1.0 + 1.0 / k))
 
     def _received_power(self, inten, g, chain, ranges, rng, corr):
         """``|sqrt(I) g + sqrt(R) + sqrt(N) n|^2`` referred back through ``chain`` (see `apply`)."""
@@ -600,23 +630,7 @@ def has_scene_speckle(scan) -> bool:
     return scan.meta.speckle == "scene" and scan.meta.aperture_h is not None
 
 
-def _complex_gaussian(shape, rng: np.random.Generator, corr_bins=None) -> np.ndarray:
-    """Unit circular complex Gaussian samples of ``shape`` (mean power 1), filtered along the last
-    axis with the amplitude weights ``corr_bins`` (normalised), so that neighbouring bins within
-    one pulse are correlated like the matched filter's output; the marginal law is unchanged."""
-    n_bins = shape[-1]
-    h = np.ones(1) if corr_bins is None else np.asarray(corr_bins, dtype=np.float64)
-    h = h[h > 0]
-    h = h / math.sqrt(float(np.sum(h * h)))
-    k = h.size
-    z = rng.standard_normal(tuple(shape[:-1]) + (n_bins + k - 1, 2)).view(np.complex128)[..., 0]
-    z *= math.sqrt(0.5)
-    if k == 1:
-        return z
-    zf = np.zeros(shape, dtype=np.complex128)
-    for j in range(k):
-        zf += h[j] * z[..., j:j + n_bins]
-    return zf
+_complex_gaussian = fastchain.complex_gaussian
 
 
 def _round_half_up(v: np.ndarray) -> np.ndarray:
@@ -641,22 +655,17 @@ def _bin_width(ranges) -> float:
 
 def _convolve_range(inten: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     """Convolve along the last axis with a centred kernel; energy pushed off the ends is dropped."""
-    m = (kernel.size - 1) // 2
-    n = inten.shape[-1]
-    out = np.zeros_like(inten)
-    for j, w in enumerate(kernel):
-        shift = j - m
-        if w == 0.0 or abs(shift) >= n:
-            continue
-        if shift >= 0:
-            out[..., shift:] += w * inten[..., :n - shift]
-        else:
-            out[..., :n + shift] += w * inten[..., -shift:]
-    return out
+    return (fastchain.convolve_range if FAST else fastchain.convolve_range_reference)(inten, kernel)
 
 
 def _spread_kernel(length: float, sigma: float, bin_width: float) -> np.ndarray:
-    """Bin weights of U[0, length) + N(0, sigma^2) for an echo at a bin centre (see range_kernel)."""
+    """Bin weights of U[0, length) + N(0, sigma^2) for an echo at a bin centre (see range_kernel),
+    computed once per setting when `FAST` (read-only)."""
+    key = (float(length), float(sigma), float(bin_width))
+    return fastchain.cached(key, _spread_kernel_computed) if FAST else _spread_kernel_computed(*key)
+
+
+def _spread_kernel_computed(length: float, sigma: float, bin_width: float) -> np.ndarray:
     if length <= 0 and sigma <= 0:
         return np.ones(1)
     m = int(math.ceil((length + 6.0 * sigma) / bin_width)) + 1

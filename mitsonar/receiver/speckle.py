@@ -61,6 +61,10 @@ import numpy as np
 N_FEATURES = 128
 #: Variance of the features' frequencies: intensity correlation exp(-8 ln2 |dv|^2).
 FREQUENCY_VARIANCE = 8.0 * math.log(2.0)
+#: Fields kept per process, keyed by every input (`cell_speckle`): a still head's frames share one
+#: field, which is the same numbers whether computed or looked up (0 turns the cache off).
+CACHE_SIZE = 4
+_cache: dict = {}
 def cell_speckle(poses, ranges, *, seed: int, beamwidth_h: float, aperture_h: float, resolution: float,
                  n_features: int = N_FEATURES) -> np.ndarray:
     """Complex speckle amplitude (complex128, n_rows x n_bins) of every bin of a scan.
@@ -85,13 +89,30 @@ def cell_speckle(poses, ranges, *, seed: int, beamwidth_h: float, aperture_h: fl
     Returns
     -------
     ndarray complex128
-        ``g`` with ``E|g|^2 = 1``: the amplitude factor of each bin's echo.
+        ``g`` with ``E|g|^2 = 1``: the amplitude factor of each bin's echo; read-only, shared with
+        later calls with the same arguments (a still head's frames: `CACHE_SIZE`).
     """
     poses = np.asarray(poses, dtype=np.float64)
     ranges = np.asarray(ranges, dtype=np.float64)
     for name, value in (("beamwidth_h", beamwidth_h), ("aperture_h", aperture_h), ("resolution", resolution)):
         if not (math.isfinite(value) and value > 0):
             raise ValueError(f"speckle '{name}': {value!r} is not allowed (a positive number)")
+    key = (poses.shape, poses.tobytes(), ranges.shape, ranges.tobytes(), int(seed), float(beamwidth_h),
+           float(aperture_h), float(resolution), int(n_features))
+    hit = _cache.get(key) if CACHE_SIZE > 0 else None
+    if hit is not None:
+        return hit
+    field = _field(poses, ranges, seed, beamwidth_h, aperture_h, resolution, n_features)
+    if CACHE_SIZE > 0:
+        field.setflags(write=False)   # shared between scans: nobody may change it in place
+        if len(_cache) >= CACHE_SIZE:
+            _cache.pop(next(iter(_cache)))
+        _cache[key] = field
+    return field
+
+
+def _field(poses, ranges, seed, beamwidth_h, aperture_h, resolution, n_features):
+    """`cell_speckle`'s field, computed (checked arguments)."""
     rng = np.random.default_rng([0x5BEC, int(seed)])
     w = rng.normal(0.0, math.sqrt(FREQUENCY_VARIANCE), size=(7, n_features))
     phi = rng.uniform(0.0, 2.0 * math.pi, size=n_features)

@@ -1,0 +1,156 @@
+"""Issue "Frame overhead": the fast receiver chain (float64 parts, blocks of rows, reused buffers)
+and the cached speckle field give the straightforward chain's bytes, kept in the same run as the
+reference (``electronics.FAST = False``, ``speckle.CACHE_SIZE = 0``); frames replay their kernels
+without compiling anew."""
+import os
+
+import numpy as np
+import pytest
+
+from conftest import jit_kernels
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+QUAY = os.path.join(HERE, "..", "scenes_xml", "quay_wall.xml")
+
+CONFIGS = [{}, {"speckle": "weibull", "speckle_shape": 1.5}, {"ringdown": 0.0}, {"noise_floor": -np.inf, "ringdown": 0.0},
+           {"noise_floor": -np.inf}, {"bit_depth": 4}, {"pulse_length": 0.0, "range_jitter": 0.0},
+           {"speckle": "off"}, {"tvg": "off", "gain": 30.0}]
+
+
+def chain_inputs(n_rows=45, n_bins=120, seed=1):
+    rng = np.random.default_rng(seed)
+    inten = rng.exponential(1e-9, (n_rows, n_bins)) * (rng.random((n_rows, n_bins)) < 0.3)
+    inten[3] = 0.0                                   # a silent row
+    inten[5, 7] = 1e3                                # a bin saturating the A/D
+    ranges = np.linspace(0.5, 15.0, n_bins)
+    poses = np.tile(np.eye(4), (n_rows, 1, 1))
+    poses[:, 0, 3] = np.arange(n_rows) * 0.01
+    return inten.astype(np.float32), ranges, poses
+
+
+def chain(model, inten, ranges, poses, fast, monkeypatch, drawn=False):
+    from mitsonar.receiver import electronics, speckle
+
+    monkeypatch.setattr(electronics, "FAST", fast)
+    monkeypatch.setattr(speckle, "CACHE_SIZE", 4 if fast else 0)
+    sp = None
+    if model.speckle != "off" and not drawn:
+        sp = model.scene_speckle(poses, ranges, sound_speed=1500.0, beamwidth_h=1.0, aperture_h=0.03)
+    return model.apply(inten, ranges, absorption=0.02, seed=11, speckle=sp)
+
+
+@pytest.mark.parametrize("settings", CONFIGS)
+@pytest.mark.parametrize("drawn", [False, True])
+def test_fast_chain_gives_the_reference_bytes(mitsonar_mod, monkeypatch, settings, drawn):
+    """Every setting, scene speckle or speckle drawn from the seed, a row count that is not a
+    multiple of the block (several blocks): the same bytes as the straightforward chain."""
+    from mitsonar.receiver import fastchain
+    from mitsonar.receiver.electronics import Electronics
+
+    monkeypatch.setattr(fastchain, "ROW_BLOCK", 8)
+    model = Electronics.from_dict(settings)
+    inten, ranges, poses = chain_inputs()
+    ref = chain(model, inten, ranges, poses, False, monkeypatch, drawn)
+    fast = chain(model, inten, ranges, poses, True, monkeypatch, drawn)
+    again = chain(model, inten, ranges, poses, True, monkeypatch, drawn)   # a cached speckle field
+    assert ref.dtype == fast.dtype == np.uint8
+    np.testing.assert_array_equal(fast, ref)
+    np.testing.assert_array_equal(again, ref)
+    assert len(np.unique(ref)) > 3                  # not a blank scan
+    one = chain(model, inten[6], ranges, poses[6:7], True, monkeypatch, drawn)   # one ping, 1-D
+    np.testing.assert_array_equal(one, chain(model, inten[6], ranges, poses[6:7], False, monkeypatch, drawn))
+    assert one.shape == (inten.shape[1],)
+
+
+def test_fast_chain_leaves_its_inputs_alone(mitsonar_mod, monkeypatch):
+    from mitsonar.receiver.electronics import Electronics
+
+    inten, ranges, poses = chain_inputs()
+    keep = inten.copy()
+    chain(Electronics.from_dict({}), inten, ranges, poses, True, monkeypatch)
+    np.testing.assert_array_equal(inten, keep)
+
+
+def test_speckle_cache_returns_the_computed_field_read_only(mitsonar_mod, monkeypatch):
+    from mitsonar.receiver import speckle
+
+    _, ranges, poses = chain_inputs()
+    kw = dict(seed=4, beamwidth_h=1.0, aperture_h=0.03, resolution=0.075)
+    monkeypatch.setattr(speckle, "_cache", {})
+    first = speckle.cell_speckle(poses, ranges, **kw)
+    assert speckle.cell_speckle(poses, ranges, **kw) is first      # looked up, not recomputed
+    np.testing.assert_array_equal(first, speckle._field(poses, ranges, 4, 1.0, 0.03, 0.075, speckle.N_FEATURES))
+    with pytest.raises(ValueError):
+        first[0, 0] = 0.0                           # shared: nobody may change it
+    moved = poses.copy()
+    moved[0, 1, 3] += 1e-9                          # one row moved by a nanometre: computed anew
+    other = speckle.cell_speckle(moved, ranges, **kw)
+    assert other is not first and not np.array_equal(other[0], first[0])
+    np.testing.assert_array_equal(other[1:], first[1:])
+    for i in range(speckle.CACHE_SIZE + 2):         # bounded
+        speckle.cell_speckle(poses, ranges, **{**kw, "seed": 100 + i})
+    assert len(speckle._cache) <= speckle.CACHE_SIZE
+
+
+def test_quay_frames_equal_the_reference_chain(mitsonar_mod, monkeypatch):
+    """The 512-beam frame through render_scan: a still head (the speckle field from the cache) and
+    a moved head, fast and reference chains: the same intensity and the same bytes."""
+    from mitsonar.receiver import electronics, speckle
+
+    scene = mitsonar_mod.load_scene(QUAY)
+    head = scene.sensors()[0].head_pose()
+    moved = head.copy()
+    moved[:3, 3] += (0.2, -0.1, 0.05)
+    for seed, pose in ((1, None), (2, None), (2, moved), (3, None)):
+        scans = []
+        for fast in (True, False):
+            monkeypatch.setattr(electronics, "FAST", fast)
+            monkeypatch.setattr(speckle, "CACHE_SIZE", 4 if fast else 0)
+            scans.append(mitsonar_mod.render_scan(scene, spp=2, seed=seed, pose=pose))
+        np.testing.assert_array_equal(scans[0].intensity, scans[1].intensity)
+        np.testing.assert_array_equal(scans[0].data, scans[1].data)
+        assert scans[0].data.any()
+
+
+def test_frames_replay_without_compiling(mitsonar_mod):
+    """After the first frame, frames with other seeds and poses launch the same kernels, none
+    compiled anew (Dr.Jit's kernel history), a fixed handful per frame."""
+    scene = mitsonar_mod.load_scene(QUAY)
+    head = scene.sensors()[0].head_pose()
+    mitsonar_mod.render_scan(scene, spp=2, seed=0)
+    runs = []
+    for seed, shift in ((1, 0.0), (2, 0.3), (3, -0.2)):
+        pose = head.copy()
+        pose[0, 3] += shift
+        runs.append(jit_kernels(mitsonar_mod.render_scan, scene, spp=2, seed=seed, pose=pose))
+    for hashes, compiled in runs:
+        assert compiled == []
+        assert hashes == runs[0][0]
+    assert 1 <= len(runs[0][0]) <= 4
+
+
+def test_pass_sums_in_place_equal_the_straightforward_mean(mitsonar_mod):
+    """`SonarTOFIntegrator.accumulate` sums its passes in place: the same bits as
+    ``total = 0.0; total = total + pass ...; total / spp``, signed zeros included."""
+    from mitsonar.plugins import module
+
+    acc = module("sonar_tof").SonarTOFIntegrator.accumulate
+    rng = np.random.default_rng(5)
+    parts = {s: rng.exponential(1.0, 50) * (rng.random(50) < 0.5) for s in range(0, 10, 3)}
+    for p in parts.values():
+        p[:3] = (-0.0, 0.0, 1e-300)
+    calls = []
+
+    def one_pass(start, count):
+        calls.append((start, count))
+        return parts[start].copy()
+
+    got = acc(10, 3, one_pass)
+    want = 0.0
+    for s in range(0, 10, 3):
+        want = want + parts[s]
+    want = want / 10
+    assert calls == [(0, 3), (3, 3), (6, 3), (9, 1)]
+    assert got.tobytes() == want.tobytes()
+    one = acc(1, 3, lambda s, c: parts[0].copy())   # one pass: its -0.0 becomes +0.0 as 0.0 + x did
+    assert one.tobytes() == ((0.0 + parts[0]) / 1).tobytes()
