@@ -428,17 +428,11 @@ class SonarIntegrator(mi.SamplingIntegrator):
             else:
                 record(depth, 0.5 * total, energy, echo, si)
 
-            base = DIMS_EMIT + DIMS_PER_BOUNCE * depth
-            if dr.hint(guide, mode="scalar"):
-                hard |= active & image_guide.chained(chain)
-                wo, bounce_weight, chain = image_guide.bounce(
-                    bsdf, ctx, si, chain, origin, segment, samples.get(base), samples.get2(base + 1), active)
-                throughput *= bounce_weight
-                ray = si.spawn_ray(wo)
-            else:
-                bs, bsdf_weight = bsdf.sample(ctx, si, samples.get(base), samples.get2(base + 1), active)
-                throughput *= bsdf_weight.x
-                ray = si.spawn_ray(si.to_world(bs.wo))
+            ray, bounce_weight, chain, was_chained = image_guide.scatter(
+                bsdf, ctx, si, samples, DIMS_EMIT + DIMS_PER_BOUNCE * depth, guide, chain, origin, segment, active)
+            throughput *= bounce_weight
+            if was_chained is not None:
+                hard |= was_chained
             previous = mi.Point3f(si.p)
             depth += 1
             active &= (depth < max_depth) & (throughput > 0)

@@ -169,6 +169,23 @@ def chained(chain):
     return chain[1] > 0
 
 
+
+def scatter(bsdf, ctx, si, samples, base, guide, chain, origin, segment, active):
+    """The way on from a bounce, guided or not: ``(ray, weight, chain, chained)``.
+
+    ``guide`` is a Python bool (the kernel's shape): with it, `bounce` (the guided mixture; ``chained``
+    says which lanes were on a chain before it, for the hard-echo tag); without, the BSDF's own
+    sample (``chained`` None). ``base`` is the bounce's first primary-sample dimension. The one
+    bounce step of the straight and the refracted path functions."""
+    if dr.hint(guide, mode="scalar"):
+        was_chained = active & chained(chain)
+        wo, weight, chain = bounce(bsdf, ctx, si, chain, origin, segment, samples.get(base),
+                                   samples.get2(base + 1), active)
+        return si.spawn_ray(wo), weight, chain, was_chained
+    bs, bsdf_weight = bsdf.sample(ctx, si, samples.get(base), samples.get2(base + 1), active)
+    return si.spawn_ray(si.to_world(bs.wo)), bsdf_weight.x, chain, None
+
+
 def bounce(bsdf, ctx, si, chain, origin, segment, u1, u2, active):
     """One guided bounce at ``si``: ``(wo_world, weight, chain after si)``.
 

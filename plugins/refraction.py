@@ -581,17 +581,11 @@ def sample_path(setup, ping, samples, record, active=True):
         finally:
             del refr.arrival
 
-        base = DIMS_EMIT + DIMS_PER_BOUNCE * depth
-        if dr.hint(guide, mode="scalar"):
-            hard |= active & image_guide.chained(chain)
-            wo, bounce_weight, chain = image_guide.bounce(
-                bsdf, ctx, si, chain, origin, l_seg, samples.get(base), samples.get2(base + 1), active)
-            throughput *= bounce_weight
-            nxt = si.spawn_ray(wo)
-        else:
-            bs, bsdf_weight = bsdf.sample(ctx, si, samples.get(base), samples.get2(base + 1), active)
-            throughput *= bsdf_weight.x
-            nxt = si.spawn_ray(si.to_world(bs.wo))
+        nxt, bounce_weight, chain, was_chained = image_guide.scatter(
+            bsdf, ctx, si, samples, DIMS_EMIT + DIMS_PER_BOUNCE * depth, guide, chain, origin, l_seg, active)
+        throughput *= bounce_weight
+        if was_chained is not None:
+            hard |= was_chained
         ray_o, ray_d = mi.Point3f(nxt.o), mi.Vector3f(nxt.d)
         depth += 1
         active &= (depth < max_depth) & (throughput > 0)
