@@ -29,7 +29,7 @@ import mitsuba as mi
 from mitsonar._checks import not_allowed, require
 
 from . import image_guide
-from .emission import DB_TO_LOG2, emit
+from .emission import DB_TO_LOG2, start
 from .denormals import flushed
 from .exact_sum import ExactBins
 from .props import count, text
@@ -381,12 +381,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
         receive beam and connect back through the transmit fan (``setup.connect``; reciprocity).
         """
         scene = setup.scene
-        x_ax, y_ax, z_ax, origin, d_local, weight, ray = emit(setup, ping, samples, active)
-        if setup.connect is None:
-            cx, cy, cz, c_beam = x_ax, y_ax, z_ax, setup.sensor.beam
-        else:
-            cx, cy, cz, _ = setup.connect[0].gather(ping)
-            c_beam = setup.connect[1]
+        (x_ax, y_ax, z_ax, origin, d_local, weight, ray), (cx, cy, cz, c_beam) = start(setup, ping, samples, active)
         throughput = mi.Float(weight)
         path_length = mi.Float(0.0)
         previous = mi.Point3f(origin)

@@ -21,3 +21,16 @@ def emit(setup, ping, samples, active):
     d_local, weight = setup.sensor.beam.sample(samples.get2(0), active)
     ray = mi.Ray3f(origin, x_ax * d_local.x + y_ax * d_local.y + z_ax * d_local.z)
     return x_ax, y_ax, z_ax, origin, d_local, weight, ray
+
+
+def start(setup, ping, samples, active):
+    """A path's start: `emit`'s ``(x, y, z, origin, d_local, weight, ray)`` and the frame and beam
+    of the way back (``cx, cy, cz, c_beam``): the row's own beam, or a multibeam head's transmit fan
+    (``setup.connect``, reciprocity). The straight and the refracted path functions both begin here."""
+    x_ax, y_ax, z_ax, origin, d_local, weight, ray = emit(setup, ping, samples, active)
+    if setup.connect is None:
+        cx, cy, cz, c_beam = x_ax, y_ax, z_ax, setup.sensor.beam
+    else:
+        cx, cy, cz, _ = setup.connect[0].gather(ping)
+        c_beam = setup.connect[1]
+    return (x_ax, y_ax, z_ax, origin, d_local, weight, ray), (cx, cy, cz, c_beam)

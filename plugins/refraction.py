@@ -519,17 +519,12 @@ def sample_path(setup, ping, samples, record, active=True):
     the range ``c_sensor * two-way time / 2``, absorption over the curved length and the beam
     patterns at the launch and arrival directions."""
     from . import image_guide
-    from .emission import DB_TO_LOG2, emit
+    from .emission import DB_TO_LOG2, start
     from .samples import DIMS_EMIT, DIMS_PER_BOUNCE
 
     refr = setup.refraction
     scene = setup.scene
-    x_ax, y_ax, z_ax, origin, d_local, weight, ray = emit(setup, ping, samples, active)
-    if setup.connect is None:
-        cx, cy, cz, c_beam = x_ax, y_ax, z_ax, setup.sensor.beam
-    else:
-        cx, cy, cz, _ = setup.connect[0].gather(ping)
-        c_beam = setup.connect[1]
+    (x_ax, y_ax, z_ax, origin, d_local, weight, ray), (cx, cy, cz, c_beam) = start(setup, ping, samples, active)
     throughput = mi.Float(weight)
     t_path = mi.Float(0.0)
     l_path = mi.Float(0.0)
