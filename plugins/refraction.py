@@ -113,8 +113,10 @@ def _opaque_array(values):
 
 
 class Refraction:
-    """A profile's layers as Dr.Jit arrays (the chord tracer gathers them) and as Python numbers
-    (the eigenray's layer sum is unrolled), with the chord time step of one render."""
+    """A profile's layers as Dr.Jit arrays (the chord tracer gathers them) and as opaque scalars
+    per layer (the eigenray's layer sum is unrolled over them: the layer count shapes the kernel,
+    the values do not, so another profile of as many samples reuses the compiled kernels), with
+    the chord time step of one render."""
 
     def __init__(self, depths, speeds, sensor_speed, range_max, chords=DEFAULT_CHORDS):
         d = [float(v) for v in depths]
@@ -125,7 +127,13 @@ class Refraction:
         bot = d + [FAR]
         ct = [c[0]] + c
         g = [0.0] + [(c[i + 1] - c[i]) / (d[i + 1] - d[i]) for i in range(n - 1)] + [0.0]
-        self.layers = tuple(zip(top, bot, ct, g))
+        opaque = lambda v: dr.opaque(mi.Float, v)  # noqa: E731
+        self.layers = tuple(tuple(opaque(v) for v in layer) for layer in zip(top, bot, ct, g))
+        # (depth, speed, slope to the next sample): the slopes in float64 here, as the literals were
+        self.samples_o = tuple((opaque(da), opaque(ca), opaque((cb - ca) / (db - da)), opaque(db))
+                               for (da, ca), (db, cb) in zip(self.samples, self.samples[1:]))
+        self.speed0 = opaque(c[0])
+        self.sample_points = tuple((opaque(dd), opaque(cc)) for dd, cc in self.samples)
         self.n_layers = n + 1
         self.max_crossings = 2 * (n + 1) + EXTRA_CROSSINGS
         self.top, self.bot, self.ct, self.g = (_opaque_array(v) for v in (top, bot, ct, g))
@@ -138,10 +146,9 @@ class Refraction:
     # ------------------------------------------------------------------------------- the medium
     def speed(self, z):
         """Sound speed at depth ``z`` (m, positive down): linear between samples, constant beyond."""
-        (d0, c0) = self.samples[0]
-        out = mi.Float(c0)
-        for (da, ca), (db, cb) in zip(self.samples, self.samples[1:]):
-            out = dr.select(z > da, ca + (cb - ca) / (db - da) * (dr.minimum(z, db) - da), out)
+        out = mi.Float(self.speed0)
+        for da, ca, slope, db in self.samples_o:
+            out = dr.select(z > da, ca + slope * (dr.minimum(z, db) - da), out)
         return out
 
     def layer(self, z, down):
@@ -338,8 +345,8 @@ class Refraction:
             za = dr.maximum(z_lo, top)
             zb = dr.minimum(z_hi, bot)
             dz = dr.maximum(zb - za, 0.0)
-            c1 = ct + g * (za - top) if g else mi.Float(ct)
-            c2 = ct + g * (zb - top) if g else mi.Float(ct)
+            c1 = dr.select(g == 0, ct, ct + g * (za - top))
+            c2 = dr.select(g == 0, ct, ct + g * (zb - top))
             s1, s2 = _sin_at(a, c1), _sin_at(a, c2)
             if not full:     # dx = a dz (c1 + c2) / (s1 + s2), `_piece`'s first half
                 X += dr.select(dz <= 0, 0.0, a * dz * (c1 + c2) / (s1 + s2))
@@ -362,7 +369,7 @@ class Refraction:
         z_lo, z_hi = dr.minimum(z1, z2), dr.maximum(z1, z2)
         dz = z_hi - z_lo
         c_max = dr.maximum(self.speed(z_lo), self.speed(z_hi))
-        for dd, cc in self.samples:
+        for dd, cc in self.sample_points:
             c_max = dr.select((dd > z_lo) & (dd < z_hi), dr.maximum(c_max, cc), c_max)
 
         # Two variables, chosen per lane by the straight guess, each making X (or 1/X) nearly

@@ -406,3 +406,21 @@ def test_one_chord_per_window_gives_the_echo_ranges_of_sixty_four(mitsonar_mod):
     np.testing.assert_array_less(np.abs(centroids(one) - centroids(many)), 0.05 * bin_w)
     expected = np.array([refracted_range(LAYERED, a) for a in beam_angles(one)])
     np.testing.assert_array_less(np.abs(peak_ranges(one) - expected), 1.5 * bin_w)
+
+
+def test_another_profile_of_as_many_samples_reuses_the_kernels(mitsonar_mod):
+    """The profile's values are opaque in the kernels (only its sample count shapes them): a
+    second profile renders with the kernels the first compiled (it compiled new ones when the
+    eigenray's layer sum held the speeds as literals)."""
+    from conftest import jit_kernels
+
+    scene = mitsonar_mod.load_scene(mitsonar_mod.example_scene("box"))
+
+    def render(c):
+        svp = mitsonar_mod.SoundSpeedProfile([0, 5, 10, 20], [1500, c, 1490, 1495])
+        return mitsonar_mod.render_scan(scene, spp=16, seed=0, sound_speed_profile=svp)
+
+    jit_kernels(render, 1480)  # the first render records what later ones replay
+    warm, _ = jit_kernels(render, 1480)
+    other, _ = jit_kernels(render, 1460)
+    assert other == warm
