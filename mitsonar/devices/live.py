@@ -34,7 +34,7 @@ from collections import Counter, deque
 
 import numpy as np
 
-from mitsonar.devices.poses import DatagramError, DropLog, PoseBuffer, parse_datagram
+from mitsonar.devices.poses import DatagramError, DropLog, PoseBuffer, PoseSource, parse_datagram
 from mitsonar.geometry.frames import bearing_rotation
 
 __all__ = ["live_scene", "SceneObjects", "PingRenderer", "LiveMicron", "LivePing360", "LIVE_HEADS", "PoseReceiver",
@@ -280,7 +280,7 @@ def pose_socket(url: str) -> socket.socket:
     return sock
 
 
-class PoseReceiver:
+class PoseReceiver(PoseSource):
     """Reads pose datagrams on ``sock`` into ``buffer`` in a thread until `stop` (module doc).
 
     ``stats``: ``poses`` applied, ``objects`` moved, ``dropped`` in all; ``drops.counts`` by reason.
@@ -293,22 +293,14 @@ class PoseReceiver:
         self.drops = DropLog(self.out)
         self.stats: Counter = Counter()
         self.stale_after = float(stale_after)
-        self._stop = threading.Event()
         self._stale_said = False
-        self._thread = threading.Thread(target=self._run, name="PoseReceiver", daemon=True)
+        super().__init__("PoseReceiver")
 
     @property
     def url(self) -> str:
         return f"udp://127.0.0.1:{self.sock.getsockname()[1]}"
 
-    def start(self):
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(5.0)
+    def _close(self) -> None:
         self.sock.close()
 
     def _run(self) -> None:

@@ -19,12 +19,12 @@ y port, z up, REP-103), so
 from __future__ import annotations
 
 import sys
-import threading
 import time
 from collections import Counter
 
 import numpy as np
 
+from mitsonar.devices.poses import PoseSource
 from mitsonar.geometry.trajectory import matrix_to_quat, quat_to_matrix
 
 __all__ = ["NED_TO_ENU", "FLU_TO_FRD", "ned_to_enu", "MavlinkReceiver"]
@@ -44,7 +44,7 @@ def ned_to_enu(position_ned, q_wxyz) -> tuple[np.ndarray, np.ndarray]:
     return p, matrix_to_quat(r)
 
 
-class MavlinkReceiver:
+class MavlinkReceiver(PoseSource):
     """Reads ``url`` (a pymavlink connection string: ``udpin:127.0.0.1:14550``, a serial port,
     ...) in a thread into ``buffer`` until `stop`. ``stats``: messages used, poses added, bad
     messages (non-finite or zero quaternions) skipped."""
@@ -62,8 +62,7 @@ class MavlinkReceiver:
         self.out = sys.stderr if out is None else out
         self.stats: Counter = Counter()
         self._position = self._attitude = None
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="MavlinkReceiver", daemon=True)
+        super().__init__("MavlinkReceiver")
 
     @property
     def address(self) -> str:
@@ -74,14 +73,7 @@ class MavlinkReceiver:
             return f"udpin:{host}:{port}"
         return self.url
 
-    def start(self):
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(5.0)
+    def _close(self) -> None:
         try:
             self.conn.close()
         except Exception:           # noqa: BLE001

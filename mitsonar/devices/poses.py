@@ -197,6 +197,31 @@ class TrajectoryReplay:
         return self.trajectory.at(min(max(t, self.t0), self.t1))
 
 
+class PoseSource:
+    """A thread feeding a `PoseBuffer` until `stop`: subclasses read in ``_run`` (checking
+    ``self._stop`` at least every 0.1 s) and release their input in ``_close``."""
+
+    def __init__(self, name: str):
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+
+    def start(self):
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(5.0)
+        self._close()
+
+    def _run(self) -> None:
+        raise NotImplementedError
+
+    def _close(self) -> None:
+        pass
+
+
 class DropLog:
     """Counts dropped datagrams by reason and prints at most one line per ``every`` seconds
     (the first of a burst at once, then how many more since)."""
