@@ -353,7 +353,7 @@ class Electronics:
         if bin_width == 0.0:
             return inten
         kernel = self.range_kernel(bin_width, sound_speed)
-        return _convolve_range(inten, kernel) if kernel.size > 1 else inten
+        return fastchain.convolve_range(inten, kernel) if kernel.size > 1 else inten
 
     def echo_level(self, intensity, ranges, sound_speed: float = 1500.0) -> np.ndarray:
         """The noise-free echo level at the receiver, dB re 1 uPa, per bin (``Scan.echo_level``):
@@ -651,11 +651,6 @@ def _bin_width(ranges) -> float:
     if not (math.isfinite(width) and width > 0) or not np.allclose(np.diff(r), width, rtol=1e-6, atol=0.0):
         raise ValueError("electronics: ranges must be evenly spaced increasing bin centres")
     return float(width)
-
-
-def _convolve_range(inten: np.ndarray, kernel: np.ndarray) -> np.ndarray:
-    """Convolve along the last axis with a centred kernel; energy pushed off the ends is dropped."""
-    return (fastchain.convolve_range if FAST else fastchain.convolve_range_reference)(inten, kernel)
 
 
 def _spread_kernel(length: float, sigma: float, bin_width: float) -> np.ndarray:

@@ -107,7 +107,9 @@ def filtered(z, h, n_bins):
 
 
 def convolve_range(inten: np.ndarray, kernel: np.ndarray) -> np.ndarray:
-    """`convolve_range_reference` with one scratch buffer for every tap (same products, same sums)."""
+    """Convolve along the last axis with a centred kernel; energy pushed off the ends is dropped.
+    One scratch buffer serves every tap (``np.multiply(..., out=)``: the products and sums of
+    ``out += w * x``, without a new temporary per tap)."""
     m = (kernel.size - 1) // 2
     n = inten.shape[-1]
     out = np.zeros_like(inten)
@@ -122,22 +124,6 @@ def convolve_range(inten: np.ndarray, kernel: np.ndarray) -> np.ndarray:
             out[..., :n + shift] += np.multiply(w, inten[..., -shift:], out=tmp[..., :n + shift])
     return out
 
-
-def convolve_range_reference(inten: np.ndarray, kernel: np.ndarray) -> np.ndarray:
-    """Convolve along the last axis with a centred kernel; energy pushed off the ends is dropped
-    (the straightforward form: a new temporary per tap)."""
-    m = (kernel.size - 1) // 2
-    n = inten.shape[-1]
-    out = np.zeros_like(inten)
-    for j, w in enumerate(kernel):
-        shift = j - m
-        if w == 0.0 or abs(shift) >= n:
-            continue
-        if shift >= 0:
-            out[..., shift:] += w * inten[..., :n - shift]
-        else:
-            out[..., :n + shift] += w * inten[..., -shift:]
-    return out
 
 
 def received_bytes(inten, g, kernel, quiet, ring, z, taps, f, levels, ad):
