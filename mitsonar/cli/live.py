@@ -3,10 +3,13 @@
 Each ping the client asks for is rendered when it fires, from the vehicle's pose at that time:
 poses arrive as UDP datagrams on ``--pose-url`` (`mitsonar.devices.poses`), or come from a
 ``--trajectory`` replayed in real time. Runs until ``--seconds`` or SIGINT/SIGTERM (exit 0,
-ports closed), then prints what it did. Writes no file. Exit codes as `mitsonar.cli.serial`.
+ports closed), then prints what it did. ``--foxglove``, ``--mcap``, ``--dds``: each ping also goes to
+Foxglove, an MCAP file (the only file it writes), ROS 2 over DDS (`mitsonar.devices.outputs`).
+Exit codes as `mitsonar.cli.serial`.
 """
 from __future__ import annotations
 
+import argparse
 import signal
 import sys
 import threading
@@ -44,13 +47,15 @@ def _live(args) -> int:
         from mitsonar.geometry.trajectory import Trajectory
         trajectory = Trajectory.from_tum(args.trajectory)
     sock = pose_socket(args.pose_url) if args.pose_url else None     # a bad URL fails before the load
+    outputs = None
     try:
         check_port(args.port_url, args.baud)
+        outputs = _outputs(args)                      # a bad flag fails before the load, too
         scene = live_scene(str(scene_path))
         sonar = sensor_of(scene, args)
         require_mechanical(sonar, f"live {scene_path.name}", f"no {head.serves} to serve")
         buffer = PoseBuffer() if (sock is not None or args.mavlink) else None
-        renderer = PingRenderer(scene, sonar, buffer, spp=args.spp, seed=args.seed)
+        renderer = PingRenderer(scene, sonar, buffer, spp=args.spp, seed=args.seed, outputs=outputs)
         kw = {"baudrate": args.baud, "realtime": not args.fast}
         if "no_dst" in {dest for dest, _ in head.options}:     # a head that can be a pre-DST Micron
             kw["dst"] = not args.no_dst
@@ -58,6 +63,8 @@ def _live(args) -> int:
     except BaseException:
         if sock is not None:
             sock.close()
+        if outputs is not None:
+            outputs.discard()
         raise
     receiver = None
     if sock is not None:
@@ -72,6 +79,8 @@ def _live(args) -> int:
         except BaseException:
             if receiver is not None:
                 receiver.stop()
+            if outputs is not None:
+                outputs.discard()
             raise
     stop = threading.Event()
     previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -84,6 +93,8 @@ def _live(args) -> int:
                 print(f"poses on {receiver.url}", flush=True)
             if mav is not None:
                 print(f"MAVLink poses on {mav.address}", flush=True)
+            for o in (outputs.outputs if outputs is not None else ()):
+                print(_said(o), flush=True)
             label = head.description.split(" (")[0].split()[-1]
             print(f"live {label} on {live.port}", flush=True)
             end = None if args.seconds is None else time.monotonic() + args.seconds
@@ -96,8 +107,47 @@ def _live(args) -> int:
             receiver.stop()
         if mav is not None:
             mav.stop()
-    print(_summary(renderer, receiver, mav), flush=True)
+        if outputs is not None:
+            outputs.close()
+    print(_summary(renderer, receiver, mav) + (f"; {outputs.summary()}" if outputs is not None else ""), flush=True)
     return 0
+
+
+def _outputs(args):
+    """The `LiveOutputs` that --foxglove, --mcap and --dds ask for (None: none)."""
+    if args.foxglove is None and args.mcap is None and args.dds is None:
+        return None
+    from mitsonar.devices.outputs import open_outputs
+    return open_outputs(foxglove=args.foxglove, mcap=args.mcap, dds=args.dds)
+
+
+def _said(output) -> str:
+    """The line saying where an output is: ``foxglove on ws://...``, ``recording to FILE``, ``dds on ...``."""
+    if hasattr(output, "url"):
+        return f"foxglove on {output.url}"
+    if hasattr(output, "path"):
+        return f"recording to {output.path}"
+    return f"ROS 2 topics on DDS domain {output.domain}"
+
+
+def _port(text):
+    try:
+        v = int(text)
+    except ValueError:
+        v = -1
+    if not 0 <= v <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a TCP port from 0 to 65535 (0: any free one), got {text!r}")
+    return v
+
+
+def _domain(text):
+    try:
+        v = int(text)
+    except ValueError:
+        v = -1
+    if not 0 <= v <= 232:
+        raise argparse.ArgumentTypeError(f"expected a DDS domain id from 0 to 232, got {text!r}")
+    return v
 
 
 def _summary(renderer, receiver, mav) -> str:
@@ -129,7 +179,8 @@ def add_subcommands(subparsers) -> None:
                     "({\"object\": ID, ...} moves the scene's shape ID) "
                     "(the sensor's to_world is the mount on the vehicle: x forward, y port, z up), or "
                     "from a --trajectory replayed in real time. Prints 'poses on URL' and 'live HEAD on "
-                    "PORT', serves until --seconds or SIGINT/SIGTERM, then a summary line.")
+                    "PORT', serves until --seconds or SIGINT/SIGTERM, then a summary line. --foxglove, --mcap and "
+                    "--dds send each ping also to Foxglove, an MCAP file and ROS 2 over DDS.")
     p.add_argument("scene", metavar="SCENE.xml", help="Mitsuba scene with a mechanical `sonar` sensor")
     p.add_argument("--head", choices=registry.names(), default=registry.DEFAULT,
                    help="which head to be: micron (SeaNet, default) or ping360 (ping-protocol)")
@@ -150,5 +201,15 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--fast", action="store_true", help="answer as soon as rendered (no timing model)")
     p.add_argument("--no-dst", action="store_true", help="behave as a pre-DST Micron (--head micron)")
     p.add_argument("--seconds", type=_positive(float), default=None, help="stop after T seconds")
+    p.add_argument("--foxglove", type=_port, nargs="?", const=8765, default=None, metavar="PORT",
+                   help="serve the sonar picture, the raw pings, the frames (map, base_link, sonar) and the "
+                        "vehicle pose to Foxglove over WebSocket on ws://127.0.0.1:PORT (default 8765; 0 picks "
+                        "one); needs foxglove-sdk (the live extra)")
+    p.add_argument("--mcap", default=None, metavar="FILE.mcap",
+                   help="record the same channels into this MCAP file (complete when the session stops: "
+                        "--seconds, SIGINT, SIGTERM); needs foxglove-sdk (the live extra)")
+    p.add_argument("--dds", type=_domain, nargs="?", const=0, default=None, metavar="DOMAIN",
+                   help="publish the same topics as ROS 2 messages over DDS on this domain (default 0), "
+                        "so ROS 2 nodes subscribe without a bridge; needs cyclonedds (the live extra)")
     add_sensor(p)
     p.set_defaults(func=cmd_live)

@@ -126,8 +126,12 @@ class PingRenderer:
     the 4x4 pose (beam frame) of the last ping.
     """
 
-    def __init__(self, scene, sonar, poses=None, *, spp: int = 64, seed: int = 0, out=None):
+    def __init__(self, scene, sonar, poses=None, *, spp: int = 64, seed: int = 0, out=None, outputs=None):
         self.scene, self.sonar = scene, sonar
+        #: `mitsonar.devices.outputs.LiveOutputs` (or any ``publish(t_ns, vehicle, mount, scan)``)
+        #: given each ping after it is rendered: its time (ns, Unix epoch), the vehicle's pose,
+        #: the mount and the one-row scan; None: none.
+        self.outputs = outputs
         self.mount = np.array(sonar.to_world_np, dtype=np.float64)
         self.poses = poses
         self.spp, self.seed = int(spp), int(seed)
@@ -163,7 +167,8 @@ class PingRenderer:
 
         t0 = time.monotonic()
         now = t0 if now is None else now
-        pose = self.vehicle(now) @ self.mount @ bearing_rotation(float(bearing))
+        vehicle = self.vehicle(now)
+        pose = vehicle @ self.mount @ bearing_rotation(float(bearing))
         k = self.stats["pings"]
         with self.lock:
             scan = render_scan(self.scene, spp=self.spp, seed=(self.seed + k) % _SEED_MAX, pose=pose,
@@ -172,6 +177,8 @@ class PingRenderer:
         self.stats["pings"] += 1
         self.last_pose = pose
         self.latencies.append(time.monotonic() - t0)
+        if self.outputs is not None:    # queued: the outputs' thread sends it (LiveOutputs)
+            self.outputs.publish(time.time_ns() - round((time.monotonic() - now) * 1e9), vehicle, self.mount, scan)
         return scan
 
     def summary(self) -> str:
