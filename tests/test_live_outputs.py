@@ -423,3 +423,91 @@ def test_bad_output_flags_are_one_line_before_the_scene_loads_and_leave_no_file(
         with pytest.raises(SystemExit) as e:
             cli("live", BOX, *argv)
         assert e.value.code == 2 and words in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- ROS 2 over DDS
+
+LOOPBACK = ('<CycloneDDS><Domain id="any"><General><Interfaces><NetworkInterface name="lo"/></Interfaces>'
+            '</General></Domain></CycloneDDS>')
+
+
+def test_dds_topics_are_ros2_messages_a_subscriber_reads(box, monkeypatch):
+    """A cyclonedds subscriber on the same host (loopback, a domain of this process's own) reads
+    the four topics under ROS 2's names; each sample's CDR is byte for byte what mcap-ros2-support
+    encodes from the ROS 2 ``.msg`` definitions for the same message (so ``rclcpp`` reads it)."""
+    pytest.importorskip("cyclonedds")
+    mcap_ros2 = pytest.importorskip("mcap_ros2._dynamic")
+    monkeypatch.setenv("CYCLONEDDS_URI", LOOPBACK)
+    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+
+    from mitsonar.devices.outputs import LiveOutputs
+    from mitsonar.devices.outputs.dds import TOPICS, DdsOutput, ros_qos, ros_types
+    from mitsonar.export.ros import messages as M
+    from mitsonar.export.ros import msgdefs
+
+    domain = 100 + os.getpid() % 100
+    types = ros_types()
+    assert {n: types[t].__idl_typename__ for n, t in TOPICS.items()} == {
+        "rt/sonar/fan": "sensor_msgs::msg::dds_::Image_",
+        "rt/sonar/image": "marine_acoustic_msgs::msg::dds_::ProjectedSonarImage_",
+        "rt/tf": "tf2_msgs::msg::dds_::TFMessage_", "rt/vehicle/pose": "geometry_msgs::msg::dds_::PoseStamped_"}
+    dds, seen = DdsOutput(domain), Collect()
+    outs = LiveOutputs([dds, seen])
+    participant = DomainParticipant(domain)
+    readers = {n: DataReader(participant, Topic(participant, n, types[t]), qos=ros_qos()) for n, t in TOPICS.items()}
+    got = {n: [] for n in TOPICS}
+
+    def take():
+        for n, r in readers.items():
+            got[n] += r.take(N=100)
+
+    try:
+        box.poses = PoseBuffer()
+        box.poses.add([1.0, 0.5, 0.0], yaw_q(20))
+        box.outputs = outs
+        for _ in range(100):                    # until the reader and the writers have met
+            box.render(0.0)
+            assert outs.flush(30)
+            threading.Event().wait(0.1)
+            take()
+            if all(got.values()):
+                break
+        k0 = len(seen.pings)
+        scans = [box.render(b) for b in (math.pi / 2, -0.4)]
+        assert outs.flush(30)
+        mine = {p[0] for p in seen.pings[k0:]}
+
+        def stamp_ns(sample):
+            h = sample.transforms[0].header if hasattr(sample, "transforms") else sample.header
+            return h.stamp.sec * 10**9 + h.stamp.nanosec
+
+        for _ in range(300):
+            take()
+            if all(sum(stamp_ns(s) in mine for s in v) == len(scans) for v in got.values()):
+                break
+            threading.Event().wait(0.1)
+    finally:
+        box.outputs = None
+        outs.close()
+    mine_by_topic = {n: [s for s in v if stamp_ns(s) in mine] for n, v in got.items()}
+    assert {n: len(v) for n, v in mine_by_topic.items()} == {n: len(scans) for n in TOPICS}
+    pictures = replayed_pictures([p[3] for p in seen.pings])[k0:]
+    encoders = {t: mcap_ros2.serialize_dynamic(t, msgdefs.definition(t))[t] for t in
+                ("sensor_msgs/msg/Image", "marine_acoustic_msgs/msg/ProjectedSonarImage", "tf2_msgs/msg/TFMessage")}
+    for k, (t_ns, vehicle, mount, scan) in enumerate(seen.pings[k0:]):
+        assert scan is scans[k]
+        fan, image = mine_by_topic["rt/sonar/fan"][k], mine_by_topic["rt/sonar/image"][k]
+        assert bytes(fan.data) == pictures[k].tobytes() and (fan.height, fan.width) == pictures[k].shape
+        assert bytes(image.image.data) == scan.data.tobytes() and image.header.frame_id == "sonar"
+        assert fan.serialize() == bytes(encoders["sensor_msgs/msg/Image"](M.mono8(t_ns, "sonar", pictures[k])))
+        assert image.serialize() == bytes(encoders["marine_acoustic_msgs/msg/ProjectedSonarImage"](
+            M.projected_image(scan, [0], t_ns)))
+        sonar = mount @ M.SONAR_AXES                 # the mount in ROS sonar axes: where the ping was
+        np.testing.assert_allclose(sonar, np.linalg.inv(vehicle) @ M.sonar_pose(scan, 0), atol=1e-12)
+        assert mine_by_topic["rt/tf"][k].serialize() == bytes(encoders["tf2_msgs/msg/TFMessage"](
+            {"transforms": [M.transform(vehicle, t_ns, "map", "base_link"),
+                            M.transform(sonar, t_ns, "base_link", "sonar")]}))
+        pose = mine_by_topic["rt/vehicle/pose"][k].pose
+        np.testing.assert_allclose([pose.position.x, pose.position.y, pose.position.z], vehicle[:3, 3], atol=1e-12)
