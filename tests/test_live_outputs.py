@@ -251,6 +251,38 @@ def test_an_mcap_recording_holds_each_rendered_ping(box, tmp_path):
         "foxglove.FrameTransforms": "protobuf", "foxglove.PoseInFrame": "protobuf"}
 
 
+def test_a_multibeam_frame_is_one_message_of_its_fan(tmp_path):
+    """A multibeam head publishes whole frames (all its beams at once): one picture (the bags' fan
+    of that frame alone) and one raw ping holding every beam."""
+    pytest.importorskip("foxglove")
+    from mitsonar.devices.outputs import open_outputs
+    from mitsonar.export.ros.messages import fan_pixels
+    from mitsonar.geometry.frames import bearing_rotation
+    from mitsonar.scan.model import Scan
+
+    rng = np.random.default_rng(5)
+    bearings = np.radians(np.linspace(-60, 60, 16))
+    frames = []
+    for k in range(2):
+        data = rng.integers(0, 256, (16, 80), dtype=np.uint8)
+        frames.append(Scan(intensity=np.zeros(data.shape, np.float32), data=data, ranges=(np.arange(80) + 0.5) * 0.25,
+                           bearings=bearings, poses=np.stack([bearing_rotation(b) for b in bearings]),
+                           range_min=0.0, range_max=20.0, beamwidth_h=8.0, kind="multibeam"))
+    outs = open_outputs(mcap=tmp_path / "mb.mcap")
+    for k, frame in enumerate(frames):
+        outs.publish(10**18 + k * 10**8, np.eye(4), np.eye(4), frame)
+    outs.close()
+    messages, _ = read_mcap(tmp_path / "mb.mcap")
+    assert {t: len(v) for t, v in messages.items()} == {"/sonar/fan": 2, "/sonar/ping": 2, "/tf": 2, "/vehicle/pose": 2}
+    for frame, fan, ping in zip(frames, messages["/sonar/fan"], messages["/sonar/ping"]):
+        img = protobuf_class(fan[1], fan[3]).FromString(fan[4])
+        assert img.data == fan_pixels(frame, 400).tobytes()
+        ping = json.loads(ping[4])
+        assert (ping["beam_count"], ping["bin_count"]) == (16, 80)
+        assert base64.b64decode(ping["intensities"]) == frame.data.tobytes()
+        np.testing.assert_array_equal(ping["bearings"], bearings)
+
+
 def test_a_discarded_recording_leaves_no_file(tmp_path):
     pytest.importorskip("foxglove")
     from mitsonar.devices.outputs import open_outputs

@@ -2,7 +2,8 @@
 `mitsonar.devices.outputs.foxglove.FoxgloveChannels` written by foxglove-sdk's MCAP writer,
 under a temporary name beside ``FILE`` (`mitsonar._files.StagedFiles`) renamed onto it when
 the session closes (SIGINT, SIGTERM, ``--seconds``: the file is complete and readable); a
-session that fails removes it.
+session that fails to start removes it (`discard`). A process killed outright (SIGKILL) leaves the
+temporary ``.NAME.*.partial.mcap``, without its summary.
 """
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ look the same.
 A mechanical head's pings (one row each) are gathered into its sweep (`SweepPicture`): a polar
 grid of ``slots`` bearings around the circle, each ping overwriting the slots its beam covers
 (its ``beamwidth_h``, at least the one nearest its bearing), drawn through a table of each
-pixel's slot and bin made once per range window. A multibeam frame (several rows) is drawn
+pixel's slot and bin made once per range window. A multibeam frame (all its beams) is drawn
 alone, with ``fan_pixels``; a side-scan ping as its waterfall rows.
 """
 from __future__ import annotations
