@@ -28,7 +28,9 @@ WHERE = "soundings"
 
 #: The PointCloud2 layout: (name, numpy type, sensor_msgs/PointField datatype).
 POINTCLOUD2_FIELDS = (("x", "<f4", 7), ("y", "<f4", 7), ("z", "<f4", 7), ("intensity", "<f4", 7), ("beam", "<u2", 4))
-PLY_FIELDS = (("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("intensity", "<f4"), ("beam", "<u2"), ("ping", "<u4"),
+#: The PLY's vertex properties: beam and ping as int32, which every common reader keeps (Open3D
+#: drops unsigned 16/32-bit attributes).
+PLY_FIELDS = (("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("intensity", "<f4"), ("beam", "<i4"), ("ping", "<i4"),
               ("angle", "<f4"))
 MAX_CELLS = 50_000_000
 
@@ -48,7 +50,7 @@ def pointcloud2(soundings):
 
 def write_ply(path, soundings):
     """Write the soundings as a binary little-endian PLY point cloud (``element vertex`` with double
-    x y z, float intensity, ushort beam, uint ping, float angle; `mitsonar.geometry.ply`), under a temporary
+    x y z, float intensity, int beam, int ping, float angle; `mitsonar.geometry.ply`), under a temporary
     name renamed onto ``path`` when complete. Returns the number of points."""
     from mitsonar.geometry.ply import write_ply as write
 
