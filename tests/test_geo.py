@@ -307,3 +307,36 @@ def test_lat_lon_trajectories_from_csv_and_nmea(tmp_path):
     (tmp_path / "far.csv").write_text("time,lat,lon,depth\n0,95,4.5,1\n")
     with pytest.raises(GeoError, match=r"far.csv: line 2: lat lon 95 4.5: off the Earth"):
         read_geo_trajectory(tmp_path / "far.csv", frame)
+
+
+def test_one_geotiff_writer_serves_every_grid():
+    """The mosaic, the depth grid (georeferenced or not), the elevation grid of `mitsonar map` and
+    the BAG's staging file are all written by `mitsonar.export.geotiff.write_geotiff`: no other
+    module of mitsonar opens a GeoTIFF for writing (hilbertmap keeps its own writer, as it must
+    not import mitsonar)."""
+    import pathlib
+    import re
+
+    root = pathlib.Path(__file__).resolve().parents[1] / "mitsonar"
+    writers = sorted(str(p.relative_to(root)) for p in root.rglob("*.py")
+                     if re.search(r"""driver\s*=\s*["']GTiff["']""", p.read_text(encoding="utf-8")))
+    assert writers == ["export/geotiff.py"]
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--origin", "95", "4"], "--origin 95 4: off the Earth"),
+    (["--origin", "52", "4", "--crs", "EPSG:1"], "--crs EPSG:1: unknown EPSG code"),
+    (["--origin", "52", "4", "--crs", "EPSG:4326"], "--crs EPSG:4326: WGS 84 is geographic"),
+])
+def test_bathymetry_refuses_bad_geo_flags_in_one_line(tmp_path, capsys, flags, message):
+    import os
+
+    from conftest import SCENES
+    from mitsonar.cli import main
+
+    out = tmp_path / "run"
+    rc = main(["bathymetry", os.path.join(SCENES, "rocky_slope.xml"), "--trajectory",
+               os.path.join(SCENES, "rocky_slope_survey.tum"), "--max-scans", "1", "-q", "-o", str(out)] + flags)
+    err = capsys.readouterr().err.strip()
+    assert rc == 1 and err.count("\n") == 0 and message in err, err
+    assert not out.exists()

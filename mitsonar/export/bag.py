@@ -59,23 +59,18 @@ def write_bag(path, grid, frame, soundings, sigma=None) -> None:
     renamed into place when complete)."""
     if not bag_available():
         raise ImportError("BAG output needs rasterio with GDAL's BAG driver (HDF5): pip install 'mitsonar[geo]'")
-    import rasterio
     from rasterio.shutil import copy
-    from rasterio.transform import Affine
 
-    a, b, c, d, e, f = grid.transform
-    rows, cols = grid.depth.shape
+    from mitsonar.export.geotiff import write_geotiff
+
     elevation = np.where(np.isnan(grid.depth), NODATA, -grid.depth).astype(np.float32)
     unc = cell_uncertainty(grid, soundings, sigma)
     unc = np.where(np.isnan(grid.depth) | np.isnan(unc), NODATA, unc).astype(np.float32)
     with replacing(path) as tmp:
         staging = tmp + ".tif"
         try:
-            with rasterio.open(staging, "w", driver="GTiff", height=rows, width=cols, count=2, dtype="float32",
-                               crs=frame.crs, transform=Affine(a, b, c + frame.e0, d, e, f + frame.n0),
-                               nodata=NODATA) as dst:
-                dst.write(elevation, 1)
-                dst.write(unc, 2)
+            write_geotiff(staging, [elevation, unc], grid.transform, frame, nodata=NODATA,
+                          descriptions=["elevation", "uncertainty"], units=["metre", "metre"])
             copy(staging, tmp, driver="BAG")
         finally:
             if os.path.exists(staging):

@@ -101,18 +101,16 @@ class DepthGrid:
 
     def write_geotiff(self, path, crs=None):
         """One-band float32 GeoTIFF of the depth (NaN nodata) with the grid's transform; ``crs``
-        as rasterio takes it (None: a local frame). Needs ``rasterio`` (the ``geotiff`` extra)."""
+        as rasterio takes it (None: a local frame). Needs ``rasterio`` (the ``geotiff`` extra).
+        Written by `mitsonar.export.geotiff.write_geotiff`, the one GeoTIFF writer."""
+        from mitsonar.export.geotiff import write_geotiff
+
         try:
-            import rasterio
-            from rasterio.transform import Affine
+            write_geotiff(path, self.depth, self.transform, crs=crs, descriptions=["depth"], units=["metre"],
+                          tags=[{"positive": "down"}])
         except ImportError:
             raise ImportError("GeoTIFF output needs rasterio: pip install 'mitsonar[geotiff]' "
                               "(the depth grid is also saved as .npz)") from None
-        rows, cols = self.depth.shape
-        with replacing(path) as tmp:
-            with rasterio.open(tmp, "w", driver="GTiff", height=rows, width=cols, count=1, dtype="float32",
-                               crs=crs, transform=Affine(*self.transform), nodata=float("nan")) as dst:
-                dst.write(self.depth.astype(np.float32), 1)
 
 
 def grid_depths(soundings, cell=0.5, bounds=None) -> DepthGrid:
