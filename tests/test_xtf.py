@@ -281,3 +281,24 @@ def test_survey_along_a_lat_lon_csv_track(tmp_path, capsys):
     assert main(base + ["-o", str(tmp_path / "out"), "--origin", "52", "4.5"]) == 0, capsys.readouterr().err
     track = Trajectory.from_tum(tmp_path / "out" / "trajectory.tum")
     assert np.allclose(track.positions[:, :2], [[0.0, 0.0], [15.0, 0.0]], atol=1e-4)
+
+
+@pytest.mark.parametrize("output", ["--xtf", "--mcap"])
+@pytest.mark.parametrize("flags, message", [
+    (["--origin", "95", "4"], "--origin 95 4: off the Earth"),
+    (["--origin", "52", "4", "--crs", "EPSG:1"], "--crs EPSG:1: unknown EPSG code"),
+    (["--origin", "52", "4", "--crs", "EPSG:4326"], "--crs EPSG:4326: WGS 84 is geographic"),
+    (["--crs", "EPSG:32631"], "--crs EPSG:32631: needs --origin"),
+])
+def test_export_refuses_bad_geo_flags_in_one_line_and_writes_nothing(tmp_path, capsys, output, flags, message):
+    """`mitsonar export` with --xtf or --mcap (whose /fix uses the origin): a bad --origin/--crs
+    is one line naming the flag, exit 1, no file."""
+    pytest.importorskip("mcap_ros2", reason="MCAP needs mcap-ros2-support (the ros extra)")
+    from mitsonar.cli import main
+
+    sidescan().save(tmp_path / "s.npz")
+    target = tmp_path / ("o.xtf" if output == "--xtf" else "o.mcap")
+    rc = main(["export", str(tmp_path / "s.npz"), output, str(target)] + flags)
+    err = capsys.readouterr().err.strip()
+    assert rc == 1 and err.count("\n") == 0 and message in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.npz"]
