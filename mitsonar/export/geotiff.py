@@ -1,5 +1,5 @@
 """GeoTIFF grids (rasterio; the ``geotiff`` extra): one writer, `write_geotiff`, serves the side-scan
-mosaic, the depth grid, the seabed elevation grid and the staging file of a BAG.
+mosaic, the depth grid, the seabed elevation grid, and (with GDAL's BAG driver) the BAG.
 
     from mitsonar.export.geotiff import write_depth_geotiff
     write_depth_geotiff("depth.tif", grid, frame)     # grid: a mitsonar.products.soundings.DepthGrid
@@ -36,14 +36,16 @@ def _rasterio():
 
 
 def write_geotiff(path, bands, transform, frame=None, *, crs=None, descriptions=(), units=(), tags=(),
-                  nodata=float("nan")) -> None:
+                  nodata=float("nan"), driver="GTiff", options=None) -> None:
     """Write ``bands`` (2-D arrays of one shape, or one array) as a float32 GeoTIFF at ``path``,
     under a temporary name renamed into place when complete.
 
     ``transform``: the grid's affine (a, b, c, d, e, f) in world metres; ``frame``: a `GeoFrame`
     (the cells shifted by its ``e0``, ``n0``, its CRS written), else ``crs`` as rasterio takes it
     (None: a local frame, no CRS) with the cells as given. ``descriptions``, ``units`` and ``tags``
-    (dicts), one per band or fewer; ``nodata`` the value of cells without data.
+    (dicts), one per band or fewer; ``nodata`` the value of cells without data. ``driver`` and
+    ``options`` (its creation options): another GDAL raster format on the same grid (`write_bag`:
+    ``"BAG"``); opened for writing here, not copied, so that the options' text keeps its case.
     """
     rasterio, Affine = _rasterio()
     bands = [np.asarray(bands)] if np.ndim(bands) == 2 else [np.asarray(b) for b in bands]
@@ -52,8 +54,8 @@ def write_geotiff(path, bands, transform, frame=None, *, crs=None, descriptions=
     if frame is not None:
         c, f, crs = c + frame.e0, f + frame.n0, frame.crs
     with replacing(path) as tmp:
-        with rasterio.open(tmp, "w", driver="GTiff", height=rows, width=cols, count=len(bands), dtype="float32",
-                           crs=crs, transform=Affine(a, b, c, d, e, f), nodata=nodata) as dst:
+        with rasterio.open(tmp, "w", driver=driver, height=rows, width=cols, count=len(bands), dtype="float32",
+                           crs=crs, transform=Affine(a, b, c, d, e, f), nodata=nodata, **(options or {})) as dst:
             for i, band in enumerate(bands, start=1):
                 dst.write(band.astype(np.float32), i)
             for i, text in enumerate(descriptions, start=1):
