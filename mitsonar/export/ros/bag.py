@@ -142,10 +142,11 @@ class McapBag:
         datatype = TOPICS[topic]
         if datatype not in self._schemas:
             self._schemas[datatype] = self._writer.register_msgdef(datatype, msgdefs.definition(datatype))
-        if topic in QOS and topic not in self._writer._channel_ids:
+        ids = getattr(self._writer, "_channel_ids", None)   # mcap_ros2 0.5-0.6's; without it, no QoS metadata
+        if topic in QOS and isinstance(ids, dict) and topic not in ids and hasattr(self._writer, "_writer"):
             # mcap_ros2's Writer registers a channel without metadata on a topic's first message:
             # register this one first, with the QoS rosbag2 reads (its documented channel metadata).
-            self._writer._channel_ids[topic] = self._writer._writer.register_channel(
+            ids[topic] = self._writer._writer.register_channel(
                 topic=topic, message_encoding="cdr", schema_id=self._schemas[datatype].id,
                 metadata={"offered_qos_profiles": QOS[topic]})
         self._writer.write_message(topic, self._schemas[datatype], message, log_time=ns, publish_time=ns)
