@@ -311,3 +311,34 @@ def test_cli_summary_and_plot_without_any_ground_truth(tmp_path):
     run.true_z[:] = -10.25                                  # 25 cm too shallow everywhere
     assert "rms depth error 25.00 cm" in bathy_cli.summary_line(
         bathymetry.SurveyResult(s, run.true_z, 1, run.sonar).summary(), [], "out")
+
+
+def test_ply_soundings_read_by_plyfile_keep_beam_and_ping(tmp_path):
+    """The soundings PLY holds its fields in the types every common reader keeps (int32, float32,
+    float64; Open3D drops ushort/uint attributes): plyfile, an independent reader, gets beam and
+    ping back exactly, and the header declares them 'int'. A PLY written before (ushort/uint)
+    still reads with our reader."""
+    plyfile = pytest.importorskip("plyfile", reason="plyfile (the test extra) reads PLY")
+    from mitsonar.geometry.ply import read_ply as read_any
+    from mitsonar.products.bathymetry import SOUNDING_DTYPE
+    from mitsonar.products.soundings import write_ply
+
+    s = np.zeros(300, SOUNDING_DTYPE)
+    s["x"], s["y"], s["z"] = np.arange(300) * 0.1, 2.0, -10.0
+    s["beam"], s["ping"], s["angle"], s["intensity"] = np.arange(300) % 257, 70_000 + np.arange(300), 12.5, 0.25
+    write_ply(tmp_path / "s.ply", s)
+    el = plyfile.PlyData.read(str(tmp_path / "s.ply"))["vertex"]
+    types = {p.name: p.val_dtype for p in el.properties}
+    assert {k: np.dtype(types[k]).kind + str(np.dtype(types[k]).itemsize) for k in ("beam", "ping", "angle")} == \
+        {"beam": "i4", "ping": "i4", "angle": "f4"}
+    assert all(np.dtype(t).kind != "u" for t in types.values())
+    np.testing.assert_array_equal(el["beam"], s["beam"])
+    np.testing.assert_array_equal(el["ping"], s["ping"])
+    np.testing.assert_array_equal(el["x"], s["x"])
+    old = tmp_path / "old.ply"                               # the layout written before: ushort beam, uint ping
+    rows = np.zeros(2, [("x", "<f4"), ("beam", "<u2"), ("ping", "<u4")])
+    rows["beam"], rows["ping"] = (3, 65535), (9, 2 ** 32 - 1)
+    old.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty float x\n"
+                    b"property ushort beam\nproperty uint ping\nend_header\n" + rows.tobytes())
+    back, _ = read_any(old)
+    assert back["beam"].tolist() == [3, 65535] and back["ping"].tolist() == [9, 2 ** 32 - 1]

@@ -215,6 +215,66 @@ def test_bag_read_back_by_gdal_with_crs_elevation_and_uncertainty(tmp_path):
     assert cell_uncertainty(g, two)[0, 0] == pytest.approx(0.5)
 
 
+def _bag_xml(path):
+    import xml.etree.ElementTree as ET
+
+    import rasterio
+
+    with rasterio.open(path) as src:
+        return ET.fromstring(src.tags(ns="xml:BAG")["xml:BAG"].encode()), src.crs.to_wkt()
+
+
+@pytest.mark.parametrize("with_sigma", [True, False])
+def test_bag_is_attributed_as_a_hydrographer_reads_it(tmp_path, with_sigma):
+    """The BAG's ISO metadata, read back by GDAL: a citation with a title and its creation date,
+    an abstract saying what the grid is, the vertical reference system (z up from the survey's
+    sea surface at the origin's height; a given WKT replaces it) inside a compound CRS with the
+    horizontal EPSG code, the uncertainty type (productUncert for the predicted sigma, rawStdDev
+    for the spread of the soundings), the process step and the organisation: not GDAL's empty or
+    'unknown' defaults."""
+    pytest.importorskip("rasterio", reason="BAG goes through rasterio's GDAL (the geo extra)")
+    import datetime
+
+    from mitsonar.export.bag import bag_available, write_bag
+    from mitsonar.products.soundings import grid_depths
+
+    if not bag_available():
+        pytest.skip("this rasterio's GDAL has no BAG driver (HDF5)")
+    frame = GeoFrame.make((52.0, 4.5, 3.0))
+    s = _soundings(300)
+    when = datetime.datetime(2026, 3, 4, 5, 6, 7, tzinfo=datetime.timezone.utc)
+    write_bag(tmp_path / "d.bag", grid_depths(s, 4.0), frame, s, np.full(len(s), 0.05) if with_sigma else None,
+              when=when)
+    root, wkt = _bag_xml(tmp_path / "d.bag")
+    ns = {"gmd": "http://www.isotc211.org/2005/gmd", "gco": "http://www.isotc211.org/2005/gco",
+          "bag": "http://www.opennavsurf.org/schema/bag"}
+
+    def texts(path):
+        return [e.text for e in root.findall(path, ns)]
+
+    ident = "gmd:identificationInfo/bag:BAG_DataIdentification/"
+    assert texts(ident + "gmd:citation/gmd:CI_Citation/gmd:title/gco:CharacterString") == \
+        ["mitsonar simulated bathymetry, 4 m grid"]
+    assert texts(ident + "gmd:citation/gmd:CI_Citation/gmd:date/gmd:CI_Date/gmd:date/gco:Date") == ["2026-03-04"]
+    abstract = texts(ident + "gmd:abstract/gco:CharacterString")[0]
+    assert "Simulated" in abstract and "EPSG:32631" in abstract and "4 m cell" in abstract
+    code = root.find(ident + "bag:verticalUncertaintyType/bag:BAG_VertUncertCode", ns)
+    assert code.text == code.get("codeListValue") == ("productUncert" if with_sigma else "rawStdDev")
+    steps = root.findall(".//gmd:LI_ProcessStep", ns)
+    assert len(steps) == 1 and "mitsonar" in steps[0].find("gmd:description/gco:CharacterString", ns).text
+    assert steps[0].find("gmd:dateTime/gco:DateTime", ns).text == "2026-03-04T05:06:07"
+    assert "mitsonar (simulated survey)" in texts(".//gmd:organisationName/gco:CharacterString")
+    crs = pyproj.CRS.from_wkt(wkt)
+    horizontal, vertical = crs.sub_crs_list
+    assert horizontal.to_epsg() == 32631
+    assert "sea surface, 3 m above the WGS 84 ellipsoid" in vertical.name and vertical.axis_info[0].direction == "up"
+    # a known vertical datum replaces the local one
+    write_bag(tmp_path / "e.bag", grid_depths(s, 4.0), frame, s, None,
+              vertical_wkt=pyproj.CRS.from_epsg(5709).to_wkt("WKT1_GDAL"))      # NAP height
+    _, wkt = _bag_xml(tmp_path / "e.bag")
+    assert pyproj.CRS.from_wkt(wkt).sub_crs_list[1].name == "NAP height"
+
+
 def test_a_target_at_a_known_lat_lon_is_there_in_the_mosaic_geotiff(tmp_path):
     """A bright echo from a point at a chosen lat/lon (one ping, port, slant range over a flat
     bottom at a known altitude) lands, in the mosaic GeoTIFF read back through GDAL, in the cell
@@ -307,3 +367,36 @@ def test_lat_lon_trajectories_from_csv_and_nmea(tmp_path):
     (tmp_path / "far.csv").write_text("time,lat,lon,depth\n0,95,4.5,1\n")
     with pytest.raises(GeoError, match=r"far.csv: line 2: lat lon 95 4.5: off the Earth"):
         read_geo_trajectory(tmp_path / "far.csv", frame)
+
+
+def test_one_geotiff_writer_serves_every_grid():
+    """The mosaic, the depth grid (georeferenced or not), the elevation grid of `mitsonar map` and
+    the BAG's staging file are all written by `mitsonar.export.geotiff.write_geotiff`: no other
+    module of mitsonar opens a GeoTIFF for writing (hilbertmap keeps its own writer, as it must
+    not import mitsonar)."""
+    import pathlib
+    import re
+
+    root = pathlib.Path(__file__).resolve().parents[1] / "mitsonar"
+    writers = sorted(str(p.relative_to(root)) for p in root.rglob("*.py")
+                     if re.search(r"""driver\s*=\s*["']GTiff["']""", p.read_text(encoding="utf-8")))
+    assert writers == ["export/geotiff.py"]
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--origin", "95", "4"], "--origin 95 4: off the Earth"),
+    (["--origin", "52", "4", "--crs", "EPSG:1"], "--crs EPSG:1: unknown EPSG code"),
+    (["--origin", "52", "4", "--crs", "EPSG:4326"], "--crs EPSG:4326: WGS 84 is geographic"),
+])
+def test_bathymetry_refuses_bad_geo_flags_in_one_line(tmp_path, capsys, flags, message):
+    import os
+
+    from conftest import SCENES
+    from mitsonar.cli import main
+
+    out = tmp_path / "run"
+    rc = main(["bathymetry", os.path.join(SCENES, "rocky_slope.xml"), "--trajectory",
+               os.path.join(SCENES, "rocky_slope_survey.tum"), "--max-scans", "1", "-q", "-o", str(out)] + flags)
+    err = capsys.readouterr().err.strip()
+    assert rc == 1 and err.count("\n") == 0 and message in err, err
+    assert not out.exists()

@@ -398,3 +398,25 @@ def test_directories_are_named_not_temporary_files(tmp_path, ext):
         msg = str(err.value)
         assert msg.startswith(f"{target}: ") and words in msg and ".tmp-" not in msg, msg
     assert sorted(os.listdir(tmp_path)) == [f"dir{ext}"] and os.listdir(folder) == []
+
+
+def test_exr_opens_in_opencv_as_the_intensity(tmp_path):
+    """Every EXR scan also holds a FLOAT 'Y' channel equal to 'intensity': OpenCV's imread (which
+    reads only R/G/B/Y channels) returns the intensity bit for bit; our reader ignores 'Y', and
+    a file written before it (no 'Y') still loads."""
+    os.environ.setdefault("OPENCV_IO_ENABLE_OPENEXR", "1")
+    cv2 = pytest.importorskip("cv2", reason="opencv-python-headless (the test extra) reads EXR")
+    if "OpenEXR:                     NO" in cv2.getBuildInformation():
+        pytest.skip("this OpenCV build has no OpenEXR codec (opencv-python-headless 5.0 wheels)")
+    scan = make_scan()
+    path = str(tmp_path / "scan.exr")
+    save_scan(scan, path)
+    with OpenEXR.File(path, separate_channels=True) as f:
+        ch = {k: np.array(v.pixels) for k, v in f.channels().items()}
+    assert sorted(ch) == ["Y", "data", "intensity"] and ch["Y"].dtype == np.float32
+    image = cv2.imread(path, cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH)
+    assert image is not None and image.dtype == np.float32 and image.shape == scan.intensity.shape
+    assert np.array_equal(image, scan.intensity)
+    assert_same_scan(scan, load_scan(path))
+    old = os.path.join(os.path.dirname(__file__), "data", "old_levels_scan.exr")    # written without 'Y'
+    assert load_scan(old).n_pings > 0

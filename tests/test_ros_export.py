@@ -61,7 +61,7 @@ def test_multibeam_and_mechanical_round_trip(tmp_path):
     by_topic = {}
     for topic, schema, log_time, decoded in msgs:
         by_topic.setdefault(topic, []).append((schema, log_time, decoded))
-    assert set(by_topic) == set(TOPICS)
+    assert set(by_topic) == set(TOPICS) - {"/tf_static", "/fix"}    # no trajectory, no side-scan, no origin
     assert {t: len(v) for t, v in by_topic.items()} == counts
     for topic, items in by_topic.items():
         assert {s for s, _, _ in items} == {TOPICS[topic]}
@@ -198,8 +198,13 @@ def test_survey_mcap_has_the_vehicle_frames(tmp_path, capsys):
         return m
 
     first = tfs[0].transforms
-    assert [(t.header.frame_id, t.child_frame_id) for t in first] == [("map", "base_link"), ("base_link", "sonar")]
-    np.testing.assert_allclose(matrix(first[0]) @ matrix(first[1]), sonar_pose(scans[0], 0), atol=1e-9)
+    assert [(t.header.frame_id, t.child_frame_id) for t in first] == [("map", "base_link")]
+    # the sonar's mount is fixed on the vehicle: one static transform, base_link -> sonar
+    statics = [d for t, _, _, d in msgs if t == "/tf_static"]
+    assert len(statics) == 1 and [(t.header.frame_id, t.child_frame_id) for t in statics[0].transforms] == \
+        [("base_link", "sonar")]
+    np.testing.assert_allclose(matrix(first[0]) @ matrix(statics[0].transforms[0]), sonar_pose(scans[0], 0),
+                               atol=1e-9)
     # the twist is the vehicle's velocity in base_link: forward at the lawnmower's 0.2 m/s on a line
     odoms = [d for t, _, _, d in msgs if t == "/odom"]
     assert odoms[0].child_frame_id == "base_link"
@@ -211,31 +216,121 @@ def test_survey_mcap_has_the_vehicle_frames(tmp_path, capsys):
     assert "exists" in capsys.readouterr().err and not (tmp_path / "other").exists()
 
 
-def test_sidescan_channels_each_in_their_own_frame(tmp_path):
-    """A side-scan ping is two groups, one per channel, each in its own sonar frame whose z axis is
-    that channel's boresight (port looks +y, starboard -y): the starboard rows are not drawn in
-    the port channel's frame. One odometry per ping, no fan picture (a line has no fan)."""
+def _matrix(tr):
+    from mitsonar.geometry.trajectory import quat_to_matrix
+
+    m = np.eye(4)
+    r = tr.transform.rotation
+    m[:3, :3] = quat_to_matrix(np.array([r.x, r.y, r.z, r.w]))
+    m[:3, 3] = [tr.transform.translation.x, tr.transform.translation.y, tr.transform.translation.z]
+    return m
+
+
+def _sidescan(n=3, bins=16, depression=15.0, yaw=0.0, meta=None):
+    """A two-sided side-scan scan whose head is level, turned ``yaw`` deg about z and moving along +x."""
     from mitsonar.geometry.frames import sidescan_rotation
 
-    n, bins = 3, 16
     channel = np.repeat([0, 1], n)
-    poses = sidescan_rotation(channel, math.radians(15.0))
-    scan = Scan(intensity=np.zeros((2 * n, bins), np.float32), data=np.full((2 * n, bins), 7, np.uint8),
+    head = np.tile(np.eye(4), (2 * n, 1, 1))
+    c, s = math.cos(math.radians(yaw)), math.sin(math.radians(yaw))
+    head[:, :2, :2] = [[c, -s], [s, c]]
+    head[:, :3, 3] = np.stack([np.tile(np.arange(n) * 0.5, 2) + 3.0, np.full(2 * n, -2.0), np.full(2 * n, -5.0)], 1)
+    poses = head @ sidescan_rotation(channel, math.radians(depression))
+    return Scan(intensity=np.zeros((2 * n, bins), np.float32), data=np.full((2 * n, bins), 7, np.uint8),
                 ranges=np.linspace(0.5, 20, bins), bearings=np.zeros(2 * n), poses=poses, range_min=0.0,
                 range_max=20.5, kind="sidescan", beamwidth_h=1.0, beamwidth_v=50.0,
-                times=np.tile(np.arange(n) * 0.1, 2), meta={"side": "both"})
+                times=np.tile(np.arange(n) * 0.1, 2), meta={"side": "both", **(meta or {})}), head
+
+
+def _tf_tree(msgs):
+    """``{child: (parent, 4x4)}`` of the first /tf message and every /tf_static transform."""
+    tree = {}
+    for topic, _, _, d in msgs:
+        if topic == "/tf_static":
+            tree.update({t.child_frame_id: (t.header.frame_id, _matrix(t)) for t in d.transforms})
+    first = next(d for topic, _, _, d in msgs if topic == "/tf")
+    tree.update({t.child_frame_id: (t.header.frame_id, _matrix(t)) for t in first.transforms})
+    return tree
+
+
+def _in_map(tree, frame):
+    pose = np.eye(4)
+    while frame != "map":
+        assert frame in tree, f"frame {frame!r} is not in TF (frames: {sorted(tree)})"
+        parent, m = tree[frame]
+        pose, frame = m @ pose, parent
+    return pose
+
+
+@pytest.mark.parametrize("meta", [{}, {"depression": 15.0}])
+def test_sidescan_channel_frames_have_x_up_and_every_stamped_frame_is_in_tf(tmp_path, meta):
+    """marine_acoustic_msgs' ProjectedSonarImage: "The Z-axis is centered in the plane of the fan
+    ('forward'), with X up". Each side-scan channel's frame has z its boresight and x up (a level
+    head: +z of the world), right-handed; the channel frames hang off the head frame ``sonar`` on
+    /tf_static (transient-local, as rosbag2 records a latched topic), and every frame an image is
+    stamped with (the waterfall's included) reaches ``map`` through TF. The depression comes from
+    ``meta`` or, without it, from the angle between the two boresights."""
+    scan, head = _sidescan(yaw=30.0, meta=meta)
     path = tmp_path / "ss.mcap"
     counts = write_mcap(path, [scan])
     msgs = _read(path)
     images = [d for topic, _, _, d in msgs if topic == "/sonar/image"]
-    assert len(images) == 2 * n and counts.get("/sonar/fan", 0) == 0 and counts["/odom"] == n
-    assert [im.header.frame_id for im in images] == ["sonar_port", "sonar_starboard"] * n
-    tfs = {t.child_frame_id: t for topic, _, _, d in msgs if topic == "/tf" for t in d.transforms}
-    for frame, sign in (("sonar_port", 1.0), ("sonar_starboard", -1.0)):
-        q = tfs[frame].transform.rotation
-        from mitsonar.geometry.trajectory import quat_to_matrix
-        rot = quat_to_matrix(np.array([q.x, q.y, q.z, q.w]))
-        assert np.sign(rot[1, 2]) == sign                 # the frame's z (boresight) looks to its side
+    assert len(images) == 6 and counts.get("/sonar/fan", 0) == 0 and counts["/odom"] == counts["/tf"] == 3
+    assert [im.header.frame_id for im in images] == ["sonar_port", "sonar_starboard"] * 3
+    tree = _tf_tree(msgs)
+    stamped = {d.header.frame_id for topic, _, _, d in msgs if topic.startswith("/sonar/")}
+    assert stamped == {"sonar", "sonar_port", "sonar_starboard", "map"}
+    for frame in stamped:
+        _in_map(tree, frame)
+    assert tree["sonar_port"][0] == tree["sonar_starboard"][0] == "sonar"
+    np.testing.assert_allclose(_in_map(tree, "sonar"), head[0], atol=1e-9)      # the head itself
+    for row, frame in ((0, "sonar_port"), (3, "sonar_starboard")):
+        world = _in_map(tree, frame)
+        rot = world[:3, :3]
+        assert np.isclose(np.linalg.det(rot), 1.0)
+        np.testing.assert_allclose(rot[:, 2], scan.poses[row][:3, 2], atol=1e-9)   # z: the boresight
+        assert rot[2, 0] > 0.9                                                     # x: up (cos 15 deg)
+        np.testing.assert_allclose(rot[:, 0], -scan.poses[row][:3, 1], atol=1e-9)
     for im in images:                                     # every beam on its own frame's boresight
         d = im.beam_directions[0]
         assert np.allclose([d.x, d.y, d.z], [0.0, 0.0, 1.0], atol=1e-9)
+    with open(path, "rb") as fh:
+        channels = {c.topic: c for c in make_reader(fh).get_summary().channels.values()}
+    qos = channels["/tf_static"].metadata["offered_qos_profiles"]
+    assert "durability: 1" in qos and "reliability: 1" in qos and "history: 1" in qos and "depth: 1" in qos
+
+
+def test_navsatfix_on_fix_with_an_origin(tmp_path):
+    """With an origin (the scans' metadata, or ``frame=``) the bag holds sensor_msgs/NavSatFix on
+    /fix, one per ping: the latitude and longitude of the vehicle (with a trajectory) or of the
+    sonar, within 1e-7 deg of pyproj's transform of its grid coordinates, and height the origin's
+    + z. Without an origin there is no /fix."""
+    pyproj = pytest.importorskip("pyproj", reason="georeferencing needs pyproj (the geo extra)")
+    from mitsonar.geometry.geodesy import GeoFrame
+    from mitsonar.geometry.trajectory import Trajectory
+
+    geo = GeoFrame.make((52.0, 4.5, 12.0))
+    scan, head = _sidescan(meta=geo.meta())
+    to_ll = pyproj.Transformer.from_crs(geo.crs, "EPSG:4326", always_xy=True)
+    write_mcap(tmp_path / "a.mcap", [scan])
+    fixes = [(lt, d) for topic, _, lt, d in _read(tmp_path / "a.mcap") if topic == "/fix"]
+    assert len(fixes) == 3
+    for k, (lt, fix) in enumerate(fixes):
+        lon, lat = to_ll.transform(head[k, 0, 3] + geo.e0, head[k, 1, 3] + geo.n0)
+        assert abs(fix.latitude - lat) < 1e-7 and abs(fix.longitude - lon) < 1e-7
+        assert fix.altitude == pytest.approx(12.0 - 5.0) and fix.header.frame_id == "sonar"
+        assert _ns(fix.header.stamp) == lt == round(0.1 * k * 1e9)
+        assert fix.status.status == 0 and fix.position_covariance_type == 0
+    # a trajectory: the vehicle's position, frame base_link; the frame given outright
+    times = np.array([-1.0, 1.0])
+    poses = np.tile(np.eye(4), (2, 1, 1))
+    poses[:, :3, 3] = [[100.0, 200.0, -1.0], [120.0, 200.0, -1.0]]
+    bare, _ = _sidescan()
+    write_mcap(tmp_path / "b.mcap", [bare], trajectory=Trajectory(times, poses), frame=geo)
+    fixes = [d for topic, _, _, d in _read(tmp_path / "b.mcap") if topic == "/fix"]
+    for k, fix in enumerate(fixes):
+        lon, lat = to_ll.transform(110.0 + 10.0 * 0.1 * k + geo.e0, 200.0 + geo.n0)
+        assert abs(fix.latitude - lat) < 1e-7 and abs(fix.longitude - lon) < 1e-7
+        assert fix.header.frame_id == "base_link" and fix.altitude == pytest.approx(11.0)
+    write_mcap(tmp_path / "c.mcap", [bare])
+    assert not [1 for topic, *_ in _read(tmp_path / "c.mcap") if topic == "/fix"]

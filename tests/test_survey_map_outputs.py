@@ -80,3 +80,44 @@ def test_map_incremental_cli(floor_scan, tmp_path):
     proc = _run("map", str(survey / "scan_00000.npz"), "-o", str(tmp_path / "m3.npz"), "--elevation", str(elev))
     assert proc.returncode != 0 and "--elevation needs --incremental" in proc.stderr
     assert not (tmp_path / "m2.npz").exists() and not (tmp_path / "m3.npz").exists()
+
+
+def test_map_elevation_geotiff_has_the_scans_crs(tmp_path, capsys):
+    """`mitsonar map --incremental --elevation X.tif` writes through mitsonar's one GeoTIFF writer
+    (`mitsonar.export.geotiff`): scans holding an origin give a grid in its CRS (cells shifted by
+    the origin's easting and northing), band 'elevation', metres, positive up; the values are the
+    map's elevation grid. Scans with different origins are refused in one line, nothing written."""
+    rasterio = pytest.importorskip("rasterio", reason="GeoTIFF needs rasterio (the geo extra)")
+    pytest.importorskip("pyproj", reason="georeferencing needs pyproj (the geo extra)")
+    from mitsonar import Scan
+    from mitsonar.cli import main
+    from mitsonar.geometry.geodesy import GeoFrame
+
+    geo = GeoFrame.make((52.0, 4.5))
+    survey = tmp_path / "survey"
+    survey.mkdir()
+    for i in range(2):
+        s = box_scan(moving_poses((0, -1 + i, 0), (0, i, 0), n_pings=40, **DOWN), n_pings=40,
+                     bearing_step=9.0, rays=30, seed=i)
+        Scan(intensity=s.intensity, data=s.data, ranges=s.ranges, bearings=s.bearings, poses=s.poses,
+             range_min=s.range_min, range_max=s.range_max, beamwidth_h=s.beamwidth_h,
+             beamwidth_v=s.beamwidth_v, meta=geo.meta()).save(str(survey / f"scan_{i:05d}.npz"))
+    out, tif = tmp_path / "map.npz", tmp_path / "seabed.tif"
+    assert main(["map", str(survey), "--incremental", "-o", str(out), "--elevation", str(tif),
+                 "--elevation-resolution", "0.5"]) == 0
+    grid = elevation_grid(IncrementalHilbertMap.load(out), resolution=0.5)
+    with rasterio.open(tif) as src:
+        assert src.crs.to_epsg() == 32631 and src.descriptions == ("elevation",) and src.units == ("metre",)
+        assert src.tags(1)["positive"] == "up"
+        a, b, c, d, e, f = grid.transform
+        assert tuple(src.transform)[:6] == pytest.approx((a, b, c + geo.e0, d, e, f + geo.n0), abs=1e-6)
+        np.testing.assert_array_equal(src.read(1), grid.elevation.astype(np.float32))
+    other = GeoFrame.make((10.0, 4.5))
+    s = Scan.load(str(survey / "scan_00001.npz"))
+    s.meta = {**s.meta, **other.meta()}
+    s.save(str(survey / "scan_00001.npz"))
+    capsys.readouterr()
+    bad = tmp_path / "bad.tif"
+    assert main(["map", str(survey), "--incremental", "-o", str(tmp_path / "m2.npz"), "--elevation", str(bad)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "different origins" in err and not bad.exists()

@@ -41,8 +41,9 @@ def sidescan(n=5, bins=40, yaw_deg=30.0, speed=1.5, t0=100.0, seed=0, x0=(10.0, 
 
 # ---- an independent reader: the structures' fields at their offsets in the XTF document ----------
 
-def parse_xtf(path):
-    """(file header dict, [(ping header dict, [(chan header dict, samples)])]) by plain offsets."""
+def parse_xtf(path, attitudes=None):
+    """(file header dict, [(ping header dict, [(chan header dict, samples)])]) by plain offsets;
+    the attitude packets (XTFATTITUDEDATA, HeaderType 3) go into the list ``attitudes`` as dicts."""
     raw = open(path, "rb").read()
     fh = dict(zip(("FileFormat", "SystemType"), raw[0:2]))
     fh["NavUnits"], fh["NumberOfSonarChannels"] = struct.unpack_from("<HH", raw, 164)
@@ -58,10 +59,21 @@ def parse_xtf(path):
         assert magic == 0xFACE
         nbytes = struct.unpack_from("<I", raw, pos + 10)[0]
         assert nbytes % 64 == 0
+        if htype == 3:                           # XTFATTITUDEDATA: 64 bytes
+            assert nbytes == 64
+            micro, epoch = struct.unpack_from("<II", raw, pos + 22)
+            tag, heading = struct.unpack_from("<If", raw, pos + 46)
+            ms, = struct.unpack_from("<H", raw, pos + 61)
+            if attitudes is not None:
+                attitudes.append(dict(EpochMicroseconds=micro, SourceEpoch=epoch, TimeTag=tag, Heading=heading,
+                                      Second=raw[pos + 60], Millisecond=ms))
+            pos += nbytes
+            continue
         ph = dict(HeaderType=htype, NumChansToFollow=nchan, NumBytesThisRecord=nbytes)
         ph["SoundVelocity"] = struct.unpack_from("<f", raw, pos + 32)[0]
         ph["SensorYcoordinate"], ph["SensorXcoordinate"] = struct.unpack_from("<dd", raw, pos + 160)
         ph["SensorHeading"] = struct.unpack_from("<f", raw, pos + 212)[0]
+        ph["AttitudeTimeTag"], _, ph["NavFixMilliseconds"] = struct.unpack_from("<IfI", raw, pos + 224)
         c, cs = pos + 256, []
         for _ in range(nchan):
             number, = struct.unpack_from("<H", raw, c)
@@ -83,6 +95,10 @@ def test_independent_offsets_match_the_maintained_reader():
     assert c.XTFFileHeader.NavUnits.offset == 164 and c.XTFChanInfo.SampleFormat.offset == 74
     assert c.XTFPingHeader.SensorYcoordinate.offset == 160 and c.XTFPingHeader.SensorHeading.offset == 212
     assert c.XTFPingHeader.SoundVelocity.offset == 32 and c.XTFPingChanHeader.NumSamples.offset == 42
+    assert c.XTFPingHeader.AttitudeTimeTag.offset == 224 and c.XTFPingHeader.NavFixMilliseconds.offset == 232
+    a = c.XTFAttitudeData
+    assert (a.EpochMicroseconds.offset, a.SourceEpoch.offset, a.TimeTag.offset, a.Heading.offset, a.Second.offset,
+            a.Millisecond.offset, c.ctypes.sizeof(a)) == (22, 26, 46, 50, 60, 61, 64)
 
 
 def test_writer_layouts_match_pyxtf_field_by_field():
@@ -92,7 +108,8 @@ def test_writer_layouts_match_pyxtf_field_by_field():
 
     c = pyxtf.xtf_ctypes
     for (st, names), ref in ((X.CHANINFO, c.XTFChanInfo), (X.FILEHEADER, c.XTFFileHeader),
-                             (X.PINGHEADER, c.XTFPingHeader), (X.PINGCHANHEADER, c.XTFPingChanHeader)):
+                             (X.PINGHEADER, c.XTFPingHeader), (X.PINGCHANHEADER, c.XTFPingChanHeader),
+                             (X.ATTITUDEDATA, c.XTFAttitudeData)):
         off = 0
         for name, code in zip(names, X._codes(st.format)):
             assert getattr(ref, name).offset == off, (ref.__name__, name)
@@ -139,7 +156,7 @@ def test_xtf_read_back_by_pyxtf_byte_equal_with_nav(tmp_path):
             assert p.SensorDepth == pytest.approx(8.0)
             t = start + scan.meta.start_time + scan.times[i]
             got = p.get_time().astype("datetime64[ms]").astype(np.int64) / 1000.0
-            assert abs(got - t) <= 0.01 + 1e-6        # HSeconds: hundredths of a second
+            assert abs(got - t) <= 0.005 + 1e-6       # HSeconds: the nearest hundredth of a second
             k += 1
     # the heading is the head's grid direction turned to true north: 90 - 30 deg in the grid, minus
     # the meridian convergence at the point (pyproj's); not the grid's 60 deg
@@ -154,7 +171,8 @@ def test_xtf_independent_parser(tmp_path):
     frame = GeoFrame.make(ORIGIN)
     scan = sidescan(n=3, bins=33)                      # 256 + 2 (64 + 33) bytes: padded to 512
     write_xtf(tmp_path / "s.xtf", [scan], frame)
-    fh, pings = parse_xtf(tmp_path / "s.xtf")
+    attitudes = []
+    fh, pings = parse_xtf(tmp_path / "s.xtf", attitudes)
     assert fh["FileFormat"] == 0x7B and fh["NavUnits"] == 3 and fh["NumberOfSonarChannels"] == 2
     assert [(c["TypeOfChannel"], c["BytesPerSample"], c["SampleFormat"]) for c in fh["ChanInfo"][:2]] == \
         [(1, 1, 8), (2, 1, 8)]
@@ -165,6 +183,12 @@ def test_xtf_independent_parser(tmp_path):
         assert [c["ChannelNumber"] for c, _ in chans] == [0, 1]
         assert np.array_equal(chans[0][1], scan.data[k]) and np.array_equal(chans[1][1], scan.data[3 + k])
         assert abs(ph["SensorXcoordinate"] - lon[k]) < 1e-9 and abs(ph["SensorYcoordinate"] - lat[k]) < 1e-9
+        # each ping's attitude packet: its millisecond tag, its time to the microsecond (start 0: the
+        # scan's start_time 100 s + 0.2 k s after the epoch)
+        att = attitudes[k]
+        assert att["TimeTag"] == ph["AttitudeTimeTag"] == ph["NavFixMilliseconds"] == 200 * k
+        assert att["SourceEpoch"] + att["EpochMicroseconds"] * 1e-6 == pytest.approx(100.0 + 0.2 * k, abs=1e-6)
+        assert att["Heading"] == pytest.approx(ph["SensorHeading"])
 
 
 def test_xtf_refuses_a_scan_that_is_not_sidescan_and_leaves_nothing(tmp_path):
@@ -281,3 +305,50 @@ def test_survey_along_a_lat_lon_csv_track(tmp_path, capsys):
     assert main(base + ["-o", str(tmp_path / "out"), "--origin", "52", "4.5"]) == 0, capsys.readouterr().err
     track = Trajectory.from_tum(tmp_path / "out" / "trajectory.tum")
     assert np.allclose(track.positions[:, :2], [[0.0, 0.0], [15.0, 0.0]], atol=1e-4)
+
+
+@pytest.mark.parametrize("output", ["--xtf", "--mcap"])
+@pytest.mark.parametrize("flags, message", [
+    (["--origin", "95", "4"], "--origin 95 4: off the Earth"),
+    (["--origin", "52", "4", "--crs", "EPSG:1"], "--crs EPSG:1: unknown EPSG code"),
+    (["--origin", "52", "4", "--crs", "EPSG:4326"], "--crs EPSG:4326: WGS 84 is geographic"),
+    (["--crs", "EPSG:32631"], "--crs EPSG:32631: needs --origin"),
+])
+def test_export_refuses_bad_geo_flags_in_one_line_and_writes_nothing(tmp_path, capsys, output, flags, message):
+    """`mitsonar export` with --xtf or --mcap (whose /fix uses the origin): a bad --origin/--crs
+    is one line naming the flag, exit 1, no file."""
+    pytest.importorskip("mcap_ros2", reason="MCAP needs mcap-ros2-support (the ros extra)")
+    from mitsonar.cli import main
+
+    sidescan().save(tmp_path / "s.npz")
+    target = tmp_path / ("o.xtf" if output == "--xtf" else "o.mcap")
+    rc = main(["export", str(tmp_path / "s.npz"), output, str(target)] + flags)
+    err = capsys.readouterr().err.strip()
+    assert rc == 1 and err.count("\n") == 0 and message in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.npz"]
+
+
+def test_xtf_times_round_trip_to_the_millisecond(tmp_path):
+    """The sonar packet holds its time to the hundredth of a second (HSeconds, rounded to the
+    nearest); the attitude packet before each ping, paired with it by TimeTag = AttitudeTimeTag,
+    holds it to the microsecond (SourceEpoch + EpochMicroseconds), so pyxtf gives back every
+    ping's time within a millisecond."""
+    pyxtf = pytest.importorskip("pyxtf", reason="pyxtf (the test extra) reads XTF")
+    from mitsonar.export.xtf import write_xtf
+
+    scan = sidescan(n=6, t0=100.0)
+    scan.times = np.tile(np.array([0.0, 0.2137, 0.4004, 0.6291, 0.8555, 1.0678]), 2)   # not whole hundredths
+    start = 1_700_000_000.0 + 0.0123
+    write_xtf(tmp_path / "t.xtf", [scan], GeoFrame.make(ORIGIN), start=start)
+    _, packets = pyxtf.xtf_read(str(tmp_path / "t.xtf"))
+    sonar, attitude = packets[pyxtf.XTFHeaderType.sonar], packets[pyxtf.XTFHeaderType.attitude]
+    assert len(sonar) == len(attitude) == 6
+    by_tag = {a.TimeTag: a for a in attitude}
+    for k, p in enumerate(sonar):
+        want = start + 100.0 + scan.times[k]
+        a = by_tag[p.AttitudeTimeTag]
+        got = a.get_time().astype("datetime64[us]").astype(np.int64) * 1e-6
+        assert abs(got - want) < 1e-3, (k, got - want)
+        coarse = p.get_time().astype("datetime64[ms]").astype(np.int64) * 1e-3
+        assert abs(coarse - want) <= 0.005 + 1e-6
+        assert a.Heading == pytest.approx(p.SensorHeading)

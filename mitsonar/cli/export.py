@@ -8,7 +8,7 @@ written under a temporary name and renamed at the end, so a failure leaves nothi
 """
 from __future__ import annotations
 
-from mitsonar.export.ros.bag import THRESHOLD, ExportError, McapBag, check_output, check_scan, scan_base
+from mitsonar.export.ros.bag import THRESHOLD, ExportError, McapBag, _geo_of, check_output, check_scan, scan_base
 
 
 def add_mcap_options(parser, *, scans_help=True, force_help="overwrite an existing MCAP file"):
@@ -31,15 +31,18 @@ def cmd_export(args):
         check_output(args.mcap, args.force)
     if args.xtf is not None:
         from mitsonar.export.xtf import check_xtf_output
-        from mitsonar.geometry.geodesy import frame_from_args
 
         check_xtf_output(args.xtf, args.force)
-        frame_from_args(args)                     # a bad --origin/--crs: refused before reading scans
+    from mitsonar.geometry.geodesy import frame_from_args
+
+    frame = frame_from_args(args)                 # a bad --origin/--crs: refused before reading scans
     traj = Trajectory.from_tum(args.trajectory) if args.trajectory else None
     scans = []
     for path in args.scans:                       # every input read and checked before any output
         scan = load_scan(path)
         check_scan(scan, path)
+        if args.mcap is not None and frame is None:
+            _geo_of(scan, path)                   # an origin in its metadata that /fix cannot use
         t0, t1 = scan_base(scan) + scan.times[0], scan_base(scan) + scan.times[-1]
         if traj is not None and not traj.covers(t0, t1):
             lo, hi = traj.span
@@ -50,10 +53,11 @@ def cmd_export(args):
         _export_xtf(args, scans, traj)
     if args.mcap is None:
         return 0
-    with McapBag(args.mcap, start=args.start, trajectory=traj, threshold=args.threshold, force=args.force) as bag:
+    with McapBag(args.mcap, start=args.start, trajectory=traj, threshold=args.threshold, force=args.force,
+                 frame=frame) as bag:
         for scan, path in zip(scans, args.scans):
             bag.add(scan, path)
-    summary = ", ".join(f"{n} on {t}" for t, n in bag.counts.items())
+    summary = ", ".join(f"{n} on {t}" for t, n in bag.written().items())
     print(f"wrote {args.mcap}: {summary}")
     return 0
 
@@ -81,7 +85,8 @@ def add_subcommands(sub):
     e = sub.add_parser("export", help="write scans as a ROS 2 bag (MCAP) for Foxglove and ros2 bag",
                        description="Write scans as an MCAP file of ROS 2 messages: "
                                    "marine_acoustic_msgs/ProjectedSonarImage per ping, the fan and the "
-                                   "waterfall as sensor_msgs/Image, detections as PointCloud2, /tf and /odom.")
+                                   "waterfall as sensor_msgs/Image, detections as PointCloud2, /tf, /tf_static and /odom, and with "
+                                   "an origin (--origin, or the scans' metadata) NavSatFix on /fix.")
     e.add_argument("scans", nargs="+", help="scan files (.npz or .exr), in time order")
     e.add_argument("--mcap", metavar="OUT", help="output file (.mcap)")
     e.add_argument("--trajectory", metavar="TUM", help="the vehicle's trajectory (a survey's trajectory.tum): "

@@ -199,6 +199,26 @@ class _Stages:
         return f"{time.perf_counter() - self.start:.1f} s ({parts})"
 
 
+def _elevation_frame(args, scans):
+    """(the `GeoFrame` the scans' metadata hold, None without; or None and the one-line reason)
+    for a GeoTIFF ``--elevation``: the grid is then written in that CRS. Scans holding different
+    origins are refused."""
+    if not (getattr(args, "elevation", None) or "").lower().endswith((".tif", ".tiff")):
+        return None, None
+    from mitsonar.geometry.geodesy import GeoError, GeoFrame
+
+    frames = []
+    for path, scan in zip(args.scans, scans):
+        try:
+            frames.append(GeoFrame.from_meta(scan.meta, f"{path}: meta"))
+        except GeoError as exc:
+            return None, str(exc)
+    if any(f != frames[0] for f in frames):
+        return None, (f"--elevation {args.elevation}: the scans hold different origins/CRS in their metadata "
+                      "(allowed: one survey's scans, all with the same origin, or none)")
+    return frames[0], None
+
+
 def cmd_map(args) -> int:
     stages = _Stages()
     if args.inducing is None or args.inducing < 1:
@@ -249,6 +269,9 @@ def cmd_map(args) -> int:
             return _fail(f"{path}: is a directory, not a scan file")
 
     scans, problem = _read_scans(args.scans)
+    if problem:
+        return _fail(problem)
+    args.geo, problem = _elevation_frame(args, scans)
     if problem:
         return _fail(problem)
     # a mesh grid too fine for what the scans can reach: refused now, not after the fit
@@ -352,10 +375,15 @@ def _write(args, hm, n_scans: int, V, F, outputs: StagedFiles, stages: _Stages) 
             option, path = "--mesh", args.mesh
             write_mesh(outputs.temporary(args.mesh), V, F)
         if getattr(args, "elevation", None):
-            from hilbertmap.elevation import write_elevation
-
             option, path = "--elevation", args.elevation
-            write_elevation(outputs.temporary(args.elevation), args.elevation_grid)
+            if args.elevation.lower().endswith((".tif", ".tiff")):   # mitsonar's one GeoTIFF writer
+                from mitsonar.export.geotiff import write_elevation_geotiff
+
+                write_elevation_geotiff(outputs.temporary(args.elevation), args.elevation_grid, args.geo)
+            else:
+                from hilbertmap.elevation import write_elevation
+
+                write_elevation(outputs.temporary(args.elevation), args.elevation_grid)
     except OSError as exc:
         return _fail(f"{option} {path}: {exc.strerror or exc}")
     return 0

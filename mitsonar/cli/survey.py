@@ -115,7 +115,8 @@ def cmd_survey(args):
     if args.mcap is not None:   # the ROS 2 bag, written beside the scans, renamed into place at the end
         from mitsonar.export.ros.bag import McapBag
 
-        bag = McapBag(args.mcap, start=args.start, trajectory=traj, threshold=args.threshold, force=args.force)
+        bag = McapBag(args.mcap, start=args.start, trajectory=traj, threshold=args.threshold, force=args.force,
+                      frame=frame)
     if kept is not None:
         scans = _keeping(scans, kept)
     try:

@@ -21,13 +21,19 @@ north (meridian convergence included), ``ShipGyro`` the vehicle's; ``SensorSpeed
 in knots (the track's speed); ``SensorDepth`` m below z = 0; ``SensorPrimaryAltitude`` the first
 bottom return (m; 0 where none); ``SoundVelocity`` the one-way speed of sound (m/s). Times: the
 ping's time (``--start`` + the scan's ``start_time`` + its row time, seconds of the Unix epoch, UTC)
-in ``Year`` .. ``HSeconds`` and ``JulianDay``; ``NavFixMilliseconds`` and ``AttitudeTimeTag`` the
-milliseconds since the first ping. Per channel: ``SlantRange`` = ``range_max``, ``TimeDelay`` the
+in ``Year`` .. ``HSeconds`` and ``JulianDay``, rounded to the hundredth of a second the sonar
+packet holds; ``NavFixMilliseconds`` and ``AttitudeTimeTag`` the milliseconds since the first ping
+(the file's millisecond clock). Each ping is preceded by an attitude packet (``HeaderType`` 3,
+``XTFATTITUDEDATA``) of the same instant: its ``TimeTag`` is the ping's ``AttitudeTimeTag``, its
+time ``SourceEpoch`` + ``EpochMicroseconds`` (and ``Year`` .. ``Second`` + ``Millisecond``), so a
+reader that pairs them (pyxtf's ``get_time`` on the attitude packet) has every ping's time to the
+microsecond, not only to the hundredth; its ``Heading`` is the ping's ``SensorHeading``. Per channel: ``SlantRange`` = ``range_max``, ``TimeDelay`` the
 two-way time to ``range_min``, ``TimeDuration`` the two-way time of the window, ``SecondsPerPing``,
 ``NumSamples``, ``Frequency`` (kHz).
 """
 from __future__ import annotations
 
+import calendar
 import datetime
 import os
 import struct
@@ -36,8 +42,8 @@ import numpy as np
 
 from mitsonar._files import replacing
 
-#: XTFHeaderType of a sonar (side-scan) packet, and the ChanInfo TypeOfChannel codes.
-SONAR, PORT_TYPE, STARBOARD_TYPE = 0, 1, 2
+#: XTFHeaderType of a sonar (side-scan) and an attitude packet, and the ChanInfo TypeOfChannel codes.
+SONAR, ATTITUDE, PORT_TYPE, STARBOARD_TYPE = 0, 3, 1, 2
 NAV_LATLON = 3
 KNOT = 1852.0 / 3600.0
 
@@ -94,7 +100,14 @@ PINGCHANHEADER = _layout([
     ("ContactClassification", "H"), ("ContactSubNumber", "B"), ("ContactType", "B"), ("NumSamples", "I"),
     ("MillivoltScale", "H"), ("ContactTimeOffTrack", "f"), ("ContactCloseNumber", "B"), ("Reserved2", "B"),
     ("FixedVSOP", "f"), ("Weight", "h"), ("ReservedSpace", "4s")])
-assert (CHANINFO[0].size, FILEHEADER[0].size, PINGHEADER[0].size, PINGCHANHEADER[0].size) == (128, 256, 256, 64)
+ATTITUDEDATA = _layout([
+    ("MagicNumber", "H"), ("HeaderType", "B"), ("SubChannelNumber", "B"), ("NumChansToFollow", "H"),
+    ("Reserved1", "4s"), ("NumBytesThisRecord", "I"), ("Reserved2", "8s"), ("EpochMicroseconds", "I"),
+    ("SourceEpoch", "I"), ("Pitch", "f"), ("Roll", "f"), ("Heave", "f"), ("Yaw", "f"), ("TimeTag", "I"),
+    ("Heading", "f"), ("Year", "H"), ("Month", "B"), ("Day", "B"), ("Hour", "B"), ("Minute", "B"), ("Second", "B"),
+    ("Millisecond", "H"), ("Reserved3", "1s")])
+assert (CHANINFO[0].size, FILEHEADER[0].size, PINGHEADER[0].size, PINGCHANHEADER[0].size, ATTITUDEDATA[0].size) == \
+    (128, 256, 256, 64, 64)
 
 
 def _pack(layout, **values) -> bytes:
@@ -202,12 +215,14 @@ def write_xtf(path, scans, frame, *, names=None, start=0.0, trajectory=None, son
         f.write(_file_header(first, os.path.basename(os.fspath(path)), sonar_name, frame))
         t0 = pings.t.min() if len(pings.t) else 0.0
         for k, (scan, p, s) in enumerate(pings.rows):
-            when = _utc(pings.start + pings.t[k])
+            exact = _utc(pings.start + pings.t[k])
             ms = int(round(1000 * (pings.t[k] - t0)))
+            f.write(_attitude(exact, ms, heading[k]))
+            when = _utc(round(pings.start + pings.t[k], 2))      # the sonar packet holds hundredths
             chans = b"".join(_channel(scan, row, ch) for ch, row in ((0, p), (1, s)))
             size = PINGHEADER[0].size + len(chans)
             padded = (size + 63) // 64 * 64
-            hsec = min(99, when.microsecond // 10000)
+            hsec = min(99, int(round(when.microsecond / 10000)))
             head = _pack(
                 PINGHEADER, MagicNumber=0xFACE, HeaderType=SONAR, NumChansToFollow=2, NumBytesThisRecord=padded,
                 Year=when.year, Month=when.month, Day=when.day, Hour=when.hour, Minute=when.minute,
@@ -221,6 +236,16 @@ def write_xtf(path, scans, frame, *, names=None, start=0.0, trajectory=None, son
                 ComputerClockSecond=when.second, ComputerClockHsec=hsec)
             f.write(head + chans + b"\0" * (padded - size))
     return len(pings.rows)
+
+
+def _attitude(when, ms, heading) -> bytes:
+    """The attitude packet of a ping at ``when`` (a UTC datetime): its time to the microsecond,
+    ``TimeTag`` the ping's millisecond tag ``ms``, its heading."""
+    epoch = max(0, calendar.timegm(when.timetuple()))
+    return _pack(ATTITUDEDATA, MagicNumber=0xFACE, HeaderType=ATTITUDE, NumBytesThisRecord=ATTITUDEDATA[0].size,
+                 EpochMicroseconds=when.microsecond, SourceEpoch=epoch, TimeTag=ms, Heading=float(heading),
+                 Year=when.year, Month=when.month, Day=when.day, Hour=when.hour, Minute=when.minute,
+                 Second=when.second, Millisecond=when.microsecond // 1000)
 
 
 def _frequency_khz(scan):

@@ -28,7 +28,9 @@ WHERE = "soundings"
 
 #: The PointCloud2 layout: (name, numpy type, sensor_msgs/PointField datatype).
 POINTCLOUD2_FIELDS = (("x", "<f4", 7), ("y", "<f4", 7), ("z", "<f4", 7), ("intensity", "<f4", 7), ("beam", "<u2", 4))
-PLY_FIELDS = (("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("intensity", "<f4"), ("beam", "<u2"), ("ping", "<u4"),
+#: The PLY's vertex properties: beam and ping as int32, which every common reader keeps (Open3D
+#: drops unsigned 16/32-bit attributes).
+PLY_FIELDS = (("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("intensity", "<f4"), ("beam", "<i4"), ("ping", "<i4"),
               ("angle", "<f4"))
 MAX_CELLS = 50_000_000
 
@@ -48,7 +50,7 @@ def pointcloud2(soundings):
 
 def write_ply(path, soundings):
     """Write the soundings as a binary little-endian PLY point cloud (``element vertex`` with double
-    x y z, float intensity, ushort beam, uint ping, float angle; `mitsonar.geometry.ply`), under a temporary
+    x y z, float intensity, int beam, int ping, float angle; `mitsonar.geometry.ply`), under a temporary
     name renamed onto ``path`` when complete. Returns the number of points."""
     from mitsonar.geometry.ply import write_ply as write
 
@@ -99,18 +101,16 @@ class DepthGrid:
 
     def write_geotiff(self, path, crs=None):
         """One-band float32 GeoTIFF of the depth (NaN nodata) with the grid's transform; ``crs``
-        as rasterio takes it (None: a local frame). Needs ``rasterio`` (the ``geotiff`` extra)."""
+        as rasterio takes it (None: a local frame). Needs ``rasterio`` (the ``geotiff`` extra).
+        Written by `mitsonar.export.geotiff.write_geotiff`, the one GeoTIFF writer."""
+        from mitsonar.export.geotiff import write_geotiff
+
         try:
-            import rasterio
-            from rasterio.transform import Affine
+            write_geotiff(path, self.depth, self.transform, crs=crs, descriptions=["depth"], units=["metre"],
+                          tags=[{"positive": "down"}])
         except ImportError:
             raise ImportError("GeoTIFF output needs rasterio: pip install 'mitsonar[geotiff]' "
                               "(the depth grid is also saved as .npz)") from None
-        rows, cols = self.depth.shape
-        with replacing(path) as tmp:
-            with rasterio.open(tmp, "w", driver="GTiff", height=rows, width=cols, count=1, dtype="float32",
-                               crs=crs, transform=Affine(*self.transform), nodata=float("nan")) as dst:
-                dst.write(self.depth.astype(np.float32), 1)
 
 
 def grid_depths(soundings, cell=0.5, bounds=None) -> DepthGrid:

@@ -7,13 +7,16 @@ fields, `read` returns the fields a Scan is built from (``Scan.save``/``Scan.loa
 EXR layout (one scanline part, ZIP compression, lossless)
 ---------------------------------------------------------
 The image is ``n_pings`` rows by ``n_bins`` columns (row k is ping k, column j is bin j), with
-two channels:
+three channels:
 
 ============= ========== ===========================================================================
 channel       pixel type content
 ============= ========== ===========================================================================
 ``intensity`` FLOAT      ``Scan.intensity``: noise-free echo energy per bin (float32, bit-exact)
 ``data``      UINT       ``Scan.data``: device bytes 0..255 (EXR has no 8-bit type; stored as uint32)
+``Y``         FLOAT      a copy of ``intensity`` under the luminance name, so that EXR tools that know
+                         only RGB/Y images (OpenCV's ``imread``, image viewers) open the scan as a
+                         grey float image; files written before it have no ``Y`` and read the same
 ============= ========== ===========================================================================
 
 Everything else lives in one string header attribute, ``mitsonar``, holding JSON (the OpenEXR
@@ -288,8 +291,10 @@ def _write_exr(scan, text: str, path: str) -> None:
 
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage, HEADER_ATTRIBUTE: text,
               CRC_ATTRIBUTE: f"{_crc_text(text):08x}"}
-    channels = {"intensity": np.ascontiguousarray(scan.intensity, dtype=np.float32),
-                "data": np.ascontiguousarray(scan.data, dtype=np.uint32)}
+    intensity = np.ascontiguousarray(scan.intensity, dtype=np.float32)
+    # 'Y': the same floats under the name EXR tools read as a grey image (OpenCV opens no other).
+    channels = {"intensity": intensity, "data": np.ascontiguousarray(scan.data, dtype=np.uint32),
+                "Y": intensity.copy()}
     with OpenEXR.File(header, channels) as f:
         f.write(path)
 

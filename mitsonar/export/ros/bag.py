@@ -12,8 +12,14 @@ Topics (see docs/howto/ros2_bags.rst):
                                                               for side-scan: a line has no fan)
 ``/sonar/waterfall`` sensor_msgs/Image (mono8)                one per scan, rows x bins
 ``/sonar/detections`` sensor_msgs/PointCloud2                 one per scan, frame ``map``
-``/tf``             tf2_msgs/TFMessage                        one per ping
+``/tf``             tf2_msgs/TFMessage                        one per ping: ``map -> sonar``, or
+                                                              ``map -> base_link`` with a trajectory
+``/tf_static``      tf2_msgs/TFMessage                        the fixed mounts (``base_link ->
+                                                              sonar``; a side-scan's ``sonar ->
+                                                              sonar_port``, ``sonar_starboard``),
+                                                              transient-local, when they change
 ``/odom``           nav_msgs/Odometry                         one per ping (twist: trajectory)
+``/fix``            sensor_msgs/NavSatFix                     one per ping, with a geodetic origin
 =================== ========================================= =====================================
 
 Stamps: ``start + base + scan.times[k]`` seconds, ``start`` given by the caller (default 0) and
@@ -35,7 +41,20 @@ from mitsonar.scan.meta import ScanMeta
 from mitsonar.scan.model import as_scans
 
 TOPICS = {"/sonar/image": M.PROJECTED, "/sonar/fan": M.IMAGE, "/sonar/waterfall": M.IMAGE,
-          "/sonar/detections": M.CLOUD, "/tf": M.TF, "/odom": M.ODOMETRY}
+          "/sonar/detections": M.CLOUD, "/tf": M.TF, "/tf_static": M.TF, "/odom": M.ODOMETRY, "/fix": M.NAVSATFIX}
+
+#: The QoS ``ros2 bag`` records for a latched static-transform topic (rosbag2's
+#: ``offered_qos_profiles`` channel metadata; rmw enums: history 1 keep-last, reliability 1
+#: reliable, durability 1 transient-local, liveliness 1 automatic), so that ``ros2 bag play``
+#: republishes ``/tf_static`` transient-local and a late subscriber (RViz, tf2) still gets it.
+_FOREVER = "{sec: 2147483647, nsec: 4294967295}"
+STATIC_QOS = (f"- history: 1\n  depth: 1\n  reliability: 1\n  durability: 1\n  deadline: {_FOREVER}\n"
+              f"  lifespan: {_FOREVER}\n  liveliness: 1\n  liveliness_lease_duration: {_FOREVER}\n"
+              "  avoid_ros_namespace_conventions: false\n")
+QOS = {"/tf_static": STATIC_QOS}
+#: How far (m, and radians as rotation-matrix entries) a mount may move between pings and still
+#: be one static transform.
+MOUNT_TOLERANCE = 1e-6
 
 #: Default level (0-255) a row's strongest bin must reach to be a detected return.
 THRESHOLD = 128
@@ -96,10 +115,14 @@ def check_output(path, force=False, folder_may_be=None) -> str:
 class McapBag:
     """An MCAP file being written: `add` scans, then `close` (renames it into place); `discard`
     (or an exception inside ``with``) leaves nothing. ``trajectory``: the vehicle's `Trajectory`
-    (its clock that of the scans' ``start_time``): then ``/tf`` holds ``map -> base_link ->
-    sonar`` and ``/odom`` the vehicle; without it ``map -> sonar`` and the sonar's pose."""
+    (its clock that of the scans' ``start_time``): then ``/tf`` holds ``map -> base_link``,
+    ``/tf_static`` the mount ``base_link -> sonar`` (when it is the same at every ping of a scan;
+    else on ``/tf``) and ``/odom`` the vehicle; without it ``/tf`` holds ``map -> sonar`` and
+    ``/odom`` the sonar's pose. ``frame``: a `GeoFrame` (default: the one a scan's metadata
+    holds, if any): then ``/fix`` holds the vehicle's (or the sonar's) latitude, longitude and
+    height above the ellipsoid (the origin's height + z) at every ping."""
 
-    def __init__(self, path, *, start=0.0, trajectory=None, threshold=THRESHOLD, force=False):
+    def __init__(self, path, *, start=0.0, trajectory=None, threshold=THRESHOLD, force=False, frame=None):
         Writer = _require_mcap()
         self.path = check_output(path, force)
         if not (isinstance(start, (int, float)) and math.isfinite(start) and start >= 0):
@@ -107,41 +130,86 @@ class McapBag:
         if not (isinstance(threshold, (int, np.integer)) and 0 <= threshold <= 255):
             raise ExportError(f"threshold: {threshold!r} is not allowed (a level from 0 to 255)")
         self.start, self.trajectory, self.threshold = float(start), trajectory, int(threshold)
+        self.frame = frame
         self.staged = StagedFiles()
         self.counts = {t: 0 for t in TOPICS}
         self._fh = open(self.staged.temporary(self.path), "wb")
         self._writer = Writer(self._fh)
         self._schemas = {}
+        self._static = {}           # child frame -> (parent, 4x4): what /tf_static holds so far
 
     def _write(self, topic, message, ns):
         datatype = TOPICS[topic]
         if datatype not in self._schemas:
             self._schemas[datatype] = self._writer.register_msgdef(datatype, msgdefs.definition(datatype))
+        ids = getattr(self._writer, "_channel_ids", None)   # mcap_ros2 0.5-0.6's; without it, no QoS metadata
+        if topic in QOS and isinstance(ids, dict) and topic not in ids and hasattr(self._writer, "_writer"):
+            # mcap_ros2's Writer registers a channel without metadata on a topic's first message:
+            # register this one first, with the QoS rosbag2 reads (its documented channel metadata).
+            ids[topic] = self._writer._writer.register_channel(
+                topic=topic, message_encoding="cdr", schema_id=self._schemas[datatype].id,
+                metadata={"offered_qos_profiles": QOS[topic]})
         self._writer.write_message(topic, self._schemas[datatype], message, log_time=ns, publish_time=ns)
         self.counts[topic] += 1
+
+    def _static_transforms(self, mounts: dict, ns: int) -> None:
+        """Publish on ``/tf_static`` every static transform so far (as tf2's static broadcaster
+        does) when ``mounts`` (``{child: (parent, 4x4)}``) adds or changes one."""
+        changed = False
+        for child, (parent, pose) in mounts.items():
+            old = self._static.get(child)
+            if old is None or old[0] != parent or not np.allclose(old[1], pose, rtol=0, atol=MOUNT_TOLERANCE):
+                self._static[child] = (parent, pose)
+                changed = True
+        if changed:
+            tfs = [M.transform(pose, ns, parent, child) for child, (parent, pose) in self._static.items()]
+            self._write("/tf_static", {"transforms": tfs}, ns)
 
     def add(self, scan, name="scan") -> None:
         """Write one scan's messages (refused, naming ``name`` and the field, if it lacks one)."""
         check_scan(scan, name)
+        geo = self.frame if self.frame is not None else _geo_of(scan, name)
         base = scan_base(scan)
         groups = M.pings(scan)
+        firsts = [(t, rows[0]) for i, (t, rows, _) in enumerate(groups) if i == 0 or t != groups[i - 1][0]]
+        heads = {row: M.head_pose(scan, row) for _, row in firsts}
+        vehicles = {row: self.trajectory.at(base + t) for t, row in firsts} if self.trajectory is not None else None
+        ns0 = M.stamp_ns(self.start + base + groups[0][0])
+        mounts = {child: (M.SONAR_FRAME, pose) for child, pose in M.channel_mounts(scan).items()}
+        static_mount = False
+        if vehicles is not None:
+            mount = [np.linalg.inv(vehicles[row]) @ heads[row] for _, row in firsts]
+            static_mount = all(np.allclose(m, mount[0], rtol=0, atol=MOUNT_TOLERANCE) for m in mount)
+            if static_mount:
+                mounts[M.SONAR_FRAME] = (M.VEHICLE_FRAME, mount[0])
+        self._static_transforms(mounts, ns0)
+        fix = None
+        if geo is not None:
+            where = vehicles if vehicles is not None else heads
+            xyz = np.array([where[row][:3, 3] for _, row in firsts])
+            lon, lat = geo.to_lonlat(xyz[:, 0], xyz[:, 1])
+            fix = {row: (lat[k], lon[k], geo.height + xyz[k, 2]) for k, (_, row) in enumerate(firsts)}
         previous = None
         for i, (t, rows, frame) in enumerate(groups):
             ns = M.stamp_ns(self.start + base + t)
-            sonar = M.sonar_pose(scan, rows[0])
-            first_of_ping = ns != previous      # a side-scan ping has one group per channel
-            previous = ns
-            if self.trajectory is not None:
-                vehicle = self.trajectory.at(base + t)
-                tfs = [M.transform(vehicle, ns, M.WORLD_FRAME, M.VEHICLE_FRAME),
-                       M.transform(np.linalg.inv(vehicle) @ sonar, ns, M.VEHICLE_FRAME, frame)]
-                odom = M.odometry(vehicle, ns, M.WORLD_FRAME, M.VEHICLE_FRAME, *M.velocity(self.trajectory, base + t))
-            else:
-                tfs = [M.transform(sonar, ns, M.WORLD_FRAME, frame)]
-                odom = M.odometry(sonar, ns, M.WORLD_FRAME, frame)
-            self._write("/tf", {"transforms": tfs}, ns)
-            if first_of_ping:
+            if ns != previous:              # a side-scan ping has one group per channel: one /tf, /odom, /fix
+                previous = ns
+                head = heads[rows[0]]
+                if vehicles is not None:
+                    vehicle = vehicles[rows[0]]
+                    tfs = [M.transform(vehicle, ns, M.WORLD_FRAME, M.VEHICLE_FRAME)]
+                    if not static_mount:
+                        tfs.append(M.transform(np.linalg.inv(vehicle) @ head, ns, M.VEHICLE_FRAME, M.SONAR_FRAME))
+                    odom = M.odometry(vehicle, ns, M.WORLD_FRAME, M.VEHICLE_FRAME,
+                                      *M.velocity(self.trajectory, base + t))
+                else:
+                    tfs = [M.transform(head, ns, M.WORLD_FRAME, M.SONAR_FRAME)]
+                    odom = M.odometry(head, ns, M.WORLD_FRAME, M.SONAR_FRAME)
+                self._write("/tf", {"transforms": tfs}, ns)
                 self._write("/odom", odom, ns)
+                if fix is not None:
+                    child = M.VEHICLE_FRAME if vehicles is not None else M.SONAR_FRAME
+                    self._write("/fix", M.navsatfix(*fix[rows[0]], ns, child), ns)
             self._write("/sonar/image", M.projected_image(scan, rows, ns, frame), ns)
             if i == 0:
                 if scan.sonar_kind.has_fan:   # a side-scan line has no fan to draw
@@ -152,11 +220,15 @@ class McapBag:
         self._write("/sonar/detections", M.point_cloud(pts, levels, last), last)
 
     def close(self) -> dict:
-        """Finish the file and rename it into place; returns the message count per topic."""
+        """Finish the file and rename it into place; returns the message count per topic written."""
         self._writer.finish()
         self._fh.close()
         self.staged.commit()
-        return dict(self.counts)
+        return self.written()
+
+    def written(self) -> dict:
+        """The message count of each topic written to so far."""
+        return {t: n for t, n in self.counts.items() if n}
 
     def discard(self) -> None:
         try:
@@ -175,16 +247,33 @@ class McapBag:
         return False
 
 
-def write_mcap(path, scans, *, start=0.0, trajectory=None, threshold=THRESHOLD, force=False, names=None) -> dict:
+def _geo_of(scan, name):
+    """The `GeoFrame` a scan's metadata holds (``origin``, ``crs``), or None."""
+    meta = getattr(scan, "meta", None)
+    if not isinstance(meta, Mapping) or meta.get("origin") is None:
+        return None
+    from mitsonar.geometry.geodesy import GeoError, GeoFrame
+
+    try:
+        return GeoFrame.from_meta(dict(meta), f"{name}: meta")
+    except GeoError as exc:
+        raise ExportError(str(exc)) from None
+
+
+def write_mcap(path, scans, *, start=0.0, trajectory=None, threshold=THRESHOLD, force=False, names=None,
+               frame=None) -> dict:
     """Write ``scans`` (a `Scan` or a list) into the MCAP file ``path``; returns the message count
-    per topic. Every scan is checked before the file is opened; ``names`` label them in errors."""
+    per topic written. Every scan is checked before the file is opened; ``names`` label them in
+    errors. ``frame``: a `GeoFrame` for ``/fix`` (default: the scans' metadata's, if any)."""
     scans = as_scans(scans)
     names = names or [f"scan {i}" for i in range(len(scans))]
     if not scans:
         raise ExportError("no scans to export")
     for scan, name in zip(scans, names):
         check_scan(scan, name)
-    with McapBag(path, start=start, trajectory=trajectory, threshold=threshold, force=force) as bag:
+        if frame is None:
+            _geo_of(scan, name)
+    with McapBag(path, start=start, trajectory=trajectory, threshold=threshold, force=force, frame=frame) as bag:
         for scan, name in zip(scans, names):
             bag.add(scan, name)
-    return bag.counts
+    return bag.written()

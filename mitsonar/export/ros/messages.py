@@ -6,6 +6,12 @@ in the marine_acoustic_msgs convention, z forward (the boresight at bearing 0), 
 in its y-z plane at azimuth ``a`` (rotation about x): direction ``(0, -sin a, cos a)``. mitsonar's
 beam frame (+z boresight, +y the scan axis, bearing ``b`` a right-handed turn about +y) maps onto
 it as ``x_sonar = y_beam``, ``y_sonar = -x_beam``, ``z_sonar = z_beam``; so azimuth = bearing.
+
+A side-scan head has two channel frames, ``sonar_port`` and ``sonar_starboard``, in the same
+convention: z the channel's boresight, x up. A side-scan beam frame's +y points down, to the
+nadir side of the fan (`mitsonar.geometry.frames.sidescan_rotation`), so there ``x_sonar =
+-y_beam``, ``y_sonar = x_beam``, ``z_sonar = z_beam`` (`SIDESCAN_AXES`). Their parent ``sonar``
+is then the head itself (REP-103: x forward, y port, z up), which the waterfall is stamped with.
 """
 from __future__ import annotations
 
@@ -14,7 +20,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from mitsonar.geometry.frames import bearing_rotation
+from mitsonar.geometry.frames import bearing_rotation, sidescan_rotation
 from mitsonar.geometry.trajectory import matrix_to_quat
 
 WORLD_FRAME = "map"
@@ -28,12 +34,19 @@ IMAGE = "sensor_msgs/msg/Image"
 CLOUD = "sensor_msgs/msg/PointCloud2"
 TF = "tf2_msgs/msg/TFMessage"
 ODOMETRY = "nav_msgs/msg/Odometry"
+NAVSATFIX = "sensor_msgs/msg/NavSatFix"
 
 #: The sonar frame's axes in mitsonar's beam frame (columns): x = +y_beam, y = -x_beam, z = +z_beam.
 SONAR_AXES = np.array([[0.0, -1.0, 0.0, 0.0],
                        [1.0, 0.0, 0.0, 0.0],
                        [0.0, 0.0, 1.0, 0.0],
                        [0.0, 0.0, 0.0, 1.0]])
+#: A side-scan channel frame's axes in its beam frame: x = -y_beam (up: the beam frame's +y
+#: points down to the nadir side), y = +x_beam, z = +z_beam (the boresight).
+SIDESCAN_AXES = np.array([[0.0, 1.0, 0.0, 0.0],
+                          [-1.0, 0.0, 0.0, 0.0],
+                          [0.0, 0.0, 1.0, 0.0],
+                          [0.0, 0.0, 0.0, 1.0]])
 
 #: Fields a scan needs for each message (a scan lacking one is refused naming it).
 NEEDS = ("data", "ranges", "bearings", "poses", "times", "sound_speed", "beamwidth_h", "beamwidth_v",
@@ -68,10 +81,54 @@ def pings(scan) -> list:
     return out
 
 
-def sonar_pose(scan, row: int) -> np.ndarray:
-    """World pose (4x4) of the ``sonar`` frame at row ``row``'s ping: its head at bearing 0."""
+def sonar_pose(scan, row: int, frame: str = SONAR_FRAME) -> np.ndarray:
+    """World pose (4x4) of the sonar frame ``frame`` at row ``row``'s ping: its head at bearing 0
+    in the marine_acoustic_msgs convention (z the boresight, x up; `SIDESCAN_AXES` for a
+    side-scan channel's frame)."""
     head = scan.poses[row] @ np.linalg.inv(bearing_rotation(scan.bearings[row]))
-    return head @ SONAR_AXES
+    return head @ (SIDESCAN_AXES if frame in CHANNEL_FRAMES else SONAR_AXES)
+
+
+def depression(scan) -> float:
+    """A side-scan scan's depression in radians: ``meta.depression`` (deg) when it holds one, else
+    half the angle by which its first ping's two boresights miss being opposite (both channels
+    turned down by ``d`` meet at 180 - 2d deg), else 0."""
+    v = scan.meta.get("depression") if isinstance(scan.meta, Mapping) else None
+    if isinstance(v, (int, float)) and math.isfinite(v):
+        return math.radians(float(v))
+    channel = np.asarray(scan.channel)
+    times = np.asarray(scan.times, np.float64)
+    port = np.flatnonzero(channel == 0)
+    for p in port:
+        stbd = np.flatnonzero((channel == 1) & (times == times[p]))
+        if len(stbd):
+            cos = float(np.dot(scan.poses[p][:3, 2], scan.poses[stbd[0]][:3, 2]))
+            return 0.5 * math.acos(min(1.0, max(-1.0, -cos)))
+    return 0.0
+
+
+def head_pose(scan, row: int) -> np.ndarray:
+    """World pose (4x4) of the ``sonar`` frame at row ``row``'s ping: `sonar_pose`, but for a
+    side-scan the head whose channels are ``sonar_port`` and ``sonar_starboard`` (x forward, y
+    port, z up: ``poses[row]`` undone by its channel's `sidescan_rotation`)."""
+    channel = getattr(scan, "channel", None)
+    if channel is None:
+        return sonar_pose(scan, row)
+    return scan.poses[row] @ np.linalg.inv(sidescan_rotation(channel[row], depression(scan)))
+
+
+def channel_mounts(scan) -> dict:
+    """A side-scan's channel frames in its ``sonar`` head frame (fixed: ``{frame: 4x4}``, from the
+    first row of each channel); an empty dict for other heads."""
+    channel = getattr(scan, "channel", None)
+    if channel is None:
+        return {}
+    out = {}
+    for c, frame in enumerate(CHANNEL_FRAMES):
+        rows = np.flatnonzero(np.asarray(channel) == c)
+        if len(rows):
+            out[frame] = np.linalg.inv(head_pose(scan, rows[0])) @ sonar_pose(scan, rows[0], frame)
+    return out
 
 
 def frequency(scan) -> float:
@@ -95,7 +152,7 @@ def projected_image(scan, rows, ns: int, frame: str = SONAR_FRAME) -> dict:
     then of range 1 (byte ``range * beam_count + beam``), as the message's reference reader
     indexes them (APL's sonar_image_proc, ``SonarImageMsgInterface::index``), so a scan's
     (beams, bins) bytes go in transposed."""
-    world = sonar_pose(scan, rows[0])
+    world = sonar_pose(scan, rows[0], frame)
     rot = world[:3, :3].T
     dirs = (rot @ scan.poses[rows][:, :3, 2].T).T
     data = np.ascontiguousarray(scan.data[rows].T, dtype=np.uint8)
@@ -234,3 +291,11 @@ def odometry(pose: np.ndarray, ns: int, parent: str, child: str, linear=(0, 0, 0
             "pose": {"pose": {"position": tf["translation"], "orientation": tf["rotation"]},
                      "covariance": [0.0] * 36},
             "twist": {"twist": {"linear": vec(linear), "angular": vec(angular)}, "covariance": [0.0] * 36}}
+
+
+def navsatfix(lat: float, lon: float, altitude: float, ns: int, frame: str) -> dict:
+    """A sensor_msgs/NavSatFix of WGS 84 ``lat``, ``lon`` (deg) and ``altitude`` (m above the
+    ellipsoid): status FIX, service GPS, covariance unknown (a simulated fix is exact)."""
+    return {"header": header(ns, frame), "status": {"status": 0, "service": 1}, "latitude": float(lat),
+            "longitude": float(lon), "altitude": float(altitude), "position_covariance": [0.0] * 9,
+            "position_covariance_type": 0}
