@@ -104,7 +104,8 @@ def one_row(bearing, data, r_min=0.0, r_max=10.0, beamwidth=3.0):
 
 
 def test_a_sweep_puts_each_bin_where_its_bearing_and_range_are():
-    """Bearing 0 up the picture, bearing +90 deg to its right (as the bags' fan); a pixel at
+    """Bearing 0 up the picture, bearing +90 deg (port) to its left (seen from above, as the bags'
+    fan and `plot_fan`); a pixel at
     distance r from the centre holds bin floor(r / width); later pings keep the earlier ones."""
     from mitsonar.devices.outputs.pictures import Pictures
 
@@ -120,11 +121,37 @@ def test_a_sweep_puts_each_bin_where_its_bearing_and_range_are():
         r = (c - i - 0.5) * px                     # pixel row i, just right of the centre column
         along = math.hypot(r, 0.5 * px)
         assert pic[i, c] == ahead[int(along / (r_max / n))], i
-        assert pic[c - 1, size - 1 - i] == right[int(along / (r_max / n))], i
+        assert pic[c - 1, i] == right[int(along / (r_max / n))], i
     assert pic[size - 5, c] == 0 and pic[0, 0] == 0      # behind: no ping yet; outside the circle
     # a third ping at the same bearing replaces its slots only
     pic = pictures.of(one_row(0.0, np.full(n, 7), r_max=r_max))
-    assert pic[c - 40, c] == 7 and pic[c - 1, c + 40] == right[int(math.hypot(40.5, 0.5) * px / (r_max / n))]
+    assert pic[c - 40, c] == 7 and pic[c - 1, c - 41] == right[int(math.hypot(40.5, 0.5) * px / (r_max / n))]
+
+
+def test_a_fan_is_drawn_from_above_port_on_the_left():
+    """A two-beam fan (bearings +-30 deg; positive bearings turn the boresight towards the beam
+    frame's +x, port for an upright head, `bearing_rotation`): the +30 deg beam's level lies left of
+    the picture's centre column and up, the -30 deg beam's right, as `plot_fan` draws them."""
+    from mitsonar.export.ros.messages import fan_pixels
+    from mitsonar.scan.model import Scan
+
+    b = math.radians(30)
+    data = np.array([np.full(40, 200), np.full(40, 50)], np.uint8)      # +30 deg: 200, -30 deg: 50
+    ranges = (np.arange(40) + 0.5) * 10.0 / 40
+    scan = Scan(intensity=np.zeros(data.shape, np.float32), data=data, ranges=ranges, bearings=[b, -b],
+                poses=np.tile(np.eye(4), (2, 1, 1)), range_min=0.0, range_max=10.0, beamwidth_h=2.0,
+                kind="multibeam")
+    pic = fan_pixels(scan, 200)
+    h, w = pic.shape
+    rows, cols = np.nonzero(pic == 200)
+    assert len(cols) and cols.mean() < 0.4 * w and np.mean(cols < w / 2 + 1) == 1
+    rows, cols = np.nonzero(pic == 50)
+    assert len(cols) and cols.mean() > 0.6 * w and np.mean(cols > w / 2 - 2) == 1
+    # at range 8 m along +30 deg: x = -8 sin 30 (left), up 8 cos 30 from the apex at the bottom
+    px = (2 * 10.0 * math.sin(b)) / w
+    col = int((-8 * math.sin(b) + 10.0 * math.sin(b)) / px)
+    row = int((10.0 - 8 * math.cos(b)) / px)
+    assert pic[row, col] == 200
 
 
 # ---------------------------------------------------------------- rendered pings out

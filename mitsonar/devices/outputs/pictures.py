@@ -1,6 +1,7 @@
 """The sonar picture of a live head, as Foxglove and ROS 2 viewers show it: the fan seen as
-`mitsonar.export.ros.messages.fan_pixels` draws it (the boresight up the picture, bearing
-``b`` at ``atan2(x, y_up) = b``, ``x`` to the right), so that a live session and an exported bag
+`mitsonar.export.ros.messages.fan_pixels` draws it (seen from above: the boresight up the
+picture, positive bearings counter-clockwise, bearing ``b`` at ``atan2(-x, y_up) = b`` with
+``x`` to the right), so that a live session, an exported bag and `mitsonar.products.plots`
 look the same.
 
 A mechanical head's pings (one row each) are gathered into its sweep (`SweepPicture`): a polar
@@ -41,7 +42,7 @@ class SweepPicture:
         up = range_max - c
         xx, uu = np.meshgrid(x, up)
         r = np.hypot(xx, uu)
-        a = np.arctan2(xx, uu)
+        a = np.arctan2(-xx, uu)
         self._slot = np.round(a / (2 * math.pi / self.slots)).astype(np.int64) % self.slots
         width = (range_max - range_min) / n_bins
         b = np.floor((r - range_min) / width).astype(np.int64)

@@ -182,9 +182,11 @@ def waterfall(scan, ns: int) -> dict:
 
 
 def fan_pixels(scan, size: int = 400) -> np.ndarray:
-    """The scan drawn in its fan's plane, seen from the sonar's x (up) axis: the boresight up the
-    picture, the beam frame's +x to the right, each pixel the level of the nearest beam and bin
-    (0 outside the fan); ``size`` pixels across the fan's widest extent."""
+    """The scan drawn in its fan's plane seen from the beam frame's +y (the scan axis: from above
+    for an upright head), as `mitsonar.products.plots.plot_fan` draws it: the boresight up the
+    picture, positive bearings counter-clockwise (the beam frame's +x, port for an upright head,
+    to the left); each pixel the level of the nearest beam and bin (0 outside the fan); ``size``
+    pixels across the fan's widest extent."""
     r_max = float(scan.range_max)
     az = np.asarray(scan.bearings, dtype=np.float64)
     wrapped = np.mod(az + math.pi, 2 * math.pi) - math.pi
@@ -194,7 +196,7 @@ def fan_pixels(scan, size: int = 400) -> np.ndarray:
     half = 0.5 * (float(np.median(gaps)) if len(gaps) else math.radians(scan.beamwidth_h))
     half = max(half, 1e-9)
     edge = np.linspace(sorted_az[0] - half, sorted_az[-1] + half, 64)
-    xs = np.concatenate([[0.0], r_max * np.sin(edge)])
+    xs = np.concatenate([[0.0], -r_max * np.sin(edge)])
     zs = np.concatenate([[0.0], r_max * np.cos(edge)])
     x0, x1, z0, z1 = xs.min(), xs.max(), zs.min(), zs.max()
     if len(gaps) and sorted_az[-1] - sorted_az[0] + 2 * half >= 2 * math.pi - 1e-6:
@@ -205,7 +207,7 @@ def fan_pixels(scan, size: int = 400) -> np.ndarray:
     z = z1 - (np.arange(h) + 0.5) * px
     xx, zz = np.meshgrid(x, z)
     r = np.hypot(xx, zz)
-    a = np.arctan2(xx, zz)
+    a = np.arctan2(-xx, zz)
     k = np.searchsorted(sorted_az, a)
     lo, hi = np.clip(k - 1, 0, len(sorted_az) - 1), np.clip(k, 0, len(sorted_az) - 1)
     d_lo = np.abs(np.mod(a - sorted_az[lo] + math.pi, 2 * math.pi) - math.pi)
