@@ -154,3 +154,93 @@ def test_pass_sums_in_place_equal_the_straightforward_mean(mitsonar_mod):
     assert got.tobytes() == want.tobytes()
     one = acc(1, 3, lambda s, c: parts[0].copy())   # one pass: its -0.0 becomes +0.0 as 0.0 + x did
     assert one.tobytes() == ((0.0 + parts[0]) / 1).tobytes()
+
+
+def _reference_words(values, index, n):
+    """The module docstring's integer words of each bin, in exact Python integers (bin-major:
+    ``words[i][k]``), and the count of non-finite values per bin."""
+    words = [[0] * 9 for _ in range(n)]
+    bad = [0] * n
+    for v, i in zip(values.astype(np.float32), index):
+        bits = int(v.view(np.uint32))
+        e = (bits >> 23) & 0xFF
+        if e == 255:
+            bad[i] += 1
+            continue
+        if e == 0:                                  # zero or subnormal: adds nothing
+            continue
+        b = e - 1
+        wide = ((bits & 0x7FFFFF) | 0x800000) << (b & 31)
+        sign = -1 if bits >> 31 else 1
+        words[i][b >> 5] += sign * (wide & 0xFFFFFFFF)
+        words[i][(b >> 5) + 1] += sign * (wide >> 32)
+    return words, bad
+
+
+def test_exact_sums_are_stored_word_major_and_sum_as_the_reference(mitsonar_mod):
+    """Word k of bin i at ``k n + i`` (one contiguous run per word for the conversion); every
+    word is the exact integer sum of the docstring's pieces and the float64 totals are those
+    words converted and added in the fixed order k = 0..8 (the bytes of the bin-major layout),
+    within one rounding of the exact sum (``math.fsum``); a non-finite value makes its bin NaN."""
+    import math
+
+    import drjit as dr
+    import mitsuba as mi
+
+    from mitsonar.plugins import exact_sum
+
+    rng = np.random.default_rng(46)
+    n = 37
+    big = np.float32(np.finfo(np.float32).max)
+    values = np.concatenate([
+        rng.normal(0.0, 1.0, 3000) * 10.0 ** rng.integers(-30, 30, 3000),   # both signs, all scales
+        [big] * 6 + [-big] * 2,                       # into the top words; bin total above float32
+        [1e30, 1.0, -1e30, 2.0 ** -126, -(2.0 ** -126)],   # cancellation, the smallest normal
+        [1e-40, -1e-41, 0.0, -0.0],                   # subnormals and zeros: nothing
+        [np.inf], [np.nan], [-np.inf],
+        [np.float32(16777215.0)] * 500,               # carries well past 32 bits in a low word
+    ]).astype(np.float32)
+    index = rng.choice([i for i in range(n) if not 5 <= i <= 10], values.size).astype(np.uint32)
+    index[3000:3008] = 5
+    index[3008:3013] = 6
+    index[3013:3017] = 7
+    index[3017:3020] = (8, 9, 8)
+    index[3020:] = 10
+    active = np.ones(values.size, bool)
+    active[rng.integers(0, 3000, 40)] = False          # inactive lanes add nothing
+    hist = exact_sum.ExactBins(n)
+    hist.add(mi.Float(values), mi.UInt32(index), mi.Bool(active))
+    got = hist.numpy()
+    words = hist.words.numpy().reshape(exact_sum.STRIDE, n)
+
+    want_words, bad = _reference_words(values[active], index[active], n)
+    np.testing.assert_array_equal(words[:exact_sum.WORDS].T, np.array(want_words, dtype=np.int64))
+    np.testing.assert_array_equal(words[exact_sum.WORDS], bad)
+    for i in range(n):
+        if bad[i]:
+            assert np.isnan(got[i])
+            continue
+        total = 0.0
+        for k in range(exact_sum.WORDS):
+            total += float(want_words[i][k]) * 2.0 ** (32 * k - 149)
+        assert got[i].tobytes() == np.float64(total).tobytes()
+        sel = active & (index == i) & (np.abs(values) >= np.finfo(np.float32).tiny)
+        exact = math.fsum(float(v) for v in values[sel])
+        assert abs(got[i] - exact) <= 4 * np.spacing(max(abs(exact), np.finfo(np.float64).tiny))
+    assert got[6] == 1.0                                  # 1e30 + 1 - 1e30 + tiny - tiny, exactly
+    assert got[5] == 4.0 * float(big)                     # beyond float32's range, finite
+    assert np.isnan(got[8]) and np.isnan(got[9])
+
+    # folding (`reserve` past MAX_ADDS) keeps the layout: the partial sums plus the new words
+    hist.reserve(exact_sum.MAX_ADDS)
+    hist.reserve(1)
+    assert hist.partial is not None and not dr.any(hist.words != 0)
+    hist.add(mi.Float(values[:3000]), mi.UInt32(index[:3000]), mi.Bool(active[:3000]))
+    again = hist.numpy()
+    more, _ = _reference_words(values[:3000][active[:3000]], index[:3000][active[:3000]], n)
+    for i in range(n):
+        if not bad[i]:
+            part = 0.0
+            for k in range(exact_sum.WORDS):
+                part += float(more[i][k]) * 2.0 ** (32 * k - 149)
+            assert again[i].tobytes() == np.float64(got[i] + part).tobytes()
