@@ -319,6 +319,7 @@ def test_emission_setting_is_checked_in_one_line(mitsonar_mod):
 
     with pytest.raises(Exception, match="sonar_tof.*emission.*transmit, receive"):
         mi.load_dict({"type": "sonar_tof", "emission": "beams"})
+    assert "emission=receive" in str(mi.load_dict({"type": "sonar_tof"}))   # the default
 
 
 def test_noise_drawn_in_the_background_gives_the_same_numbers(mitsonar_mod, monkeypatch):
