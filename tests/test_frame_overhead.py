@@ -320,33 +320,3 @@ def test_emission_setting_is_checked_in_one_line(mitsonar_mod):
     with pytest.raises(Exception, match="sonar_tof.*emission.*transmit, receive"):
         mi.load_dict({"type": "sonar_tof", "emission": "beams"})
     assert "emission=receive" in str(mi.load_dict({"type": "sonar_tof"}))   # the default
-
-
-def test_noise_drawn_in_the_background_gives_the_same_numbers(mitsonar_mod, monkeypatch):
-    """The receiver noise drawn by its own thread, a block of rows at a time (`fastchain.Draws`),
-    is the numbers of one ``standard_normal`` call on the whole scan; rows read before they are
-    drawn wait; the thread is done after `finish`; a failing generator raises in the caller."""
-    from mitsonar.receiver import fastchain
-
-    monkeypatch.setattr(fastchain, "ROW_BLOCK", 5)
-    shape, taps = (23, 40), np.array([0.2, 1.0, 0.5])
-    want = np.random.default_rng(8).standard_normal((23, 42, 2)) * np.sqrt(0.5)
-    z, h = fastchain.gaussian_draws(shape, np.random.default_rng(8), taps, background=True)
-    assert isinstance(z, fastchain.Draws)
-    np.testing.assert_array_equal(z[slice(20, 25)], want[20:])   # the last (short) block
-    np.testing.assert_array_equal(z[slice(0, 5)], want[:5])
-    z.finish()
-    assert not z.thread.is_alive()
-    np.testing.assert_array_equal(z.z, want)
-    np.testing.assert_array_equal(h, taps / np.sqrt(np.sum(taps ** 2)))
-    small, _ = fastchain.gaussian_draws((4, 40), np.random.default_rng(8), taps, background=True)
-    assert isinstance(small, np.ndarray)                            # one block: drawn in place
-
-    class Broken:
-        def standard_normal(self, out):
-            raise FloatingPointError("generator failed")
-
-    bad, _ = fastchain.gaussian_draws(shape, Broken(), taps, background=True)
-    with pytest.raises(FloatingPointError, match="generator failed"):
-        bad[slice(0, 5)]
-    bad.finish()

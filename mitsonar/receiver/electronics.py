@@ -555,7 +555,7 @@ class Electronics:
         ring = np.sqrt(10.0 ** ((self.ringdown_db(ranges) - chain) / 10.0)) if self.ringdown > 0 else None
         z, taps, f = None, None, None
         if not quiet and self.noise_floor > -math.inf:
-            z, taps = fastchain.gaussian_draws(inten.shape, rng, corr, background=True)
+            z, taps = fastchain.gaussian_draws(inten.shape, rng, corr)
             f = math.sqrt(10.0 ** (self.noise_floor / 10.0)) * 10.0 ** (-chain / 20.0)
         return fastchain.received_bytes(inten, g, kernel, quiet, ring, z, taps, f, (calibration, self.gain, tvg),
                                         (self.ad_low, self.ad_span, self.bit_depth))

@@ -80,61 +80,18 @@ def complex_gaussian(shape, rng: np.random.Generator, corr_bins=None) -> np.ndar
     return zf
 
 
-def gaussian_draws(shape, rng: np.random.Generator, corr_bins=None, background=False):
+def gaussian_draws(shape, rng: np.random.Generator, corr_bins=None):
     """`complex_gaussian`'s draws (the same numbers from ``rng``), unfiltered, as
     float64 (..., n_bins + k - 1, 2) (real, imaginary) in a kept buffer, and its normalised taps;
-    `filtered` filters them. ``background``: drawn by a thread of their own, `ROW_BLOCK` rows at
-    a time in row order (`Draws`: the same numbers, as the generator fills an array in C order),
-    while the caller works on the rows already drawn."""
+    `filtered` filters them."""
     n_bins = shape[-1]
     h = np.ones(1) if corr_bins is None else np.asarray(corr_bins, dtype=np.float64)
     h = h[h > 0]
     h = h / math.sqrt(float(np.sum(h * h)))
     z = _buffer("draws", tuple(shape[:-1]) + (n_bins + h.size - 1, 2))
-    if background and z.ndim == 3 and z.shape[0] > ROW_BLOCK:
-        return Draws(z, rng), h
     rng.standard_normal(out=z)
     z *= math.sqrt(0.5)
     return z, h
-
-
-class Draws:
-    """`gaussian_draws`' buffer ``z`` filled by a thread of its own, `ROW_BLOCK` rows at a time in
-    row order: ``draws[rows]`` waits for those rows. The numbers are those of one
-    ``rng.standard_normal(out=z)`` (the generator draws in C order; consecutive row blocks
-    continue its stream) times sqrt(1/2). NumPy's generators release the GIL while they fill an
-    array, so the receiver noise (the largest part of a frame's chain: 0.5 M normal numbers for
-    512 x 500 bins) is drawn while the caller works through the blocks already drawn. `finish`
-    waits for the thread (the buffer is reused by the next frame); use it in a ``finally``."""
-
-    def __init__(self, z, rng):
-        self.z, self.block = z, ROW_BLOCK
-        self.ready = [threading.Event() for _ in range(0, z.shape[0], self.block)]
-        self.error = None
-        self.thread = threading.Thread(target=self._fill, args=(rng,), name="mitsonar-noise-draws", daemon=True)
-        self.thread.start()
-
-    def _fill(self, rng):
-        try:
-            for i, r0 in enumerate(range(0, self.z.shape[0], self.block)):
-                part = self.z[r0:r0 + self.block]
-                rng.standard_normal(out=part)
-                part *= math.sqrt(0.5)
-                self.ready[i].set()
-        except BaseException as exc:   # surfaced in the caller's thread by __getitem__
-            self.error = exc
-            for e in self.ready:
-                e.set()
-
-    def __getitem__(self, rows: slice):
-        stop = self.z.shape[0] if rows.stop is None else min(rows.stop, self.z.shape[0])
-        self.ready[max(stop - 1, 0) // self.block].wait()
-        if self.error is not None:
-            raise self.error
-        return self.z[rows]
-
-    def finish(self):
-        self.thread.join()
 
 
 def filtered(z, h, n_bins):
@@ -181,19 +138,6 @@ def received_bytes(inten, g, kernel, quiet, ring, z, taps, f, levels, ad):
     ad_low, ad_span, bit_depth = ad
     scale = 15.0 if bit_depth == 4 else 255.0
     out = np.empty(inten.shape, dtype=np.uint8)
-    try:
-        _blocks(inten, g, kernel, quiet, ring, z, taps, f, (calibration, gain, tvg), (ad_low, ad_span, scale, bit_depth),
-                out)
-    finally:
-        if isinstance(z, Draws):
-            z.finish()
-    return out
-
-
-def _blocks(inten, g, kernel, quiet, ring, z, taps, f, levels, ad, out):
-    """`received_bytes`' work, `ROW_BLOCK` rows at a time, into ``out``."""
-    calibration, gain, tvg = levels
-    ad_low, ad_span, scale, bit_depth = ad
     for r0 in range(0, inten.shape[0], ROW_BLOCK):
         rows = slice(r0, r0 + ROW_BLOCK)
         x = convolve_range(inten[rows], kernel) if kernel.size > 1 else inten[rows]
@@ -233,3 +177,4 @@ def _blocks(inten, g, kernel, quiet, ring, z, taps, f, levels, ad, out):
         if bit_depth == 4:
             q *= 17.0
         out[rows] = q
+    return out
