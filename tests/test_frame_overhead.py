@@ -362,3 +362,33 @@ def test_receive_weighted_emission_weights_integrate_the_fan(mitsonar_mod, tx_ki
     assert swath.mean() > own.mean() + 0.05
     with pytest.raises(ValueError, match="defensive share"):
         remit.ReceiveWeighted(tx, rx, bearings, 0.1, beta=0.0)
+
+
+def test_range_spread_over_the_echoes_span_gives_the_same_bytes(mitsonar_mod, monkeypatch):
+    """`fastchain.convolve_span` (only the columns within a kernel of an echo) against
+    `convolve_range` (every column): the same bytes for blocks with echoes in a middle span, at
+    either end, a lone echo, none at all, signed zeros; and the whole chain on such a frame gives
+    the straightforward chain's bytes."""
+    from mitsonar.receiver import fastchain
+    from mitsonar.receiver.electronics import Electronics
+
+    rng = np.random.default_rng(3)
+    kernel = fastchain.cached((0.3, 0.0, 0.03), lambda *k: np.array([0.05, 0.2, 0.5, 0.2, 0.05]))
+    blocks = []
+    for lo, hi in ((60, 100), (0, 7), (113, 120), (50, 51), (0, 0), (0, 120)):
+        b = np.zeros((6, 120))
+        b[:, lo:hi] = rng.exponential(1e-9, (6, hi - lo)) * (rng.random((6, hi - lo)) < 0.5)
+        b[0, lo:hi] = 1e-9 if hi > lo else 0.0
+        blocks.append(b)
+    blocks[0][2, 30] = -0.0
+    for b in blocks:
+        got, want = fastchain.convolve_span(b, kernel), fastchain.convolve_range(b, kernel)
+        assert got.tobytes() == want.tobytes()
+    monkeypatch.setattr(fastchain, "ROW_BLOCK", 6)
+    inten = np.concatenate(blocks).astype(np.float32)
+    ranges = np.linspace(0.5, 15.0, 120)
+    poses = np.tile(np.eye(4), (len(inten), 1, 1))
+    for settings in ({}, {"noise_floor": -np.inf, "ringdown": 0.0}):
+        model = Electronics.from_dict(settings)
+        ref = chain(model, inten, ranges, poses, False, monkeypatch)
+        np.testing.assert_array_equal(chain(model, inten, ranges, poses, True, monkeypatch), ref)
