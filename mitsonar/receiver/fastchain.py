@@ -125,6 +125,24 @@ def convolve_range(inten: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     return out
 
 
+def convolve_span(inten: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """`convolve_range` of a block of rows (intensities >= 0, weights >= 0) computed only over
+    the columns that can receive energy: those within ``kernel.size`` of a column holding a
+    non-zero value. The same bytes: every other output is ``+0.0`` either way (sums of ``w x 0``),
+    and inside the span the skipped terms are ``+0.0`` products, which leave a sum unchanged
+    (no ``-0.0`` arises from non-negative terms). A sonar frame's echoes start at the nearest
+    surface: the bins before it (a third of the quay frame's) are not convolved."""
+    n = inten.shape[-1]
+    cols = np.flatnonzero(inten.any(axis=0))
+    if cols.size == 0:
+        return np.zeros_like(inten)
+    lo, hi = max(0, int(cols[0]) - kernel.size), min(n, int(cols[-1]) + 1 + kernel.size)
+    if lo == 0 and hi == n:
+        return convolve_range(inten, kernel)
+    out = np.zeros_like(inten)
+    out[..., lo:hi] = convolve_range(inten[..., lo:hi], kernel)
+    return out
+
 
 def received_bytes(inten, g, kernel, quiet, ring, z, taps, f, levels, ad):
     """Device bytes (uint8, the shape of ``inten``) of the chain after its set-up (`Electronics._apply_fast`).
@@ -140,7 +158,7 @@ def received_bytes(inten, g, kernel, quiet, ring, z, taps, f, levels, ad):
     out = np.empty(inten.shape, dtype=np.uint8)
     for r0 in range(0, inten.shape[0], ROW_BLOCK):
         rows = slice(r0, r0 + ROW_BLOCK)
-        x = convolve_range(inten[rows], kernel) if kernel.size > 1 else inten[rows]
+        x = convolve_span(inten[rows], kernel) if kernel.size > 1 else inten[rows]
         gb = g[rows]
         if quiet:
             total = np.abs(gb) ** 2
