@@ -420,3 +420,14 @@ def test_the_micron_driver_reconnects_to_the_live_head(box_scene):
                 assert driver.read_ping().bearing is not None
         assert vm.stats["internal errors"] == 0
 
+
+
+def test_the_log_keeps_a_fixed_ring_for_its_percentiles():
+    """Memory stays flat: the percentiles are over the newest ``keep`` pings, held in a ring
+    allocated once; the record dicts kept are the newest 256."""
+    log = PingLog(keep=100)
+    ring = log._ring
+    for k in range(1000):
+        log.add({"ping": k, "latency_ms": float(k), "paths": 16, "error": 0.1, "render_ms": 1.0})
+    assert log._ring is ring and ring.shape[0] == 100 and len(log.records) == 256 and log.count == 1000
+    assert log.percentiles("latency_ms", (0, 100)) == [900.0, 999.0]

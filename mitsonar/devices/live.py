@@ -160,7 +160,7 @@ class PingRenderer:
     """
 
     def __init__(self, scene, sonar, poses=None, *, spp: int | None = 64, seed: int = 0, out=None,
-                 budget: float | None = None, log=None, calibration: int = 6):
+                 budget: float | None = None, log=None, calibration: int = 8):
         from mitsonar.devices.realtime import ErrorModel, PathBudget, PingLog
 
         self.scene, self.sonar = scene, sonar

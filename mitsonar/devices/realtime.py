@@ -29,7 +29,7 @@ from collections import deque
 
 import numpy as np
 
-__all__ = ["SPP_LADDER", "PathBudget", "ErrorModel", "CALIBRATION_PATHS", "PingLog", "WireClock", "RECORD_FIELDS", "check_records_path"]
+__all__ = ["SPP_LADDER", "PathBudget", "ErrorModel", "CALIBRATION_PATHS", "PingLog", "WireClock", "RECORD_FIELDS", "SUMMARY_FIELDS", "check_records_path"]
 
 #: the sizes (paths per ping) a budgeted ping may take: 16 .. 2**22, four per octave
 SPP_LADDER = tuple(sorted({int(round(16 * 2 ** (i / 4) / 4)) * 4 for i in range(0, 4 * 18 + 1)}))
@@ -148,13 +148,19 @@ def check_records_path(path) -> str:
     return p
 
 
+#: the fields `PingLog` keeps the percentiles of
+SUMMARY_FIELDS = ("latency_ms", "paths", "error", "render_ms")
+
+
 class PingLog:
-    """Records of pings (module doc). ``keep``: the records the percentiles are taken over (the
-    newest; memory stays flat in long sessions). ``path``: the records file (None: none).
+    """Records of pings (module doc). ``keep``: the pings the percentiles are taken over (the
+    newest, in a ring of numbers allocated once: memory stays flat in long sessions);
+    ``records``: the newest 256 records themselves. ``path``: the records file (None: none).
     Thread-safe: heads, frame loops and the summary's signal handler use it together."""
 
     def __init__(self, path=None, keep: int = 10000):
-        self.records: deque = deque(maxlen=int(keep))
+        self.records: deque = deque(maxlen=256)
+        self._ring = np.full((int(keep), len(SUMMARY_FIELDS)), np.nan)
         self.count = 0
         self.skipped = 0
         self._lock = threading.Lock()
@@ -169,6 +175,7 @@ class PingLog:
     def add(self, record: dict) -> None:
         """Keep ``record`` (fields of `RECORD_FIELDS`) and write its line."""
         with self._lock:
+            self._ring[self.count % len(self._ring)] = [_number(record.get(k)) for k in SUMMARY_FIELDS]
             self.count += 1
             self.records.append(record)
             if self._file is not None:
@@ -187,9 +194,10 @@ class PingLog:
                 os.replace(self._tmp, self.path)
 
     def percentiles(self, field: str, qs=(50, 95, 99)):
-        """The percentiles of ``field`` over the kept records (finite values); None if none."""
+        """The percentiles of ``field`` (one of `SUMMARY_FIELDS`) over the kept pings (finite
+        values); None if none."""
         with self._lock:
-            v = np.array([r.get(field) for r in self.records if r.get(field) is not None], np.float64)
+            v = self._ring[:min(self.count, len(self._ring)), SUMMARY_FIELDS.index(field)].copy()
         v = v[np.isfinite(v)]
         return None if v.size == 0 else [float(np.percentile(v, q)) for q in qs]
 
@@ -204,6 +212,10 @@ class PingLog:
         if self.skipped:
             parts.append(f"{self.skipped} late frames skipped")
         return "; ".join(parts)
+
+
+def _number(v) -> float:
+    return math.nan if v is None else float(v)
 
 
 def _csv(v) -> str:
