@@ -29,13 +29,18 @@ BOX_FLS = os.path.join(ROOT, "scenes_xml", "box_fls.xml")      # a 256-beam mult
 
 # ---------------------------------------------------------------- the budget
 
-def test_the_ladder_is_four_sizes_an_octave_and_quantising_rounds_down():
-    assert SPP_LADDER[0] == 16 and SPP_LADDER[-1] == 16 * 2 ** 18
-    assert all(b > a for a, b in zip(SPP_LADDER, SPP_LADDER[1:]))
-    assert all(n % 4 == 0 for n in SPP_LADDER)
-    assert [n for n in SPP_LADDER if 64 <= n <= 128] == [64, 76, 92, 108, 128]
+def test_the_ladder_is_few_sizes_that_use_fewer_pass_sizes_than_frozen_recordings_kept():
+    from mitsonar.plugins import module
+
+    assert SPP_LADDER[0] == 16 and SPP_LADDER[-1] == 2 ** 22
+    assert [n for n in SPP_LADDER if 64 <= n <= 256] == [64, 96, 128, 192, 256]
     b = PathBudget(1.0)
-    assert b.quantise(100) == 92 and b.quantise(92) == 92 and b.quantise(3) == 16 and b.quantise(1e12) == SPP_LADDER[-1]
+    assert b.quantise(100) == 96 and b.quantise(96) == 96 and b.quantise(3) == 16 and b.quantise(1e12) == 2 ** 22
+    # the pass sizes (a pass: at most MAX_SPP_PER_PASS paths, or a power of two fewer per beam)
+    tof, frozen = module("sonar_tof"), module("frozen_pass")
+    for most in (tof.MAX_SPP_PER_PASS, tof.MAX_LANES_PER_PASS // 256):
+        sizes = {min(n, most) for n in SPP_LADDER} | {n % most for n in SPP_LADDER if n > most and n % most}
+        assert len(sizes) <= 25 < frozen.MAX_RECORDINGS, (most, sorted(sizes))
 
 
 def test_paths_converge_to_fill_the_budget_with_a_fixed_cost():
@@ -72,18 +77,30 @@ def box_scene():
 
 
 def test_other_numbers_of_paths_launch_the_same_kernels(box_scene):
-    """The budget may pick any ladder size: no size compiles new kernels."""
+    """The budget may pick any ladder size: no size compiles new kernels; a size seen before
+    replays its frozen pass (no new recording)."""
     from conftest import jit_kernels
     from mitsonar.devices.live import PingRenderer
 
     scene, sonar = box_scene
     r = PingRenderer(scene, sonar, PoseBuffer(), spp=16, out=io.StringIO(), calibration=0)
     r.render(0.0)
+    from mitsonar.plugins import module
+
+    frozen = module("frozen_pass")
     kernels = []
-    for n in (16, 76, 1024, 92 * 1024):          # the last: two passes of 2**16 and the rest
+    sizes = (16, 96, 1024, 96 * 1024)            # the last: a pass of 2**16 and one of 2**15
+    for n in sizes:
         r.spp = n
         kernels.append(sorted(set(jit_kernels(r.render, 0.2)[0])))
     assert kernels[0] and all(k == kernels[0] for k in kernels), kernels
+    recorded = []
+    for _ in range(2):          # (outside jit_kernels: its kernel history makes other recordings)
+        for n in sizes:
+            r.spp = n
+            r.render(0.3)
+        recorded.append(len(frozen._alive))
+    assert recorded[1] == recorded[0], recorded
 
 
 def test_a_tight_budget_renders_fewer_paths_than_a_loose_one(box_scene):

@@ -3,10 +3,11 @@
 * `PathBudget`: how many paths the next ping renders. The time per path is measured on every
   ping (``seconds / paths``, fixed costs included) and smoothed by an exponential average; the
   next ping takes ``headroom * budget / (time per path)`` paths, rounded down onto a fixed ladder
-  of sizes (`SPP_LADDER`, four per octave). With ``t(n) = a + b n`` (a fixed cost ``a``), the
+  of sizes (`SPP_LADDER`, ``2**k`` and ``1.5 x 2**k``). With ``t(n) = a + b n`` (a fixed cost ``a``), the
   choice ``n' = B n / t(n)`` converges to ``t(n) = B`` (its fixed point; the map contracts by
   ``a / B`` per ping). Choosing another size does not recompile the path kernels (the number of
-  paths is a launch size, not a constant of the kernels: tests/test_live_realtime.py checks it).
+  paths is a launch size, not a constant of the kernels: tests/test_live_realtime.py checks it);
+  a new pass size records the frozen pass once (tens of ms), hence few sizes.
 * `ErrorModel`: the relative error of a ping's echo intensity,
   ``e(n) = ||I_n - E[I]||_2 / ||E[I]||_2`` over the row's bins at ``n`` paths, measured once on
   the scene at start (`ErrorModel.measure`: the sample variance of ``m`` independent renders at
@@ -31,8 +32,13 @@ import numpy as np
 
 __all__ = ["SPP_LADDER", "PathBudget", "ErrorModel", "CALIBRATION_PATHS", "PingLog", "WireClock", "RECORD_FIELDS", "SUMMARY_FIELDS", "check_records_path"]
 
-#: the sizes (paths per ping) a budgeted ping may take: 16 .. 2**22, four per octave
-SPP_LADDER = tuple(sorted({int(round(16 * 2 ** (i / 4) / 4)) * 4 for i in range(0, 4 * 18 + 1)}))
+#: the sizes (paths per ping) a budgeted ping may take: 16 .. 2**22, 2**k and 1.5 x 2**k. Few on
+#: purpose: no size compiles new kernels, but each pass size is a recording of the frozen pass
+#: (``plugins/frozen_pass.py``: tens of ms to record, at most ``MAX_RECORDINGS`` = 32 kept, all
+#: dropped past that). A pass holds at most 2**16 paths (fewer per beam for a wide multibeam, a
+#: power of two): a size past it is passes of the largest and one of 0 or half of it, so these
+#: sizes use 25 pass sizes in all.
+SPP_LADDER = tuple(sorted(n for k in range(3, 22) for n in (2 << k, 3 << k) if n <= 1 << 22))
 
 
 class PathBudget:
