@@ -228,8 +228,8 @@ def add_subcommands(subparsers) -> None:
                     "than one period late is skipped and counted, never queued. Real time: each ping "
                     "renders as many paths as fit its budget (the head's ping period, or --budget-ms), "
                     "from the time per path measured on the pings before; --spp fixes the paths instead. "
-                    "Each ping's paths, estimated relative error (c/sqrt(paths), c measured on the scene "
-                    "at start) and latency (pose time to last byte written, or frame published) are "
+                    "Each ping's paths, estimated relative error (measured on the scene at start at 16 to "
+                    "4096 paths, interpolated) and latency (pose time to last byte written, or frame published) are "
                     "recorded (--records). Prints 'poses on URL' and 'live HEAD on PORT' (or 'live "
                     "multibeam ID at RATE Hz'), serves until --seconds or SIGINT/SIGTERM, then a "
                     "summary line (also on SIGUSR1): latency, paths and error p50/p95/p99.")
