@@ -2,10 +2,13 @@
 
 Each ping the client asks for is rendered when it fires, from the vehicle's pose at that time:
 poses arrive as UDP datagrams on ``--pose-url`` (`mitsonar.devices.poses`), or come from a
-``--trajectory`` replayed in real time. Runs until ``--seconds`` or SIGINT/SIGTERM (exit 0,
-ports closed), then prints what it did. ``--foxglove``, ``--mcap``, ``--dds``: each ping also goes to
-Foxglove, an MCAP file (the only file it writes), ROS 2 over DDS (`mitsonar.devices.outputs`).
-Exit codes as `mitsonar.cli.serial`.
+``--trajectory`` replayed in real time. Without ``--head``, a scene with a multibeam publishes
+its whole frames at ``--ping-rate`` (`mitsonar.devices.framing`). Each ping takes the paths that
+fit its budget (the head's ping period, or ``--budget-ms``; ``--spp`` fixes them instead) and is
+recorded (`mitsonar.devices.realtime`; ``--records FILE.csv|.jsonl``). Runs until ``--seconds``
+or SIGINT/SIGTERM (exit 0, ports and files closed), then prints what it did (and on SIGUSR1).
+``--foxglove``, ``--mcap``, ``--dds``: each ping (or frame) also goes to Foxglove, an MCAP file, ROS 2
+over DDS (`mitsonar.devices.outputs`). Exit codes as `mitsonar.cli.serial`.
 """
 from __future__ import annotations
 
@@ -21,14 +24,38 @@ from mitsonar.cli.serial import _guard, _head, _positive
 __all__ = ["add_subcommands", "cmd_live"]
 
 
+def _frame_mode(args, scene_path) -> bool:
+    """True when the session publishes multibeam frames: no ``--head`` and a multibeam in the
+    scene (the first sensor whose rows fire as one frame); None when ``--sensor`` names the
+    sensor (its kind decides once the scene is loaded); False with a ``--head``."""
+    if args.head is not None:
+        return False
+    from mitsonar.devices.live import scene_kinds
+
+    if args.sensor is not None:
+        return None             # decided by the named sensor's kind once the scene is loaded
+    return any(k.transmit_fan for k in scene_kinds(str(scene_path)))
+
+
 def _live(args) -> int:
     scene_path = Path(args.scene)
     if not scene_path.is_file():
         raise FileNotFoundError(f"scene file not found: {scene_path}")
-    head = _head(args)
+    if args.spp is not None and args.budget_ms is not None:
+        raise ValueError("--spp (fixed paths per ping) and --budget-ms (paths fitted to a time budget): give one")
+    frames = _frame_mode(args, scene_path)       # True, False, or None: --sensor's kind decides
+    if frames:
+        _refuse_head_flags(args, scene_path)
+    elif args.ping_rate is not None and args.head is not None:
+        raise ValueError("--ping-rate is for multibeam frames (no --head); a head pings when its client asks")
+    if args.head is None and frames is False:
+        from mitsonar.devices import registry
+        args.head = registry.DEFAULT
+    head = _head(args) if args.head is not None else None
     from mitsonar.devices.live import LIVE_HEADS, PingRenderer, PoseReceiver, SceneObjects, live_scene, pose_socket
     from mitsonar.devices.poses import PoseBuffer, TrajectoryReplay
-    if head.name not in LIVE_HEADS:
+    from mitsonar.devices.realtime import PingLog, check_records_path
+    if head is not None and head.name not in LIVE_HEADS:
         raise ValueError(f"--head {head.name}: no live version (live heads: {', '.join(LIVE_HEADS)})")
     sources = [f for f, v in (("--pose-url", args.pose_url), ("--trajectory", args.trajectory),
                               ("--mavlink", args.mavlink)) if v]
@@ -38,6 +65,8 @@ def _live(args) -> int:
     from mitsonar.devices.micron.seanet.settings import require_mechanical
     from mitsonar.devices.transports import check_port
     check_counts(args, ValueError)
+    if args.records is not None:
+        check_records_path(args.records)
     if args.mavlink:
         import importlib.util
         if importlib.util.find_spec("pymavlink") is None:
@@ -47,22 +76,48 @@ def _live(args) -> int:
         from mitsonar.geometry.trajectory import Trajectory
         trajectory = Trajectory.from_tum(args.trajectory)
     sock = pose_socket(args.pose_url) if args.pose_url else None     # a bad URL fails before the load
-    outputs = None
+    log = loop = live = outputs = None
     try:
-        check_port(args.port_url, args.baud)
+        if head is not None:
+            check_port(args.port_url, args.baud)
         outputs = _outputs(args)                      # a bad flag fails before the load, too
         scene = live_scene(str(scene_path))
-        sonar = sensor_of(scene, args)
-        require_mechanical(sonar, f"live {scene_path.name}", f"no {head.serves} to serve")
+        sonar = _frame_sensor(scene, args) if frames is not False else sensor_of(scene, args)
+        if frames is None:          # --sensor named it: a multibeam publishes frames, else a head
+            frames = bool(sonar.sonar_kind.transmit_fan)
+            if frames:
+                _refuse_head_flags(args, scene_path)
+            else:
+                from mitsonar.devices import registry
+                args.head = registry.DEFAULT
+                head = _head(args)
+                check_port(args.port_url, args.baud)
+        if not frames:
+            require_mechanical(sonar, f"live {scene_path.name}", f"no {head.serves} to serve")
         buffer = PoseBuffer() if (sock is not None or args.mavlink) else None
-        renderer = PingRenderer(scene, sonar, buffer, spp=args.spp, seed=args.seed, outputs=outputs)
-        kw = {"baudrate": args.baud, "realtime": not args.fast}
-        if "no_dst" in {dest for dest, _ in head.options}:     # a head that can be a pre-DST Micron
-            kw["dst"] = not args.no_dst
-        live = LIVE_HEADS[head.name]()(renderer, args.port_url, **kw)
+        log = PingLog(args.records) if args.records else PingLog()
+        budget = None if args.budget_ms is None else args.budget_ms * 1e-3
+        renderer = PingRenderer(scene, sonar, buffer, spp=args.spp, seed=args.seed, budget=budget, log=log,
+                                outputs=outputs)
+        if frames:
+            from mitsonar.devices.framing import FrameLoop
+            rate = args.ping_rate
+            if rate is None:
+                period = float(getattr(sonar, "ping_period", 0.0) or 0.0)
+                rate = 1.0 / period if period > 0 else 10.0
+            renderer.warm()
+            # the renderer hands each frame to the outputs; on_frame: any further consumers
+            loop = FrameLoop(renderer, rate, on_frame=[])
+        else:
+            kw = {"baudrate": args.baud, "realtime": not args.fast}
+            if "no_dst" in {dest for dest, _ in head.options}:     # a head that can be a pre-DST Micron
+                kw["dst"] = not args.no_dst
+            live = LIVE_HEADS[head.name]()(renderer, args.port_url, **kw)
     except BaseException:
         if sock is not None:
             sock.close()
+        if log is not None:
+            log.close()
         if outputs is not None:
             outputs.discard()
         raise
@@ -79,6 +134,7 @@ def _live(args) -> int:
         except BaseException:
             if receiver is not None:
                 receiver.stop()
+            log.close()
             if outputs is not None:
                 outputs.discard()
             raise
@@ -86,17 +142,20 @@ def _live(args) -> int:
     previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     if hasattr(signal, "SIGUSR1"):        # the summary so far, on demand (kill -USR1 PID)
         previous[signal.SIGUSR1] = signal.signal(
-            signal.SIGUSR1, lambda *_: print(_summary(renderer, receiver, mav), flush=True))
+            signal.SIGUSR1, lambda *_: print(_summary(renderer, receiver, mav, loop), flush=True))
     try:
-        with live:
+        with (loop_running(loop) if loop is not None else live):
             if receiver is not None:
                 print(f"poses on {receiver.url}", flush=True)
             if mav is not None:
                 print(f"MAVLink poses on {mav.address}", flush=True)
             for o in (outputs.outputs if outputs is not None else ()):
                 print(_said(o), flush=True)
-            label = head.description.split(" (")[0].split()[-1]
-            print(f"live {label} on {live.port}", flush=True)
+            if loop is not None:
+                print(f"live multibeam {sonar.id() or 'sonar'} at {loop.rate:g} Hz", flush=True)
+            else:
+                label = head.description.split(" (")[0].split()[-1]
+                print(f"live {label} on {live.port}", flush=True)
             end = None if args.seconds is None else time.monotonic() + args.seconds
             while not stop.is_set() and (end is None or time.monotonic() < end):
                 stop.wait(0.05 if end is None else max(0.0, min(0.05, end - time.monotonic())))
@@ -107,9 +166,11 @@ def _live(args) -> int:
             receiver.stop()
         if mav is not None:
             mav.stop()
+        log.close()
         if outputs is not None:
             outputs.close()
-    print(_summary(renderer, receiver, mav) + (f"; {outputs.summary()}" if outputs is not None else ""), flush=True)
+    print(_summary(renderer, receiver, mav, loop) + (f"; {outputs.summary()}" if outputs is not None else ""),
+          flush=True)
     return 0
 
 
@@ -150,9 +211,43 @@ def _domain(text):
     return v
 
 
-def _summary(renderer, receiver, mav) -> str:
-    """One line: pings rendered, render time percentiles, poses applied and dropped by reason."""
+def _refuse_head_flags(args, scene_path) -> None:
+    for dest, flag in (("port_url", "--port-url"), ("fast", "--fast"), ("no_dst", "--no-dst"), ("baud", "--baud")):
+        if getattr(args, dest) not in (None, False):
+            raise ValueError(f"{flag} is for a head (--head micron|ping360); {scene_path.name}'s multibeam "
+                             "publishes frames at --ping-rate")
+
+
+class loop_running:  # noqa: N801 - a context manager, named for its use
+    """``with loop_running(loop):`` runs a `mitsonar.devices.framing.FrameLoop` for the block."""
+
+    def __init__(self, loop):
+        self.loop = loop
+
+    def __enter__(self):
+        return self.loop.start()
+
+    def __exit__(self, *exc):
+        self.loop.stop()
+
+
+def _frame_sensor(scene, args):
+    """``--sensor``'s sensor, else the scene's first multibeam (`_frame_mode` found one)."""
+    from mitsonar.cli.common import sensor_of
+    if args.sensor is not None:
+        return sensor_of(scene, args)
+    for s in scene.sensors():
+        if getattr(getattr(s, "sonar_kind", None), "transmit_fan", False):
+            return s
+    raise ValueError(f"{args.scene}: no multibeam sensor to publish frames of")
+
+
+def _summary(renderer, receiver, mav, loop=None) -> str:
+    """One line: pings rendered, render time percentiles, latency, paths and error percentiles,
+    frames published and skipped, poses applied and dropped by reason."""
     line = renderer.summary()
+    if loop is not None:
+        line += f"; {loop.stats['frames']} frames published of {loop.due} due"
     if receiver is not None:
         st = receiver.stats
         reasons = ", ".join(f"{n} {r}" for r, n in sorted(receiver.drops.counts.items()))
@@ -172,18 +267,28 @@ def add_subcommands(subparsers) -> None:
     from mitsonar.cli.common import add_sensor
     from mitsonar.devices import registry
     p = subparsers.add_parser(
-        "live", help="a live head: pings rendered when asked, from the vehicle's pose at that time",
+        "live", help="a live head or multibeam: pings rendered when they fire, from the vehicle's pose then",
         description="Serve the scene's sonar as a Micron or a Ping360 (as virtual-sonar) but render each "
                     "ping the client asks for when it fires, from the vehicle pose at that time: poses "
                     "arrive as JSON datagrams {\"t\", \"position\", \"orientation\"} on --pose-url "
                     "({\"object\": ID, ...} moves the scene's shape ID) "
                     "(the sensor's to_world is the mount on the vehicle: x forward, y port, z up), or "
-                    "from a --trajectory replayed in real time. Prints 'poses on URL' and 'live HEAD on "
-                    "PORT', serves until --seconds or SIGINT/SIGTERM, then a summary line. --foxglove, --mcap and "
-                    "--dds send each ping also to Foxglove, an MCAP file and ROS 2 over DDS.")
-    p.add_argument("scene", metavar="SCENE.xml", help="Mitsuba scene with a mechanical `sonar` sensor")
-    p.add_argument("--head", choices=registry.names(), default=registry.DEFAULT,
-                   help="which head to be: micron (SeaNet, default) or ping360 (ping-protocol)")
+                    "from a --trajectory replayed in real time. Without --head, a scene with a multibeam "
+                    "renders its whole frames at --ping-rate, each at the pose at its time; a frame more "
+                    "than one period late is skipped and counted, never queued. Real time: each ping "
+                    "renders as many paths as fit its budget (the head's ping period, or --budget-ms), "
+                    "from the time per path measured on the pings before; --spp fixes the paths instead. "
+                    "Each ping's paths, estimated relative error (measured on the scene at start at 16 to "
+                    "4096 paths, interpolated) and latency (pose time to last byte written, or frame published) are "
+                    "recorded (--records). Prints 'poses on URL' and 'live HEAD on PORT' (or 'live "
+                    "multibeam ID at RATE Hz'), serves until --seconds or SIGINT/SIGTERM, then a "
+                    "summary line (also on SIGUSR1): latency, paths and error p50/p95/p99. --foxglove, "
+                    "--mcap and --dds send each ping (or frame) also to Foxglove, an MCAP file and ROS 2 "
+                    "over DDS.")
+    p.add_argument("scene", metavar="SCENE.xml", help="Mitsuba scene with a mechanical or multibeam `sonar` sensor")
+    p.add_argument("--head", choices=registry.names(), default=None,
+                   help="which head to be: micron (SeaNet) or ping360 (ping-protocol); default: the scene's "
+                        "multibeam publishes frames, else micron")
     p.add_argument("--port-url", default=None, metavar="URL",
                    help="where to serve, as virtual-sonar: a pseudo-terminal (default), socket://HOST:PORT, "
                         "udp://127.0.0.1:PORT (Ping360)")
@@ -195,7 +300,16 @@ def add_subcommands(subparsers) -> None:
                    help="read the vehicle's LOCAL_POSITION_NED and ATTITUDE_QUATERNION from this pymavlink "
                         "connection (udpin:127.0.0.1:14550, a serial port; NED/FRD turned to ENU/FLU); "
                         "needs pymavlink (the live extra)")
-    p.add_argument("--spp", type=_positive(int), default=64, help="paths per ping (default 64)")
+    p.add_argument("--spp", type=_positive(int), default=None,
+                   help="paths of every ping (fixed); default: as many as fit each ping's budget")
+    p.add_argument("--budget-ms", type=_positive(float), default=None, metavar="MS",
+                   help="render time each ping may take (default: the head's ping period: its listening "
+                        "time, transmit and motor step; a frame's period)")
+    p.add_argument("--ping-rate", type=_positive(float), default=None, metavar="HZ",
+                   help="multibeam frames per second (default: 1 / the sensor's ping_period)")
+    p.add_argument("--records", default=None, metavar="FILE.csv|FILE.jsonl",
+                   help="write one line per ping: ping, t, pose_time, bearing, paths, error, render_ms, "
+                        "latency_ms, budget_ms (written as FILE.part, renamed at the end)")
     p.add_argument("--seed", type=int, default=0, help="seed of ping 0; ping k uses seed + k (default 0)")
     p.add_argument("--baud", type=_positive(int), default=None, help="baud rate of the timing model")
     p.add_argument("--fast", action="store_true", help="answer as soon as rendered (no timing model)")

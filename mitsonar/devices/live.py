@@ -3,16 +3,20 @@ the vehicle's pose at that time, and answered in the head's protocol.
 
 Pieces:
 
-* `live_scene`: the scene file loaded with its sonar reduced to one ping at bearing 0
-  (``n_pings`` 1, ``bearing_start`` 0), so that a ping costs one row's paths; its ``to_world`` is
-  the mount on the vehicle (x forward, y port, z up).
+* `live_scene`: the scene file loaded with its scanning sonars reduced to one ping at bearing 0
+  (``n_pings`` 1, ``bearing_start`` 0), so that a ping costs one row's paths (a multibeam keeps
+  its fan: `mitsonar.devices.framing` renders its whole frames); a sensor's ``to_world`` is the
+  mount on the vehicle (x forward, y port, z up).
 * `PingRenderer`: ``render(bearing)`` renders that one row with `mitsonar.render_scan` at the
   pose ``vehicle(t) @ mount @ bearing_rotation(bearing)`` (`mitsonar.geometry.frames`), the
   vehicle's pose coming from a pose source's ``at(t)`` (`mitsonar.devices.poses.PoseBuffer` or
   `mitsonar.devices.poses.TrajectoryReplay`); before any pose, the mount at the origin (said
   once). The pose enters the kernels as data, not as a literal: after the first ping, later
   pings launch the same compiled kernels (no recompilation; tests/test_live.py checks it).
-  Ping ``k`` renders with seed ``seed + k``, so a session is reproducible given its poses.
+  Ping ``k`` renders with seed ``seed + k``, so a session is reproducible given its poses (and,
+  with a budget instead of a fixed ``spp``, the paths each ping took: its record says).
+  A ping's paths fit its time budget and its record (paths, estimated error, latency from the
+  pose time to its last byte written) goes to a `mitsonar.devices.realtime.PingLog`.
 * `LiveMicron`, `LivePing360`: the virtual heads (`mitsonar.devices.micron.virtual`,
   `mitsonar.devices.ping360.virtual`) with their ``row`` rendering the requested bearing anew
   instead of looking it up in a pre-rendered scan; everything else (protocol, timing model,
@@ -37,10 +41,11 @@ import numpy as np
 from mitsonar.devices.poses import DatagramError, DropLog, PoseBuffer, PoseSource, parse_datagram
 from mitsonar.geometry.frames import bearing_rotation
 
-__all__ = ["live_scene", "SceneObjects", "PingRenderer", "LiveMicron", "LivePing360", "LIVE_HEADS", "PoseReceiver",
+__all__ = ["live_scene", "scene_kinds", "SceneObjects", "PingRenderer", "LiveMicron", "LivePing360", "LIVE_HEADS", "PoseReceiver",
            "pose_socket"]
 
 _SEED_MAX = 2**31 - 1
+_CALIBRATION_SEED = 1 << 30     # the error model's renders: seeds far from the pings'
 
 
 def live_scene(path: str):
@@ -57,8 +62,8 @@ def live_scene(path: str):
     except (OSError, ET.ParseError) as e:
         raise SceneError(f"{path}: cannot read the scene XML ({e})") from None
     for sensor in root.iter("sensor"):
-        if sensor.get("type") != "sonar":
-            continue
+        if sensor.get("type") != "sonar" or not _xml_kind(sensor).scanlines:
+            continue       # a multibeam keeps its fan: its frames render whole
         for name, tag, value in (("n_pings", "integer", "1"), ("bearing_start", "float", "0")):
             el = next((c for c in sensor if c.get("name") == name), None)
             if el is None:
@@ -74,6 +79,27 @@ def live_scene(path: str):
     scene = load_scene(ET.tostring(root, encoding="unicode"), optimize=False)
     scene.set_id(os.path.basename(path))
     return scene
+
+
+def _xml_kind(sensor):
+    """The `mitsonar.geometry.kinds.SonarKind` a ``sonar`` sensor element names (the default kind
+    without a ``kind``; an unknown name: the default's, and the scene's load says what is wrong)."""
+    from mitsonar.geometry import kinds
+
+    el = next((c for c in sensor if c.get("name") == "kind"), None)
+    return kinds.lookup(kinds.DEFAULT if el is None else el.get("value")) or kinds.get(kinds.DEFAULT)
+
+
+def scene_kinds(path: str) -> list:
+    """The `mitsonar.geometry.kinds.SonarKind` of each ``sonar`` sensor of the scene file, in order
+    (SceneError naming the file if it cannot be read)."""
+    from mitsonar.sim.scene import SceneError
+
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as e:
+        raise SceneError(f"{path}: cannot read the scene XML ({e})") from None
+    return [_xml_kind(s) for s in root.iter("sensor") if s.get("type") == "sonar"]
 
 
 class SceneObjects:
@@ -120,25 +146,42 @@ class SceneObjects:
 
 
 class PingRenderer:
-    """Renders one ping at a bearing from the pose source's pose at the ping's time (module doc).
+    """Renders one ping at a bearing (or a whole frame) from the pose source's pose at the ping's
+    time (module doc), with as many paths as fit its time budget (`mitsonar.devices.realtime`).
 
-    ``stats``: pings rendered; ``latencies``: seconds of the last 1000 renders; ``last_pose``:
-    the 4x4 pose (beam frame) of the last ping.
+    ``spp``: paths of every ping (fixed); None: each ping takes the paths that fit its budget
+    (`mitsonar.devices.realtime.PathBudget`), ``budget`` seconds (default: the one each `render`
+    is given, the head's ping period). ``log``: a `mitsonar.devices.realtime.PingLog` the
+    records of finished pings go to (`finish`). ``stats``: pings rendered; ``latencies``:
+    seconds of the last 1000 renders; ``last_pose``: the 4x4 pose (beam frame) of the last ping;
+    ``last_record``: the record of the last ping (paths, estimated error, render time, ...);
+    ``error``: the scene's `mitsonar.devices.realtime.ErrorModel` (measured by `warm`, with
+    ``calibration`` renders at each of its numbers of paths).
     """
 
-    def __init__(self, scene, sonar, poses=None, *, spp: int = 64, seed: int = 0, out=None, outputs=None):
+    def __init__(self, scene, sonar, poses=None, *, spp: int | None = 64, seed: int = 0, out=None,
+                 budget: float | None = None, log=None, calibration: int = 8, outputs=None):
+        from mitsonar.devices.realtime import ErrorModel, PathBudget, PingLog
+
         self.scene, self.sonar = scene, sonar
         #: `mitsonar.devices.outputs.LiveOutputs` (or any ``publish(t_ns, vehicle, mount, scan)``)
-        #: given each ping after it is rendered: its time (ns, Unix epoch), the vehicle's pose,
-        #: the mount and the one-row scan; None: none.
+        #: given each ping (or frame) after it is rendered: its time (ns, Unix epoch), the
+        #: vehicle's pose, the mount and the scan; None: none.
         self.outputs = outputs
         self.mount = np.array(sonar.to_world_np, dtype=np.float64)
         self.poses = poses
-        self.spp, self.seed = int(spp), int(seed)
+        self.spp = None if spp is None else int(spp)
+        self.seed = int(seed)
+        self.budget = None if budget is None else float(budget)
+        self.paths = PathBudget(self.budget if self.budget is not None else 1.0)
+        self.error = ErrorModel()
+        self.calibration = int(calibration)
+        self.log = PingLog() if log is None else log
         self.out = sys.stderr if out is None else out
         self.stats: Counter = Counter()
         self.latencies: deque = deque(maxlen=1000)
-        self.last_pose = None
+        self.last_pose = self.last_vehicle = None
+        self.last_record = None
         self.lock = threading.Lock()
         self._said_no_pose = False
 
@@ -154,55 +197,160 @@ class PingRenderer:
 
     def warm(self):
         """Render one ping from the mount at the origin, uncounted: compiles the kernels before a
-        client asks; returns the one-row `Scan` (bearing 0)."""
+        client asks; then measures the scene's error at a few numbers of paths there
+        (`mitsonar.devices.realtime.ErrorModel.measure`, ``calibration`` renders each; 0: no
+        error estimate) and the time per path. Returns the first render's `Scan` (bearing 0)."""
+        from mitsonar.devices.realtime import ErrorModel
         from mitsonar.sim.render import render_scan
 
-        with self.lock:
-            return render_scan(self.scene, spp=self.spp, seed=self.seed, pose=self.mount, sensor=self.sonar)
+        paths = self.spp if self.spp is not None else self.paths.next()
+        times = []
 
-    def render(self, bearing: float, now: float | None = None):
+        def one(n, i):
+            t0 = time.monotonic()
+            seed = (self.seed + _CALIBRATION_SEED + 7919 * n + i) % _SEED_MAX
+            scan = render_scan(self.scene, spp=n, seed=seed, pose=self.mount, sensor=self.sonar)
+            times.append((n, time.monotonic() - t0))
+            return scan.intensity
+
+        with self.lock:
+            first = render_scan(self.scene, spp=paths, seed=self.seed, pose=self.mount, sensor=self.sonar)
+            if self.calibration >= 2:
+                self.error = ErrorModel.measure(one, self.calibration)
+            else:
+                one(paths, 0)
+        n, t = max(times)      # the largest renders: the time per path least blurred by fixed costs
+        self.paths.per_path = t / n
+        return first
+
+    def render(self, bearing: float | None, now: float | None = None, budget: float | None = None):
         """A one-row `Scan` of the ping at ``bearing`` (radians, the simulator's convention) fired
-        at ``now`` (``time.monotonic``, default now); its ``bearings`` is ``[bearing]``."""
+        at ``now`` (``time.monotonic``, default now); its ``bearings`` is ``[bearing]``.
+        ``bearing`` None: the sensor's whole frame (every row) at the vehicle's pose.
+        ``budget``: seconds this ping may take (default the renderer's ``budget``)."""
         from mitsonar.sim.render import render_scan
 
         t0 = time.monotonic()
         now = t0 if now is None else now
+        wall = time.time() - (t0 - now)
         vehicle = self.vehicle(now)
-        pose = vehicle @ self.mount @ bearing_rotation(float(bearing))
+        pose = vehicle @ self.mount
+        if bearing is not None:
+            pose = pose @ bearing_rotation(float(bearing))
+        budget = self.budget if self.budget is not None else budget
+        paths = self.spp if self.spp is not None else self.paths.next(budget)
         k = self.stats["pings"]
         with self.lock:
-            scan = render_scan(self.scene, spp=self.spp, seed=(self.seed + k) % _SEED_MAX, pose=pose,
+            t1 = time.monotonic()
+            scan = render_scan(self.scene, spp=paths, seed=(self.seed + k) % _SEED_MAX, pose=pose,
                                sensor=self.sonar)
-        scan.bearings = np.array([float(bearing)])
+            spent = time.monotonic() - t1
+        if self.spp is None:
+            self.paths.measured(paths, spent)
+        if bearing is not None:
+            scan.bearings = np.array([float(bearing)])
         self.stats["pings"] += 1
-        self.last_pose = pose
+        self.last_pose, self.last_vehicle = pose, vehicle
         self.latencies.append(time.monotonic() - t0)
+        self.last_record = {"ping": k, "t": wall, "pose_time": now,
+                            "bearing": None if bearing is None else float(bearing), "paths": int(paths),
+                            "error": self.error(paths), "render_ms": spent * 1e3,
+                            "budget_ms": None if budget is None else budget * 1e3}
         if self.outputs is not None:    # queued: the outputs' thread sends it (LiveOutputs)
-            self.outputs.publish(time.time_ns() - round((time.monotonic() - now) * 1e9), vehicle, self.mount, scan)
+            self.outputs.publish(round(wall * 1e9), vehicle, self.mount, scan)
         return scan
+
+    def finish(self, record: dict, written: float | None = None) -> None:
+        """``record``'s ping is out (its last byte written, or its frame published) at
+        ``written`` (``time.monotonic``, default now): its latency from the pose time, logged."""
+        written = time.monotonic() if written is None else written
+        record["latency_ms"] = (written - record["pose_time"]) * 1e3
+        self.log.add(record)
 
     def summary(self) -> str:
         n = self.stats["pings"]
         if not self.latencies:
-            return f"{n} pings rendered"
-        lat = np.array(self.latencies) * 1e3
-        return (f"{n} pings rendered; render ms p50 {np.percentile(lat, 50):.1f}, "
-                f"p95 {np.percentile(lat, 95):.1f}, max {lat.max():.1f}")
+            line = f"{n} pings rendered"
+        else:
+            lat = np.array(self.latencies) * 1e3
+            line = (f"{n} pings rendered; render ms p50 {np.percentile(lat, 50):.1f}, "
+                    f"p95 {np.percentile(lat, 95):.1f}, max {lat.max():.1f}")
+        more = self.log.summary()
+        return line + (f"; {more}" if more else "")
+
+
+def _clocked(head) -> None:
+    """Wrap ``head``'s port so that each write tells its `WireClock` (``head.clock``)."""
+    transport = head._transport
+    write = transport.write
+
+    def clocked_write(data):
+        n = write(data)
+        head.clock.wrote(n or 0, time.monotonic())
+        return n
+
+    transport.write = clocked_write
 
 
 def _micron():
     from mitsonar.devices.micron.seanet import bearing_to_radians
     from mitsonar.devices.micron.virtual import VirtualMicron
+    from mitsonar.devices.realtime import WireClock
 
     class LiveMicron(VirtualMicron):
-        """A `VirtualMicron` whose scanline at wire bearing ``b`` is rendered when it fires."""
+        """A `VirtualMicron` whose scanline at wire bearing ``b`` is rendered when it fires: when
+        the driver's mtSendData starts the ping (from the pose at that time, with the ping's time
+        as budget: the request, the listening ``2R/c`` and the motor step), sent when the head's
+        timing model says (or when rendered, if later)."""
 
         def __init__(self, renderer: PingRenderer, port_url=None, **kwargs):
             self.renderer = renderer
+            self.clock = WireClock()
+            self._pending = None            # (bearing, scan, record) rendered at the request
+            self._record = None             # the record of the scanline being sent
             super().__init__(renderer.warm(), port_url, **kwargs)
 
+        def _power_on(self) -> None:
+            super()._power_on()
+            _clocked(self)
+
+        def _boot(self, now: float) -> None:
+            super()._boot(now)
+            self.clock.resync()
+
+        def ping_period(self) -> float:
+            """Seconds of one scanline: the request's transfer, the listening, the motor step."""
+            s = self.settings
+            return 18 * 10.0 / self.baudrate + s.n_bins * s.sampling_interval + self.motor_time
+
+        def _request(self, now: float) -> None:
+            fires = self.command is not None and not self._busy
+            super()._request(now)
+            if fires:
+                b = self.bearing
+                scan = self.renderer.render(bearing_to_radians(b, self.settings.invert), now, self.ping_period())
+                self._pending = (b, scan, self.renderer.last_record)
+
+        def _ping(self, now: float) -> None:
+            super()._ping(now)
+            self._record = None
+
+        def _emit(self, now: float, data: bytes) -> None:
+            stalled = now < self._stalled_until
+            super()._emit(now, data)
+            if not stalled:
+                record, self._record = self._record, None
+                done = None if record is None else (lambda t, r=record: self.renderer.finish(r, t))
+                self.clock.queue(len(data), done)
+
         def row(self, bearing: int) -> np.ndarray:
-            self.scan = self.renderer.render(bearing_to_radians(bearing, self.settings.invert))
+            pending, self._pending = self._pending, None
+            if pending is not None and pending[0] == bearing:
+                _, self.scan, self._record = pending
+            else:       # not rendered at its request (new parameters since): now
+                self.scan = self.renderer.render(bearing_to_radians(bearing, self.settings.invert), None,
+                                                 self.ping_period())
+                self._record = self.renderer.last_record
             self._prepare_rows()
             return super().row(bearing)
 
@@ -210,12 +358,15 @@ def _micron():
 
 
 def _ping360():
-    from mitsonar.devices.ping360.head import angle_to_radians
+    from mitsonar.devices.ping360.head import TICK, angle_to_radians
     from mitsonar.devices.ping360.protocol import ids
     from mitsonar.devices.ping360.virtual import VirtualPing360
+    from mitsonar.devices.realtime import WireClock
 
     class LivePing360(VirtualPing360):
-        """A `VirtualPing360` whose samples at ``angle`` are rendered when it pings.
+        """A `VirtualPing360` whose samples at ``angle`` are rendered when it pings, with the
+        ping's time as budget (the listening ``number_of_samples * sample_period * 25 ns``, the
+        transmit pulse, the motor's step).
 
         Stale requests are coalesced: of the ping requests (``transducer`` with ``transmit``)
         waiting on the line together (a client that timed out and asked again while a ping
@@ -241,11 +392,30 @@ def _ping360():
 
         def __init__(self, renderer: PingRenderer, port_url=None, **kwargs):
             self.renderer = renderer
+            self.clock = WireClock()
+            self._record = None
             super().__init__(renderer.warm(), port_url, **kwargs)
+
+        def _power_on(self) -> None:
+            super()._power_on()
+            _clocked(self)
+
+        def _reset(self) -> None:
+            super()._reset()
+            if hasattr(self, "clock"):
+                self.clock.resync()
+
+        def _send(self, msg, now: float, busy: float = 0.0, ping: int | None = None) -> None:
+            super()._send(msg, now, busy, ping)
+            record, self._record = (self._record, None) if ping is not None else (None, self._record)
+            done = None if record is None else (lambda t, r=record: self.renderer.finish(r, t))
+            self.clock.queue(len(self._queue[-1][1]), done)
 
         def row(self, angle: int, sample_period: int, n: int, step: int = 1) -> bytes:
             rad = angle_to_radians(angle)
-            self.scan = self.renderer.render(rad)
+            period = n * sample_period * TICK + self.state["transmit_duration"] * 1e-6 + step * self.motor_time
+            self.scan = self.renderer.render(rad, None, period)
+            self._record = self.renderer.last_record
             self._b = np.array([rad % (2 * math.pi)])
             self._scan_step = 0.0
             return super().row(angle, sample_period, n, step)
