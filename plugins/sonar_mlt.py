@@ -181,7 +181,7 @@ class SonarMLTIntegrator(SonarIntegrator):
         setup = self.setup(scene, sensor, pose, max_depth)
         self.plan(setup.sensor.n_pings, spp)  # refuses explicit counts that do not fit, before any work
         if self.split != "off" and self.guide == "image":
-            return render_split(self, setup, seed, int(spp), progress)
+            return render_split(self, setup, seed, int(spp), progress, pose)
         return self.metropolis(setup, seed, spp, progress=progress)
 
     def metropolis(self, setup, seed, spp, hard_only=False, progress=None):
