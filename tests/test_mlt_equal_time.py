@@ -41,11 +41,13 @@ def test_ratio_spread_and_errors_are_what_was_measured(bench, tmp_path, monkeypa
     again = bench.measure("hidden_target", tof, {**tof, "sampling": "independent"}, 64, 5, 256, str(tmp_path))
     assert again["baseline"]["rel_l2"] == a["rel_l2"]
     assert again["reference"] == out["reference"]
-    # the spread of a synthetic run whose ratio is 2 in every repeat: 2 in every resample
-    ea, eb = np.array([1.0, 2.0, 3.0, 4.0, 5.0]), np.array([0.5, 1.0, 1.5, 2.0, 2.5])
-    t = np.ones(5)
-    lo, hi = bench.bootstrap_spread(ea, t, eb, t, np.random.default_rng(0))
-    assert lo <= 2.0 <= hi and hi / lo < 3
+    # the spread: the renders of each side are resampled on their own (they are independent); a
+    # run with the same error x sqrt(time) in every repeat has no spread, times included
+    ea, eb = np.full(5, 2.0), np.full(5, 1.0)
+    assert bench.bootstrap_spread(ea, np.ones(5), eb, np.ones(5), np.random.default_rng(0)) == [2.0, 2.0]
+    assert bench.bootstrap_spread(ea, np.full(5, 4.0), eb, np.ones(5), np.random.default_rng(0)) == [4.0, 4.0]
+    lo, hi = bench.bootstrap_spread(np.arange(1.0, 6.0), np.ones(5), eb, np.ones(5), np.random.default_rng(0))
+    assert 1.0 <= lo < 3.0 < hi <= 5.0
 
 
 @pytest.mark.parametrize("args, message", [
