@@ -39,7 +39,8 @@ target over the scan), the spread of the per-ping totals (``ping_total_cv2``), t
 f and the share of paths with f = 0.
 
     python benchmarks/mlt_oracle.py [--scenes box,slot_chamber,glossy_corridor,hidden_target] [--paths 4096]
-                                    [--guide image|none] [--baseline-spp 4096,32768 --baseline-repeats 8]
+                                    [--guide image|none] [--curved-guide]
+                                    [--baseline-spp 4096,32768 --baseline-repeats 8]
 
 The ratios are estimates from the paths traced: on hidden_target, where 2 paths in 1000 carry nearly
 all of the boulder's echo, 4096 paths per ping give an ideal ratio of 24 and 65536 give 18.
@@ -176,6 +177,9 @@ def main(argv=None):
     ap.add_argument("--paths", type=int, default=4096)
     ap.add_argument("--guide", default="image", choices=("image", "none"),
                     help="the path function's guide (sonar_tof's default image, or none: BSDF sampling)")
+    ap.add_argument("--curved-guide", action="store_true",
+                    help="turn on the image guide through curved mirrors (plugins/image_guide.py CURVED_GUIDE) for "
+                         "the path function and the baseline")
     ap.add_argument("--baseline-spp", default="",
                     help="also render the default sonar_tof at these spp (comma separated) and compare the ideal "
                          "sampler with its measured error (see the module's docstring)")
@@ -192,6 +196,11 @@ def main(argv=None):
         ap.error("--baseline-spp takes positive numbers and --baseline-repeats at least 2")
     if args.resample_draws < 0:
         ap.error("--resample-draws takes a number of paths per ping (0: off)")
+    if args.curved_guide:
+        import mitsonar  # noqa: F401  (registers the plugins)
+        from mitsonar.plugins import image_guide
+
+        image_guide.CURVED_GUIDE = True
     print(json.dumps([analyse(s, args.paths, guide=args.guide, baseline_spp=spps, baseline_repeats=args.baseline_repeats,
                               resample_draws=args.resample_draws) for s in args.scenes.split(",")], indent=1))
 

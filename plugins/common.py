@@ -317,7 +317,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
         """The `PathSetup` of one render (sensor resolved, ``max_depth`` checked)."""
         depth = check_max_depth(self.max_depth if max_depth is None else int(max_depth), self.name)
         setup = PathSetup(scene, resolve_sensor(scene, sensor), depth, pose)
-        setup.guide = self.guide == "image" and image_guide.has_mirrors(scene)
+        setup.guide = self.guide == "image" and image_guide.guide_kind(scene)
         profile = getattr(self, "sound_speed_profile", None)
         if profile is not None:
             from .refraction import from_profile
@@ -394,6 +394,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
         # vertices since the last diffuse one, the chain's narrowest lobe, and the way back's target.
         guide = setup.guide
         chain = image_guide.start_chain(origin)
+        flags = image_guide.ray_flags(guide)
         # With ``setup.tag_hard`` the echoes after a chained vertex are told apart (``record``'s
         # sixth argument): the paths that only the guide finds well (`sonar_mlt`'s split). An
         # unguided kernel (a scene without mirrors) forms no chain: none of its echoes is hard.
@@ -401,7 +402,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
         hard = mi.Bool(False)
 
         while dr.hint(active, label="sonar_echo_path"):
-            si = scene.ray_intersect(ray, active)
+            si = scene.ray_intersect(ray, flags, False, active)
             active &= si.is_valid()
             segment = dr.norm(si.p - previous)
             path_length += segment

@@ -79,7 +79,8 @@ class SonarMLTIntegrator(SonarIntegrator):
     split            0        with the guide: the chains' share of the budget; path tracing
                               estimates the echoes before any chained bounce, the chains the
                               others (`mlt_split`). 0 (the default): no chains, the path
-                              tracer's estimate with per-row paths (at equal time the chains
+                              tracer's estimate, ``sonar_tof``'s own (shared beams where the
+                              head can share, `mlt_split.path_traced`) (at equal time the chains
                               lost 2-6x to the guided path tracer on every scene with mirrors,
                               docs/benchmarks.rst); ``auto``: the share from a pilot's
                               variances; a number in [0, 0.9]; ``off`` (or ``guide="none"``):
@@ -181,7 +182,7 @@ class SonarMLTIntegrator(SonarIntegrator):
         setup = self.setup(scene, sensor, pose, max_depth)
         self.plan(setup.sensor.n_pings, spp)  # refuses explicit counts that do not fit, before any work
         if self.split != "off" and self.guide == "image":
-            return render_split(self, setup, seed, int(spp), progress)
+            return render_split(self, setup, seed, int(spp), progress, pose)
         return self.metropolis(setup, seed, spp, progress=progress)
 
     def metropolis(self, setup, seed, spp, hard_only=False, progress=None):

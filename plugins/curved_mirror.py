@@ -1,0 +1,157 @@
+"""The image guide through a curved mirror: the reflection point on a sphere or a cylinder.
+
+`image_guide` aims the bounce after a chain of mirrors at the transducer's image in the tangent
+plane of the last mirror, the plane where the path met it on the way out. On a plane that is the
+way home from anywhere; on a curved mirror (a tank, a pile, a ship's bow) the way home from the
+target ``x`` meets the mirror at another point ``S``, the *specular point* of ``x`` and the image
+``I`` before that mirror (the transducer itself after one mirror): the point of the surface whose
+normal bisects the directions to ``x`` and to ``I``. For a sphere or a cylinder it lies in a plane
+(the plane of the sphere's centre, ``x`` and ``I``; for a cylinder, the cross-section, the axial
+coordinate following by unfolding), where it solves Alhazen's problem, the reflection point on a
+circle (Alhazen, *Optics* book V; a quartic in the point's coordinates, Neumann 1998,
+*Amer. Math. Monthly* 105, 523-528): here by Newton's method on the angle ``phi`` of the point on
+the circle, ``g(phi) = n x u_x + n x u_I = 0`` (``n`` the circle's normal at ``phi``, ``u`` the unit
+vectors to ``x`` and ``I``, ``x`` the 2D cross product), from the angle of the bisector of the
+directions from the centre to ``x`` and to ``I`` (exact when both are far), `NEWTON_STEPS` steps
+(with the analytic derivative of `_g`).
+
+The mirror's shape is read where the path met it (`local_mirror`): the normal curvatures along the
+surface's parameter directions, ``k_u = (dn/du . dp/du) / |dp/du|^2`` and ``k_v`` likewise (the
+second fundamental form over the first, do Carmo 1976, sec. 3-2; for Mitsuba's sphere and
+cylinder the parameter directions are the principal ones). Equal curvatures make a sphere, one of
+them under `FLAT_RATIO` of the other a cylinder along that direction, of radius ``1 / k``, centred
+``1 / k`` behind the surface. A concave or flat mirror (curvature under `MIN_CURVATURE`) keeps the
+tangent-plane image.
+
+The guide's width: a turn ``delta`` at ``x`` moves the point on the mirror by ``delta a / cos
+theta`` (``a = |x - S|``, ``theta`` the angle of incidence) in the plane of the curvature, whose
+normal then turns by that over ``R``, so the reflected ray turns by ``delta (D / b + 2 a / (R cos
+theta))`` with ``D = a + b``, ``b = |S - I|`` (the plane's ``D / b`` of `image_guide`, plus the
+curvature's part); across (a sphere's second direction) by ``delta (D / b + 2 a cos theta / R)``,
+along a cylinder's axis by ``delta D / b``. The guide is an isotropic Phong lobe: its exponent is
+the mirror's times the square of the smaller factor (the wider direction: narrower, it left part of
+the echo to BSDF sampling alone, which raised the error behind a tank by 1.3x; the product of the
+two factors was best on the bow, the smaller one is within 1.3x of it there). Whatever the width and aim, the mixture's density is evaluated for
+the same deterministic axis, so the estimate stays unbiased (`image_guide`).
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+#: Newton steps of the reflection point's angle.
+NEWTON_STEPS = 2
+#: Least curvature (1/m) that makes a mirror curved: under it (a radius over 1 km) the tangent
+#: plane is the mirror.
+MIN_CURVATURE = 1e-3
+#: A principal curvature under this fraction of the other is flat: a cylinder along it.
+FLAT_RATIO = 0.1
+#: Ray flags of the path kernel's intersections when guiding: the normal's derivatives too.
+RAY_FLAGS = mi.RayFlags.All | mi.RayFlags.dNSdUV
+
+
+def local_mirror(si, incoming):
+    """The sphere or cylinder that fits the surface at ``si`` (met by a ray of direction
+    ``incoming``): ``(centre, axis, radius)``; ``axis`` is zero for a sphere, ``radius`` 0 where the
+    surface is flat or concave seen from the ray's side (the tangent plane is the guide's mirror)."""
+    n = mi.Vector3f(si.sh_frame.n)
+    side = dr.select(dr.dot(n, incoming) < 0, 1.0, -1.0)       # +1: the normal faces the ray
+    ku = dr.dot(si.dn_du, si.dp_du) / dr.maximum(dr.squared_norm(si.dp_du), 1e-20) * side
+    kv = dr.dot(si.dn_dv, si.dp_dv) / dr.maximum(dr.squared_norm(si.dp_dv), 1e-20) * side
+    k_hi = dr.maximum(ku, kv)
+    k_lo = dr.minimum(ku, kv)
+    convex = (k_hi > MIN_CURVATURE) & (k_lo > -FLAT_RATIO * k_hi) & dr.isfinite(k_hi)
+    cylinder = k_lo < FLAT_RATIO * k_hi
+    k = dr.select(cylinder, k_hi, 0.5 * (ku + kv))
+    radius = dr.select(convex, 1.0 / dr.maximum(k, MIN_CURVATURE), 0.0)
+    # a cylinder's axis: the parameter direction of the smaller curvature
+    along = dr.select(ku < kv, si.dp_du, si.dp_dv)
+    axis = dr.select(convex & cylinder, dr.normalize(along), mi.Vector3f(0.0))
+    centre = si.p - radius * side * n
+    return mi.Point3f(centre), axis, radius
+
+
+def _cross2(ax, ay, bx, by):
+    return ax * by - ay * bx
+
+
+def _g(phi, radius, xx, yx, yy):
+    """Alhazen's condition at angle ``phi`` for the 2D points ``(xx, 0)`` and ``(yx, yy)``, and its
+    derivative in ``phi``: per point, ``h = n x u`` with ``u = (X - S) / L`` has
+    ``h' = t x u - (R / L) (1 - (u . t) h)`` (``t = dn/dphi``, ``n x t = 1``)."""
+    s, c = dr.sincos(phi)
+    g, dg = mi.Float(0.0), mi.Float(0.0)
+    for px, py in ((xx, mi.Float(0.0)), (yx, yy)):
+        ax, ay = px - radius * c, py - radius * s
+        length = dr.maximum(dr.sqrt(ax * ax + ay * ay), 1e-20)
+        ux, uy = ax / length, ay / length
+        h = _cross2(c, s, ux, uy)
+        g += h
+        dg += _cross2(-s, c, ux, uy) - radius / length * (1.0 - (-s * ux + c * uy) * h)
+    return g, dg
+
+
+def specular_point(x, image, centre, axis, radius, start=None):
+    """The point ``S`` of the mirror ``(centre, axis, radius)`` (`local_mirror`) that reflects
+    ``x`` into ``image``: ``(S, ok, cos_theta)``. ``ok`` where Newton's method converged to a
+    point seen from both sides' points (else the caller keeps the tangent-plane image). ``start``:
+    a point near the answer (the path's own hit on the mirror, where the way out reflected), else
+    the bisector's guess."""
+    sphere = dr.squared_norm(axis) < 0.5
+    rx, ri = x - centre, image - centre
+    plane_n = dr.cross(rx, ri)
+    a = dr.select(sphere, plane_n / dr.maximum(dr.norm(plane_n), 1e-20), axis)
+    zx, zi = dr.dot(rx, a), dr.dot(ri, a)
+    px = rx - zx * a
+    e1 = px / dr.maximum(dr.norm(px), 1e-20)
+    e2 = dr.cross(a, e1)
+    xx = dr.norm(px)
+    yx, yy = dr.dot(ri, e1), dr.dot(ri, e2)
+    # start: the bisector of the directions from the centre to x and to the image
+    ly = dr.maximum(dr.sqrt(yx * yx + yy * yy), 1e-20)
+    phi = dr.atan2(yy / ly, 1.0 + yx / ly)
+    if start is not None:
+        rs = start - centre
+        phi = dr.atan2(dr.dot(rs, e2), dr.dot(rs, e1))
+    for _ in range(NEWTON_STEPS):
+        g0, slope = _g(phi, radius, xx, yx, yy)
+        step = dr.select(dr.abs(slope) > 1e-12, g0 / slope, 0.0)
+        phi = phi - dr.clip(step, -0.5, 0.5)
+    s, c = dr.sincos(phi)
+    sx, sy = radius * c, radius * s
+    l1 = dr.norm(mi.Vector2f(xx - sx, -sy))
+    l2 = dr.norm(mi.Vector2f(yx - sx, yy - sy))
+    z = zx + (zi - zx) * l1 / dr.maximum(l1 + l2, 1e-20)
+    S = centre + sx * e1 + sy * e2 + z * a
+    n = c * e1 + s * e2
+    to_x, to_i = dr.normalize(x - S), dr.normalize(image - S)
+    cos_x, cos_i = dr.dot(n, to_x), dr.dot(n, to_i)
+    # converged: the normal bisects the two directions in the plane (|n x u_x + n x u_I| small)
+    resid = _cross2(c, s, (xx - sx) / dr.maximum(l1, 1e-20), -sy / dr.maximum(l1, 1e-20)) + \
+        _cross2(c, s, (yx - sx) / dr.maximum(l2, 1e-20), (yy - sy) / dr.maximum(l2, 1e-20))
+    ok = ((radius > 0) & (xx > radius) & (ly > radius) & (cos_x > 0) & (cos_i > 0)
+          & (dr.abs(resid) < 1e-3) & dr.isfinite(phi))
+    return mi.Point3f(S), ok, cos_x
+
+
+def aim(x, image, n_chain, centre, axis, radius, start=None):
+    """The guide's target after a curved mirror, in the terms of `image_guide.sample_bounce`:
+    ``(virtual image, segment, n_chain, ok)``. The virtual image lies on the ray from ``x``
+    through the specular point ``S`` at the unfolded length ``D = |x - S| + |S - image|``, and the
+    segment is ``|x - S|``, so that `sample_bounce`'s plane rule gives ``(D / b)^2``; ``n_chain``
+    carries the curvature's extra narrowing (the module docstring)."""
+    S, ok, cos_t = specular_point(x, image, centre, axis, radius, start)
+    to_s = S - x
+    a_len = dr.norm(to_s)
+    b_len = dr.norm(image - S)
+    d_len = a_len + b_len
+    plane = d_len / dr.maximum(b_len, 1e-3 * d_len)
+    cos_t = dr.maximum(cos_t, 1e-2)
+    r = dr.maximum(radius, 1e-6)
+    k1 = plane + 2.0 * a_len / (r * cos_t)
+    sphere = dr.squared_norm(axis) < 0.5
+    k2 = plane + dr.select(sphere, 2.0 * a_len * cos_t / r, 0.0)
+    virtual = x + to_s / dr.maximum(a_len, 1e-12) * d_len
+    # the wider of the two directions sets the (isotropic) guide's width: a guide narrower than the
+    # integrand leaves part of it to the BSDF's own sampling (heavy tails), a wider one only wastes
+    return mi.Point3f(virtual), a_len, n_chain * dr.square(dr.minimum(k1, k2) / plane), ok
