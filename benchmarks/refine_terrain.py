@@ -1,0 +1,121 @@
+#!/usr/bin/env python
+"""Analysis by synthesis on the rocky slope (issue 45, item 2): a side-scan survey's heights refined
+from a flat start until rendering them gives back the recorded pings.
+
+The truth: ``scenes_xml/rocky_slope.ply`` (a 14 deg slope rising towards +y, 0.08 m rms roughness,
+rocks), surveyed by a two-channel side-scan head (2 x 50 deg beams, depressed 30 deg, 0-10 m in
+200 bins) running along x at ``y = 0``, ``--altitude`` above the slope's mean, pinging every
+``--spacing`` metres over ``x in [-L/2, L/2]``; the recorded pings are the renders of the true
+mesh (noise-free expected intensities, the seeds the fit uses: common random numbers). The model:
+a height field on a ``--cell`` grid over ``x in [-L/2, L/2]``, ``y in [-8, 8]``, started flat at
+the true mean depth of the vertices the pings see (``1.5 <= |y| <= 7.5`` m: outside the nadir gap,
+inside the swath), refined by :func:`mitsonar.jobs.refine.refine_height_field`.
+
+Prints one JSON object: the RMS height error over the seen vertices before and after (and their
+ratio), the render-and-compare loss at the last stage's blur before and after (and their ratio),
+the seconds, and whether a second run with the same seed gives the same heights (``--check-determinism``).
+
+    python benchmarks/refine_terrain.py [--length 3] [--cell 0.25] [--spp 64] [--iterations 25] [--seed 0] [--check-determinism]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+
+def true_heights(x, y):
+    """The rocky slope's heights at the grid points (bilinear in its 99 x 99 vertex grid)."""
+    from scipy.interpolate import RegularGridInterpolator
+
+    from mitsonar.scenes.terrain import read_ply
+
+    V, _ = read_ply(os.path.join(ROOT, "scenes_xml", "rocky_slope.ply"))
+    xs, ys = np.unique(np.round(V[:, 0], 5)), np.unique(np.round(V[:, 1], 5))
+    Z = np.full((len(xs), len(ys)), np.nan)
+    Z[np.searchsorted(xs, np.round(V[:, 0], 5)), np.searchsorted(ys, np.round(V[:, 1], 5))] = V[:, 2]
+    f = RegularGridInterpolator((xs, ys), Z)
+    X, Y = np.meshgrid(x, y, indexing="ij")
+    return f(np.stack([X.ravel(), Y.ravel()], 1)).reshape(len(x), len(y))
+
+
+def run(length=3.0, cell=0.5, spacing=0.5, altitude=3.0, spp=128, seed=0, stages=((2.5, 6.0, 15), (1.0, 2.0, 15)),
+        lr=0.08, smooth=0.05, verbose=True):
+    import mitsuba as mi
+
+    import mitsonar
+    from mitsonar.jobs.refine import grid_mesh, refine_height_field, sidescan_xml, write_ply
+
+    from mitsonar.sim.variant import ensure_variant
+
+    ensure_variant()
+    half = length / 2
+    x = np.arange(-half, half + 1e-9, cell)
+    y = np.arange(-8.0, 8.0 + 1e-9, cell)
+    z_true = true_heights(x, y)
+    seen = (np.abs(y)[None, :] >= 1.5) & (np.abs(y)[None, :] <= 7.5) & np.ones((len(x), 1), bool)
+    depth = float(z_true[seen].mean())
+    pings = np.arange(-half + spacing / 2, half, spacing)
+    poses = []
+    for xp in pings:
+        m = np.eye(4)
+        m[:3, 3] = (xp, 0.0, -10.0 + altitude)
+        poses.append(m)
+    truth = mitsonar.load_scene(sidescan_xml(os.path.join(ROOT, "scenes_xml", "rocky_slope.ply")))
+    targets = []
+    p = mi.traverse(truth)
+    for k, P in enumerate(poses):
+        p["head.to_world"] = mi.Transform4f(mi.Matrix4f(P))
+        p.update()
+        targets.append(np.asarray(mi.render(truth, spp=spp, seed=seed + k))[..., 0])
+    with tempfile.TemporaryDirectory() as tmp:
+        ply = os.path.join(tmp, "model.ply")
+        write_ply(ply, *grid_mesh(x, y, np.full_like(z_true, depth)))
+        model = mitsonar.load_scene(sidescan_xml(ply))
+
+    def rms(z):
+        return float(np.sqrt(np.mean((z - z_true)[seen] ** 2)))
+
+    def show(it, loss, z):
+        if verbose:
+            print(f"iter {it:3d} loss {loss:.4f} rms {rms(z):.3f} m", file=sys.stderr, flush=True)
+
+    res = refine_height_field(model, x, y, np.full_like(z_true, depth), poses, targets, stages=stages, spp=spp,
+                              seed=seed, lr=lr, smooth=smooth, callback=show)
+    return res, rms(np.full_like(z_true, depth)), rms(res["z"]), dict(nx=len(x), ny=len(y), pings=len(poses),
+                                                                       depth=depth)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--length", type=float, default=3.0, help="survey length along x (m)")
+    ap.add_argument("--cell", type=float, default=0.25, help="model grid spacing (m); the truth's is 0.245")
+    ap.add_argument("--spp", type=int, default=64)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--iterations", type=int, default=25, help="per stage (two stages)")
+    ap.add_argument("--check-determinism", action="store_true")
+    a = ap.parse_args(argv)
+    if not (a.length > 0 and a.cell > 0 and a.spp >= 1 and a.iterations >= 1):
+        raise SystemExit("refine_terrain: --length, --cell must be > 0 m, --spp and --iterations >= 1")
+    stages = ((2.5, 6.0, a.iterations), (1.0, 2.0, a.iterations))
+    res, before, after, info = run(a.length, a.cell, spp=a.spp, seed=a.seed, stages=stages)
+    out = {"scene": "scenes_xml/rocky_slope.ply, side-scan along x at y = 0", **info, "spp": a.spp, "seed": a.seed,
+           "stages": stages, "rms_before_m": before, "rms_after_m": after, "rms_ratio": before / max(after, 1e-12),
+           "loss_before": res["loss_start"], "loss_after": res["loss_final"],
+           "loss_ratio": res["loss_start"] / max(res["loss_final"], 1e-30), "seconds": round(res["seconds"], 1)}
+    if a.check_determinism:
+        res2, _, after2, _ = run(a.length, a.cell, spp=a.spp, seed=a.seed, stages=stages, verbose=False)
+        out["deterministic"] = bool(np.array_equal(res2["z"], res["z"]))
+    print(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
