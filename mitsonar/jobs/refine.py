@@ -65,8 +65,10 @@ def sidescan_xml(ply, *, n_bins=200, range_max=10.0, depression=30.0, beamwidth_
                  bsdf='<string name="preset" value="seabed_rock"/>'):
     """A scene of a two-channel side-scan head (``id="head"``, one ping) over the mesh ``ply``
     (``id="seabed"``, face normals), single-bounce echoes."""
+    from mitsonar.geometry.kinds import SIDESCAN
+
     return ('<scene version="3.0.0"><integrator type="sonar_tof"><integer name="max_depth" value="1"/></integrator>'
-            '<sensor type="sonar" id="head"><string name="kind" value="sidescan"/><string name="side" value="both"/>'
+            f'<sensor type="sonar" id="head"><string name="kind" value="{SIDESCAN.name}"/><string name="side" value="both"/>'
             f'<integer name="n_pings" value="1"/><float name="depression" value="{depression}"/>'
             f'<float name="range_min" value="0"/><float name="range_max" value="{range_max}"/>'
             f'<integer name="n_bins" value="{n_bins}"/><float name="beamwidth_h" value="{beamwidth_h}"/>'
