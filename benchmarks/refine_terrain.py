@@ -100,18 +100,34 @@ def main(argv=None):
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--iterations", type=int, default=25, help="per stage (two stages)")
+    ap.add_argument("--stages", default=None, help="sigma:blur:iterations,... (vertices, bins, steps; default "
+                    "2.5:6:N,1:2:N with N = --iterations)")
+    ap.add_argument("--lr", type=float, default=0.08)
+    ap.add_argument("--smooth", type=float, default=0.05)
     ap.add_argument("--check-determinism", action="store_true")
     a = ap.parse_args(argv)
     if not (a.length > 0 and a.cell > 0 and a.spp >= 1 and a.iterations >= 1):
         raise SystemExit("refine_terrain: --length, --cell must be > 0 m, --spp and --iterations >= 1")
     stages = ((2.5, 6.0, a.iterations), (1.0, 2.0, a.iterations))
-    res, before, after, info = run(a.length, a.cell, spp=a.spp, seed=a.seed, stages=stages)
+    if a.stages:
+        try:
+            stages = tuple((float(s), float(b), int(n)) for s, b, n in (t.split(":") for t in a.stages.split(",")))
+            assert all(s > 0 and b >= 0 and n >= 1 for s, b, n in stages)
+        except (ValueError, AssertionError):
+            raise SystemExit(f"refine_terrain: --stages must be sigma:blur:iterations,... (sigma > 0, blur >= 0, "
+                             f"iterations >= 1), not {a.stages!r}") from None
+    kw = dict(spp=a.spp, seed=a.seed, stages=stages, lr=a.lr, smooth=a.smooth)
+    res, before, after, info = run(a.length, a.cell, **kw)
     out = {"scene": "scenes_xml/rocky_slope.ply, side-scan along x at y = 0", **info, "spp": a.spp, "seed": a.seed,
+           "lr": a.lr, "smooth": a.smooth,
            "stages": stages, "rms_before_m": before, "rms_after_m": after, "rms_ratio": before / max(after, 1e-12),
            "loss_before": res["loss_start"], "loss_after": res["loss_final"],
-           "loss_ratio": res["loss_start"] / max(res["loss_final"], 1e-30), "seconds": round(res["seconds"], 1)}
+           "loss_ratio": res["loss_start"] / max(res["loss_final"], 1e-30),
+           "loss_by_blur_bins": {str(b): {"before": v[0], "after": v[1], "ratio": v[0] / max(v[1], 1e-30)}
+                                 for b, v in res["loss_by_blur"].items()},
+           "seconds": round(res["seconds"], 1)}
     if a.check_determinism:
-        res2, _, after2, _ = run(a.length, a.cell, spp=a.spp, seed=a.seed, stages=stages, verbose=False)
+        res2, _, after2, _ = run(a.length, a.cell, verbose=False, **kw)
         out["deterministic"] = bool(np.array_equal(res2["z"], res["z"]))
     print(json.dumps(out, indent=1))
     return 0

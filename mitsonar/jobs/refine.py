@@ -177,7 +177,7 @@ def refine_height_field(scene, x, y, z_start, poses, targets, *, stages=((2.5, 6
     dict
         ``z`` (nx, ny) refined heights, ``loss`` per iteration (the render-and-compare part, at
         the stage's blur), ``loss_start`` and ``loss_final`` (both at the last stage's blur),
-        ``seconds``.
+        ``loss_by_blur`` (each stage's blur: (start, final)), ``seconds``.
     """
     import drjit as dr
 
@@ -245,9 +245,10 @@ def _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, smooth,
         return total
 
     t0 = time.perf_counter()
+    blurs = sorted({float(b) for _, b, _ in stages})
     last_blur = float(stages[-1][1])
     with dr.suspend_grad():
-        loss_start = data_loss(z0_dr, last_blur, False)
+        start = {b: data_loss(z0_dr, b, False) for b in blurs}
     history = []
     it = 0
     for s, (_, blur, iters) in enumerate(stages):
@@ -264,9 +265,9 @@ def _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, smooth,
             it += 1
     with dr.suspend_grad():
         z_fin = heights(len(stages))
-        loss_final = data_loss(z_fin, last_blur, False)
+        final = {b: data_loss(z_fin, b, False) for b in blurs}
         z_fin = np.asarray(z_fin, np.float64).reshape(nx, ny)
     params[key] = mi.Float(V0.ravel())
     params.update()
-    return {"z": z_fin, "loss": history, "loss_start": loss_start, "loss_final": loss_final,
-            "seconds": time.perf_counter() - t0}
+    return {"z": z_fin, "loss": history, "loss_start": start[last_blur], "loss_final": final[last_blur],
+            "loss_by_blur": {b: (start[b], final[b]) for b in blurs}, "seconds": time.perf_counter() - t0}
