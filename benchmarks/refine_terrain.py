@@ -14,8 +14,11 @@ inside the swath), refined by :func:`mitsonar.jobs.refine.refine_height_field`.
 Prints one JSON object: the RMS height error over the seen vertices before and after (and their
 ratio), the render-and-compare loss at the last stage's blur before and after (and their ratio),
 the seconds, and whether a second run with the same seed gives the same heights (``--check-determinism``).
+With ``--feedback``: the survey mapped by ``hilbertmap.HilbertMap`` (pings every 0.1 m), without and
+with the refined surface fed back as occupied evidence (``hilbertmap.evidence``), and with the flat
+start's instead (a control), each scored by the map's own seabed heights against the truth.
 
-    python benchmarks/refine_terrain.py [--length 3] [--cell 0.25] [--spp 64] [--iterations 25] [--seed 0] [--check-determinism]
+    python benchmarks/refine_terrain.py [--length 3] [--cell 0.25] [--spp 64] [--iterations 25] [--seed 0] [--check-determinism] [--feedback]
 """
 from __future__ import annotations
 
@@ -93,6 +96,58 @@ def run(length=3.0, cell=0.5, spacing=0.5, altitude=3.0, spp=128, seed=0, stages
                                                                        depth=depth)
 
 
+def map_heights(hm, x, y, cell):
+    """The map's seabed height at the grid's vertices (``hilbertmap.elevation``'s column peak;
+    NaN where the column never reaches p = 0.5 in the region seen)."""
+    from hilbertmap.elevation import elevation_grid
+
+    lo = (x[0] - cell / 2, y[0] - cell / 2, -13.0)
+    hi = (x[-1] + cell / 2, y[-1] + cell / 2, -6.5)
+    g = elevation_grid(hm, resolution=cell, z_step=0.02, bounds=(lo, hi))
+    return g.elevation[::-1].T[:len(x), :len(y)]
+
+
+def feedback(x, y, z_true, z_refined, seen, cell, spp=256, seed=0, spacing=0.1, altitude=3.0):
+    """The Hilbert map of the side-scan survey (pings every ``spacing`` m), then the same map with
+    the refined surface's seen vertices as occupied evidence (:mod:`hilbertmap.evidence`), and as
+    a control with the flat start's; the map's own seabed heights against the truth."""
+    import mitsonar
+    from hilbertmap import HilbertMap
+    from hilbertmap.embedding import Samples
+    from hilbertmap.evidence import surface_samples
+    from mitsonar.jobs.refine import sidescan_xml
+
+    truth = mitsonar.load_scene(sidescan_xml(os.path.join(ROOT, "scenes_xml", "rocky_slope.ply")))
+    xs = np.arange(x[0], x[-1] + 1e-9, spacing)
+    scans = []
+    for k, xp in enumerate(xs):
+        T = np.eye(4)
+        T[:3, 3] = (xp, 0.0, -10.0 + altitude)
+        scans.append(mitsonar.render_scan(truth, pose=T, spp=spp, seed=seed + k))
+    X, Y = np.meshgrid(x, y, indexing="ij")
+
+    def score(z):
+        ok = seen & np.isfinite(z)
+        return {"rms_m": float(np.sqrt(np.mean((z - z_true)[ok] ** 2))) if ok.any() else None,
+                "bias_m": float(np.mean((z - z_true)[ok])) if ok.any() else None,
+                "coverage": float(ok.sum() / seen.sum())}
+
+    out = {}
+    for name, z_ev in (("scans_only", None), ("with_refined_surface", z_refined), ("with_flat_start", "flat")):
+        hm = HilbertMap(random_state=seed)
+        samples = hm.embed_all(scans)
+        if z_ev is not None:
+            z_ev = np.full_like(z_true, float(z_true[seen].mean())) if isinstance(z_ev, str) else z_ev
+            P = np.stack([X[seen], Y[seen], z_ev[seen]], 1)
+            O = np.stack([xs[np.abs(xs[None, :] - P[:, :1]).argmin(1)], np.zeros(len(P)),
+                          np.full(len(P), -10.0 + altitude)], 1)
+            samples = Samples.concatenate([samples, surface_samples(P, O, rng=np.random.default_rng(seed))])
+        hm.fit(scans, samples=samples)
+        out[name] = score(map_heights(hm, x, y, cell))
+    out["pings"] = len(scans)
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--length", type=float, default=3.0, help="survey length along x (m)")
@@ -105,6 +160,8 @@ def main(argv=None):
     ap.add_argument("--lr", type=float, default=0.08)
     ap.add_argument("--smooth", type=float, default=0.05)
     ap.add_argument("--check-determinism", action="store_true")
+    ap.add_argument("--feedback", action="store_true", help="also map the survey with hilbertmap, without and with "
+                    "the refined surface as occupied evidence, and score the map's own seabed heights")
     a = ap.parse_args(argv)
     if not (a.length > 0 and a.cell > 0 and a.spp >= 1 and a.iterations >= 1):
         raise SystemExit("refine_terrain: --length, --cell must be > 0 m, --spp and --iterations >= 1")
@@ -126,6 +183,12 @@ def main(argv=None):
            "loss_by_blur_bins": {str(b): {"before": v[0], "after": v[1], "ratio": v[0] / max(v[1], 1e-30)}
                                  for b, v in res["loss_by_blur"].items()},
            "seconds": round(res["seconds"], 1)}
+    if a.feedback:
+        x = np.arange(-a.length / 2, a.length / 2 + 1e-9, a.cell)
+        y = np.arange(-8.0, 8.0 + 1e-9, a.cell)
+        z_true = true_heights(x, y)
+        seen = (np.abs(y)[None, :] >= 1.5) & (np.abs(y)[None, :] <= 7.5) & np.ones((len(x), 1), bool)
+        out["hilbert_map"] = feedback(x, y, z_true, res["z"], seen, a.cell, seed=a.seed)
     if a.check_determinism:
         res2, _, after2, _ = run(a.length, a.cell, verbose=False, **kw)
         out["deterministic"] = bool(np.array_equal(res2["z"], res["z"]))

@@ -123,7 +123,8 @@ class Samples:
 def _offset_concat(arrays, sizes):
     out, base = [], 0
     for a, n in zip(arrays, sizes):
-        out.append(np.asarray(a, dtype=np.int64) + base)
+        a = np.asarray(a, dtype=np.int64)
+        out.append(np.where(a >= 0, a + base, -1))  # -1: evidence of no ping (hilbertmap.evidence)
         base += n
     return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
 
