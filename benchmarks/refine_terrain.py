@@ -50,7 +50,7 @@ def true_heights(x, y):
 
 
 def run(length=3.0, cell=0.5, spacing=0.5, altitude=3.0, spp=128, seed=0, stages=((2.5, 6.0, 15), (1.0, 2.0, 15)),
-        lr=0.08, smooth=0.05, verbose=True):
+        lr=0.08, smooth=0.05, lr_decay=1.0, verbose=True):
     import mitsuba as mi
 
     import mitsonar
@@ -91,7 +91,7 @@ def run(length=3.0, cell=0.5, spacing=0.5, altitude=3.0, spp=128, seed=0, stages
             print(f"iter {it:3d} loss {loss:.4f} rms {rms(z):.3f} m", file=sys.stderr, flush=True)
 
     res = refine_height_field(model, x, y, np.full_like(z_true, depth), poses, targets, stages=stages, spp=spp,
-                              seed=seed, lr=lr, smooth=smooth, callback=show)
+                              seed=seed, lr=lr, lr_decay=lr_decay, smooth=smooth, callback=show)
     return res, rms(np.full_like(z_true, depth)), rms(res["z"]), dict(nx=len(x), ny=len(y), pings=len(poses),
                                                                        depth=depth)
 
@@ -159,6 +159,7 @@ def main(argv=None):
                     "2.5:6:N,1:2:N with N = --iterations)")
     ap.add_argument("--lr", type=float, default=0.08)
     ap.add_argument("--smooth", type=float, default=0.05)
+    ap.add_argument("--lr-decay", type=float, default=1.0, help="each stage's step falls to lr * this")
     ap.add_argument("--check-determinism", action="store_true")
     ap.add_argument("--feedback", action="store_true", help="also map the survey with hilbertmap, without and with "
                     "the refined surface as occupied evidence, and score the map's own seabed heights")
@@ -173,10 +174,10 @@ def main(argv=None):
         except (ValueError, AssertionError):
             raise SystemExit(f"refine_terrain: --stages must be sigma:blur:iterations,... (sigma > 0, blur >= 0, "
                              f"iterations >= 1), not {a.stages!r}") from None
-    kw = dict(spp=a.spp, seed=a.seed, stages=stages, lr=a.lr, smooth=a.smooth)
+    kw = dict(spp=a.spp, seed=a.seed, stages=stages, lr=a.lr, smooth=a.smooth, lr_decay=a.lr_decay)
     res, before, after, info = run(a.length, a.cell, **kw)
     out = {"scene": "scenes_xml/rocky_slope.ply, side-scan along x at y = 0", **info, "spp": a.spp, "seed": a.seed,
-           "lr": a.lr, "smooth": a.smooth,
+           "lr": a.lr, "lr_decay": a.lr_decay, "smooth": a.smooth,
            "stages": stages, "rms_before_m": before, "rms_after_m": after, "rms_ratio": before / max(after, 1e-12),
            "loss_before": res["loss_start"], "loss_after": res["loss_final"],
            "loss_ratio": res["loss_start"] / max(res["loss_final"], 1e-30),

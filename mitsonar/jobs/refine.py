@@ -139,8 +139,8 @@ def _laplacian_penalty(z, nx, ny):
 
 
 def refine_height_field(scene, x, y, z_start, poses, targets, *, stages=((2.5, 6.0, 20), (1.0, 2.0, 20)),
-                        spp=256, seed=0, lr=0.05, smooth=0.05, head="head", mesh="seabed", deterministic=True,
-                        callback=None):
+                        spp=256, seed=0, lr=0.05, lr_decay=1.0, smooth=0.05, head="head", mesh="seabed",
+                        deterministic=True, callback=None):
     """Refine the heights of the grid mesh ``mesh`` of ``scene`` so that its renders match ``targets``.
 
     Parameters
@@ -163,6 +163,8 @@ def refine_height_field(scene, x, y, z_start, poses, targets, *, stages=((2.5, 6
         Samples per ping; ping ``k`` renders with ``seed + k`` in every iteration.
     lr : float
         Adam's step (m of the smoothed component per iteration, about).
+    lr_decay : float
+        Each stage's step falls geometrically from ``lr`` to ``lr * lr_decay`` over its iterations.
     smooth : float
         ``lambda`` of the Laplacian penalty.
     deterministic : bool
@@ -185,12 +187,13 @@ def refine_height_field(scene, x, y, z_start, poses, targets, *, stages=((2.5, 6
     if deterministic:
         dr.set_thread_count(1)
     try:
-        return _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, smooth, head, mesh, callback)
+        return _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, lr_decay, smooth, head, mesh,
+                       callback)
     finally:
         dr.set_thread_count(threads)
 
 
-def _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, smooth, head, mesh, callback):
+def _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, lr_decay, smooth, head, mesh, callback):
     import drjit as dr
     import mitsuba as mi
 
@@ -253,7 +256,8 @@ def _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, smooth,
     it = 0
     for s, (_, blur, iters) in enumerate(stages):
         opt[f"u{s}"] = dr.zeros(mi.Float, n)
-        for _ in range(int(iters)):
+        for j in range(int(iters)):
+            opt.set_learning_rate(lr * float(lr_decay) ** (j / max(int(iters) - 1, 1)))
             total = data_loss(heights(s + 1), float(blur), True)
             reg = smooth * _laplacian_penalty(heights(s + 1), nx, ny)
             dr.backward(reg)
