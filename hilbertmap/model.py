@@ -169,7 +169,10 @@ class HilbertMap:
         on first-echo evidence, each candidate between the first and the last echo run is kept
         with probability ``1 - max p`` along its path from the transducer (its visibility in that
         map: a direction the first echo's reflector shadows crosses it), and the map is learnt
-        again on both (:mod:`hilbertmap.multiecho`); about twice the SGD time.
+        again on both (:mod:`hilbertmap.multiecho`); about twice the SGD time. Off by default: in
+        the thesis box (seed 11) 91 % of the candidates lie behind the walls (multipath echoes),
+        6 of 43155 pass and the slice distance stays 0.23 m; on the harbour's multibeam frames
+        (100, batch) 1 of 911 passes.
     random_state : int >= 0 or None, default None
         Seed of every random choice.
     variant : {'llvm', 'cuda'}, default 'llvm'
@@ -345,6 +348,8 @@ class HilbertMap:
         self.n_between_candidates_ = int(len(cand))
         self.between_visibility_ = vis
         self.multi_echo_free_ = extra.free  # the candidates labelled free (not saved with the map)
+        if not len(extra.free):
+            return  # nothing reached: the first map stands (a refit would only redraw the SGD's batches)
         merged = dataclasses.replace(samples, free=np.concatenate([samples.free, extra.free]),
                                      free_gap=np.concatenate([samples.gaps(), extra.gaps()]))
         self.free_coverage_.add(extra.free)
