@@ -10,7 +10,7 @@ the same samples, and the OctoMap anchor on the same pings (if ``octomap-python`
 Figures go to ``--out`` (default ``out/thesis_mapping``).
 
     python benchmarks/thesis_mapping.py [--out DIR] [--quick] [--no-sklearn] [--no-octomap] [--seed N]
-        [--only 1x3,...] [--box LxWxD --origin x,y,z --speckle-seed N]
+        [--only 1x3,...] [--box LxWxD --origin x,y,z --speckle-seed N] [--multi-echo]
 
 ``--box 9x7x2.5 --origin 0.6,-0.4,0`` maps a held-out box (other walls, the sonar off-centre);
 with ``--only 1x3`` only the thesis setting's three scans are rendered.
@@ -225,6 +225,8 @@ def main(argv=None) -> int:
                     "default scenes_xml/box.xml, 10x8x3)")
     ap.add_argument("--origin", default=None, help="x,y,z of the first position (the 1 x 3 experiments' sonar)")
     ap.add_argument("--speckle-seed", type=int, default=None, help="the scene's speckle (default the sensor's)")
+    ap.add_argument("--multi-echo", action="store_true", help="HilbertMap(multi_echo=True): water between echoes "
+                    "labelled free where a first map shows it reached")
     args = ap.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
     positions = list(POSITIONS)
@@ -248,6 +250,7 @@ def main(argv=None) -> int:
     scans, truth, t_render = render_sets(args.seed, scene_path, positions, args.speckle_seed)
     V, F = truth
     report = {"scene": f"box {args.box}" if args.box else "scenes_xml/box.xml", "seed": args.seed,
+              "multi_echo": args.multi_echo,
               "speckle_seed": args.speckle_seed, "positions": positions, "n_scans": len(scans),
               "render_s": t_render, "cpu_count": os.cpu_count(), "experiments": {}}
     experiments = [("1x3", scans[:3], 1.0, "Fig. 5.1 / 5.2: 1 position x 3 orientations, 100 % beams"),
@@ -264,7 +267,7 @@ def main(argv=None) -> int:
     extents = [((-6, 6), (-5, 5)), ((-6, 6), (-3.5, 6)), ((-5, 5), (-3.5, 6))]
     kept = {}
     for name, subset, stride, what in experiments:
-        hm = HilbertMap(beam_stride=stride, random_state=args.seed)
+        hm = HilbertMap(beam_stride=stride, random_state=args.seed, multi_echo=args.multi_echo)
         t0 = time.perf_counter()
         samples = hm.embed_all(subset, np.random.default_rng(args.seed))
         t_embed = time.perf_counter() - t0

@@ -105,6 +105,7 @@ def check_params(hm) -> None:
     check_pass_params(hm)
     check_bounds("bounds", hm.bounds)
     check_coverage_params(hm)
+    need("multi_echo", hm.multi_echo, isinstance(hm.multi_echo, (bool, np.bool_)), "True or False")
 
 
 def check_echo_params(hm) -> None:

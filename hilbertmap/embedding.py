@@ -10,7 +10,10 @@ For every ping (beam) of a scan:
 - **occupied groups**: each full bin of the first echo (``occupied_bins``) gives a group of
   ``occupied_samples`` points in that bin's frustum; the model averages their features (kernel
   mean embedding, thesis eq. 4.6) and labels the mean occupied;
-- nothing behind the first echo (acoustic shadow).
+- nothing behind the first echo (acoustic shadow); with ``multi_echo`` the water between the
+  first and the last echo is drawn as candidates (``Samples.between``) that
+  :meth:`HilbertMap.fit` keeps where a first map shows the beam reached them
+  (:mod:`hilbertmap.multiecho`).
 
 Directions follow the beam: ``beam_sampling='pattern'`` draws them in proportion to the two-way
 beam pattern (gaussian with the scan's -3 dB widths; ``uniform`` patterns inside the widths),
@@ -60,6 +63,8 @@ class Samples:
     and ``range_max`` (the nominal frustum of each ping); ``spans``: (P, 3) the ranges where its
     free part starts, where its first echo starts and where that echo's full bins end (the last
     two are nan for a ping without echo); ``occupied_ping``: (G,) the ping of each group.
+    ``between``: (B, 3) multi-echo candidates (water between a ping's echoes, not yet labelled),
+    ``between_ping`` (B,) their pings and ``between_gap`` (B,) their metres to the next echo.
     ``info``: counts.
     """
 
@@ -72,6 +77,9 @@ class Samples:
     spans: np.ndarray = None
     occupied_ping: np.ndarray = None
     free_gap: np.ndarray = None
+    between: np.ndarray = None
+    between_ping: np.ndarray = None
+    between_gap: np.ndarray = None
 
     def gaps(self) -> np.ndarray:
         """Metres from each free sample to its ping's first echo (inf: no echo, or not recorded)."""
@@ -100,13 +108,23 @@ class Samples:
             spans=np.concatenate([p.spans for p in parts]) if parts else np.zeros((0, 3)),
             occupied_ping=_offset_concat([p.occupied_ping for p in parts], [len(p.frames) for p in parts]),
             free_gap=np.concatenate([p.gaps() for p in parts]) if parts else np.zeros(0),
+            between=np.concatenate([p.between_points() for p in parts]) if parts else np.zeros((0, 3)),
+            between_ping=_offset_concat([p.between_ping if p.between_ping is not None else np.zeros(0, np.int64)
+                                         for p in parts], [len(p.frames) for p in parts]),
+            between_gap=np.concatenate([p.between_gap if p.between_gap is not None else np.zeros(0)
+                                        for p in parts]) if parts else np.zeros(0),
         )
+
+    def between_points(self) -> np.ndarray:
+        """The multi-echo candidates (B, 3), empty when none were drawn."""
+        return self.between if self.between is not None else np.zeros((0, 3))
 
 
 def _offset_concat(arrays, sizes):
     out, base = [], 0
     for a, n in zip(arrays, sizes):
-        out.append(np.asarray(a, dtype=np.int64) + base)
+        a = np.asarray(a, dtype=np.int64)
+        out.append(np.where(a >= 0, a + base, -1))  # -1: evidence of no ping (hilbertmap.evidence)
         base += n
     return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
 
@@ -180,7 +198,7 @@ def embed_scan(scan, rng: np.random.Generator, *, source="auto", bin_rule="otsu+
                free_density=40.0, max_free_per_ping=400, free_margin=0.0, near_free=0, near_depth=0.5,
                occupied_samples=16,
                occupied_bins="first_run", max_run=0.3, beam_sampling="pattern", beam_extent=1.0, ping_stride=1,
-               min_echo_bins=4,
+               min_echo_bins=4, multi_echo=False,
                ping_offset=0) -> Samples:
     """Samples of one scan (see the module docstring). Only the scan's attributes are read."""
     values, src = scan_values(scan, source)
@@ -281,13 +299,26 @@ def embed_scan(scan, rng: np.random.Generator, *, source="auto", bin_rule="otsu+
     d = _beam_directions(rng, G * m, scan, beam_sampling, beam_extent)
     occ = _to_world(np.repeat(poses[gp], m, axis=0), d * rr[:, None]).reshape(G, m, 3)
 
+    # --- multi-echo candidates (labelled free by HilbertMap.fit where the beam reached them) ---
+    if multi_echo:
+        from .multiecho import between_echo_candidates
+        b_pts, b_ping, b_gap = between_echo_candidates(
+            full, poses, range_min + np.arange(n_bins) * bw, bw, max(r_blank, range_min), solid, rng,
+            directions=lambda n: _beam_directions(rng, n, scan, beam_sampling, beam_extent),
+            free_density=free_density, max_free_per_ping=max_free_per_ping, near_free=near_free,
+            near_depth=near_depth)
+    else:
+        b_pts, b_ping, b_gap = np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros(0)
+
     info = dict(n_pings=int(len(pings)), n_pings_with_echo=int(has.sum()), n_free=int(len(free)),
-                n_groups=int(G), blanking=float(r_blank), level=float(level) if np.isfinite(level) else float("nan"),
+                n_between=int(len(b_pts)), n_groups=int(G), blanking=float(r_blank),
+                level=float(level) if np.isfinite(level) else float("nan"),
                 source=src)
     beams = np.tile([float(scan.beamwidth_h), float(scan.beamwidth_v), range_max], (len(pings), 1))
     spans = np.stack([r0, np.where(has, r_first, np.nan), np.where(has, r_first + run_len * bw, np.nan)], axis=1)
     return Samples(free=free, occupied=occ, origins=poses[:, :3, 3].copy(), info=info, frames=poses.copy(),
-                   beams=beams, spans=spans, occupied_ping=gp.astype(np.int64), free_gap=gap)
+                   beams=beams, spans=spans, occupied_ping=gp.astype(np.int64), free_gap=gap,
+                   between=b_pts, between_ping=b_ping, between_gap=b_gap)
 
 
 def _drop_short_runs(full: np.ndarray, k: int) -> np.ndarray:

@@ -164,6 +164,15 @@ class HilbertMap:
         level onto them.
     max_groups_per_voxel : int >= 1 or None, default 2
         The same cap for occupied bins, by their centre.
+    multi_echo : bool, default False
+        Label free also the water between a ping's echoes where the beam reached it: after a fit
+        on first-echo evidence, each candidate between the first and the last echo run is kept
+        with probability ``1 - max p`` along its path from the transducer (its visibility in that
+        map: a direction the first echo's reflector shadows crosses it), and the map is learnt
+        again on both (:mod:`hilbertmap.multiecho`); about twice the SGD time. Off by default: in
+        the thesis box (seed 11) 91 % of the candidates lie behind the walls (multipath echoes),
+        6 of 43155 pass and the slice distance stays 0.23 m; on the harbour's multibeam frames
+        (100, batch) 1 of 911 passes.
     random_state : int >= 0 or None, default None
         Seed of every random choice.
     variant : {'llvm', 'cuda'}, default 'llvm'
@@ -202,7 +211,7 @@ class HilbertMap:
                  beam_sampling="pattern", beam_extent=1.0, beam_stride=1, alpha=1e-6, l1_ratio=0.15,
                  schedule="thesis", eta0="auto", k1=1.0, t0=None, batch_size=2048, n_passes=5, partial_passes=1,
                  fit_intercept=True, bounds=None, coverage_voxel=0.25, max_free_per_voxel=12,
-                 max_groups_per_voxel=2, random_state=None, variant="llvm"):
+                 max_groups_per_voxel=2, multi_echo=False, random_state=None, variant="llvm"):
         args = locals()
         for name in self._get_param_names():
             setattr(self, name, args[name])
@@ -277,6 +286,8 @@ class HilbertMap:
         self.loss_curve_ = []
         for _ in range(int(self.n_passes)):
             self.loss_curve_.append(self._sgd_pass(samples))
+        if self.multi_echo and len(samples.between_points()):
+            self._refit_multi_echo(samples)
         t_end = time.perf_counter()
         self.timings_ = dict(embed_s=t_embed - t_start, features_s=t_init - t_embed, sgd_s=t_end - t_init,
                              total_s=t_end - t_start)
@@ -318,6 +329,39 @@ class HilbertMap:
         for _ in range(int(self.partial_passes)):
             self.loss_curve_.append(self._sgd_pass(samples))
         return self
+
+    def _refit_multi_echo(self, samples: Samples) -> None:
+        """Label free the multi-echo candidates the first map shows reached (kept with probability
+        their visibility, :mod:`hilbertmap.multiecho`), thin them on the per-voxel budget and learn
+        the weights again, from zero, on both kinds of free space (same inducing points)."""
+        import dataclasses
+
+        from . import multiecho
+
+        cand = samples.between_points()
+        ping = samples.between_ping
+        vis = multiecho.visibility(self, cand, samples.origins[ping], samples.spans[ping, 0], margin=self.near_depth)
+        keep = multiecho.keep_visible(vis, self._rng)
+        extra = dataclasses.replace(samples, free=cand[keep], free_gap=samples.between_gap[keep],
+                                    occupied=samples.occupied[:0])
+        extra = self._thin(extra)
+        self.n_between_candidates_ = int(len(cand))
+        self.between_visibility_ = vis
+        self.multi_echo_free_ = extra.free  # the candidates labelled free (not saved with the map)
+        if not len(extra.free):
+            return  # nothing reached: the first map stands (a refit would only redraw the SGD's batches)
+        merged = dataclasses.replace(samples, free=np.concatenate([samples.free, extra.free]),
+                                     free_gap=np.concatenate([samples.gaps(), extra.gaps()]))
+        self.free_coverage_.add(extra.free)
+        self.coverage_.add(extra.free)
+        self.weights_ = np.zeros_like(self.weights_)
+        self.dual_coef_ = np.zeros_like(self.dual_coef_)
+        self.intercept_ = 0.0
+        self.t_ = 0.0
+        self.n_schedule_ = len(merged.free) + len(merged.occupied)
+        self.eta0_ = sgd.initial_step(self, merged)
+        for _ in range(int(self.n_passes)):
+            self.loss_curve_.append(self._sgd_pass(merged))
 
     def _check_n_inducing(self, samples: Samples, source: str) -> None:
         # More inducing points than samples leaves the kernel no data to span (the length-scale
@@ -544,5 +588,5 @@ def embed_with(hm, scan, rng=None) -> Samples:
         free_margin=hm.free_margin, near_depth=hm.near_depth, **budget,
         occupied_bins=hm.occupied_bins, max_run=hm.max_run,
         beam_sampling=hm.beam_sampling, beam_extent=hm.beam_extent, ping_stride=hm.beam_stride,
-        min_echo_bins=hm.min_echo_bins,
+        min_echo_bins=hm.min_echo_bins, multi_echo=bool(getattr(hm, "multi_echo", False)),
     )
