@@ -52,6 +52,8 @@ class SonarBDPTIntegrator(SonarTOFIntegrator):
     guide        none     only ``none``: the subpaths are sampled by the BSDFs alone (the MIS
                           weights would need ``sonar_tof``'s image guide's density at the other
                           subpath's vertices)
+    emission     transmit only ``transmit``: subpath B starts in proportion to the transmit fan
+                          (no shared multibeam paths for ``sonar_tof``'s ``receive`` to weight)
     ============ ======== ====================================================================
 
     ``render_histogram`` returns the float64 ``(n_pings, n_bins)`` histogram like ``sonar_tof``'s;
@@ -64,6 +66,9 @@ class SonarBDPTIntegrator(SonarTOFIntegrator):
     # Its subpaths are sampled by the BSDFs alone: the MIS weights would need the guide's density
     # along the other subpath's vertices.
     GUIDES = ("none",)
+    # Its subpaths start from each row's own beam or the transmit fan: it has no shared
+    # multibeam paths for ``emission=receive`` to weight.
+    EMISSIONS = ("transmit",)
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)

@@ -100,6 +100,8 @@ class SonarTOFIntegrator(SonarIntegrator):
     """
 
     name = "sonar_tof"
+    #: ``emission`` values, the default first (the table above).
+    EMISSIONS = (EMISSION, "transmit")
     REFRACTS = True
     SAMPLERS = {"sobol": SobolSamples, "independent": HashSamples}
 
@@ -108,9 +110,9 @@ class SonarTOFIntegrator(SonarIntegrator):
         self.sampling = text(props, "sampling", "sobol", self.name)
         require(self.sampling in self.SAMPLERS, self.name, "sampling", self.sampling,
                 "one of " + ", ".join(self.SAMPLERS))
-        self.emission = text(props, "emission", EMISSION, self.name)
-        require(self.emission in ("transmit", "receive"), self.name, "emission", self.emission,
-                "one of transmit, receive")
+        self.emission = text(props, "emission", self.EMISSIONS[0], self.name)
+        require(self.emission in self.EMISSIONS, self.name, "emission", self.emission,
+                "one of " + ", ".join(self.EMISSIONS))
         self.share_beams = None   # auto: share when the head can (see the table)
         if "share_beams" in props:
             kind = props.type("share_beams").name

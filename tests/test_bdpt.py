@@ -165,6 +165,8 @@ def test_same_seed_same_scan(mitsonar_mod):
     ({"mis": "veach"}, r"sonar_bdpt 'mis': 'veach' is not allowed \(one of balance, power\)"),
     ({"strategy": "6"}, r"sonar_bdpt 'strategy': '6' is not allowed"),
     ({"strategy": "two"}, r"sonar_bdpt 'strategy': 'two' is not allowed"),
+    # no shared multibeam paths to weight: sonar_tof's default would be silently ignored
+    ({"emission": "receive"}, r"sonar_bdpt 'emission': 'receive' is not allowed \(one of transmit\)"),
 ])
 def test_bad_settings_are_refused(mitsonar_mod, params, message):
     sensor = sonar_xml(n_pings=1, n_bins=4)
