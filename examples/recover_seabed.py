@@ -38,6 +38,10 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _inverse import argument_parser, positive_int, pyplot, relative_l2, save_figure  # noqa: E402
 
+# The height map as a mesh, two triangles a cell, and its binary PLY: the library's
+# (`mitsonar.jobs.refine`, which refines such height fields coarse-to-fine).
+from mitsonar.jobs.refine import grid_mesh, write_ply  # noqa: E402,F401
+
 DEPTH = -2.0
 
 
@@ -49,29 +53,6 @@ def true_heights(nx, ny, spacing, amplitude=0.25):
     z = (np.exp(-((X - 0.8) ** 2 + (Y - 2.5) ** 2) / 1.2) - 0.8 * np.exp(-((X + 0.5) ** 2 + (Y + 3.0) ** 2) / 1.5)
          + 0.6 * np.exp(-((X + 1.0) ** 2 + (Y - 4.5) ** 2) / 0.8))
     return DEPTH + amplitude * z, x, y
-
-
-def grid_mesh(x, y, z):
-    """(vertices (n, 3) float32, faces (m, 3) uint32) of the height map ``z[i, j]`` at ``(x[i], y[j])``,
-    two triangles a cell, counter-clockwise seen from above (normals up)."""
-    nx, ny = len(x), len(y)
-    X, Y = np.meshgrid(x, y, indexing="ij")
-    V = np.stack([X.ravel(), Y.ravel(), z.ravel()], 1).astype(np.float32)
-    idx = np.arange(nx * ny).reshape(nx, ny)
-    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
-    F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(np.uint32)
-    return V, F
-
-
-def write_ply(path, V, F):
-    import mitsuba as mi
-
-    m = mi.Mesh("seabed", len(V), len(F), has_vertex_normals=False)
-    p = mi.traverse(m)
-    p["vertex_positions"] = mi.Float(V.ravel())
-    p["faces"] = mi.UInt32(F.ravel())
-    p.update()
-    m.write_ply(path)
 
 
 def survey_xml(ply, n_bins=120, range_max=8.0, depression=30.0):
