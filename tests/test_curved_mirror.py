@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from test_bdpt import SEEDS, integrator, load, stats, z_scores
+from test_image_guide import window_variance
 
 
 @pytest.fixture
@@ -116,33 +117,10 @@ def test_curved_guide_cuts_the_variance_per_path_behind_a_bow(mitsonar_mod, monk
     than with the tangent-plane image (1.75-1.86x measured on three seeds of twice as many paths),
     and the echo's energy agrees. (Sobol renders of a few seeds are no measure here: the planar
     guide's estimate is heavy tailed, one seed in ten holds most of its spread.)"""
-    import drjit as dr
-    import mitsuba as mi
-    from mitsonar.plugins import frozen_pass, image_guide
-    from mitsonar.plugins.samples import HashSamples
-    from mitsonar.plugins.sonar_mlt import _Context
-
     scene = load(mitsonar_mod, "hull_target")
     lo, paths = int(7.4 / 10 * 400), 32768
-
-    def window(flag):
-        monkeypatch.setattr(image_guide, "CURVED_GUIDE", flag)
-        frozen_pass.clear()
-        integ = integrator(type="sonar_tof", max_depth=5, guide="image")
-        ctx = _Context(integ, integ.setup(scene, 0, max_depth=5))
-        n = ctx.sensor.n_pings
-        lane = dr.arange(mi.UInt32, n * paths)
-        ping = lane // paths
-        f, bins, vals = ctx.records(n * paths)
-        ctx.trace(HashSamples(mi.UInt32(5), ping, lane - ping * paths), ping, lane, f, bins, vals)
-        b = bins.numpy().reshape(n, paths, -1)
-        v = np.where(b >= lo, vals.numpy().astype(np.float64).reshape(n, paths, -1), 0.0)
-        mean = np.zeros((n, 400))
-        np.add.at(mean, (np.repeat(np.arange(n), v[0].size), b.ravel()), v.ravel() / paths)
-        return (v ** 2).sum() / paths - (mean ** 2).sum(), mean.sum(), math.sqrt((v.sum(axis=2) ** 2).sum()) / paths
-
-    (var_c, e_c, se_c), (var_p, e_p, se_p) = window(True), window(False)
-    frozen_pass.clear()
+    var_c, e_c, se_c = window_variance(monkeypatch, scene, "CURVED_GUIDE", True, 5, lo, paths)
+    var_p, e_p, se_p = window_variance(monkeypatch, scene, "CURVED_GUIDE", False, 5, lo, paths)
     assert e_c > 0
     assert var_p > 1.4 * var_c, (var_p, var_c)
     assert abs(e_c - e_p) < 4 * math.hypot(se_c, se_p)

@@ -82,37 +82,41 @@ def test_the_way_back_through_two_mirrors_aims_at_the_image_in_the_farther_one(m
     assert step(si_x, after_a[:4])[5][0] == 0
 
 
-def test_guiding_the_way_back_lowers_the_variance_per_path(mitsonar_mod, monkeypatch):
-    """The periscope's boulder window (10.4-14 m), 21 pings x 32768 independent paths each way:
-    the variance per path (summed over the window's bins) is at least 1.5x lower with the way back
-    guided (2.0-2.8x measured on three seeds of twice as many paths), and the echo's energy agrees."""
+def window_variance(monkeypatch, scene, flag_name, flag, seed, lo, paths, n_bins=400):
+    """Independent paths of ``sonar_tof`` (guide ``image``, `image_guide` flag ``flag_name`` set to
+    ``flag``) on every ping of ``scene``, ``paths`` a ping: (the variance per path of the echo
+    summed over bins >= ``lo``, the window's energy, its standard error)."""
     import drjit as dr
     import mitsuba as mi
     from mitsonar.plugins import frozen_pass, image_guide
     from mitsonar.plugins.samples import HashSamples
     from mitsonar.plugins.sonar_mlt import _Context
 
+    monkeypatch.setattr(image_guide, flag_name, flag)
+    frozen_pass.clear()
+    integ = integrator(type="sonar_tof", max_depth=5, guide="image")
+    ctx = _Context(integ, integ.setup(scene, 0, max_depth=5))
+    n = ctx.sensor.n_pings
+    lane = dr.arange(mi.UInt32, n * paths)
+    ping = lane // paths
+    f, bins, vals = ctx.records(n * paths)
+    ctx.trace(HashSamples(mi.UInt32(seed), ping, lane - ping * paths), ping, lane, f, bins, vals)
+    b = bins.numpy().reshape(n, paths, -1)
+    v = np.where(b >= lo, vals.numpy().astype(np.float64).reshape(n, paths, -1), 0.0)
+    mean = np.zeros((n, n_bins))
+    np.add.at(mean, (np.repeat(np.arange(n), v[0].size), b.ravel()), v.ravel() / paths)
+    frozen_pass.clear()
+    return (v ** 2).sum() / paths - (mean ** 2).sum(), mean.sum(), math.sqrt((v.sum(axis=2) ** 2).sum()) / paths
+
+
+def test_guiding_the_way_back_lowers_the_variance_per_path(mitsonar_mod, monkeypatch):
+    """The periscope's boulder window (10.4-14 m), 21 pings x 32768 independent paths each way:
+    the variance per path (summed over the window's bins) is at least 1.5x lower with the way back
+    guided (2.0-2.8x measured on three seeds of twice as many paths), and the echo's energy agrees."""
     scene = load(mitsonar_mod, "periscope")
     lo, paths = int(10.4 / 14 * 400), 32768
-
-    def window(flag):
-        monkeypatch.setattr(image_guide, "RETURN_GUIDE", flag)
-        frozen_pass.clear()
-        integ = integrator(type="sonar_tof", max_depth=5, guide="image")
-        ctx = _Context(integ, integ.setup(scene, 0, max_depth=5))
-        n = ctx.sensor.n_pings
-        lane = dr.arange(mi.UInt32, n * paths)
-        ping = lane // paths
-        f, bins, vals = ctx.records(n * paths)
-        ctx.trace(HashSamples(mi.UInt32(9), ping, lane - ping * paths), ping, lane, f, bins, vals)
-        b = bins.numpy().reshape(n, paths, -1)
-        v = np.where(b >= lo, vals.numpy().astype(np.float64).reshape(n, paths, -1), 0.0)
-        mean = np.zeros((n, 400))
-        np.add.at(mean, (np.repeat(np.arange(n), v[0].size), b.ravel()), v.ravel() / paths)
-        return (v ** 2).sum() / paths - (mean ** 2).sum(), mean.sum(), math.sqrt((v.sum(axis=2) ** 2).sum()) / paths
-
-    (var_on, e_on, se_on), (var_off, e_off, se_off) = window(True), window(False)
-    frozen_pass.clear()
+    var_on, e_on, se_on = window_variance(monkeypatch, scene, "RETURN_GUIDE", True, 9, lo, paths)
+    var_off, e_off, se_off = window_variance(monkeypatch, scene, "RETURN_GUIDE", False, 9, lo, paths)
     assert e_on > 0
     assert var_off > 1.5 * var_on, (var_off, var_on)
     assert abs(e_on - e_off) < 4 * math.hypot(se_on, se_off)
