@@ -447,3 +447,43 @@ def test_the_log_keeps_a_fixed_ring_for_its_percentiles():
         log.add({"ping": k, "latency_ms": float(k), "paths": 16, "error": 0.1, "render_ms": 1.0})
     assert log._ring is ring and ring.shape[0] == 100 and len(log.records) == 256 and log.count == 1000
     assert log.percentiles("latency_ms", (0, 100)) == [900.0, 999.0]
+
+
+def _cli(*argv):
+    import argparse
+
+    from mitsonar.cli import live as live_cli
+
+    parser = argparse.ArgumentParser(prog="mitsonar")
+    live_cli.add_subcommands(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args([str(a) for a in argv])
+    return args.func(args)
+
+
+def test_ping_rate_for_a_scene_without_a_multibeam_is_refused_not_ignored(capsys, tmp_path):
+    from test_serial_cli import one_error_line
+
+    # no --head: the scene's mechanical sonar becomes a head, which has no frames to rate
+    assert _cli("live", BOX, "--ping-rate", "10", "--seconds", "0.1", "--records", tmp_path / "r.csv") == 1
+    assert "--ping-rate is for multibeam frames" in one_error_line(capsys, "live")
+    assert not list(tmp_path.iterdir())
+
+
+def test_records_discard_leaves_no_file(tmp_path):
+    log = PingLog(tmp_path / "r.jsonl")
+    log.add({"ping": 0, "paths": 16})
+    log.discard()
+    log.close()
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_session_that_fails_to_start_leaves_no_records_file(capsys, tmp_path):
+    pytest.importorskip("pymavlink")
+    from test_serial_cli import one_error_line
+
+    # 203.0.113.1 (TEST-NET-3) is no address of this machine: the MAVLink port cannot open, after
+    # the scene loaded and the records file was opened
+    assert _cli("live", BOX, "--spp", "16", "--seconds", "0.1", "--mavlink", "udpin:203.0.113.1:14550",
+                "--records", tmp_path / "r.csv") != 0
+    capsys.readouterr()
+    assert not list(tmp_path.iterdir())

@@ -46,8 +46,8 @@ def _live(args) -> int:
     frames = _frame_mode(args, scene_path)       # True, False, or None: --sensor's kind decides
     if frames:
         _refuse_head_flags(args, scene_path)
-    elif args.ping_rate is not None and args.head is not None:
-        raise ValueError("--ping-rate is for multibeam frames (no --head); a head pings when its client asks")
+    elif args.ping_rate is not None and frames is False:
+        _refuse_ping_rate(args, scene_path)
     if args.head is None and frames is False:
         from mitsonar.devices import registry
         args.head = registry.DEFAULT
@@ -88,6 +88,8 @@ def _live(args) -> int:
             if frames:
                 _refuse_head_flags(args, scene_path)
             else:
+                if args.ping_rate is not None:
+                    _refuse_ping_rate(args, scene_path)
                 from mitsonar.devices import registry
                 args.head = registry.DEFAULT
                 head = _head(args)
@@ -117,7 +119,7 @@ def _live(args) -> int:
         if sock is not None:
             sock.close()
         if log is not None:
-            log.close()
+            log.discard()
         if outputs is not None:
             outputs.discard()
         raise
@@ -134,7 +136,7 @@ def _live(args) -> int:
         except BaseException:
             if receiver is not None:
                 receiver.stop()
-            log.close()
+            log.discard()
             if outputs is not None:
                 outputs.discard()
             raise
@@ -209,6 +211,13 @@ def _domain(text):
     if not 0 <= v <= 232:
         raise argparse.ArgumentTypeError(f"expected a DDS domain id from 0 to 232, got {text!r}")
     return v
+
+
+def _refuse_ping_rate(args, scene_path) -> None:
+    if args.head is not None:
+        raise ValueError("--ping-rate is for multibeam frames (no --head); a head pings when its client asks")
+    raise ValueError(f"--ping-rate is for multibeam frames; {scene_path.name}'s sensor is a mechanical head, "
+                     "which pings when its client asks")
 
 
 def _refuse_head_flags(args, scene_path) -> None:

@@ -16,7 +16,7 @@
 * `PingLog`: one record per ping or frame (time, pose time, paths, estimated error, render and
   latency seconds, budget), percentiles for the summary (p50, p95, p99 of latency, paths and
   error), and optionally a file of records (``.csv`` or ``.jsonl``) written under a temporary
-  name and renamed on `PingLog.close`.
+  name and renamed on `PingLog.close` (removed by `PingLog.discard`).
 * `WireClock`: stamps a ping's record when the last byte of its reply is written to the port
   (latency: the ping's pose time to its bytes written).
 """
@@ -198,6 +198,15 @@ class PingLog:
                 self._file.close()
                 self._file = None
                 os.replace(self._tmp, self.path)
+
+    def discard(self) -> None:
+        """Close the records file and remove it (a session that failed to start leaves no file)."""
+        with self._lock:
+            if self._file is not None:
+                self._file.close()
+                self._file = None
+                if os.path.exists(self._tmp):
+                    os.remove(self._tmp)
 
     def percentiles(self, field: str, qs=(50, 95, 99)):
         """The percentiles of ``field`` (one of `SUMMARY_FIELDS`) over the kept pings (finite
