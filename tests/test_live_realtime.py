@@ -487,3 +487,44 @@ def test_a_session_that_fails_to_start_leaves_no_records_file(capsys, tmp_path):
                 "--records", tmp_path / "r.csv") != 0
     capsys.readouterr()
     assert not list(tmp_path.iterdir())
+
+
+def test_two_threads_sharing_a_renderer_render_distinct_pings_and_read_their_own_records(box_scene):
+    """A frame loop and a head may render with one `PingRenderer` at once: each ping takes its own
+    number (its seed), and ``last_record`` is the calling thread's. Both threads are held at the
+    renderer's lock until both are there (a barrier, not a timing): before the fix, both had read
+    the ping count (0) before taking it."""
+    import threading
+
+    from mitsonar.devices.live import PingRenderer
+
+    scene, sonar = box_scene
+    r = PingRenderer(scene, sonar, PoseBuffer(), spp=16, out=io.StringIO(), calibration=0)
+    barrier = threading.Barrier(2)
+
+    class Gate:
+        def __init__(self, lock):
+            self.lock = lock
+
+        def __enter__(self):
+            barrier.wait(60)
+            return self.lock.__enter__()
+
+        def __exit__(self, *exc):
+            return self.lock.__exit__(*exc)
+
+    r.lock = Gate(r.lock)
+    seen = {}
+
+    def ping(bearing):
+        r.render(bearing)
+        seen[bearing] = r.last_record
+
+    threads = [threading.Thread(target=ping, args=(b,)) for b in (0.25, 0.5)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    assert sorted(rec["ping"] for rec in seen.values()) == [0, 1]
+    assert all(rec["bearing"] == b for b, rec in seen.items())
+    assert r.stats["pings"] == 2

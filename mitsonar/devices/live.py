@@ -154,7 +154,9 @@ class PingRenderer:
     is given, the head's ping period). ``log``: a `mitsonar.devices.realtime.PingLog` the
     records of finished pings go to (`finish`). ``stats``: pings rendered; ``latencies``:
     seconds of the last 1000 renders; ``last_pose``: the 4x4 pose (beam frame) of the last ping;
-    ``last_record``: the record of the last ping (paths, estimated error, render time, ...);
+    ``last_vehicle``: the vehicle's pose then; ``last_record``: the record of the last ping (paths,
+    estimated error, render time, ...); these three are the calling thread's own last ping's
+    (a frame loop and a head may render with one renderer at once);
     ``error``: the scene's `mitsonar.devices.realtime.ErrorModel` (measured by `warm`, with
     ``calibration`` renders at each of its numbers of paths).
     """
@@ -180,8 +182,8 @@ class PingRenderer:
         self.out = sys.stderr if out is None else out
         self.stats: Counter = Counter()
         self.latencies: deque = deque(maxlen=1000)
-        self.last_pose = self.last_vehicle = None
-        self.last_record = None
+        self._mine = threading.local()
+        self._shared = (None, None, None)       # last_pose, last_vehicle, last_record of any thread
         self.lock = threading.Lock()
         self._said_no_pose = False
 
@@ -227,7 +229,8 @@ class PingRenderer:
         """A one-row `Scan` of the ping at ``bearing`` (radians, the simulator's convention) fired
         at ``now`` (``time.monotonic``, default now); its ``bearings`` is ``[bearing]``.
         ``bearing`` None: the sensor's whole frame (every row) at the vehicle's pose.
-        ``budget``: seconds this ping may take (default the renderer's ``budget``)."""
+        ``budget``: seconds this ping may take (the head's ping period), used when the renderer has
+        no ``budget`` of its own (``--budget-ms``, which wins); ignored with a fixed ``spp``."""
         from mitsonar.sim.render import render_scan
 
         t0 = time.monotonic()
@@ -239,26 +242,42 @@ class PingRenderer:
             pose = pose @ bearing_rotation(float(bearing))
         budget = self.budget if self.budget is not None else budget
         paths = self.spp if self.spp is not None else self.paths.next(budget)
-        k = self.stats["pings"]
-        with self.lock:
+        with self.lock:         # the ping's number (its seed) is taken and counted in one step
+            k = self.stats["pings"]
+            self.stats["pings"] += 1
             t1 = time.monotonic()
             scan = render_scan(self.scene, spp=paths, seed=(self.seed + k) % _SEED_MAX, pose=pose,
                                sensor=self.sonar)
             spent = time.monotonic() - t1
-        if self.spp is None:
-            self.paths.measured(paths, spent)
-        if bearing is not None:
-            scan.bearings = np.array([float(bearing)])
-        self.stats["pings"] += 1
-        self.last_pose, self.last_vehicle = pose, vehicle
-        self.latencies.append(time.monotonic() - t0)
-        self.last_record = {"ping": k, "t": wall, "pose_time": now,
-                            "bearing": None if bearing is None else float(bearing), "paths": int(paths),
-                            "error": self.error(paths), "render_ms": spent * 1e3,
-                            "budget_ms": None if budget is None else budget * 1e3}
-        if self.outputs is not None:    # queued: the outputs' thread sends it (LiveOutputs)
-            self.outputs.publish(round(wall * 1e9), vehicle, self.mount, scan)
+            if self.spp is None:
+                self.paths.measured(paths, spent)
+            if bearing is not None:
+                scan.bearings = np.array([float(bearing)])
+            record = {"ping": k, "t": wall, "pose_time": now,
+                      "bearing": None if bearing is None else float(bearing), "paths": int(paths),
+                      "error": self.error(paths), "render_ms": spent * 1e3,
+                      "budget_ms": None if budget is None else budget * 1e3}
+            self.last_pose, self.last_vehicle, self.last_record = pose, vehicle, record
+            self._mine.last = (pose, vehicle, record)
+            self.latencies.append(time.monotonic() - t0)
+            if self.outputs is not None:    # queued, in ping order: the outputs' thread sends it (LiveOutputs)
+                self.outputs.publish(round(wall * 1e9), vehicle, self.mount, scan)
         return scan
+
+    # What the calling thread rendered last (a frame loop and a head may share the renderer):
+    # the pose, vehicle and record of its own last ping; another thread's if it rendered none.
+    last_pose = property(lambda self: self._last(0), lambda self, v: self._set_last(0, v))
+    last_vehicle = property(lambda self: self._last(1), lambda self, v: self._set_last(1, v))
+    last_record = property(lambda self: self._last(2), lambda self, v: self._set_last(2, v))
+
+    def _last(self, i: int):
+        mine = getattr(self._mine, "last", None)
+        return (mine if mine is not None else self._shared)[i]
+
+    def _set_last(self, i: int, value) -> None:
+        shared = list(self._shared)
+        shared[i] = value
+        self._shared = tuple(shared)
 
     def finish(self, record: dict, written: float | None = None) -> None:
         """``record``'s ping is out (its last byte written, or its frame published) at
