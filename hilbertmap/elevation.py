@@ -99,13 +99,24 @@ def write_elevation(path, grid: ElevationGrid, crs=None) -> None:
         raise ValueError(f"HilbertMap: {path}: elevation grids are written as .tif/.tiff (GeoTIFF) or .npz, not "
                          f"{ext or 'a name without extension'}")
     tmp = path + ".part" + ext
+    try:
+        _write_elevation(tmp, ext, path, grid, crs)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)           # a failed write leaves no partial file
+        raise
+    os.replace(tmp, path)
+
+
+def _write_elevation(tmp, ext, path, grid, crs) -> None:
     if ext == ".npz":
         with open(tmp, "wb") as fh:
             np.savez_compressed(fh, elevation=grid.elevation.astype(np.float32),
                                 transform=np.asarray(grid.transform, dtype=np.float64))
     else:
-        # mitsonar writes its GeoTIFF with mitsonar.products.soundings (DepthGrid.write_geotiff);
-        # hilbertmap keeps this writer of its own because it must not import mitsonar.
+        # mitsonar writes its grids with mitsonar.export.geotiff.write_geotiff (``mitsonar map
+        # --elevation``: write_elevation_geotiff, with the band's name, unit and a GeoFrame's
+        # CRS); hilbertmap keeps this writer of its own because it must not import mitsonar.
         try:
             import rasterio
             from rasterio.transform import Affine
@@ -116,7 +127,6 @@ def write_elevation(path, grid: ElevationGrid, crs=None) -> None:
         with rasterio.open(tmp, "w", driver="GTiff", height=rows, width=cols, count=1, dtype="float32",
                            crs=crs, transform=Affine(*grid.transform), nodata=np.nan) as dst:
             dst.write(grid.elevation.astype(np.float32), 1)
-    os.replace(tmp, path)
 
 
 def read_elevation(path) -> ElevationGrid:

@@ -121,3 +121,14 @@ def test_map_elevation_geotiff_has_the_scans_crs(tmp_path, capsys):
     assert main(["map", str(survey), "--incremental", "-o", str(tmp_path / "m2.npz"), "--elevation", str(bad)]) == 1
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "different origins" in err and not bad.exists()
+
+
+def test_a_failed_elevation_write_leaves_no_partial_file(tmp_path):
+    """An elevation grid that cannot be written (a transform that is not numbers) raises and
+    leaves nothing behind: no ``.part`` file beside the path."""
+    from hilbertmap.elevation import ElevationGrid
+
+    bad = ElevationGrid(np.zeros((2, 2)), ("a", 0.0, 0.0, 0.0, -1.0, 0.0), 1.0)
+    with pytest.raises(ValueError):
+        write_elevation(tmp_path / "seabed.npz", bad)
+    assert not list(tmp_path.iterdir())
