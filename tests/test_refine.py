@@ -65,7 +65,7 @@ def test_refinement_lowers_the_height_error_and_the_loss(fitted):
     z_true, start, res, _, _ = fitted
     before, after = rms(start, z_true), rms(res["z"], z_true)
     assert before > 0.5
-    assert after < before / 3.0, (before, after)  # 0.70 -> 0.19 m at seed 7
+    assert after < before / 3.0, (before, after)  # 0.70 -> 0.11 m at seed 7
     assert res["loss_final"] < res["loss_start"] / 10.0, (res["loss_start"], res["loss_final"])
 
 
@@ -83,3 +83,28 @@ def test_bad_inputs_are_refused_in_one_line(fitted):
         refine_height_field(sc, X, Y, np.zeros((2, 2)), poses, targets)
     with pytest.raises(ValueError, match=r"one target per pose is needed, got 2 poses and 1 targets"):
         refine_height_field(sc, X, Y, start, poses, targets[:1])
+
+
+def test_every_ping_moves_the_heights_not_only_the_first(tmp_path):
+    """Ping 0's target is its own render at the start (its loss and gradient are zero); ping 1's is
+    the true terrain's. The heights must move: the gradient of every ping reaches them (the bug:
+    the first ping's backward pass freed the heights' graph, so later pings added nothing)."""
+    import mitsuba as mi
+
+    from mitsonar.jobs.refine import refine_height_field
+
+    z_true = truth()
+    start = np.full_like(z_true, z_true[:, SEEN].mean())
+    poses = [pose(-0.25), pose(0.25)]
+    targets = []
+    for k, (P, z) in enumerate(zip(poses, (start, z_true))):
+        (tmp_path / str(k)).mkdir()
+        sc = setup(str(tmp_path / str(k)), z)
+        p = mi.traverse(sc)
+        p["head.to_world"] = mi.Transform4f(mi.Matrix4f(P))
+        p.update()
+        targets.append(np.asarray(mi.render(sc, spp=16, seed=3 + k))[..., 0])
+    res = refine_height_field(setup(str(tmp_path), start), X, Y, start, poses, targets, spp=16, seed=3,
+                              lr=0.05, smooth=1e-6, stages=((1.0, 2.0, 1),))
+    assert res["loss_start"] > 0
+    assert np.abs(res["z"] - start).max() > 1e-3

@@ -230,10 +230,14 @@ def _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, lr_deca
         return z
 
     def data_loss(z, blur, grad):
+        """The summed loss of every ping; ``z``: the heights, or a function making them. Each ping's
+        backward pass frees the graph it traversed, heights included, so with ``grad`` the heights
+        are made anew per ping (else only the first ping's gradient would reach ``u``)."""
         total = 0.0
         for k, (P, t) in enumerate(zip(tf, tg)):
             params[f"{head}.to_world"] = P
-            params[key] = xy + zsel * dr.gather(mi.Float, z, vid)
+            zk = z() if callable(z) else z
+            params[key] = xy + zsel * dr.gather(mi.Float, zk, vid)
             params.update()
             if grad:
                 img = mi.render(scene, params, spp=spp, seed=seed + k)
@@ -258,7 +262,7 @@ def _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, lr_deca
         opt[f"u{s}"] = dr.zeros(mi.Float, n)
         for j in range(int(iters)):
             opt.set_learning_rate(lr * float(lr_decay) ** (j / max(int(iters) - 1, 1)))
-            total = data_loss(heights(s + 1), float(blur), True)
+            total = data_loss(lambda: heights(s + 1), float(blur), True)
             reg = smooth * _laplacian_penalty(heights(s + 1), nx, ny)
             dr.backward(reg)
             history.append(total)
