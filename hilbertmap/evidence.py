@@ -8,8 +8,9 @@ survey's soundings) as labelled samples that :meth:`HilbertMap.fit` takes beside
 Each point becomes an occupied group of one point (the group's mean is the point: a surface known
 to the centimetre, not an echo spread over a fan), weighted as a full bin (``occupied_weight``); the
 water on the straight segment from its ``origin`` (the sensor that saw it) to ``margin`` metres
-before it becomes ``free_per_point`` free samples (uniform in range), the last ``near_depth`` of
-them counted as the shell before a surface (thinned on its own budget). The points add no ping to
+before it becomes ``free_per_point`` free samples (uniform in range); each keeps its metres to the
+point (``free_gap``), so that those within the map's ``near_depth`` of it count as the shell before
+a surface (thinned on its own budget). The points add no ping to
 the map's record of what was insonified.
 """
 from __future__ import annotations
