@@ -172,7 +172,9 @@ def test_records_are_written_under_a_temporary_name_and_renamed_on_close(tmp_pat
         assert [r["latency_ms"] for r in rows] == [4.0, 5.0, 6.0] and rows[1]["error"] is None
     assert log.percentiles("latency_ms") == pytest.approx([5.0, 5.9, 5.98])
     assert "latency ms p50 5.0" in log.summary()
-    for bad, why in ((tmp_path / "x.txt", "ending in .csv or .jsonl"), (tmp_path / "no" / "x.csv", "does not exist")):
+    (tmp_path / "dir.csv").mkdir()           # os.replace onto it would fail only when the session ends
+    for bad, why in ((tmp_path / "x.txt", "ending in .csv or .jsonl"), (tmp_path / "no" / "x.csv", "does not exist"),
+                     (tmp_path / "dir.csv", "is a folder")):
         with pytest.raises(ValueError, match=why):
             PingLog(bad)
 

@@ -144,10 +144,13 @@ RECORD_FIELDS = ("ping", "t", "pose_time", "bearing", "paths", "error", "render_
 
 
 def check_records_path(path) -> str:
-    """``path`` if it ends in ``.csv`` or ``.jsonl`` and its folder exists; ValueError naming it."""
+    """``path`` if it ends in ``.csv`` or ``.jsonl``, is not a folder and its folder exists;
+    ValueError naming it."""
     p = os.fspath(path)
     if not p.endswith((".csv", ".jsonl")):
         raise ValueError(f"--records {p}: expected a file name ending in .csv or .jsonl")
+    if os.path.isdir(p):
+        raise ValueError(f"--records {p}: is a folder; expected a file name ending in .csv or .jsonl")
     folder = os.path.dirname(os.path.abspath(p))
     if not os.path.isdir(folder):
         raise ValueError(f"--records {p}: folder {folder} does not exist")
