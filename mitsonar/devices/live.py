@@ -221,8 +221,11 @@ class PingRenderer:
                 self.error = ErrorModel.measure(one, self.calibration)
             else:
                 one(paths, 0)
-        n, t = max(times)      # the largest renders: the time per path least blurred by fixed costs
-        self.paths.per_path = t / n
+        # the largest renders: the time per path least blurred by fixed costs; their median, not
+        # the slowest (max over (n, t) pairs took the slowest repeat: the first at a new pass size
+        # records the frozen pass, so the first budgeted pings started with too few paths)
+        n = max(k for k, _ in times)
+        self.paths.per_path = float(np.median([t for k, t in times if k == n])) / n
         return first
 
     def render(self, bearing: float | None, now: float | None = None, budget: float | None = None):
