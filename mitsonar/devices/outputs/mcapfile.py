@@ -44,7 +44,11 @@ class McapRecording(FoxgloveChannels):
             raise OutputError(f"--mcap {self.path}: cannot write ({e})") from None
 
     def close(self) -> None:
-        self.writer.close()
+        try:
+            self.writer.close()
+        except BaseException:
+            self._staged.discard()        # a recording that could not be finished leaves no file
+            raise
         self._staged.commit()
 
     def discard(self) -> None:
