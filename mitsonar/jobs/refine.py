@@ -166,7 +166,7 @@ def refine_height_field(scene, x, y, z_start, poses, targets, *, stages=((2.5, 6
     lr_decay : float
         Each stage's step falls geometrically from ``lr`` to ``lr * lr_decay`` over its iterations.
     smooth : float
-        ``lambda`` of the Laplacian penalty.
+        ``lambda`` of the Laplacian penalty (0: none).
     deterministic : bool
         Run Dr.Jit on one thread during the fit (restored after): the vertex gradients and the
         smoothing are sums by atomic adds, whose order, and so whose rounding, varies between
@@ -263,8 +263,8 @@ def _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, lr_deca
         for j in range(int(iters)):
             opt.set_learning_rate(lr * float(lr_decay) ** (j / max(int(iters) - 1, 1)))
             total = data_loss(lambda: heights(s + 1), float(blur), True)
-            reg = smooth * _laplacian_penalty(heights(s + 1), nx, ny)
-            dr.backward(reg)
+            if smooth:      # smooth 0: no penalty (its graph would hold no gradient for backward)
+                dr.backward(smooth * _laplacian_penalty(heights(s + 1), nx, ny))
             history.append(total)
             opt.step()
             if callback is not None:
