@@ -83,6 +83,10 @@ def test_bad_inputs_are_refused_in_one_line(fitted):
         refine_height_field(sc, X, Y, np.zeros((2, 2)), poses, targets)
     with pytest.raises(ValueError, match=r"one target per pose is needed, got 2 poses and 1 targets"):
         refine_height_field(sc, X, Y, start, poses, targets[:1])
+    with pytest.raises(ValueError, match=r"targets\[1\] must be a \(rows, bins\) array like the renders, not shape"):
+        refine_height_field(sc, X, Y, start, poses, [targets[0], np.ravel(targets[1])])
+    with pytest.raises(ValueError, match=r"poses\[0\] must be a 4x4 matrix, not shape \(3, 4\)"):
+        refine_height_field(sc, X, Y, start, [np.eye(4)[:3], poses[1]], targets)
 
 
 def test_every_ping_moves_the_heights_not_only_the_first(tmp_path):

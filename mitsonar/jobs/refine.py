@@ -209,6 +209,12 @@ def _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, lr_deca
                          f"{len(targets)} targets")
     if not stages:
         raise ValueError("refine_height_field: stages must hold at least one (sigma, blur, iterations)")
+    for k, (P, t) in enumerate(zip(poses, targets)):
+        if np.shape(P) != (4, 4):
+            raise ValueError(f"refine_height_field: poses[{k}] must be a 4x4 matrix, not shape {np.shape(P)}")
+        if np.ndim(t) != 2:
+            raise ValueError(f"refine_height_field: targets[{k}] must be a (rows, bins) array like the "
+                             f"renders, not shape {np.shape(t)}")
     key = f"{mesh}.vertex_positions"
     params = scan_parameters(scene, [f"{head}.to_world", key])
     V0, _ = grid_mesh(x, y, z0)
