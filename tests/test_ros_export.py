@@ -134,6 +134,20 @@ def test_refusals(tmp_path):
     assert sorted(os.listdir(tmp_path)) == ["x.mcap"]       # nothing written, no temporary left
 
 
+def test_a_bag_that_cannot_be_finished_leaves_no_file(tmp_path, monkeypatch):
+    """The MCAP writer failing at its last step (the summary, e.g. a full disk): the error comes
+    through and neither the bag nor its temporary file is left."""
+    from mcap_ros2.writer import Writer
+
+    def full(self, *a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Writer, "finish", full)
+    with pytest.raises(OSError, match="No space left"):
+        write_mcap(tmp_path / "z.mcap", _scan("multibeam"))
+    assert os.listdir(tmp_path) == []
+
+
 def test_cli_export_round_trip_and_refusals(tmp_path, capsys):
     from mitsonar.cli import main
 

@@ -220,9 +220,14 @@ class McapBag:
         self._write("/sonar/detections", M.point_cloud(pts, levels, last), last)
 
     def close(self) -> dict:
-        """Finish the file and rename it into place; returns the message count per topic written."""
-        self._writer.finish()
-        self._fh.close()
+        """Finish the file and rename it into place; returns the message count per topic written.
+        A failure to finish leaves no file (the temporary one is removed)."""
+        try:
+            self._writer.finish()
+            self._fh.close()
+        except BaseException:
+            self.discard()
+            raise
         self.staged.commit()
         return self.written()
 
