@@ -68,7 +68,7 @@ CACHE_SIZE = 4
 _cache: dict = {}
 #: The pose-free tables of the field (`_tables`), keyed by seed, ranges, resolution and features.
 _tables_cache: dict = {}
-_blas = None   # threadpoolctl's controller, made on first use (`one_blas_thread`)
+_blas = None   # threadpoolctl's BLAS controllers, found on first use (`one_blas_thread`)
 
 
 def cell_speckle(poses, ranges, *, seed: int, beamwidth_h: float, aperture_h: float, resolution: float,
@@ -156,10 +156,25 @@ def one_blas_thread():
         try:
             from threadpoolctl import ThreadpoolController
 
-            _blas = ThreadpoolController()
+            _blas = [lib for lib in ThreadpoolController().lib_controllers if lib.user_api == "blas"]
         except Exception:   # noqa: BLE001 - no control over the BLAS: run it as it comes
-            _blas = False
-    return _blas.limit(limits=1, user_api="blas") if _blas else contextlib.nullcontext()
+            _blas = []
+    return _held_to_one(_blas) if _blas else contextlib.nullcontext()
+
+
+@contextlib.contextmanager
+def _held_to_one(libs):
+    """Each BLAS library of ``libs`` (threadpoolctl's controllers) on one thread for the block,
+    its count given back after (a few microseconds: ``threadpool_limits`` would look the
+    libraries up again on every call, 1 ms)."""
+    before = [lib.get_num_threads() for lib in libs]
+    for lib in libs:
+        lib.set_num_threads(1)
+    try:
+        yield
+    finally:
+        for lib, n in zip(libs, before):
+            lib.set_num_threads(n)
 
 
 def _field(poses, ranges, seed, beamwidth_h, aperture_h, resolution, n_features):
