@@ -498,3 +498,66 @@ def test_live_pings_equal_the_reference_chain(mitsonar_mod, monkeypatch):
         np.testing.assert_array_equal(scans[0].intensity, scans[1].intensity)
         np.testing.assert_array_equal(scans[0].data, scans[1].data)
         assert scans[0].data.any()
+
+
+def test_prefetched_noise_gives_the_same_bytes(mitsonar_mod, monkeypatch):
+    """`render_scan` draws the receiver noise on a worker thread during the render
+    (`fastchain.prefetch_draws`): every frame takes the prefetched draws (same seed and shape)
+    and its bytes are those drawn by `Electronics.apply` itself; another seed or shape is not
+    taken."""
+    from mitsonar.receiver import fastchain
+    from mitsonar.receiver.electronics import Electronics
+
+    scene = mitsonar_mod.load_scene(QUAY)
+    taken = []
+    take = fastchain.take_draws
+
+    def spy(*args):
+        drawn = take(*args)
+        taken.append(drawn is not None)
+        return drawn
+
+    monkeypatch.setattr(fastchain, "take_draws", spy)
+    scans = {}
+    for prefetch in (True, False):
+        monkeypatch.setattr(fastchain, "PREFETCH", prefetch)
+        scans[prefetch] = [mitsonar_mod.render_scan(scene, spp=1, seed=s, electronics_seed=e)
+                           for s, e in ((4, None), (4, 9))]
+    assert taken == [True, True, False, False]
+    for a, b in zip(scans[True], scans[False]):
+        np.testing.assert_array_equal(a.data, b.data)
+    assert not np.array_equal(scans[True][0].data, scans[True][1].data)
+    model = Electronics.from_dict({})
+    ranges = np.linspace(0.5, 10.0, 50)
+    monkeypatch.setattr(fastchain, "PREFETCH", True)
+    model.prefetch_noise((3, 50), ranges, 1500.0, 7)
+    assert fastchain.take_draws((3, 50), 8) is None        # another seed: drawn by apply
+    model.prefetch_noise((3, 50), ranges, 1500.0, 7)
+    assert fastchain.take_draws((4, 50), 7) is None        # another shape
+
+
+def _draws_in_child(queue):
+    from mitsonar.receiver import fastchain
+
+    fastchain.prefetch_draws((2, 30), 5)
+    queue.put(float(fastchain.take_draws((2, 30), 5)[0].sum()))
+
+
+def test_prefetch_works_in_a_forked_child(mitsonar_mod):
+    """A process forked after a prefetch (a dataset's workers) has no worker thread: its own
+    prefetch starts one instead of waiting forever on the parent's."""
+    import multiprocessing
+
+    from mitsonar.receiver import fastchain
+
+    fastchain.prefetch_draws((2, 30), 5)
+    want = float(fastchain.take_draws((2, 30), 5)[0].sum())
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    child = ctx.Process(target=_draws_in_child, args=(queue,))
+    child.start()
+    child.join(30)
+    alive = child.is_alive()
+    if alive:
+        child.kill()
+    assert not alive and queue.get(timeout=5) == want

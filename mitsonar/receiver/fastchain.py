@@ -15,6 +15,7 @@ faults).
 from __future__ import annotations
 
 import math
+import os
 import threading
 
 import numpy as np
@@ -92,6 +93,56 @@ def gaussian_draws(shape, rng: np.random.Generator, corr_bins=None):
     rng.standard_normal(out=z)
     z *= math.sqrt(0.5)
     return z, h
+
+
+#: `prefetch_draws` draws on a worker thread (False: `Electronics.apply` draws; the same numbers).
+PREFETCH = True
+_drawer = None          # (process id, one worker thread) drawing prefetched noise (`prefetch_draws`)
+_prefetched: dict = {}  # calling thread -> ((seed, shape), future)
+
+
+def prefetch_draws(shape, seed: int, corr_bins=None) -> None:
+    """Start drawing `gaussian_draws`' numbers for ``(shape, default_rng(seed), corr_bins)`` on a
+    worker thread, for the calling thread's next `take_draws` with the same seed and shape.
+    ``render_scan`` calls it before its render: NumPy draws without holding the GIL, so on a
+    second core the draws (the quay frame: 0.5 M normals, 5 ms) overlap the render's Python
+    set-up and kernels instead of following them. The same numbers: a fresh generator of that
+    seed whose first use is this fill, as in `Electronics.apply`."""
+    global _drawer
+    if not PREFETCH or isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        return
+    if _drawer is None or _drawer[0] != os.getpid():   # a forked child has no worker thread: a new one
+        from concurrent.futures import ThreadPoolExecutor
+
+        _prefetched.clear()
+        _drawer = (os.getpid(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="mitsonar-draws"))
+    size = tuple(shape[:-1]) + (shape[-1] + _taps(corr_bins).size - 1, 2)
+    key = (int(seed), size)
+    _prefetched[threading.get_ident()] = (key, _drawer[1].submit(_draw, key[0], size))
+
+
+def _draw(seed, size):
+    z = np.empty(size)
+    np.random.default_rng(seed).standard_normal(out=z)
+    return z
+
+
+def take_draws(shape, seed, corr_bins=None):
+    """`gaussian_draws(shape, np.random.default_rng(seed), corr_bins)` from the calling thread's
+    `prefetch_draws` when it drew that seed and shape (then forgotten), else None."""
+    pending = _prefetched.pop(threading.get_ident(), None)
+    h = _taps(corr_bins)
+    if pending is None or pending[0] != (seed, tuple(shape[:-1]) + (shape[-1] + h.size - 1, 2)):
+        return None
+    z = pending[1].result()
+    z *= math.sqrt(0.5)
+    return z, h
+
+
+def _taps(corr_bins):
+    h = np.ones(1) if corr_bins is None else np.asarray(corr_bins, dtype=np.float64)
+    h = h[h > 0]
+    return h / math.sqrt(float(np.sum(h * h)))
 
 
 def filtered(z, h, n_bins):
