@@ -27,12 +27,18 @@ with measurements: the same frames with glibc keeping freed memory (``MALLOC_MMA
 from NumPy's large temporaries being mapped afresh), with Dr.Jit's allocation cache flushed after
 every frame (``dr.flush_malloc_cache``), and with one Dr.Jit thread instead of the default.
 
-Usage: python benchmarks/frame_profile.py [--frames 12] [--spp 64] [--ref-factor 16] [--quick]
+``live_ping`` (also alone, with ``quay_frame_spp1``, by ``--fixed-only``): the fixed cost of
+the live heads' one-row ping (harbour.xml's mechanical head, 16 paths, a new bearing each ping)
+and of the quay frame at spp 1, stage by stage, for the reference chain, the fast chain and the
+fast chain without its noise prefetch (`mitsonar.receiver.fastchain.PREFETCH`), interleaved.
+
+Usage: python benchmarks/frame_profile.py [--frames 12] [--spp 64] [--ref-factor 16] [--quick] [--fixed-only]
 """
 from __future__ import annotations
 
 import argparse
 import contextlib
+import itertools
 import json
 import math
 import os
@@ -288,32 +294,42 @@ def fixed_cost(scene, frames):
     return out
 
 
-def staged(go, frames, fast_modes=(False, True)):
-    """``go(seed)`` timed ``frames`` times per chain, the chains interleaved (reference, fast, ...),
-    each stage as in `profile_case` (no saving): medians of the wall time and mean ms per stage."""
-    for fast in fast_modes:          # compile and fill the caches before timing
-        set_chain(fast)
+def set_mode(mode):
+    """``reference``, ``fast`` or ``fast_no_prefetch`` (the fast chain drawing its receiver noise
+    after the render instead of during it, `fastchain.PREFETCH`)."""
+    from mitsonar.receiver import fastchain
+
+    set_chain(mode != "reference")
+    if hasattr(fastchain, "PREFETCH"):
+        fastchain.PREFETCH = mode == "fast"
+
+
+def staged(go, frames, modes=("reference", "fast", "fast_no_prefetch")):
+    """``go(seed)`` timed ``frames`` times per mode (`set_mode`), the modes interleaved, each
+    stage as in `profile_case` (no saving): medians of the wall time and mean ms per stage."""
+    for mode in modes:               # compile and fill the caches before timing
+        set_mode(mode)
         go(1)
-    acc = {f: {"wall": [], "stages": dict.fromkeys(STAGES, 0.0), "usage": np.zeros(6)} for f in fast_modes}
+    acc = {m: {"wall": [], "stages": dict.fromkeys(STAGES, 0.0), "usage": np.zeros(6)} for m in modes}
     for i in range(frames):
-        for fast in fast_modes:
-            set_chain(fast)
+        for mode in modes:
+            set_mode(mode)
             st = Stages()
             with instrument(st):
                 u0 = usage()
                 t = time.perf_counter()
                 go(100 + i)
                 wall = time.perf_counter() - t
-                acc[fast]["usage"] += usage() - u0
+                acc[mode]["usage"] += usage() - u0
             st.t["python_setup"] = wall - sum(v for k, v in st.t.items() if k != "python_setup")
-            acc[fast]["wall"].append(wall)
+            acc[mode]["wall"].append(wall)
             for k in STAGES:
-                acc[fast]["stages"][k] += st.t[k]
-    set_chain(True)
+                acc[mode]["stages"][k] += st.t[k]
+    set_mode("fast")
     out = {}
-    for fast in fast_modes:
-        a = acc[fast]
-        out["fast" if fast else "reference"] = {
+    for mode in modes:
+        a = acc[mode]
+        out[mode] = {
             "ms_median": round(1e3 * statistics.median(a["wall"]), 3), "ms_min": round(1e3 * min(a["wall"]), 3),
             "stages_ms_mean": {k: round(1e3 * v / frames, 3) for k, v in a["stages"].items() if k != "save"},
             "cpu_per_frame": per_frame(a["usage"], frames)}
@@ -332,8 +348,10 @@ def live_ping_fixed_cost(frames, spp=16):
     sonar = scene.sensors()[0]
     mount = np.array(sonar.to_world_np, dtype=np.float64)
 
-    def go(i):
-        pose = mount @ bearing_rotation(math.radians(1.8 * (i % 200)))
+    turns = itertools.count()
+
+    def go(i):   # every call a new bearing (no mode finds another's field in the cache)
+        pose = mount @ bearing_rotation(math.radians(1.8 * (next(turns) % 200)))
         return render_mod.render_scan(scene, spp=spp, seed=i, pose=pose, sensor=sonar)
 
     return {"rows": 1, "bins": int(sonar.n_bins), "spp": spp, **staged(go, frames)}
