@@ -530,7 +530,11 @@ def test_prefetched_noise_gives_the_same_bytes(mitsonar_mod, monkeypatch):
     model = Electronics.from_dict({})
     ranges = np.linspace(0.5, 10.0, 50)
     monkeypatch.setattr(fastchain, "PREFETCH", True)
+    model.prefetch_noise((1, 600), np.linspace(0.5, 30.5, 600), 1500.0, 7)    # a one-row ping: drawn by apply
+    assert fastchain.take_draws((1, 600), 7) is None
+    monkeypatch.setattr(fastchain, "PREFETCH_MIN", 0)
     model.prefetch_noise((3, 50), ranges, 1500.0, 7)
+    assert fastchain.take_draws((3, 50), 7) is not None
     assert fastchain.take_draws((3, 50), 8) is None        # another seed: drawn by apply
     model.prefetch_noise((3, 50), ranges, 1500.0, 7)
     assert fastchain.take_draws((4, 50), 7) is None        # another shape
@@ -543,13 +547,14 @@ def _draws_in_child(queue):
     queue.put(float(fastchain.take_draws((2, 30), 5)[0].sum()))
 
 
-def test_prefetch_works_in_a_forked_child(mitsonar_mod):
+def test_prefetch_works_in_a_forked_child(mitsonar_mod, monkeypatch):
     """A process forked after a prefetch (a dataset's workers) has no worker thread: its own
     prefetch starts one instead of waiting forever on the parent's."""
     import multiprocessing
 
     from mitsonar.receiver import fastchain
 
+    monkeypatch.setattr(fastchain, "PREFETCH_MIN", 0)
     fastchain.prefetch_draws((2, 30), 5)
     want = float(fastchain.take_draws((2, 30), 5)[0].sum())
     ctx = multiprocessing.get_context("fork")

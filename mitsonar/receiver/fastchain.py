@@ -97,6 +97,10 @@ def gaussian_draws(shape, rng: np.random.Generator, corr_bins=None):
 
 #: `prefetch_draws` draws on a worker thread (False: `Electronics.apply` draws; the same numbers).
 PREFETCH = True
+#: Fewest normals worth a worker (about 1 ms of draws): handing a one-row ping's 1 200 draws to a
+#: thread cost more than drawing them (the worker's wake-up and its turn with the GIL: the live
+#: harbour ping took 14-21 ms instead of 9-10 ms, benchmarks/frame_profile.py --fixed-only).
+PREFETCH_MIN = 1 << 17
 _drawer = None          # (process id, one worker thread) drawing prefetched noise (`prefetch_draws`)
 _prefetched: dict = {}  # calling thread -> ((seed, shape), future)
 
@@ -117,6 +121,8 @@ def prefetch_draws(shape, seed: int, corr_bins=None) -> None:
         _prefetched.clear()
         _drawer = (os.getpid(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="mitsonar-draws"))
     size = tuple(shape[:-1]) + (shape[-1] + _taps(corr_bins).size - 1, 2)
+    if math.prod(size) < PREFETCH_MIN:
+        return
     key = (int(seed), size)
     _prefetched[threading.get_ident()] = (key, _drawer[1].submit(_draw, key[0], size))
 
