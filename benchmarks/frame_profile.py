@@ -27,13 +27,20 @@ with measurements: the same frames with glibc keeping freed memory (``MALLOC_MMA
 from NumPy's large temporaries being mapped afresh), with Dr.Jit's allocation cache flushed after
 every frame (``dr.flush_malloc_cache``), and with one Dr.Jit thread instead of the default.
 
-Usage: python benchmarks/frame_profile.py [--frames 12] [--spp 64] [--ref-factor 16] [--quick]
+``live_ping`` (also alone, with ``quay_frame_spp1``, by ``--fixed-only``): the fixed cost of
+the live heads' one-row ping (harbour.xml's mechanical head, 16 paths, a new bearing each ping)
+and of the quay frame at spp 1, stage by stage, for the reference chain, the fast chain and the
+fast chain without its noise prefetch (`mitsonar.receiver.fastchain.PREFETCH`), interleaved.
+
+Usage: python benchmarks/frame_profile.py [--frames 12] [--spp 64] [--ref-factor 16] [--quick] [--fixed-only]
 """
 from __future__ import annotations
 
 import argparse
 import contextlib
+import itertools
 import json
+import math
 import os
 import resource
 import statistics
@@ -287,6 +294,76 @@ def fixed_cost(scene, frames):
     return out
 
 
+def set_mode(mode):
+    """``reference``, ``fast`` or ``fast_no_prefetch`` (the fast chain drawing its receiver noise
+    after the render instead of during it, `fastchain.PREFETCH`)."""
+    from mitsonar.receiver import fastchain
+
+    set_chain(mode != "reference")
+    if hasattr(fastchain, "PREFETCH"):
+        fastchain.PREFETCH = mode == "fast"
+
+
+def staged(go, frames, modes=("reference", "fast", "fast_no_prefetch")):
+    """``go(seed)`` timed ``frames`` times per mode (`set_mode`), the modes interleaved, each
+    stage as in `profile_case` (no saving): medians of the wall time and mean ms per stage."""
+    for mode in modes:               # compile and fill the caches before timing
+        set_mode(mode)
+        go(1)
+    acc = {m: {"wall": [], "stages": dict.fromkeys(STAGES, 0.0), "usage": np.zeros(6)} for m in modes}
+    for i in range(frames):
+        for mode in modes:
+            set_mode(mode)
+            st = Stages()
+            with instrument(st):
+                u0 = usage()
+                t = time.perf_counter()
+                go(100 + i)
+                wall = time.perf_counter() - t
+                acc[mode]["usage"] += usage() - u0
+            st.t["python_setup"] = wall - sum(v for k, v in st.t.items() if k != "python_setup")
+            acc[mode]["wall"].append(wall)
+            for k in STAGES:
+                acc[mode]["stages"][k] += st.t[k]
+    set_mode("fast")
+    out = {}
+    for mode in modes:
+        a = acc[mode]
+        out[mode] = {
+            "ms_median": round(1e3 * statistics.median(a["wall"]), 3), "ms_min": round(1e3 * min(a["wall"]), 3),
+            "stages_ms_mean": {k: round(1e3 * v / frames, 3) for k, v in a["stages"].items() if k != "save"},
+            "cpu_per_frame": per_frame(a["usage"], frames)}
+    return out
+
+
+def live_ping_fixed_cost(frames, spp=16):
+    """The live heads' ping (issue "live"): one row of scenes_xml/harbour.xml's mechanical head
+    (`mitsonar.devices.live.live_scene`), ``spp`` paths, from the mount turned to a new bearing
+    every ping (1.8 deg steps, as `PingRenderer.render` does): the pose changes every ping, so
+    the speckle field of each ping is new. Stages per chain, interleaved."""
+    from mitsonar.devices.live import live_scene
+    from mitsonar.geometry.frames import bearing_rotation
+
+    scene = live_scene(os.path.join(SCENES, "harbour.xml"))
+    sonar = scene.sensors()[0]
+    mount = np.array(sonar.to_world_np, dtype=np.float64)
+
+    turns = itertools.count()
+
+    def go(i):   # every call a new bearing (no mode finds another's field in the cache)
+        pose = mount @ bearing_rotation(math.radians(1.8 * (next(turns) % 200)))
+        return render_mod.render_scan(scene, spp=spp, seed=i, pose=pose, sensor=sonar)
+
+    return {"rows": 1, "bins": int(sonar.n_bins), "spp": spp, **staged(go, frames)}
+
+
+def quay_fixed_cost_stages(frames):
+    """The 512-beam quay frame at spp 1 (the fixed cost of a frame, spp -> 0), stage by stage."""
+    scene = load_case("quay_wall_512_beams")
+    return {"rows": int(scene.sensors()[0].n_pings), "spp": 1,
+            **staged(lambda i: render_mod.render_scan(scene, spp=1, seed=i), frames)}
+
+
 CHILD = "MITSONAR_FRAME_PROFILE_CHILD"
 
 
@@ -323,7 +400,15 @@ def main(argv=None):
                     help="quay-wall frame's paths per beam (320: about 5 %% relative error, shared beams, max_depth 3)")
     ap.add_argument("--ref-factor", type=int, default=16)
     ap.add_argument("--quick", action="store_true", help="skip the error, ray-casting and child-process parts")
+    ap.add_argument("--fixed-only", action="store_true",
+                    help="only the fixed costs: the live one-row harbour ping (spp 16) and the quay frame at spp 1")
     args = ap.parse_args(argv)
+    if args.fixed_only:
+        print(json.dumps({"cores": os.cpu_count(), "load_avg_start": os.getloadavg(),
+                          "live_ping": live_ping_fixed_cost(args.frames),
+                          "quay_frame_spp1": quay_fixed_cost_stages(args.frames),
+                          "load_avg_end": os.getloadavg()}, indent=1))
+        return
     out = {"cores": os.cpu_count(), "dr_threads": dr.thread_count(), "load_avg_start": os.getloadavg(),
            "cases": {}}
     with tempfile.TemporaryDirectory() as d:
@@ -343,6 +428,7 @@ def main(argv=None):
                 res["ray_cast_estimate"] = ray_cast_estimate(scene, res["spp"])
                 res["fixed_cost"] = fixed_cost(scene, args.frames)
             out["cases"][name] = res
+    out["live_ping"] = live_ping_fixed_cost(args.frames)
     set_chain(True)
     if not args.quick:
         n = max(4, args.frames)

@@ -515,7 +515,7 @@ class Electronics:
                 raise ValueError(f"electronics: speckle {speckle.shape} does not match intensity {inten.shape}")
         rng = np.random.default_rng(seed)
         if FAST and self.speckle != "off":
-            data = self._apply_fast(inten, ranges, absorption, sound_speed, rng, speckle)
+            data = self._apply_fast(inten, ranges, absorption, sound_speed, rng, speckle, seed)
             return data[0] if one_ping else data
 
         bin_width = _bin_width(ranges)
@@ -540,7 +540,7 @@ class Electronics:
         data = self.quantise(level)
         return data[0] if one_ping else data
 
-    def _apply_fast(self, inten, ranges, absorption, sound_speed, rng, speckle):
+    def _apply_fast(self, inten, ranges, absorption, sound_speed, rng, speckle, seed=None):
         """`apply`'s chain (speckle on) in `mitsonar.receiver.fastchain`: the same bytes as the
         straightforward chain; the random draws first, for the whole scan, in its order."""
         bin_width = _bin_width(ranges)
@@ -555,10 +555,18 @@ class Electronics:
         ring = np.sqrt(10.0 ** ((self.ringdown_db(ranges) - chain) / 10.0)) if self.ringdown > 0 else None
         z, taps, f = None, None, None
         if not quiet and self.noise_floor > -math.inf:
-            z, taps = fastchain.gaussian_draws(inten.shape, rng, corr)
+            drawn = fastchain.take_draws(inten.shape, seed, corr) if speckle is not None else None   # rng's 1st use
+            z, taps = drawn if drawn is not None else fastchain.gaussian_draws(inten.shape, rng, corr)
             f = math.sqrt(10.0 ** (self.noise_floor / 10.0)) * 10.0 ** (-chain / 20.0)
         return fastchain.received_bytes(inten, g, kernel, quiet, ring, z, taps, f, (calibration, self.gain, tvg),
                                         (self.ad_low, self.ad_span, self.bit_depth))
+
+    def prefetch_noise(self, shape, ranges, sound_speed: float, seed: int) -> None:
+        """Start drawing the receiver noise of ``apply(intensity of shape, ranges, sound_speed=..., seed=seed,
+        speckle=...)`` on a worker thread (`mitsonar.receiver.fastchain.prefetch_draws`; `render_scan`)."""
+        if FAST and self.speckle != "off" and self.noise_floor > -math.inf:
+            pulse = _spread_kernel(sound_speed * self.pulse_length / 2.0, 0.0, _bin_width(ranges) or 1.0)
+            fastchain.prefetch_draws(tuple(shape), seed, pulse if pulse.size > 1 and _bin_width(ranges) else None)
 
     def _speckle(self, g):
         """The complex speckle ``g`` with its modulus reshaped to the Weibull law (``weibull``)."""

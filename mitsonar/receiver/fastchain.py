@@ -15,6 +15,7 @@ faults).
 from __future__ import annotations
 
 import math
+import os
 import threading
 
 import numpy as np
@@ -94,6 +95,62 @@ def gaussian_draws(shape, rng: np.random.Generator, corr_bins=None):
     return z, h
 
 
+#: `prefetch_draws` draws on a worker thread (False: `Electronics.apply` draws; the same numbers).
+PREFETCH = True
+#: Fewest normals worth a worker (about 1 ms of draws): handing a one-row ping's 1 200 draws to a
+#: thread cost more than drawing them (the worker's wake-up and its turn with the GIL: the live
+#: harbour ping took 14-21 ms instead of 9-10 ms, benchmarks/frame_profile.py --fixed-only).
+PREFETCH_MIN = 1 << 17
+_drawer = None          # (process id, one worker thread) drawing prefetched noise (`prefetch_draws`)
+_prefetched: dict = {}  # calling thread -> ((seed, shape), future)
+
+
+def prefetch_draws(shape, seed: int, corr_bins=None) -> None:
+    """Start drawing `gaussian_draws`' numbers for ``(shape, default_rng(seed), corr_bins)`` on a
+    worker thread, for the calling thread's next `take_draws` with the same seed and shape.
+    ``render_scan`` calls it before its render: NumPy draws without holding the GIL, so on a
+    second core the draws (the quay frame: 0.5 M normals, 5 ms) overlap the render's Python
+    set-up and kernels instead of following them. The same numbers: a fresh generator of that
+    seed whose first use is this fill, as in `Electronics.apply`."""
+    global _drawer
+    if not PREFETCH or isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        return
+    if _drawer is None or _drawer[0] != os.getpid():   # a forked child has no worker thread: a new one
+        from concurrent.futures import ThreadPoolExecutor
+
+        _prefetched.clear()
+        _drawer = (os.getpid(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="mitsonar-draws"))
+    size = tuple(shape[:-1]) + (shape[-1] + _taps(corr_bins).size - 1, 2)
+    if math.prod(size) < PREFETCH_MIN:
+        return
+    key = (int(seed), size)
+    _prefetched[threading.get_ident()] = (key, _drawer[1].submit(_draw, key[0], size))
+
+
+def _draw(seed, size):
+    z = np.empty(size)
+    np.random.default_rng(seed).standard_normal(out=z)
+    return z
+
+
+def take_draws(shape, seed, corr_bins=None):
+    """`gaussian_draws(shape, np.random.default_rng(seed), corr_bins)` from the calling thread's
+    `prefetch_draws` when it drew that seed and shape (then forgotten), else None."""
+    pending = _prefetched.pop(threading.get_ident(), None)
+    h = _taps(corr_bins)
+    if pending is None or pending[0] != (seed, tuple(shape[:-1]) + (shape[-1] + h.size - 1, 2)):
+        return None
+    z = pending[1].result()
+    z *= math.sqrt(0.5)
+    return z, h
+
+
+def _taps(corr_bins):
+    h = np.ones(1) if corr_bins is None else np.asarray(corr_bins, dtype=np.float64)
+    h = h[h > 0]
+    return h / math.sqrt(float(np.sum(h * h)))
+
+
 def filtered(z, h, n_bins):
     """(real, imaginary) of `complex_gaussian`'s filtered samples from `gaussian_draws`' ``z``
     (the same sums in the same order, without complex temporaries)."""
@@ -144,6 +201,36 @@ def convolve_span(inten: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     return out
 
 
+def convolve_sparse(inten: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """`convolve_range` computed from the non-zero values only (a new array): for each tap in
+    `convolve_range`'s order, every non-zero value's product is added to its output bin. The
+    same bytes: an output's sum takes the same non-zero products in the same order (tap by tap;
+    within a tap no two values share an output bin), and the dense sum's other terms are
+    ``+0.0`` products (intensities >= 0, weights >= 0), which leave a sum unchanged. A frame
+    rendered with few paths holds few echoes (the quay frame at spp 1: 1 % of its bins), so its
+    spread costs a few thousand products instead of 17 passes over every bin."""
+    n = inten.shape[-1]
+    m = (kernel.size - 1) // 2
+    flat = inten.reshape(-1)
+    at = np.flatnonzero(flat)
+    values = flat[at]
+    cols = at % n
+    out = np.zeros_like(flat)
+    for j, w in enumerate(kernel):
+        shift = j - m
+        if w == 0.0 or abs(shift) >= n:
+            continue
+        keep = (cols >= -shift) & (cols < n - shift)
+        to = at[keep] + shift
+        out[to] += w * values[keep]
+    return out.reshape(inten.shape)
+
+
+#: `received_bytes` spreads a scan through `convolve_sparse` when at most one bin in this many
+#: holds an echo (a scattered add costs about as much as this many bins of a dense pass).
+SPARSE_RATIO = 16
+
+
 def received_bytes(inten, g, kernel, quiet, ring, z, taps, f, levels, ad):
     """Device bytes (uint8, the shape of ``inten``) of the chain after its set-up (`Electronics._apply_fast`).
 
@@ -156,9 +243,15 @@ def received_bytes(inten, g, kernel, quiet, ring, z, taps, f, levels, ad):
     ad_low, ad_span, bit_depth = ad
     scale = 15.0 if bit_depth == 4 else 255.0
     out = np.empty(inten.shape, dtype=np.uint8)
+    spread = None
+    if kernel.size > 1 and np.count_nonzero(inten) * SPARSE_RATIO <= inten.size:
+        spread = convolve_sparse(inten, kernel)
     for r0 in range(0, inten.shape[0], ROW_BLOCK):
         rows = slice(r0, r0 + ROW_BLOCK)
-        x = convolve_span(inten[rows], kernel) if kernel.size > 1 else inten[rows]
+        if spread is not None:
+            x = spread[rows]
+        else:
+            x = convolve_span(inten[rows], kernel) if kernel.size > 1 else inten[rows]
         gb = g[rows]
         if quiet:
             total = np.abs(gb) ** 2

@@ -53,6 +53,7 @@ length: at the Micron's 3.6 cm aperture and 7.5 cm pulse, within a factor of two
 """
 from __future__ import annotations
 
+import contextlib
 import math
 
 import numpy as np
@@ -65,6 +66,11 @@ FREQUENCY_VARIANCE = 8.0 * math.log(2.0)
 #: field, which is the same numbers whether computed or looked up (0 turns the cache off).
 CACHE_SIZE = 4
 _cache: dict = {}
+#: The pose-free tables of the field (`_tables`), keyed by seed, ranges, resolution and features.
+_tables_cache: dict = {}
+_blas = None   # threadpoolctl's BLAS controllers, found on first use (`one_blas_thread`)
+
+
 def cell_speckle(poses, ranges, *, seed: int, beamwidth_h: float, aperture_h: float, resolution: float,
                  n_features: int = N_FEATURES) -> np.ndarray:
     """Complex speckle amplitude (complex128, n_rows x n_bins) of every bin of a scan.
@@ -111,12 +117,70 @@ def cell_speckle(poses, ranges, *, seed: int, beamwidth_h: float, aperture_h: fl
     return field
 
 
-def _field(poses, ranges, seed, beamwidth_h, aperture_h, resolution, n_features):
-    """`cell_speckle`'s field, computed (checked arguments)."""
+def _tables(seed, ranges, resolution, n_features):
+    """The field's features ``w`` (7, M), phases ``phi`` (M,) and bin factors ``exp(i r w_7 / L)``
+    (n_bins, M) for a seed, bin ranges and resolution: they do not depend on the pose, so a
+    moving head's pings share them (kept per arguments, `CACHE_SIZE`; 0: computed every call).
+    The same numbers either way: for a one-row ping the bin factors were most of the field's cost
+    (76 800 complex exponentials for 600 bins)."""
+    key = (int(seed), ranges.shape, ranges.tobytes(), float(resolution), int(n_features))
+    hit = _tables_cache.get(key) if CACHE_SIZE > 0 else None
+    if hit is not None:
+        return hit
     rng = np.random.default_rng([0x5BEC, int(seed)])
     w = rng.normal(0.0, math.sqrt(FREQUENCY_VARIANCE), size=(7, n_features))
     phi = rng.uniform(0.0, 2.0 * math.pi, size=n_features)
-    row = np.concatenate([poses[:, :3, 2] / math.radians(beamwidth_h), poses[:, :3, 3] / aperture_h], axis=1)
-    row_phase = row @ w[:6] + phi                                   # (n_rows, M)
     bin_phase = np.outer(ranges / resolution, w[6])                 # (n_bins, M)
-    return (np.exp(1j * row_phase) @ np.exp(1j * bin_phase).T) / math.sqrt(n_features)
+    tables = (w, phi, np.exp(1j * bin_phase))
+    if CACHE_SIZE > 0:
+        for a in tables:
+            a.setflags(write=False)
+        if len(_tables_cache) >= CACHE_SIZE:
+            _tables_cache.pop(next(iter(_tables_cache)))
+        _tables_cache[key] = tables
+    return tables
+
+
+def one_blas_thread():
+    """A context in which NumPy's BLAS runs on the calling thread only (``threadpoolctl``).
+
+    The field's products are small (a one-row ping: 1 x 128 x 600); handing them to OpenBLAS's
+    threads wakes threads that then spin waiting for more work, on the cores the renderer's
+    kernels and Python need: measured in benchmarks/frame_profile.py ``--fixed-only`` (harbour
+    live ping), the speckle stage took 11 ms instead of 0.8 ms and the next ping's kernel replay
+    7 ms instead of 2.6 ms. The products' numbers do not change (OpenBLAS splits a product by
+    output blocks, each summed by one thread in the same order: tests/test_frame_overhead.py).
+    """
+    global _blas
+    if _blas is None:
+        try:
+            from threadpoolctl import ThreadpoolController
+
+            _blas = [lib for lib in ThreadpoolController().lib_controllers if lib.user_api == "blas"]
+        except Exception:   # noqa: BLE001 - no control over the BLAS: run it as it comes
+            _blas = []
+    return _held_to_one(_blas) if _blas else contextlib.nullcontext()
+
+
+@contextlib.contextmanager
+def _held_to_one(libs):
+    """Each BLAS library of ``libs`` (threadpoolctl's controllers) on one thread for the block,
+    its count given back after (a few microseconds: ``threadpool_limits`` would look the
+    libraries up again on every call, 1 ms)."""
+    before = [lib.get_num_threads() for lib in libs]
+    for lib in libs:
+        lib.set_num_threads(1)
+    try:
+        yield
+    finally:
+        for lib, n in zip(libs, before):
+            lib.set_num_threads(n)
+
+
+def _field(poses, ranges, seed, beamwidth_h, aperture_h, resolution, n_features):
+    """`cell_speckle`'s field, computed (checked arguments)."""
+    w, phi, bin_factor = _tables(seed, ranges, resolution, n_features)
+    row = np.concatenate([poses[:, :3, 2] / math.radians(beamwidth_h), poses[:, :3, 3] / aperture_h], axis=1)
+    with one_blas_thread():
+        row_phase = row @ w[:6] + phi                                   # (n_rows, M)
+        return (np.exp(1j * row_phase) @ bin_factor.T) / math.sqrt(n_features)

@@ -276,8 +276,12 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
         model = Electronics.from_dict(settings, source="render_scan electronics" if electronics else "sonar")
     except ValueError as exc:
         raise SceneError(str(exc)) from None
+    eseed = seed if electronics_seed is None else electronics_seed
+    ranges = sonar.bin_centres()
     try:
         sonar.head_pose(pose)
+        # the receiver noise depends on the seed and the scan's shape only: drawn during the render
+        model.prefetch_noise((int(sonar.n_pings), int(sonar.n_bins)), ranges, sonar.sound_speed, eseed)
         with _profile_of(integrator, sound_speed_profile):
             hist = integrator.render_histogram(scene, sonar, seed=seed, spp=spp, pose=pose, max_depth=max_depth,
                                                progress=progress)
@@ -285,8 +289,6 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
         raise SceneError(str(exc)) from None
 
     intensity = hist.astype(np.float32)
-    ranges = sonar.bin_centres()
-    eseed = seed if electronics_seed is None else electronics_seed
     poses = sonar.ping_poses(pose)
     speckle = None if model.speckle == "off" else model.scene_speckle(poses, ranges, **speckle_geometry(sonar))
     data = model.apply(intensity, ranges, absorption=sonar.absorption, sound_speed=sonar.sound_speed, seed=eseed,
