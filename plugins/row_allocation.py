@@ -1,0 +1,154 @@
+"""``sonar_tof``'s ``allocation="adaptive"``: more paths for the rows (pings) whose echoes are noisy.
+
+A two-stage path tracer. The error a benchmark measures is the relative L2 over the whole scan,
+``sum_r V_r / n_r`` over the squared norm, where row ``r`` gets ``n_r`` paths and ``V_r`` is the
+summed per-path variance of its bins. For a fixed total ``N = sum_r n_r`` it is smallest at
+``n_r proportional to sqrt(V_r)`` (Neyman allocation: Cochran, *Sampling Techniques*, 3rd ed.
+1977, eq. 5.26). ``V_r`` is unknown, so:
+
+1. **pilot**: `PILOT_FRACTION` of ``spp`` (at least `MIN_PILOT`) paths per row, path traced with a
+   seed of their own, estimate ``V_r`` (per echo: a path's echoes rarely share a bin);
+2. **allocation**: the rest of the budget, ``(spp - pilot) * n_rows`` paths, is shared out
+   ``n_r = N_2 (m / R + (1 - m) sqrt(V_r) / sum_s sqrt(V_s))`` (`UNIFORM_MIX` = ``m``: every row
+   keeps at least ``m`` of its uniform share, so a row whose rare echo the pilot missed still has
+   paths), at least one path per row, integers by largest remainders;
+3. **estimate**: each row's mean over its own ``n_r`` paths (`samples.SobolSamples` with the
+   render's seed: Sobol emission as ``sonar_tof``'s).
+
+Unbiased: the second stage's samples are drawn with a seed apart from the pilot's, so given the
+pilot (hence ``n_r``) each row's mean is the mean of ``n_r`` paths of the row's own distribution.
+The pilot's paths only choose and are left out of the estimate: combining them weighted by counts
+that depend on their own values is a ratio estimator, biased (rows whose pilot saw more get more
+paths, which would weight their pilot's sums down). The cost is the pilot's share of the budget.
+Deterministic per seed: the sums are exact (`exact_sum`) and the samples depend on
+(seed, row, path number) only.
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from . import frozen_pass
+from .exact_sum import ExactBins
+from .samples import SobolSamples, opaque_u32
+
+#: Share of ``spp`` the pilot traces per row (at least `MIN_PILOT` paths), and the least ``spp``
+#: worth a pilot (below it the render is uniform).
+PILOT_FRACTION = 1.0 / 16.0
+MIN_PILOT = 8
+MIN_SPP = 4 * MIN_PILOT
+#: Share of the second stage spread evenly over the rows (the floor of the allocation).
+UNIFORM_MIX = 0.25
+#: The pilot's samples: the render's seed xor this (independent of the second stage's).
+PILOT_SEED = 0xA110C8ED
+
+
+def allocate(v, total, mix=UNIFORM_MIX):
+    """Paths per row (int64, summing to ``total``, each at least 1) for rows of per-path variance
+    ``v``: ``total (mix / R + (1 - mix) sqrt(v) / sum sqrt(v))`` rounded by largest remainders;
+    uniform when no row has variance."""
+    v = np.asarray(v, dtype=np.float64)
+    n_rows = v.size
+    total = int(total)
+    if total < n_rows:
+        raise ValueError(f"allocation: {total} paths cannot give each of {n_rows} rows one")
+    if not 0.0 <= mix <= 1.0:
+        raise ValueError(f"allocation: mix {mix} must be in [0, 1]")
+    s = np.sqrt(np.maximum(v, 0.0))
+    share = np.full(n_rows, 1.0 / n_rows)
+    if s.sum() > 0 and np.isfinite(s.sum()):
+        share = mix / n_rows + (1.0 - mix) * s / s.sum()
+    # one path each first, the rest by share (largest remainders, ties to the lower row)
+    want = (total - n_rows) * share
+    n = np.floor(want).astype(np.int64)
+    rest = total - n_rows - int(n.sum())
+    if rest > 0:
+        order = np.lexsort((np.arange(n_rows), -(want - n)))
+        n[order[:rest]] += 1
+    return n + 1
+
+
+def row_variance(integrator, setup, seed, count):
+    """The pilot: ``count`` paths per row (Sobol emission, seed ``seed ^ PILOT_SEED``); per row the
+    summed per-path variance of its bins, ``sum_b (E[e^2] - E[e]^2)``, float64 ``(n_rows,)``."""
+    n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
+    counts = np.full(n_rows, count, dtype=np.int64)
+    first, second = _sums(integrator, setup, seed ^ PILOT_SEED, counts, squares=True)
+    mean = first.reshape(n_rows, n_bins) / count
+    return np.maximum(second.reshape(n_rows, n_bins) / count - mean * mean, 0.0).sum(axis=1)
+
+
+def render(integrator, setup, seed, spp, progress=None):
+    """The adaptive render (module docstring): float64 ``(n_rows, n_bins)``, the mean per row over
+    its own paths; the paths of each row in ``integrator.last_counts``, a summary (pilot paths per
+    row, the least, median and most paths of a row) in ``integrator.last_plan``. ``spp`` under `MIN_SPP`: every row gets ``spp`` paths (uniform)."""
+    n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
+    spp = int(spp)
+    if spp < 1:
+        raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
+    pilot = 0
+    if spp < MIN_SPP or n_rows < 2:
+        counts = np.full(n_rows, spp, dtype=np.int64)
+    else:
+        pilot = max(MIN_PILOT, int(spp * PILOT_FRACTION))
+        counts = allocate(row_variance(integrator, setup, seed, pilot), (spp - pilot) * n_rows)
+    if progress is not None:
+        progress(pilot, spp)
+    (total,) = _sums(integrator, setup, seed, counts)
+    integrator.last_counts = counts
+    integrator.last_plan = {"allocation": "adaptive", "pilot": pilot, "paths_per_row_min": int(counts.min()),
+                            "paths_per_row_median": float(np.median(counts)), "paths_per_row_max": int(counts.max())}
+    if progress is not None:
+        progress(spp, spp)
+    return total.reshape(n_rows, n_bins) / counts[:, None]
+
+
+def _sums(integrator, setup, seed, counts, squares=False):
+    """Paths ``0 .. counts[r]`` of every row ``r`` (Sobol emission, seed ``seed``), in passes of at
+    most `sonar_tof.MAX_LANES_PER_PASS` lanes: the summed energy per bin (and with ``squares`` the
+    summed squared echo energies), float64 ``n_rows * n_bins`` arrays."""
+    from .denormals import flushing
+    from .sonar_tof import MAX_LANES_PER_PASS
+
+    counts = np.asarray(counts, dtype=np.int64)
+    row = np.repeat(np.arange(counts.size, dtype=np.uint32), counts)
+    index = (np.arange(row.size, dtype=np.int64) - np.repeat(np.cumsum(counts) - counts, counts)).astype(np.uint32)
+    seed_o = opaque_u32(seed)
+
+    def body(setup, seed_o, ping, idx, d, w):
+        return _traced(setup, integrator, seed_o, ping, idx, d, w, squares)
+
+    # the recording's key names the body: one per kind of pass
+    body.__qualname__ = f"row_allocation.{'moments' if squares else 'sums'}"
+    out = None
+    with dr.suspend_grad(), flushing():
+        for a in range(0, row.size, MAX_LANES_PER_PASS):
+            ping, idx = mi.UInt32(row[a:a + MAX_LANES_PER_PASS]), mi.UInt32(index[a:a + MAX_LANES_PER_PASS])
+            d, w = frozen_pass.emitted(setup.sensor.beam, SobolSamples(seed_o, ping, idx))
+            parts = frozen_pass.run(body, integrator, setup, seed_o, ping, idx, d, w)
+            parts = [p.numpy().astype(np.float64) for p in (parts if squares else (parts,))]
+            out = parts if out is None else [o + p for o, p in zip(out, parts)]
+    return out
+
+
+def _traced(setup, integrator, seed_o, ping, idx, d, w, squares):
+    """One pass's path kernel: the lanes' rows ``ping`` and path numbers ``idx``, their emitted
+    directions ``d`` and weights ``w`` drawn beforehand (`frozen_pass.emitted`)."""
+    from .sonar_tof import _emitting
+
+    n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
+    samples = SobolSamples(seed_o, ping, idx)
+    sums = [ExactBins(n_rows * n_bins) for _ in range(2 if squares else 1)]
+    bins = setup.bins
+
+    def record(depth_k, rng, energy, valid, hit):
+        b, valid = bins.index(rng, valid)
+        at = bins.flat(ping, b)
+        sums[0].add(energy, at, valid)
+        if squares:
+            sums[1].add(energy * energy, at, valid)
+
+    integrator.sample(_emitting(setup, d, w), ping, samples, record)
+    totals = [s.total() for s in sums]
+    return tuple(totals) if squares else totals[0]
