@@ -7,13 +7,13 @@ summed per-path variance of its bins. For a fixed total ``N = sum_r n_r`` it is 
 1977, eq. 5.26). ``V_r`` is unknown, so:
 
 1. **pilot**: `PILOT_FRACTION` of ``spp`` (at least `MIN_PILOT`) paths per row, path traced with a
-   seed of their own, estimate ``V_r`` (per echo: a path's echoes rarely share a bin);
+   seed of their own (``seed ^ PILOT_SEED``), estimate ``V_r`` (per echo: a path's echoes rarely share a bin);
 2. **allocation**: the rest of the budget, ``(spp - pilot) * n_rows`` paths, is shared out
    ``n_r = N_2 (m / R + (1 - m) sqrt(V_r) / sum_s sqrt(V_s))`` (`UNIFORM_MIX` = ``m``: every row
    keeps at least ``m`` of its uniform share, so a row whose rare echo the pilot missed still has
    paths), at least one path per row, integers by largest remainders;
-3. **estimate**: each row's mean over its own ``n_r`` paths (`samples.SobolSamples` with the
-   render's seed: Sobol emission as ``sonar_tof``'s).
+3. **estimate**: each row's mean over its own ``n_r`` paths, drawn as ``sonar_tof``'s (its
+   ``sampling``: `samples.SobolSamples` by default) with the render's seed.
 
 Unbiased: the second stage's samples are drawn with a seed apart from the pilot's, so given the
 pilot (hence ``n_r``) each row's mean is the mean of ``n_r`` paths of the row's own distribution.
@@ -31,7 +31,7 @@ import numpy as np
 
 from . import frozen_pass
 from .exact_sum import ExactBins
-from .samples import SobolSamples, opaque_u32
+from .samples import opaque_u32
 
 #: Share of ``spp`` the pilot traces per row (at least `MIN_PILOT` paths), and the least ``spp``
 #: worth a pilot (below it the render is uniform).
@@ -70,7 +70,7 @@ def allocate(v, total, mix=UNIFORM_MIX):
 
 
 def row_variance(integrator, setup, seed, count):
-    """The pilot: ``count`` paths per row (Sobol emission, seed ``seed ^ PILOT_SEED``); per row the
+    """The pilot: ``count`` paths per row (seed ``seed ^ PILOT_SEED``); per row the
     summed per-path variance of its bins, ``sum_b (E[e^2] - E[e]^2)``, float64 ``(n_rows,)``."""
     n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
     counts = np.full(n_rows, count, dtype=np.int64)
@@ -105,7 +105,7 @@ def render(integrator, setup, seed, spp, progress=None):
 
 
 def _sums(integrator, setup, seed, counts, squares=False):
-    """Paths ``0 .. counts[r]`` of every row ``r`` (Sobol emission, seed ``seed``), in passes of at
+    """Paths ``0 .. counts[r]`` of every row ``r`` (the integrator's ``sampling``, seed ``seed``), in passes of at
     most `sonar_tof.MAX_LANES_PER_PASS` lanes: the summed energy per bin (and with ``squares`` the
     summed squared echo energies), float64 ``n_rows * n_bins`` arrays."""
     from .denormals import flushing
@@ -115,6 +115,7 @@ def _sums(integrator, setup, seed, counts, squares=False):
     row = np.repeat(np.arange(counts.size, dtype=np.uint32), counts)
     index = (np.arange(row.size, dtype=np.int64) - np.repeat(np.cumsum(counts) - counts, counts)).astype(np.uint32)
     seed_o = opaque_u32(seed)
+    sampler = integrator.SAMPLERS[integrator.sampling]
 
     def body(setup, seed_o, ping, idx, d, w):
         return _traced(setup, integrator, seed_o, ping, idx, d, w, squares)
@@ -125,7 +126,7 @@ def _sums(integrator, setup, seed, counts, squares=False):
     with dr.suspend_grad(), flushing():
         for a in range(0, row.size, MAX_LANES_PER_PASS):
             ping, idx = mi.UInt32(row[a:a + MAX_LANES_PER_PASS]), mi.UInt32(index[a:a + MAX_LANES_PER_PASS])
-            d, w = frozen_pass.emitted(setup.sensor.beam, SobolSamples(seed_o, ping, idx))
+            d, w = frozen_pass.emitted(setup.sensor.beam, sampler(seed_o, ping, idx))
             parts = frozen_pass.run(body, integrator, setup, seed_o, ping, idx, d, w)
             parts = [p.numpy().astype(np.float64) for p in (parts if squares else (parts,))]
             out = parts if out is None else [o + p for o, p in zip(out, parts)]
@@ -138,7 +139,7 @@ def _traced(setup, integrator, seed_o, ping, idx, d, w, squares):
     from .sonar_tof import _emitting
 
     n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
-    samples = SobolSamples(seed_o, ping, idx)
+    samples = integrator.SAMPLERS[integrator.sampling](seed_o, ping, idx)
     sums = [ExactBins(n_rows * n_bins) for _ in range(2 if squares else 1)]
     bins = setup.bins
 
