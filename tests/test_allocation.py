@@ -28,6 +28,30 @@ def test_allocate_is_the_square_root_rule_with_a_floor():
         allocate(np.ones(5), 4)
 
 
+def test_predicted_gain_closed_form():
+    """Rows of variance 1 and 9 with 1 and 3 paths (sqrt rule): uniform 2 each gives 5, these
+    give 1 + 3 = 4, a gain of 1.25; equal variances with equal paths gain nothing."""
+    from mitsonar.plugins.row_allocation import predicted_gain
+
+    assert predicted_gain([1.0, 9.0], np.array([1, 3])) == pytest.approx(1.25)
+    assert predicted_gain([2.0, 2.0, 2.0], np.array([5, 5, 5])) == pytest.approx(1.0)
+    assert predicted_gain([0.0, 0.0], np.array([5, 5])) == 1.0
+
+
+def test_a_small_predicted_gain_keeps_the_uniform_split(mitsonar_mod):
+    """The periscope's pings are alike (the pilot predicts 1.08): every ping keeps the same
+    paths, the pilot's cost is all that is lost."""
+    import mitsuba as mi
+
+    from mitsonar.plugins.row_allocation import MIN_GAIN
+
+    scene = mitsonar_mod.load_scene(os.path.join(SCENES, "periscope.xml"))
+    tof = mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"})
+    tof.render_histogram(scene, seed=1, spp=1024)
+    assert tof.last_plan["predicted_gain"] < MIN_GAIN
+    assert (tof.last_counts == tof.last_counts[0]).all()
+
+
 @pytest.fixture(scope="module")
 def intake(mitsonar_mod):
     return mitsonar_mod.load_scene(os.path.join(SCENES, "intake.xml"))
