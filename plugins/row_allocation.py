@@ -85,20 +85,22 @@ def predicted_gain(v, counts):
     return float(v.sum() * v.size / counts.sum()) / adaptive if adaptive > 0 else 1.0
 
 
-def row_variance(integrator, setup, seed, count):
+def row_variance(integrator, setup, seed, count, lanes):
     """The pilot: ``count`` paths per row (seed ``seed ^ PILOT_SEED``); per row the
     summed per-path variance of its bins, ``sum_b (E[e^2] - E[e]^2)``, float64 ``(n_rows,)``."""
     n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
     counts = np.full(n_rows, count, dtype=np.int64)
-    first, second = _sums(integrator, setup, seed ^ PILOT_SEED, counts, squares=True)
+    first, second = _sums(integrator, setup, seed ^ PILOT_SEED, counts, lanes, squares=True)
     mean = first.reshape(n_rows, n_bins) / count
     return np.maximum(second.reshape(n_rows, n_bins) / count - mean * mean, 0.0).sum(axis=1)
 
 
-def render(integrator, setup, seed, spp, progress=None):
-    """The adaptive render (module docstring): float64 ``(n_rows, n_bins)``, the mean per row over
-    its own paths; the paths of each row in ``integrator.last_counts``, a summary (pilot paths per
-    row, the least, median and most paths of a row) in ``integrator.last_plan``. ``spp`` under `MIN_SPP`: every row gets ``spp`` paths (uniform)."""
+def render(integrator, setup, seed, spp, lanes, progress=None):
+    """The adaptive render (module docstring) in passes of at most ``lanes`` paths: float64
+    ``(n_rows, n_bins)``, the mean per row over its own paths; the paths of each row in
+    ``integrator.last_counts``, a summary (pilot paths per row, predicted gain, the least, median
+    and most paths of a row) in ``integrator.last_plan``. ``spp`` under `MIN_SPP`: every row gets
+    ``spp`` paths (uniform)."""
     n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
     spp = int(spp)
     if spp < 1:
@@ -108,14 +110,14 @@ def render(integrator, setup, seed, spp, progress=None):
         counts = np.full(n_rows, spp, dtype=np.int64)
     else:
         pilot = max(MIN_PILOT, int(spp * PILOT_FRACTION))
-        v = row_variance(integrator, setup, seed, pilot)
+        v = row_variance(integrator, setup, seed, pilot, lanes)
         counts = allocate(v, (spp - pilot) * n_rows)
         gain = predicted_gain(v, counts)
         if gain < MIN_GAIN:
             counts = allocate(np.zeros(n_rows), (spp - pilot) * n_rows)
     if progress is not None:
         progress(pilot, spp)
-    (total,) = _sums(integrator, setup, seed, counts)
+    (total,) = _sums(integrator, setup, seed, counts, lanes)
     integrator.last_counts = counts
     integrator.last_plan = {"allocation": "adaptive", "pilot": pilot, "predicted_gain": gain,
                             "paths_per_row_min": int(counts.min()),
@@ -125,12 +127,11 @@ def render(integrator, setup, seed, spp, progress=None):
     return total.reshape(n_rows, n_bins) / counts[:, None]
 
 
-def _sums(integrator, setup, seed, counts, squares=False):
-    """Paths ``0 .. counts[r]`` of every row ``r`` (the integrator's ``sampling``, seed ``seed``), in passes of at
-    most `sonar_tof.MAX_LANES_PER_PASS` lanes: the summed energy per bin (and with ``squares`` the
+def _sums(integrator, setup, seed, counts, lanes, squares=False):
+    """Paths ``0 .. counts[r]`` of every row ``r`` (the integrator's ``sampling``, seed ``seed``),
+    in passes of at most ``lanes`` lanes: the summed energy per bin (and with ``squares`` the
     summed squared echo energies), float64 ``n_rows * n_bins`` arrays."""
     from .denormals import flushing
-    from .sonar_tof import MAX_LANES_PER_PASS
 
     counts = np.asarray(counts, dtype=np.int64)
     row = np.repeat(np.arange(counts.size, dtype=np.uint32), counts)
@@ -145,8 +146,8 @@ def _sums(integrator, setup, seed, counts, squares=False):
     body.__qualname__ = f"row_allocation.{'moments' if squares else 'sums'}"
     out = None
     with dr.suspend_grad(), flushing():
-        for a in range(0, row.size, MAX_LANES_PER_PASS):
-            ping, idx = mi.UInt32(row[a:a + MAX_LANES_PER_PASS]), mi.UInt32(index[a:a + MAX_LANES_PER_PASS])
+        for a in range(0, row.size, lanes):
+            ping, idx = mi.UInt32(row[a:a + lanes]), mi.UInt32(index[a:a + lanes])
             d, w = frozen_pass.emitted(setup.sensor.beam, sampler(seed_o, ping, idx))
             parts = frozen_pass.run(body, integrator, setup, seed_o, ping, idx, d, w)
             parts = [p.numpy().astype(np.float64) for p in (parts if squares else (parts,))]
@@ -157,8 +158,6 @@ def _sums(integrator, setup, seed, counts, squares=False):
 def _traced(setup, integrator, seed_o, ping, idx, d, w, squares):
     """One pass's path kernel: the lanes' rows ``ping`` and path numbers ``idx``, their emitted
     directions ``d`` and weights ``w`` drawn beforehand (`frozen_pass.emitted`)."""
-    from .sonar_tof import _emitting
-
     n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
     samples = integrator.SAMPLERS[integrator.sampling](seed_o, ping, idx)
     sums = [ExactBins(n_rows * n_bins) for _ in range(2 if squares else 1)]
@@ -171,6 +170,6 @@ def _traced(setup, integrator, seed_o, ping, idx, d, w, squares):
         if squares:
             sums[1].add(energy * energy, at, valid)
 
-    integrator.sample(_emitting(setup, d, w), ping, samples, record)
+    integrator.sample(integrator.emitting(setup, d, w), ping, samples, record)
     totals = [s.total() for s in sums]
     return tuple(totals) if squares else totals[0]

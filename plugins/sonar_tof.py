@@ -142,7 +142,7 @@ class SonarTOFIntegrator(SonarIntegrator):
         if self.allocation == "adaptive":
             from . import row_allocation
 
-            return row_allocation.render(self, setup, seed, spp, progress)
+            return row_allocation.render(self, setup, seed, spp, MAX_LANES_PER_PASS, progress)
         shared = None
         if self.share_beams is not False:
             from .shared_beams import SharedFrame, can_share, same_pose, window
@@ -188,6 +188,11 @@ class SonarTOFIntegrator(SonarIntegrator):
                     progress(start, spp)
         total /= spp
         return total
+
+    @staticmethod
+    def emitting(setup, d, w):
+        """``setup`` with its beam drawing the directions ``d`` and weights ``w`` drawn beforehand."""
+        return _emitting(setup, d, w)
 
     def lanes(self, n_rows, seed, start, count):
         """The lanes of one pass (`samples.row_lanes`) with this integrator's sampling."""
