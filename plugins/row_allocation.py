@@ -117,14 +117,21 @@ def render(integrator, setup, seed, spp, lanes, progress=None):
             counts = allocate(np.zeros(n_rows), (spp - pilot) * n_rows)
     if progress is not None:
         progress(pilot, spp)
-    (total,) = _sums(integrator, setup, seed, counts, lanes)
+    if (counts == counts[0]).all():
+        # the uniform render's own passes (ping and path number computed in the kernel, its
+        # recordings): the same samples and sums, without the lanes' index arrays
+        mean = integrator.accumulate(int(counts[0]), lanes // n_rows,
+                                     lambda start, count: integrator._pass(setup, seed, start, count))
+    else:
+        (total,) = _sums(integrator, setup, seed, counts, lanes)
+        mean = total.reshape(n_rows, n_bins) / counts[:, None]
     integrator.last_counts = counts
     integrator.last_plan = {"allocation": "adaptive", "pilot": pilot, "predicted_gain": gain,
                             "paths_per_row_min": int(counts.min()),
                             "paths_per_row_median": float(np.median(counts)), "paths_per_row_max": int(counts.max())}
     if progress is not None:
         progress(spp, spp)
-    return total.reshape(n_rows, n_bins) / counts[:, None]
+    return mean.reshape(n_rows, n_bins)
 
 
 def _sums(integrator, setup, seed, counts, lanes, squares=False):
