@@ -87,6 +87,12 @@ class SonarTOFIntegrator(SonarIntegrator):
                                  time / 2. Unset, or constant at the sensor's speed: straight rays.
                                  Primal renders only
     svp_chords          4        chords per range window along which a refracted ray meets the scene
+    allocation          uniform  paths per row: ``uniform`` (``spp`` each) or ``adaptive`` (a pilot of
+                                 ``spp / 16`` paths per row, which only chooses, then the rest of the
+                                 budget shared out in proportion to the square root of each row's
+                                 estimated variance, a quarter of it evenly: `row_allocation`). Same
+                                 expectation; per-row paths only (``share_beams`` auto then shares
+                                 no beams; ``share_beams`` true refuses it). Primal renders only
     =================== ======== ========================================================================
 
     Each pass runs as a Dr.Jit frozen function (`frozen_pass`): its kernel is traced once per
@@ -104,6 +110,8 @@ class SonarTOFIntegrator(SonarIntegrator):
     EMISSIONS = (EMISSION, "transmit")
     REFRACTS = True
     SAMPLERS = {"sobol": SobolSamples, "independent": HashSamples}
+    #: ``allocation`` values, the default first (the table above).
+    ALLOCATIONS = ("uniform", "adaptive")
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
@@ -118,6 +126,11 @@ class SonarTOFIntegrator(SonarIntegrator):
             kind = props.type("share_beams").name
             require(kind == "Bool", self.name, "share_beams", props.get("share_beams"), "<boolean> true or false")
             self.share_beams = bool(props.get("share_beams"))
+        self.allocation = text(props, "allocation", self.ALLOCATIONS[0], self.name)
+        require(self.allocation in self.ALLOCATIONS, self.name, "allocation", self.allocation,
+                "one of " + ", ".join(self.ALLOCATIONS))
+        require(not (self.allocation == "adaptive" and self.share_beams), self.name, "allocation",
+                self.allocation, "uniform when share_beams is true (adaptive allocates per-row paths)")
 
     def render_histogram(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None, progress=None):
         """Mean echo energy per bin, float64 ``(n_pings, n_bins)``.
@@ -126,6 +139,10 @@ class SonarTOFIntegrator(SonarIntegrator):
         """
         setup = self.setup(scene, sensor, pose, max_depth)
         n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
+        if self.allocation == "adaptive":
+            from . import row_allocation
+
+            return row_allocation.render(self, setup, seed, spp, MAX_LANES_PER_PASS, progress)
         shared = None
         if self.share_beams is not False:
             from .shared_beams import SharedFrame, can_share, same_pose, window
@@ -171,6 +188,11 @@ class SonarTOFIntegrator(SonarIntegrator):
                     progress(start, spp)
         total /= spp
         return total
+
+    @staticmethod
+    def emitting(setup, d, w):
+        """``setup`` with its beam drawing the directions ``d`` and weights ``w`` drawn beforehand."""
+        return _emitting(setup, d, w)
 
     def lanes(self, n_rows, seed, start, count):
         """The lanes of one pass (`samples.row_lanes`) with this integrator's sampling."""
@@ -241,7 +263,7 @@ class SonarTOFIntegrator(SonarIntegrator):
         return (f"SonarTOFIntegrator[max_depth={self.max_depth}, sampling={self.sampling}, "
                 f"share_beams={'auto' if self.share_beams is None else str(self.share_beams).lower()}, "
                 f"emission={self.emission}, "
-                f"guide={self.guide}]")
+                f"guide={self.guide}, allocation={self.allocation}]")
 
 
 def _emitting(setup, d, w):

@@ -1,0 +1,132 @@
+"""sonar_tof's allocation="adaptive" (plugins/row_allocation.py): the paths per row, the same
+expectation as the uniform render, determinism per seed, refused settings."""
+import os
+
+import numpy as np
+import pytest
+
+from conftest import SCENES
+
+
+def test_allocate_is_the_square_root_rule_with_a_floor():
+    """Closed forms: with no floor, the second stage's paths go in proportion to sqrt(v) after one
+    each; with the floor ``mix`` every row keeps at least ``mix`` of its uniform share; no
+    variance anywhere gives the uniform split; the total is exact."""
+    from mitsonar.plugins.row_allocation import allocate
+
+    # 64 paths over 4 rows: one each, then 60 as sqrt(v) = 0, 1, 2, 3 (sixths)
+    assert allocate([0.0, 1.0, 4.0, 9.0], 64, mix=0.0).tolist() == [1, 11, 21, 31]
+    assert allocate([0.0, 1.0, 4.0, 9.0], 64, mix=1.0).tolist() == [16, 16, 16, 16]
+    assert allocate([0.0, 0.0, 0.0], 30).tolist() == [10, 10, 10]
+    n = allocate([0.0, 0.0, 0.0, 100.0], 4004, mix=0.25)
+    # 4000 shared: 250 each from the floor, the last row also the other 3000
+    assert n.tolist() == [251, 251, 251, 3251]
+    # largest remainders: the total is kept whatever the rounding
+    m = allocate(np.arange(7.0) ** 3, 1001)
+    assert m.sum() == 1001 and (np.diff(m) >= 0).all()
+    with pytest.raises(ValueError, match="cannot give each of 5 rows one"):
+        allocate(np.ones(5), 4)
+
+
+def test_predicted_gain_closed_form():
+    """Rows of variance 1 and 9 with 1 and 3 paths (sqrt rule): uniform 2 each gives 5, these
+    give 1 + 3 = 4, a gain of 1.25; equal variances with equal paths gain nothing."""
+    from mitsonar.plugins.row_allocation import predicted_gain
+
+    assert predicted_gain([1.0, 9.0], np.array([1, 3])) == pytest.approx(1.25)
+    assert predicted_gain([2.0, 2.0, 2.0], np.array([5, 5, 5])) == pytest.approx(1.0)
+    assert predicted_gain([0.0, 0.0], np.array([5, 5])) == 1.0
+
+
+def test_a_small_predicted_gain_keeps_the_uniform_split(mitsonar_mod):
+    """The periscope's pings are alike (the pilot predicts 1.08), the hidden target's nearly
+    (1.3): every ping keeps the same paths, the pilot's cost is all that is lost."""
+    import mitsuba as mi
+
+    from mitsonar.plugins.row_allocation import MIN_GAIN
+
+    for name in ("periscope.xml", "hidden_target.xml"):
+        scene = mitsonar_mod.load_scene(os.path.join(SCENES, name))
+        tof = mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"})
+        tof.render_histogram(scene, seed=1, spp=1024)
+        assert 1.0 <= tof.last_plan["predicted_gain"] < MIN_GAIN
+        assert (tof.last_counts == tof.last_counts[0]).all()
+
+
+@pytest.fixture(scope="module")
+def intake(mitsonar_mod):
+    return mitsonar_mod.load_scene(os.path.join(SCENES, "intake.xml"))
+
+
+def test_adaptive_is_deterministic_and_moves_paths_to_the_rows_with_echoes(intake):
+    """Same seed, same bytes; another seed, another scan; the budget is kept (the pilot's paths and
+    the rows' paths sum to spp per row); on the intake (echoes in a few pings) the noisiest row
+    gets many times the paths of the quietest, which keeps a quarter of its uniform share."""
+    import mitsuba as mi
+
+    from mitsonar.plugins.row_allocation import UNIFORM_MIX
+
+    tof = mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"})
+    a = tof.render_histogram(intake, seed=3, spp=256)
+    counts = tof.last_counts.copy()
+    b = tof.render_histogram(intake, seed=3, spp=256)
+    assert np.array_equal(a, b) and np.array_equal(counts, tof.last_counts)
+    assert not np.array_equal(a, tof.render_histogram(intake, seed=4, spp=256))
+    pilot = tof.last_plan["pilot"]
+    n_rows = intake.sensors()[0].n_pings
+    assert counts.sum() == (256 - pilot) * n_rows
+    assert counts.min() >= int(UNIFORM_MIX * (256 - pilot))
+    assert counts.max() > 10 * counts.min()
+
+
+def test_small_spp_is_the_uniform_render(intake):
+    """Under MIN_SPP there is no pilot: every row gets spp paths, and the render is the uniform
+    one to the byte (the same samples of each row, summed exactly)."""
+    import mitsuba as mi
+
+    from mitsonar.plugins.row_allocation import MIN_SPP
+
+    spp = MIN_SPP // 2
+    adaptive = mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"})
+    uniform = mi.load_dict({"type": "sonar_tof"})
+    assert np.array_equal(adaptive.render_histogram(intake, seed=9, spp=spp),
+                          uniform.render_histogram(intake, seed=9, spp=spp))
+    assert adaptive.last_plan["pilot"] == 0
+
+
+@pytest.mark.parametrize("name", ["intake.xml", "box.xml", "hidden_target.xml"])
+def test_adaptive_has_the_expectation_of_the_uniform_render(mitsonar_mod, name):
+    """Welch t tests on block sums (10 ping groups x 6 range groups, and the total) of 8 renders
+    each, Bonferroni-corrected so that the whole test raises a false alarm with probability 1e-3
+    when both have the same mean. The pilot chooses from its own seed, so each row's mean is
+    unbiased whatever it chose; a pilot counted into the estimate by its own counts would not be."""
+    import mitsuba as mi
+    from scipy import stats
+
+    from test_mlt import grouped
+
+    scene = mitsonar_mod.load_scene(os.path.join(SCENES, name))
+    uniform = mi.load_dict({"type": "sonar_tof"})
+    adaptive = mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"})
+    runs, spp = 8, 1024
+
+    def blocks(integrator, seed):
+        h = integrator.render_histogram(scene, seed=seed, spp=spp)
+        return np.append(grouped(h, 10, 6), h.sum())
+
+    a = np.stack([blocks(uniform, s) for s in range(runs)])
+    b = np.stack([blocks(adaptive, 100 + s) for s in range(runs)])
+    keep = (a.mean(0) > 1e-3 * a.mean(0).max()) & (a.std(0) > 0) & (b.std(0) > 0)
+    assert keep.sum() >= 5 and keep[-1]
+    p = stats.ttest_ind(a[:, keep], b[:, keep], equal_var=False).pvalue
+    assert p.min() > 1e-3 / keep.sum(), (p.min(), keep.sum())
+
+
+@pytest.mark.parametrize("params, message", [
+    ({"allocation": "neyman"}, "allocation.*one of uniform, adaptive"),
+    ({"allocation": "adaptive", "share_beams": True}, "allocation.*uniform when share_beams is true")])
+def test_refused_settings(mitsonar_mod, params, message):
+    import mitsuba as mi
+
+    with pytest.raises(Exception, match=message):
+        mi.load_dict({"type": "sonar_tof", **params})
