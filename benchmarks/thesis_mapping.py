@@ -158,9 +158,10 @@ def sklearn_comparison(samples, hm, points, bands, passes: int, seed: int):
     return res
 
 
-def octomap_anchor(samples, points, truth, resolution: float, true_surface_points, bands):
+def octomap_anchor(samples, points, truth, resolution: float, true_surface_points, bands, return_tree=False):
     """OctoMap on the same pings: rays from each transducer to its first echo's points (occupied at
-    the end, free along), pings without echo as free rays to the end of their range window."""
+    the end, free along), pings without echo as free rays to the end of their range window.
+    ``return_tree``: return ``(metrics, tree)``, the ``octomap.OcTree`` too."""
     import octomap
 
     from hilbertmap.metrics import point_metrics, point_set_surface_metrics
@@ -206,7 +207,7 @@ def octomap_anchor(samples, points, truth, resolution: float, true_surface_point
     V, F = truth
     res.update(point_set_surface_metrics(occ, true_surface_points, V, F, prefix="voxels"))
     res.update(resolution=resolution, build_s=t_build, n_occupied_voxels=int(len(occ)))
-    return res
+    return (res, tree) if return_tree else res
 
 
 # ----------------------------------------------------------------------------- main
