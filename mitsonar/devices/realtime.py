@@ -143,18 +143,20 @@ class ErrorModel:
 RECORD_FIELDS = ("ping", "t", "pose_time", "bearing", "paths", "error", "render_ms", "latency_ms", "budget_ms")
 
 
+_RECORDS_WORDS = {
+    "directory": "--records {path}: is a folder; expected a file name ending in .csv or .jsonl",
+    "extension": "--records {path}: expected a file name ending in .csv or .jsonl",
+    "no_folder": "--records {path}: folder {folder} does not exist",
+    "not_writable": "--records {path}: folder {folder} is not writable",
+}
+
+
 def check_records_path(path) -> str:
-    """``path`` if it ends in ``.csv`` or ``.jsonl``, is not a folder and its folder exists;
-    ValueError naming it."""
-    p = os.fspath(path)
-    if not p.endswith((".csv", ".jsonl")):
-        raise ValueError(f"--records {p}: expected a file name ending in .csv or .jsonl")
-    if os.path.isdir(p):
-        raise ValueError(f"--records {p}: is a folder; expected a file name ending in .csv or .jsonl")
-    folder = os.path.dirname(os.path.abspath(p))
-    if not os.path.isdir(folder):
-        raise ValueError(f"--records {p}: folder {folder} does not exist")
-    return p
+    """``path`` if it ends in ``.csv`` or ``.jsonl``, is not a folder and its folder exists and
+    is writable (`mitsonar._files.check_output_file`); ValueError naming it."""
+    from mitsonar._files import check_output_file
+
+    return check_output_file(path, ValueError, extensions=(".csv", ".jsonl"), force=True, words=_RECORDS_WORDS)
 
 
 #: the fields `PingLog` keeps the percentiles of
@@ -178,7 +180,7 @@ class PingLog:
         if self.path is not None:
             self._tmp = f"{self.path}.part"
             self._file = open(self._tmp, "w", encoding="utf-8", newline="")
-            if self.path.endswith(".csv"):
+            if self.path.lower().endswith(".csv"):
                 self._file.write(",".join(RECORD_FIELDS) + "\n")
 
     def add(self, record: dict) -> None:
@@ -188,7 +190,7 @@ class PingLog:
             self.count += 1
             self.records.append(record)
             if self._file is not None:
-                if self.path.endswith(".csv"):
+                if self.path.lower().endswith(".csv"):
                     self._file.write(",".join(_csv(record.get(k)) for k in RECORD_FIELDS) + "\n")
                 else:
                     self._file.write(json.dumps({k: _json(record.get(k)) for k in RECORD_FIELDS}) + "\n")
