@@ -38,9 +38,10 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _inverse import argument_parser, positive_int, pyplot, relative_l2, save_figure  # noqa: E402
 
-# The height map as a mesh, two triangles a cell, and its binary PLY: the library's
-# (`mitsonar.jobs.refine`, which refines such height fields coarse-to-fine).
-from mitsonar.jobs.refine import grid_mesh, write_ply  # noqa: E402,F401
+# The height map as a mesh and its binary PLY, the Gaussian smoothing of the heights and the
+# Laplacian penalty: the library's (`mitsonar.jobs.refine`, which refines such height fields
+# coarse-to-fine).
+from mitsonar.jobs.refine import grid_mesh, laplacian_penalty, smoothed, smoothing_taps, write_ply  # noqa: E402,F401
 
 DEPTH = -2.0
 
@@ -75,47 +76,6 @@ def head_poses(x_pings, altitude):
         m = np.eye(4)
         m[:3, 3] = (x, 0.0, DEPTH + altitude)
         out.append(m)
-    return out
-
-
-def laplacian_penalty(dz, nx, ny):
-    """``sum (laplacian dz)^2`` over the interior vertices of the ``nx x ny`` grid (Dr.Jit, differentiable)."""
-    import drjit as dr
-    import mitsuba as mi
-
-    i, j = np.meshgrid(np.arange(1, nx - 1), np.arange(1, ny - 1), indexing="ij")
-    c = (i * ny + j).ravel()
-    g = lambda k: dr.gather(mi.Float, dz, mi.UInt32(k.astype(np.uint32)))  # noqa: E731
-    lap = g(c - ny) + g(c + ny) + g(c - 1) + g(c + 1) - 4.0 * g(c)
-    return dr.sum(dr.square(lap))
-
-
-def smoothing_taps(nx, ny, sigma):
-    """The sparse matrix ``S`` of a separable Gaussian blur (``sigma`` vertices, to 2 sigma, rows
-    normalised) over the ``nx x ny`` grid, as (row, column, weight) arrays."""
-    half = max(1, int(np.ceil(2 * sigma)))
-    rows, cols, w = [], [], []
-    for i in range(nx):
-        for j in range(ny):
-            taps = [(i + a, j + b, np.exp(-0.5 * (a * a + b * b) / sigma ** 2))
-                    for a in range(-half, half + 1) for b in range(-half, half + 1)
-                    if 0 <= i + a < nx and 0 <= j + b < ny]
-            total = sum(t[2] for t in taps)
-            for a, b, t in taps:
-                rows.append(i * ny + j)
-                cols.append(a * ny + b)
-                w.append(t / total)
-    return np.asarray(rows, np.uint32), np.asarray(cols, np.uint32), np.asarray(w, np.float32)
-
-
-def smoothed(u, taps, n):
-    """``S u`` (Dr.Jit, differentiable) for ``taps`` from `smoothing_taps`."""
-    import drjit as dr
-    import mitsuba as mi
-
-    rows, cols, w = taps
-    out = dr.zeros(mi.Float, n)
-    dr.scatter_add(out, dr.gather(mi.Float, u, mi.UInt32(cols)) * mi.Float(w), mi.UInt32(rows))
     return out
 
 

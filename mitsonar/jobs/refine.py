@@ -78,7 +78,7 @@ def sidescan_xml(ply, *, n_bins=200, range_max=10.0, depression=30.0, beamwidth_
             '<boolean name="face_normals" value="true"/><ref id="bed"/></shape></scene>')
 
 
-def _blur_taps(nx, ny, sigma):
+def smoothing_taps(nx, ny, sigma):
     """(rows, cols, weights) of a normalised Gaussian blur of ``sigma`` vertices (to 2 sigma)."""
     half = max(1, int(math.ceil(2 * sigma)))
     off = np.arange(-half, half + 1)
@@ -96,7 +96,8 @@ def _blur_taps(nx, ny, sigma):
     return rows.astype(np.uint32), cols.astype(np.uint32), w.astype(np.float32)
 
 
-def _apply(u, taps, n):
+def smoothed(u, taps, n):
+    """``S u`` (Dr.Jit, differentiable) for ``taps`` from `smoothing_taps`."""
     import drjit as dr
     import mitsuba as mi
 
@@ -127,7 +128,8 @@ def _blur_range(img, sigma_bins):
     return out
 
 
-def _laplacian_penalty(z, nx, ny):
+def laplacian_penalty(z, nx, ny):
+    """``sum (laplacian z)^2`` over the interior vertices of the ``nx x ny`` grid (Dr.Jit, differentiable)."""
     import drjit as dr
     import mitsuba as mi
 
@@ -226,13 +228,13 @@ def _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, lr_deca
     tf = [mi.Transform4f(mi.Matrix4f(np.asarray(P, np.float64))) for P in poses]
     tg = [mi.TensorXf(np.asarray(t, np.float32).reshape(np.shape(t)[0], np.shape(t)[1], 1)) for t in targets]
 
-    taps = [_blur_taps(nx, ny, float(s)) for s, _, _ in stages]
+    taps = [smoothing_taps(nx, ny, float(s)) for s, _, _ in stages]
     opt = mi.ad.Adam(lr=lr)
 
     def heights(k_active):
         z = z0_dr
         for l in range(k_active):
-            z = z + _apply(opt[f"u{l}"], taps[l], n)
+            z = z + smoothed(opt[f"u{l}"], taps[l], n)
         return z
 
     def data_loss(z, blur, grad):
@@ -270,7 +272,7 @@ def _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, lr_deca
             opt.set_learning_rate(lr * float(lr_decay) ** (j / max(int(iters) - 1, 1)))
             total = data_loss(lambda: heights(s + 1), float(blur), True)
             if smooth:      # smooth 0: no penalty (its graph would hold no gradient for backward)
-                dr.backward(smooth * _laplacian_penalty(heights(s + 1), nx, ny))
+                dr.backward(smooth * laplacian_penalty(heights(s + 1), nx, ny))
             history.append(total)
             opt.step()
             if callback is not None:
