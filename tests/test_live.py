@@ -181,10 +181,11 @@ def leading_edge(samples, width):
 EDGE_TOL = 0.1      # m: the pulse and the 8-bit receiver blur the edge by a few 2.4 cm bins
 
 
-def _start_live(*extra):
+def live_process(*args):
+    """``mitsonar live ARGS`` in a process: (the process, its output up to the serving line)."""
     env = dict(os.environ)
     env.pop("MITSONAR_DEBUG", None)
-    proc = subprocess.Popen([sys.executable, "-m", "mitsonar", "live", BOX, "--spp", "64", "--fast", *extra],
+    proc = subprocess.Popen([sys.executable, "-m", "mitsonar", "live", *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     lines = []
     for line in proc.stdout:        # ends (EOF) if the command dies before serving
@@ -193,6 +194,10 @@ def _start_live(*extra):
             break
     text = "".join(lines)
     return proc, text
+
+
+def _start_live(*extra):
+    return live_process(BOX, "--spp", "64", "--fast", *extra)
 
 
 def test_live_ping360_over_udp_follows_pose_datagrams_and_survives_garbage():

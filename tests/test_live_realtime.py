@@ -12,8 +12,6 @@ import math
 import os
 import signal
 import socket
-import subprocess
-import sys
 import time
 
 import numpy as np
@@ -21,6 +19,7 @@ import pytest
 
 from mitsonar.devices.poses import PoseBuffer
 from mitsonar.devices.realtime import SPP_LADDER, ErrorModel, PathBudget, PingLog, WireClock
+from test_live import live_process
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BOX = os.path.join(ROOT, "scenes_xml", "box.xml")
@@ -318,22 +317,9 @@ def loop_t0(loop):
     return loop.t0
 
 
-def _start_live(*args):
-    env = dict(os.environ)
-    env.pop("MITSONAR_DEBUG", None)
-    proc = subprocess.Popen([sys.executable, "-m", "mitsonar", "live", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=env)
-    lines = []
-    for line in proc.stdout:
-        lines.append(line)
-        if line.startswith("live "):
-            break
-    return proc, "".join(lines)
-
-
 def test_live_multibeam_without_head_publishes_frames_and_records_them_after_sigterm(tmp_path):
     records = tmp_path / "frames.jsonl"
-    proc, text = _start_live(BOX_FLS, "--ping-rate", "5", "--spp", "16", "--records", str(records))
+    proc, text = live_process(BOX_FLS, "--ping-rate", "5", "--spp", "16", "--records", str(records))
     try:
         assert "live multibeam sonar at 5 Hz" in text, (text, proc.stderr)
         proc.send_signal(signal.SIGUSR1)
