@@ -193,24 +193,21 @@ def _said(output) -> str:
     return f"ROS 2 topics on DDS domain {output.domain}"
 
 
-def _port(text):
-    try:
-        v = int(text)
-    except ValueError:
-        v = -1
-    if not 0 <= v <= 65535:
-        raise argparse.ArgumentTypeError(f"expected a TCP port from 0 to 65535 (0: any free one), got {text!r}")
-    return v
+def _whole_in(lo: int, hi: int, what: str):
+    """An argparse type: a whole number from ``lo`` to ``hi``; else ``expected WHAT, got TEXT`` (``what`` may name {lo} and {hi})."""
+    def parse(text):
+        try:
+            v = int(text)
+        except ValueError:
+            v = lo - 1
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"expected {what.format(lo=lo, hi=hi)}, got {text!r}")
+        return v
+    return parse
 
 
-def _domain(text):
-    try:
-        v = int(text)
-    except ValueError:
-        v = -1
-    if not 0 <= v <= 232:
-        raise argparse.ArgumentTypeError(f"expected a DDS domain id from 0 to 232, got {text!r}")
-    return v
+_port = _whole_in(0, 65535, "a TCP port from {lo} to {hi} (0: any free one)")
+_domain = _whole_in(0, 232, "a DDS domain id from {lo} to {hi}")
 
 
 def _refuse_ping_rate(args, scene_path) -> None:
