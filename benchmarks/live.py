@@ -46,6 +46,8 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
+from mitsonar.devices.ping360.head import Ping360Settings
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 HARBOUR = os.path.join(ROOT, "scenes_xml", "harbour.xml")
 
@@ -135,11 +137,12 @@ def brping_client(head):
     if not p.initialize():
         raise RuntimeError("brping could not initialise the live Ping360")
     rng, _ = scene_range()
-    n = 600
-    period = round(2 * rng / (1500 * n * 25e-9))
-    p.set_number_of_samples(n)
-    p.set_sample_period(period)
-    p.set_transmit_duration(min(1000, max(5, round(8000 * rng / 1500))))
+    # the head's fields for that range as mitsonar's Ping360 client sets them (sample period in
+    # 25 ns ticks, Blue Robotics' transmit duration)
+    settings = Ping360Settings(range=rng, number_of_samples=600)
+    p.set_number_of_samples(settings.number_of_samples)
+    p.set_sample_period(settings.sample_period)
+    p.set_transmit_duration(settings.transmit_duration)
     return p
 
 
