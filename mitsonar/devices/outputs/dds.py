@@ -80,7 +80,7 @@ class DdsOutput:
         self.count = 0
 
     def publish(self, t_ns: int, vehicle, mount, scan) -> None:
-        from mitsonar.export.ros.messages import projected_image
+        from mitsonar.export.ros.messages import mono8, projected_image
 
         T = self.types
         stamp = T["builtin_interfaces/msg/Time"](sec=int(t_ns // 1_000_000_000), nanosec=int(t_ns % 1_000_000_000))
@@ -88,11 +88,8 @@ class DdsOutput:
         def header(frame):
             return T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
 
-        pixels = self.pictures.of(scan)
-        h, w = pixels.shape
-        self.writers["rt/sonar/fan"].write(T["sensor_msgs/msg/Image"](
-            header=header(SONAR_FRAME), height=h, width=w, encoding="mono8", is_bigendian=0, step=w,
-            data=pixels.tobytes()))
+        image = mono8(t_ns, SONAR_FRAME, self.pictures.of(scan))     # the bags' Image fields
+        self.writers["rt/sonar/fan"].write(T["sensor_msgs/msg/Image"](**{**image, "header": header(SONAR_FRAME)}))
         m = projected_image(scan, list(range(scan.data.shape[0])), t_ns)
         vec = T["geometry_msgs/msg/Vector3"]
         self.writers["rt/sonar/image"].write(T["marine_acoustic_msgs/msg/ProjectedSonarImage"](
