@@ -60,6 +60,41 @@ class BeamPatternError(ValueError):
     pass
 
 
+#: pi in three float32 parts (Cody and Waite 1980; Cephes ``sinf``'s ``DP1..DP3`` times 4): ``k pi``
+#: subtracted part by part is exact for the ``k`` a beam pattern meets (|k| < 2^8).
+_PI_PARTS = (3.140625, 9.67502593994140625e-4, 1.509957990978376432e-7)
+
+
+def sin_over_x(x):
+    """``sin(x) / x`` (1 at 0) to float32 rounding for any ``|x| < 2^8 pi``, from float32 arithmetic
+    alone: ``x = k pi + r`` with ``|r| <= pi/2`` (Cody-Waite reduction, `_PI_PARTS`), ``sin x =
+    (-1)^k sin r``, ``sin r`` by its Taylor series to ``r^13`` (truncation below 7e-10 on
+    ``[-pi/2, pi/2]``; Abramowitz and Stegun 4.3.65).
+
+    Used on the ``cuda`` variants, where Dr.Jit's ``sin`` of a float32 is the GPU's approximate
+    ``sin.approx`` (absolute error about 2^-21 only inside ``[-pi, pi]``, growing with ``|x|``
+    outside): a piston's side lobes take ``x`` to 20 and more, and ``sin(x) / x`` there lost three
+    significant digits (measured on an H100). The ``llvm`` variants keep Dr.Jit's own ``sin``
+    (Cephes' reduction and polynomial: already accurate), so their scans keep their bytes."""
+    k = dr.round(x * (1.0 / math.pi))
+    r = x
+    for part in _PI_PARTS:
+        r = dr.fma(-k, part, r)
+    r2 = dr.square(r)
+    poly = 1.0 / 6227020800.0
+    for c in (-1.0 / 39916800.0, 1.0 / 362880.0, -1.0 / 5040.0, 1.0 / 120.0, -1.0 / 6.0):
+        poly = dr.fma(poly, r2, c)
+    sin_r = dr.fma(r * r2, poly, r)
+    odd = (mi.Int32(k) & 1) != 0
+    out = dr.select(odd, -sin_r, sin_r) / x
+    return dr.select(dr.abs(x) > 1e-6, out, 1.0)
+
+
+def _approximate_sin():
+    """True where Dr.Jit's float32 ``sin`` is the hardware approximation (the CUDA backend)."""
+    return dr.backend_v(mi.Float) == dr.JitBackend.CUDA
+
+
 def _sinc(t):
     t = np.asarray(t, dtype=np.float64)
     out = np.ones_like(t)
@@ -362,8 +397,11 @@ class BeamPattern:
         if self.kind == "sinc":
             x = self._p_kh * dr.cos(el) * dr.sin(az)
             y = self._p_kv * dr.sin(el)
-            sx = dr.select(dr.abs(x) > 1e-6, dr.sin(x) / x, 1.0)
-            sy = dr.select(dr.abs(y) > 1e-6, dr.sin(y) / y, 1.0)
+            if _approximate_sin():
+                sx, sy = sin_over_x(x), sin_over_x(y)
+            else:
+                sx = dr.select(dr.abs(x) > 1e-6, dr.sin(x) / x, 1.0)
+                sy = dr.select(dr.abs(y) > 1e-6, dr.sin(y) / y, 1.0)
             return dr.select(dr.abs(az) <= dr.pi / 2, dr.square(sx * sy), 0.0)
         g, inside = mi.Float(0.0), mi.Bool(True)
         for axis, ang in (("h", az), ("v", el)):

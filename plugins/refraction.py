@@ -69,10 +69,34 @@ MERGE_TOL = 0.01
 DEFAULT_CHORDS = 4
 
 
-def _log1p_over(y):
-    """``log1p(y) / y`` without cancellation (Goldberg's trick), 1 at 0."""
+#: Below this ``|y|``, `log1p_over` sums the series instead of dividing ``log(1 + y)`` (CUDA).
+SERIES_BELOW = 0.25
+
+
+def log1p_over(y, series=None):
+    """``log1p(y) / y`` (1 at 0) without cancellation.
+
+    On the ``llvm`` variants: Goldberg's trick ``log(u) / (u - 1)`` with ``u = 1 + y`` rounded
+    (Goldberg 1991, "What every computer scientist should know about floating-point arithmetic",
+    thm. 4), exact to rounding because Dr.Jit's ``log`` is. On the ``cuda`` variants Dr.Jit's
+    float32 ``log`` is the GPU's ``lg2.approx`` (absolute error about 2^-22), so near ``u = 1``
+    the quotient lost up to four digits (travel times 1e-4 too long through a 20-layer profile,
+    measured on an H100): there (or wherever ``series`` is True), for ``|y| < SERIES_BELOW``,
+    ``log1p(y) = 2 atanh(t)`` with ``t = y / (2 + y)`` and ``atanh`` by its series (Abramowitz
+    and Stegun 4.6.33) to ``t^10`` (``|t| <= 1/7``: truncation below 1e-9), in float32
+    arithmetic alone. ``series`` None: by the backend."""
     u = 1.0 + y
-    return dr.select(u == 1.0, 1.0, dr.log(u) / (u - 1.0))
+    goldberg = dr.select(u == 1.0, 1.0, dr.log(u) / (u - 1.0))
+    if series is None:
+        series = dr.backend_v(y) == dr.JitBackend.CUDA
+    if not series:
+        return goldberg
+    inv = 1.0 / (2.0 + y)
+    t2 = dr.square(y * inv)
+    poly = 1.0 / 11.0
+    for c in (1.0 / 9.0, 1.0 / 7.0, 1.0 / 5.0, 1.0 / 3.0, 1.0):
+        poly = dr.fma(poly, t2, c)
+    return dr.select(dr.abs(y) < SERIES_BELOW, 2.0 * inv * poly, goldberg)
 
 
 def _sinhc(x):
@@ -84,6 +108,16 @@ def _sin_at(a, c):
     return dr.safe_sqrt((1.0 - ac) * (1.0 + ac))
 
 
+def _sin_below(a, c, u_ref, c_ref):
+    """`_sin_at` for a ray whose ``1 - a c_ref`` is known as ``u_ref`` (no cancellation):
+    ``1 - a c = u_ref + a (c_ref - c)`` (the speeds' difference is exact), ``sin^2 = u (2 - u)``.
+    Near-horizontal eigenrays need it: ``1 - a c`` formed from a rounded ``a`` lost its digits
+    there (float32; on an H100, whose division rounds less well, a point 50 m off and 1 m below
+    the head was declared unreachable)."""
+    u = u_ref + a * (c_ref - c)
+    return dr.safe_sqrt(u * (2.0 - u))
+
+
 def _piece(dz, c1, s1, c2, s2, a, g):
     """Horizontal distance and time between depths ``z1 < z1 + dz`` on one side of a turn
     (profile.py ``_piece``: ``dx = a dz (c1 + c2) / (s1 + s2)``, ``dt = (1/g) log1p(y)``)."""
@@ -92,7 +126,7 @@ def _piece(dz, c1, s1, c2, s2, a, g):
     K = (1.0 + s1) + c1 * a * a * (c1 + c2) / ssum
     D = c1 * (1.0 + s2)
     y = g * dz * K / D
-    dt = dz * K / D * _log1p_over(y)
+    dt = dz * K / D * log1p_over(y)
     zero = dz <= 0
     return dr.select(zero, 0.0, dx), dr.select(zero, 0.0, dt)
 
@@ -279,7 +313,7 @@ class Refraction:
             hit = pi.is_valid() & active
             f = dr.clip(pi.t / dr.maximum(L, 1e-30), 0.0, 1.0)
             r = c2 / c1 - 1.0
-            frac = f * _log1p_over(r * f) / _log1p_over(r)
+            frac = f * log1p_over(r * f) / log1p_over(r)
             hit_o = dr.select(hit, start, hit_o)
             hit_d = dr.select(hit, ray.d, hit_d)
             hit_t = dr.select(hit, L, hit_t)
@@ -337,9 +371,10 @@ class Refraction:
         up = dr.select(chord.z >= 0, 1.0, -1.0)
         return dr.normalize(mi.Vector3f(-h.x * cos_p, -h.y * cos_p, up * sin_p))
 
-    def _sum(self, a, z_lo, z_hi, full=True):
+    def _sum(self, a, z_lo, z_hi, full=True, u_ref=None, c_ref=None):
         """Horizontal distance, time and arc length of the direct ray of invariant ``a`` between
-        depths ``z_lo < z_hi`` (layers unrolled); the distance alone unless ``full``."""
+        depths ``z_lo < z_hi`` (layers unrolled); the distance alone unless ``full``. With
+        ``u_ref = 1 - a c_ref`` the sines come from `_sin_below` (no cancellation)."""
         X, T, L = mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)
         for top, bot, ct, g in self.layers:
             za = dr.maximum(z_lo, top)
@@ -347,7 +382,10 @@ class Refraction:
             dz = dr.maximum(zb - za, 0.0)
             c1 = dr.select(g == 0, ct, ct + g * (za - top))
             c2 = dr.select(g == 0, ct, ct + g * (zb - top))
-            s1, s2 = _sin_at(a, c1), _sin_at(a, c2)
+            if u_ref is None:
+                s1, s2 = _sin_at(a, c1), _sin_at(a, c2)
+            else:
+                s1, s2 = _sin_below(a, c1, u_ref, c_ref), _sin_below(a, c2, u_ref, c_ref)
             if not full:     # dx = a dz (c1 + c2) / (s1 + s2), `_piece`'s first half
                 X += dr.select(dz <= 0, 0.0, a * dz * (c1 + c2) / (s1 + s2))
                 continue
@@ -381,16 +419,18 @@ class Refraction:
 
         def at(q):
             cos_m = dr.select(steep, q * dr.rsqrt(1.0 + q * q), dr.safe_sqrt((1.0 - q) * (1.0 + q)))
+            # 1 - cos at c_max: steep, cos <= 1/sqrt(2) (no cancellation); flat, sin^2 / (1 + cos)
+            u_m = dr.select(steep, 1.0 - cos_m, q * q / (1.0 + cos_m))
             a = cos_m / c_max
-            Xs = self._sum(a, z_lo, z_hi, full=False)[0]
-            return a, Xs, dr.select(steep, Xs - X, dr.rcp(dr.maximum(Xs, 1e-30)) - inv_X)
+            Xs = self._sum(a, z_lo, z_hi, full=False, u_ref=u_m, c_ref=c_max)[0]
+            return a, u_m, Xs, dr.select(steep, Xs - X, dr.rcp(dr.maximum(Xs, 1e-30)) - inv_X)
 
         q0 = dr.select(steep, X / dr.maximum(dz, 1e-30), 0.0)
-        a0, X0, F0 = at(q0)
+        a0, u0, X0, F0 = at(q0)
         q1 = dr.select(steep, q0 * X / dr.maximum(X0, 1e-30),
                        dr.minimum(dz * dr.rsqrt(dr.square(X) + dr.square(dz)), 1.0 - 1e-7))
         q1 = dr.select(dr.isfinite(q1), q1, q0)
-        a1, X1, F1 = at(q1)
+        a1, u1, X1, F1 = at(q1)
         top = dr.select(steep, dr.inf, 1.0 - 1e-7)
         for _ in range(EIGEN_STEPS):
             den = F1 - F0
@@ -398,8 +438,8 @@ class Refraction:
             q2 = dr.select(dr.isfinite(q2) & (den != 0), dr.clip(q2, 0.0, top), q1)
             q0, F0 = q1, F1
             q1 = q2
-            a1, X1, F1 = at(q1)
-        X1, T1, L1 = self._sum(a1, z_lo, z_hi)
+            a1, u1, X1, F1 = at(q1)
+        X1, T1, L1 = self._sum(a1, z_lo, z_hi, u_ref=u1, c_ref=c_max)
         vertical = X <= 1e-6 * (dz + 1.0)        # straight down or up: a = 0
         a_v, X_v, T_v, L_v = (mi.Float(0.0),) + self._sum(mi.Float(0.0), z_lo, z_hi)
         a1, X1, T1, L1 = (dr.select(vertical, u, v) for u, v in ((a_v, a1), (X_v, X1), (T_v, T1), (L_v, L1)))

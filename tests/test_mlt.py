@@ -6,7 +6,7 @@ import drjit as dr
 import numpy as np
 import pytest
 
-from conftest import SCENES, jit_kernels
+from conftest import SCENES, jit_kernels, on_cuda
 
 
 def grouped(hist, ping_groups, range_groups):
@@ -201,7 +201,9 @@ def test_split_partitions_the_echoes(mitsonar_mod):
     mlt = mi.load_dict({"type": "sonar_mlt", "max_depth": 5})
     easy, hard = traced(mlt, mlt.setup(scene, 0), 7, 0, 1024)
     tof = mi.load_dict({"type": "sonar_tof", "max_depth": 5}).render_histogram(scene, 0, seed=7, spp=1024)
-    assert np.allclose((easy + hard).reshape(tof.shape) / 1024, tof, rtol=1e-9, atol=1e-300)
+    # the same paths in two kernels: the same sums on llvm; float32 rounding apart on cuda (ptxas
+    # fuses each kernel's multiplies and adds on its own)
+    assert np.allclose((easy + hard).reshape(tof.shape) / 1024, tof, rtol=1e-3 if on_cuda() else 1e-9, atol=1e-300)
     r = scene.sensors()[0].bin_centres()
     easy, hard = easy.reshape(tof.shape).sum(0), hard.reshape(tof.shape).sum(0)
     assert hard.sum() > 0.1 * easy.sum()

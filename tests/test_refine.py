@@ -70,7 +70,12 @@ def test_refinement_lowers_the_height_error_and_the_loss(fitted):
 
 
 def test_refinement_is_deterministic_per_seed(fitted):
+    from conftest import on_cuda
+
     _, _, res, fit, _ = fitted
+    if on_cuda():   # the gradients' scatter-adds are float atomics in any order on a GPU
+        np.testing.assert_allclose(fit()["z"], res["z"], rtol=0, atol=1e-5)   # 10 um; 1.7 um on an H100
+        return
     np.testing.assert_array_equal(fit()["z"], res["z"])
 
 
