@@ -22,7 +22,10 @@ Prints one JSON object:
   * ``fixed_cost``: the quay frame at spp 1 (`render_scan` and `render_histogram`, medians) and
     the intercept of the seconds-per-spp line of the sweep; target < 2 ms.
 
-Usage: python benchmarks/frame_targets.py [--repeats 5] [--ref-spp 8192] [--big-spp 8192] [--quick]
+``--chain``: the receiver chain (`mitsonar.receiver.jitchain`; ``auto``: one Dr.Jit kernel on a GPU,
+NumPy on the CPU).
+
+Usage: python benchmarks/frame_targets.py [--repeats 5] [--ref-spp 8192] [--big-spp 8192] [--quick] [--chain auto]
 """
 from __future__ import annotations
 
@@ -161,13 +164,20 @@ def main(argv=None):
     ap.add_argument("--ref-spp", type=int, default=8192, help="quay reference paths per beam (both emissions)")
     ap.add_argument("--big-spp", type=int, default=8192, help="box scan paths per ping for the segment ratio")
     ap.add_argument("--quick", action="store_true", help="fewer sweep points and repeats (a smoke run)")
+    ap.add_argument("--chain", choices=("auto", "jit", "numpy"), default="auto",
+                    help="the receiver chain: one Dr.Jit kernel (jit), NumPy, or auto (the kernel on a GPU)")
     args = ap.parse_args(argv)
     import drjit as dr
+
+    from mitsonar.receiver import jitchain
+
+    jitchain.CHAIN = args.chain
 
     quay_spps = [64, 256] if args.quick else [64, 128, 256, 512]
     box_spps = [256, 1024] if args.quick else [128, 256, 512, 1024, 2048]
     repeats = 3 if args.quick else args.repeats
-    out = {"cores": os.cpu_count(), "dr_threads": dr.thread_count(), "load_avg_start": os.getloadavg()}
+    out = {"cores": os.cpu_count(), "dr_threads": dr.thread_count(), "load_avg_start": os.getloadavg(),
+           "variant": mi.variant(), "receiver_chain": "jit" if jitchain.use_jit() else "numpy"}
     scene, out["quay_frame"] = quay_frame(quay_spps, repeats, args.ref_spp)
     out["box_scan"], out["segments"] = box_scan(box_spps, repeats, 16, args.big_spp)
     fits = {f"max_depth_{d}_{e}": out["quay_frame"][f"max_depth_{d}"][e]["fit"]["overhead_s"]

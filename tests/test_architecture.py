@@ -169,6 +169,7 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     # and those import nothing of mitsonar's above them (the electronics' scene speckle and the
     # sonar equation's levels are numpy-only leaves beside them)
     leaves = {"mitsonar._checks", "mitsonar.receiver.speckle", "mitsonar.receiver.fastchain",
+              "mitsonar.receiver.jitchain",
               "mitsonar.sonar_equation.levels",
               "mitsonar.acoustics._checks", "mitsonar.acoustics.seawater", "mitsonar.acoustics.interface",
               "mitsonar.acoustics.seabed", "mitsonar.acoustics.materials", "mitsonar.geometry.elements"}

@@ -415,10 +415,12 @@ def test_sparse_spread_gives_the_dense_spread_bit_for_bit(mitsonar_mod):
 
 def test_sparse_scans_take_the_sparse_spread_and_keep_the_bytes(mitsonar_mod, monkeypatch):
     """A scan with echoes in under 1/16 of its bins goes through `convolve_sparse` (not the dense
-    spread) and gives the straightforward chain's bytes, for every setting."""
-    from mitsonar.receiver import fastchain
+    spread) and gives the straightforward chain's bytes, for every setting (the NumPy chain: on a
+    GPU the kernel chain of `mitsonar.receiver.jitchain` spreads every bin)."""
+    from mitsonar.receiver import fastchain, jitchain
     from mitsonar.receiver.electronics import Electronics
 
+    monkeypatch.setattr(jitchain, "CHAIN", "numpy")
     inten, ranges, poses = chain_inputs()
     inten = inten * (np.random.default_rng(8).random(inten.shape) < 0.15)   # about 5 % of bins
     assert 0 < np.count_nonzero(inten) * fastchain.SPARSE_RATIO <= inten.size

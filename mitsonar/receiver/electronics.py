@@ -66,7 +66,7 @@ from typing import Any
 import numpy as np
 
 from mitsonar._checks import is_number, not_a, not_allowed
-import mitsonar.receiver.fastchain as fastchain
+import mitsonar.receiver.fastchain as fastchain, mitsonar.receiver.jitchain as jitchain  # noqa: E401
 from mitsonar.sonar_equation.levels import (DEFAULT_NOISE_LEVEL, DEFAULT_RECEIVER_SENSITIVITY, DEFAULT_SOURCE_LEVEL,
                                     SOURCE_LEVELS, echo_level, rename_settings, source_level_error)
 
@@ -558,8 +558,8 @@ class Electronics:
             drawn = fastchain.take_draws(inten.shape, seed, corr) if speckle is not None else None   # rng's 1st use
             z, taps = drawn if drawn is not None else fastchain.gaussian_draws(inten.shape, rng, corr)
             f = math.sqrt(10.0 ** (self.noise_floor / 10.0)) * 10.0 ** (-chain / 20.0)
-        return fastchain.received_bytes(inten, g, kernel, quiet, ring, z, taps, f, (calibration, self.gain, tvg),
-                                        (self.ad_low, self.ad_span, self.bit_depth))
+        return (jitchain if jitchain.use_jit() else fastchain).received_bytes(   # the same bytes
+            inten, g, kernel, quiet, ring, z, taps, f, (calibration, self.gain, tvg), (self.ad_low, self.ad_span, self.bit_depth))
 
     def prefetch_noise(self, shape, ranges, sound_speed: float, seed: int) -> None:
         """Start drawing the receiver noise of ``apply(intensity of shape, ranges, sound_speed=..., seed=seed,

@@ -1,0 +1,131 @@
+"""The receiver chain's per-bin arithmetic as one Dr.Jit kernel (issue "Frame overhead").
+
+`mitsonar.receiver.fastchain.received_bytes` does a frame's range spread, noise filter, received
+power, dB levels and A/D quantisation in NumPy on the CPU. On a GPU the render of a 512-beam frame
+takes about 3 ms and that chain about 15-20 ms (NVIDIA H100, ``benchmarks/frame_profile.py``), so
+on the ``cuda`` variants `received_bytes` here runs the same arithmetic as one kernel in float64
+on the device: the random draws, the speckle and the settings are computed as before on the CPU
+(the same numbers from the same seeds) and uploaded, the bytes come back.
+
+Every bin goes through `fastchain`'s operations in its order: the spread's taps added one by one
+to a sum that starts at ``+0.0`` (out-of-range taps add nothing), the noise filter's likewise,
+``sqrt(I) g + ring + f n`` then ``re^2 + im^2``, ``10 log10`` plus calibration, gain and TVG, the
+A/D window, halves rounded up. Two steps may round differently: ``log10`` (Dr.Jit's ``log`` times
+``1 / ln 10`` against the C library's ``log10``: a few units in the last place) and, on a GPU,
+ptxas fusing a multiply and an add into one FMA. A byte can differ only where its level falls
+within about 1e-13 of a quantisation step's half; tests/test_jitchain.py finds every byte equal
+to NumPy's (every electronics setting, 512 x 500 quay frames) on ``llvm`` and on an NVIDIA H100.
+
+Measured on the H100 (``python benchmarks/frame_targets.py --chain numpy`` then ``--chain auto``,
+alternating, two rounds, *2026-11-26*): the quay frame at 5 % in 27-31 ms with the NumPy chain,
+15-16 ms with this kernel (61-66 frames/s against 32-37); at spp 1, 23 ms against 13-15 ms.
+
+`CHAIN` chooses: ``"auto"`` (this kernel on the ``cuda`` variants, NumPy on ``llvm``, where the
+NumPy chain in cache-sized blocks was as fast), ``"jit"`` (this kernel on any backend; what the
+tests use on the CPU), ``"numpy"``. Imports nothing of mitsonar.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: ``"auto"``, ``"jit"`` or ``"numpy"`` (see the module docstring).
+CHAIN = "auto"
+CHOICES = ("auto", "jit", "numpy")
+
+
+def use_jit() -> bool:
+    """True when `received_bytes` should run here rather than in `fastchain` (`CHAIN`)."""
+    if CHAIN not in CHOICES:
+        raise ValueError(f"jitchain.CHAIN {CHAIN!r} is not one of {', '.join(CHOICES)}")
+    if CHAIN == "numpy":
+        return False
+    try:
+        import drjit as dr
+        import mitsuba as mi
+    except ImportError:
+        return False
+    variant = mi.variant() or ""
+    if not (variant.startswith("llvm") or variant.startswith("cuda")) or "mono" not in variant:
+        return False
+    return CHAIN == "jit" or dr.backend_v(mi.Float) == dr.JitBackend.CUDA
+
+
+def _f64(values):
+    import mitsuba as mi
+
+    return mi.Float64(np.ascontiguousarray(values, dtype=np.float64).reshape(-1))
+
+
+def received_bytes(inten, g, kernel, quiet, ring, z, taps, f, levels, ad):
+    """`fastchain.received_bytes` (same arguments, same result: uint8 of ``inten``'s shape) as one
+    Dr.Jit kernel of the active variant. ``quiet`` (no ring-down, no noise) goes to `fastchain`:
+    its ``|g|^2`` is NumPy's ``hypot``, which this kernel does not reproduce."""
+    import drjit as dr
+    import mitsuba as mi
+
+    import mitsonar.receiver.fastchain as fastchain   # a leaf, like this module
+
+    if quiet:
+        return fastchain.received_bytes(inten, g, kernel, quiet, ring, z, taps, f, levels, ad)
+    calibration, gain, tvg = levels
+    ad_low, ad_span, bit_depth = ad
+    scale = 15.0 if bit_depth == 4 else 255.0
+    n_rows, n_bins = inten.shape
+    with dr.suspend_grad():
+        lane = dr.arange(mi.UInt32, n_rows * n_bins)
+        row = lane // n_bins
+        col = mi.Int32(lane - row * n_bins)
+        base = row * n_bins
+        x_all = _f64(inten)
+        # the range spread: out[b] += w_j x[b - (j - m)], tap by tap (fastchain.convolve_range)
+        if kernel.size > 1:
+            m = (kernel.size - 1) // 2
+            x = mi.Float64(0.0)
+            for j, w in enumerate(np.asarray(kernel, dtype=np.float64)):
+                shift = j - m
+                if w == 0.0 or abs(shift) >= n_bins:
+                    continue
+                src = col - shift
+                ok = (src >= 0) & (src < n_bins)
+                v = dr.gather(mi.Float64, x_all, base + mi.UInt32(dr.maximum(src, 0)), ok)
+                x = dr.select(ok, x + float(w) * v, x)
+        else:
+            x = dr.gather(mi.Float64, x_all, lane)
+        gc = np.asarray(g)
+        g_re = _f64(gc.real if np.iscomplexobj(gc) else gc)
+        g_im = _f64(gc.imag) if np.iscomplexobj(gc) else None
+        amp = dr.sqrt(x)
+        re = amp * dr.gather(mi.Float64, g_re, lane)
+        im = amp * dr.gather(mi.Float64, g_im, lane) if g_im is not None else mi.Float64(0.0) * amp
+        if ring is not None:
+            re = re + dr.gather(mi.Float64, _f64(ring), mi.UInt32(col))
+        if z is not None:
+            width = z.shape[-2]          # n_bins + taps - 1 draws per row, (real, imaginary)
+            z_all = _f64(z)
+            start = (row * width + mi.UInt32(col)) * 2
+            h = np.asarray(taps, dtype=np.float64)
+            if h.size == 1:
+                n_re = dr.gather(mi.Float64, z_all, start)
+                n_im = dr.gather(mi.Float64, z_all, start + 1)
+            else:
+                n_re, n_im = mi.Float64(0.0), mi.Float64(0.0)
+                for j, hj in enumerate(h):
+                    n_re = n_re + dr.gather(mi.Float64, z_all, start + 2 * j) * float(hj)
+                    n_im = n_im + dr.gather(mi.Float64, z_all, start + 2 * j + 1) * float(hj)
+            fb = dr.gather(mi.Float64, _f64(f), mi.UInt32(col))
+            re = re + n_re * fb
+            im = im + n_im * fb
+        total = re * re + im * im
+        level = dr.log(total) * (1.0 / math.log(10.0))
+        level = level * 10.0 + float(calibration) + float(gain)
+        level = level + dr.gather(mi.Float64, _f64(tvg), mi.UInt32(col))
+        level = (level - float(ad_low)) / float(ad_span)
+        level = dr.select(dr.isnan(level), 0.0, dr.clip(level, 0.0, 1.0)) * scale
+        q = dr.floor(level)
+        q = dr.select(level - q >= 0.5, q + 1.0, q)
+        if bit_depth == 4:
+            q = q * 17.0
+        data = mi.UInt32(q).numpy()
+    return data.astype(np.uint8).reshape(n_rows, n_bins)

@@ -1,0 +1,80 @@
+"""The receiver chain as one Dr.Jit kernel (`mitsonar.receiver.jitchain`): the bytes of the NumPy
+chain (`mitsonar.receiver.fastchain`) for every electronics setting, on the active variant."""
+import numpy as np
+import pytest
+
+from conftest import jit_kernels, on_cuda
+from test_frame_overhead import CONFIGS, QUAY, chain, chain_inputs
+
+
+def both(model, inten, ranges, poses, monkeypatch, drawn):
+    from mitsonar.receiver import jitchain
+
+    out = []
+    for mode in ("numpy", "jit"):
+        monkeypatch.setattr(jitchain, "CHAIN", mode)
+        out.append(chain(model, inten, ranges, poses, True, monkeypatch, drawn))
+    return out
+
+
+@pytest.mark.parametrize("settings", CONFIGS)
+@pytest.mark.parametrize("drawn", [False, True])
+def test_kernel_chain_gives_the_numpy_chain_bytes(mitsonar_mod, monkeypatch, settings, drawn):
+    """Every setting (speckle drawn or the scene's, Weibull, no ring-down, no noise, 4 bits, no
+    pulse, a fixed gain): the same bytes, for a scan and for one ping."""
+    from mitsonar.receiver.electronics import Electronics
+
+    model = Electronics.from_dict(settings)
+    inten, ranges, poses = chain_inputs()
+    ref, got = both(model, inten, ranges, poses, monkeypatch, drawn)
+    assert got.dtype == np.uint8 and got.shape == ref.shape
+    np.testing.assert_array_equal(got, ref)
+    assert len(np.unique(ref)) > 3
+    one_ref, one = both(model, inten[6], ranges, poses[6:7], monkeypatch, drawn)
+    np.testing.assert_array_equal(one, one_ref)
+
+
+def test_quay_frames_through_the_kernel_chain_keep_their_bytes(mitsonar_mod, monkeypatch):
+    """render_scan's 512 x 500 frame at spp 2 and 64, three seeds: the kernel chain's bytes are
+    the NumPy chain's (the intensities are the same render's)."""
+    from mitsonar.receiver import jitchain
+
+    scene = mitsonar_mod.load_scene(QUAY)
+    for spp, seed in ((2, 1), (64, 2), (64, 3)):
+        scans = []
+        for mode in ("numpy", "jit"):
+            monkeypatch.setattr(jitchain, "CHAIN", mode)
+            scans.append(mitsonar_mod.render_scan(scene, spp=spp, seed=seed))
+        np.testing.assert_array_equal(scans[0].intensity, scans[1].intensity)
+        np.testing.assert_array_equal(scans[1].data, scans[0].data)
+        assert (scans[0].data > 0).mean() > 0.1
+
+
+def test_kernel_chain_compiles_once_for_new_frames(mitsonar_mod, monkeypatch):
+    """A new seed or new intensities of the same shape replay the compiled kernel."""
+    from mitsonar.receiver import jitchain
+    from mitsonar.receiver.electronics import Electronics
+
+    monkeypatch.setattr(jitchain, "CHAIN", "jit")
+    model = Electronics.from_dict({})
+    inten, ranges, poses = chain_inputs()
+    sp = model.scene_speckle(poses, ranges, sound_speed=1500.0, beamwidth_h=1.0, aperture_h=0.03)
+    model.apply(inten, ranges, seed=1, speckle=sp)
+    first, _ = jit_kernels(lambda: model.apply(inten * 2.0, ranges, seed=2, speckle=sp))
+    again, fresh = jit_kernels(lambda: model.apply(inten * 3.0, ranges, seed=3, speckle=sp))
+    assert first and sorted(again) == sorted(first) and not fresh
+
+
+def test_chain_choice(mitsonar_mod, monkeypatch):
+    """``auto`` takes the kernel on a GPU only; a bad choice is one line naming the setting."""
+    from mitsonar.receiver import jitchain
+
+    monkeypatch.setattr(jitchain, "CHAIN", "auto")
+    assert jitchain.use_jit() == on_cuda()
+    monkeypatch.setattr(jitchain, "CHAIN", "jit")
+    assert jitchain.use_jit()
+    monkeypatch.setattr(jitchain, "CHAIN", "numpy")
+    assert not jitchain.use_jit()
+    monkeypatch.setattr(jitchain, "CHAIN", "gpu")
+    with pytest.raises(ValueError, match=r"^jitchain.CHAIN 'gpu' is not one of auto, jit, numpy$"):
+        jitchain.use_jit()
