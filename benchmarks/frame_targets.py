@@ -22,8 +22,8 @@ Prints one JSON object:
   * ``fixed_cost``: the quay frame at spp 1 (`render_scan` and `render_histogram`, medians) and
     the intercept of the seconds-per-spp line of the sweep; target < 2 ms.
 
-``--chain``: the receiver chain (`mitsonar.receiver.jitchain`; ``auto``: one Dr.Jit kernel on a GPU,
-NumPy on the CPU).
+``--chain``: the receiver chain (`mitsonar.receiver.jitchain`; ``auto``: one Dr.Jit kernel for
+frames of 4096 bins or more, NumPy below; ``jit``; ``numpy``).
 
 Usage: python benchmarks/frame_targets.py [--repeats 5] [--ref-spp 8192] [--big-spp 8192] [--quick] [--chain auto]
 """
@@ -165,7 +165,7 @@ def main(argv=None):
     ap.add_argument("--big-spp", type=int, default=8192, help="box scan paths per ping for the segment ratio")
     ap.add_argument("--quick", action="store_true", help="fewer sweep points and repeats (a smoke run)")
     ap.add_argument("--chain", choices=("auto", "jit", "numpy"), default="auto",
-                    help="the receiver chain: one Dr.Jit kernel (jit), NumPy, or auto (the kernel on a GPU)")
+                    help="the receiver chain: one Dr.Jit kernel (jit), NumPy, or auto (the kernel for frames)")
     args = ap.parse_args(argv)
     import drjit as dr
 

@@ -17,6 +17,15 @@ CONFIGS = [{}, {"speckle": "weibull", "speckle_shape": 1.5}, {"ringdown": 0.0}, 
            {"speckle": "off"}, {"tvg": "off", "gain": 30.0}]
 
 
+@pytest.fixture(autouse=True)
+def numpy_chain(monkeypatch):
+    """These tests are about the NumPy chain (`fastchain`: its blocks, spreads, buffers); the
+    kernel chain that `auto` takes for frames has its own (tests/test_jitchain.py)."""
+    from mitsonar.receiver import jitchain
+
+    monkeypatch.setattr(jitchain, "CHAIN", "numpy")
+
+
 def chain_inputs(n_rows=45, n_bins=120, seed=1):
     rng = np.random.default_rng(seed)
     inten = rng.exponential(1e-9, (n_rows, n_bins)) * (rng.random((n_rows, n_bins)) < 0.3)
@@ -415,12 +424,10 @@ def test_sparse_spread_gives_the_dense_spread_bit_for_bit(mitsonar_mod):
 
 def test_sparse_scans_take_the_sparse_spread_and_keep_the_bytes(mitsonar_mod, monkeypatch):
     """A scan with echoes in under 1/16 of its bins goes through `convolve_sparse` (not the dense
-    spread) and gives the straightforward chain's bytes, for every setting (the NumPy chain: on a
-    GPU the kernel chain of `mitsonar.receiver.jitchain` spreads every bin)."""
-    from mitsonar.receiver import fastchain, jitchain
+    spread) and gives the straightforward chain's bytes, for every setting."""
+    from mitsonar.receiver import fastchain
     from mitsonar.receiver.electronics import Electronics
 
-    monkeypatch.setattr(jitchain, "CHAIN", "numpy")
     inten, ranges, poses = chain_inputs()
     inten = inten * (np.random.default_rng(8).random(inten.shape) < 0.15)   # about 5 % of bins
     assert 0 < np.count_nonzero(inten) * fastchain.SPARSE_RATIO <= inten.size

@@ -3,7 +3,7 @@ chain (`mitsonar.receiver.fastchain`) for every electronics setting, on the acti
 import numpy as np
 import pytest
 
-from conftest import jit_kernels, on_cuda
+from conftest import jit_kernels
 from test_frame_overhead import CONFIGS, QUAY, chain, chain_inputs
 
 
@@ -66,15 +66,17 @@ def test_kernel_chain_compiles_once_for_new_frames(mitsonar_mod, monkeypatch):
 
 
 def test_chain_choice(mitsonar_mod, monkeypatch):
-    """``auto`` takes the kernel on a GPU only; a bad choice is one line naming the setting."""
+    """``auto`` takes the kernel from JIT_MIN bins on (a frame, not a live ping); a bad choice is
+    one line naming the setting."""
     from mitsonar.receiver import jitchain
 
     monkeypatch.setattr(jitchain, "CHAIN", "auto")
-    assert jitchain.use_jit() == on_cuda()
+    assert jitchain.use_jit(512 * 500) and jitchain.use_jit(jitchain.JIT_MIN)
+    assert not jitchain.use_jit(600) and not jitchain.use_jit(jitchain.JIT_MIN - 1)
     monkeypatch.setattr(jitchain, "CHAIN", "jit")
-    assert jitchain.use_jit()
+    assert jitchain.use_jit(600)
     monkeypatch.setattr(jitchain, "CHAIN", "numpy")
-    assert not jitchain.use_jit()
+    assert not jitchain.use_jit(512 * 500)
     monkeypatch.setattr(jitchain, "CHAIN", "gpu")
     with pytest.raises(ValueError, match=r"^jitchain.CHAIN 'gpu' is not one of auto, jit, numpy$"):
         jitchain.use_jit()

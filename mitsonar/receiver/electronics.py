@@ -558,7 +558,7 @@ class Electronics:
             drawn = fastchain.take_draws(inten.shape, seed, corr) if speckle is not None else None   # rng's 1st use
             z, taps = drawn if drawn is not None else fastchain.gaussian_draws(inten.shape, rng, corr)
             f = math.sqrt(10.0 ** (self.noise_floor / 10.0)) * 10.0 ** (-chain / 20.0)
-        return (jitchain if jitchain.use_jit() else fastchain).received_bytes(   # the same bytes
+        return (jitchain if jitchain.use_jit(inten.size) else fastchain).received_bytes(   # the same bytes
             inten, g, kernel, quiet, ring, z, taps, f, (calibration, self.gain, tvg), (self.ad_low, self.ad_span, self.bit_depth))
 
     def prefetch_noise(self, shape, ranges, sound_speed: float, seed: int) -> None:

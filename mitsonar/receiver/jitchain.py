@@ -1,11 +1,12 @@
 """The receiver chain's per-bin arithmetic as one Dr.Jit kernel (issue "Frame overhead").
 
 `mitsonar.receiver.fastchain.received_bytes` does a frame's range spread, noise filter, received
-power, dB levels and A/D quantisation in NumPy on the CPU. On a GPU the render of a 512-beam frame
-takes about 3 ms and that chain about 15-20 ms (NVIDIA H100, ``benchmarks/frame_profile.py``), so
-on the ``cuda`` variants `received_bytes` here runs the same arithmetic as one kernel in float64
-on the device: the random draws, the speckle and the settings are computed as before on the CPU
-(the same numbers from the same seeds) and uploaded, the bytes come back.
+power, dB levels and A/D quantisation in NumPy, pass after pass over the bins. On a GPU the render
+of a 512-beam frame takes about 3 ms and that chain about 15-20 ms (NVIDIA H100,
+``benchmarks/frame_profile.py``). `received_bytes` here runs the same arithmetic as one kernel of
+the active variant, in float64 (on the GPU for ``cuda``, on all cores for ``llvm``): the random
+draws, the speckle and the settings are computed as before (the same numbers from the same seeds)
+and uploaded, the bytes come back.
 
 Every bin goes through `fastchain`'s operations in its order: the spread's taps added one by one
 to a sum that starts at ``+0.0`` (out-of-range taps add nothing), the noise filter's likewise,
@@ -20,9 +21,13 @@ Measured on the H100 (``python benchmarks/frame_targets.py --chain numpy`` then 
 alternating, two rounds, *2026-11-26*): the quay frame at 5 % in 27-31 ms with the NumPy chain,
 15-16 ms with this kernel (61-66 frames/s against 32-37); at spp 1, 23 ms against 13-15 ms.
 
-`CHAIN` chooses: ``"auto"`` (this kernel on the ``cuda`` variants, NumPy on ``llvm``, where the
-NumPy chain in cache-sized blocks was as fast), ``"jit"`` (this kernel on any backend; what the
-tests use on the CPU), ``"numpy"``. Imports nothing of mitsonar.
+On the CPU (``llvm``, 2 cores, `Electronics.apply` with its draws, interleaved medians) the kernel
+fuses what NumPy does in passes: 1.5x faster for 32 x 500 bins, 1.7x for 200 x 500 (the box
+scan), 2.1x for 512 x 500 (20 ms to 10 ms), but slower for one ping of 600 bins (0.43 ms against
+0.33 ms: tracing the kernel costs more than the arithmetic).
+
+`CHAIN` chooses: ``"auto"`` (this kernel from `JIT_MIN` bins of a call on, NumPy below),
+``"jit"`` (this kernel always), ``"numpy"`` (never). Imports nothing of mitsonar.
 """
 from __future__ import annotations
 
@@ -33,26 +38,30 @@ import numpy as np
 #: ``"auto"``, ``"jit"`` or ``"numpy"`` (see the module docstring).
 CHAIN = "auto"
 CHOICES = ("auto", "jit", "numpy")
+#: ``"auto"`` takes the kernel from this many bins of a call on (measured crossover: 1000-4000).
+JIT_MIN = 4096
 
 
-def use_jit() -> bool:
-    """True when `received_bytes` should run here rather than in `fastchain` (`CHAIN`)."""
+def use_jit(size: int = JIT_MIN) -> bool:
+    """True when `received_bytes` of ``size`` bins should run here rather than in `fastchain`
+    (`CHAIN`, `JIT_MIN`; a Dr.Jit ``mono`` variant must be active)."""
     if CHAIN not in CHOICES:
         raise ValueError(f"jitchain.CHAIN {CHAIN!r} is not one of {', '.join(CHOICES)}")
     if CHAIN == "numpy":
         return False
     try:
-        import drjit as dr
         import mitsuba as mi
     except ImportError:
         return False
     variant = mi.variant() or ""
     if not (variant.startswith("llvm") or variant.startswith("cuda")) or "mono" not in variant:
         return False
-    return CHAIN == "jit" or dr.backend_v(mi.Float) == dr.JitBackend.CUDA
+    return CHAIN == "jit" or size >= JIT_MIN
 
 
 def _f64(values):
+    """A flat float64 array of the variant (the kernel only gathers from it: a mapped NumPy
+    array's alignment does not change the compiled kernel, unlike a contiguous read's)."""
     import mitsuba as mi
 
     return mi.Float64(np.ascontiguousarray(values, dtype=np.float64).reshape(-1))
