@@ -65,6 +65,26 @@ def test_kernel_chain_compiles_once_for_new_frames(mitsonar_mod, monkeypatch):
     assert first and sorted(again) == sorted(first) and not fresh
 
 
+def test_uploads_compile_one_kernel_whatever_the_host_alignment(mitsonar_mod):
+    """`jitchain._f64` of arrays at every 8-byte offset from a 256-byte boundary, read
+    contiguously as the chain reads the speckle and the intensities: one kernel for all (a plain
+    ``mi.Float64(array)`` maps the memory and compiles for its alignment: two kernels)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from mitsonar.receiver import jitchain
+
+    n = 5000
+    raw = np.arange(n + 64, dtype=np.float64)
+    start = (-raw.ctypes.data % 256) // 8
+    hashes = set()
+    for k in range(16):
+        a = jitchain._f64(raw[start + k:start + k + n])
+        lane = dr.arange(mi.UInt32, n)
+        hashes.update(jit_kernels(lambda: dr.eval(dr.gather(mi.Float64, a, lane) * 3.0 + 1.0))[0])
+    assert len(hashes) == 1, hashes
+
+
 def test_chain_choice(mitsonar_mod, monkeypatch):
     """``auto`` takes the kernel from JIT_MIN bins on (a frame, not a live ping); a bad choice is
     one line naming the setting."""

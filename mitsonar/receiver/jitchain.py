@@ -60,11 +60,14 @@ def use_jit(size: int = JIT_MIN) -> bool:
 
 
 def _f64(values):
-    """A flat float64 array of the variant (the kernel only gathers from it: a mapped NumPy
-    array's alignment does not change the compiled kernel, unlike a contiguous read's)."""
+    """A flat float64 array of the variant in memory of a fixed alignment (`mitsonar._jit.upload`):
+    Dr.Jit maps NumPy memory and compiles a contiguous read of it (a gather at ``arange``) for
+    the pointer's alignment, which NumPy leaves to chance: another kernel now and then."""
     import mitsuba as mi
 
-    return mi.Float64(np.ascontiguousarray(values, dtype=np.float64).reshape(-1))
+    from mitsonar._jit import upload
+
+    return upload(mi.Float64, values, np.float64)
 
 
 def received_bytes(inten, g, kernel, quiet, ring, z, taps, f, levels, ad):
