@@ -117,3 +117,19 @@ def test_refine_room_is_deterministic_per_seed_and_refuses_bad_input(box_targets
         refine_room(scene, start, 20.0, frames, targets, top=14.0)
     with pytest.raises(ValueError, match="vertices, a room of 5 corners"):
         refine_room(scene, np.r_[start, [[5.0 * 0.95, -3.9]]][[0, 4, 1, 2, 3]], -2.9, frames, targets, top=14.0)
+
+
+def test_room_feedback_refuses_scans_it_cannot_model_before_any_work():
+    """A head carried along a line, or scans from two positions, in one line before any fit."""
+    from hilbertmap.testing import box_scan, frame, moving_poses, orthogonal_frames
+    from mitsonar.jobs.refine_room import room_feedback
+
+    moving = box_scan(moving_poses((0, 0, 0), (1, 0, 0), n_pings=20), n_pings=20, rays=10, seed=0)
+    with pytest.raises(ValueError, match=r"scans\[0\] must be a mechanical scan from one fixed position"):
+        room_feedback([moving], None)
+    two = [box_scan(orthogonal_frames()[0], n_pings=20, rays=10, seed=0),
+           box_scan(frame((1, 0, 0), (0, 0, 1), (1.0, 0, 0)), n_pings=20, rays=10, seed=1)]
+    with pytest.raises(ValueError, match="one sonar position"):
+        room_feedback(two, None)
+    with pytest.raises(ValueError, match="at least one scan"):
+        room_feedback([], None)
