@@ -31,7 +31,7 @@ import time
 
 import numpy as np
 
-__all__ = ["grid_mesh", "refine_height_field", "sidescan_xml"]
+__all__ = ["grid_mesh", "refine_height_field", "render_loss", "sidescan_xml"]
 
 
 def grid_mesh(x, y, z):
@@ -126,6 +126,35 @@ def _blur_range(img, sigma_bins):
         ok = (b + j >= 0) & (b + j < n_bins)
         out += float(wj) * dr.gather(mi.Float, flat, mi.UInt32(mi.Int32(idx) + j), ok)
     return out
+
+
+def render_loss(scene, params, head, key, transforms, targets, vertices, *, blur, grad, spp, seed):
+    """The summed render-and-compare loss of every ping, ``sum_k |B s_k - B t_k|^2 / |B t_k|^2``
+    (`_blur_range` ``B``), the mesh ``key``'s vertex positions set to ``vertices()`` and the head
+    ``head`` moved to ``transforms[k]`` for ping ``k`` (rendered with ``seed + k``); with ``grad``
+    each ping's loss is back-propagated at once. ``vertices`` is called per ping: each backward
+    pass frees the graph it traversed, so the vertices are made anew for the next ping (else only
+    the first ping's gradient would reach the unknowns). Shared by `refine_height_field` and
+    `mitsonar.jobs.refine_room`."""
+    import drjit as dr
+    import mitsuba as mi
+
+    total = 0.0
+    for k, (P, t) in enumerate(zip(transforms, targets)):
+        params[f"{head}.to_world"] = P
+        params[key] = vertices()
+        params.update()
+        if grad:
+            img = mi.render(scene, params, spp=spp, seed=seed + k)
+        else:
+            with dr.suspend_grad():
+                img = mi.render(scene, params, spp=spp, seed=seed + k)
+        a, b = _blur_range(img, blur), _blur_range(t, blur)
+        loss = dr.sum(dr.square(a - b)) / dr.sum(dr.square(b))
+        if grad:
+            dr.backward(loss)
+        total += float(loss[0])
+    return total
 
 
 def laplacian_penalty(z, nx, ny):
@@ -238,26 +267,12 @@ def _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, lr_deca
         return z
 
     def data_loss(z, blur, grad):
-        """The summed loss of every ping; ``z``: the heights, or a function making them. Each ping's
-        backward pass frees the graph it traversed, heights included, so with ``grad`` the heights
-        are made anew per ping (else only the first ping's gradient would reach ``u``)."""
-        total = 0.0
-        for k, (P, t) in enumerate(zip(tf, tg)):
-            params[f"{head}.to_world"] = P
-            zk = z() if callable(z) else z
-            params[key] = xy + zsel * dr.gather(mi.Float, zk, vid)
-            params.update()
-            if grad:
-                img = mi.render(scene, params, spp=spp, seed=seed + k)
-            else:
-                with dr.suspend_grad():
-                    img = mi.render(scene, params, spp=spp, seed=seed + k)
-            a, b = _blur_range(img, blur), _blur_range(t, blur)
-            loss = dr.sum(dr.square(a - b)) / dr.sum(dr.square(b))
-            if grad:
-                dr.backward(loss)
-            total += float(loss[0])
-        return total
+        """The summed loss of every ping (`render_loss`); ``z``: the heights, or a function making
+        them anew per ping."""
+        def vertices():
+            return xy + zsel * dr.gather(mi.Float, z() if callable(z) else z, vid)
+
+        return render_loss(scene, params, head, key, tf, tg, vertices, blur=blur, grad=grad, spp=spp, seed=seed)
 
     t0 = time.perf_counter()
     blurs = sorted({float(b) for _, b, _ in stages})

@@ -300,7 +300,7 @@ def _refine(scene, C, floor, poses, targets, top, stages, spp, seed, lr, lr_deca
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.jobs.refine import _blur_range
+    from mitsonar.jobs.refine import render_loss
     from mitsonar.sim.render import scan_parameters
 
     key = f"{mesh}.vertex_positions"
@@ -324,22 +324,8 @@ def _refine(scene, C, floor, poses, targets, top, stages, spp, seed, lr, lr_deca
         return dr.gather(mi.Float, c, src) * use_c + dr.gather(mi.Float, zf, src * 0) * use_f + top_part
 
     def data_loss(blur, grad):
-        total = 0.0
-        for k, (P, t) in enumerate(zip(tf, tg)):
-            params[f"{head}.to_world"] = P
-            params[key] = vertices(opt["c"], opt["zf"])
-            params.update()
-            if grad:
-                img = mi.render(scene, params, spp=spp, seed=seed + k)
-            else:
-                with dr.suspend_grad():
-                    img = mi.render(scene, params, spp=spp, seed=seed + k)
-            a, b = _blur_range(img, blur), _blur_range(t, blur)
-            loss = dr.sum(dr.square(a - b)) / dr.sum(dr.square(b))
-            if grad:
-                dr.backward(loss)
-            total += float(loss[0])
-        return total
+        return render_loss(scene, params, head, key, tf, tg, lambda: vertices(opt["c"], opt["zf"]), blur=blur,
+                           grad=grad, spp=spp, seed=seed)
 
     t0 = time.perf_counter()
     last_blur = float(stages[-1][0])
