@@ -151,7 +151,7 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     the sonar kinds) and the electronics' settings (the sensor reads and checks its electronics
     fields), nothing else of mitsonar (not the Scan, files, render or devices)."""
     _, edges = import_graph()
-    allowed = {"mitsonar._checks", "mitsonar._jit", "mitsonar.geometry.frames", "mitsonar.geometry.kinds",
+    allowed = {"mitsonar._checks", "mitsonar.geometry.frames", "mitsonar.geometry.kinds",
                "mitsonar.receiver.electronics",
                # the water and seabed acoustics (NumPy, and scipy.special for the APL-UW model's
                # erfc; nothing of mitsonar beyond each other): the sensor's absorption and sound
@@ -169,11 +169,11 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     # and those import nothing of mitsonar's above them (the electronics' scene speckle and the
     # sonar equation's levels are numpy-only leaves beside them)
     leaves = {"mitsonar._checks", "mitsonar.receiver.speckle", "mitsonar.receiver.fastchain",
-              "mitsonar.receiver.jitchain", "mitsonar._jit",
+              "mitsonar.receiver.jitchain",
               "mitsonar.sonar_equation.levels",
               "mitsonar.acoustics._checks", "mitsonar.acoustics.seawater", "mitsonar.acoustics.interface",
               "mitsonar.acoustics.seabed", "mitsonar.acoustics.materials", "mitsonar.geometry.elements"}
-    for low in (allowed | leaves) - {"mitsonar._checks", "mitsonar._jit", "mitsonar.geometry.kinds"}:
+    for low in (allowed | leaves) - {"mitsonar._checks", "mitsonar.geometry.kinds"}:
         assert not {t for t in edges[low] if t.startswith("mitsonar")} - leaves, low
     # the kinds (numpy only) rotate rows with the frames' rotations
     assert {t for t in edges["mitsonar.geometry.kinds"] if t.startswith("mitsonar")} == {"mitsonar.geometry.frames"}

@@ -65,24 +65,42 @@ def test_kernel_chain_compiles_once_for_new_frames(mitsonar_mod, monkeypatch):
     assert first and sorted(again) == sorted(first) and not fresh
 
 
-def test_uploads_compile_one_kernel_whatever_the_host_alignment(mitsonar_mod):
-    """`jitchain._f64` of arrays at every 8-byte offset from a 256-byte boundary, read
-    contiguously as the chain reads the speckle and the intensities: one kernel for all (a plain
-    ``mi.Float64(array)`` maps the memory and compiles for its alignment: two kernels)."""
-    import drjit as dr
-    import mitsuba as mi
-
+def test_kernel_chain_compiles_one_way_whatever_the_host_alignment(mitsonar_mod):
+    """Intensities, speckle, draws and per-bin arrays placed at every 8-byte offset from a 256-byte
+    boundary (NumPy's allocations land anywhere; Dr.Jit maps host memory on llvm and would compile
+    a contiguous read of it for its alignment): one kernel for all, and the same bytes."""
     from mitsonar.receiver import jitchain
+    from mitsonar.receiver.electronics import Electronics
 
-    n = 5000
-    raw = np.arange(n + 64, dtype=np.float64)
-    start = (-raw.ctypes.data % 256) // 8
-    hashes = set()
-    for k in range(16):
-        a = jitchain._f64(raw[start + k:start + k + n])
-        lane = dr.arange(mi.UInt32, n)
-        hashes.update(jit_kernels(lambda: dr.eval(dr.gather(mi.Float64, a, lane) * 3.0 + 1.0))[0])
-    assert len(hashes) == 1, hashes
+    model = Electronics.from_dict({})
+    inten, ranges, poses = chain_inputs(n_rows=16, n_bins=300)
+    inten = inten.astype(np.float64)
+    rng = np.random.default_rng(3)
+    g = rng.normal(size=inten.shape) + 1j * rng.normal(size=inten.shape)
+    kernel = model.range_kernel(ranges[1] - ranges[0])
+    taps = np.array([0.6, 0.8])
+    z = rng.normal(size=(inten.shape[0], inten.shape[1] + 1, 2))
+    f = np.full(inten.shape[1], 1e-5)
+    ring = np.full(inten.shape[1], 1e-6)
+    tvg = np.linspace(0.0, 30.0, inten.shape[1])
+
+    def placed(a, k):
+        """``a`` copied into memory ``8 k`` bytes past a 256-byte boundary."""
+        raw = np.empty(a.nbytes + 512, dtype=np.uint8)
+        start = -raw.ctypes.data % 256 + 8 * k
+        out = raw[start:start + a.nbytes].view(a.dtype).reshape(a.shape)
+        out[...] = a
+        return out
+
+    hashes, results = [], []
+    for k in range(8):
+        args = [placed(a, k) for a in (inten, g, z, f, ring, tvg)]
+        run = lambda: results.append(jitchain.received_bytes(  # noqa: E731
+            args[0], args[1], kernel, False, args[4], args[2], taps, args[3], (52.0, 10.0, args[5]),
+            (model.ad_low, model.ad_span, model.bit_depth)))
+        hashes.append(sorted(set(jit_kernels(run)[0])))
+    assert hashes[0] and all(h == hashes[0] for h in hashes), hashes
+    assert all(np.array_equal(r, results[0]) for r in results)
 
 
 def test_chain_choice(mitsonar_mod, monkeypatch):

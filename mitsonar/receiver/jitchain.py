@@ -60,14 +60,14 @@ def use_jit(size: int = JIT_MIN) -> bool:
 
 
 def _f64(values):
-    """A flat float64 array of the variant in memory of a fixed alignment (`mitsonar._jit.upload`):
-    Dr.Jit maps NumPy memory and compiles a contiguous read of it (a gather at ``arange``) for
-    the pointer's alignment, which NumPy leaves to chance: another kernel now and then."""
+    """A flat float64 array of the variant. On ``llvm`` Dr.Jit maps a contiguous NumPy array (no
+    copy) and would compile a contiguous read of it (a gather at a plain ``arange``) for the
+    pointer's alignment, which NumPy leaves to chance: `received_bytes` reads every array through
+    computed indices, which compile one way whatever the alignment (an aligned copy of the 10 MB a
+    frame uploads cost more than the chain saved)."""
     import mitsuba as mi
 
-    from mitsonar._jit import upload
-
-    return upload(mi.Float64, values, np.float64)
+    return mi.Float64(np.ascontiguousarray(values, dtype=np.float64).reshape(-1))
 
 
 def received_bytes(inten, g, kernel, quiet, ring, z, taps, f, levels, ad):
@@ -90,6 +90,7 @@ def received_bytes(inten, g, kernel, quiet, ring, z, taps, f, levels, ad):
         row = lane // n_bins
         col = mi.Int32(lane - row * n_bins)
         base = row * n_bins
+        at = base + mi.UInt32(col)      # = lane, but computed: a gather, not an alignment-bound load
         x_all = _f64(inten)
         # the range spread: out[b] += w_j x[b - (j - m)], tap by tap (fastchain.convolve_range)
         if kernel.size > 1:
@@ -104,13 +105,13 @@ def received_bytes(inten, g, kernel, quiet, ring, z, taps, f, levels, ad):
                 v = dr.gather(mi.Float64, x_all, base + mi.UInt32(dr.maximum(src, 0)), ok)
                 x = dr.select(ok, x + float(w) * v, x)
         else:
-            x = dr.gather(mi.Float64, x_all, lane)
+            x = dr.gather(mi.Float64, x_all, at)
         gc = np.asarray(g)
         g_re = _f64(gc.real if np.iscomplexobj(gc) else gc)
         g_im = _f64(gc.imag) if np.iscomplexobj(gc) else None
         amp = dr.sqrt(x)
-        re = amp * dr.gather(mi.Float64, g_re, lane)
-        im = amp * dr.gather(mi.Float64, g_im, lane) if g_im is not None else mi.Float64(0.0) * amp
+        re = amp * dr.gather(mi.Float64, g_re, at)
+        im = amp * dr.gather(mi.Float64, g_im, at) if g_im is not None else mi.Float64(0.0) * amp
         if ring is not None:
             re = re + dr.gather(mi.Float64, _f64(ring), mi.UInt32(col))
         if z is not None:
