@@ -166,8 +166,8 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
         if name.startswith("mitsonar.plugins"):
             above = {t for t in out if t.startswith("mitsonar") and not t.startswith("mitsonar.plugins")}
             assert above <= allowed, (name, above - allowed)
-    # and those import nothing of mitsonar's above them (the electronics' scene speckle and the
-    # sonar equation's levels are numpy-only leaves beside them)
+    # and those import nothing of mitsonar's above them (the electronics' scene speckle, its NumPy
+    # and Dr.Jit chains and the sonar equation's levels are leaves beside them)
     leaves = {"mitsonar._checks", "mitsonar.receiver.speckle", "mitsonar.receiver.fastchain",
               "mitsonar.receiver.jitchain",
               "mitsonar.sonar_equation.levels",
