@@ -118,3 +118,23 @@ def test_chain_choice(mitsonar_mod, monkeypatch):
     monkeypatch.setattr(jitchain, "CHAIN", "gpu")
     with pytest.raises(ValueError, match=r"^jitchain.CHAIN 'gpu' is not one of auto, jit, numpy$"):
         jitchain.use_jit()
+
+
+def test_levels_on_a_quantisation_half_keep_the_numpy_byte(mitsonar_mod, monkeypatch):
+    """The ring-down without noise, ranges on a 1 cm grid: in the empty bins the level is the
+    ring-down's line ``40 - 50 r`` dB, which at r = 0.15 m is 32.5 dB, byte 212.5 of the default
+    window (12.5 dB + 24 dB): exactly a half, where Dr.Jit's ``log`` and NumPy's ``log10`` may
+    round to either side. NumPy's byte (213) it must be, as for every other bin."""
+    from mitsonar.receiver import jitchain
+    from mitsonar.receiver.electronics import Electronics
+
+    model = Electronics.from_dict({"noise_floor": -np.inf})
+    ranges = np.arange(1, 501) * 0.01
+    inten = np.zeros((16, ranges.size))
+    inten[:, 300:] = 1e-9 * np.arange(1, 201) / 200
+    out = []
+    for mode in ("numpy", "jit"):
+        monkeypatch.setattr(jitchain, "CHAIN", mode)
+        out.append(model.apply(inten, ranges, seed=4))
+    assert (out[0][:, 14] == 213).all()
+    np.testing.assert_array_equal(out[1], out[0])
