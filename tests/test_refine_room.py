@@ -115,6 +115,9 @@ def test_refine_room_is_deterministic_per_seed_and_refuses_bad_input(box_targets
         refine_room(scene, start[::-1], -2.9, frames, targets, top=14.0)
     with pytest.raises(ValueError, match="top must be above floor|below top"):
         refine_room(scene, start, 20.0, frames, targets, top=14.0)
+    with pytest.raises(ValueError, match=r"^refine_room: targets\[1\] has shape \(10, 500\), the head 'head' renders "
+                                         r"\(200, 500\) \(pings, bins\)$"):
+        refine_room(scene, start, -2.9, frames, [targets[0], targets[1][:10]] + list(targets[2:]), top=14.0)
     with pytest.raises(ValueError, match="vertices, a room of 5 corners"):
         refine_room(scene, np.r_[start, [[5.0 * 0.95, -3.9]]][[0, 4, 1, 2, 3]], -2.9, frames, targets, top=14.0)
 

@@ -310,6 +310,11 @@ def _refine(scene, C, floor, poses, targets, top, stages, spp, seed, lr, lr_deca
     if dr.width(params[key]) != V0.size:
         raise ValueError(f"refine_room: the scene's {mesh!r} has {dr.width(params[key]) // 3} vertices, a room "
                          f"of {n} corners has {len(V0)} (make it with room_mesh)")
+    shape = next((tuple(int(v) for v in s.film().size())[::-1] for s in scene.sensors() if s.id() == head), None)
+    for k, t in enumerate(targets):   # before any render: a Dr.Jit size error would come after the first
+        if shape is not None and tuple(np.shape(t)) != shape:
+            raise ValueError(f"refine_room: targets[{k}] has shape {tuple(np.shape(t))}, the head {head!r} renders "
+                             f"{shape} (pings, bins)")
     src, use_c, use_f = _vertex_sources(n)
     src, use_c, use_f = mi.UInt32(src), mi.Float(use_c), mi.Float(use_f)
     top_part = mi.Float(np.tile([0.0, 0.0, top], len(V0)).astype(np.float32) * (1 - np.asarray(use_f))
