@@ -103,6 +103,24 @@ def test_kernel_chain_compiles_one_way_whatever_the_host_alignment(mitsonar_mod)
     assert all(np.array_equal(r, results[0]) for r in results)
 
 
+def test_one_bin_frames_do_not_bake_their_values_into_the_kernel(mitsonar_mod):
+    """A frame of one bin a row (its per-bin TVG, noise and ring-down arrays hold one value): a
+    new TVG value replays the compiled kernel (a one-element array would be a literal)."""
+    from mitsonar.receiver import jitchain
+
+    rng = np.random.default_rng(5)
+    inten = rng.exponential(1e-9, (64, 1))
+    g = rng.normal(size=inten.shape) + 1j * rng.normal(size=inten.shape)
+    z = rng.normal(size=(64, 1, 2))
+    hashes = []
+    for tvg in (10.0, 20.0):
+        run = lambda t=tvg: jitchain.received_bytes(  # noqa: E731
+            inten, g, np.ones(1), False, np.full(1, 1e-6), z, np.ones(1), np.full(1, 1e-5),
+            (52.0, 10.0, np.full(1, t)), (40.0, 60.0, 8))
+        hashes.append(sorted(set(jit_kernels(run)[0])))
+    assert hashes[0] and hashes[1] == hashes[0], hashes
+
+
 def test_chain_choice(mitsonar_mod, monkeypatch):
     """``auto`` takes the kernel from JIT_MIN bins on (a frame, not a live ping); a bad choice is
     one line naming the setting."""
