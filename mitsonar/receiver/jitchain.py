@@ -97,9 +97,11 @@ def received_bytes(inten, g, kernel, quiet, ring, z, taps, f, levels, ad):
     n_rows, n_bins = inten.shape
     with dr.suspend_grad():
         lane = dr.arange(mi.UInt32, n_rows * n_bins)
-        row = lane // n_bins
-        col = mi.Int32(lane - row * n_bins)
-        base = row * n_bins
+        # the bin count opaque: with a literal 1 Dr.Jit would simplify `at` back to `lane`
+        nb = dr.opaque(mi.UInt32, n_bins)
+        row = lane // nb
+        col = mi.Int32(lane - row * nb)
+        base = row * nb
         at = base + mi.UInt32(col)      # = lane, but computed: a gather, not an alignment-bound load
         x_all = _f64(inten)
         # the range spread: out[b] += w_j x[b - (j - m)], tap by tap (fastchain.convolve_range)
