@@ -25,9 +25,9 @@ alternating, two rounds, *2026-11-26*): the quay frame at 5 % in 27-31 ms with t
 15-16 ms with this kernel (61-66 frames/s against 32-37); at spp 1, 23 ms against 13-15 ms.
 
 On the CPU (``llvm``, 2 cores, `Electronics.apply` with its draws, interleaved medians) the kernel
-fuses what NumPy does in passes: 1.5x faster for 32 x 500 bins, 1.7x for 200 x 500 (the box
-scan), 2.1x for 512 x 500 (20 ms to 10 ms), but slower for one ping of 600 bins (0.43 ms against
-0.33 ms: tracing the kernel costs more than the arithmetic).
+fuses what NumPy does in passes: 1.3x faster for 32 x 500 bins, 1.75x for 200 x 500 (the box
+scan), 1.76x for 512 x 500 (17.6 ms to 10.0 ms), but slower for one ping of 600 bins (0.35 ms
+against 0.25 ms: tracing the kernel costs more than the arithmetic).
 
 `CHAIN` chooses: ``"auto"`` (this kernel from `JIT_MIN` bins of a call on, NumPy below),
 ``"jit"`` (this kernel always), ``"numpy"`` (never). Imports nothing of mitsonar.
