@@ -128,6 +128,19 @@ def _blur_range(img, sigma_bins):
     return out
 
 
+def check_poses_and_targets(what, poses, targets):
+    """One-line ``ValueError`` (``what: ...``) unless there is one 4x4 pose per target and every
+    target is a 2-D (rows, bins) array; checked before anything renders."""
+    if len(poses) != len(targets) or not len(poses):
+        raise ValueError(f"{what}: one target per pose is needed, got {len(poses)} poses and {len(targets)} targets")
+    for k, (P, t) in enumerate(zip(poses, targets)):
+        if np.shape(P) != (4, 4):
+            raise ValueError(f"{what}: poses[{k}] must be a 4x4 matrix, not shape {np.shape(P)}")
+        if np.ndim(t) != 2:
+            raise ValueError(f"{what}: targets[{k}] must be a (rows, bins) array like the renders, not shape "
+                             f"{np.shape(t)}")
+
+
 def render_loss(scene, params, head, key, transforms, targets, vertices, *, blur, grad, spp, seed):
     """The summed render-and-compare loss of every ping, ``sum_k |B s_k - B t_k|^2 / |B t_k|^2``
     (`_blur_range` ``B``), the mesh ``key``'s vertex positions set to ``vertices()`` and the head
@@ -235,17 +248,9 @@ def _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, lr_deca
     z0 = np.asarray(z_start, np.float64)
     if z0.shape != (nx, ny):
         raise ValueError(f"refine_height_field: z_start must have shape ({nx}, {ny}), not {z0.shape}")
-    if len(poses) != len(targets) or not len(poses):
-        raise ValueError(f"refine_height_field: one target per pose is needed, got {len(poses)} poses and "
-                         f"{len(targets)} targets")
+    check_poses_and_targets("refine_height_field", poses, targets)
     if not stages:
         raise ValueError("refine_height_field: stages must hold at least one (sigma, blur, iterations)")
-    for k, (P, t) in enumerate(zip(poses, targets)):
-        if np.shape(P) != (4, 4):
-            raise ValueError(f"refine_height_field: poses[{k}] must be a 4x4 matrix, not shape {np.shape(P)}")
-        if np.ndim(t) != 2:
-            raise ValueError(f"refine_height_field: targets[{k}] must be a (rows, bins) array like the "
-                             f"renders, not shape {np.shape(t)}")
     key = f"{mesh}.vertex_positions"
     params = scan_parameters(scene, [f"{head}.to_world", key])
     V0, _ = grid_mesh(x, y, z0)

@@ -41,6 +41,8 @@ import time
 
 import numpy as np
 
+from mitsonar.jobs.refine import check_poses_and_targets
+
 __all__ = ["polygon_from_points", "refine_room", "room_feedback", "room_mesh", "room_xml", "wall_points"]
 
 
@@ -273,19 +275,11 @@ def refine_room(scene, corners, floor, poses, targets, *, top, stages=((4.0, 15)
     C = _corners(corners, "refine_room")
     if not math.isfinite(floor) or not (math.isfinite(top) and top > floor):
         raise ValueError(f"refine_room: floor must be finite and below top (got floor {floor!r}, top {top!r})")
-    if len(poses) != len(targets) or not len(poses):
-        raise ValueError(f"refine_room: one target per pose is needed, got {len(poses)} poses and "
-                         f"{len(targets)} targets")
+    check_poses_and_targets("refine_room", poses, targets)
     if not (lr > 0 and 0 < lr_decay <= 1):
         raise ValueError(f"refine_room: need lr > 0 and 0 < lr_decay <= 1 (got lr {lr!r}, lr_decay {lr_decay!r})")
     if not stages or any(len(s) != 2 or not s[0] >= 0 or int(s[1]) < 0 for s in stages):
         raise ValueError(f"refine_room: stages must be (blur_bins >= 0, iterations >= 0) pairs, not {stages!r}")
-    for k, (P, t) in enumerate(zip(poses, targets)):
-        if np.shape(P) != (4, 4):
-            raise ValueError(f"refine_room: poses[{k}] must be a 4x4 matrix, not shape {np.shape(P)}")
-        if np.ndim(t) != 2:
-            raise ValueError(f"refine_room: targets[{k}] must be a (pings, bins) array like the renders, "
-                             f"not shape {np.shape(t)}")
     threads = dr.thread_count()
     if deterministic:
         dr.set_thread_count(1)
