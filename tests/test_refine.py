@@ -92,6 +92,10 @@ def test_bad_inputs_are_refused_in_one_line(fitted):
         refine_height_field(sc, X, Y, start, poses, [targets[0], np.ravel(targets[1])])
     with pytest.raises(ValueError, match=r"poses\[0\] must be a 4x4 matrix, not shape \(3, 4\)"):
         refine_height_field(sc, X, Y, start, [np.eye(4)[:3], poses[1]], targets)
+    short = np.asarray(targets[1])[:, :-1]          # one bin fewer than the head renders
+    with pytest.raises(ValueError, match=r"^refine_height_field: targets\[1\] has shape \(\d+, \d+\), the head "
+                                         r"'head' renders \(\d+, \d+\) \(rows, bins\)$"):
+        refine_height_field(sc, X, Y, start, poses, [targets[0], short])
 
 
 def test_every_ping_moves_the_heights_not_only_the_first(tmp_path):

@@ -50,6 +50,9 @@ def test_polygon_from_points_finds_the_corners_that_a_rounded_cut_misses():
     assert d.max() < 0.02, C
     with pytest.raises(ValueError, match="polygon_from_points: points must be"):
         polygon_from_points(np.zeros((2, 2)), (0, 0))
+    for bad in ((0.0,), (0.0, np.nan), [[0.0, 0.0]]):
+        with pytest.raises(ValueError, match=r"^polygon_from_points: center must be a finite \(x, y\) or \(x, y, z\)"):
+            polygon_from_points(P, bad)
 
 
 def test_wall_points_lie_on_the_walls():
@@ -116,7 +119,7 @@ def test_refine_room_is_deterministic_per_seed_and_refuses_bad_input(box_targets
     with pytest.raises(ValueError, match="top must be above floor|below top"):
         refine_room(scene, start, 20.0, frames, targets, top=14.0)
     with pytest.raises(ValueError, match=r"^refine_room: targets\[1\] has shape \(10, 500\), the head 'head' renders "
-                                         r"\(200, 500\) \(pings, bins\)$"):
+                                         r"\(200, 500\) \(rows, bins\)$"):
         refine_room(scene, start, -2.9, frames, [targets[0], targets[1][:10]] + list(targets[2:]), top=14.0)
     with pytest.raises(ValueError, match="vertices, a room of 5 corners"):
         refine_room(scene, np.r_[start, [[5.0 * 0.95, -3.9]]][[0, 4, 1, 2, 3]], -2.9, frames, targets, top=14.0)

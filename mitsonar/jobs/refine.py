@@ -128,17 +128,25 @@ def _blur_range(img, sigma_bins):
     return out
 
 
-def check_poses_and_targets(what, poses, targets):
+def check_poses_and_targets(what, poses, targets, scene=None, head=None):
     """One-line ``ValueError`` (``what: ...``) unless there is one 4x4 pose per target and every
-    target is a 2-D (rows, bins) array; checked before anything renders."""
+    target is a 2-D (rows, bins) array, of the shape the sensor ``head`` of ``scene`` renders when
+    they are given; checked before anything renders (a Dr.Jit size error would come after the
+    first render)."""
     if len(poses) != len(targets) or not len(poses):
         raise ValueError(f"{what}: one target per pose is needed, got {len(poses)} poses and {len(targets)} targets")
+    shape = None
+    if scene is not None:
+        shape = next((tuple(int(v) for v in s.film().size())[::-1] for s in scene.sensors() if s.id() == head), None)
     for k, (P, t) in enumerate(zip(poses, targets)):
         if np.shape(P) != (4, 4):
             raise ValueError(f"{what}: poses[{k}] must be a 4x4 matrix, not shape {np.shape(P)}")
         if np.ndim(t) != 2:
             raise ValueError(f"{what}: targets[{k}] must be a (rows, bins) array like the renders, not shape "
                              f"{np.shape(t)}")
+        if shape is not None and tuple(np.shape(t)) != shape:
+            raise ValueError(f"{what}: targets[{k}] has shape {tuple(np.shape(t))}, the head {head!r} renders "
+                             f"{shape} (rows, bins)")
 
 
 def render_loss(scene, params, head, key, transforms, targets, vertices, *, blur, grad, spp, seed):
@@ -248,7 +256,7 @@ def _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, lr_deca
     z0 = np.asarray(z_start, np.float64)
     if z0.shape != (nx, ny):
         raise ValueError(f"refine_height_field: z_start must have shape ({nx}, {ny}), not {z0.shape}")
-    check_poses_and_targets("refine_height_field", poses, targets)
+    check_poses_and_targets("refine_height_field", poses, targets, scene, head)
     if not stages:
         raise ValueError("refine_height_field: stages must hold at least one (sigma, blur, iterations)")
     key = f"{mesh}.vertex_positions"

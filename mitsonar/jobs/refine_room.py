@@ -149,7 +149,10 @@ def polygon_from_points(points, center, *, tol=0.15, min_wall=0.8, trim=0.4, bin
     if P.ndim != 2 or P.shape[1] not in (2, 3) or len(P) < 3 or not np.isfinite(P).all():
         raise ValueError(f"polygon_from_points: points must be a finite (M, 2) or (M, 3) array with M >= 3, "
                          f"not shape {P.shape}")
-    o = np.asarray(center, dtype=np.float64)[:2]
+    o = np.asarray(center, dtype=np.float64)
+    if o.shape not in ((2,), (3,)) or not np.isfinite(o).all():
+        raise ValueError(f"polygon_from_points: center must be a finite (x, y) or (x, y, z), not {center!r}")
+    o = o[:2]
     q = P[:, :2] - o
     ang = np.arctan2(q[:, 1], q[:, 0])
     rad = np.hypot(q[:, 0], q[:, 1])
@@ -275,7 +278,7 @@ def refine_room(scene, corners, floor, poses, targets, *, top, stages=((4.0, 15)
     C = _corners(corners, "refine_room")
     if not math.isfinite(floor) or not (math.isfinite(top) and top > floor):
         raise ValueError(f"refine_room: floor must be finite and below top (got floor {floor!r}, top {top!r})")
-    check_poses_and_targets("refine_room", poses, targets)
+    check_poses_and_targets("refine_room", poses, targets, scene, head)
     if not (lr > 0 and 0 < lr_decay <= 1):
         raise ValueError(f"refine_room: need lr > 0 and 0 < lr_decay <= 1 (got lr {lr!r}, lr_decay {lr_decay!r})")
     if not stages or any(len(s) != 2 or not s[0] >= 0 or int(s[1]) < 0 for s in stages):
@@ -304,11 +307,6 @@ def _refine(scene, C, floor, poses, targets, top, stages, spp, seed, lr, lr_deca
     if dr.width(params[key]) != V0.size:
         raise ValueError(f"refine_room: the scene's {mesh!r} has {dr.width(params[key]) // 3} vertices, a room "
                          f"of {n} corners has {len(V0)} (make it with room_mesh)")
-    shape = next((tuple(int(v) for v in s.film().size())[::-1] for s in scene.sensors() if s.id() == head), None)
-    for k, t in enumerate(targets):   # before any render: a Dr.Jit size error would come after the first
-        if shape is not None and tuple(np.shape(t)) != shape:
-            raise ValueError(f"refine_room: targets[{k}] has shape {tuple(np.shape(t))}, the head {head!r} renders "
-                             f"{shape} (pings, bins)")
     src, use_c, use_f = _vertex_sources(n)
     src, use_c, use_f = mi.UInt32(src), mi.Float(use_c), mi.Float(use_f)
     top_part = mi.Float(np.tile([0.0, 0.0, top], len(V0)).astype(np.float32) * (1 - np.asarray(use_f))
