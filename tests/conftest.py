@@ -21,6 +21,21 @@ def frame_matrix(boresight, scan_axis, position=(0.0, 0.0, 0.0)):
     return m
 
 
+def subcommand_runner(module):
+    """``run(*argv)``: ``mitsonar ARGV`` parsed by ``module``'s subcommands alone (its
+    ``add_subcommands``, e.g. `mitsonar.cli.live`), arguments turned to strings; returns the
+    command's exit status."""
+    import argparse
+
+    def run(*argv):
+        parser = argparse.ArgumentParser(prog="mitsonar")
+        module.add_subcommands(parser.add_subparsers(dest="command", required=True))
+        args = parser.parse_args([str(a) for a in argv])
+        return args.func(args)
+
+    return run
+
+
 def on_cuda() -> bool:
     """True when the suite runs on a ``cuda`` variant (``MITSONAR_VARIANT=cuda_ad_mono``). There,
     the same arithmetic compiled into two different kernels may round differently (ptxas fuses

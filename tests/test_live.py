@@ -15,6 +15,7 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import subcommand_runner
 
 from mitsonar.devices.poses import (MAX_DATAGRAM, DatagramError, PoseBuffer, parse_datagram, pose_matrix)
 from mitsonar.geometry.trajectory import quat_to_matrix
@@ -279,16 +280,10 @@ def test_live_stops_after_seconds_and_on_sigterm_and_sums_up_on_sigusr1():
 
 
 def test_bad_pose_urls_are_one_line_before_the_scene_loads(capsys):
-    import argparse
-
     from mitsonar.cli import live as live_cli
     from test_serial_cli import one_error_line
 
-    def cli(*argv):
-        parser = argparse.ArgumentParser(prog="mitsonar")
-        live_cli.add_subcommands(parser.add_subparsers(dest="command", required=True))
-        args = parser.parse_args([str(a) for a in argv])
-        return args.func(args)
+    cli = subcommand_runner(live_cli)
 
     for url in ("udp://10.0.0.1:5000", "tcp://127.0.0.1:5000", "udp://127.0.0.1:notaport"):
         assert cli("live", BOX, "--pose-url", url) == 1

@@ -21,6 +21,7 @@ import threading
 
 import numpy as np
 import pytest
+from conftest import subcommand_runner
 
 from mitsonar.devices.poses import PoseBuffer
 from mitsonar.geometry.trajectory import quat_to_matrix
@@ -450,16 +451,11 @@ def test_live_session_recorded_to_mcap_is_complete_after_sigint(tmp_path):
 
 def test_bad_output_flags_are_one_line_before_the_scene_loads_and_leave_no_file(capsys, tmp_path):
     pytest.importorskip("foxglove")
-    import argparse
 
     from mitsonar.cli import live as live_cli
     from test_serial_cli import one_error_line
 
-    def cli(*argv):
-        parser = argparse.ArgumentParser(prog="mitsonar")
-        live_cli.add_subcommands(parser.add_subparsers(dest="command", required=True))
-        args = parser.parse_args([str(a) for a in argv])
-        return args.func(args)
+    cli = subcommand_runner(live_cli)
 
     (tmp_path / "old.mcap").write_bytes(b"keep")
     busy = socket.socket()

@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 import pytest
+from conftest import subcommand_runner
 
 from mitsonar.devices.poses import PoseBuffer
 from mitsonar.devices.realtime import SPP_LADDER, ErrorModel, PathBudget, PingLog, WireClock
@@ -343,16 +344,10 @@ def test_live_multibeam_without_head_publishes_frames_and_records_them_after_sig
 
 
 def test_bad_real_time_options_are_one_line_before_the_scene_loads(capsys, tmp_path):
-    import argparse
-
     from mitsonar.cli import live as live_cli
     from test_serial_cli import one_error_line
 
-    def cli(*argv):
-        parser = argparse.ArgumentParser(prog="mitsonar")
-        live_cli.add_subcommands(parser.add_subparsers(dest="command", required=True))
-        args = parser.parse_args([str(a) for a in argv])
-        return args.func(args)
+    cli = subcommand_runner(live_cli)
 
     assert cli("live", BOX, "--spp", "64", "--budget-ms", "20") == 1
     assert "give one" in one_error_line(capsys, "live")
@@ -441,14 +436,9 @@ def test_the_log_keeps_a_fixed_ring_for_its_percentiles():
 
 
 def _cli(*argv):
-    import argparse
-
     from mitsonar.cli import live as live_cli
 
-    parser = argparse.ArgumentParser(prog="mitsonar")
-    live_cli.add_subcommands(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args([str(a) for a in argv])
-    return args.func(args)
+    return subcommand_runner(live_cli)(*argv)
 
 
 def test_ping_rate_for_a_scene_without_a_multibeam_is_refused_not_ignored(capsys, tmp_path):

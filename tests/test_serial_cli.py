@@ -7,6 +7,7 @@ import re
 
 import numpy as np
 import pytest
+from conftest import subcommand_runner
 
 import mitsonar
 from mitsonar.cli import serial as serial_cli
@@ -27,11 +28,7 @@ def small_scan(seed=0):
                 range_min=0.0, range_max=R)
 
 
-def cli(*argv):
-    parser = argparse.ArgumentParser(prog="mitsonar")
-    serial_cli.add_subcommands(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args([str(a) for a in argv])
-    return args.func(args)
+cli = subcommand_runner(serial_cli)
 
 
 def one_error_line(capsys, name):
