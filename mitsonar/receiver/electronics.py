@@ -518,9 +518,7 @@ class Electronics:
             data = self._apply_fast(inten, ranges, absorption, sound_speed, rng, speckle, seed)
             return data[0] if one_ping else data
 
-        bin_width = _bin_width(ranges)
-        pulse = _spread_kernel(sound_speed * self.pulse_length / 2.0, 0.0, bin_width) if bin_width > 0 else np.ones(1)
-        corr = pulse if pulse.size > 1 else None
+        corr = self._noise_corr(_bin_width(ranges), sound_speed)
         inten = self.spread(inten, ranges, sound_speed)
 
         # SL + sensitivity first: with the defaults (200 - 148) it is exactly the old constant 52,
@@ -544,8 +542,7 @@ class Electronics:
         """`apply`'s chain (speckle on) in `mitsonar.receiver.fastchain`: the same bytes as the
         straightforward chain; the random draws first, for the whole scan, in its order."""
         bin_width = _bin_width(ranges)
-        pulse = _spread_kernel(sound_speed * self.pulse_length / 2.0, 0.0, bin_width) if bin_width > 0 else np.ones(1)
-        corr = pulse if pulse.size > 1 else None
+        corr = self._noise_corr(bin_width, sound_speed)
         kernel = self.range_kernel(bin_width, sound_speed) if bin_width > 0 else np.ones(1)
         calibration = self.source_level + self.receiver_sensitivity
         tvg = self.tvg_db(ranges, absorption)
@@ -561,12 +558,15 @@ class Electronics:
         return (jitchain if jitchain.use_jit(inten.size) else fastchain).received_bytes(   # the same bytes
             inten, g, kernel, quiet, ring, z, taps, f, (calibration, self.gain, tvg), (self.ad_low, self.ad_span, self.bit_depth))
 
+    def _noise_corr(self, bin_width, sound_speed):
+        """The receiver noise's correlation over the pulse (amplitude taps), None for one bin."""
+        pulse = _spread_kernel(sound_speed * self.pulse_length / 2.0, 0.0, bin_width) if bin_width > 0 else np.ones(1)
+        return pulse if pulse.size > 1 else None
+
     def prefetch_noise(self, shape, ranges, sound_speed: float, seed: int) -> None:
-        """Start drawing the receiver noise of ``apply(intensity of shape, ranges, sound_speed=..., seed=seed,
-        speckle=...)`` on a worker thread (`mitsonar.receiver.fastchain.prefetch_draws`; `render_scan`)."""
+        """Start drawing `apply`'s receiver noise for ``seed`` on a worker thread (`fastchain.prefetch_draws`)."""
         if FAST and self.speckle != "off" and self.noise_floor > -math.inf:
-            pulse = _spread_kernel(sound_speed * self.pulse_length / 2.0, 0.0, _bin_width(ranges) or 1.0)
-            fastchain.prefetch_draws(tuple(shape), seed, pulse if pulse.size > 1 and _bin_width(ranges) else None)
+            fastchain.prefetch_draws(tuple(shape), seed, self._noise_corr(_bin_width(ranges), sound_speed))
 
     def _speckle(self, g):
         """The complex speckle ``g`` with its modulus reshaped to the Weibull law (``weibull``)."""

@@ -67,11 +67,9 @@ def complex_gaussian(shape, rng: np.random.Generator, corr_bins=None) -> np.ndar
     axis with the amplitude weights ``corr_bins`` (normalised), so that neighbouring bins within
     one pulse are correlated like the matched filter's output; the marginal law is unchanged."""
     n_bins = shape[-1]
-    h = np.ones(1) if corr_bins is None else np.asarray(corr_bins, dtype=np.float64)
-    h = h[h > 0]
-    h = h / math.sqrt(float(np.sum(h * h)))
+    h = _taps(corr_bins)
     k = h.size
-    z = rng.standard_normal(tuple(shape[:-1]) + (n_bins + k - 1, 2)).view(np.complex128)[..., 0]
+    z = rng.standard_normal(_draws_shape(shape, h)).view(np.complex128)[..., 0]
     z *= math.sqrt(0.5)
     if k == 1:
         return z
@@ -85,11 +83,8 @@ def gaussian_draws(shape, rng: np.random.Generator, corr_bins=None):
     """`complex_gaussian`'s draws (the same numbers from ``rng``), unfiltered, as
     float64 (..., n_bins + k - 1, 2) (real, imaginary) in a kept buffer, and its normalised taps;
     `filtered` filters them."""
-    n_bins = shape[-1]
-    h = np.ones(1) if corr_bins is None else np.asarray(corr_bins, dtype=np.float64)
-    h = h[h > 0]
-    h = h / math.sqrt(float(np.sum(h * h)))
-    z = _buffer("draws", tuple(shape[:-1]) + (n_bins + h.size - 1, 2))
+    h = _taps(corr_bins)
+    z = _buffer("draws", _draws_shape(shape, h))
     rng.standard_normal(out=z)
     z *= math.sqrt(0.5)
     return z, h
@@ -120,7 +115,7 @@ def prefetch_draws(shape, seed: int, corr_bins=None) -> None:
 
         _prefetched.clear()
         _drawer = (os.getpid(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="mitsonar-draws"))
-    size = tuple(shape[:-1]) + (shape[-1] + _taps(corr_bins).size - 1, 2)
+    size = _draws_shape(shape, _taps(corr_bins))
     if math.prod(size) < PREFETCH_MIN:
         return
     key = (int(seed), size)
@@ -138,7 +133,7 @@ def take_draws(shape, seed, corr_bins=None):
     `prefetch_draws` when it drew that seed and shape (then forgotten), else None."""
     pending = _prefetched.pop(threading.get_ident(), None)
     h = _taps(corr_bins)
-    if pending is None or pending[0] != (seed, tuple(shape[:-1]) + (shape[-1] + h.size - 1, 2)):
+    if pending is None or pending[0] != (seed, _draws_shape(shape, h)):
         return None
     z = pending[1].result()
     z *= math.sqrt(0.5)
@@ -146,9 +141,16 @@ def take_draws(shape, seed, corr_bins=None):
 
 
 def _taps(corr_bins):
+    """The noise filter's taps: ``corr_bins``' positive weights normalised to unit power (one tap
+    of 1 for None)."""
     h = np.ones(1) if corr_bins is None else np.asarray(corr_bins, dtype=np.float64)
     h = h[h > 0]
     return h / math.sqrt(float(np.sum(h * h)))
+
+
+def _draws_shape(shape, h):
+    """The draws behind a filtered ``shape`` with taps ``h``: (..., n_bins + taps - 1, 2) (re, im)."""
+    return tuple(shape[:-1]) + (shape[-1] + h.size - 1, 2)
 
 
 def filtered(z, h, n_bins):
