@@ -260,8 +260,7 @@ class PingRenderer:
                       "bearing": None if bearing is None else float(bearing), "paths": int(paths),
                       "error": self.error(paths), "render_ms": spent * 1e3,
                       "budget_ms": None if budget is None else budget * 1e3}
-            self.last_pose, self.last_vehicle, self.last_record = pose, vehicle, record
-            self._mine.last = (pose, vehicle, record)
+            self._shared = self._mine.last = (pose, vehicle, record)
             self.latencies.append(time.monotonic() - t0)
             if self.outputs is not None:    # queued, in ping order: the outputs' thread sends it (LiveOutputs)
                 self.outputs.publish(round(wall * 1e9), vehicle, self.mount, scan)
@@ -269,18 +268,13 @@ class PingRenderer:
 
     # What the calling thread rendered last (a frame loop and a head may share the renderer):
     # the pose, vehicle and record of its own last ping; another thread's if it rendered none.
-    last_pose = property(lambda self: self._last(0), lambda self, v: self._set_last(0, v))
-    last_vehicle = property(lambda self: self._last(1), lambda self, v: self._set_last(1, v))
-    last_record = property(lambda self: self._last(2), lambda self, v: self._set_last(2, v))
+    last_pose = property(lambda self: self._last(0))
+    last_vehicle = property(lambda self: self._last(1))
+    last_record = property(lambda self: self._last(2))
 
     def _last(self, i: int):
         mine = getattr(self._mine, "last", None)
         return (mine if mine is not None else self._shared)[i]
-
-    def _set_last(self, i: int, value) -> None:
-        shared = list(self._shared)
-        shared[i] = value
-        self._shared = tuple(shared)
 
     def finish(self, record: dict, written: float | None = None) -> None:
         """``record``'s ping is out (its last byte written, or its frame published) at
