@@ -26,6 +26,7 @@ random numbers), so a fit is deterministic per seed.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 
@@ -149,6 +150,31 @@ def check_poses_and_targets(what, poses, targets, scene=None, head=None):
                              f"{shape} (rows, bins)")
 
 
+@contextlib.contextmanager
+def one_thread_if(deterministic):
+    """Dr.Jit on one thread for the block when ``deterministic`` (its thread count restored after):
+    the vertex gradients are sums by atomic adds, whose order and rounding vary on several."""
+    import drjit as dr
+
+    threads = dr.thread_count()
+    if deterministic:
+        dr.set_thread_count(1)
+    try:
+        yield
+    finally:
+        dr.set_thread_count(threads)
+
+
+def jit_poses_targets(poses, targets):
+    """The pings' head transforms (``mi.Transform4f``) and targets (``mi.TensorXf`` (rows, bins, 1)),
+    converted once for `render_loss`."""
+    import mitsuba as mi
+
+    tf = [mi.Transform4f(mi.Matrix4f(np.asarray(P, np.float64))) for P in poses]
+    tg = [mi.TensorXf(np.asarray(t, np.float32).reshape(np.shape(t)[0], np.shape(t)[1], 1)) for t in targets]
+    return tf, tg
+
+
 def render_loss(scene, params, head, key, transforms, targets, vertices, *, blur, grad, spp, seed):
     """The summed render-and-compare loss of every ping, ``sum_k |B s_k - B t_k|^2 / |B t_k|^2``
     (`_blur_range` ``B``), the mesh ``key``'s vertex positions set to ``vertices()`` and the head
@@ -233,16 +259,9 @@ def refine_height_field(scene, x, y, z_start, poses, targets, *, stages=((2.5, 6
         the stage's blur), ``loss_start`` and ``loss_final`` (both at the last stage's blur),
         ``loss_by_blur`` (each stage's blur: (start, final)), ``seconds``.
     """
-    import drjit as dr
-
-    threads = dr.thread_count()
-    if deterministic:
-        dr.set_thread_count(1)
-    try:
+    with one_thread_if(deterministic):
         return _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, lr_decay, smooth, head, mesh,
                        callback)
-    finally:
-        dr.set_thread_count(threads)
 
 
 def _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, lr_decay, smooth, head, mesh, callback):
@@ -267,8 +286,7 @@ def _refine(scene, x, y, z_start, poses, targets, stages, spp, seed, lr, lr_deca
     zsel = mi.Float((np.arange(V0.size) % 3 == 2).astype(np.float32))
     vid = dr.arange(mi.UInt32, V0.size) // 3
     z0_dr = mi.Float(z0.ravel().astype(np.float32))
-    tf = [mi.Transform4f(mi.Matrix4f(np.asarray(P, np.float64))) for P in poses]
-    tg = [mi.TensorXf(np.asarray(t, np.float32).reshape(np.shape(t)[0], np.shape(t)[1], 1)) for t in targets]
+    tf, tg = jit_poses_targets(poses, targets)
 
     taps = [smoothing_taps(nx, ny, float(s)) for s, _, _ in stages]
     opt = mi.ad.Adam(lr=lr)

@@ -41,7 +41,7 @@ import time
 
 import numpy as np
 
-from mitsonar.jobs.refine import check_poses_and_targets
+from mitsonar.jobs.refine import check_poses_and_targets, one_thread_if
 
 __all__ = ["polygon_from_points", "refine_room", "room_feedback", "room_mesh", "room_xml", "wall_points"]
 
@@ -273,8 +273,6 @@ def refine_room(scene, corners, floor, poses, targets, *, top, stages=((4.0, 15)
         ``corners`` (N, 2) and ``floor`` refined, ``loss`` per iteration, ``loss_start`` and
         ``loss_final`` (at the last stage's blur), ``seconds``.
     """
-    import drjit as dr
-
     C = _corners(corners, "refine_room")
     if not math.isfinite(floor) or not (math.isfinite(top) and top > floor):
         raise ValueError(f"refine_room: floor must be finite and below top (got floor {floor!r}, top {top!r})")
@@ -283,21 +281,16 @@ def refine_room(scene, corners, floor, poses, targets, *, top, stages=((4.0, 15)
         raise ValueError(f"refine_room: need lr > 0 and 0 < lr_decay <= 1 (got lr {lr!r}, lr_decay {lr_decay!r})")
     if not stages or any(len(s) != 2 or not s[0] >= 0 or int(s[1]) < 0 for s in stages):
         raise ValueError(f"refine_room: stages must be (blur_bins >= 0, iterations >= 0) pairs, not {stages!r}")
-    threads = dr.thread_count()
-    if deterministic:
-        dr.set_thread_count(1)
-    try:
+    with one_thread_if(deterministic):
         return _refine(scene, C, float(floor), poses, targets, float(top), stages, spp, seed, lr, lr_decay, head,
                        mesh, callback)
-    finally:
-        dr.set_thread_count(threads)
 
 
 def _refine(scene, C, floor, poses, targets, top, stages, spp, seed, lr, lr_decay, head, mesh, callback):
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.jobs.refine import render_loss
+    from mitsonar.jobs.refine import jit_poses_targets, render_loss
     from mitsonar.sim.render import scan_parameters
 
     key = f"{mesh}.vertex_positions"
@@ -311,8 +304,7 @@ def _refine(scene, C, floor, poses, targets, top, stages, spp, seed, lr, lr_deca
     src, use_c, use_f = mi.UInt32(src), mi.Float(use_c), mi.Float(use_f)
     top_part = mi.Float(np.tile([0.0, 0.0, top], len(V0)).astype(np.float32) * (1 - np.asarray(use_f))
                         * (1 - np.asarray(use_c)))
-    tf = [mi.Transform4f(mi.Matrix4f(np.asarray(P, np.float64))) for P in poses]
-    tg = [mi.TensorXf(np.asarray(t, np.float32).reshape(np.shape(t)[0], np.shape(t)[1], 1)) for t in targets]
+    tf, tg = jit_poses_targets(poses, targets)
     opt = mi.ad.Adam(lr=lr)
     opt["c"] = mi.Float(C.ravel().astype(np.float32))
     opt["zf"] = mi.Float([floor])
