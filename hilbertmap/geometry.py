@@ -70,48 +70,63 @@ def _closest_on_triangles(p, a, b, c):
 
 
 def point_mesh_distance(points, vertices, faces, chunk: int = 1 << 20) -> np.ndarray:
-    """Exact unsigned distance from each point to the nearest triangle (brute force over triangles
-    for small meshes, k nearest triangle centres for large ones)."""
+    """Exact unsigned distance from each point to the nearest triangle.
+
+    Small meshes (64 triangles or fewer) by brute force. Larger ones: the largest triangles (radius
+    over four times the median, at most 64: a seabed of two triangles beside piles of hundreds) by
+    brute force, the rest by their nearest centres, the search widened (k x 4) for every point
+    whose k-th centre is nearer than its best distance plus the largest radius of the rest, until
+    no triangle left out can be nearer.
+    """
     P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     t = _tris(vertices, faces)
     if len(t) == 0:
         return np.full(len(P), np.inf)
     if len(t) <= 64:
-        best = np.full(len(P), np.inf)
-        for a, b, c in t:
-            A = np.broadcast_to(a, P.shape)
-            q = _closest_on_triangles(P, A, np.broadcast_to(b, P.shape), np.broadcast_to(c, P.shape))
-            best = np.minimum(best, np.linalg.norm(P - q, axis=1))
-        return best
+        return _brute_distance(P, t)
     from scipy.spatial import cKDTree
 
     cen = t.mean(axis=1)
-    rad = np.max(np.linalg.norm(t - cen[:, None], axis=2))
-    tree = cKDTree(cen)
-    k = min(16, len(t))
+    rads = np.max(np.linalg.norm(t - cen[:, None], axis=2), axis=1)
+    order = np.argsort(rads)[::-1]
+    n_big = int(min(64, np.count_nonzero(rads > 4.0 * np.median(rads))))
+    big, small = order[:n_big], np.sort(order[n_big:])
+    ts, cs = t[small], cen[small]
+    rad = float(rads[small].max())
+    tree = cKDTree(cs)
     out = np.empty(len(P))
-    for s in range(0, len(P), chunk // k):
-        p = P[s:s + chunk // k]
-        dc, idx = tree.query(p, k=k, workers=-1)
-        best = np.full(len(p), np.inf)
-        for j in range(k):
-            tj = t[idx[:, j]]
-            q = _closest_on_triangles(p, tj[:, 0], tj[:, 1], tj[:, 2])
-            best = np.minimum(best, np.linalg.norm(p - q, axis=1))
-        # a triangle whose centre is beyond the k-th could still be closer only if the k-th centre
-        # is farther than best + the largest triangle radius: fall back to a wider search there
-        unsure = dc[:, -1] < best + rad
-        if unsure.any() and len(t) > k:
-            kk = min(len(t), 64)
-            _, idx2 = tree.query(p[unsure], k=kk, workers=-1)
-            b2 = best[unsure]
-            for j in range(kk):
-                tj = t[idx2[:, j]]
-                q = _closest_on_triangles(p[unsure], tj[:, 0], tj[:, 1], tj[:, 2])
-                b2 = np.minimum(b2, np.linalg.norm(p[unsure] - q, axis=1))
-            best[unsure] = b2
+    k0 = min(16, len(ts))
+    for s in range(0, len(P), max(chunk // k0, 1)):
+        p = P[s:s + chunk // k0]
+        best = _brute_distance(p, t[big]) if n_big else np.full(len(p), np.inf)
+        rest, k = np.arange(len(p)), k0
+        while len(rest):
+            dc, idx = tree.query(p[rest], k=k, workers=-1)
+            dc, idx = dc.reshape(len(rest), k), idx.reshape(len(rest), k)
+            b = best[rest]
+            for j in range(k):
+                tj = ts[idx[:, j]]
+                q = _closest_on_triangles(p[rest], tj[:, 0], tj[:, 1], tj[:, 2])
+                b = np.minimum(b, np.linalg.norm(p[rest] - q, axis=1))
+            best[rest] = b
+            if k == len(ts):
+                break
+            # a triangle whose centre lies beyond the k-th can be nearer only if the k-th centre is
+            # nearer than best + the largest radius: those points search again, wider
+            rest = rest[dc[:, -1] < b + rad]
+            k = min(4 * k, len(ts))
         out[s:s + len(p)] = best
     return out
+
+
+def _brute_distance(P, t) -> np.ndarray:
+    """Distance from each point ``P`` (N, 3) to the nearest of the triangles ``t`` (T, 3, 3)."""
+    best = np.full(len(P), np.inf)
+    for a, b, c in t:
+        A = np.broadcast_to(a, P.shape)
+        q = _closest_on_triangles(P, A, np.broadcast_to(b, P.shape), np.broadcast_to(c, P.shape))
+        best = np.minimum(best, np.linalg.norm(P - q, axis=1))
+    return best
 
 
 def segments_blocked(origins, points, vertices, faces, eps: float = 1e-6) -> np.ndarray:

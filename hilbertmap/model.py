@@ -503,30 +503,44 @@ class HilbertMap:
         frames = np.asarray(self.ping_frames_, dtype=np.float64)
         beams = np.asarray(self.ping_beams_, dtype=np.float64)
         spans = np.asarray(self.ping_spans_, dtype=np.float64)
-        for k in range(len(frames)):
-            if part == "echo" and not np.isfinite(spans[k, 1]):
-                continue
+        # pings in blocks: the line-of-sight test runs once per block on the distinct (sensor
+        # position, point) pairs of its pings (a multibeam frame's beams share one position)
+        block = 256
+        for k0 in range(0, len(frames), block):
             rest = np.nonzero(~out)[0]
             if len(rest) == 0:
                 break
-            R, o = frames[k, :3, :3], frames[k, :3, 3]
-            loc = (P[rest] - o) @ R
-            r = np.linalg.norm(loc, axis=1)
-            az = np.arctan2(loc[:, 0], loc[:, 2])
-            el = np.arcsin(np.clip(loc[:, 1] / np.maximum(r, 1e-12), -1, 1))
-            inside = (np.abs(az) <= np.radians(beams[k, 0]) / 2) & (np.abs(el) <= np.radians(beams[k, 1]) / 2)
-            if part == "any":
-                inside &= r <= beams[k, 2]
-            elif part == "free":
-                end = spans[k, 1] if np.isfinite(spans[k, 1]) else beams[k, 2]
-                inside &= (r >= spans[k, 0]) & (r < end)
-            else:
-                inside &= (r >= spans[k, 1] - tolerance) & (r <= spans[k, 2] + tolerance)
-            idx = rest[inside]
-            if len(idx) and vertices is not None and part != "echo":
-                blocked = segments_blocked(np.broadcast_to(o, (len(idx), 3)), P[idx], vertices, faces)
-                idx = idx[~blocked]
-            out[idx] = True
+            pairs_o, pairs_i = [], []
+            for k in range(k0, min(k0 + block, len(frames))):
+                if part == "echo" and not np.isfinite(spans[k, 1]):
+                    continue
+                R, o = frames[k, :3, :3], frames[k, :3, 3]
+                loc = (P[rest] - o) @ R
+                r = np.linalg.norm(loc, axis=1)
+                az = np.arctan2(loc[:, 0], loc[:, 2])
+                el = np.arcsin(np.clip(loc[:, 1] / np.maximum(r, 1e-12), -1, 1))
+                inside = (np.abs(az) <= np.radians(beams[k, 0]) / 2) & (np.abs(el) <= np.radians(beams[k, 1]) / 2)
+                if part == "any":
+                    inside &= r <= beams[k, 2]
+                elif part == "free":
+                    end = spans[k, 1] if np.isfinite(spans[k, 1]) else beams[k, 2]
+                    inside &= (r >= spans[k, 0]) & (r < end)
+                else:
+                    inside &= (r >= spans[k, 1] - tolerance) & (r <= spans[k, 2] + tolerance)
+                idx = rest[inside]
+                if vertices is None or part == "echo":
+                    out[idx] = True
+                elif len(idx):
+                    pairs_o.append(np.broadcast_to(o, (len(idx), 3)))
+                    pairs_i.append(idx)
+            if pairs_i:
+                O = np.concatenate(pairs_o)
+                I = np.concatenate(pairs_i)
+                key = np.unique(np.column_stack([O, I.astype(np.float64)]), axis=0)
+                O, I = key[:, :3], key[:, 3].astype(np.int64)
+                todo = ~out[I]
+                blocked = segments_blocked(O[todo], P[I[todo]], vertices, faces)
+                out[I[todo][~blocked]] = True
         return out
 
     # -- surfaces and slices (hilbertmap.surfaces) --------------------------------------------

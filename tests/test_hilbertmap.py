@@ -315,6 +315,32 @@ def test_geometry_distances_and_visibility():
     assert geo.point_mesh_distance(s, V, F).max() < 1e-9
 
 
+def test_point_mesh_distance_is_exact_beside_large_triangles():
+    """A floor of two 60 x 40 m triangles (z = 0) beside 300 small ones (a ring of thin posts 5 m
+    up): points 0.2-1.5 m above the floor near the posts are that far from the mesh (the floor's
+    triangle centres are 10 m away, farther than the posts' 16 nearest centres, which alone gave
+    the posts' distance: the harbour's seabed read metres off beside its piles)."""
+    floor_v = np.array([[-30.0, -20, 0], [30, -20, 0], [30, 20, 0], [-30, 20, 0]])
+    floor_f = np.array([[0, 1, 2], [0, 2, 3]])
+    ang = np.linspace(0, 2 * np.pi, 101)[:-1]
+    ring = np.column_stack([np.cos(ang), np.sin(ang), np.full(100, 5.0)])
+    V = np.vstack([floor_v, ring, ring + [0, 0, 1.0], ring * [1.1, 1.1, 1]])
+    F = [floor_f]
+    for k in range(100):  # three triangles per post: vertical strip and an outward fin
+        a, b, c = 4 + k, 104 + k, 204 + k
+        F.append([[a, b, c], [a, c, 4 + (k + 1) % 100], [b, c, 104 + (k + 1) % 100]])
+    F = np.vstack(F)
+    assert len(F) > 64
+    rng = np.random.default_rng(3)
+    z = rng.uniform(0.2, 1.5, 400)
+    pts = np.column_stack([rng.uniform(-1.5, 1.5, 400), rng.uniform(-1.5, 1.5, 400), z])
+    np.testing.assert_allclose(geo.point_mesh_distance(pts, V, F), z, atol=1e-9)
+    # and anywhere: the same as checking every triangle
+    far = rng.uniform([-30, -20, -3], [30, 20, 8], (2000, 3))
+    np.testing.assert_allclose(geo.point_mesh_distance(far, V, F), geo._brute_distance(far, geo._tris(V, F)),
+                               atol=1e-12)
+
+
 def test_water_boundary_keeps_the_side_of_the_band_facing_the_sonar():
     """A ring of p > 0.5 between r = 2 and r = 2.4 around a sonar at the origin: the contour
     points that bound the sonar's water are the inner circle, those in the shadow the outer."""
