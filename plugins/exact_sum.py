@@ -73,9 +73,13 @@ class ExactBins:
         lo, hi = dr.select(neg, -lo, lo), dr.select(neg, -hi, hi)
         index = mi.UInt32(index)
         slot = (b >> 5) * self.n + index          # word-major: word k of bin i at k n + i
-        dr.scatter_add(self.words, lo, slot, finite, mode=mode)
+        # A non-finite value counts 1 in the tenth word through the low word's add: one atomic
+        # pass over the lanes instead of two (an LLVM scatter-add loops over the packet's lanes
+        # even where none is active), the same integers in the same words.
+        bad = e == 255
+        dr.scatter_add(self.words, dr.select(bad, mi.Int64(1), lo), dr.select(bad, index + WORDS * self.n, slot),
+                       active & (e > 0), mode=mode)
         dr.scatter_add(self.words, hi, slot + self.n, finite & (hi != 0), mode=mode)
-        dr.scatter_add(self.words, mi.Int64(1), index + WORDS * self.n, active & (e == 255), mode=mode)
 
     def _sum_words(self):
         at = dr.arange(mi.UInt32, self.n)
