@@ -19,6 +19,9 @@ What makes a replay give the same numbers as tracing again:
 * a scene that holds textures anywhere (`has_textures`) is traced every pass (`Context.freezable`): a replay after
   texels changed through ``mi.traverse`` read the old texels (tests/test_gradients.py's
   per-texel finite difference found it);
+* so is a scene whose meshes move (`trace_every_pass`, called by ``scan_parameters`` for vertex
+  positions): a replay casts rays at the acceleration structure it recorded, not at the one
+  ``params.update()`` rebuilt;
 * the emitted directions are drawn before the frozen call (`emitted`): the beam's sampling table
   (``mi.MarginalContinuous2D0``) hides its arrays from Dr.Jit's traversal, so it cannot be read
   inside a recording. Drawn in a kernel of its own, the direction and its weight are the same
@@ -111,7 +114,8 @@ class Context:
         # texels changed through mi.traverse was seen to read the texels before the change, also
         # for a texture a C++ BSDF holds (an acoustic BSDF in a twosided, Mitsuba's diffuse with a
         # bitmap), which the walk above does not reach: the scene's own traversal says.
-        self.freezable = not textured and not any(isinstance(v, mi.Texture) for v in self.values)
+        moving = scene is not None and _moving.get(id(scene)) is scene
+        self.freezable = not textured and not moving and not any(isinstance(v, mi.Texture) for v in self.values)
 
     def __hash__(self):
         return hash(self.key)
@@ -135,6 +139,22 @@ def has_textures(scene) -> bool:
         found = any(isinstance(params.properties[k][2], mi.Texture) for k in params.keys())
         entry = _textured[id(scene)] = (scene, found)
     return entry[1]
+
+
+# id(scene) -> scene: scenes whose meshes move (`trace_every_pass`), traced every pass
+_moving = {}
+
+
+def trace_every_pass(scene):
+    """Trace every pass of ``scene`` from now on: its meshes' vertices will change through
+    ``mi.traverse``. A replay casts its rays at the acceleration structure of the geometry it
+    recorded (the ray-tracing library's scene is no JIT value, so no input of the recording): after
+    ``params.update()`` rebuilt it, replays read the old one or a freed one (renders of the same
+    vertices and seed came out different, tests/test_refine_piles.py). `mitsonar.sim.render.scan_parameters`
+    calls it for a scene asked for vertex positions."""
+    if len(_moving) >= MAX_RECORDINGS:
+        _moving.clear()
+    _moving[id(scene)] = scene
 
 
 def _state(context, *args):

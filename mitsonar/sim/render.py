@@ -355,7 +355,8 @@ def scan_parameters(scene, keys=None):
     ``<id>.beamwidth_h``/``_v`` (gaussian beam) and the acoustic BSDF's ``<id>.diffuse``,
     ``.specular``, ``.shininess`` (a textured diffuse: its texture's ``<id>.diffuse.data``), and a
     mesh's ``<id>.vertex_positions`` (single-bounce echoes, silhouettes ignored; see
-    docs/tutorials/gradients.rst). Returns ``mi.traverse(scene)`` kept to those keys. Refused in one line: a variant without
+    docs/tutorials/gradients.rst; a scene asked for vertex positions is rendered without frozen
+    passes from then on: a replay would cast rays at the geometry it recorded). Returns ``mi.traverse(scene)`` kept to those keys. Refused in one line: a variant without
     automatic differentiation, or a key that is not one of these (the message lists them).
     """
     import re
@@ -377,4 +378,8 @@ def scan_parameters(scene, keys=None):
             raise SceneError(f"scan_parameters: {k!r} is not a differentiable parameter of this scene; "
                              f"allowed: {', '.join(allowed) or 'none'}")
     params.keep([re.escape(k) + "$" for k in wanted])
+    if any(k.endswith(".vertex_positions") for k in wanted):
+        # a frozen pass replays the ray casts of the geometry it recorded: a scene whose meshes
+        # move is traced every pass (plugins/frozen_pass.py, `trace_every_pass`)
+        module("frozen_pass").trace_every_pass(scene)
     return params
