@@ -178,18 +178,23 @@ def jit_poses_targets(poses, targets):
 def render_loss(scene, params, head, key, transforms, targets, vertices, *, blur, grad, spp, seed):
     """The summed render-and-compare loss of every ping, ``sum_k |B s_k - B t_k|^2 / |B t_k|^2``
     (`_blur_range` ``B``), the mesh ``key``'s vertex positions set to ``vertices()`` and the head
-    ``head`` moved to ``transforms[k]`` for ping ``k`` (rendered with ``seed + k``); with ``grad``
+    ``head`` moved to ``transforms[k]`` for ping ``k`` (rendered with ``seed + k``; ``key`` may be a
+    tuple of meshes' keys, ``vertices()`` then giving one array each); with ``grad``
     each ping's loss is back-propagated at once. ``vertices`` is called per ping: each backward
     pass frees the graph it traversed, so the vertices are made anew for the next ping (else only
     the first ping's gradient would reach the unknowns). Shared by `refine_height_field` and
-    `mitsonar.jobs.refine_room`."""
+    `mitsonar.jobs.refine_room` and `mitsonar.jobs.refine_piles`."""
     import drjit as dr
     import mitsuba as mi
 
     total = 0.0
     for k, (P, t) in enumerate(zip(transforms, targets)):
         params[f"{head}.to_world"] = P
-        params[key] = vertices()
+        if isinstance(key, str):
+            params[key] = vertices()
+        else:  # several meshes: ``vertices()`` gives one array per key
+            for k_, v_ in zip(key, vertices()):
+                params[k_] = v_
         params.update()
         if grad:
             img = mi.render(scene, params, spp=spp, seed=seed + k)
