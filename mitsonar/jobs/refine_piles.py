@@ -7,7 +7,8 @@ carve it away. Here the scene is modelled as a horizontal seabed ``z = z_s`` and
 ``(c_x, c_y, rho)`` (piles, standing from below the seabed to above what the head reaches), started
 from the first map's surface (:func:`piles_from_points`), refined until their renders with the
 survey's poses give back the recorded intensities (:func:`refine_piles`; the loss and Adam as
-:func:`mitsonar.jobs.refine_room.refine_room`'s), and fed back (:func:`piles_feedback`):
+:func:`mitsonar.jobs.refine_room.refine_room`'s; the seabed given, e.g. by the vehicle's altimeter,
+or searched by rendering, :func:`seabed_search`), and fed back (:func:`piles_feedback`):
 
 * **echo attribution**: each occupied group of the scans (the arc of one full bin) keeps the
   points of its beam where the refined model's first surface lies at that bin's range (rays cast
@@ -194,8 +195,8 @@ def seabed_search(scene, piles, poses, targets, candidates, *, top, bounds, blur
 
 
 def refine_piles(scene, piles, seabed, poses, targets, *, top, bounds, stages=((4.0, 20), (1.5, 20)), spp=32,
-                 seed=0, lr=0.02, lr_decay=0.1, sides=24, head="head", refine_seabed=True, deterministic=True,
-                 callback=None):
+                 seed=0, lr=0.02, lr_decay=0.1, sides=24, head="head", refine_seabed=True, refine_radius=True,
+                 deterministic=True, callback=None):
     """Refine the piles ``(x, y, radius)`` and the seabed height of `piles_xml`'s scene so that its
     renders with ``poses`` match ``targets`` (loss and Adam as `refine_room`'s: the intensities
     blurred along range, stage by stage).
@@ -221,6 +222,9 @@ def refine_piles(scene, piles, seabed, poses, targets, *, top, bounds, stages=((
         Adam's step (m) and its geometric fall over each stage.
     refine_seabed : bool
         Move the seabed too (False: kept where it is, e.g. from the vehicle's altimeter).
+    refine_radius : bool
+        Move the radii too (False: kept; seen from one side, a pile's front fixes ``|c - s| -
+        radius``, and the radius only the views' spread around it).
     deterministic : bool
         One Dr.Jit thread during the fit (the vertex gradients are atomic sums).
     callback : callable, optional
@@ -242,11 +246,11 @@ def refine_piles(scene, piles, seabed, poses, targets, *, top, bounds, stages=((
         raise ValueError(f"refine_piles: stages must be (blur_bins >= 0, iterations >= 0) pairs, not {stages!r}")
     with one_thread_if(deterministic):
         return _refine(scene, P, float(seabed), poses, targets, float(top), bounds, stages, spp, seed, lr, lr_decay,
-                       sides, head, refine_seabed, callback)
+                       sides, head, refine_seabed, refine_radius, callback)
 
 
 def _refine(scene, P, seabed, poses, targets, top, bounds, stages, spp, seed, lr, lr_decay, sides, head, refine_seabed,
-            callback):
+            refine_radius, callback):
     import drjit as dr
     import mitsuba as mi
 
@@ -301,8 +305,8 @@ def _refine(scene, P, seabed, poses, targets, top, bounds, stages, spp, seed, lr
             history.append(data_loss(float(blur), True))
             opt.step()
             q = np.asarray(opt["piles"], np.float64).reshape(n, 3)
-            if (q[:, 2] < 0.02).any():  # a radius may not cross zero
-                q[:, 2] = np.maximum(q[:, 2], 0.02)
+            if not refine_radius or (q[:, 2] < 0.02).any():  # a radius may not cross zero
+                q[:, 2] = P[:, 2] if not refine_radius else np.maximum(q[:, 2], 0.02)
                 opt["piles"] = mi.Float(q.ravel().astype(np.float32))
             if callback is not None:
                 callback(it, history[-1], q, float(opt["zs"][0]) if refine_seabed else seabed)
@@ -382,14 +386,16 @@ def piles_feedback(scans, first_map, *, seabed=None, piles=None, seed=0, spp=32,
                    radius=0.25, rays=256, evidence_rays=16, free_per_point=16, margin=0.02, sides=24, ridge_resolution=0.2,
                    pile_bsdf='<string name="preset" value="concrete_good"/>',
                    seabed_bsdf='<string name="preset" value="seabed_mud"/>', max_depth=3, corroborate=0.25, seabed_evidence=True,
-                   drop_unexplained=False, **map_params):
+                   drop_unexplained=False, refine_radius=True, **map_params):
     """A second map of the survey ``scans`` (frames of one steered head along a track) with the
     refined piles and seabed fed back (see the module docstring).
 
     The piles start from ``piles`` ((N, 3) ``(x, y, radius)``, e.g. a chart's) or else from the
     first map's ridge (`piles_from_points`, ``ridge_resolution`` m), the seabed from ``seabed``
     (e.g. the vehicle's altimeter; then kept fixed) or else from a search by rendering
-    (`seabed_search`: every 0.25 m below the head; the map itself may show none); every ``frame_stride``-th frame refines them
+    (`seabed_search`: every 0.25 m below the head, then every 5 cm around the best, after a first
+    stage has refined the piles on a seabed as deep as the head reaches; the map itself may show
+    none); the seabed is kept there while every ``frame_stride``-th frame refines the piles
     (`refine_piles`); then each scan is embedded by a new
     ``hilbertmap.IncrementalHilbertMap(random_state=seed, **map_params)``, its groups attributed
     (`attribute_groups`, ``rays`` a group), the model's first hits of ``evidence_rays`` rays a
@@ -400,7 +406,9 @@ def piles_feedback(scans, first_map, *, seabed=None, piles=None, seed=0, spp=32,
     -------
     dict
         ``map``, ``piles_start``, ``seabed_start``, ``piles``, ``seabed``, ``refine`` (`refine_piles`'s
-        result), ``explained`` (the share of the scans' occupied groups the model explained).
+        result; its ``loss_start`` that of the whole fit), ``explained`` (the share of the scans'
+        occupied groups the model explained), ``evidence_share`` (of the model's hits, those the
+        recording corroborates).
     """
     import os
     import tempfile
@@ -438,14 +446,26 @@ def piles_feedback(scans, first_map, *, seabed=None, piles=None, seed=0, spp=32,
                                               max_depth=max_depth))
     use = list(range(0, len(scans), int(frame_stride)))
     poses, targets = [frames[k] for k in use], [np.asarray(scans[k].intensity) for k in use]
-    if seabed is None:  # a search by rendering, every 0.25 m from the head down to its reach
+    start = piles0
+    if seabed is None:
+        # the piles first, standing on a seabed as deep as the head reaches (their echoes all
+        # kept), then the seabed searched by rendering every 0.25 m with the piles in place (with
+        # misplaced piles, cutting them short lowered the loss: a seabed far too high), then both
         z_head = float(sensors[:, 2].mean())
         cand = np.arange(z_head - 0.5, z_head - head["range_max"], -0.25)
-        seabed0, _ = seabed_search(scene, piles0, poses, targets, cand, top=top, bounds=bounds, seed=seed, sides=sides)
+        first = refine_piles(scene, piles0, float(cand[-1]), poses, targets, top=top, bounds=bounds,
+                             stages=stages[:1], spp=spp, seed=seed, lr=lr, sides=sides, refine_seabed=False,
+                             refine_radius=refine_radius)
+        start = first["piles"]
+        z0, _ = seabed_search(scene, start, poses, targets, cand, top=top, bounds=bounds, seed=seed, sides=sides)
+        fine = z0 + np.arange(-0.25, 0.2501, 0.05)  # then every 5 cm around the best
+        seabed0, _ = seabed_search(scene, start, poses, targets, fine, top=top, bounds=bounds, seed=seed, sides=sides)
     else:
-        seabed0 = float(seabed)
-    res = refine_piles(scene, piles0, seabed0, poses, targets, top=top, bounds=bounds, stages=stages,
-                       spp=spp, seed=seed, lr=lr, sides=sides, refine_seabed=seabed is None)
+        first, seabed0 = None, float(seabed)
+    res = refine_piles(scene, start, seabed0, poses, targets, top=top, bounds=bounds, stages=stages,
+                       spp=spp, seed=seed, lr=lr, sides=sides, refine_seabed=False, refine_radius=refine_radius)
+    if first is not None:
+        res["loss_start"] = first["loss_start"]  # the whole fit's start (the first stage's blur)
     # the refined model, for the rays
     from mitsonar.sim.render import scan_parameters
 
