@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
@@ -106,19 +105,7 @@ def main(argv=None) -> int:
     report["evidence_share"] = res["evidence_share"]
 
     if not args.no_octomap:
-        try:
-            import octomap  # noqa: F401
-        except ImportError as exc:
-            report["octomap"] = {"skipped": f"octomap-python not installed ({exc})"}
-        else:
-            from thesis_mapping import octomap_anchor
-
-            from hilbertmap import geometry as geo
-
-            true_pts = geo.sample_triangles(V, F, 20000, np.random.default_rng(0))
-            true_pts = true_pts[first.insonified(true_pts, part="echo")]
-            oc = octomap_anchor(samples, full.points, (V, F), 0.1, true_pts, ((0.1, 0.3), (0.3, 1.0), (1.0, math.inf)))
-            report["octomap"] = {k: v for k, v in oc.items() if not isinstance(v, (list, np.ndarray))}
+        report["octomap"] = sm.octomap_report(first, samples, full, V, F)
 
     fb = report["feedback"]
     report["targets"] = {

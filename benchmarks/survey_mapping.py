@@ -233,6 +233,27 @@ def multibeam_quality(hm_default, hm_light, V, F, resolution) -> dict:
     return out
 
 
+def octomap_report(hm, samples, full, V, F) -> dict:
+    """OctoMap (0.1 m) on the pings of ``samples`` (``thesis_mapping.octomap_anchor``), scored on
+    the test points of ``full`` (the map ``hm``'s evaluation) and the true surface it saw; a
+    ``skipped`` entry when octomap-python is not installed."""
+    try:
+        import octomap  # noqa: F401
+    except ImportError as exc:
+        return {"skipped": f"octomap-python not installed ({exc})"}
+    from thesis_mapping import octomap_anchor
+
+    from hilbertmap import geometry as geo
+
+    true_pts = geo.sample_triangles(V, F, 20000, np.random.default_rng(0))
+    true_pts = true_pts[hm.insonified(true_pts, part="echo")]
+    bands = ((0.1, 0.3), (0.3, 1.0), (1.0, math.inf))
+    t0 = time.perf_counter()
+    oc = octomap_anchor(samples, full.points, (V, F), 0.1, true_pts, bands)
+    oc["total_s"] = time.perf_counter() - t0
+    return {k: v for k, v in oc.items() if not isinstance(v, (list, np.ndarray))}
+
+
 def targets(report: dict) -> dict:
     """The issue's speed targets next to what this run measured."""
     out = {}
@@ -346,22 +367,7 @@ def main(argv=None) -> int:
         report["speed"] = speed(samples)
 
     if not args.no_octomap and full is not None:
-        try:
-            import octomap  # noqa: F401
-        except ImportError as exc:
-            report["octomap"] = {"skipped": f"octomap-python not installed ({exc})"}
-        else:
-            from thesis_mapping import octomap_anchor
-
-            from hilbertmap import geometry as geo
-
-            true_pts = geo.sample_triangles(V, F, 20000, np.random.default_rng(0))
-            true_pts = true_pts[hm.insonified(true_pts, part="echo")]
-            bands = ((0.1, 0.3), (0.3, 1.0), (1.0, math.inf))
-            t0 = time.perf_counter()
-            oc = octomap_anchor(samples, full.points, (V, F), 0.1, true_pts, bands)
-            oc["total_s"] = time.perf_counter() - t0
-            report["octomap"] = {k: v for k, v in oc.items() if not isinstance(v, (list, np.ndarray))}
+        report["octomap"] = octomap_report(hm, samples, full, V, F)
 
     if hm is not None:
         from hilbertmap.elevation import elevation_grid

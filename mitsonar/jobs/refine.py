@@ -150,6 +150,16 @@ def check_poses_and_targets(what, poses, targets, scene=None, head=None):
                              f"{shape} (rows, bins)")
 
 
+def check_adam_stages(what, lr, lr_decay, stages):
+    """One-line ``ValueError`` (``what: ...``) unless ``lr > 0``, ``0 < lr_decay <= 1`` and
+    ``stages`` are ``(blur_bins >= 0, iterations >= 0)`` pairs: the settings `refine_room` and
+    `refine_piles` share."""
+    if not (lr > 0 and 0 < lr_decay <= 1):
+        raise ValueError(f"{what}: need lr > 0 and 0 < lr_decay <= 1 (got lr {lr!r}, lr_decay {lr_decay!r})")
+    if not stages or any(len(s) != 2 or not s[0] >= 0 or int(s[1]) < 0 for s in stages):
+        raise ValueError(f"{what}: stages must be (blur_bins >= 0, iterations >= 0) pairs, not {stages!r}")
+
+
 @contextlib.contextmanager
 def one_thread_if(deterministic):
     """Dr.Jit on one thread for the block when ``deterministic`` (its thread count restored after):

@@ -37,7 +37,7 @@ import time
 
 import numpy as np
 
-from mitsonar.jobs.refine import check_poses_and_targets, one_thread_if
+from mitsonar.jobs.refine import check_adam_stages, check_poses_and_targets, one_thread_if
 
 __all__ = ["attribute_groups", "model_hits", "piles_feedback", "piles_from_points", "piles_mesh", "piles_xml",
            "refine_piles", "seabed_search"]
@@ -240,10 +240,7 @@ def refine_piles(scene, piles, seabed, poses, targets, *, top, bounds, stages=((
     if not math.isfinite(seabed) or not (math.isfinite(top) and top > seabed):
         raise ValueError(f"refine_piles: seabed must be finite and below top (got {seabed!r}, top {top!r})")
     check_poses_and_targets("refine_piles", poses, targets, scene, head)
-    if not (lr > 0 and 0 < lr_decay <= 1):
-        raise ValueError(f"refine_piles: need lr > 0 and 0 < lr_decay <= 1 (got lr {lr!r}, lr_decay {lr_decay!r})")
-    if not stages or any(len(s) != 2 or not s[0] >= 0 or int(s[1]) < 0 for s in stages):
-        raise ValueError(f"refine_piles: stages must be (blur_bins >= 0, iterations >= 0) pairs, not {stages!r}")
+    check_adam_stages("refine_piles", lr, lr_decay, stages)
     with one_thread_if(deterministic):
         return _refine(scene, P, float(seabed), poses, targets, float(top), bounds, stages, spp, seed, lr, lr_decay,
                        sides, head, refine_seabed, refine_radius, callback)

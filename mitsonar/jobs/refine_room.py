@@ -41,7 +41,7 @@ import time
 
 import numpy as np
 
-from mitsonar.jobs.refine import check_poses_and_targets, one_thread_if
+from mitsonar.jobs.refine import check_adam_stages, check_poses_and_targets, one_thread_if
 
 __all__ = ["polygon_from_points", "refine_room", "room_feedback", "room_mesh", "room_xml", "wall_points"]
 
@@ -277,10 +277,7 @@ def refine_room(scene, corners, floor, poses, targets, *, top, stages=((4.0, 15)
     if not math.isfinite(floor) or not (math.isfinite(top) and top > floor):
         raise ValueError(f"refine_room: floor must be finite and below top (got floor {floor!r}, top {top!r})")
     check_poses_and_targets("refine_room", poses, targets, scene, head)
-    if not (lr > 0 and 0 < lr_decay <= 1):
-        raise ValueError(f"refine_room: need lr > 0 and 0 < lr_decay <= 1 (got lr {lr!r}, lr_decay {lr_decay!r})")
-    if not stages or any(len(s) != 2 or not s[0] >= 0 or int(s[1]) < 0 for s in stages):
-        raise ValueError(f"refine_room: stages must be (blur_bins >= 0, iterations >= 0) pairs, not {stages!r}")
+    check_adam_stages("refine_room", lr, lr_decay, stages)
     with one_thread_if(deterministic):
         return _refine(scene, C, float(floor), poses, targets, float(top), stages, spp, seed, lr, lr_decay, head,
                        mesh, callback)
