@@ -160,6 +160,30 @@ def check_adam_stages(what, lr, lr_decay, stages):
         raise ValueError(f"{what}: stages must be (blur_bins >= 0, iterations >= 0) pairs, not {stages!r}")
 
 
+def staged_adam(opt, stages, lr, lr_decay, data_loss, after_step=None):
+    """Adam's steps over ``stages`` of ``(blur_bins, iterations)``, shared by `refine_room` and
+    `refine_piles`: each step back-propagates ``data_loss(blur, True)`` (the summed loss of every
+    ping) and moves ``opt``, its rate falling geometrically from ``lr`` to ``lr * lr_decay`` over
+    each stage; ``after_step(iteration, loss)`` after each. Returns ``(loss at the last stage's
+    blur before, the losses per iteration, the loss at the last stage's blur after)``."""
+    import drjit as dr
+
+    last_blur = float(stages[-1][0])
+    with dr.suspend_grad():
+        start = data_loss(last_blur, False)
+    history = []
+    for blur, iters in stages:
+        for j in range(int(iters)):
+            opt.set_learning_rate(lr * float(lr_decay) ** (j / max(int(iters) - 1, 1)))
+            history.append(data_loss(float(blur), True))
+            opt.step()
+            if after_step is not None:
+                after_step(len(history) - 1, history[-1])
+    with dr.suspend_grad():
+        final = data_loss(last_blur, False)
+    return start, history, final
+
+
 @contextlib.contextmanager
 def one_thread_if(deterministic):
     """Dr.Jit on one thread for the block when ``deterministic`` (its thread count restored after):

@@ -251,7 +251,7 @@ def _refine(scene, P, seabed, poses, targets, top, bounds, stages, spp, seed, lr
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.jobs.refine import jit_poses_targets, render_loss
+    from mitsonar.jobs.refine import jit_poses_targets, render_loss, staged_adam
     from mitsonar.sim.render import scan_parameters
 
     keys = ("piles.vertex_positions", "seabed.vertex_positions")
@@ -291,25 +291,16 @@ def _refine(scene, P, seabed, poses, targets, top, bounds, stages, spp, seed, lr
     def data_loss(blur, grad):
         return render_loss(scene, params, head, keys, tf, tg, vertices, blur=blur, grad=grad, spp=spp, seed=seed)
 
+    def step_done(it, loss):
+        q = np.asarray(opt["piles"], np.float64).reshape(n, 3)
+        if not refine_radius or (q[:, 2] < 0.02).any():  # a radius may not cross zero
+            q[:, 2] = P[:, 2] if not refine_radius else np.maximum(q[:, 2], 0.02)
+            opt["piles"] = mi.Float(q.ravel().astype(np.float32))
+        if callback is not None:
+            callback(it, loss, q, float(opt["zs"][0]) if refine_seabed else seabed)
+
     t0 = time.perf_counter()
-    last_blur = float(stages[-1][0])
-    with dr.suspend_grad():
-        start = data_loss(last_blur, False)
-    history, it = [], 0
-    for blur, iters in stages:
-        for j in range(int(iters)):
-            opt.set_learning_rate(lr * float(lr_decay) ** (j / max(int(iters) - 1, 1)))
-            history.append(data_loss(float(blur), True))
-            opt.step()
-            q = np.asarray(opt["piles"], np.float64).reshape(n, 3)
-            if not refine_radius or (q[:, 2] < 0.02).any():  # a radius may not cross zero
-                q[:, 2] = P[:, 2] if not refine_radius else np.maximum(q[:, 2], 0.02)
-                opt["piles"] = mi.Float(q.ravel().astype(np.float32))
-            if callback is not None:
-                callback(it, history[-1], q, float(opt["zs"][0]) if refine_seabed else seabed)
-            it += 1
-    with dr.suspend_grad():
-        final = data_loss(last_blur, False)
+    start, history, final = staged_adam(opt, stages, lr, lr_decay, data_loss, step_done)
     out_p = np.asarray(opt["piles"], np.float64).reshape(n, 3)
     out_z = float(opt["zs"][0]) if refine_seabed else seabed
     params[keys[0]], params[keys[1]] = mi.Float(Vp.ravel()), mi.Float(Vs.ravel())

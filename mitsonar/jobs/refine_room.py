@@ -287,7 +287,7 @@ def _refine(scene, C, floor, poses, targets, top, stages, spp, seed, lr, lr_deca
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.jobs.refine import jit_poses_targets, render_loss
+    from mitsonar.jobs.refine import jit_poses_targets, render_loss, staged_adam
     from mitsonar.sim.render import scan_parameters
 
     key = f"{mesh}.vertex_positions"
@@ -313,21 +313,12 @@ def _refine(scene, C, floor, poses, targets, top, stages, spp, seed, lr, lr_deca
         return render_loss(scene, params, head, key, tf, tg, lambda: vertices(opt["c"], opt["zf"]), blur=blur,
                            grad=grad, spp=spp, seed=seed)
 
+    def step_done(it, loss):
+        if callback is not None:
+            callback(it, loss, np.asarray(opt["c"], np.float64).reshape(n, 2), float(opt["zf"][0]))
+
     t0 = time.perf_counter()
-    last_blur = float(stages[-1][0])
-    with dr.suspend_grad():
-        start = data_loss(last_blur, False)
-    history, it = [], 0
-    for blur, iters in stages:
-        for j in range(int(iters)):
-            opt.set_learning_rate(lr * float(lr_decay) ** (j / max(int(iters) - 1, 1)))
-            history.append(data_loss(float(blur), True))
-            opt.step()
-            if callback is not None:
-                callback(it, history[-1], np.asarray(opt["c"], np.float64).reshape(n, 2), float(opt["zf"][0]))
-            it += 1
-    with dr.suspend_grad():
-        final = data_loss(last_blur, False)
+    start, history, final = staged_adam(opt, stages, lr, lr_decay, data_loss, step_done)
     c_fin = np.asarray(opt["c"], np.float64).reshape(n, 2)
     zf_fin = float(opt["zf"][0])
     params[key] = mi.Float(V0.ravel())
