@@ -34,6 +34,8 @@ a JIT value the inputs do not name, so a value missed here cannot be baked in si
 """
 from __future__ import annotations
 
+import sys
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -153,7 +155,10 @@ def trace_every_pass(scene):
     vertices and seed came out different, tests/test_refine_piles.py). `mitsonar.sim.render.scan_parameters`
     calls it for a scene asked for vertex positions."""
     if len(_moving) >= MAX_RECORDINGS:
-        _moving.clear()
+        # forget only the scenes nobody else holds (clearing all would let a moving scene still in
+        # use be replayed again): the dict's reference and getrefcount's argument are all they have
+        for k in [k for k in _moving if sys.getrefcount(_moving[k]) <= 2]:
+            del _moving[k]
     _moving[id(scene)] = scene
 
 

@@ -205,3 +205,17 @@ def test_renders_follow_the_vertices_a_fit_sets():
     for imgs in seen:
         for a, b in zip(imgs, fresh):
             np.testing.assert_array_equal(a, b)
+
+
+def test_a_moving_scene_in_use_stays_traced_past_the_registry_limit():
+    """The registry of moving scenes forgets only scenes nobody holds: clearing it whole past its
+    limit would let a scene still being fitted be replayed from stale recordings again."""
+    from mitsonar.plugins import module
+
+    fp = module("frozen_pass")
+    keep = _scene(PILE, SEABED)
+    fp.trace_every_pass(keep)
+    for _ in range(fp.MAX_RECORDINGS + 5):
+        fp.trace_every_pass(_scene(PILE, SEABED))
+    assert fp._moving.get(id(keep)) is keep
+    assert len(fp._moving) <= fp.MAX_RECORDINGS
