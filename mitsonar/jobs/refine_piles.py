@@ -77,6 +77,15 @@ def piles_mesh(piles, seabed, bounds, top, *, sides=24):
     return (np.asarray(V, np.float32).reshape(-1, 3), np.asarray(F, np.uint32).reshape(-1, 3), Vs, Fs)
 
 
+def _vertex_arrays(piles, seabed, bounds, top, sides):
+    """`piles_mesh`'s vertex positions as the two flat ``mi.Float`` the scene's ``piles`` and
+    ``seabed`` take (``<id>.vertex_positions``)."""
+    import mitsuba as mi
+
+    Vp, _, Vs, _ = piles_mesh(piles, seabed, bounds, top, sides=sides)
+    return mi.Float(Vp.ravel()), mi.Float(Vs.ravel())
+
+
 def piles_xml(piles_ply, seabed_ply, head, *, pile_bsdf='<string name="preset" value="concrete_good"/>',
               seabed_bsdf='<string name="preset" value="seabed_mud"/>', max_depth=3):
     """A scene of one sonar (``id="head"``, the settings ``head`` of `_head_settings`: kind,
@@ -177,8 +186,6 @@ def seabed_search(scene, piles, poses, targets, candidates, *, top, bounds, blur
     """The seabed height among ``candidates`` whose renders (the piles fixed) best match
     ``targets`` (`mitsonar.jobs.refine.render_loss`, no gradients), and the loss of each: the
     start for `refine_piles` where the map shows no seabed (a weak echo, like mud's)."""
-    import mitsuba as mi
-
     from mitsonar.jobs.refine import jit_poses_targets, render_loss
     from mitsonar.sim.render import scan_parameters
 
@@ -187,9 +194,8 @@ def seabed_search(scene, piles, poses, targets, candidates, *, top, bounds, blur
     tf, tg = jit_poses_targets(poses, targets)
     losses = []
     for z in candidates:
-        Vp, _, Vs, _ = piles_mesh(piles, float(z), bounds, top, sides=sides)
-        losses.append(render_loss(scene, params, head, keys, tf, tg,
-                                  lambda: (mi.Float(Vp.ravel()), mi.Float(Vs.ravel())), blur=blur, grad=False,
+        arrays = _vertex_arrays(piles, float(z), bounds, top, sides)
+        losses.append(render_loss(scene, params, head, keys, tf, tg, lambda: arrays, blur=blur, grad=False,
                                   spp=spp, seed=seed))
     return float(np.asarray(candidates)[int(np.argmin(losses))]), np.asarray(losses)
 
@@ -303,7 +309,7 @@ def _refine(scene, P, seabed, poses, targets, top, bounds, stages, spp, seed, lr
     start, history, final = staged_adam(opt, stages, lr, lr_decay, data_loss, step_done)
     out_p = np.asarray(opt["piles"], np.float64).reshape(n, 3)
     out_z = float(opt["zs"][0]) if refine_seabed else seabed
-    params[keys[0]], params[keys[1]] = mi.Float(Vp.ravel()), mi.Float(Vs.ravel())
+    params[keys[0]], params[keys[1]] = _vertex_arrays(P, seabed, bounds, top, sides)
     params.update()
     return {"piles": out_p, "seabed": out_z, "loss": history, "loss_start": start, "loss_final": final,
             "seconds": time.perf_counter() - t0}
@@ -458,11 +464,11 @@ def piles_feedback(scans, first_map, *, seabed=None, piles=None, seed=0, spp=32,
     from mitsonar.sim.render import scan_parameters
 
     params = scan_parameters(scene, ["head.to_world", "piles.vertex_positions", "seabed.vertex_positions"])
-    Vp, _, Vs, _ = piles_mesh(res["piles"], res["seabed"], bounds, top, sides=sides)
+    params["piles.vertex_positions"], params["seabed.vertex_positions"] = _vertex_arrays(res["piles"], res["seabed"],
+                                                                                      bounds, top, sides)
+    params.update()
     import mitsuba as mi
 
-    params["piles.vertex_positions"], params["seabed.vertex_positions"] = mi.Float(Vp.ravel()), mi.Float(Vs.ravel())
-    params.update()
     hm = IncrementalHilbertMap(random_state=seed, **map_params)
     rng = np.random.default_rng(seed)
     explained, kept = [], []
