@@ -407,6 +407,8 @@ def piles_feedback(scans, first_map, *, seabed=None, piles=None, seed=0, spp=32,
     import os
     import tempfile
 
+    from scipy.ndimage import maximum_filter1d
+
     import mitsonar
     from hilbertmap import IncrementalHilbertMap
     from hilbertmap.embedding import Samples
@@ -486,8 +488,9 @@ def piles_feedback(scans, first_map, *, seabed=None, piles=None, seed=0, spp=32,
         params.update()
         with dr.suspend_grad():
             model = np.asarray(mi.render(scene, params, spp=spp, seed=seed + k), np.float64)[..., 0]
-        rec = np.asarray(s.intensity, np.float64)
-        rec = np.maximum(rec, np.maximum(np.roll(rec, 1, axis=1), np.roll(rec, -1, axis=1)))
+        # each bin with its neighbours (one bin of slack in range; np.roll wrapped the last bin's
+        # echo round onto the first)
+        rec = maximum_filter1d(np.asarray(s.intensity, np.float64), 3, axis=1, mode="nearest")
         rows = np.arange(len(rec))
         O, D = _beam_rays(s, rows, int(evidence_rays), rng)
         t = model_hits(scene, O, D)
