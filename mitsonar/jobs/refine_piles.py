@@ -182,10 +182,18 @@ def piles_from_points(points, sensors, *, cell=0.2, min_points=20, max_extent=3.
 
 
 def seabed_search(scene, piles, poses, targets, candidates, *, top, bounds, blur=4.0, spp=16, seed=0, sides=24,
-                  head="head"):
+                  head="head", floor_db=-40.0):
     """The seabed height among ``candidates`` whose renders (the piles fixed) best match
-    ``targets`` (`mitsonar.jobs.refine.render_loss`, no gradients), and the loss of each: the
-    start for `refine_piles` where the map shows no seabed (a weak echo, like mud's)."""
+    ``targets``, and the loss of each: the start for `refine_piles` where the map shows no seabed
+    (a weak echo, like mud's).
+
+    The loss (`mitsonar.jobs.refine.render_loss`, no gradients) compares each frame's mean level
+    against range, averaged over its beams, in dB above a floor ``floor_db`` below the peak of
+    the recorded averages (`render_loss`'s ``across_beams`` and ``floor_db``): the seabed echoes in
+    every beam, the piles in a few, so the seabed's onset range and level rule it. With ``floor_db=None`` the relative loss of
+    `refine_piles` over every bin instead, ruled by the piles' bright faces: on the harbour survey
+    it moved with the render's seed by more than the seabed's own part of it and chose -4.5 m for
+    a seabed at -6 m with one seed in two (``benchmarks/harbour_feedback.py``)."""
     from mitsonar.jobs.refine import jit_poses_targets, render_loss
     from mitsonar.sim.render import scan_parameters
 
@@ -196,7 +204,7 @@ def seabed_search(scene, piles, poses, targets, candidates, *, top, bounds, blur
     for z in candidates:
         arrays = _vertex_arrays(piles, float(z), bounds, top, sides)
         losses.append(render_loss(scene, params, head, keys, tf, tg, lambda: arrays, blur=blur, grad=False,
-                                  spp=spp, seed=seed))
+                                  spp=spp, seed=seed, floor_db=floor_db, across_beams=floor_db is not None))
     return float(np.asarray(candidates)[int(np.argmin(losses))]), np.asarray(losses)
 
 
@@ -454,8 +462,9 @@ def piles_feedback(scans, first_map, *, seabed=None, piles=None, seed=0, spp=32,
                              refine_radius=refine_radius)
         start = first["piles"]
         z0, _ = seabed_search(scene, start, poses, targets, cand, top=top, bounds=bounds, seed=seed, sides=sides)
-        fine = z0 + np.arange(-0.25, 0.2501, 0.05)  # then every 5 cm around the best
-        seabed0, _ = seabed_search(scene, start, poses, targets, fine, top=top, bounds=bounds, seed=seed, sides=sides)
+        fine = z0 + np.arange(-0.25, 0.2501, 0.05)  # then every 5 cm around the best, less blurred
+        seabed0, _ = seabed_search(scene, start, poses, targets, fine, top=top, bounds=bounds, blur=1.5, seed=seed,
+                                   sides=sides)
     else:
         first, seabed0 = None, float(seabed)
     res = refine_piles(scene, start, seabed0, poses, targets, top=top, bounds=bounds, stages=stages,
