@@ -244,3 +244,14 @@ def test_a_moving_scene_in_use_stays_traced_past_the_registry_limit():
         fp.trace_every_pass(_scene(PILE, SEABED))
     assert fp._moving.get(id(keep)) is keep
     assert len(fp._moving) <= fp.MAX_RECORDINGS
+
+
+def test_parabola_vertex_lies_between_the_candidates():
+    """The seabed between 5 cm candidates: the vertex of the least-squares parabola, exact for a
+    parabola, within the candidates' span, and the best candidate where the losses open downwards."""
+    from mitsonar.jobs.refine_piles import _parabola_vertex
+
+    z = -6.05 + np.arange(-0.25, 0.2501, 0.05)
+    assert _parabola_vertex(z, 3.0 + 40.0 * (z + 5.987) ** 2) == pytest.approx(-5.987, abs=1e-9)
+    assert _parabola_vertex(z, 40.0 * (z + 5.0) ** 2) == pytest.approx(z.max())  # clipped to the span
+    assert _parabola_vertex(z, -(z + 6.0) ** 2) == pytest.approx(z[0])  # opens downwards: the lowest loss

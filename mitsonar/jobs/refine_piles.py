@@ -208,6 +208,16 @@ def seabed_search(scene, piles, poses, targets, candidates, *, top, bounds, blur
     return float(np.asarray(candidates)[int(np.argmin(losses))]), np.asarray(losses)
 
 
+def _parabola_vertex(z, losses):
+    """The vertex of the least-squares parabola through ``(z, losses)``, kept within the
+    candidates' span; the best candidate where the fit opens downwards."""
+    z, losses = np.asarray(z, np.float64), np.asarray(losses, np.float64)
+    a, b, _ = np.polyfit(z, losses, 2)
+    if not a > 0:
+        return float(z[np.argmin(losses)])
+    return float(np.clip(-b / (2.0 * a), z.min(), z.max()))
+
+
 def refine_piles(scene, piles, seabed, poses, targets, *, top, bounds, stages=((4.0, 20), (1.5, 20)), spp=32,
                  seed=0, lr=0.02, lr_decay=0.1, sides=24, head="head", refine_seabed=True, refine_radius=True,
                  deterministic=True, callback=None):
@@ -398,7 +408,8 @@ def piles_feedback(scans, first_map, *, seabed=None, piles=None, seed=0, spp=32,
     (`seabed_search`: every 0.25 m below the head, then every 5 cm around the best, after a first
     stage has refined the piles on a seabed as deep as the head reaches; the map itself may show
     none); the seabed is kept there while every ``frame_stride``-th frame refines the piles
-    (`refine_piles`); then each scan is embedded by a new
+    (`refine_piles`), then searched again every 5 cm beside the refined piles (the vertex of a
+    parabola fitted to the losses); then each scan is embedded by a new
     ``hilbertmap.IncrementalHilbertMap(random_state=seed, **map_params)``, its groups attributed
     (`attribute_groups`, ``rays`` a group), the model's first hits of ``evidence_rays`` rays a
     beam added as surface evidence with ``free_per_point`` free samples each (up to ``margin`` m
@@ -407,8 +418,9 @@ def piles_feedback(scans, first_map, *, seabed=None, piles=None, seed=0, spp=32,
     Returns
     -------
     dict
-        ``map``, ``piles_start``, ``seabed_start``, ``piles``, ``seabed``, ``refine`` (`refine_piles`'s
-        result; its ``loss_start`` that of the whole fit), ``explained`` (the share of the scans'
+        ``map``, ``piles_start``, ``seabed_start`` (where the piles were refined), ``piles``,
+        ``seabed`` (searched: the second search's), ``refine`` (`refine_piles`'s result; its
+        ``loss_start`` that of the whole fit, its ``seabed`` the final one), ``explained`` (the share of the scans'
         occupied groups the model explained), ``evidence_share`` (of the model's hits, those the
         recording corroborates).
     """
@@ -471,6 +483,13 @@ def piles_feedback(scans, first_map, *, seabed=None, piles=None, seed=0, spp=32,
                        spp=spp, seed=seed, lr=lr, sides=sides, refine_seabed=False, refine_radius=refine_radius)
     if first is not None:
         res["loss_start"] = first["loss_start"]  # the whole fit's start (the first stage's blur)
+        # the seabed searched again beside the refined piles (the first stage's piles, a few cm
+        # fat, left it 3-5 cm deep on the harbour survey), at the vertex of the parabola fitted to
+        # the losses every 5 cm around it: between candidates, and steadier than one of them
+        fine = seabed0 + np.arange(-0.25, 0.2501, 0.05)
+        _, losses = seabed_search(scene, res["piles"], poses, targets, fine, top=top, bounds=bounds, blur=1.5,
+                                  seed=seed, sides=sides)
+        res["seabed"] = _parabola_vertex(fine, losses)
     # the refined model, for the rays
     from mitsonar.sim.render import scan_parameters
 
