@@ -307,7 +307,10 @@ def bounce(bsdf, ctx, si, chain, origin, segment, u1, u2, active, curved=False, 
     if mirrors:
         from . import curved_mirror
 
-        here = active & (n_here >= MIN_EXPONENT)
+        # the first mirror of a chain only: from a mirror met after others (the quay wall on the
+        # way home from the pile) a strip leads to another round trip, whose echo is weak (on
+        # pile_quay such echoes hold 0.5 % of the second moment; the longer paths cost time)
+        here = active & (n_here >= MIN_EXPONENT) & (n_chain == 0)
         nrm = si.sh_frame.n
         after = image - 2.0 * dr.dot(image - si.p, nrm) * nrm    # the image after si (`advance_chain`)
         strips = []
