@@ -142,3 +142,33 @@ def test_same_seed_same_bytes_with_any_thread_count(mitsonar_mod, strip):
     for run in out[1:]:
         assert all(a.tobytes() == b.tobytes() for a, b in zip(run, out[0]))
     assert not np.array_equal(out[0][0], out[0][1])
+
+
+def test_the_variance_diagnostic_finds_the_pile(mitsonar_mod, capsys, monkeypatch):
+    """benchmarks/pile_variance.py: the pile's window holds nearly all of the variance, the bounce-2
+    echoes nearly all of the second moment, and the guide puts more paths on the strip (256 paths a
+    ping: 0.7 % and 12 % with 65536)."""
+    import importlib.util
+    import os
+    import re
+
+    from conftest import SCENES
+    from mitsonar.plugins import frozen_pass, image_guide
+
+    monkeypatch.setattr(image_guide, "STRIP_GUIDE", image_guide.STRIP_GUIDE)
+    spec = importlib.util.spec_from_file_location(
+        "pile_variance", os.path.join(SCENES, "..", "benchmarks", "pile_variance.py"))
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    strip_share = []
+    for extra in ([], ["--no-strip-guide"]):
+        frozen_pass.clear()
+        assert bench.main(["--paths", "2048", *extra]) == 0
+        out = capsys.readouterr().out
+        assert float(re.search(r"\(>= 6\.5 m\): ([0-9.]+) of the variance", out).group(1)) > 0.95
+        assert float(re.search(r"bounce 2: [0-9.]+ of the energy, ([0-9.]+) of the second", out).group(1)) > 0.95
+        strip_share.append(float(re.search(r"within 2 deg of the strip: ([0-9.]+)", out).group(1)))
+    frozen_pass.clear()
+    assert strip_share[0] > 5 * strip_share[1] > 0
+    with pytest.raises(SystemExit):
+        bench.main(["--paths", "4"])
