@@ -165,11 +165,11 @@ def aim(x, image, n_chain, centre, axis, radius, start=None):
 STRIP_WIDEN = 1.0
 
 
-def scene_mirrors(scene, min_exponent):
+def scene_mirrors(scene, min_exponent, lobe_exponent):
     """The convex curved mirrors of ``scene`` known in closed form: a tuple of
     ``(centre, axis, radius, exponent)`` (Python floats; ``axis`` (0, 0, 0) for a sphere) for every
     Mitsuba sphere and cylinder whose BSDF's lobe counts as a mirror (``exponent`` at least
-    ``min_exponent``, `image_guide.lobe_exponent`) and whose ``to_world`` keeps it round (a
+    ``min_exponent``, read by ``lobe_exponent(bsdf)``: `image_guide.lobe_exponent`) and whose ``to_world`` keeps it round (a
     uniform scale across the axis). Mitsuba's unit sphere is centred at the origin, its unit
     cylinder runs along z from 0 to 1 with radius 1 (``p0``/``p1``/``radius`` go to ``to_world``).
 
@@ -177,8 +177,6 @@ def scene_mirrors(scene, min_exponent):
     a mirror-like vertex on another shape (from the mirror itself there is no strip to aim at), so
     a scene whose only mirror is the curved one keeps its kernel and cost."""
     import numpy as np
-
-    from .image_guide import lobe_exponent
 
     out = []
     shapes = list(scene.shapes())

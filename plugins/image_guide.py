@@ -161,7 +161,7 @@ def guide_kind(scene):
     if STRIP_GUIDE:
         from .curved_mirror import scene_mirrors
 
-        mirrors = scene_mirrors(scene, MIN_EXPONENT)
+        mirrors = scene_mirrors(scene, MIN_EXPONENT, lobe_exponent)
         if mirrors:
             return Guide(curved, mirrors)
     return "curved" if curved else True

@@ -35,7 +35,8 @@ def test_the_curved_mirrors_are_read_from_the_scene(mitsonar_mod):
     at, and keeps the planar kernel; planar scenes and scenes without mirrors likewise."""
     from mitsonar.plugins import curved_mirror, image_guide
 
-    (centre, axis, radius, n), = curved_mirror.scene_mirrors(load(mitsonar_mod, "pile_quay"), image_guide.MIN_EXPONENT)
+    (centre, axis, radius, n), = curved_mirror.scene_mirrors(load(mitsonar_mod, "pile_quay"), image_guide.MIN_EXPONENT,
+                                                             image_guide.lobe_exponent)
     assert np.allclose(centre, (4, 3, -3)) and np.allclose(axis, (0, 0, 1)) and math.isclose(radius, 0.3, rel_tol=1e-6)
     assert math.isclose(n, image_guide.lobe_exponent(load(mitsonar_mod, "pile_quay").shapes()[0].bsdf()))
     kinds = {name: image_guide.guide_kind(load(mitsonar_mod, name))
