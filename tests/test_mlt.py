@@ -121,7 +121,9 @@ def test_mutations_do_not_recompile(mitsonar_mod):
     import mitsuba as mi
 
     scene = mitsonar_mod.load_scene(os.path.join(SCENES, "box.xml"))
-    mlt = mi.load_dict({"type": "sonar_mlt"})
+    # the path tracer's even split (the default before allocation="adaptive": whose per-row passes
+    # are sized by the pilot's counts)
+    mlt = mi.load_dict({"type": "sonar_mlt", "allocation": "uniform"})
     mlt.render_histogram(scene, seed=0, spp=512)
     first, _ = jit_kernels(mlt.render_histogram, scene, seed=0, spp=512)
     # New seed, pose and spp: other bootstrap, chain and mutation counts, same kernels. (The
