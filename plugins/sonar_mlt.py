@@ -85,23 +85,25 @@ class SonarMLTIntegrator(SonarIntegrator):
                               docs/benchmarks.rst); ``auto``: the share from a pilot's
                               variances; a number in [0, 0.9]; ``off`` (or ``guide="none"``):
                               chains over every echo, Kelemen's PSSMLT as before the guide
-    allocation       adaptive paths per ping of the path-traced render (``split`` 0):
+    allocation       uniform  paths per ping of the path-traced render (``split`` 0):
+                              ``uniform``: ``sonar_tof``'s default, spp paths per ping;
                               ``adaptive``: ``sonar_tof``'s ``allocation="adaptive"``
                               (`row_allocation`: a pilot of spp/16 paths per ping, its cost
                               counted, moves the paths to the pings whose echoes are noisy,
-                              and keeps them even where it predicts under 2x); ``uniform``:
-                              ``sonar_tof``'s default, spp paths per ping
+                              and keeps them even where it predicts under 2x)
     ================ ======== =================================================================
 
     The defaults are the best settings measured on ``scenes_xml/`` (see the documentation's
     Benchmarks page and ``benchmarks/mlt.py``): one target over the scan, few long chains (about 2^13 in
-    all) and mostly small steps. With no parameters ``sonar_mlt`` path traces, its pilot choosing
-    the paths per ping (``allocation``): at equal CPU time (``benchmarks/mlt_equal_time.py``, spp
-    16384) 1.77-2.05x less error than ``sonar_tof`` on ``pile_quay``, 2.05x on ``intake``, 1.16x on
-    ``box``, and 0.76-0.94x on ``periscope``, 0.89-0.98x on ``hidden_target`` (the pilot's cost,
-    where it keeps the even split); the chains lost to the guided path tracer on every scene
-    measured, ``pile_quay`` included (0.28-0.69x), whose room the oracle bounds at 6.1-6.6x
-    (``benchmarks/mlt_oracle.py``; the documentation's Benchmarks page).
+    all) and mostly small steps. With no parameters ``sonar_mlt`` is ``sonar_tof``'s scan: the
+    chains lost to the guided path tracer on every scene measured, ``pile_quay`` included
+    (0.28-0.69x at equal time), whose room the oracle bounds at 6.1-6.6x
+    (``benchmarks/mlt_oracle.py``). ``allocation="adaptive"`` wins where there is room (at equal
+    CPU time, spp 16384: 1.77-2.05x less error than ``sonar_tof`` on ``pile_quay``, 2.05x on
+    ``intake``, 1.16x on ``box``) but loses 0.6-0.94x where its pilot keeps the even split
+    (``periscope``, ``hidden_target``, ``slot_chamber``, the tank and the bow: the pilot's time,
+    and a Sobol render of ``spp - pilot`` paths, short of the power of two), so it is not the
+    default (the documentation's Benchmarks page).
 
     ``spp`` counts path evaluations per ping (bootstrap plus chains x mutations), so equal
     ``spp`` means about equal work for ``sonar_tof`` and ``sonar_mlt``.
@@ -119,7 +121,7 @@ class SonarMLTIntegrator(SonarIntegrator):
         self.bootstrap = count(props, "bootstrap", 0, "sonar_mlt")
         self.normalisation = text(props, "normalisation", "scan", "sonar_mlt")
         self.ping_step = number(props, "ping_step", 1.0, "sonar_mlt")
-        self.allocation = text(props, "allocation", "adaptive", "sonar_mlt")
+        self.allocation = text(props, "allocation", "uniform", "sonar_mlt")
         self.split = 0.0
         if "split" in props:
             if props.type("split").name == "String":

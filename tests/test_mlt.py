@@ -256,15 +256,15 @@ def test_split_gives_the_hidden_echoes_to_the_chains(mitsonar_mod):
 
 
 @pytest.mark.parametrize("name", ["pile_quay", "periscope"])
-def test_the_default_is_the_path_tracer_with_the_pilots_allocation(mitsonar_mod, name):
-    """With no parameters sonar_mlt renders sonar_tof's ``allocation="adaptive"`` scan, byte for
-    byte: its pilot moves the paths to the pings with noisy echoes on pile_quay (it predicts more
-    than 2x there), and keeps the even split on the periscope (its pings are alike); the plan says
-    so. ``allocation="uniform"`` is sonar_tof's default scan."""
+def test_adaptive_allocation_is_the_path_tracer_with_the_pilots_allocation(mitsonar_mod, name):
+    """``allocation="adaptive"``: sonar_mlt renders sonar_tof's ``allocation="adaptive"`` scan,
+    byte for byte: its pilot moves the paths to the pings with noisy echoes on pile_quay (it
+    predicts more than 2x there), and keeps the even split on the periscope (its pings are alike);
+    the plan says so. The default (``uniform``) is sonar_tof's default scan."""
     import mitsuba as mi
 
     scene = _scene(mitsonar_mod, name)
-    mlt = mi.load_dict({"type": "sonar_mlt", "max_depth": 5})
+    mlt = mi.load_dict({"type": "sonar_mlt", "max_depth": 5, "allocation": "adaptive"})
     got = mlt.render_histogram(scene, 0, seed=4, spp=1024)
     tof = mi.load_dict({"type": "sonar_tof", "max_depth": 5, "allocation": "adaptive"})
     assert got.tobytes() == tof.render_histogram(scene, 0, seed=4, spp=1024).tobytes()
@@ -272,7 +272,7 @@ def test_the_default_is_the_path_tracer_with_the_pilots_allocation(mitsonar_mod,
     assert plan["allocation"] == "adaptive" and plan["chains_spp"] == 0 and plan["allocation_pilot"] == 64
     moved = plan["paths_per_row_max"] > plan["paths_per_row_min"]
     assert moved == (name == "pile_quay") and (plan["predicted_gain"] >= 2.0) == moved
-    uniform = mi.load_dict({"type": "sonar_mlt", "max_depth": 5, "allocation": "uniform"})
+    uniform = mi.load_dict({"type": "sonar_mlt", "max_depth": 5})
     plain = mi.load_dict({"type": "sonar_tof", "max_depth": 5})
     assert uniform.render_histogram(scene, 0, seed=4, spp=1024).tobytes() == \
         plain.render_histogram(scene, 0, seed=4, spp=1024).tobytes()
