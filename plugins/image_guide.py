@@ -45,7 +45,7 @@ second moment. So at the first mirror of a chain, for each mirror-like sphere or
 scene (`curved_mirror.scene_mirrors`), the bounce may aim at its specular point towards the image
 after the vertex (Alhazen's problem, `curved_mirror.strip_lobe`), with a Gaussian lobe as wide as
 the echo across and along the mirror: a component of probability `STRIP_PROB` of the same
-one-sample mixture. On pile_quay 11.9 % of the paths now meet the strip, the variance per path is
+one-sample mixture. On pile_quay 12.5 % of the paths now meet the strip, the variance per path is
 6.1x lower for 1.9x the time per path (the paths that reach the pile go on), and the error at
 equal CPU time 1.3-2.5x lower (docs/benchmarks.rst). Scenes whose only mirror is the curved one
 (a tank, a bow: there is no other mirror to aim from) or without curved mirrors keep their kernel,
