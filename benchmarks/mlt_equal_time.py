@@ -23,7 +23,7 @@ own noise removed (``sqrt(e^2 - e_ref^2)``, ``e_ref`` from the halves' differenc
 
     python benchmarks/mlt_equal_time.py --scenes periscope,intake [--spp 4096] [--repeats 7]
         [--contender sonar_mlt] [--set split=auto] [--baseline sonar_tof] [--reference-spp 262144]
-        [--curved contender]
+        [--curved contender] [--strip contender]
 
 ``--set`` and ``--baseline-set`` pass parameters (``name=value``; numbers are read as floats,
 ``true``/``false`` as booleans) to the contender and the baseline. Prints one JSON object per
@@ -88,6 +88,8 @@ def timed(integ, scene, spp, seed):
     # the image guide through curved mirrors, per integrator (`image_guide.CURVED_GUIDE` is read
     # when a render sets up; its kernels are recorded apart from the planar guide's)
     image_guide.CURVED_GUIDE = bool(getattr(integ, "_bench_curved", False))
+    # the strip guide (`image_guide.STRIP_GUIDE`, on by default), likewise per integrator
+    image_guide.STRIP_GUIDE = bool(getattr(integ, "_bench_strip", True))
     t0 = time.process_time()
     h = integ.render_histogram(scene, seed=seed, spp=spp)
     return h, time.process_time() - t0
@@ -103,7 +105,8 @@ def bootstrap_spread(ea, ta, eb, tb, rng, n=2000):
     return [float(v) for v in np.percentile(r, [10, 90])]
 
 
-def measure(name, baseline, contender, spp, repeats, ref_spp, folder, seed=0, curved=(False, False)):
+def measure(name, baseline, contender, spp, repeats, ref_spp, folder, seed=0, curved=(False, False),
+            strip=(True, True)):
     import mitsuba as mi
 
     import mitsonar
@@ -114,6 +117,7 @@ def measure(name, baseline, contender, spp, repeats, ref_spp, folder, seed=0, cu
     A = mi.load_dict(baseline)
     B = mi.load_dict(contender)
     A._bench_curved, B._bench_curved = curved
+    A._bench_strip, B._bench_strip = strip
 
     def err(h):
         e = np.linalg.norm(h - ref) / norm
@@ -147,6 +151,7 @@ def measure(name, baseline, contender, spp, repeats, ref_spp, folder, seed=0, cu
                           "rel_l2_median": float(np.median(eb)), "rel_l2": [float(v) for v in eb],
                           "plan": getattr(B, "last_plan", None)},
             "time_mismatch": float(np.median(tb) / np.median(ta)), "curved_guide": list(curved),
+            "strip_guide": list(strip),
             "reference": {"spp": ref_spp, "self_rel_l2": self_err}}
 
 
@@ -160,6 +165,9 @@ def main(argv=None):
     ap.add_argument("--curved", default="", choices=("", "baseline", "contender", "both"),
                     help="which integrator renders with the image guide through curved mirrors "
                          "(plugins/image_guide.py CURVED_GUIDE, off by default)")
+    ap.add_argument("--strip", default="both", choices=("none", "baseline", "contender", "both"),
+                    help="which integrator renders with the strip guide to curved mirrors "
+                         "(plugins/image_guide.py STRIP_GUIDE, on by default: both)")
     ap.add_argument("--spp", type=int, default=4096, help="the baseline's spp (default 4096)")
     ap.add_argument("--repeats", type=int, default=7, help=f"renders each (at least {MIN_REPEATS}; default 7)")
     ap.add_argument("--reference-spp", type=int, default=1 << 18)
@@ -177,7 +185,9 @@ def main(argv=None):
     baseline = {"type": args.baseline, **parse_params(args.baseline_set, "--baseline-set")}
     contender = {"type": args.contender, **parse_params(args.set, "--set")}
     curved = (args.curved in ("baseline", "both"), args.curved in ("contender", "both"))
-    out = [measure(s, baseline, contender, args.spp, args.repeats, args.reference_spp, args.output, args.seed, curved)
+    strip = (args.strip in ("baseline", "both"), args.strip in ("contender", "both"))
+    out = [measure(s, baseline, contender, args.spp, args.repeats, args.reference_spp, args.output, args.seed, curved,
+                   strip)
            for s in scenes]
     json.dump(out, sys.stdout, indent=1)
     print()

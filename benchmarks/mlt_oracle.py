@@ -39,7 +39,7 @@ target over the scan), the spread of the per-ping totals (``ping_total_cv2``), t
 f and the share of paths with f = 0.
 
     python benchmarks/mlt_oracle.py [--scenes box,slot_chamber,glossy_corridor,hidden_target] [--paths 4096]
-                                    [--guide image|none] [--curved-guide]
+                                    [--guide image|none] [--curved-guide] [--no-strip-guide]
                                     [--baseline-spp 4096,32768 --baseline-repeats 8]
 
 The ratios are estimates from the paths traced: on hidden_target, where 2 paths in 1000 carry nearly
@@ -180,6 +180,9 @@ def main(argv=None):
     ap.add_argument("--curved-guide", action="store_true",
                     help="turn on the image guide through curved mirrors (plugins/image_guide.py CURVED_GUIDE) for "
                          "the path function and the baseline")
+    ap.add_argument("--no-strip-guide", action="store_true",
+                    help="turn off the strip guide to curved mirrors (plugins/image_guide.py STRIP_GUIDE, on by "
+                         "default) for the path function and the baseline: the bound as measured before it")
     ap.add_argument("--baseline-spp", default="",
                     help="also render the default sonar_tof at these spp (comma separated) and compare the ideal "
                          "sampler with its measured error (see the module's docstring)")
@@ -201,6 +204,11 @@ def main(argv=None):
         from mitsonar.plugins import image_guide
 
         image_guide.CURVED_GUIDE = True
+    if args.no_strip_guide:
+        import mitsonar  # noqa: F401  (registers the plugins)
+        from mitsonar.plugins import image_guide
+
+        image_guide.STRIP_GUIDE = False
     print(json.dumps([analyse(s, args.paths, guide=args.guide, baseline_spp=spps, baseline_repeats=args.baseline_repeats,
                               resample_draws=args.resample_draws) for s in args.scenes.split(",")], indent=1))
 

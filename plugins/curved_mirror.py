@@ -155,3 +155,118 @@ def aim(x, image, n_chain, centre, axis, radius, start=None):
     # the wider of the two directions sets the (isotropic) guide's width: a guide narrower than the
     # integrand leaves part of it to the BSDF's own sampling (heavy tails), a wider one only wastes
     return mi.Point3f(virtual), a_len, n_chain * dr.square(dr.minimum(k1, k2) / plane), ok
+
+
+# ---------------------------------------------------------------------------------------------
+# The way out to a curved mirror's specular strip (`image_guide.STRIP_GUIDE`).
+
+#: Widening of the strip lobe over the integrand's width (the mixture's other components cover
+#: what a narrower lobe misses, but a lobe narrower than the echo leaves it to them: heavy tails).
+STRIP_WIDEN = 1.0
+
+
+def scene_mirrors(scene, min_exponent, lobe_exponent):
+    """The convex curved mirrors of ``scene`` known in closed form: a tuple of
+    ``(centre, axis, radius, exponent)`` (Python floats; ``axis`` (0, 0, 0) for a sphere) for every
+    Mitsuba sphere and cylinder whose BSDF's lobe counts as a mirror (``exponent`` at least
+    ``min_exponent``, read by ``lobe_exponent(bsdf)``: `image_guide.lobe_exponent`) and whose ``to_world`` keeps it round (a
+    uniform scale across the axis). Mitsuba's unit sphere is centred at the origin, its unit
+    cylinder runs along z from 0 to 1 with radius 1 (``p0``/``p1``/``radius`` go to ``to_world``).
+
+    A curved mirror counts only where another shape is mirror-like too: the strip is aimed at from
+    a mirror-like vertex on another shape (from the mirror itself there is no strip to aim at), so
+    a scene whose only mirror is the curved one keeps its kernel and cost."""
+    import numpy as np
+
+    out = []
+    shapes = list(scene.shapes())
+    exps = [lobe_exponent(shape.bsdf()) for shape in shapes]
+    for i, shape in enumerate(shapes):
+        kind = shape.class_name()
+        if not any(e >= min_exponent for j, e in enumerate(exps) if j != i):
+            continue
+        if kind not in ("Sphere", "Cylinder"):
+            continue
+        n = exps[i]
+        if not n >= min_exponent or not np.isfinite(n):
+            continue
+        m = np.array(mi.traverse(shape)["to_world"].matrix, dtype=np.float64).reshape(4, 4)
+        centre, ex, ey, ez = m[:3, 3], m[:3, 0], m[:3, 1], m[:3, 2]
+        radius = float(np.linalg.norm(ex))
+        if not np.isclose(radius, np.linalg.norm(ey), rtol=1e-4) or radius <= 0:
+            continue        # an ellipse or ellipsoid: no closed-form specular point here
+        if kind == "Sphere":
+            if not np.isclose(radius, np.linalg.norm(ez), rtol=1e-4):
+                continue
+            axis = (0.0, 0.0, 0.0)
+        else:
+            axis = tuple(float(v) for v in ez / np.linalg.norm(ez))
+        out.append((tuple(float(v) for v in centre), axis, radius, float(n)))
+    return tuple(out)
+
+
+def strip_lobe(x, image, mirror):
+    """The guide from a mirror-like vertex ``x`` to the specular point of the convex ``mirror``
+    (`scene_mirrors`) between ``x`` and ``image`` (the transducer's image after ``x``): the
+    point ``S`` whose normal bisects the directions to ``x`` and to ``image`` (Alhazen's problem,
+    `specular_point`), ``(axis, e1, e2, sigma1, sigma2, ok)``: a Gaussian in the plane
+    tangent to the direction ``axis = (S - x) / a`` (`strip_pdf`). Its widths are the echo's: a
+    turn ``delta`` at ``x`` moves the point on the mirror by ``delta a / cos theta`` across the
+    curvature, which turns the ray reflected at it by ``delta k1`` with ``k1 = D / b + 2 a /
+    (R cos theta)`` (``b = |image - S|``, ``D = a + b``; along a cylinder's axis ``k2 = D / b``,
+    across a sphere's plane of incidence ``D / b + 2 a cos theta / R``, the module docstring); the
+    mirror's Phong lobe of exponent ``n`` keeps ``cos^n`` of the turn, a Gaussian of standard
+    deviation ``1 / sqrt(n)``, so ``sigma_i = STRIP_WIDEN / (k_i sqrt(n))``. ``ok`` where
+    Newton's method converged to a point that faces both ``x`` and ``image`` (`specular_point`)."""
+    (cx, cy, cz), (ax, ay, az), radius, n = mirror
+    centre, c_axis = mi.Point3f(cx, cy, cz), mi.Vector3f(ax, ay, az)
+    sphere = (ax, ay, az) == (0.0, 0.0, 0.0)
+    S, ok, cos_t = specular_point(x, image, centre, c_axis, mi.Float(radius))
+    to_s = S - x
+    a_len = dr.norm(to_s)
+    d = to_s / dr.maximum(a_len, 1e-12)
+    b_len = dr.norm(image - S)
+    d_len = a_len + b_len
+    plane = d_len / dr.maximum(b_len, 1e-3 * d_len)
+    cos_t = dr.maximum(cos_t, 1e-2)
+    k1 = plane + 2.0 * a_len / (radius * cos_t)
+    k2 = plane + (2.0 * a_len * cos_t / radius if sphere else 0.0)
+    # e1: across the curvature (a cylinder: perpendicular to its axis; a sphere: in the plane of
+    # incidence, that of x, S and the centre), e2 = d x e1
+    if sphere:
+        side = dr.cross(S - centre, d)
+    else:
+        side = dr.cross(d, c_axis)
+    fallback = mi.Frame3f(d).s
+    side_n = dr.norm(side)
+    across = dr.select(side_n > 1e-6, side / dr.maximum(side_n, 1e-12), fallback)
+    e1 = dr.normalize(dr.cross(across, d)) if sphere else across
+    e1 = dr.select(side_n > 1e-6, e1, fallback)
+    e2 = dr.cross(d, e1)
+    root_n = dr.sqrt(mi.Float(n))
+    # x on (or inside) the mirror itself: no strip to aim at
+    rel = x - centre
+    off_axis = dr.norm(rel if sphere else rel - dr.dot(rel, c_axis) * c_axis)
+    ok &= (off_axis > radius * (1.0 + 1e-3)) & (a_len > 1e-3 * radius) & dr.isfinite(a_len)
+    return d, e1, e2, STRIP_WIDEN / (k1 * root_n), STRIP_WIDEN / (k2 * root_n), ok
+
+
+def strip_sample(lobe, u):
+    """A direction from the strip lobe (`strip_lobe`) for the uniform point ``u`` (Box-Muller in
+    the tangent plane of the axis: ``w = normalize(axis + s1 g1 e1 + s2 g2 e2)``)."""
+    d, e1, e2, s1, s2, _ = lobe
+    r = dr.sqrt(-2.0 * dr.log(dr.maximum(1.0 - u.x, 1e-30)))
+    sn, cs = dr.sincos(2.0 * dr.pi * u.y)
+    return dr.normalize(d + (s1 * r * cs) * e1 + (s2 * r * sn) * e2)
+
+
+def strip_pdf(lobe, w):
+    """Solid-angle density of `strip_sample` at the unit direction ``w``: the plane's Gaussian
+    times the Jacobian of the gnomonic map, ``p(w) = N(u / s1) N(v / s2) / (s1 s2 t^3)`` with
+    ``t = w . axis``, ``u = w . e1 / t``, ``v = w . e2 / t`` (``du dv = dw / t^3``)."""
+    d, e1, e2, s1, s2, _ = lobe
+    t = dr.dot(w, d)
+    ts = dr.maximum(t, 1e-6)
+    u, v = dr.dot(w, e1) / ts / s1, dr.dot(w, e2) / ts / s2
+    g = dr.exp(-0.5 * (u * u + v * v)) * (0.5 * dr.inv_pi) / (s1 * s2 * ts * ts * ts)
+    return dr.select(t > 1e-6, g, 0.0)

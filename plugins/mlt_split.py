@@ -80,7 +80,7 @@ def share(easy, hard, easy2, hard2, n):
     return min(MAX_SHARE, math.sqrt(v_hard) / (math.sqrt(v_hard) + math.sqrt(v_easy)))
 
 
-def path_traced(integrator, setup, seed, start, count, pose=None, progress=None):
+def path_traced(integrator, setup, seed, start, count, pose=None, progress=None, allocation="uniform"):
     """Samples ``start .. start + count`` of every row with ``sonar_tof``'s own estimator (the same
     guide and depth): float64 ``(n_rows, n_bins)``, the mean over the ``count`` paths per row.
 
@@ -88,7 +88,14 @@ def path_traced(integrator, setup, seed, start, count, pose=None, progress=None)
     head can share): with every echo path traced, ``sonar_mlt`` is ``sonar_tof``. (`traced`'s
     per-row paths are unbiased as well, but on a multibeam head they find a small target in the
     tails of the neighbouring receive beams only through rare emitted directions: on
-    ``fls_array`` a t test of 8 renders saw them 14 % low.)"""
+    ``fls_array`` a t test of 8 renders saw them 14 % low.)
+
+    ``allocation="adaptive"`` (a whole render, ``start`` 0, on a head that does not share beams:
+    per-row paths miss a multibeam's beam tails, above): the pilot of ``sonar_tof``'s adaptive
+    allocation (`row_allocation.choose`, its cost counted) chooses; where it predicts 2x or more,
+    each row gets its own paths (`row_allocation.row_sums`), else the paths it left are rendered
+    as without it. The same scan as ``sonar_tof``'s ``allocation="adaptive"``. Its plan in
+    ``integrator.last_plan``."""
     tof = getattr(integrator, "_path_tracer", None)
     if tof is None:
         tof = integrator._path_tracer = mi.load_dict(
@@ -96,7 +103,25 @@ def path_traced(integrator, setup, seed, start, count, pose=None, progress=None)
     from .shared_beams import SharedFrame, can_share, same_pose
 
     n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
-    if can_share(setup.sensor) and same_pose(setup.sensor, pose):
+    sharing = can_share(setup.sensor) and same_pose(setup.sensor, pose)
+    if allocation == "adaptive" and start == 0 and not sharing:
+        from . import row_allocation
+
+        pilot, counts, gain = row_allocation.choose(tof, setup, seed, count, MAX_LANES_PER_PASS)
+        integrator.last_plan = {"allocation": "adaptive", "pilot": pilot, "predicted_gain": gain}
+        if counts is not None:
+            integrator.last_plan.update(paths_per_row_min=int(counts.min()), paths_per_row_max=int(counts.max()))
+            if progress is not None:
+                progress(pilot, count)
+            return row_allocation.row_sums(tof, setup, seed, counts, MAX_LANES_PER_PASS) / counts[:, None]
+        # the even split: sonar_tof's own render of what the pilot left (its paths, of a seed of
+        # their own, only chose)
+        count -= pilot
+        integrator.last_plan.update(paths_per_row_min=count, paths_per_row_max=count)
+        if progress is not None:
+            inner = progress
+            progress = (lambda done, total: inner(pilot + done, pilot + total))
+    if sharing:
         shared = SharedFrame(setup, pose)
 
         def one_pass(first, n):
@@ -137,9 +162,15 @@ def render_split(integrator, setup, seed, spp, progress=None, pose=None):
         n_chain = 0
     n_traced = spp - pilot - n_chain
     if n_chain == 0:
-        integrator.last_plan = {"split": chosen, "pilot": pilot, "traced": n_traced, "chains_spp": 0}
-        return path_traced(integrator, setup, seed, pilot, n_traced, pose,
-                           None if progress is None else (lambda done, total: progress(pilot + done, spp)))
+        plan = {"split": chosen, "pilot": pilot, "traced": n_traced, "chains_spp": 0}
+        integrator.last_plan = {}
+        out = path_traced(integrator, setup, seed, pilot, n_traced, pose,
+                          None if progress is None else (lambda done, total: progress(pilot + done, spp)),
+                          allocation=getattr(integrator, "allocation", "uniform"))
+        # the adaptive allocation's plan (its own pilot as allocation_pilot)
+        extra = {("allocation_pilot" if k == "pilot" else k): v for k, v in integrator.last_plan.items()}
+        integrator.last_plan = {**plan, **extra}
+        return out
     if n_traced < 1:   # explicit chains that take the whole budget: chains over every echo
         return integrator.metropolis(setup, seed, spp, progress=progress)
     # sonar_tof's pass loop over the paths after the pilot's; each pass gives [easy | hard] sums

@@ -105,16 +105,9 @@ def render(integrator, setup, seed, spp, lanes, progress=None):
     spp = int(spp)
     if spp < 1:
         raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
-    pilot, gain = 0, 1.0
-    if spp < MIN_SPP or n_rows < 2:
-        counts = np.full(n_rows, spp, dtype=np.int64)
-    else:
-        pilot = max(MIN_PILOT, int(spp * PILOT_FRACTION))
-        v = row_variance(integrator, setup, seed, pilot, lanes)
-        counts = allocate(v, (spp - pilot) * n_rows)
-        gain = predicted_gain(v, counts)
-        if gain < MIN_GAIN:
-            counts = allocate(np.zeros(n_rows), (spp - pilot) * n_rows)
+    pilot, counts, gain = choose(integrator, setup, seed, spp, lanes)
+    if counts is None:
+        counts = np.full(n_rows, spp - pilot, dtype=np.int64)
     if progress is not None:
         progress(pilot, spp)
     if (counts == counts[0]).all():
@@ -132,6 +125,28 @@ def render(integrator, setup, seed, spp, lanes, progress=None):
     if progress is not None:
         progress(spp, spp)
     return mean.reshape(n_rows, n_bins)
+
+
+def choose(integrator, setup, seed, spp, lanes):
+    """Steps 1 and 2 of the module docstring for a budget of ``spp`` paths per row: ``(pilot
+    paths per row, paths per row or None, predicted gain)``; None (the even split of the ``spp -
+    pilot`` paths left) where the pilot predicts under `MIN_GAIN`, or where ``spp`` is under
+    `MIN_SPP` or there is one row (then no pilot runs)."""
+    n_rows = setup.sensor.n_pings
+    if spp < MIN_SPP or n_rows < 2:
+        return 0, None, 1.0
+    pilot = max(MIN_PILOT, int(spp * PILOT_FRACTION))
+    v = row_variance(integrator, setup, seed, pilot, lanes)
+    counts = allocate(v, (spp - pilot) * n_rows)
+    gain = predicted_gain(v, counts)
+    return pilot, (counts if gain >= MIN_GAIN else None), gain
+
+
+def row_sums(integrator, setup, seed, counts, lanes):
+    """Paths ``0 .. counts[r]`` of every row ``r`` (the integrator's ``sampling``, seed ``seed``):
+    the summed energy per bin, float64 ``(n_rows, n_bins)`` (step 3)."""
+    (total,) = _sums(integrator, setup, seed, counts, lanes)
+    return total.reshape(setup.sensor.n_pings, setup.sensor.n_bins)
 
 
 def _sums(integrator, setup, seed, counts, lanes, squares=False):

@@ -85,11 +85,25 @@ class SonarMLTIntegrator(SonarIntegrator):
                               docs/benchmarks.rst); ``auto``: the share from a pilot's
                               variances; a number in [0, 0.9]; ``off`` (or ``guide="none"``):
                               chains over every echo, Kelemen's PSSMLT as before the guide
+    allocation       uniform  paths per ping of the path-traced render (``split`` 0):
+                              ``uniform``: ``sonar_tof``'s default, spp paths per ping;
+                              ``adaptive``: ``sonar_tof``'s ``allocation="adaptive"``
+                              (`row_allocation`: a pilot of spp/16 paths per ping, its cost
+                              counted, moves the paths to the pings whose echoes are noisy,
+                              and keeps them even where it predicts under 2x)
     ================ ======== =================================================================
 
     The defaults are the best settings measured on ``scenes_xml/`` (see the documentation's
     Benchmarks page and ``benchmarks/mlt.py``): one target over the scan, few long chains (about 2^13 in
-    all) and mostly small steps.
+    all) and mostly small steps. With no parameters ``sonar_mlt`` is ``sonar_tof``'s scan: the
+    chains lost to the guided path tracer on every scene measured, ``pile_quay`` included
+    (0.28-0.69x at equal time), whose room the oracle bounds at 6.1-6.6x
+    (``benchmarks/mlt_oracle.py``). ``allocation="adaptive"`` wins where there is room (at equal
+    CPU time, spp 16384: 1.77-2.05x less error than ``sonar_tof`` on ``pile_quay``, 2.05x on
+    ``intake``, 1.16x on ``box``) but loses 0.6-0.94x where its pilot keeps the even split
+    (``periscope``, ``hidden_target``, ``slot_chamber``, the tank and the bow: the pilot's time,
+    and a Sobol render of ``spp - pilot`` paths, short of the power of two), so it is not the
+    default (the documentation's Benchmarks page).
 
     ``spp`` counts path evaluations per ping (bootstrap plus chains x mutations), so equal
     ``spp`` means about equal work for ``sonar_tof`` and ``sonar_mlt``.
@@ -107,6 +121,7 @@ class SonarMLTIntegrator(SonarIntegrator):
         self.bootstrap = count(props, "bootstrap", 0, "sonar_mlt")
         self.normalisation = text(props, "normalisation", "scan", "sonar_mlt")
         self.ping_step = number(props, "ping_step", 1.0, "sonar_mlt")
+        self.allocation = text(props, "allocation", "uniform", "sonar_mlt")
         self.split = 0.0
         if "split" in props:
             if props.type("split").name == "String":
@@ -123,6 +138,8 @@ class SonarMLTIntegrator(SonarIntegrator):
         need(self.bootstrap >= 0, "bootstrap", self.bootstrap, "0 for automatic, or a positive number of paths per ping")
         need(self.normalisation in ("scan", "ping"), "normalisation", self.normalisation,
              "'scan' (one target over all pings) or 'ping'")
+        need(self.allocation in ("adaptive", "uniform"), "allocation", self.allocation,
+             "'adaptive' or 'uniform' (paths per ping of the path-traced render, as sonar_tof's)")
         need(0.0 <= self.ping_step <= 1.0, "ping_step", self.ping_step,
              "a fraction in [0, 1] of the small step applied to the ping")
         need(0.0 <= self.large_step <= 1.0, "large_step", self.large_step, "a probability in [0, 1]")
@@ -293,7 +310,8 @@ class SonarMLTIntegrator(SonarIntegrator):
 
     def to_string(self):
         return (f"SonarMLTIntegrator[max_depth={self.max_depth}, chains={self.chains or 'auto'}, "
-                f"large_step={self.large_step}, guide={self.guide}, split={self.split}]")
+                f"large_step={self.large_step}, guide={self.guide}, split={self.split}, "
+                f"allocation={self.allocation}]")
 
 
 def _resample(f, k, rng):

@@ -80,7 +80,11 @@ class SonarTOFIntegrator(SonarIntegrator):
                                  echoes seen only through such plates get 5-20x less noise at equal
                                  time (hidden_target, periscope); scenes without mirror-like BSDFs
                                  trace the unguided kernel (no cost), others pay up to 31 % more time per
-                                 path. ``none``: BSDF sampling only. Gradient renders are unguided
+                                 path. At the first mirror of a chain half of the bounces aim at the
+                                 specular strip of a mirror-like sphere or cylinder, where the scene
+                                 has one besides other mirrors (`curved_mirror.strip_lobe`): the pile
+                                 seen in a quay wall, 1.3-2.5x less error at equal time (pile_quay).
+                                 ``none``: BSDF sampling only. Gradient renders are unguided
     sound_speed_profile (none)   a CSV file (``depth,sound_speed``; a path relative to the scene
                                  file): the water the paths refract through (`refraction`): arcs out,
                                  an eigenray back, range = sensor ``sound_speed`` x two-way travel

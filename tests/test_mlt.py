@@ -121,7 +121,9 @@ def test_mutations_do_not_recompile(mitsonar_mod):
     import mitsuba as mi
 
     scene = mitsonar_mod.load_scene(os.path.join(SCENES, "box.xml"))
-    mlt = mi.load_dict({"type": "sonar_mlt"})
+    # the path tracer's even split (the default before allocation="adaptive": whose per-row passes
+    # are sized by the pilot's counts)
+    mlt = mi.load_dict({"type": "sonar_mlt", "allocation": "uniform"})
     mlt.render_histogram(scene, seed=0, spp=512)
     first, _ = jit_kernels(mlt.render_histogram, scene, seed=0, spp=512)
     # New seed, pose and spp: other bootstrap, chain and mutation counts, same kernels. (The
@@ -220,7 +222,7 @@ def test_split_path_traces_a_scene_without_mirrors(mitsonar_mod):
     # a fixed share too: without mirrors no echo is hard, so no chain may run (it would count the
     # echoes path tracing already counts)
     for split in ("auto", 0.5):
-        mlt = mi.load_dict({"type": "sonar_mlt", "max_depth": 3, "split": split})
+        mlt = mi.load_dict({"type": "sonar_mlt", "max_depth": 3, "split": split, "allocation": "uniform"})
         a = mlt.render_histogram(scene, 0, seed=3, spp=512)
         assert mlt.last_plan["chains_spp"] == 0 and mlt.last_plan["split"] == 0.0
         assert np.allclose(a, b, rtol=1e-9, atol=1e-300)
@@ -248,8 +250,40 @@ def test_split_gives_the_hidden_echoes_to_the_chains(mitsonar_mod):
     assert fixed.last_plan["chains_spp"] == 1024 and fixed.last_plan["pilot"] == 0
     (m1, s1), (m2, s2) = ((np.mean(v), np.std(v, ddof=1) / math.sqrt(len(v))) for v in sums.values())
     assert m1 > 0 and abs(m1 - m2) < 4 * math.hypot(s1, s2), (m1, s1, m2, s2)
-    default = mi.load_dict({"type": "sonar_mlt", "max_depth": 5}).render_histogram(scene, 0, seed=4, spp=256)
-    assert np.allclose(default, tof.render_histogram(scene, 0, seed=4, spp=256), rtol=1e-9, atol=1e-300)
+    uniform = mi.load_dict({"type": "sonar_mlt", "max_depth": 5, "allocation": "uniform"})
+    assert np.allclose(uniform.render_histogram(scene, 0, seed=4, spp=256), tof.render_histogram(scene, 0, seed=4, spp=256),
+                       rtol=1e-9, atol=1e-300)
+
+
+@pytest.mark.parametrize("name", ["pile_quay", "periscope"])
+def test_adaptive_allocation_is_the_path_tracer_with_the_pilots_allocation(mitsonar_mod, name):
+    """``allocation="adaptive"``: sonar_mlt renders sonar_tof's ``allocation="adaptive"`` scan,
+    byte for byte: its pilot moves the paths to the pings with noisy echoes on pile_quay (it
+    predicts more than 2x there), and keeps the even split on the periscope (its pings are alike);
+    the plan says so. The default (``uniform``) is sonar_tof's default scan."""
+    import mitsuba as mi
+
+    scene = _scene(mitsonar_mod, name)
+    mlt = mi.load_dict({"type": "sonar_mlt", "max_depth": 5, "allocation": "adaptive"})
+    got = mlt.render_histogram(scene, 0, seed=4, spp=1024)
+    tof = mi.load_dict({"type": "sonar_tof", "max_depth": 5, "allocation": "adaptive"})
+    assert got.tobytes() == tof.render_histogram(scene, 0, seed=4, spp=1024).tobytes()
+    plan = mlt.last_plan
+    assert plan["allocation"] == "adaptive" and plan["chains_spp"] == 0 and plan["allocation_pilot"] == 64
+    moved = plan["paths_per_row_max"] > plan["paths_per_row_min"]
+    assert moved == (name == "pile_quay") and (plan["predicted_gain"] >= 2.0) == moved
+    uniform = mi.load_dict({"type": "sonar_mlt", "max_depth": 5})
+    plain = mi.load_dict({"type": "sonar_tof", "max_depth": 5})
+    assert uniform.render_histogram(scene, 0, seed=4, spp=1024).tobytes() == \
+        plain.render_histogram(scene, 0, seed=4, spp=1024).tobytes()
+
+
+def test_bad_allocation_is_refused(mitsonar_mod):
+    from conftest import scene_xml, sonar_xml
+
+    with pytest.raises(mitsonar_mod.SceneError, match=r"sonar_mlt 'allocation'.*'adaptive' or 'uniform'"):
+        mitsonar_mod.load_scene(scene_xml(sonar_xml(n_pings=1, n_bins=4), integrator='<integrator type="sonar_mlt">'
+                                          '<string name="allocation" value="even"/></integrator>'))
 
 
 @pytest.mark.parametrize("value, kind", [("0.95", "float"), ("maybe", "string")])
