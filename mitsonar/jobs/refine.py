@@ -221,18 +221,18 @@ def render_loss(scene, params, head, key, transforms, targets, vertices, *, blur
     `mitsonar.jobs.refine_room` and `mitsonar.jobs.refine_piles`.
 
     With ``floor_db`` (dB, negative) the loss compares levels instead: the mean over pings of
-    ``mean_bins (10 log10(B s_k + e) - 10 log10(B t_k + e))^2`` (dB^2), ``e`` the floor
-    ``floor_db`` below the peak of all the pings' compared targets (``max_k max B t_k``, or of
-    their beam averages with ``across_beams``; a silent ping has the same floor as the others). The relative loss is ruled by the
-    brightest echoes (a pile's face holds most of a harbour frame's energy); in dB a faint echo,
-    a mud seabed's at grazing incidence, counts as much as a bright one, and bins where one side
-    is silent count by how far the other rises above the floor. ``across_beams``: each ping's
-    intensities are first averaged over its rows (beams), the ping's mean level against range:
-    the seabed's echo, in every beam, then sets the level, one beam's pile hardly does, and the
-    average of 100 beams has a tenth of one beam's Monte Carlo noise, which the logarithm
-    would otherwise turn into a bias (the mean of the log of a noisy estimate is below the log
-    of its mean; a median over the beams, blind to the piles, was biased the same way: 0.4 m
-    too high a seabed on the harbour survey, 0.25 m on the tests' pile)."""
+    ``mean_bins (10 log10(B s_k + e) - 10 log10(B t_k + e))^2`` (dB^2), ``e`` the floor ``floor_db``
+    below the peak of all the pings' compared targets (``max_k max B t_k``, or of their beam
+    averages with ``across_beams``; a silent ping has the same floor as the others). The relative
+    loss is ruled by the brightest echoes (a pile's face holds most of a harbour frame's energy); in
+    dB a faint echo, a mud seabed's at grazing incidence, counts as much as a bright one, and bins
+    where one side is silent count by how far the other rises above the floor. ``across_beams``:
+    each ping's intensities are first averaged over its rows (beams), the ping's mean level against
+    range: the seabed's echo, in every beam, then sets the level, one beam's pile hardly does, and
+    the average of 100 beams has a tenth of one beam's Monte Carlo noise, which the logarithm would
+    otherwise turn into a bias (the mean of the log of a noisy estimate is below the log of its
+    mean; a median over the beams, blind to the piles, was biased the same way: 0.4 m too high a
+    seabed on the harbour survey, 0.25 m on the tests' pile)."""
     import drjit as dr
     import mitsuba as mi
 

@@ -188,12 +188,13 @@ def seabed_search(scene, piles, poses, targets, candidates, *, top, bounds, blur
     (a weak echo, like mud's).
 
     The loss (`mitsonar.jobs.refine.render_loss`, no gradients) compares each frame's mean level
-    against range, averaged over its beams, in dB above a floor ``floor_db`` below the peak of
-    the recorded averages (`render_loss`'s ``across_beams`` and ``floor_db``): the seabed echoes in
-    every beam, the piles in a few, so the seabed's onset range and level rule it. With ``floor_db=None`` the relative loss of
-    `refine_piles` over every bin instead, ruled by the piles' bright faces: on the harbour survey
-    it moved with the render's seed by more than the seabed's own part of it and chose -4.5 m for
-    a seabed at -6 m with one seed in two (``benchmarks/harbour_feedback.py``)."""
+    against range, averaged over its beams, in dB above a floor ``floor_db`` below the peak of the
+    recorded averages (`render_loss`'s ``across_beams`` and ``floor_db``): the seabed echoes in
+    every beam, the piles in a few, so the seabed's onset range and level rule it. With
+    ``floor_db=None`` the relative loss of `refine_piles` over every bin instead, ruled by the
+    piles' bright faces: on the harbour survey it moved with the render's seed by more than the
+    seabed's own part of it and chose -4.5 m for a seabed at -6 m with one seed in two
+    (``benchmarks/harbour_feedback.py``)."""
     from mitsonar.jobs.refine import jit_poses_targets, render_loss
     from mitsonar.sim.render import scan_parameters
 
@@ -420,9 +421,9 @@ def piles_feedback(scans, first_map, *, seabed=None, piles=None, seed=0, spp=32,
     dict
         ``map``, ``piles_start``, ``seabed_start`` (where the piles were refined), ``piles``,
         ``seabed`` (searched: the second search's), ``refine`` (`refine_piles`'s result; its
-        ``loss_start`` that of the whole fit, its ``seabed`` the final one), ``explained`` (the share of the scans'
-        occupied groups the model explained), ``evidence_share`` (of the model's hits, those the
-        recording corroborates).
+        ``loss_start`` that of the whole fit, its ``seabed`` the final one), ``explained`` (the
+        share of the scans' occupied groups the model explained), ``evidence_share`` (of the model's
+        hits, those the recording corroborates).
     """
     import os
     import tempfile
