@@ -23,7 +23,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import erfc
 
 from mitsonar.acoustics._checks import as_array, at_least, grazing_angle, in_range
 from mitsonar.acoustics.interface import DB_PER_WAVELENGTH_PER_DELTA
@@ -237,6 +236,8 @@ _sediment_by_name = sediment   # apl_uw_backscatter's parameter is called ``sedi
 
 def _shadowing(theta, s):
     """Eqs. 43-45: Wagner's shadowing for rms slope ``s``; 1 where ``tan(theta)/s > 2``."""
+    from scipy.special import erfc  # here: scipy.special is a quarter second of every CLI start
+
     t = np.tan(theta) / s
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         q = (np.exp(-t * t) / np.sqrt(np.pi) - t * erfc(t)) / (4.0 * t)
