@@ -92,10 +92,8 @@ def path_traced(integrator, setup, seed, start, count, pose=None, progress=None,
 
     ``allocation="adaptive"`` (a whole render, ``start`` 0, on a head that does not share beams:
     per-row paths miss a multibeam's beam tails, above): the pilot of ``sonar_tof``'s adaptive
-    allocation (`row_allocation.choose`, its cost counted) chooses; where it predicts 2x or more,
-    each row gets its own paths (`row_allocation.row_sums`), else the paths it left are rendered
-    as without it. The same scan as ``sonar_tof``'s ``allocation="adaptive"``. Its plan in
-    ``integrator.last_plan``."""
+    allocation chooses (its cost counted): `row_allocation.render`, ``sonar_tof``'s own
+    ``allocation="adaptive"`` render, its plan copied to ``integrator.last_plan``."""
     tof = getattr(integrator, "_path_tracer", None)
     if tof is None:
         tof = integrator._path_tracer = mi.load_dict(
@@ -107,20 +105,9 @@ def path_traced(integrator, setup, seed, start, count, pose=None, progress=None,
     if allocation == "adaptive" and start == 0 and not sharing:
         from . import row_allocation
 
-        pilot, counts, gain = row_allocation.choose(tof, setup, seed, count, MAX_LANES_PER_PASS)
-        integrator.last_plan = {"allocation": "adaptive", "pilot": pilot, "predicted_gain": gain}
-        if counts is not None:
-            integrator.last_plan.update(paths_per_row_min=int(counts.min()), paths_per_row_max=int(counts.max()))
-            if progress is not None:
-                progress(pilot, count)
-            return row_allocation.row_sums(tof, setup, seed, counts, MAX_LANES_PER_PASS) / counts[:, None]
-        # the even split: sonar_tof's own render of what the pilot left (its paths, of a seed of
-        # their own, only chose)
-        count -= pilot
-        integrator.last_plan.update(paths_per_row_min=count, paths_per_row_max=count)
-        if progress is not None:
-            inner = progress
-            progress = (lambda done, total: inner(pilot + done, pilot + total))
+        out = row_allocation.render(tof, setup, seed, count, MAX_LANES_PER_PASS, progress)
+        integrator.last_plan = dict(tof.last_plan)
+        return out
     if sharing:
         shared = SharedFrame(setup, pose)
 

@@ -142,13 +142,6 @@ def choose(integrator, setup, seed, spp, lanes):
     return pilot, (counts if gain >= MIN_GAIN else None), gain
 
 
-def row_sums(integrator, setup, seed, counts, lanes):
-    """Paths ``0 .. counts[r]`` of every row ``r`` (the integrator's ``sampling``, seed ``seed``):
-    the summed energy per bin, float64 ``(n_rows, n_bins)`` (step 3)."""
-    (total,) = _sums(integrator, setup, seed, counts, lanes)
-    return total.reshape(setup.sensor.n_pings, setup.sensor.n_bins)
-
-
 def _sums(integrator, setup, seed, counts, lanes, squares=False):
     """Paths ``0 .. counts[r]`` of every row ``r`` (the integrator's ``sampling``, seed ``seed``),
     in passes of at most ``lanes`` lanes: the summed energy per bin (and with ``squares`` the
