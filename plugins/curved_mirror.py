@@ -134,6 +134,24 @@ def specular_point(x, image, centre, axis, radius, start=None):
     return mi.Point3f(S), ok, cos_x
 
 
+def turn_rates(x, S, image, cos_t, radius, sphere):
+    """How fast the echo's ray turns when the ray from ``x`` turns (the module docstring), for the
+    specular point ``S`` on a mirror of ``radius`` between ``x`` and ``image``, ``cos_t`` its
+    angle of incidence: ``(S - x, a, D, D / b, k1, k2)`` with ``a = |S - x|``, ``b = |image - S|``,
+    ``D = a + b``; ``k1 = D / b + 2 a / (R cos theta)`` across the curvature, ``k2`` along it
+    (``D / b`` along a cylinder's axis, ``D / b + 2 a cos theta / R`` across a sphere's plane of
+    incidence; ``sphere`` a mask or a Python bool). Shared by `aim` and `strip_lobe`."""
+    to_s = S - x
+    a_len = dr.norm(to_s)
+    b_len = dr.norm(image - S)
+    d_len = a_len + b_len
+    plane = d_len / dr.maximum(b_len, 1e-3 * d_len)
+    cos_t = dr.maximum(cos_t, 1e-2)
+    k1 = plane + 2.0 * a_len / (radius * cos_t)
+    k2 = plane + dr.select(sphere, 2.0 * a_len * cos_t / radius, 0.0)
+    return to_s, a_len, d_len, plane, k1, k2
+
+
 def aim(x, image, n_chain, centre, axis, radius, start=None):
     """The guide's target after a curved mirror, in the terms of `image_guide.sample_bounce`:
     ``(virtual image, segment, n_chain, ok)``. The virtual image lies on the ray from ``x``
@@ -141,16 +159,8 @@ def aim(x, image, n_chain, centre, axis, radius, start=None):
     segment is ``|x - S|``, so that `sample_bounce`'s plane rule gives ``(D / b)^2``; ``n_chain``
     carries the curvature's extra narrowing (the module docstring)."""
     S, ok, cos_t = specular_point(x, image, centre, axis, radius, start)
-    to_s = S - x
-    a_len = dr.norm(to_s)
-    b_len = dr.norm(image - S)
-    d_len = a_len + b_len
-    plane = d_len / dr.maximum(b_len, 1e-3 * d_len)
-    cos_t = dr.maximum(cos_t, 1e-2)
-    r = dr.maximum(radius, 1e-6)
-    k1 = plane + 2.0 * a_len / (r * cos_t)
-    sphere = dr.squared_norm(axis) < 0.5
-    k2 = plane + dr.select(sphere, 2.0 * a_len * cos_t / r, 0.0)
+    to_s, a_len, d_len, plane, k1, k2 = turn_rates(x, S, image, cos_t, dr.maximum(radius, 1e-6),
+                                                   dr.squared_norm(axis) < 0.5)
     virtual = x + to_s / dr.maximum(a_len, 1e-12) * d_len
     # the wider of the two directions sets the (isotropic) guide's width: a guide narrower than the
     # integrand leaves part of it to the BSDF's own sampling (heavy tails), a wider one only wastes
@@ -222,15 +232,8 @@ def strip_lobe(x, image, mirror):
     centre, c_axis = mi.Point3f(cx, cy, cz), mi.Vector3f(ax, ay, az)
     sphere = (ax, ay, az) == (0.0, 0.0, 0.0)
     S, ok, cos_t = specular_point(x, image, centre, c_axis, mi.Float(radius))
-    to_s = S - x
-    a_len = dr.norm(to_s)
+    to_s, a_len, _, _, k1, k2 = turn_rates(x, S, image, cos_t, radius, sphere)
     d = to_s / dr.maximum(a_len, 1e-12)
-    b_len = dr.norm(image - S)
-    d_len = a_len + b_len
-    plane = d_len / dr.maximum(b_len, 1e-3 * d_len)
-    cos_t = dr.maximum(cos_t, 1e-2)
-    k1 = plane + 2.0 * a_len / (radius * cos_t)
-    k2 = plane + (2.0 * a_len * cos_t / radius if sphere else 0.0)
     # e1: across the curvature (a cylinder: perpendicular to its axis; a sphere: in the plane of
     # incidence, that of x, S and the centre), e2 = d x e1
     if sphere:
