@@ -464,6 +464,12 @@ def piles_feedback(scans, first_map, *, seabed=None, piles=None, seed=0, spp=32,
     use = list(range(0, len(scans), int(frame_stride)))
     poses, targets = [frames[k] for k in use], [np.asarray(scans[k].intensity) for k in use]
     start = piles0
+
+    def fine_search(P, around):  # every 5 cm within 0.25 m of ``around``, less blurred
+        fine = around + np.arange(-0.25, 0.2501, 0.05)
+        return fine, seabed_search(scene, P, poses, targets, fine, top=top, bounds=bounds, blur=1.5, seed=seed,
+                                   sides=sides)[1]
+
     if seabed is None:
         # the piles first, standing on a seabed as deep as the head reaches (their echoes all
         # kept), then the seabed searched by rendering every 0.25 m with the piles in place (with
@@ -475,9 +481,8 @@ def piles_feedback(scans, first_map, *, seabed=None, piles=None, seed=0, spp=32,
                              refine_radius=refine_radius)
         start = first["piles"]
         z0, _ = seabed_search(scene, start, poses, targets, cand, top=top, bounds=bounds, seed=seed, sides=sides)
-        fine = z0 + np.arange(-0.25, 0.2501, 0.05)  # then every 5 cm around the best, less blurred
-        seabed0, _ = seabed_search(scene, start, poses, targets, fine, top=top, bounds=bounds, blur=1.5, seed=seed,
-                                   sides=sides)
+        fine, losses = fine_search(start, z0)  # then every 5 cm around the best
+        seabed0 = float(fine[int(np.argmin(losses))])
     else:
         first, seabed0 = None, float(seabed)
     res = refine_piles(scene, start, seabed0, poses, targets, top=top, bounds=bounds, stages=stages,
@@ -487,10 +492,7 @@ def piles_feedback(scans, first_map, *, seabed=None, piles=None, seed=0, spp=32,
         # the seabed searched again beside the refined piles (the first stage's piles, a few cm
         # fat, left it 3-5 cm deep on the harbour survey), at the vertex of the parabola fitted to
         # the losses every 5 cm around it: between candidates, and steadier than one of them
-        fine = seabed0 + np.arange(-0.25, 0.2501, 0.05)
-        _, losses = seabed_search(scene, res["piles"], poses, targets, fine, top=top, bounds=bounds, blur=1.5,
-                                  seed=seed, sides=sides)
-        res["seabed"] = _parabola_vertex(fine, losses)
+        res["seabed"] = _parabola_vertex(*fine_search(res["piles"], seabed0))
     # the refined model, for the rays
     from mitsonar.sim.render import scan_parameters
 
