@@ -129,17 +129,18 @@ class Guide:
     `guide_kind`'s ``"curved"``, ``mirrors`` from `curved_mirror.scene_mirrors` (Python numbers:
     part of a frozen pass's key, `frozen_pass`)."""
 
-    def __init__(self, curved, mirrors):
-        self.curved, self.mirrors = bool(curved), tuple(mirrors)
+    def __init__(self, curved, mirrors, planes=()):
+        self.curved, self.mirrors, self.planes = bool(curved), tuple(mirrors), tuple(planes)
 
     def __eq__(self, other):
-        return isinstance(other, Guide) and (self.curved, self.mirrors) == (other.curved, other.mirrors)
+        return isinstance(other, Guide) and (self.curved, self.mirrors, self.planes) == \
+            (other.curved, other.mirrors, other.planes)
 
     def __hash__(self):
-        return hash((self.curved, self.mirrors))
+        return hash((self.curved, self.mirrors, self.planes))
 
     def __repr__(self):
-        return f"Guide(curved={self.curved}, mirrors={len(self.mirrors)})"
+        return f"Guide(curved={self.curved}, mirrors={len(self.mirrors)}, planes={len(self.planes)})"
 
 
 def is_curved(guide):
@@ -153,9 +154,14 @@ def guide_kind(scene):
     reads the normal's derivatives and solves for the reflection points, `curved_mirror`), a
     `Guide` where such a shape is known in closed form and `STRIP_GUIDE` is on (the bounces at
     mirror-like vertices may aim at its specular strip), else True (planar mirrors: the
-    tangent-plane images alone, at no extra cost)."""
+    tangent-plane images alone, at no extra cost). A scene without mirrors but with glossy
+    rectangles (`plane_guide.scene_planes`) gets a `Guide` holding them (``planes``)."""
     if not has_mirrors(scene):
-        return False
+        from . import plane_guide
+
+        # no chain can form; glossy planes ahead may still turn echoes home (`plane_guide`)
+        planes = plane_guide.scene_planes(scene, lobe_exponent) if plane_guide.PLANE_GUIDE else ()
+        return Guide(False, (), planes) if planes else False
     curved = CURVED_GUIDE and any(shape.class_name() in CURVED_SHAPES and lobe_exponent(shape.bsdf()) >= MIN_EXPONENT
                                   for shape in scene.shapes())
     if STRIP_GUIDE:
@@ -172,7 +178,7 @@ def phong_pdf(n, cos_a):
     return dr.select(cos_a > 0, (n + 1) * (0.5 * dr.inv_pi) * dr.power(dr.maximum(cos_a, 0.0), n), 0.0)
 
 
-def sample_bounce(bsdf, ctx, si, image, n_chain, segment, u1, u2, active, strips=()):
+def sample_bounce(bsdf, ctx, si, image, n_chain, segment, u1, u2, active, strips=(), probs=None):
     """The next direction at ``si`` from the mixture of the guide and the BSDF.
 
     ``image`` is the transducer's image through the glossy vertices since the last diffuse one
@@ -180,7 +186,8 @@ def sample_bounce(bsdf, ctx, si, image, n_chain, segment, u1, u2, active, strips
     alone); ``segment`` is the length of the ray that reached ``si`` (from the previous vertex,
     the chain's last mirror when there is one). ``strips``: lobes towards curved mirrors'
     specular strips (`curved_mirror.strip_lobe`, `STRIP_GUIDE`), each a component of probability
-    ``STRIP_PROB / len(strips)`` where its ``ok`` holds, the other components sharing the rest.
+    ``STRIP_PROB / len(strips)`` (or ``probs``, one per lobe: `plane_guide.lobes`) where its
+    ``ok`` holds, the other components sharing the rest.
     Returns ``(wo_world, weight)``: the world direction and ``f cos / pdf`` of the mixture.
     """
     # A BSDF with a delta lobe (Mitsuba's conductor, smooth plastic) keeps its own sampling: the
@@ -193,7 +200,8 @@ def sample_bounce(bsdf, ctx, si, image, n_chain, segment, u1, u2, active, strips
 
         # the strips' components first: u1 below their summed probability picks one, the rest of
         # [0, 1) is rescaled for the planar guide and the BSDF as without them
-        beta = [dr.select(lobe[-1] & smooth, STRIP_PROB / len(strips), 0.0) for lobe in strips]
+        probs = probs or [STRIP_PROB / len(strips)] * len(strips)
+        beta = [dr.select(lobe[-1] & smooth, p, 0.0) for lobe, p in zip(strips, probs)]
         beta_sum, use_s, wo_s, below = mi.Float(0.0), mi.Bool(False), mi.Vector3f(0.0), mi.Float(0.0)
         for lobe, b in zip(strips, beta):
             beta_sum += b
@@ -298,13 +306,13 @@ def scatter(bsdf, ctx, si, samples, base, guide, chain, origin, segment, active)
         was_chained = active & chained(chain)
         wo, weight, chain = bounce(bsdf, ctx, si, chain, origin, segment, samples.get(base),
                                    samples.get2(base + 1), active, curved=is_curved(guide),
-                                   mirrors=getattr(guide, "mirrors", ()))
+                                   mirrors=getattr(guide, "mirrors", ()), planes=getattr(guide, "planes", ()))
         return si.spawn_ray(wo), weight, chain, was_chained
     bs, bsdf_weight = bsdf.sample(ctx, si, samples.get(base), samples.get2(base + 1), active)
     return si.spawn_ray(si.to_world(bs.wo)), bsdf_weight.x, chain, None
 
 
-def bounce(bsdf, ctx, si, chain, origin, segment, u1, u2, active, curved=False, mirrors=()):
+def bounce(bsdf, ctx, si, chain, origin, segment, u1, u2, active, curved=False, mirrors=(), planes=()):
     """One guided bounce at ``si``: ``(wo_world, weight, chain after si)``.
 
     The target is the chain's image (the guide's width narrowed by ``segment``, the ray that
@@ -315,8 +323,16 @@ def bounce(bsdf, ctx, si, chain, origin, segment, u1, u2, active, curved=False, 
     point (`curved_mirror.aim`). ``mirrors``: the scene's convex curved mirrors
     (`curved_mirror.scene_mirrors`, `STRIP_GUIDE`): at a mirror-like ``si`` the bounce may aim at
     the specular strip of each, towards the transducer's image after ``si``
-    (`curved_mirror.strip_lobe`)."""
+    (`curved_mirror.strip_lobe`). ``planes``: glossy rectangles of a scene without mirrors
+    (`plane_guide`): every bounce may aim at their specular points towards the transducer; no
+    chain forms there, so it is returned as it came."""
     image, n_chain, prev_image, prev_n, ret_image, ret_n, centre, axis, radius, hit = chain
+    if planes:
+        from . import plane_guide
+
+        lobes, probs = plane_guide.lobes(si.p, origin, planes, active)
+        wo, weight = sample_bounce(bsdf, ctx, si, image, n_chain, segment, u1, u2, active, lobes, probs)
+        return wo, weight, chain
     n_here = lobe_at(bsdf, si, active)
     strips = ()
     if mirrors:

@@ -84,6 +84,10 @@ class SonarTOFIntegrator(SonarIntegrator):
                                  specular strip of a mirror-like sphere or cylinder, where the scene
                                  has one besides other mirrors (`curved_mirror.strip_lobe`): the pile
                                  seen in a quay wall, 1.3-2.5x less error at equal time (pile_quay).
+                                 A scene without mirrors but with glossy rectangles (exponent >= 10:
+                                 a concrete quay wall) aims a quarter of its bounces at their
+                                 specular points towards the transducer (`plane_guide`): the quay
+                                 wall's dihedral corner needs 2.9x fewer paths for 5 %.
                                  ``none``: BSDF sampling only. Gradient renders are unguided
     sound_speed_profile (none)   a CSV file (``depth,sound_speed``; a path relative to the scene
                                  file): the water the paths refract through (`refraction`): arcs out,
