@@ -119,11 +119,18 @@ def received_bytes(inten, g, kernel, quiet, ring, z, taps, f, levels, ad):
         else:
             x = dr.gather(mi.Float64, x_all, at)
         gc = np.asarray(g)
-        g_re = _f64(gc.real if np.iscomplexobj(gc) else gc)
-        g_im = _f64(gc.imag) if np.iscomplexobj(gc) else None
         amp = dr.sqrt(x)
-        re = amp * dr.gather(mi.Float64, g_re, at)
-        im = amp * dr.gather(mi.Float64, g_im, at) if g_im is not None else mi.Float64(0.0) * amp
+        if np.iscomplexobj(gc) and gc.dtype == np.complex128 and gc.flags.c_contiguous:
+            # (real, imaginary) pairs read in place: no copies of the real and imaginary parts
+            g_all = _f64(gc.reshape(-1).view(np.float64))
+            re = amp * dr.gather(mi.Float64, g_all, 2 * at)
+            im = amp * dr.gather(mi.Float64, g_all, 2 * at + 1)
+        elif np.iscomplexobj(gc):
+            re = amp * dr.gather(mi.Float64, _f64(gc.real), at)
+            im = amp * dr.gather(mi.Float64, _f64(gc.imag), at)
+        else:
+            re = amp * dr.gather(mi.Float64, _f64(gc), at)
+            im = mi.Float64(0.0) * amp
         if ring is not None:
             re = re + dr.gather(mi.Float64, _f64(ring), mi.UInt32(col))
         if z is not None:
