@@ -47,15 +47,22 @@ FREEZE = True
 MAX_RECORDINGS = 32
 
 
+# Exact types of the leaves most members are (a `jit_state` walk visits some 170 objects per
+# pass): taken in the loops below without a call. Subclasses (an IntEnum, np.float64) still go
+# through `walk`'s isinstance tests: the same entries either way.
+_LEAVES = frozenset((bool, int, float, str, type(None)))
+
+
 def jit_state(obj):
     """(JIT values, Python scalars) reachable from ``obj``: arrays and Dr.Jit-traversable objects
     (the scene, its plugins) go to the first list, in a fixed order; numbers and strings, and the
     identity of objects that are neither, to the second (the recording's key)."""
     values, scalars, seen = [], [], set()
+    leaves, add = _LEAVES, scalars.append
 
     def walk(o, path):
         if isinstance(o, (bool, int, float, str, type(None), np.generic)):
-            scalars.append((path, o if not isinstance(o, np.generic) else o.item()))
+            add((path, o if not isinstance(o, np.generic) else o.item()))
             return
         if isinstance(o, np.ndarray):
             return      # host data: read into JIT values (which are inputs) when a setup is built
@@ -64,11 +71,14 @@ def jit_state(obj):
         seen.add(id(o))
         if isinstance(o, dr.ArrayBase):
             values.append(o)
-            scalars.append((path, type(o).__name__, dr.width(o)))
+            add((path, type(o).__name__, dr.width(o)))
             return
         if isinstance(o, (tuple, list)):
             for i, v in enumerate(o):
-                walk(v, f"{path}[{i}]")
+                if type(v) in leaves:
+                    add((f"{path}[{i}]", v))
+                else:
+                    walk(v, f"{path}[{i}]")
             return
         if isinstance(o, dict):
             for k in sorted(o, key=str):
@@ -76,7 +86,7 @@ def jit_state(obj):
             return
         if isinstance(o, dr.detail.TraversableBase):
             values.append(o)      # Dr.Jit traverses it (a scene: shapes, BSDFs; a Python plugin: its members)
-            scalars.append((path, type(o).__name__, id(o)))
+            add((path, type(o).__name__, id(o)))
             if isinstance(o, mi.Scene):
                 # A Python BSDF's members are walked here: Dr.Jit's traversal of the scene does
                 # not reach the textures they hold (a bitmap's texels changed through
@@ -86,10 +96,13 @@ def jit_state(obj):
             if not hasattr(o, "__dict__"):
                 return
         elif not hasattr(o, "__dict__"):
-            scalars.append((path, type(o).__name__, id(o)))
+            add((path, type(o).__name__, id(o)))
             return
         for k, v in sorted(vars(o).items()):
-            walk(v, f"{path}.{k}")
+            if type(v) in leaves:
+                add((f"{path}.{k}", v))
+            else:
+                walk(v, f"{path}.{k}")
 
     walk(obj, "")
     return values, tuple(scalars)
