@@ -198,6 +198,7 @@ class SonarSensor(mi.Sensor):
             raise ValueError(f"sonar 'beam_table' is only used with beam_pattern 'table' (got {pattern!r})")
         self.beam = BeamPattern(pattern, bw_h, bw_v, DEFAULT_FREQUENCY if frequency is None else frequency,
                                 ap_h, ap_v, self.sound_speed, table)
+        self._tx_props = dict(tx)   # kept: a fan derived from the beam's widths follows them (parameters_changed)
         self.transmit = self._transmit(tx, bw_h, bw_v, self.beam.frequency)
         self.bandwidth = num("bandwidth", preset.get("bandwidth", self.beam.frequency / DEFAULT_Q))
         if not (math.isfinite(self.bandwidth) and 0.0 < self.bandwidth < 2.0 * self.beam.frequency):
@@ -376,7 +377,10 @@ class SonarSensor(mi.Sensor):
     def parameters_changed(self, keys):
         """Take new values of the traversed parameters, checked as in the XML (rigid ``to_world``,
         ``absorption`` >= 0, widths in (0, 360] x (0, 180] deg); the beam's sampling table is rebuilt
-        for new widths."""
+        for new widths, and so is a multibeam's transmit fan where its widths follow the beam's (no
+        ``tx_beamwidth_h``/``tx_beamwidth_v`` in the XML): the scene then renders as one loaded with
+        the new widths. Gradients with respect to the widths are the receive beam's (the fan's
+        dependence on them is not differentiated)."""
         d = self.differentiable()
         if "to_world" in keys:
             m = np.array(d["to_world"].matrix, dtype=np.float64).reshape(4, 4)
@@ -389,6 +393,10 @@ class SonarSensor(mi.Sensor):
         if "beamwidth_h" in keys or "beamwidth_v" in keys:
             h, v = float(d["beamwidth_h"][0]), float(d["beamwidth_v"][0])
             self.beam = BeamPattern(self.beam.kind, h, v, self.beam.frequency, None, None, self.sound_speed)
+            if self.transmit is not None:
+                # a multibeam's fan whose widths the XML left to the beam's (the swath plus one beam
+                # width across, the beam's height) follows them, as loading those widths would do
+                self.transmit = self._transmit(self._tx_props, h, v, self.beam.frequency)
         super().parameters_changed(keys)
 
     def to_string(self):

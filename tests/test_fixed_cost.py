@@ -165,3 +165,25 @@ def test_bsdf_changed_through_traverse_reaches_the_next_frame(mitsonar_mod, monk
     after = _render(mitsonar_mod, scene)
     assert not np.array_equal(after, before)
     assert after.tobytes() == _cold(mitsonar_mod, monkeypatch, scene).tobytes()
+
+
+def test_traversed_beam_width_renders_as_the_xml_width(mitsonar_mod):
+    """A multibeam's transmit fan follows the beam's widths unless the XML sets its own: the quay
+    wall with ``beamwidth_h`` 0.8 deg set through ``mi.traverse`` renders the bytes of the scene
+    loaded with 0.8 in its XML (the fan as wide as the swath plus one new beam width), not a fan
+    kept from the 0.5 deg beam."""
+    import mitsuba as mi
+
+    path = os.path.join(SCENES, "quay_wall.xml")
+    with open(path) as f:
+        xml = f.read()
+    old = '<float name="beamwidth_h" value="0.5"/>'
+    assert old in xml
+    loaded = mitsonar_mod.load_scene(xml.replace(old, '<float name="beamwidth_h" value="0.8"/>'))
+    traversed = mitsonar_mod.load_scene(path)
+    params = mi.traverse(traversed)
+    params["sonar.beamwidth_h"] = 0.8
+    params.update()
+    tx_t, tx_l = traversed.sensors()[0].transmit, loaded.sensors()[0].transmit
+    assert (tx_t.beamwidth_h, tx_t.beamwidth_v) == pytest.approx((tx_l.beamwidth_h, tx_l.beamwidth_v), rel=1e-6)
+    assert _render(mitsonar_mod, traversed).tobytes() == _render(mitsonar_mod, loaded).tobytes()
