@@ -32,10 +32,7 @@ the live heads' one-row ping (harbour.xml's mechanical head, 16 paths, a new bea
 and of the quay frame at spp 1, stage by stage, for the reference chain, the fast chain and the
 fast chain without its noise prefetch (`mitsonar.receiver.fastchain.PREFETCH`), interleaved.
 
-``--key-ab``: those fixed costs (and render_histogram alone) with the recording key's walk
-(`frozen_pass.jit_state`) as it was and as it is, interleaved in one process.
-
-Usage: python benchmarks/frame_profile.py [--frames 12] [--spp 64] [--ref-factor 16] [--quick] [--fixed-only] [--key-ab]
+Usage: python benchmarks/frame_profile.py [--frames 12] [--spp 64] [--ref-factor 16] [--quick] [--fixed-only]
 """
 from __future__ import annotations
 
@@ -371,73 +368,6 @@ def quay_fixed_cost_stages(frames, **modes):
             **staged(lambda i: render_mod.render_scan(scene, spp=1, seed=i), frames, **modes)}
 
 
-def _jit_state_before(obj):
-    """`frozen_pass.jit_state` as it was before its leaves were taken inline (the same values and
-    key, checked in tests/test_fixed_cost.py), for ``--key-ab``."""
-    values, scalars, seen = [], [], set()
-
-    def walk(o, path):
-        if isinstance(o, (bool, int, float, str, type(None), np.generic)):
-            scalars.append((path, o if not isinstance(o, np.generic) else o.item()))
-            return
-        if isinstance(o, np.ndarray):
-            return
-        if id(o) in seen:
-            return
-        seen.add(id(o))
-        if isinstance(o, dr.ArrayBase):
-            values.append(o)
-            scalars.append((path, type(o).__name__, dr.width(o)))
-            return
-        if isinstance(o, (tuple, list)):
-            for i, v in enumerate(o):
-                walk(v, f"{path}[{i}]")
-            return
-        if isinstance(o, dict):
-            for k in sorted(o, key=str):
-                walk(o[k], f"{path}[{k!r}]")
-            return
-        if isinstance(o, dr.detail.TraversableBase):
-            values.append(o)
-            scalars.append((path, type(o).__name__, id(o)))
-            if isinstance(o, mi.Scene):
-                for i, shape in enumerate(o.shapes()):
-                    walk(shape.bsdf(), f"{path}.shapes[{i}].bsdf")
-            if not hasattr(o, "__dict__"):
-                return
-        elif not hasattr(o, "__dict__"):
-            scalars.append((path, type(o).__name__, id(o)))
-            return
-        for k, v in sorted(vars(o).items()):
-            walk(v, f"{path}.{k}")
-
-    walk(obj, "")
-    return values, tuple(scalars)
-
-
-_JIT_STATE_AFTER = module("frozen_pass").jit_state
-
-
-def set_key_walk(mode):
-    """``before`` / ``after``: the recording key's walk (`frozen_pass.jit_state`) as it was / is,
-    on the fast chain."""
-    set_mode("fast")
-    module("frozen_pass").jit_state = _jit_state_before if mode == "before" else _JIT_STATE_AFTER
-
-
-def key_ab(frames):
-    """Before/after of the key walk, interleaved in this process: render_histogram alone and
-    render_scan (stages) of the quay frame at spp 1, and the live ping."""
-    ab = {"modes": ("before", "after"), "set_mode": set_key_walk}
-    scene = load_case("quay_wall_512_beams")
-    integ, sensor = scene.integrator(), scene.sensors()[0]
-    hist = staged(lambda i: integ.render_histogram(scene, sensor, seed=i, spp=1), frames, **ab)
-    return {"quay_render_histogram_spp1": {m: {k: r[k] for k in ("ms_median", "ms_min", "ms_quartiles")}
-                                           for m, r in hist.items()},
-            "quay_render_scan_spp1": quay_fixed_cost_stages(frames, **ab),
-            "live_ping": live_ping_fixed_cost(frames, **ab)}
-
-
 CHILD = "MITSONAR_FRAME_PROFILE_CHILD"
 
 
@@ -476,13 +406,7 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="skip the error, ray-casting and child-process parts")
     ap.add_argument("--fixed-only", action="store_true",
                     help="only the fixed costs: the live one-row harbour ping (spp 16) and the quay frame at spp 1")
-    ap.add_argument("--key-ab", action="store_true",
-                    help="only the fixed costs, with the recording key's walk as it was and as it is, interleaved")
     args = ap.parse_args(argv)
-    if args.key_ab:
-        print(json.dumps({"cores": os.cpu_count(), "load_avg_start": os.getloadavg(), **key_ab(args.frames),
-                          "load_avg_end": os.getloadavg()}, indent=1))
-        return
     if args.fixed_only:
         print(json.dumps({"cores": os.cpu_count(), "load_avg_start": os.getloadavg(),
                           "live_ping": live_ping_fixed_cost(args.frames),
