@@ -41,8 +41,9 @@ rectangles into one mesh, and on the harbour (a concrete quay mesh on a sand sea
 the mesh's planar faces (a prototype) left the error unchanged at spp 64 (the direct echoes' noise
 rules there) for 1.1-1.3x the CPU time; so the box, the harbour and the wreck trace the unguided
 kernel as before. Measured on the quay wall's 512-beam frame (docs/benchmarks.rst): the corner
-bins' multipath error 1.5x lower at equal paths (2.1x fewer paths to 5 %), the frame's error
-3.8-4.2 % against 4.5-4.7 % at spp 256, for 5-19 % more CPU time per path. Spheres and cylinders
+bins' multipath error 1.6-1.7x lower at equal paths (3 900 paths per beam to 5 % instead of
+11 400), the frame's error 3.8-4.2 % against 4.5-4.7 % at spp 256, for up to 19 % more CPU time
+per path (the frame reaches 5 % at spp 247 instead of 270). Spheres and cylinders
 (the piles' feet: another 8 % less error) are left out: finding their specular point
 (`curved_mirror.specular_point`, Newton's method) took 30-50 % more time per path, which ate the
 gain.
