@@ -129,10 +129,7 @@ def shared_segments(scene, integ, spp, seed=1):
     shared = shared_beams.SharedFrame(setup)
     seed_o, first_o = module("samples").opaque_u32(seed), module("samples").opaque_u32(0)
     zero, _, samples = integ._shared_lanes(shared.n_rows * spp, seed_o, first_o)
-    beam = shared.path_setup.sensor.beam
-    if integ.emission == "receive":
-        beam = module("receive_emission").for_frame(shared)
-    d, w = module("frozen_pass").emitted(beam, samples)
+    d, w = integ.shared_emitted(shared, samples)
     counts = dr.zeros(mi.UInt32, 2)
 
     def record(depth, rng, energy, valid, hit):

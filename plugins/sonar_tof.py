@@ -236,13 +236,18 @@ class SonarTOFIntegrator(SonarIntegrator):
         of the frame's one sequence, scored into every row that hears them (`shared_beams`)."""
         seed_o, first_o = opaque_u32(seed), opaque_u32(start * shared.n_rows)
         _, _, samples = self._shared_lanes(shared.n_rows * count, seed_o, first_o)
+        d, w = self.shared_emitted(shared, samples)
+        return frozen_pass.run(self._shared_body, self, shared, seed_o, first_o, d, w, count).numpy()
+
+    def shared_emitted(self, shared, samples):
+        """The emitted directions and weights of a frame's shared paths (`frozen_pass.emitted`),
+        drawn from the fan's density or the receive-weighted one (``emission``)."""
         beam = shared.path_setup.sensor.beam
         if self.emission == "receive":
             from .receive_emission import for_frame
 
             beam = for_frame(shared)
-        d, w = frozen_pass.emitted(beam, samples)
-        return frozen_pass.run(self._shared_body, self, shared, seed_o, first_o, d, w, count).numpy()
+        return frozen_pass.emitted(beam, samples)
 
     def _shared_lanes(self, n, seed_o, first_o):
         """``n`` lanes of a frame's one sequence from path ``first_o`` on: (row 0 for all, each
