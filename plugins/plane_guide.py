@@ -73,15 +73,13 @@ def scene_planes(scene, lobe_exponent):
     box of concrete rectangles gains nothing)."""
     import numpy as np
 
-    exps = [lobe_exponent(shape.bsdf()) for shape in scene.shapes()]
+    shapes = list(scene.shapes())
+    exps = [lobe_exponent(shape.bsdf()) for shape in shapes]
     if not any(e < PLANE_EXPONENT for e in exps):
         return ()
     out = []
-    for shape in scene.shapes():
-        if shape.class_name() != "Rectangle":
-            continue
-        n = lobe_exponent(shape.bsdf())
-        if not (PLANE_EXPONENT <= n < math.inf):
+    for shape, n in zip(shapes, exps):
+        if shape.class_name() != "Rectangle" or not (PLANE_EXPONENT <= n < math.inf):
             continue
         m = np.array(mi.traverse(shape)["to_world"].matrix, dtype=np.float64).reshape(4, 4)
         c, ex, ey = m[:3, 3], m[:3, 0], m[:3, 1]
