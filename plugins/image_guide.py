@@ -251,6 +251,11 @@ def lobe_at(bsdf, si, active):
     return exponent_of_peak(bsdf.pdf(mi.BSDFContext(mi.TransportMode.Importance), si, mirror_dir, active))
 
 
+def mirror_image(point, p, normal):
+    """The image of ``point`` in the plane through ``p`` with unit ``normal``."""
+    return point - 2.0 * dr.dot(point - p, normal) * normal
+
+
 def advance_chain(si, origin, image, n_chain, prev_image, prev_n, n_here, active):
     """`advance` with the way back: ``(image, n_chain, prev_image, prev_n, ret_image, ret_n)``.
 
@@ -263,7 +268,7 @@ def advance_chain(si, origin, image, n_chain, prev_image, prev_n, n_here, active
     up. One level is kept: with ``max_depth`` 5 a round trip through more mirrors cannot close."""
     mirror = active & (n_here >= MIN_EXPONENT)
     nrm = si.sh_frame.n
-    reflected = image - 2.0 * dr.dot(image - si.p, nrm) * nrm
+    reflected = mirror_image(image, si.p, nrm)
     extended = dr.select(n_chain > 0, dr.minimum(n_chain, n_here), n_here)
     zero = mi.Float(0.0)
     return (dr.select(mirror, reflected, origin), dr.select(mirror, extended, zero),
@@ -343,7 +348,7 @@ def bounce(bsdf, ctx, si, chain, origin, segment, u1, u2, active, curved=False, 
         # pile_quay such echoes hold 0.5 % of the second moment; the longer paths cost time)
         here = active & (n_here >= MIN_EXPONENT) & (n_chain == 0)
         nrm = si.sh_frame.n
-        after = image - 2.0 * dr.dot(image - si.p, nrm) * nrm    # the image after si (`advance_chain`)
+        after = mirror_image(image, si.p, nrm)    # the image after si (as `advance_chain` makes it)
         strips = []
         for m in mirrors:
             lobe = curved_mirror.strip_lobe(si.p, after, m)
