@@ -304,7 +304,7 @@ def set_mode(mode):
         fastchain.PREFETCH = mode == "fast"
 
 
-def staged(go, frames, modes=("reference", "fast", "fast_no_prefetch"), set_mode=set_mode):
+def staged(go, frames, modes=("reference", "fast", "fast_no_prefetch")):
     """``go(seed)`` timed ``frames`` times per mode (`set_mode`), the modes interleaved, each
     stage as in `profile_case` (no saving): medians of the wall time and mean ms per stage."""
     for mode in modes:               # compile and fill the caches before timing
@@ -325,7 +325,7 @@ def staged(go, frames, modes=("reference", "fast", "fast_no_prefetch"), set_mode
             acc[mode]["wall"].append(wall)
             for k in STAGES:
                 acc[mode]["stages"][k].append(st.t[k])
-    set_mode(modes[-1] if modes[-1] != "fast_no_prefetch" else "fast")
+    set_mode("fast")
     out = {}
     for mode in modes:
         a = acc[mode]
@@ -340,7 +340,7 @@ def staged(go, frames, modes=("reference", "fast", "fast_no_prefetch"), set_mode
     return out
 
 
-def live_ping_fixed_cost(frames, spp=16, **modes):
+def live_ping_fixed_cost(frames, spp=16):
     """The live heads' ping (issue "live"): one row of scenes_xml/harbour.xml's mechanical head
     (`mitsonar.devices.live.live_scene`), ``spp`` paths, from the mount turned to a new bearing
     every ping (1.8 deg steps, as `PingRenderer.render` does): the pose changes every ping, so
@@ -358,14 +358,14 @@ def live_ping_fixed_cost(frames, spp=16, **modes):
         pose = mount @ bearing_rotation(math.radians(1.8 * (next(turns) % 200)))
         return render_mod.render_scan(scene, spp=spp, seed=i, pose=pose, sensor=sonar)
 
-    return {"rows": 1, "bins": int(sonar.n_bins), "spp": spp, **staged(go, frames, **modes)}
+    return {"rows": 1, "bins": int(sonar.n_bins), "spp": spp, **staged(go, frames)}
 
 
-def quay_fixed_cost_stages(frames, **modes):
+def quay_fixed_cost_stages(frames):
     """The 512-beam quay frame at spp 1 (the fixed cost of a frame, spp -> 0), stage by stage."""
     scene = load_case("quay_wall_512_beams")
     return {"rows": int(scene.sensors()[0].n_pings), "spp": 1,
-            **staged(lambda i: render_mod.render_scan(scene, spp=1, seed=i), frames, **modes)}
+            **staged(lambda i: render_mod.render_scan(scene, spp=1, seed=i), frames)}
 
 
 CHILD = "MITSONAR_FRAME_PROFILE_CHILD"
