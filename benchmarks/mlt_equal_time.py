@@ -11,7 +11,10 @@ margins the targets ask for. Three things made it so, and are changed here:
   integrators' renders are interleaved (A B A B ...), so a slow phase of the machine meets both;
 * **matching**: the contender's spp is chosen so that its median render takes the baseline's time
   (`MATCH_ROUNDS` rounds of timing and rescaling: a Metropolis render's time is far from linear in
-  spp), and every render's error is still corrected by the square root of its own time (``e sqrt(t)``: the error at one second of CPU, Monte Carlo's rate);
+  spp), and every render's error is still corrected by the square root of its own time (``e sqrt(t)``: the error at one second of CPU, Monte Carlo's rate).
+  ``--match spp`` renders both at ``--spp`` and leaves the whole time difference to that
+  correction: the Sobol emission is a complete net at powers of two, so a matched spp that falls
+  short of one (a contender a few per cent slower) is penalised beyond its time;
 * **spread**: ``--repeats`` (at least 5) renders each; the ratio is
   ``median(e_a sqrt(t_a)) / median(e_b sqrt(t_b))`` (> 1: the contender is better) and its spread a
   bootstrap over the repeats (10th-90th percentile of 2000 resamples), printed beside it, with
@@ -23,7 +26,7 @@ own noise removed (``sqrt(e^2 - e_ref^2)``, ``e_ref`` from the halves' differenc
 
     python benchmarks/mlt_equal_time.py --scenes periscope,intake [--spp 4096] [--repeats 7]
         [--contender sonar_mlt] [--set split=auto] [--baseline sonar_tof] [--reference-spp 262144]
-        [--curved contender] [--strip contender]
+        [--curved contender] [--strip contender] [--match spp]
 
 ``--set`` and ``--baseline-set`` pass parameters (``name=value``; numbers are read as floats,
 ``true``/``false`` as booleans) to the contender and the baseline. Prints one JSON object per
@@ -106,7 +109,7 @@ def bootstrap_spread(ea, ta, eb, tb, rng, n=2000):
 
 
 def measure(name, baseline, contender, spp, repeats, ref_spp, folder, seed=0, curved=(False, False),
-            strip=(True, True)):
+            strip=(True, True), match="time"):
     import mitsuba as mi
 
     import mitsonar
@@ -129,7 +132,7 @@ def measure(name, baseline, contender, spp, repeats, ref_spp, folder, seed=0, cu
     t_a = np.median([timed(A, scene, spp, 2 + i)[1] for i in range(3)])
     t_b = np.median([timed(B, scene, spp, 2 + i)[1] for i in range(3)])
     spp_b = spp
-    for _ in range(MATCH_ROUNDS):   # a render's time is not linear in spp (launches, fixed costs)
+    for _ in range(MATCH_ROUNDS if match == "time" else 0):   # a render's time is not linear in spp
         spp_b = max(16, int(round(spp_b * t_a / t_b)))
         timed(B, scene, spp_b, 1)   # warm at the new spp
         t_b = np.median([timed(B, scene, spp_b, 5 + i)[1] for i in range(2)])
@@ -150,7 +153,7 @@ def measure(name, baseline, contender, spp, repeats, ref_spp, folder, seed=0, cu
             "contender": {"spec": contender, "spp": spp_b, "cpu_s_median": float(np.median(tb)),
                           "rel_l2_median": float(np.median(eb)), "rel_l2": [float(v) for v in eb],
                           "plan": getattr(B, "last_plan", None)},
-            "time_mismatch": float(np.median(tb) / np.median(ta)), "curved_guide": list(curved),
+            "time_mismatch": float(np.median(tb) / np.median(ta)), "match": match, "curved_guide": list(curved),
             "strip_guide": list(strip),
             "reference": {"spp": ref_spp, "self_rel_l2": self_err}}
 
@@ -173,6 +176,9 @@ def main(argv=None):
     ap.add_argument("--reference-spp", type=int, default=1 << 18)
     ap.add_argument("-o", "--output", default=os.path.join("out", "benchmark_mlt_equal_time"))
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--match", default="time", choices=("time", "spp"),
+                    help="time: the contender's spp matched to the baseline's time (default); spp: "
+                         "both at --spp, the time difference left to the sqrt(t) correction")
     args = ap.parse_args(argv)
     if args.repeats < MIN_REPEATS:
         ap.error(f"--repeats {args.repeats}: at least {MIN_REPEATS} (the spread between runs is the point)")
@@ -187,7 +193,7 @@ def main(argv=None):
     curved = (args.curved in ("baseline", "both"), args.curved in ("contender", "both"))
     strip = (args.strip in ("baseline", "both"), args.strip in ("contender", "both"))
     out = [measure(s, baseline, contender, args.spp, args.repeats, args.reference_spp, args.output, args.seed, curved,
-                   strip)
+                   strip, args.match)
            for s in scenes]
     json.dump(out, sys.stdout, indent=1)
     print()

@@ -41,6 +41,7 @@ f and the share of paths with f = 0.
     python benchmarks/mlt_oracle.py [--scenes box,slot_chamber,glossy_corridor,hidden_target] [--paths 4096]
                                     [--guide image|none] [--curved-guide] [--no-strip-guide]
                                     [--baseline-spp 4096,32768 --baseline-repeats 8]
+                                    [--baseline-allocation auto|uniform|adaptive]
 
 The ratios are estimates from the paths traced: on hidden_target, where 2 paths in 1000 carry nearly
 all of the boulder's echo, 4096 paths per ping give an ideal ratio of 24 and 65536 give 18.
@@ -57,7 +58,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 
 
 def analyse(name, paths, seed=7, guide="image", baseline_spp=(), baseline_repeats=8, baseline_sampling="sobol",
-            resample_draws=0, resample_repeats=8):
+            resample_draws=0, resample_repeats=8, baseline_allocation="auto"):
     import drjit as dr
     import mitsuba as mi
 
@@ -119,7 +120,8 @@ def analyse(name, paths, seed=7, guide="image", baseline_spp=(), baseline_repeat
     if resample_draws:
         out["resampled_ideal"] = resampled_ideal(f, bins, vals, resample_draws, resample_repeats, seed)
     if baseline_spp:
-        tof = mi.load_dict({"type": "sonar_tof", "guide": guide, "sampling": baseline_sampling})
+        tof = mi.load_dict({"type": "sonar_tof", "guide": guide, "sampling": baseline_sampling,
+                            "allocation": baseline_allocation})
         out["baseline"] = baseline(tof, scene, out, baseline_spp, baseline_repeats, depth)
     return out
 
@@ -154,18 +156,24 @@ def resampled_ideal(f, bins, vals, draws, repeats, seed):
 def baseline(integrator, scene, oracle, spps, repeats, depth):
     """``sonar_tof`` (by default its Sobol emission, the oracle's guide) measured against the oracle:
     per spp, its relative L2 error over ``repeats`` renders (seeds 1000, 1001, ...), the error the
-    independent-path estimator would have there, and the ideal Metropolis sampler's."""
+    independent-path estimator would have there, and the ideal Metropolis sampler's, all at the
+    paths the render traced (its allocation's pilot included: ``paths_per_ping``)."""
     if repeats < 2:
         raise ValueError(f"--baseline-repeats {repeats}: at least 2 renders are needed for a variance")
     rows = {}
     for spp in spps:
+        integrator.last_plan = {}
         H = np.stack([integrator.render_histogram(scene, seed=1000 + r, spp=spp, max_depth=depth)
                       for r in range(repeats)])
         rel = float(np.sqrt(H.var(axis=0, ddof=1).sum() / (H.mean(axis=0) ** 2).sum()))
-        indep = oracle["pt_rel_error_per_path"] / np.sqrt(spp)
+        plan = dict(getattr(integrator, "last_plan", None) or {})
+        paths = spp + plan.get("pilot", 0)
+        indep = oracle["pt_rel_error_per_path"] / np.sqrt(paths)
         ideal = indep / oracle["global_ideal_error_ratio"]
         bound = indep / oracle["global_normalisation_bound_error_ratio"]
-        rows[str(spp)] = {"sonar_tof_rel_error": rel, "independent_rel_error": float(indep),
+        rows[str(spp)] = {"paths_per_ping": paths, "allocation": plan.get("allocation", "uniform"),
+                          "moved": plan.get("paths_per_row_min") != plan.get("paths_per_row_max"),
+                          "sonar_tof_rel_error": rel, "independent_rel_error": float(indep),
                           "sobol_gain": float(indep / rel), "global_ideal_over_sonar_tof": float(rel / ideal),
                           "global_normalisation_bound_over_sonar_tof": float(rel / bound)}
     return rows
@@ -187,6 +195,9 @@ def main(argv=None):
                     help="also render the default sonar_tof at these spp (comma separated) and compare the ideal "
                          "sampler with its measured error (see the module's docstring)")
     ap.add_argument("--baseline-repeats", type=int, default=8, help="renders per baseline spp (default 8)")
+    ap.add_argument("--baseline-allocation", default="auto", choices=("auto", "uniform", "adaptive"),
+                    help="the baseline sonar_tof's allocation (default auto, its own default; uniform: the "
+                         "baseline before 2026-11-27)")
     ap.add_argument("--resample-draws", type=int, default=0,
                     help="also run the ideal sampler by resampling this many paths per ping from the traced ones "
                          "(checks the ideal ratio's formula; keep it well under --paths)")
@@ -210,7 +221,8 @@ def main(argv=None):
 
         image_guide.STRIP_GUIDE = False
     print(json.dumps([analyse(s, args.paths, guide=args.guide, baseline_spp=spps, baseline_repeats=args.baseline_repeats,
-                              resample_draws=args.resample_draws) for s in args.scenes.split(",")], indent=1))
+                              resample_draws=args.resample_draws, baseline_allocation=args.baseline_allocation)
+                      for s in args.scenes.split(",")], indent=1))
 
 
 if __name__ == "__main__":
