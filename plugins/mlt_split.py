@@ -80,7 +80,7 @@ def share(easy, hard, easy2, hard2, n):
     return min(MAX_SHARE, math.sqrt(v_hard) / (math.sqrt(v_hard) + math.sqrt(v_easy)))
 
 
-def path_traced(integrator, setup, seed, start, count, pose=None, progress=None, allocation="uniform"):
+def path_traced(integrator, setup, seed, start, count, pose=None, progress=None, allocation="auto"):
     """Samples ``start .. start + count`` of every row with ``sonar_tof``'s own estimator (the same
     guide and depth): float64 ``(n_rows, n_bins)``, the mean over the ``count`` paths per row.
 
@@ -90,21 +90,21 @@ def path_traced(integrator, setup, seed, start, count, pose=None, progress=None,
     tails of the neighbouring receive beams only through rare emitted directions: on
     ``fls_array`` a t test of 8 renders saw them 14 % low.)
 
-    ``allocation="adaptive"`` (a whole render, ``start`` 0, on a head that does not share beams:
-    per-row paths miss a multibeam's beam tails, above): the pilot of ``sonar_tof``'s adaptive
+    ``allocation`` ``adaptive``, or ``auto`` on a large render (a whole render, ``start`` 0, on a
+    head that does not share beams: per-row paths miss a multibeam's beam tails, above;
+    `row_allocation.adaptive`): the pilot of ``sonar_tof``'s adaptive
     allocation chooses (its cost counted): `row_allocation.render`, ``sonar_tof``'s own
     ``allocation="adaptive"`` render, its plan copied to ``integrator.last_plan``."""
     tof = getattr(integrator, "_path_tracer", None)
     if tof is None:
         tof = integrator._path_tracer = mi.load_dict(
             {"type": "sonar_tof", "max_depth": integrator.max_depth, "guide": integrator.guide})
+    from . import row_allocation
     from .shared_beams import SharedFrame, can_share, same_pose
 
     n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
     sharing = can_share(setup.sensor) and same_pose(setup.sensor, pose)
-    if allocation == "adaptive" and start == 0 and not sharing:
-        from . import row_allocation
-
+    if start == 0 and not sharing and row_allocation.adaptive(allocation, n_rows, count):
         out = row_allocation.render(tof, setup, seed, count, MAX_LANES_PER_PASS, progress)
         integrator.last_plan = dict(tof.last_plan)
         return out
@@ -153,7 +153,7 @@ def render_split(integrator, setup, seed, spp, progress=None, pose=None):
         integrator.last_plan = {}
         out = path_traced(integrator, setup, seed, pilot, n_traced, pose,
                           None if progress is None else (lambda done, total: progress(pilot + done, spp)),
-                          allocation=getattr(integrator, "allocation", "uniform"))
+                          allocation=getattr(integrator, "allocation", "auto"))
         # the adaptive allocation's plan (its own pilot as allocation_pilot)
         extra = {("allocation_pilot" if k == "pilot" else k): v for k, v in integrator.last_plan.items()}
         integrator.last_plan = {**plan, **extra}

@@ -8,11 +8,12 @@ summed per-path variance of its bins. For a fixed total ``N = sum_r n_r`` it is 
 
 1. **pilot**: `PILOT_FRACTION` of ``spp`` (at least `MIN_PILOT`) paths per row, path traced with a
    seed of their own (``seed ^ PILOT_SEED``), estimate ``V_r`` (per echo: a path's echoes rarely share a bin);
-2. **allocation**: the rest of the budget, ``(spp - pilot) * n_rows`` paths, is shared out
+2. **allocation**: the budget, ``spp * n_rows`` paths, is shared out
    ``n_r = N_2 (m / R + (1 - m) sqrt(V_r) / sum_s sqrt(V_s))`` (`UNIFORM_MIX` = ``m``: every row
    keeps at least ``m`` of its uniform share, so a row whose rare echo the pilot missed still has
    paths), at least one path per row, integers by largest remainders; evenly when the pilot
-   predicts less than `MIN_GAIN` (the pilot's cost is then all that is lost);
+   predicts less than `MIN_GAIN`: then the render is the uniform render, byte for byte (its
+   passes, samples and sums), and the pilot's time is all that is lost;
 3. **estimate**: each row's mean over its own ``n_r`` paths, drawn as ``sonar_tof``'s (its
    ``sampling``: `samples.SobolSamples` by default) with the render's seed.
 
@@ -20,7 +21,11 @@ Unbiased: the second stage's samples are drawn with a seed apart from the pilot'
 pilot (hence ``n_r``) each row's mean is the mean of ``n_r`` paths of the row's own distribution.
 The pilot's paths only choose and are left out of the estimate: combining them weighted by counts
 that depend on their own values is a ratio estimator, biased (rows whose pilot saw more get more
-paths, which would weight their pilot's sums down). The cost is the pilot's share of the budget.
+paths, which would weight their pilot's sums down). The pilot is paid on top of the budget: the
+render costs about ``1 + PILOT_FRACTION`` of the uniform one, whose ``spp`` it keeps. (It was taken
+from the budget until 2026-11-27: where the split stays even, the ``spp - pilot`` paths left fell
+short of the power of two at which the Sobol emission is a complete net, and those renders had up
+to 24 % more error than the uniform render of ``spp`` paths, their pilot's time besides.)
 Deterministic per seed: the sums are exact (`exact_sum`) and the samples depend on
 (seed, row, path number) only.
 """
@@ -34,6 +39,11 @@ from . import frozen_pass
 from .exact_sum import ExactBins
 from .samples import opaque_u32
 
+#: ``allocation="auto"`` (``sonar_tof``'s default) allocates where the render traces at least this
+#: many paths (rows x spp): the pilot's fixed cost (3-5 ms on 2 cores: its own kernel, the
+#: choice) is then under a tenth of the render's time (periscope, 21 pings x 4096: 32 ms uniform,
+#: 39 ms with the pilot; x 16384: 119 against 128 ms).
+AUTO_MIN_PATHS = 1 << 18
 #: Share of ``spp`` the pilot traces per row (at least `MIN_PILOT` paths), and the least ``spp``
 #: worth a pilot (below it the render is uniform).
 PILOT_FRACTION = 1.0 / 16.0
@@ -50,6 +60,15 @@ UNIFORM_MIX = 0.25
 MIN_GAIN = 2.0
 #: The pilot's samples: the render's seed xor this (independent of the second stage's).
 PILOT_SEED = 0xA110C8ED
+
+
+def adaptive(allocation, n_rows, spp):
+    """Whether a render of ``n_rows`` rows that do not share paths, ``spp`` each, allocates
+    adaptively under ``sonar_tof``'s ``allocation`` setting (``auto``: `AUTO_MIN_PATHS` and more
+    than one row)."""
+    if allocation == "auto":
+        return n_rows >= 2 and n_rows * int(spp) >= AUTO_MIN_PATHS
+    return allocation == "adaptive"
 
 
 def allocate(v, total, mix=UNIFORM_MIX):
@@ -107,9 +126,7 @@ def render(integrator, setup, seed, spp, lanes, progress=None):
         raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
     pilot, counts, gain = choose(integrator, setup, seed, spp, lanes)
     if counts is None:
-        counts = np.full(n_rows, spp - pilot, dtype=np.int64)
-    if progress is not None:
-        progress(pilot, spp)
+        counts = np.full(n_rows, spp, dtype=np.int64)
     if (counts == counts[0]).all():
         # the uniform render's own passes (ping and path number computed in the kernel, its
         # recordings): the same samples and sums, without the lanes' index arrays
@@ -129,15 +146,15 @@ def render(integrator, setup, seed, spp, lanes, progress=None):
 
 def choose(integrator, setup, seed, spp, lanes):
     """Steps 1 and 2 of the module docstring for a budget of ``spp`` paths per row: ``(pilot
-    paths per row, paths per row or None, predicted gain)``; None (the even split of the ``spp -
-    pilot`` paths left) where the pilot predicts under `MIN_GAIN`, or where ``spp`` is under
-    `MIN_SPP` or there is one row (then no pilot runs)."""
+    paths per row, paths per row or None, predicted gain)``; None (the even split, ``spp`` paths
+    each) where the pilot predicts under `MIN_GAIN`, or where ``spp`` is under `MIN_SPP` or there
+    is one row (then no pilot runs)."""
     n_rows = setup.sensor.n_pings
     if spp < MIN_SPP or n_rows < 2:
         return 0, None, 1.0
     pilot = max(MIN_PILOT, int(spp * PILOT_FRACTION))
     v = row_variance(integrator, setup, seed, pilot, lanes)
-    counts = allocate(v, (spp - pilot) * n_rows)
+    counts = allocate(v, spp * n_rows)
     gain = predicted_gain(v, counts)
     return pilot, (counts if gain >= MIN_GAIN else None), gain
 

@@ -16,6 +16,7 @@ from .jit_arrays import upload
 from .mlt_split import MAX_SHARE, render_split
 from .props import count, number, text
 from .samples import HashSamples, n_dims
+from .sonar_tof import SonarTOFIntegrator
 
 # Salts that keep the random streams of the stages apart for one user seed.
 _SALT_BOOT, _SALT_MUT, _SALT_START = 0x5EED0001, 0x5EED0002, 0x5EED0003
@@ -85,12 +86,11 @@ class SonarMLTIntegrator(SonarIntegrator):
                               docs/benchmarks.rst); ``auto``: the share from a pilot's
                               variances; a number in [0, 0.9]; ``off`` (or ``guide="none"``):
                               chains over every echo, Kelemen's PSSMLT as before the guide
-    allocation       uniform  paths per ping of the path-traced render (``split`` 0):
-                              ``uniform``: ``sonar_tof``'s default, spp paths per ping;
-                              ``adaptive``: ``sonar_tof``'s ``allocation="adaptive"``
-                              (`row_allocation`: a pilot of spp/16 paths per ping, its cost
-                              counted, moves the paths to the pings whose echoes are noisy,
-                              and keeps them even where it predicts under 2x)
+    allocation       auto     paths per ping of the path-traced render (``split`` 0), as
+                              ``sonar_tof``'s ``allocation`` (`row_allocation`): ``auto``
+                              (its default: the pilot's allocation for renders of 2^18 paths
+                              and more on heads that do not share beams), ``uniform``,
+                              ``adaptive``
     ================ ======== =================================================================
 
     The defaults are the best settings measured on ``scenes_xml/`` (see the documentation's
@@ -98,12 +98,9 @@ class SonarMLTIntegrator(SonarIntegrator):
     all) and mostly small steps. With no parameters ``sonar_mlt`` is ``sonar_tof``'s scan: the
     chains lost to the guided path tracer on every scene measured, ``pile_quay`` included
     (0.28-0.69x at equal time), whose room the oracle bounds at 6.1-6.6x
-    (``benchmarks/mlt_oracle.py``). ``allocation="adaptive"`` wins where there is room (at equal
-    CPU time, spp 16384: 1.77-2.05x less error than ``sonar_tof`` on ``pile_quay``, 2.05x on
-    ``intake``, 1.16x on ``box``) but loses 0.6-0.94x where its pilot keeps the even split
-    (``periscope``, ``hidden_target``, ``slot_chamber``, the tank and the bow: the pilot's time,
-    and a Sobol render of ``spp - pilot`` paths, short of the power of two), so it is not the
-    default (the documentation's Benchmarks page).
+    (``benchmarks/mlt_oracle.py``), and measured again against ``sonar_tof`` with its pilot's
+    allocation (its default ``allocation="auto"`` since 2026-11-27, which moves paths to the pings
+    with noisy echoes: the room the oracle found on ``intake`` and most of ``pile_quay``'s).
 
     ``spp`` counts path evaluations per ping (bootstrap plus chains x mutations), so equal
     ``spp`` means about equal work for ``sonar_tof`` and ``sonar_mlt``.
@@ -121,7 +118,7 @@ class SonarMLTIntegrator(SonarIntegrator):
         self.bootstrap = count(props, "bootstrap", 0, "sonar_mlt")
         self.normalisation = text(props, "normalisation", "scan", "sonar_mlt")
         self.ping_step = number(props, "ping_step", 1.0, "sonar_mlt")
-        self.allocation = text(props, "allocation", "uniform", "sonar_mlt")
+        self.allocation = text(props, "allocation", "auto", "sonar_mlt")
         self.split = 0.0
         if "split" in props:
             if props.type("split").name == "String":
@@ -138,8 +135,9 @@ class SonarMLTIntegrator(SonarIntegrator):
         need(self.bootstrap >= 0, "bootstrap", self.bootstrap, "0 for automatic, or a positive number of paths per ping")
         need(self.normalisation in ("scan", "ping"), "normalisation", self.normalisation,
              "'scan' (one target over all pings) or 'ping'")
-        need(self.allocation in ("adaptive", "uniform"), "allocation", self.allocation,
-             "'adaptive' or 'uniform' (paths per ping of the path-traced render, as sonar_tof's)")
+        need(self.allocation in SonarTOFIntegrator.ALLOCATIONS, "allocation", self.allocation,
+             "one of " + ", ".join(f"'{a}'" for a in SonarTOFIntegrator.ALLOCATIONS)
+             + " (paths per ping of the path-traced render, as sonar_tof's)")
         need(0.0 <= self.ping_step <= 1.0, "ping_step", self.ping_step,
              "a fraction in [0, 1] of the small step applied to the ping")
         need(0.0 <= self.large_step <= 1.0, "large_step", self.large_step, "a probability in [0, 1]")

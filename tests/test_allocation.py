@@ -1,5 +1,6 @@
-"""sonar_tof's allocation="adaptive" (plugins/row_allocation.py): the paths per row, the same
-expectation as the uniform render, determinism per seed, refused settings."""
+"""sonar_tof's allocation="adaptive" and "auto" (plugins/row_allocation.py): the paths per row,
+the same expectation as the uniform render, the uniform render's bytes where the split stays even,
+determinism per seed, refused settings."""
 import os
 
 import numpy as np
@@ -40,7 +41,8 @@ def test_predicted_gain_closed_form():
 
 def test_a_small_predicted_gain_keeps_the_uniform_split(mitsonar_mod):
     """The periscope's pings are alike (the pilot predicts 1.08), the hidden target's nearly
-    (1.3): every ping keeps the same paths, the pilot's cost is all that is lost."""
+    (1.3): every ping keeps its ``spp`` paths and the render is the uniform render to the byte
+    (the pilot is paid on top and only chooses: its time is all that is lost)."""
     import mitsuba as mi
 
     from mitsonar.plugins.row_allocation import MIN_GAIN
@@ -48,9 +50,11 @@ def test_a_small_predicted_gain_keeps_the_uniform_split(mitsonar_mod):
     for name in ("periscope.xml", "hidden_target.xml"):
         scene = mitsonar_mod.load_scene(os.path.join(SCENES, name))
         tof = mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"})
-        tof.render_histogram(scene, seed=1, spp=1024)
+        h = tof.render_histogram(scene, seed=1, spp=1024)
         assert 1.0 <= tof.last_plan["predicted_gain"] < MIN_GAIN
-        assert (tof.last_counts == tof.last_counts[0]).all()
+        assert (tof.last_counts == 1024).all() and tof.last_plan["pilot"] == 64
+        uniform = mi.load_dict({"type": "sonar_tof", "allocation": "uniform"})
+        assert np.array_equal(h, uniform.render_histogram(scene, seed=1, spp=1024))
 
 
 @pytest.fixture(scope="module")
@@ -59,8 +63,8 @@ def intake(mitsonar_mod):
 
 
 def test_adaptive_is_deterministic_and_moves_paths_to_the_rows_with_echoes(intake):
-    """Same seed, same bytes; another seed, another scan; the budget is kept (the pilot's paths and
-    the rows' paths sum to spp per row); on the intake (echoes in a few pings) the noisiest row
+    """Same seed, same bytes; another seed, another scan; the budget is kept (the rows' paths sum
+    to spp per row, the pilot's on top); on the intake (echoes in a few pings) the noisiest row
     gets many times the paths of the quietest, which keeps a quarter of its uniform share."""
     import mitsuba as mi
 
@@ -72,10 +76,10 @@ def test_adaptive_is_deterministic_and_moves_paths_to_the_rows_with_echoes(intak
     b = tof.render_histogram(intake, seed=3, spp=256)
     assert np.array_equal(a, b) and np.array_equal(counts, tof.last_counts)
     assert not np.array_equal(a, tof.render_histogram(intake, seed=4, spp=256))
-    pilot = tof.last_plan["pilot"]
+    assert tof.last_plan["pilot"] == 16
     n_rows = intake.sensors()[0].n_pings
-    assert counts.sum() == (256 - pilot) * n_rows
-    assert counts.min() >= int(UNIFORM_MIX * (256 - pilot))
+    assert counts.sum() == 256 * n_rows
+    assert counts.min() >= int(UNIFORM_MIX * 256)
     assert counts.max() > 10 * counts.min()
 
 
@@ -92,6 +96,37 @@ def test_small_spp_is_the_uniform_render(intake):
     assert np.array_equal(adaptive.render_histogram(intake, seed=9, spp=spp),
                           uniform.render_histogram(intake, seed=9, spp=spp))
     assert adaptive.last_plan["pilot"] == 0
+
+
+def test_auto_allocates_large_renders_of_rows_that_share_no_paths(mitsonar_mod, intake):
+    """``auto`` (the default): under AUTO_MIN_PATHS paths (rows x spp) the render is the uniform
+    one to the byte; at it, the adaptive render to the byte (the intake's paths moved); a
+    multibeam whose beams share the transmit paths stays uniform (shared) at any size, and
+    sonar_mlt's default path tracer follows sonar_tof's."""
+    import mitsuba as mi
+
+    from mitsonar.plugins.row_allocation import AUTO_MIN_PATHS
+
+    n_rows = intake.sensors()[0].n_pings
+    auto = mi.load_dict({"type": "sonar_tof"})
+    assert auto.allocation == "auto"
+    small = AUTO_MIN_PATHS // n_rows // 2
+    uniform = mi.load_dict({"type": "sonar_tof", "allocation": "uniform"})
+    assert np.array_equal(auto.render_histogram(intake, seed=5, spp=small),
+                          uniform.render_histogram(intake, seed=5, spp=small))
+    large = -(-AUTO_MIN_PATHS // n_rows)
+    adaptive = mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"})
+    h = auto.render_histogram(intake, seed=5, spp=large)
+    assert np.array_equal(h, adaptive.render_histogram(intake, seed=5, spp=large))
+    assert auto.last_counts.max() > 4 * auto.last_counts.min()
+    mlt = mi.load_dict({"type": "sonar_mlt"})
+    assert np.array_equal(h, mlt.render_histogram(intake, seed=5, spp=large))
+
+    fls = mitsonar_mod.load_scene(os.path.join(SCENES, "fls_array.xml"))
+    rows = fls.sensors()[0].n_pings
+    spp = -(-AUTO_MIN_PATHS // rows)
+    shared = mi.load_dict({"type": "sonar_tof", "allocation": "uniform"})
+    assert np.array_equal(auto.render_histogram(fls, seed=2, spp=spp), shared.render_histogram(fls, seed=2, spp=spp))
 
 
 @pytest.mark.parametrize("name", ["intake.xml", "box.xml", "hidden_target.xml"])
@@ -123,7 +158,7 @@ def test_adaptive_has_the_expectation_of_the_uniform_render(mitsonar_mod, name):
 
 
 @pytest.mark.parametrize("params, message", [
-    ({"allocation": "neyman"}, "allocation.*one of uniform, adaptive"),
+    ({"allocation": "neyman"}, "allocation.*one of auto, uniform, adaptive"),
     ({"allocation": "adaptive", "share_beams": True}, "allocation.*uniform when share_beams is true")])
 def test_refused_settings(mitsonar_mod, params, message):
     import mitsuba as mi

@@ -260,7 +260,8 @@ def test_adaptive_allocation_is_the_path_tracer_with_the_pilots_allocation(mitso
     """``allocation="adaptive"``: sonar_mlt renders sonar_tof's ``allocation="adaptive"`` scan,
     byte for byte: its pilot moves the paths to the pings with noisy echoes on pile_quay (it
     predicts more than 2x there), and keeps the even split on the periscope (its pings are alike);
-    the plan says so. The default (``uniform``) is sonar_tof's default scan."""
+    the plan says so. The default (``auto``; at 21 x 1024 paths, under its threshold: uniform) is
+    sonar_tof's default scan."""
     import mitsuba as mi
 
     scene = _scene(mitsonar_mod, name)
@@ -281,7 +282,7 @@ def test_adaptive_allocation_is_the_path_tracer_with_the_pilots_allocation(mitso
 def test_bad_allocation_is_refused(mitsonar_mod):
     from conftest import scene_xml, sonar_xml
 
-    with pytest.raises(mitsonar_mod.SceneError, match=r"sonar_mlt 'allocation'.*'adaptive' or 'uniform'"):
+    with pytest.raises(mitsonar_mod.SceneError, match=r"sonar_mlt 'allocation'.*one of 'auto', 'uniform', 'adaptive'"):
         mitsonar_mod.load_scene(scene_xml(sonar_xml(n_pings=1, n_bins=4), integrator='<integrator type="sonar_mlt">'
                                           '<string name="allocation" value="even"/></integrator>'))
 
