@@ -167,7 +167,7 @@ def baseline(integrator, scene, oracle, spps, repeats, depth):
                       for r in range(repeats)])
         rel = float(np.sqrt(H.var(axis=0, ddof=1).sum() / (H.mean(axis=0) ** 2).sum()))
         plan = dict(getattr(integrator, "last_plan", None) or {})
-        paths = spp + plan.get("pilot", 0)
+        paths = spp + plan.get("extra_paths_per_row", 0)
         indep = oracle["pt_rel_error_per_path"] / np.sqrt(paths)
         ideal = indep / oracle["global_ideal_error_ratio"]
         bound = indep / oracle["global_normalisation_bound_error_ratio"]

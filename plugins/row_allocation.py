@@ -117,8 +117,9 @@ def row_variance(integrator, setup, seed, count, lanes):
 def render(integrator, setup, seed, spp, lanes, progress=None):
     """The adaptive render (module docstring) in passes of at most ``lanes`` paths: float64
     ``(n_rows, n_bins)``, the mean per row over its own paths; the paths of each row in
-    ``integrator.last_counts``, a summary (pilot paths per row, predicted gain, the least, median
-    and most paths of a row) in ``integrator.last_plan``. ``spp`` under `MIN_SPP`: every row gets
+    ``integrator.last_counts``, a summary (pilot paths per row, also as ``extra_paths_per_row``:
+    the paths traced beyond ``spp``; predicted gain; the least, median and most paths of a row) in
+    ``integrator.last_plan``. ``spp`` under `MIN_SPP`: every row gets
     ``spp`` paths (uniform)."""
     n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
     spp = int(spp)
@@ -136,7 +137,8 @@ def render(integrator, setup, seed, spp, lanes, progress=None):
         (total,) = _sums(integrator, setup, seed, counts, lanes)
         mean = total.reshape(n_rows, n_bins) / counts[:, None]
     integrator.last_counts = counts
-    integrator.last_plan = {"allocation": "adaptive", "pilot": pilot, "predicted_gain": gain,
+    integrator.last_plan = {"allocation": "adaptive", "pilot": pilot, "extra_paths_per_row": pilot,
+                            "predicted_gain": gain,
                             "paths_per_row_min": int(counts.min()),
                             "paths_per_row_median": float(np.median(counts)), "paths_per_row_max": int(counts.max())}
     if progress is not None:

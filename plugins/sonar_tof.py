@@ -151,6 +151,8 @@ class SonarTOFIntegrator(SonarIntegrator):
         """Mean echo energy per bin, float64 ``(n_pings, n_bins)``.
 
         ``progress(done_spp, spp)`` is called after each pass (long renders run several).
+        ``last_plan`` says how the paths were allocated (``extra_paths_per_row``: those traced
+        per row beyond ``spp``, the adaptive allocation's pilot).
         """
         from . import row_allocation
 
@@ -166,6 +168,8 @@ class SonarTOFIntegrator(SonarIntegrator):
                 shared = SharedFrame(setup, pose)
         if shared is None and row_allocation.adaptive(self.allocation, n_pings, spp):
             return row_allocation.render(self, setup, seed, spp, MAX_LANES_PER_PASS, progress)
+        # what this render did (`row_allocation.render` says so for its own): spp paths per row
+        self.last_plan, self.last_counts = {"allocation": "uniform", "extra_paths_per_row": 0}, None
         if shared is None:
             def one_pass(start, count):
                 return self._pass(setup, seed, start, count)

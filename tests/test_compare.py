@@ -238,6 +238,29 @@ def test_parsers_accept_good_input():
     assert parse_regions(["chamber=3.6:12"]) == {"chamber": (3.6, 12.0)}
 
 
+def test_the_path_clock_counts_the_paths_an_allocation_traces_beyond_spp(small_scene, mitsonar_mod):
+    """sonar_tof's adaptive allocation traces a pilot of spp / 16 paths per ping on top of spp:
+    the deterministic clock charges them (equal work means equal paths traced); a uniform render
+    after it is charged its spp alone (no plan left over from the render before)."""
+    import mitsuba as mi
+
+    from mitsonar.jobs.compare.budget import PathClock
+    from mitsonar.jobs.compare.engine import Bench
+
+    scene = mitsonar_mod.load_scene(small_scene)
+    clock = PathClock(1.0)
+    bench = Bench(scene=scene, sensor=scene.sensors()[0], scene_bytes=b"", max_depth=3, integrators={},
+                  min_spp={}, calibration_seconds=0.01, clock=clock)
+    bench.render(mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"}), 1024, 1)
+    assert clock() == 4 * (1024 + 64)
+    uniform = mi.load_dict({"type": "sonar_tof", "allocation": "uniform"})
+    bench.render(uniform, 1024, 1)
+    assert clock() == 4 * (1024 + 64) + 4 * 1024
+    auto = mi.load_dict({"type": "sonar_tof"})   # 4 pings x 1024: under AUTO_MIN_PATHS, uniform
+    bench.render(auto, 1024, 2)
+    assert clock() == 4 * (1024 + 64) + 8 * 1024 and auto.last_plan["allocation"] == "uniform"
+
+
 def run_cli(*args):
     env = dict(os.environ)
     env.pop("MITSONAR_DEBUG", None)

@@ -108,10 +108,13 @@ class Bench:
 
     def render(self, integrator, spp, seed):
         """One histogram (n_pings, n_bins) of ``integrator`` at ``spp`` with ``seed`` (counted by a
-        `PathClock`)."""
+        `PathClock`, with the paths an integrator traced beyond ``spp``: its plan's
+        ``extra_paths_per_row``, the adaptive allocation's pilot)."""
+        integrator.last_plan = {}
         hist = integrator.render_histogram(self.scene, self.sensor, seed=seed, spp=int(spp), max_depth=self.max_depth)
         if isinstance(self.clock, PathClock):
-            self.clock.count(spp, self.sensor.n_pings)
+            extra = int((getattr(integrator, "last_plan", None) or {}).get("extra_paths_per_row", 0))
+            self.clock.count(int(spp) + extra, self.sensor.n_pings)
         return hist
 
 
