@@ -27,6 +27,7 @@ own noise removed (``sqrt(e^2 - e_ref^2)``, ``e_ref`` from the halves' differenc
     python benchmarks/mlt_equal_time.py --scenes periscope,intake [--spp 4096] [--repeats 7]
         [--contender sonar_mlt] [--set split=auto] [--baseline sonar_tof] [--reference-spp 262144]
         [--curved contender] [--strip contender] [--match spp]
+        [--pilot-guide contender]
 
 ``--set`` and ``--baseline-set`` pass parameters (``name=value``; numbers are read as floats,
 ``true``/``false`` as booleans) to the contender and the baseline. Prints one JSON object per
@@ -86,13 +87,15 @@ def reference(scene, name, spp, folder):
 
 
 def timed(integ, scene, spp, seed):
-    from mitsonar.plugins import image_guide
+    from mitsonar.plugins import image_guide, row_allocation
 
     # the image guide through curved mirrors, per integrator (`image_guide.CURVED_GUIDE` is read
     # when a render sets up; its kernels are recorded apart from the planar guide's)
     image_guide.CURVED_GUIDE = bool(getattr(integ, "_bench_curved", False))
     # the strip guide (`image_guide.STRIP_GUIDE`, on by default), likewise per integrator
     image_guide.STRIP_GUIDE = bool(getattr(integ, "_bench_strip", True))
+    # the adaptive allocation's guide of the emitted elevation (`row_allocation.GUIDE`, on)
+    row_allocation.GUIDE = bool(getattr(integ, "_bench_pilot_guide", True))
     t0 = time.process_time()
     h = integ.render_histogram(scene, seed=seed, spp=spp)
     return h, time.process_time() - t0
@@ -109,7 +112,7 @@ def bootstrap_spread(ea, ta, eb, tb, rng, n=2000):
 
 
 def measure(name, baseline, contender, spp, repeats, ref_spp, folder, seed=0, curved=(False, False),
-            strip=(True, True), match="time"):
+            strip=(True, True), match="time", pilot_guide=(True, True)):
     import mitsuba as mi
 
     import mitsonar
@@ -121,6 +124,7 @@ def measure(name, baseline, contender, spp, repeats, ref_spp, folder, seed=0, cu
     B = mi.load_dict(contender)
     A._bench_curved, B._bench_curved = curved
     A._bench_strip, B._bench_strip = strip
+    A._bench_pilot_guide, B._bench_pilot_guide = pilot_guide
 
     def err(h):
         e = np.linalg.norm(h - ref) / norm
@@ -154,7 +158,7 @@ def measure(name, baseline, contender, spp, repeats, ref_spp, folder, seed=0, cu
                           "rel_l2_median": float(np.median(eb)), "rel_l2": [float(v) for v in eb],
                           "plan": getattr(B, "last_plan", None)},
             "time_mismatch": float(np.median(tb) / np.median(ta)), "match": match, "curved_guide": list(curved),
-            "strip_guide": list(strip),
+            "strip_guide": list(strip), "pilot_guide": list(pilot_guide),
             "reference": {"spp": ref_spp, "self_rel_l2": self_err}}
 
 
@@ -171,6 +175,9 @@ def main(argv=None):
     ap.add_argument("--strip", default="both", choices=("none", "baseline", "contender", "both"),
                     help="which integrator renders with the strip guide to curved mirrors "
                          "(plugins/image_guide.py STRIP_GUIDE, on by default: both)")
+    ap.add_argument("--pilot-guide", default="both", choices=("none", "baseline", "contender", "both"),
+                    help="which integrator's adaptive allocation guides the emitted elevation from its pilot "
+                         "(plugins/row_allocation.py GUIDE, on by default: both)")
     ap.add_argument("--spp", type=int, default=4096, help="the baseline's spp (default 4096)")
     ap.add_argument("--repeats", type=int, default=7, help=f"renders each (at least {MIN_REPEATS}; default 7)")
     ap.add_argument("--reference-spp", type=int, default=1 << 18)
@@ -192,8 +199,9 @@ def main(argv=None):
     contender = {"type": args.contender, **parse_params(args.set, "--set")}
     curved = (args.curved in ("baseline", "both"), args.curved in ("contender", "both"))
     strip = (args.strip in ("baseline", "both"), args.strip in ("contender", "both"))
+    pilot_guide = (args.pilot_guide in ("baseline", "both"), args.pilot_guide in ("contender", "both"))
     out = [measure(s, baseline, contender, args.spp, args.repeats, args.reference_spp, args.output, args.seed, curved,
-                   strip, args.match)
+                   strip, args.match, pilot_guide)
            for s in scenes]
     json.dump(out, sys.stdout, indent=1)
     print()

@@ -14,11 +14,25 @@ summed per-path variance of its bins. For a fixed total ``N = sum_r n_r`` it is 
    paths), at least one path per row, integers by largest remainders; evenly when the pilot
    predicts less than `MIN_GAIN`: then the render is the uniform render, byte for byte (its
    passes, samples and sums), and the pilot's time is all that is lost;
-3. **estimate**: each row's mean over its own ``n_r`` paths, drawn as ``sonar_tof``'s (its
+3. **guide** (`GUIDE`): the pilot also sums each row's squared echo energies over `GUIDE_BINS`
+   slices of the primary sample that draws the emitted elevation (``u.y``: the beam table's
+   marginal). A row's slices get the second stage's paths in proportion to the square root of
+   their second moments, `GUIDE_MIX` of them evenly: a piecewise-constant density ``g`` over
+   ``u.y``, drawn by warping the row's own ``u.y`` (each slice's share of [0, 1) onto the slice,
+   monotone, so the Sobol points stay stratified), the emission weight divided by ``g``. The
+   optimal density of one primary coordinate is proportional to the root of the second moment
+   given it (importance sampling: Kahn and Marshall 1953; in primary sample space, as path
+   guiding does for directions: Mueller et al. 2017). Used where the pilot predicts at least
+   `GUIDE_MIN_GAIN` in variance, cross-validated between its even and odd paths
+   (`cross_validated_guide`; rows it does not help keep the even density): an echo that returns only at some elevations (the pile seen in a
+   quay wall returns near the horizontal, of a 35 deg beam), and the rows' variances for step 2
+   are then the guided ones;
+4. **estimate**: each row's mean over its own ``n_r`` paths, drawn as ``sonar_tof``'s (its
    ``sampling``: `samples.SobolSamples` by default) with the render's seed.
 
 Unbiased: the second stage's samples are drawn with a seed apart from the pilot's, so given the
-pilot (hence ``n_r``) each row's mean is the mean of ``n_r`` paths of the row's own distribution.
+pilot (hence ``n_r`` and ``g``) each row's mean is the mean of ``n_r`` paths of the row's own
+distribution, importance weighted by the density they were drawn with.
 The pilot's paths only choose and are left out of the estimate: combining them weighted by counts
 that depend on their own values is a ratio estimator, biased (rows whose pilot saw more get more
 paths, which would weight their pilot's sums down). The pilot is paid on top of the budget: the
@@ -37,7 +51,7 @@ import numpy as np
 
 from . import frozen_pass
 from .exact_sum import ExactBins
-from .samples import opaque_u32
+from .samples import HashSamples, opaque_u32
 
 #: ``allocation="auto"`` (``sonar_tof``'s default) allocates where the render traces at least this
 #: many paths (rows x spp): the pilot's fixed cost (3-5 ms on 2 cores: its own kernel, the
@@ -60,6 +74,18 @@ UNIFORM_MIX = 0.25
 MIN_GAIN = 2.0
 #: The pilot's samples: the render's seed xor this (independent of the second stage's).
 PILOT_SEED = 0xA110C8ED
+#: The guide of step 3: on (module docstring); slices of ``u.y``; the share of each row's paths
+#: spread evenly over them (a defensive mixture: no slice gets under 0.3 of its even share); the
+#: least predicted gain in variance (the pilot's, on its own paths) worth guiding for.
+GUIDE = True
+GUIDE_BINS = 16
+GUIDE_MIX = 0.3
+GUIDE_MIN_GAIN = 1.3
+#: The least pilot (paths per row) that guides: 8 paths per slice and half on average, for
+#: `cross_validated_guide` to score anything (at 64 the choice flipped from seed to seed).
+GUIDE_MIN_PILOT = 256
+#: The largest float32 below 1 (a warped coordinate stays in [0, 1)).
+ONE_MINUS_EPS = float(np.nextafter(np.float32(1.0), np.float32(0.0)))
 
 
 def adaptive(allocation, n_rows, spp):
@@ -105,13 +131,85 @@ def predicted_gain(v, counts):
 
 
 def row_variance(integrator, setup, seed, count, lanes):
-    """The pilot: ``count`` paths per row (seed ``seed ^ PILOT_SEED``); per row the
-    summed per-path variance of its bins, ``sum_b (E[e^2] - E[e]^2)``, float64 ``(n_rows,)``."""
+    """The pilot: ``count`` independent paths per row (`samples.HashSamples`, seed ``seed ^
+    PILOT_SEED``: its even and odd paths are then independent halves, as `cross_validated_guide`
+    needs; two halves of one Sobol sequence fill each other's gaps); per row the
+    summed per-path variance of its bins, ``sum_b (E[e^2] - E[e]^2)``, float64 ``(n_rows,)``, and
+    the mean squared echo energy per path over each of `GUIDE_BINS` slices of ``u.y``, for the
+    paths of even and of odd number apart (the sums over ``count / (2 GUIDE_BINS)``, a slice's
+    expected share), float64 ``(n_rows, 2, GUIDE_BINS)``."""
     n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
     counts = np.full(n_rows, count, dtype=np.int64)
-    first, second = _sums(integrator, setup, seed ^ PILOT_SEED, counts, lanes, squares=True)
+    first, second, sliced = _sums(integrator, setup, seed ^ PILOT_SEED, counts, lanes, squares=True)
     mean = first.reshape(n_rows, n_bins) / count
-    return np.maximum(second.reshape(n_rows, n_bins) / count - mean * mean, 0.0).sum(axis=1)
+    v = np.maximum(second.reshape(n_rows, n_bins) / count - mean * mean, 0.0).sum(axis=1)
+    return v, sliced.reshape(n_rows, 2, GUIDE_BINS) * (2 * GUIDE_BINS / count)
+
+
+def cross_validated_guide(m2, mix=GUIDE_MIX):
+    """Step 3's densities from the two halves' slice second moments ``m2`` ``(n_rows, 2, n)``
+    (`row_variance`): `guide_tables` of their mean, and per row the second moment left over the
+    even one's *cross-validated*: each half scored with the densities of the other (a slice that
+    one half saw a rare echo in is not rewarded by that same echo). Rows the guide does not help
+    so scored (factor >= 1) keep the even density (the identity warp) and factor 1: on the
+    intake, whose rare echoes through the opening the pilot's slices estimate poorly, the guide
+    fitted to the whole pilot lost 1.1-1.2x at equal paths."""
+    m2 = np.maximum(np.asarray(m2, dtype=np.float64), 0.0)
+    n_rows, _, n = m2.shape
+    prob, cdf, _ = guide_tables(m2.mean(axis=1), mix)
+    left, even = np.zeros(n_rows), np.zeros(n_rows)
+    for h in (0, 1):
+        other, _, _ = guide_tables(m2[:, 1 - h], mix)
+        left += (m2[:, h] / (n * n * other)).sum(axis=1)
+        even += m2[:, h].mean(axis=1)
+    factor = np.ones(n_rows)
+    has = even > 0
+    factor[has] = left[has] / even[has]
+    off = factor >= 1.0
+    cdf[off] = np.linspace(0.0, 1.0, n + 1, dtype=np.float32)
+    prob[off] = np.diff(cdf[off], axis=1)
+    factor[off] = 1.0
+    return prob, cdf, factor
+
+
+def guide_tables(m2, mix=GUIDE_MIX):
+    """Step 3's densities from the slices' second moments ``m2`` ``(n_rows, n_slices)``: each
+    slice's probability ``mix / n + (1 - mix) sqrt(m2) / sum sqrt(m2)`` (even in a row without
+    echoes) as float32 ``(n_rows, n_slices)`` and their cumulative sums ``(n_rows, n_slices + 1)``
+    (from 0 to 1, the probabilities their float32 differences), and per row the second moment the
+    guide leaves over the even one's, ``sum m2 / (n^2 p) / mean(m2)`` (1 without echoes)."""
+    m2 = np.maximum(np.asarray(m2, dtype=np.float64), 0.0)
+    n_rows, n = m2.shape
+    s = np.sqrt(m2)
+    total = s.sum(axis=1, keepdims=True)
+    has = total[:, 0] > 0
+    p = np.full((n_rows, n), 1.0 / n)
+    p[has] = mix / n + (1.0 - mix) * s[has] / total[has]
+    cdf = np.zeros((n_rows, n + 1), dtype=np.float32)
+    cdf[:, 1:] = np.cumsum(p, axis=1)
+    cdf[:, -1] = 1.0
+    prob = np.diff(cdf, axis=1)
+    factor = np.ones(n_rows)
+    uniform = m2.mean(axis=1)
+    factor[has] = (m2[has] / (n * n * prob[has])).sum(axis=1) / uniform[has]
+    return prob, cdf, factor
+
+
+def warp(u, row, cdf, prob, n):
+    """Step 3's draw inside a kernel: ``u`` (mi.Float in [0, 1)) of lanes in rows ``row`` moved
+    by each row's slice probabilities (``prob``, flat float32 ``n_rows * n``; ``cdf`` their
+    cumulative sums, ``n_rows * (n + 1)``): the slice ``k`` whose cumulative interval holds ``u``,
+    then ``u``'s place in it mapped onto ``[k / n, (k + 1) / n)``. Returns the new coordinate and
+    its density ``n p_k``."""
+    base = row * (n + 1)
+    k = mi.UInt32(0)
+    for j in range(1, n):
+        k += dr.select(u >= dr.gather(mi.Float, cdf, base + j), 1, 0)
+    lo = dr.gather(mi.Float, cdf, base + k)
+    pk = dr.gather(mi.Float, prob, row * n + k)
+    t = dr.clip((u - lo) / pk, 0.0, 1.0)
+    out = dr.minimum((mi.Float(k) + t) * (1.0 / n), ONE_MINUS_EPS)
+    return out, pk * n
 
 
 def render(integrator, setup, seed, spp, lanes, progress=None):
@@ -125,20 +223,21 @@ def render(integrator, setup, seed, spp, lanes, progress=None):
     spp = int(spp)
     if spp < 1:
         raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
-    pilot, counts, gain = choose(integrator, setup, seed, spp, lanes)
+    pilot, counts, gain, guide = choose(integrator, setup, seed, spp, lanes)
     if counts is None:
         counts = np.full(n_rows, spp, dtype=np.int64)
-    if (counts == counts[0]).all():
+    if guide is None and (counts == counts[0]).all():
         # the uniform render's own passes (ping and path number computed in the kernel, its
         # recordings): the same samples and sums, without the lanes' index arrays
         mean = integrator.accumulate(int(counts[0]), lanes // n_rows,
                                      lambda start, count: integrator._pass(setup, seed, start, count))
     else:
-        (total,) = _sums(integrator, setup, seed, counts, lanes)
+        (total,) = _sums(integrator, setup, seed, counts, lanes, guide=guide)
         mean = total.reshape(n_rows, n_bins) / counts[:, None]
     integrator.last_counts = counts
     integrator.last_plan = {"allocation": "adaptive", "pilot": pilot, "extra_paths_per_row": pilot,
-                            "predicted_gain": gain,
+                            "predicted_gain": gain, "guided": guide is not None,
+                            "guide_gain": None if guide is None else guide["gain"],
                             "paths_per_row_min": int(counts.min()),
                             "paths_per_row_median": float(np.median(counts)), "paths_per_row_max": int(counts.max())}
     if progress is not None:
@@ -147,31 +246,43 @@ def render(integrator, setup, seed, spp, lanes, progress=None):
 
 
 def choose(integrator, setup, seed, spp, lanes):
-    """Steps 1 and 2 of the module docstring for a budget of ``spp`` paths per row: ``(pilot
-    paths per row, paths per row or None, predicted gain)``; None (the even split, ``spp`` paths
-    each) where the pilot predicts under `MIN_GAIN`, or where ``spp`` is under `MIN_SPP` or there
-    is one row (then no pilot runs)."""
+    """Steps 1 to 3 of the module docstring for a budget of ``spp`` paths per row: ``(pilot
+    paths per row, paths per row or None, predicted gain, guide or None)``; None (the even split,
+    ``spp`` paths each) where the pilot predicts under `MIN_GAIN`, or where ``spp`` is under
+    `MIN_SPP` or there is one row (then no pilot runs); the guide (``prob`` and ``cdf``,
+    `guide_tables`, and its predicted ``gain`` in variance) None where it predicts under
+    `GUIDE_MIN_GAIN`, the pilot is under `GUIDE_MIN_PILOT` or `GUIDE` is off."""
     n_rows = setup.sensor.n_pings
     if spp < MIN_SPP or n_rows < 2:
-        return 0, None, 1.0
+        return 0, None, 1.0, None
     pilot = max(MIN_PILOT, int(spp * PILOT_FRACTION))
-    v = row_variance(integrator, setup, seed, pilot, lanes)
+    v, m2 = row_variance(integrator, setup, seed, pilot, lanes)
+    guide = None
+    if GUIDE and pilot >= GUIDE_MIN_PILOT:
+        prob, cdf, factor = cross_validated_guide(m2)
+        guided = v * factor
+        g = float(v.sum() / guided.sum()) if guided.sum() > 0 else 1.0
+        if g >= GUIDE_MIN_GAIN:
+            guide, v = {"prob": prob, "cdf": cdf, "gain": g}, guided
     counts = allocate(v, spp * n_rows)
     gain = predicted_gain(v, counts)
-    return pilot, (counts if gain >= MIN_GAIN else None), gain
+    return pilot, (counts if gain >= MIN_GAIN else None), gain, guide
 
 
-def _sums(integrator, setup, seed, counts, lanes, squares=False):
+def _sums(integrator, setup, seed, counts, lanes, squares=False, guide=None):
     """Paths ``0 .. counts[r]`` of every row ``r`` (the integrator's ``sampling``, seed ``seed``),
     in passes of at most ``lanes`` lanes: the summed energy per bin (and with ``squares`` the
-    summed squared echo energies), float64 ``n_rows * n_bins`` arrays."""
+    summed squared echo energies, and those over the `GUIDE_BINS` slices of ``u.y`` per row and
+    parity of the path's number),
+    float64 ``n_rows * n_bins`` arrays; ``guide`` (`choose`'s) draws the emission's ``u.y`` from
+    each row's slice density (`warp`)."""
     from .denormals import flushing
 
     counts = np.asarray(counts, dtype=np.int64)
     row = np.repeat(np.arange(counts.size, dtype=np.uint32), counts)
     index = (np.arange(row.size, dtype=np.int64) - np.repeat(np.cumsum(counts) - counts, counts)).astype(np.uint32)
     seed_o = opaque_u32(seed)
-    sampler = integrator.SAMPLERS[integrator.sampling]
+    sampler = _sampler(integrator, squares)
 
     def body(setup, seed_o, ping, idx, d, w):
         return _traced(setup, integrator, seed_o, ping, idx, d, w, squares)
@@ -182,20 +293,47 @@ def _sums(integrator, setup, seed, counts, lanes, squares=False):
     with dr.suspend_grad(), flushing():
         for a in range(0, row.size, lanes):
             ping, idx = mi.UInt32(row[a:a + lanes]), mi.UInt32(index[a:a + lanes])
-            d, w = frozen_pass.emitted(setup.sensor.beam, sampler(seed_o, ping, idx))
+            if guide is None:
+                d, w = frozen_pass.emitted(setup.sensor.beam, sampler(seed_o, ping, idx))
+            else:
+                d, w = _guided_emission(setup.sensor.beam, sampler(seed_o, ping, idx), ping, guide)
             parts = frozen_pass.run(body, integrator, setup, seed_o, ping, idx, d, w)
             parts = [p.numpy().astype(np.float64) for p in (parts if squares else (parts,))]
             out = parts if out is None else [o + p for o, p in zip(out, parts)]
     return out
 
 
+def _sampler(integrator, pilot):
+    """The primary samples of a pass: the integrator's ``sampling``, the pilot's independent."""
+    return HashSamples if pilot else integrator.SAMPLERS[integrator.sampling]
+
+
+def _guided_emission(beam, samples, ping, guide):
+    """The emitted directions and weights of ``samples`` (dims 0-1) with ``u.y`` drawn by the
+    guide's slice densities (`warp`): the beam's weight over the density, evaluated."""
+    if "arrays" not in guide:   # uploaded once per render
+        guide["arrays"] = tuple(mi.Float(np.ascontiguousarray(guide[k], dtype=np.float32).ravel())
+                                for k in ("cdf", "prob"))
+    cdf, prob = guide["arrays"]
+    u = samples.get2(0)
+    uy, density = warp(u.y, ping, cdf, prob, guide["prob"].shape[1])
+    d, w = beam.sample(mi.Point2f(u.x, uy), True)
+    w = w / density
+    dr.eval(d, w)
+    return d, w
+
+
 def _traced(setup, integrator, seed_o, ping, idx, d, w, squares):
     """One pass's path kernel: the lanes' rows ``ping`` and path numbers ``idx``, their emitted
     directions ``d`` and weights ``w`` drawn beforehand (`frozen_pass.emitted`)."""
     n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
-    samples = integrator.SAMPLERS[integrator.sampling](seed_o, ping, idx)
+    samples = _sampler(integrator, squares)(seed_o, ping, idx)
     sums = [ExactBins(n_rows * n_bins) for _ in range(2 if squares else 1)]
     bins = setup.bins
+    if squares:   # step 3's slices of the emission's u.y
+        sums.append(ExactBins(n_rows * 2 * GUIDE_BINS))
+        u_y = samples.get2(0).y
+        sliced = (ping * 2 + (idx & 1)) * GUIDE_BINS + mi.UInt32(dr.clip(dr.floor(u_y * GUIDE_BINS), 0, GUIDE_BINS - 1))
 
     def record(depth_k, rng, energy, valid, hit):
         b, valid = bins.index(rng, valid)
@@ -203,6 +341,7 @@ def _traced(setup, integrator, seed_o, ping, idx, d, w, squares):
         sums[0].add(energy, at, valid)
         if squares:
             sums[1].add(energy * energy, at, valid)
+            sums[2].add(energy * energy, sliced, valid)
 
     integrator.sample(integrator.emitting(setup, d, w), ping, samples, record)
     totals = [s.total() for s in sums]

@@ -41,20 +41,67 @@ def test_predicted_gain_closed_form():
 
 def test_a_small_predicted_gain_keeps_the_uniform_split(mitsonar_mod):
     """The periscope's pings are alike (the pilot predicts 1.08), the hidden target's nearly
-    (1.3): every ping keeps its ``spp`` paths and the render is the uniform render to the byte
-    (the pilot is paid on top and only chooses: its time is all that is lost)."""
+    (1.2-1.3): every ping keeps its ``spp`` paths. The periscope's echoes come from every
+    elevation (no guide either): the render is the uniform render to the byte (the pilot is paid
+    on top and only chooses: its time is all that is lost). The hidden target's boulder answers
+    at a few elevations: the pilot guides them (2x predicted), and the same paths per ping are
+    drawn there."""
     import mitsuba as mi
 
-    from mitsonar.plugins.row_allocation import MIN_GAIN
+    from mitsonar.plugins.row_allocation import GUIDE_MIN_GAIN, MIN_GAIN
 
-    for name in ("periscope.xml", "hidden_target.xml"):
+    uniform = mi.load_dict({"type": "sonar_tof", "allocation": "uniform"})
+    for name, guided in (("periscope.xml", False), ("hidden_target.xml", True)):
         scene = mitsonar_mod.load_scene(os.path.join(SCENES, name))
         tof = mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"})
-        h = tof.render_histogram(scene, seed=1, spp=1024)
+        h = tof.render_histogram(scene, seed=1, spp=4096)
         assert 1.0 <= tof.last_plan["predicted_gain"] < MIN_GAIN
-        assert (tof.last_counts == 1024).all() and tof.last_plan["pilot"] == 64
-        uniform = mi.load_dict({"type": "sonar_tof", "allocation": "uniform"})
-        assert np.array_equal(h, uniform.render_histogram(scene, seed=1, spp=1024))
+        assert (tof.last_counts == 4096).all() and tof.last_plan["pilot"] == 256
+        assert tof.last_plan["guided"] == guided
+        assert guided == (tof.last_plan["guide_gain"] is not None and tof.last_plan["guide_gain"] >= GUIDE_MIN_GAIN)
+        assert np.array_equal(h, uniform.render_histogram(scene, seed=1, spp=4096)) != guided
+
+
+def test_guide_tables_are_the_square_root_rule_with_a_floor():
+    """Closed forms: slices of second moments 0, 4, 0, 1 with a 0.2 floor get 0.05 + 0.8 x (0, 2/3, 0,
+    1/3); the cumulative sums run from 0 to 1 and their differences are the probabilities; the
+    second moment left is sum m2 / (n^2 p) over the even one's mean; a row without echoes is even
+    and keeps its variance."""
+    from mitsonar.plugins.row_allocation import guide_tables
+
+    prob, cdf, factor = guide_tables([[0.0, 4.0, 0.0, 1.0], [0.0, 0.0, 0.0, 0.0]], mix=0.2)
+    want = 0.05 + 0.8 * np.array([0.0, 2.0 / 3.0, 0.0, 1.0 / 3.0])
+    np.testing.assert_allclose(prob[0], want, rtol=1e-6)
+    np.testing.assert_allclose(prob[1], 0.25, rtol=1e-6)
+    assert cdf[0, 0] == 0.0 and cdf[0, -1] == 1.0 and np.array_equal(np.diff(cdf, axis=1), prob)
+    assert factor[0] == pytest.approx((4.0 / (16 * want[1]) + 1.0 / (16 * want[3])) / 1.25, rel=1e-6)
+    assert factor[0] < 1.0 and factor[1] == 1.0
+
+
+def test_warp_draws_each_slice_with_its_probability(mitsonar_mod):
+    """Uniform coordinates through `warp` (2 rows, 8 slices): each slice [k/8, (k+1)/8) receives
+    its probability's share of them, the map is monotone and stays in [0, 1), the density it
+    returns is 8 p_k on slice k, and the importance weights 1 / density average to 1 (what makes
+    the guided emission unbiased)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from mitsonar.plugins.row_allocation import guide_tables, warp
+
+    rng = np.random.default_rng(5)
+    prob, cdf, _ = guide_tables(rng.random((2, 8)) ** 4, mix=0.3)
+    m = 1 << 16
+    u = (np.arange(m) + 0.5) / m
+    for row in (0, 1):
+        out, dens = warp(mi.Float(u.astype(np.float32)), mi.UInt32(np.full(m, row, np.uint32)),
+                         mi.Float(cdf.ravel()), mi.Float(prob.ravel()), 8)
+        dr.eval(out, dens)
+        out, dens = out.numpy(), dens.numpy()
+        assert (np.diff(out) >= 0).all() and out.min() >= 0.0 and out.max() < 1.0
+        k = np.floor(out * 8).astype(int)
+        np.testing.assert_allclose(np.bincount(k, minlength=8) / m, prob[row], atol=2.0 / m)
+        np.testing.assert_allclose(dens, 8 * prob[row][k], rtol=1e-6)
+        assert np.mean(1.0 / dens) == pytest.approx(1.0, abs=1e-4)
 
 
 @pytest.fixture(scope="module")
@@ -129,28 +176,40 @@ def test_auto_allocates_large_renders_of_rows_that_share_no_paths(mitsonar_mod, 
     assert np.array_equal(auto.render_histogram(fls, seed=2, spp=spp), shared.render_histogram(fls, seed=2, spp=spp))
 
 
-@pytest.mark.parametrize("name", ["intake.xml", "box.xml", "hidden_target.xml"])
-def test_adaptive_has_the_expectation_of_the_uniform_render(mitsonar_mod, name):
+@pytest.mark.parametrize("name, guided", [("intake.xml", False), ("box.xml", True), ("hidden_target.xml", True)])
+def test_adaptive_has_the_expectation_of_the_uniform_render(mitsonar_mod, name, guided, monkeypatch):
     """Welch t tests on block sums (10 ping groups x 6 range groups, and the total) of 8 renders
     each, Bonferroni-corrected so that the whole test raises a false alarm with probability 1e-3
     when both have the same mean. The pilot chooses from its own seed, so each row's mean is
-    unbiased whatever it chose; a pilot counted into the estimate by its own counts would not be."""
+    unbiased whatever it chose (paths per row, and on the box and the hidden target the guide of
+    the emitted elevation, here chosen wherever it predicts any gain so that every render tests
+    it: renders guided or not mixed would widen the spread the test measures against); a pilot
+    counted into the estimate by its own counts would not be."""
     import mitsuba as mi
     from scipy import stats
 
+    from mitsonar.plugins import row_allocation
     from test_mlt import grouped
 
+    monkeypatch.setattr(row_allocation, "GUIDE_MIN_GAIN", 1.0)
     scene = mitsonar_mod.load_scene(os.path.join(SCENES, name))
-    uniform = mi.load_dict({"type": "sonar_tof"})
+    uniform = mi.load_dict({"type": "sonar_tof", "allocation": "uniform"})
     adaptive = mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"})
-    runs, spp = 8, 1024
+    runs, spp = 8, 4096
 
     def blocks(integrator, seed):
         h = integrator.render_histogram(scene, seed=seed, spp=spp)
         return np.append(grouped(h, 10, 6), h.sum())
 
     a = np.stack([blocks(uniform, s) for s in range(runs)])
-    b = np.stack([blocks(adaptive, 100 + s) for s in range(runs)])
+    b, chosen = [], []
+    for s in range(runs):
+        b.append(blocks(adaptive, 100 + s))
+        chosen.append(adaptive.last_plan["guided"])
+    b = np.stack(b)
+    # the guide of the emitted elevation is what the box's and hidden target's renders test too
+    if guided:
+        assert all(chosen), chosen
     keep = (a.mean(0) > 1e-3 * a.mean(0).max()) & (a.std(0) > 0) & (b.std(0) > 0)
     assert keep.sum() >= 5 and keep[-1]
     p = stats.ttest_ind(a[:, keep], b[:, keep], equal_var=False).pvalue
