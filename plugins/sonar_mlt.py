@@ -100,7 +100,9 @@ class SonarMLTIntegrator(SonarIntegrator):
     (0.28-0.69x at equal time), whose room the oracle bounds at 6.1-6.6x
     (``benchmarks/mlt_oracle.py``), and measured again against ``sonar_tof`` with its pilot's
     allocation (its default ``allocation="auto"`` since 2026-11-27, which moves paths to the pings
-    with noisy echoes: the room the oracle found on ``intake`` and most of ``pile_quay``'s).
+    with noisy echoes and guides their emitted elevations: the room the oracle found on
+    ``intake``, and on ``pile_quay`` all but 2.4-2.6x, of which a sampler normalised by uniform
+    paths could take at most 1.5-1.6x).
 
     ``spp`` counts path evaluations per ping (bootstrap plus chains x mutations), so equal
     ``spp`` means about equal work for ``sonar_tof`` and ``sonar_mlt``.

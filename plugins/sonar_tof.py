@@ -99,10 +99,14 @@ class SonarTOFIntegrator(SonarIntegrator):
                                  ``spp / 16`` paths per row (paid on top; it only chooses), then the
                                  ``spp`` x rows paths shared out in proportion to the square root of
                                  each row's estimated variance, a quarter of them evenly, or evenly
-                                 (the uniform render, byte for byte) where the pilot predicts under
-                                 2x (`row_allocation`): 2.0x less error at equal time on ``intake``
-                                 and ``pile_quay``, 1.2x on ``box``, the pilot's 5-16 % of time lost
-                                 where the split stays even. ``auto``: ``adaptive`` where the rows
+                                 where the pilot predicts under 2x; and where its even and odd paths
+                                 agree that it pays (>= 1.3x), each row's emitted elevation drawn by
+                                 its echoes' second moments over 16 slices of that primary sample
+                                 (`row_allocation`, step 3). Where neither, the render is the
+                                 uniform render, byte for byte.
+                                 At equal time: ``pile_quay`` 2.2x less error, ``intake`` 1.8x,
+                                 ``box`` 1.4x, the pilot's 6-23 % of time lost where nothing
+                                 changes (the numbers: docs/benchmarks.rst). ``auto``: ``adaptive`` where the rows
                                  do not share paths (no shared beams) and the render traces at
                                  least 2^18 of them (rows x spp; the pilot's fixed 3-5 ms then costs
                                  under a tenth), else ``uniform``. Same expectation. ``adaptive``

@@ -14,8 +14,8 @@ def add_subcommands(subparsers):
                     "then every integrator at every time budget, and write compare.json (errors per ping "
                     "and overall versus seconds, settings), convergence.png and polar.png.",
         epilog="Which integrator where (docs/howto/choose_integrator.rst, numbers in docs/benchmarks.rst): "
-               "sonar_tof, the default, on every scene measured (its allocation: 2.0x less error at equal "
-               "time on intake and pile_quay, 1.2x on box); sonar_mlt with no parameters is sonar_tof, its "
+               "sonar_tof, the default, on every scene measured (its pilot's allocation: 2.2x less error at "
+               "equal time on pile_quay, 1.8x on intake, 1.4x on box); sonar_mlt with no parameters is sonar_tof, its "
                "chains lost 2-16x at equal time (split=off, split=auto); sonar_bdpt to check echoes "
                "through openings.")
     c.add_argument("scene", help="scene XML file")
