@@ -226,11 +226,12 @@ def render(integrator, setup, seed, spp, lanes, progress=None):
     pilot, counts, gain, guide = choose(integrator, setup, seed, spp, lanes)
     if counts is None:
         counts = np.full(n_rows, spp, dtype=np.int64)
-    if guide is None and (counts == counts[0]).all():
+    if (counts == counts[0]).all():
         # the uniform render's own passes (ping and path number computed in the kernel, its
-        # recordings): the same samples and sums, without the lanes' index arrays
+        # recordings): the same samples and sums, without the lanes' index arrays; with the guide,
+        # its emission drawn by it
         mean = integrator.accumulate(int(counts[0]), lanes // n_rows,
-                                     lambda start, count: integrator._pass(setup, seed, start, count))
+                                     lambda start, count: integrator._pass(setup, seed, start, count, guide))
     else:
         (total,) = _sums(integrator, setup, seed, counts, lanes, guide=guide)
         mean = total.reshape(n_rows, n_bins) / counts[:, None]
@@ -296,7 +297,7 @@ def _sums(integrator, setup, seed, counts, lanes, squares=False, guide=None):
             if guide is None:
                 d, w = frozen_pass.emitted(setup.sensor.beam, sampler(seed_o, ping, idx))
             else:
-                d, w = _guided_emission(setup.sensor.beam, sampler(seed_o, ping, idx), ping, guide)
+                d, w = guided_emission(setup.sensor.beam, sampler(seed_o, ping, idx), ping, guide)
             parts = frozen_pass.run(body, integrator, setup, seed_o, ping, idx, d, w)
             parts = [p.numpy().astype(np.float64) for p in (parts if squares else (parts,))]
             out = parts if out is None else [o + p for o, p in zip(out, parts)]
@@ -308,7 +309,7 @@ def _sampler(integrator, pilot):
     return HashSamples if pilot else integrator.SAMPLERS[integrator.sampling]
 
 
-def _guided_emission(beam, samples, ping, guide):
+def guided_emission(beam, samples, ping, guide):
     """The emitted directions and weights of ``samples`` (dims 0-1) with ``u.y`` drawn by the
     guide's slice densities (`warp`): the beam's weight over the density, evaluated."""
     if "arrays" not in guide:   # uploaded once per render

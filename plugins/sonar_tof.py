@@ -221,12 +221,19 @@ class SonarTOFIntegrator(SonarIntegrator):
         """The lanes of one pass (`samples.row_lanes`) with this integrator's sampling."""
         return row_lanes(self.SAMPLERS[self.sampling], n_rows, seed, start, count)
 
-    def _pass(self, setup, seed, start, count):
+    def _pass(self, setup, seed, start, count, guide=None):
         """One pass of per-row paths: the summed echo energy per bin, float64 numpy. The emitted
-        directions are drawn first, then the paths run as a frozen function (`frozen_pass`)."""
+        directions are drawn first (with ``guide``, the adaptive allocation's density over the
+        emitted elevation: `row_allocation`), then the paths run as a frozen function
+        (`frozen_pass`)."""
         seed_o, start_o = opaque_u32(seed), opaque_u32(start)
-        _, samples = self.lanes(setup.sensor.n_pings, seed_o, start_o, count)
-        d, w = frozen_pass.emitted(setup.sensor.beam, samples)
+        ping, samples = self.lanes(setup.sensor.n_pings, seed_o, start_o, count)
+        if guide is None:
+            d, w = frozen_pass.emitted(setup.sensor.beam, samples)
+        else:
+            from .row_allocation import guided_emission
+
+            d, w = guided_emission(setup.sensor.beam, samples, ping, guide)
         return frozen_pass.run(self._pass_body, self, setup, seed_o, start_o, d, w, count).numpy()
 
     def _pass_body(self, setup, seed_o, start_o, d, w, count):

@@ -104,6 +104,28 @@ def test_warp_draws_each_slice_with_its_probability(mitsonar_mod):
         assert np.mean(1.0 / dens) == pytest.approx(1.0, abs=1e-4)
 
 
+def test_a_guided_even_split_draws_the_same_paths_as_the_lanes_passes(mitsonar_mod):
+    """The hidden target at 4096 spp: the pilot keeps the even split and guides the emitted
+    elevation. Its render (the uniform render's passes, lane indices made in the kernel, the
+    emission drawn by the guide) is, to the byte, the per-lane passes (`_sums`, index arrays)
+    with the same guide: the same samples of every row, the same weights."""
+    import mitsuba as mi
+
+    from mitsonar.plugins import row_allocation
+    from mitsonar.plugins.sonar_tof import MAX_LANES_PER_PASS
+
+    scene = mitsonar_mod.load_scene(os.path.join(SCENES, "hidden_target.xml"))
+    tof = mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"})
+    h = tof.render_histogram(scene, seed=1, spp=4096)
+    assert tof.last_plan["guided"] and (tof.last_counts == 4096).all()
+    setup = tof.setup(scene, 0, None, None)
+    _, counts, _, guide = row_allocation.choose(tof, setup, 1, 4096, MAX_LANES_PER_PASS)
+    assert counts is None and guide is not None
+    n_rows = setup.sensor.n_pings
+    (total,) = row_allocation._sums(tof, setup, 1, np.full(n_rows, 4096), MAX_LANES_PER_PASS, guide=guide)
+    assert np.array_equal(h, total.reshape(n_rows, -1) / 4096)
+
+
 @pytest.fixture(scope="module")
 def intake(mitsonar_mod):
     return mitsonar_mod.load_scene(os.path.join(SCENES, "intake.xml"))
