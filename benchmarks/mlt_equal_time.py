@@ -91,14 +91,18 @@ def timed(integ, scene, spp, seed):
 
     # the image guide through curved mirrors, per integrator (`image_guide.CURVED_GUIDE` is read
     # when a render sets up; its kernels are recorded apart from the planar guide's)
+    saved = image_guide.CURVED_GUIDE, image_guide.STRIP_GUIDE, row_allocation.GUIDE
     image_guide.CURVED_GUIDE = bool(getattr(integ, "_bench_curved", False))
     # the strip guide (`image_guide.STRIP_GUIDE`, on by default), likewise per integrator
     image_guide.STRIP_GUIDE = bool(getattr(integ, "_bench_strip", True))
     # the adaptive allocation's guide of the emitted elevation (`row_allocation.GUIDE`, on)
     row_allocation.GUIDE = bool(getattr(integ, "_bench_pilot_guide", True))
-    t0 = time.process_time()
-    h = integ.render_histogram(scene, seed=seed, spp=spp)
-    return h, time.process_time() - t0
+    try:
+        t0 = time.process_time()
+        h = integ.render_histogram(scene, seed=seed, spp=spp)
+        return h, time.process_time() - t0
+    finally:   # the reference (and anything after) renders with the defaults
+        image_guide.CURVED_GUIDE, image_guide.STRIP_GUIDE, row_allocation.GUIDE = saved
 
 
 def bootstrap_spread(ea, ta, eb, tb, rng, n=2000):

@@ -178,6 +178,8 @@ def guide_tables(m2, mix=GUIDE_MIX):
     echoes) as float32 ``(n_rows, n_slices)`` and their cumulative sums ``(n_rows, n_slices + 1)``
     (from 0 to 1, the probabilities their float32 differences), and per row the second moment the
     guide leaves over the even one's, ``sum m2 / (n^2 p) / mean(m2)`` (1 without echoes)."""
+    if not 0.0 < mix <= 1.0:
+        raise ValueError(f"guide: mix {mix} must be in (0, 1] (a slice of probability 0 would bias the render)")
     m2 = np.maximum(np.asarray(m2, dtype=np.float64), 0.0)
     n_rows, n = m2.shape
     s = np.sqrt(m2)
@@ -218,7 +220,8 @@ def render(integrator, setup, seed, spp, lanes, progress=None):
     ``integrator.last_counts``, a summary (pilot paths per row, also as ``extra_paths_per_row``:
     the paths traced beyond ``spp``; predicted gain; the least, median and most paths of a row) in
     ``integrator.last_plan``. ``spp`` under `MIN_SPP`: every row gets
-    ``spp`` paths (uniform)."""
+    ``spp`` paths (uniform; the plan says so). ``progress(done_spp, spp)`` after each pass of
+    the estimate (the pilot's pass comes first, unreported)."""
     n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
     spp = int(spp)
     if spp < 1:
@@ -231,18 +234,19 @@ def render(integrator, setup, seed, spp, lanes, progress=None):
         # recordings): the same samples and sums, without the lanes' index arrays; with the guide,
         # its emission drawn by it
         mean = integrator.accumulate(int(counts[0]), lanes // n_rows,
-                                     lambda start, count: integrator._pass(setup, seed, start, count, guide))
+                                     lambda start, count: integrator._pass(setup, seed, start, count, guide),
+                                     progress)
     else:
-        (total,) = _sums(integrator, setup, seed, counts, lanes, guide=guide)
+        done = None if progress is None else (lambda paths: progress(int(spp * paths / counts.sum()), spp))
+        (total,) = _sums(integrator, setup, seed, counts, lanes, guide=guide, done=done)
         mean = total.reshape(n_rows, n_bins) / counts[:, None]
     integrator.last_counts = counts
-    integrator.last_plan = {"allocation": "adaptive", "pilot": pilot, "extra_paths_per_row": pilot,
+    integrator.last_plan = {"allocation": "adaptive" if pilot else "uniform", "pilot": pilot,
+                            "extra_paths_per_row": pilot,
                             "predicted_gain": gain, "guided": guide is not None,
                             "guide_gain": None if guide is None else guide["gain"],
                             "paths_per_row_min": int(counts.min()),
                             "paths_per_row_median": float(np.median(counts)), "paths_per_row_max": int(counts.max())}
-    if progress is not None:
-        progress(spp, spp)
     return mean.reshape(n_rows, n_bins)
 
 
@@ -270,13 +274,14 @@ def choose(integrator, setup, seed, spp, lanes):
     return pilot, (counts if gain >= MIN_GAIN else None), gain, guide
 
 
-def _sums(integrator, setup, seed, counts, lanes, squares=False, guide=None):
+def _sums(integrator, setup, seed, counts, lanes, squares=False, guide=None, done=None):
     """Paths ``0 .. counts[r]`` of every row ``r`` (the integrator's ``sampling``, seed ``seed``),
     in passes of at most ``lanes`` lanes: the summed energy per bin (and with ``squares`` the
     summed squared echo energies, and those over the `GUIDE_BINS` slices of ``u.y`` per row and
     parity of the path's number),
     float64 ``n_rows * n_bins`` arrays; ``guide`` (`choose`'s) draws the emission's ``u.y`` from
-    each row's slice density (`warp`)."""
+    each row's slice density (`warp`); ``done(paths)`` after each pass, with the paths traced so
+    far."""
     from .denormals import flushing
 
     counts = np.asarray(counts, dtype=np.int64)
@@ -289,7 +294,7 @@ def _sums(integrator, setup, seed, counts, lanes, squares=False, guide=None):
         return _traced(setup, integrator, seed_o, ping, idx, d, w, squares)
 
     # the recording's key names the body: one per kind of pass
-    body.__qualname__ = f"row_allocation.{'moments' if squares else 'sums'}"
+    body.__qualname__ = f"row_allocation.{f'moments{GUIDE_BINS}' if squares else 'sums'}"
     out = None
     with dr.suspend_grad(), flushing():
         for a in range(0, row.size, lanes):
@@ -301,6 +306,8 @@ def _sums(integrator, setup, seed, counts, lanes, squares=False, guide=None):
             parts = frozen_pass.run(body, integrator, setup, seed_o, ping, idx, d, w)
             parts = [p.numpy().astype(np.float64) for p in (parts if squares else (parts,))]
             out = parts if out is None else [o + p for o, p in zip(out, parts)]
+            if done is not None:
+                done(min(a + lanes, row.size))
     return out
 
 

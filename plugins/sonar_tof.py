@@ -105,11 +105,14 @@ class SonarTOFIntegrator(SonarIntegrator):
                                  (`row_allocation`, step 3). Where neither, the render is the
                                  uniform render, byte for byte.
                                  At equal time: ``pile_quay`` 2.2x less error, ``intake`` 1.8x,
-                                 ``box`` 1.4x, the pilot's 6-23 % of time lost where nothing
+                                 ``box`` 1.4x, the pilot's 13-23 % of time lost where nothing
                                  changes (the numbers: docs/benchmarks.rst). ``auto``: ``adaptive`` where the rows
                                  do not share paths (no shared beams) and the render traces at
                                  least 2^18 of them (rows x spp; the pilot's fixed 3-5 ms then costs
-                                 under a tenth), else ``uniform``. Same expectation. ``adaptive``
+                                 under a tenth), else ``uniform``; the guide from spp 4096 (a pilot
+                                 of 256 paths). Same expectation; renders whose samples should
+                                 match row for row (finite differences, common random numbers)
+                                 want ``uniform``. ``adaptive``
                                  traces per-row paths (``share_beams`` auto then shares no beams;
                                  ``share_beams`` true refuses it). Primal renders only
     =================== ======== ========================================================================
@@ -173,7 +176,8 @@ class SonarTOFIntegrator(SonarIntegrator):
         if shared is None and row_allocation.adaptive(self.allocation, n_pings, spp):
             return row_allocation.render(self, setup, seed, spp, MAX_LANES_PER_PASS, progress)
         # what this render did (`row_allocation.render` says so for its own): spp paths per row
-        self.last_plan, self.last_counts = {"allocation": "uniform", "extra_paths_per_row": 0}, None
+        self.last_plan = {"allocation": "uniform", "extra_paths_per_row": 0}
+        self.last_counts = np.full(n_pings, int(spp), dtype=np.int64)
         if shared is None:
             def one_pass(start, count):
                 return self._pass(setup, seed, start, count)

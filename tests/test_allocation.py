@@ -126,6 +126,25 @@ def test_a_guided_even_split_draws_the_same_paths_as_the_lanes_passes(mitsonar_m
     assert np.array_equal(h, total.reshape(n_rows, -1) / 4096)
 
 
+@pytest.mark.parametrize("name", ["intake.xml", "periscope.xml"])
+def test_progress_is_reported_after_each_pass(mitsonar_mod, name):
+    """The adaptive render in passes of 2^14 lanes reports its progress after each (paths moved on
+    the intake, kept even on the periscope): rising, ending at (spp, spp)."""
+    import mitsuba as mi
+
+    from mitsonar.plugins import row_allocation
+
+    scene = mitsonar_mod.load_scene(os.path.join(SCENES, name))
+    tof = mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"})
+    setup = tof.setup(scene, 0, None, None)
+    calls = []
+    row_allocation.render(tof, setup, 3, 2048, 1 << 14, lambda done, total: calls.append((done, total)))
+    moved = tof.last_plan["paths_per_row_max"] > tof.last_plan["paths_per_row_min"]
+    assert moved == (name == "intake.xml")
+    assert len(calls) >= 3 and calls[-1] == (2048, 2048)
+    assert all(b[0] >= a[0] for a, b in zip(calls, calls[1:])) and {t for _, t in calls} == {2048}
+
+
 @pytest.fixture(scope="module")
 def intake(mitsonar_mod):
     return mitsonar_mod.load_scene(os.path.join(SCENES, "intake.xml"))

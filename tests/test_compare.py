@@ -251,14 +251,15 @@ def test_the_path_clock_counts_the_paths_an_allocation_traces_beyond_spp(small_s
     clock = PathClock(1.0)
     bench = Bench(scene=scene, sensor=scene.sensors()[0], scene_bytes=b"", max_depth=3, integrators={},
                   min_spp={}, calibration_seconds=0.01, clock=clock)
-    bench.render(mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"}), 1024, 1)
+    tof = mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"})
+    bench.render(tof, 1024, 1)
     assert clock() == 4 * (1024 + 64)
-    uniform = mi.load_dict({"type": "sonar_tof", "allocation": "uniform"})
-    bench.render(uniform, 1024, 1)
-    assert clock() == 4 * (1024 + 64) + 4 * 1024
-    auto = mi.load_dict({"type": "sonar_tof"})   # 4 pings x 1024: under AUTO_MIN_PATHS, uniform
-    bench.render(auto, 1024, 2)
-    assert clock() == 4 * (1024 + 64) + 8 * 1024 and auto.last_plan["allocation"] == "uniform"
+    tof.allocation = "uniform"   # the same integrator, its last plan the adaptive render's
+    bench.render(tof, 1024, 1)
+    assert clock() == 4 * (1024 + 64) + 4 * 1024 and tof.last_plan["allocation"] == "uniform"
+    tof.allocation = "auto"   # 4 pings x 1024: under AUTO_MIN_PATHS, uniform
+    bench.render(tof, 1024, 2)
+    assert clock() == 4 * (1024 + 64) + 8 * 1024 and tof.last_plan["allocation"] == "uniform"
 
 
 def run_cli(*args):

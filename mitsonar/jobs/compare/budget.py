@@ -35,7 +35,9 @@ class PathClock:
 
     `compare` with ``paths_per_second`` times its renders by this clock instead of the wall clock
     (``mitsonar compare --paths-per-second``): a render of ``spp`` paths per ping over ``n_pings``
-    pings "takes" ``spp * n_pings / paths_per_second`` seconds, whatever the machine and its load.
+    pings "takes" ``spp * n_pings / paths_per_second`` seconds, whatever the machine and its load
+    (plus the paths an integrator traces beyond ``spp``, the adaptive allocation's pilot: the
+    engine counts them from the render's plan).
     The calibration, the spp search and every field of the results are the same as with the wall
     clock, but a budget then fixes the spp (equal paths, not equal time), and a run is reproducible
     on any machine: for tests, and for comparing integrators at equal work. Calling the clock
