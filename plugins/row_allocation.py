@@ -160,8 +160,9 @@ def cross_validated_guide(m2, mix=GUIDE_MIX):
     left, even = np.zeros(n_rows), np.zeros(n_rows)
     for h in (0, 1):
         other, _, _ = guide_tables(m2[:, 1 - h], mix)
-        left += (m2[:, h] / (n * n * other)).sum(axis=1)
-        even += m2[:, h].mean(axis=1)
+        scored = _moments(m2[:, h], other)
+        left += scored[0]
+        even += scored[1]
     factor = np.ones(n_rows)
     has = even > 0
     factor[has] = left[has] / even[has]
@@ -192,9 +193,17 @@ def guide_tables(m2, mix=GUIDE_MIX):
     cdf[:, -1] = 1.0
     prob = np.diff(cdf, axis=1)
     factor = np.ones(n_rows)
-    uniform = m2.mean(axis=1)
-    factor[has] = (m2[has] / (n * n * prob[has])).sum(axis=1) / uniform[has]
+    left, even = _moments(m2, prob)
+    factor[has] = left[has] / even[has]
     return prob, cdf, factor
+
+
+def _moments(m2, prob):
+    """Per row, the second moment per path of paths drawn with slice probabilities ``prob``
+    (importance weighted: ``sum_k m2_k / (n^2 p_k)``) and of evenly drawn ones (``mean m2``),
+    for slices of second moments ``m2`` under even drawing (both ``(n_rows, n)``)."""
+    n = m2.shape[1]
+    return (m2 / (n * n * prob)).sum(axis=1), m2.mean(axis=1)
 
 
 def warp(u, row, cdf, prob, n):
@@ -299,10 +308,7 @@ def _sums(integrator, setup, seed, counts, lanes, squares=False, guide=None, don
     with dr.suspend_grad(), flushing():
         for a in range(0, row.size, lanes):
             ping, idx = mi.UInt32(row[a:a + lanes]), mi.UInt32(index[a:a + lanes])
-            if guide is None:
-                d, w = frozen_pass.emitted(setup.sensor.beam, sampler(seed_o, ping, idx))
-            else:
-                d, w = guided_emission(setup.sensor.beam, sampler(seed_o, ping, idx), ping, guide)
+            d, w = emitted(setup.sensor.beam, sampler(seed_o, ping, idx), ping, guide)
             parts = frozen_pass.run(body, integrator, setup, seed_o, ping, idx, d, w)
             parts = [p.numpy().astype(np.float64) for p in (parts if squares else (parts,))]
             out = parts if out is None else [o + p for o, p in zip(out, parts)]
@@ -316,9 +322,12 @@ def _sampler(integrator, pilot):
     return HashSamples if pilot else integrator.SAMPLERS[integrator.sampling]
 
 
-def guided_emission(beam, samples, ping, guide):
-    """The emitted directions and weights of ``samples`` (dims 0-1) with ``u.y`` drawn by the
-    guide's slice densities (`warp`): the beam's weight over the density, evaluated."""
+def emitted(beam, samples, ping, guide=None):
+    """The emitted directions and weights of ``samples`` (dims 0-1) of lanes in rows ``ping``,
+    evaluated: `frozen_pass.emitted` without a guide; with one (`choose`'s), ``u.y`` drawn by the
+    row's slice densities (`warp`) and the beam's weight over the density."""
+    if guide is None:
+        return frozen_pass.emitted(beam, samples)
     if "arrays" not in guide:   # uploaded once per render
         guide["arrays"] = tuple(mi.Float(np.ascontiguousarray(guide[k], dtype=np.float32).ravel())
                                 for k in ("cdf", "prob"))

@@ -7,7 +7,7 @@ import numpy as np
 
 from mitsonar._checks import require
 
-from . import frozen_pass
+from . import frozen_pass, row_allocation
 from .common import SonarIntegrator
 from .denormals import flushing
 from .exact_sum import ExactBins
@@ -103,18 +103,18 @@ class SonarTOFIntegrator(SonarIntegrator):
                                  agree that it pays (>= 1.3x), each row's emitted elevation drawn by
                                  its echoes' second moments over 16 slices of that primary sample
                                  (`row_allocation`, step 3). Where neither, the render is the
-                                 uniform render, byte for byte.
-                                 At equal time: ``pile_quay`` 2.2x less error, ``intake`` 1.8x,
-                                 ``box`` 1.4x, the pilot's 13-23 % of time lost where nothing
-                                 changes (the numbers: docs/benchmarks.rst). ``auto``: ``adaptive`` where the rows
-                                 do not share paths (no shared beams) and the render traces at
-                                 least 2^18 of them (rows x spp; the pilot's fixed 3-5 ms then costs
-                                 under a tenth), else ``uniform``; the guide from spp 4096 (a pilot
-                                 of 256 paths). Same expectation; renders whose samples should
-                                 match row for row (finite differences, common random numbers)
-                                 want ``uniform``. ``adaptive``
-                                 traces per-row paths (``share_beams`` auto then shares no beams;
-                                 ``share_beams`` true refuses it). Primal renders only
+                                 uniform render, byte for byte. At equal time: ``pile_quay`` 2.2x
+                                 less error, ``intake`` 1.8x, ``box`` 1.4x, the pilot's 13-23 % of
+                                 time lost where nothing changes (docs/benchmarks.rst). ``auto``:
+                                 ``adaptive`` where the rows do not share paths (no shared beams)
+                                 and the render traces at least 2^18 of them (rows x spp; the
+                                 pilot's fixed 3-5 ms then costs under a tenth), else ``uniform``;
+                                 the guide from spp 4096 (a pilot of 256 paths). Same expectation;
+                                 renders whose samples should match row for row (finite
+                                 differences, common random numbers) want ``uniform``.
+                                 ``adaptive`` traces per-row paths (``share_beams`` auto then
+                                 shares no beams; ``share_beams`` true refuses it). Primal renders
+                                 only
     =================== ======== ========================================================================
 
     Each pass runs as a Dr.Jit frozen function (`frozen_pass`): its kernel is traced once per
@@ -161,8 +161,6 @@ class SonarTOFIntegrator(SonarIntegrator):
         ``last_plan`` says how the paths were allocated (``extra_paths_per_row``: those traced
         per row beyond ``spp``, the adaptive allocation's pilot).
         """
-        from . import row_allocation
-
         setup = self.setup(scene, sensor, pose, max_depth)
         n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
         shared = None
@@ -232,12 +230,7 @@ class SonarTOFIntegrator(SonarIntegrator):
         (`frozen_pass`)."""
         seed_o, start_o = opaque_u32(seed), opaque_u32(start)
         ping, samples = self.lanes(setup.sensor.n_pings, seed_o, start_o, count)
-        if guide is None:
-            d, w = frozen_pass.emitted(setup.sensor.beam, samples)
-        else:
-            from .row_allocation import guided_emission
-
-            d, w = guided_emission(setup.sensor.beam, samples, ping, guide)
+        d, w = row_allocation.emitted(setup.sensor.beam, samples, ping, guide)
         return frozen_pass.run(self._pass_body, self, setup, seed_o, start_o, d, w, count).numpy()
 
     def _pass_body(self, setup, seed_o, start_o, d, w, count):
