@@ -166,7 +166,7 @@ def baseline(integrator, scene, oracle, spps, repeats, depth):
         H = np.stack([integrator.render_histogram(scene, seed=1000 + r, spp=spp, max_depth=depth)
                       for r in range(repeats)])
         rel = float(np.sqrt(H.var(axis=0, ddof=1).sum() / (H.mean(axis=0) ** 2).sum()))
-        plan = dict(getattr(integrator, "last_plan", None) or {})
+        plan = integrator.last_plan
         paths = spp + plan.get("extra_paths_per_row", 0)
         indep = oracle["pt_rel_error_per_path"] / np.sqrt(paths)
         ideal = indep / oracle["global_ideal_error_ratio"]

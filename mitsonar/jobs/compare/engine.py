@@ -113,7 +113,7 @@ class Bench:
         integrator.last_plan = {}
         hist = integrator.render_histogram(self.scene, self.sensor, seed=seed, spp=int(spp), max_depth=self.max_depth)
         if isinstance(self.clock, PathClock):
-            extra = int((getattr(integrator, "last_plan", None) or {}).get("extra_paths_per_row", 0))
+            extra = int(integrator.last_plan.get("extra_paths_per_row", 0))
             self.clock.count(int(spp) + extra, self.sensor.n_pings)
         return hist
 
