@@ -105,7 +105,9 @@ class SonarMLTIntegrator(SonarIntegrator):
     paths could take at most 1.5-1.6x).
 
     ``spp`` counts path evaluations per ping (bootstrap plus chains x mutations), so equal
-    ``spp`` means about equal work for ``sonar_tof`` and ``sonar_mlt``.
+    ``spp`` means about equal work for ``sonar_tof`` and ``sonar_mlt``. Its paths are straight: a
+    ``sound_speed_profile`` (XML, or ``render_scan``'s) is refused in one line before any work
+    (refracted paths are ``sonar_tof``'s).
     """
 
     name = "sonar_mlt"
