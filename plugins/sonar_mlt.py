@@ -8,6 +8,7 @@ import mitsuba as mi
 import numpy as np
 
 from mitsonar._checks import require
+from mitsonar._limits import check
 
 from .common import PathSetup, SonarIntegrator, tagging_hard
 from .denormals import flushed
@@ -134,9 +135,8 @@ class SonarMLTIntegrator(SonarIntegrator):
     def _check(self):
         def need(ok, name, value, allowed):
             require(ok, "sonar_mlt", name, value, allowed)
-        need(self.chains >= 0, "chains", self.chains, "0 for automatic, or a positive number of chains per ping")
-        need(self.mutations >= 0, "mutations", self.mutations, "0 to spend spp, or a positive number per chain")
-        need(self.bootstrap >= 0, "bootstrap", self.bootstrap, "0 for automatic, or a positive number of paths per ping")
+        for name in ("chains", "mutations", "bootstrap"):   # the bounds of `mitsonar._limits`
+            check("sonar_mlt", name, getattr(self, name))
         need(self.normalisation in ("scan", "ping"), "normalisation", self.normalisation,
              "'scan' (one target over all pings) or 'ping'")
         need(self.allocation in SonarTOFIntegrator.ALLOCATIONS, "allocation", self.allocation,
