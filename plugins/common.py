@@ -27,6 +27,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsonar._checks import not_allowed, require
+from mitsonar._limits import LIMITS
 
 from . import image_guide
 from .emission import DB_TO_LOG2, start
@@ -37,7 +38,7 @@ from .range_bins import RangeBins
 from .samples import DIMS_EMIT, DIMS_PER_BOUNCE
 from .sonar_sensor import PingFrames, SonarSensor
 
-MAX_DEPTH = 64
+MAX_DEPTH = int(LIMITS["max_depth"].hi)   # the bound of `mitsonar._limits`
 # Lanes in one gradient pass: a replayed path carries ~40 floats of state, so passes of 2^20
 # lanes bound the memory of a gradient render whatever its spp.
 GRADIENT_LANES_PER_PASS = 1 << 20
@@ -45,9 +46,8 @@ GRADIENT_LANES_PER_PASS = 1 << 20
 
 def check_max_depth(value, source="sonar_tof"):
     """``value`` if it is a whole number of surface bounces in 1..64, else a ValueError naming ``source``."""
-    if not (isinstance(value, int) and 1 <= value <= MAX_DEPTH):
-        raise not_allowed(source, "max_depth", value, f"an integer number of surface bounces from 1 to "
-                          f"{MAX_DEPTH}; 1 = single bounce")
+    if not (isinstance(value, int) and LIMITS["max_depth"].holds(value)):
+        raise not_allowed(source, "max_depth", value, LIMITS["max_depth"].allowed() + "; 1 = single bounce")
     return value
 
 

@@ -531,10 +531,9 @@ def merge_layers(depths, speeds, tol=MERGE_TOL):
 
 def check_chords(value, source):
     """``value`` if it is a whole number of chords per range window, 1 to 1024."""
-    if not (isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= 1024):
-        raise ValueError(f"{source} 'svp_chords': {value!r} is not allowed (chords per range window, "
-                         "a whole number from 1 to 1024)")
-    return value
+    from mitsonar._limits import check
+
+    return check(source, "svp_chords", value)
 
 
 def read_profile(props, source, refracts):

@@ -56,6 +56,9 @@ class SonarBDPTIntegrator(SonarTOFIntegrator):
                           (no shared multibeam paths for ``sonar_tof``'s ``receive`` to weight)
     ============ ======== ====================================================================
 
+    Its paths are straight: a ``sound_speed_profile`` (XML, or ``render_scan``'s) is refused in one
+    line before any work (refracted paths are ``sonar_tof``'s).
+
     ``render_histogram`` returns the float64 ``(n_pings, n_bins)`` histogram like ``sonar_tof``'s;
     ``spp`` counts lanes (subpath pairs) per row. With ``D = max_depth`` a lane casts ``2 D``
     rays and ``(D + 1)(D + 2) / 2 - 1`` shadow rays against ``D`` and ``D`` for a ``sonar_tof``
@@ -69,6 +72,10 @@ class SonarBDPTIntegrator(SonarTOFIntegrator):
     # Its subpaths start from each row's own beam or the transmit fan: it has no shared
     # multibeam paths for ``emission=receive`` to weight.
     EMISSIONS = ("transmit",)
+    # Its subpaths and their joins are straight segments (`bdpt_paths`): a ``sound_speed_profile``
+    # is refused in one line when the scene loads (`refraction.read_profile`) or a render is
+    # given one (``render_scan``), not inherited from ``sonar_tof`` and silently ignored.
+    REFRACTS = False
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)

@@ -8,6 +8,7 @@ import mitsuba as mi
 import numpy as np
 
 from mitsonar._checks import require
+from mitsonar._limits import check
 
 from .common import PathSetup, SonarIntegrator, tagging_hard
 from .denormals import flushed
@@ -105,7 +106,9 @@ class SonarMLTIntegrator(SonarIntegrator):
     paths could take at most 1.5-1.6x).
 
     ``spp`` counts path evaluations per ping (bootstrap plus chains x mutations), so equal
-    ``spp`` means about equal work for ``sonar_tof`` and ``sonar_mlt``.
+    ``spp`` means about equal work for ``sonar_tof`` and ``sonar_mlt``. Its paths are straight: a
+    ``sound_speed_profile`` (XML, or ``render_scan``'s) is refused in one line before any work
+    (refracted paths are ``sonar_tof``'s).
     """
 
     name = "sonar_mlt"
@@ -132,9 +135,8 @@ class SonarMLTIntegrator(SonarIntegrator):
     def _check(self):
         def need(ok, name, value, allowed):
             require(ok, "sonar_mlt", name, value, allowed)
-        need(self.chains >= 0, "chains", self.chains, "0 for automatic, or a positive number of chains per ping")
-        need(self.mutations >= 0, "mutations", self.mutations, "0 to spend spp, or a positive number per chain")
-        need(self.bootstrap >= 0, "bootstrap", self.bootstrap, "0 for automatic, or a positive number of paths per ping")
+        for name in ("chains", "mutations", "bootstrap"):   # the bounds of `mitsonar._limits`
+            check("sonar_mlt", name, getattr(self, name))
         need(self.normalisation in ("scan", "ping"), "normalisation", self.normalisation,
              "'scan' (one target over all pings) or 'ping'")
         need(self.allocation in SonarTOFIntegrator.ALLOCATIONS, "allocation", self.allocation,

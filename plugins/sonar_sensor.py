@@ -10,7 +10,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mitsonar._checks import not_allowed, require
+from mitsonar._checks import not_allowed
+from mitsonar._limits import LIMITS, check
 import mitsonar.geometry.kinds as kinds
 from mitsonar.geometry.frames import SIDES, check_rigid, check_rigid_stack
 
@@ -21,7 +22,8 @@ from .sidescan_heads import PRESETS
 from .water import check_pose, number_or_auto, read_water, resolve
 
 TX_PATTERNS = ("gaussian", "sinc", "uniform")
-MAX_BINS, MAX_PINGS = 65536, 100000
+# The size bounds are `mitsonar._limits.LIMITS`, with the physics behind them.
+MAX_BINS, MAX_PINGS = int(LIMITS["n_bins"].hi), int(LIMITS["n_pings"].hi)
 DEFAULT_FREQUENCY = 700e3
 # A side-scan head's transducers are tilted down this much unless the XML (or a preset) says.
 DEFAULT_DEPRESSION = 15.0
@@ -62,6 +64,8 @@ class SonarSensor(mi.Sensor):
     the head's overhead (its kind's ``head_overhead``, `mitsonar.geometry.kinds`: 30 ms mechanical,
     50 ms multibeam, none side-scan).
 
+    ``mi.render``'s paths per row are the ``<sampler>``'s ``sample_count``, 1 to 2^31 - 1.
+
     ================ ============ ===============================================================
     Parameter        Default      Meaning
     ================ ============ ===============================================================
@@ -69,12 +73,15 @@ class SonarSensor(mi.Sensor):
                                   ``multibeam`` (rows = receive beams across one transmit fan) or
                                   ``sidescan`` (rows = port then starboard pings)
     to_world         identity     beam frame in the world (rigid)
-    range_min        0            m, start of the range window
-    range_max        12           m, end of the range window (echoes beyond are dropped)
-    n_bins           500          range bins between ``range_min`` and ``range_max``
+    range_min        0            m, start of the range window (0 to 100 km)
+    range_max        12           m, end of the range window (echoes beyond are dropped);
+                                  at most 100 km (`mitsonar._limits`: the bounds and why)
+    n_bins           500          range bins between ``range_min`` and ``range_max`` (1 to
+                                  65536)
     bearing_start    0            deg, bearing of the first ping
     bearing_step     1.8          deg between pings (Micron: 200 steps per turn)
-    n_pings          200          pings in a scan (sidescan: per channel)
+    n_pings          200          pings in a scan (sidescan: per channel), 1 to 100000; a
+                                  multibeam's receive beams, 1 to 4096
     side             both         sidescan: ``port``, ``starboard`` or ``both`` channels
     depression       15           sidescan: deg, each channel's boresight below the horizontal
     preset           (none)       sidescan: a commercial head's defaults (``klein3000_100k``,
@@ -82,7 +89,7 @@ class SonarSensor(mi.Sensor):
     ping_period      physical     s between pings (multibeam: between frames); default
                                   ``2 range_max / sound_speed`` + 0.03 s (mechanical) or
                                   + 0.05 s (multibeam) or + 0 (sidescan); not less than the
-                                  two-way flight
+                                  two-way flight, at most 3600 s
     beam_pattern     gaussian     ``gaussian``, ``sinc``, ``uniform`` or ``table``
     beamwidth_h      3            deg, full -3 dB one-way width across the scan plane
                                   (sidescan: along track, default 1)
@@ -142,8 +149,10 @@ class SonarSensor(mi.Sensor):
         self.pings = count(props, "n_pings", 200, "sonar")
         # Checked before the film is made: without one, Mitsuba makes its default RGB film and
         # prints a warning above our error.
-        for name, value, top in (("n_bins", self.n_bins, MAX_BINS), ("n_pings", self.pings, MAX_PINGS)):
-            require(1 <= value <= top, "sonar", name, value, f"1 to {top}")
+        for name in ("n_bins", "n_pings"):
+            check("sonar", name, self.n_bins if name == "n_bins" else self.pings)
+        if self.sonar_kind.transmit_fan:   # the rows are receive beams formed across one fan
+            check("sonar", "n_pings", self.pings, "n_beams", suffix=f" for kind {self.kind!r}")
         # The rows of a scan: a side-scan head with both channels has two per ping.
         self.n_pings = self.pings * (2 if self.side == "both" else 1)
         if "film" not in props:
@@ -151,6 +160,8 @@ class SonarSensor(mi.Sensor):
             props["film"] = mi.load_dict({"type": "hdrfilm", "width": self.n_bins, "height": self.n_pings,
                                           "pixel_format": "luminance", "rfilter": {"type": "box"}})
         super().__init__(props)
+        # the paths per ping of ``mi.render`` (its <sampler>'s sample_count): a 32-bit sample index
+        check("sonar", "sample_count", int(self.sampler().sample_count()), "spp")
         self.range_min = num("range_min", 0.0)
         self.range_max = num("range_max", preset.get("range_max", 12.0))
         self.bearing_start = num("bearing_start", 0.0)
@@ -240,10 +251,9 @@ class SonarSensor(mi.Sensor):
     def _check(self):
         def bad(name, value, allowed):
             raise not_allowed("sonar", name, value, allowed)
-        if not (math.isfinite(self.range_min) and self.range_min >= 0):
-            bad("range_min", self.range_min, "a range >= 0 m")
-        if not (math.isfinite(self.range_max) and self.range_max > self.range_min):
-            bad("range_max", self.range_max, f"a range > range_min = {self.range_min:g} m")
+        check("sonar", "range_min", self.range_min)
+        check("sonar", "range_max", self.range_max, lo=self.range_min, lo_open=True,
+              lo_text=f"a range > range_min = {self.range_min:g} m")
         # Bearings are angles: beyond a turn they only lose precision (1e30 + k * 1.8 is one bearing).
         for name in ("bearing_start", "bearing_step"):
             if not (math.isfinite(getattr(self, name)) and abs(getattr(self, name)) <= 360.0):
@@ -260,9 +270,9 @@ class SonarSensor(mi.Sensor):
         flight = 2.0 * self.range_max / self.sound_speed
         if self.ping_period is None:
             self.ping_period = flight + self.sonar_kind.head_overhead
-        elif not (math.isfinite(self.ping_period) and flight <= self.ping_period <= 3600.0):
-            bad("ping_period", self.ping_period, f"seconds from the two-way flight to range_max, "
-                f"2 range_max / sound_speed = {flight:.6g} s, to 3600 s")
+        else:
+            check("sonar", "ping_period", self.ping_period, lo=flight,
+                  lo_text=f"seconds from the two-way flight to range_max, 2 range_max / sound_speed = {flight:.6g} s")
 
     def _transmit(self, tx, bw_h, bw_v, frequency):
         """The multibeam transmit fan (None for a mechanical head, whose beam transmits itself)."""

@@ -304,6 +304,45 @@ def test_cli_bad_input_gives_one_clear_line(small_scene, tmp_path, capsys, args,
     assert len(lines) == 1 and lines[0].startswith("mitsonar: error:") and message in lines[0], lines
 
 
+def test_the_metropolis_comparison_runs_chains_labelled_and_warns_once(small_scene, tmp_path, capsys):
+    """Issue 56: ``compare --integrators sonar_tof,sonar_mlt`` (the documented command) ran
+    sonar_mlt at its default ``split=0``, no chains: the path tracer against itself, labelled
+    "sonar_mlt". It now runs the chains (``split=off``), says so in the table and the JSON, and
+    prints each warning once (it was in the progress and again under the table)."""
+    from mitsonar.cli import main
+
+    out = tmp_path / "cmp"
+    # a reference of 2048 paths per ping is about as noisy as the runs: its warning is due
+    assert main(["compare", small_scene, "--integrators", "sonar_tof,sonar_mlt", "--budget", "0.01",
+                 "--reference-spp", "2048", "--repeats", "1", "--calibration-seconds", "0.01",
+                 "--paths-per-second", "409600", "--no-plots", "-o", str(out)]) == 0
+    printed = capsys.readouterr()
+    result = json.loads((out / "compare.json").read_text())
+    mlt = result["integrators"]["sonar_mlt"]
+    assert mlt["params"] == {"split": "off"} and mlt["compare_settings"] == {"split": "off"}
+    assert mlt["shown_as"] == "sonar_mlt (split=off)" and "split=off" in mlt["description"]
+    assert result["integrators"]["sonar_tof"]["shown_as"] == "sonar_tof"
+    plans = [r["plan"] for r in result["runs"] if r["integrator"] == "sonar_mlt"]
+    assert plans and all(p["chains"] > 0 and p["mutations"] > 0 for p in plans), plans
+    rows = [ln for ln in printed.out.splitlines() if ln.startswith("sonar_mlt")]
+    assert rows and all(ln.startswith("sonar_mlt (split=off) ") for ln in rows), printed.out
+    assert result["warnings"], "the scene and settings are chosen to warn"
+    for w in result["warnings"]:
+        assert (printed.out + printed.err).count(w) == 1, (w, printed.out, printed.err)
+
+
+def test_a_split_given_by_the_user_wins(small_scene, tmp_path, mitsonar_mod):
+    """``--param sonar_mlt.split=0`` compares the path tracer's scan, as asked, and says so."""
+    from mitsonar.jobs.compare import compare
+
+    run = compare(small_scene, "sonar_mlt", (0.01,), str(tmp_path / "cmp"), reference_spp=2048, repeats=1,
+                  calibration_seconds=0.01, plots=False, paths_per_second=PATHS_PER_SECOND,
+                  integrator_params={"sonar_mlt": {"split": 0}})
+    info = run["integrators"]["sonar_mlt"]
+    assert info["params"] == {"split": 0} and info["compare_settings"] == {}
+    assert info["shown_as"] == "sonar_mlt (split=0)" and run["runs"][0]["plan"]["chains_spp"] == 0
+
+
 def test_cli_missing_scene_in_a_subprocess(tmp_path):
     proc = run_cli("compare", str(tmp_path / "nope.xml"), "-o", str(tmp_path / "cmp"))
     assert proc.returncode != 0 and "Traceback" not in proc.stderr

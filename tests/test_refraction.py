@@ -240,6 +240,40 @@ def test_integrators_and_modes_without_refraction_refuse_a_profile_in_one_line(m
         mitsonar_mod.render_scan(scene, spp=16, pose=pose, integrator={"type": "sonar_tof", "svp_chords": 0})
 
 
+def _integrator_plugins():
+    from mitsonar.plugins import PLUGINS
+
+    return [name for kind, name, _, _ in PLUGINS if kind == "integrator"]
+
+
+@pytest.mark.parametrize("name", _integrator_plugins())
+def test_every_integrator_honours_or_refuses_a_profile(mitsonar_mod, tmp_path, name):
+    """Issue 56: ``sonar_bdpt`` took a profile (XML and ``render_scan``) and rendered the straight
+    scan byte for byte. Every integrator plugin either renders another scan through the profile
+    than without it, or refuses it in one line naming itself, before any work."""
+    path, pose = scene_file(tmp_path, "depth,sound_speed\n0,1450\n200,1650\n", integrator=name)
+    plain = f'<integrator type="{name}"><integer name="max_depth" value="1"/></integrator>'
+    straight = mitsonar_mod.render_scan(flat_seabed_scene(mitsonar_mod, echo_sounder(n_beams=3)[1], plain),
+                                        spp=64, seed=1, pose=pose).intensity
+    try:
+        scene = mitsonar_mod.load_scene(path)
+    except mitsonar_mod.SceneError as exc:
+        line = str(exc)
+        assert "\n" not in line and f"{name} 'sound_speed_profile'" in line and str(tmp_path) in line, line
+    else:
+        bent = mitsonar_mod.render_scan(scene, spp=64, seed=1, pose=pose).intensity
+        assert not np.array_equal(bent, straight), f"{name} ignored the XML sound_speed_profile"
+    scene = flat_seabed_scene(mitsonar_mod, echo_sounder(n_beams=3)[1], plain)
+    try:
+        bent = mitsonar_mod.render_scan(scene, spp=64, seed=1, pose=pose, sound_speed_profile=LINEAR).intensity
+    except mitsonar_mod.SceneError as exc:
+        line = str(exc)
+        assert "\n" not in line and "render_scan 'sound_speed_profile'" in line and type(
+            scene.integrator()).__name__ in line, line
+    else:
+        assert not np.array_equal(bent, straight), f"{name} ignored render_scan's sound_speed_profile"
+
+
 def test_gradients_refuse_a_profile_in_one_line(mitsonar_mod, tmp_path):
     import drjit as dr
     import mitsuba as mi

@@ -17,7 +17,8 @@ def add_subcommands(subparsers):
                "sonar_tof, the default, on every scene measured (its pilot's allocation: 2.2x less error at "
                "equal time on pile_quay, 1.8x on intake, 1.4x on box); sonar_mlt with no parameters is sonar_tof, its "
                "chains lost 2-16x at equal time (split=off, split=auto); sonar_bdpt to check echoes "
-               "through openings.")
+               "through openings. Compared here, sonar_mlt runs its chains (split=off) unless "
+               "--param sonar_mlt.split=... says otherwise.")
     c.add_argument("scene", help="scene XML file")
     c.add_argument("--integrators", default="sonar_tof,sonar_mlt",
                    help="comma-separated integrator plugins; the first is the baseline (default sonar_tof,sonar_mlt)")
@@ -74,20 +75,23 @@ def cmd_compare(args):
 
 
 def report(result) -> str:
-    """The printed summary of a `compare` result: the reference, one line per run with the asked
-    and the achieved seconds (``*`` where they differ by more than `TIME_TOLERANCE`), warnings,
-    files."""
+    """The printed summary of a `compare` result: the reference, one line per run (the integrator
+    with the parameters it ran with) with the asked and the achieved seconds (``*`` where they
+    differ by more than `TIME_TOLERANCE`), the warnings (printed here only), files."""
     from mitsonar.jobs.compare import TIME_TOLERANCE, off_budget
 
     ref = result["reference"]
     off = {(r["integrator"], r["budget_s"]) for r in off_budget(result["runs"])}
+    # each integrator with the parameters it ran with (``sonar_mlt (split=off)``: its chains)
+    shown = {lab: info.get("shown_as", lab) for lab, info in result.get("integrators", {}).items()}
+    width = max([16] + [len(v) for v in shown.values()])
     lines = [f"reference: {ref['integrator']} {ref['spp']} spp, own rel L2 {ref['self_rel_l2']:.3g}"
              + (" (cached)" if ref["from_cache"] else f" ({ref['seconds']:.3g} s)"),
-             f"{'integrator':<16} {'asked s':>8} {'took s':>8} {'spp':>10} {'rel L2':>9} {'rel L1':>9}"]
+             f"{'integrator':<{width}} {'asked s':>8} {'took s':>8} {'spp':>10} {'rel L2':>9} {'rel L1':>9}"]
     for r in result["runs"]:
         mark = " *" if (r["integrator"], r["budget_s"]) in off else ""
-        lines.append(f"{r['integrator']:<16} {r['budget_s']:>8g} {r['seconds_mean']:>8.3g} {r['spp']:>10d} "
-                     f"{r['rel_l2']:>9.4g} {r['rel_l1']:>9.4g}{mark}")
+        lines.append(f"{shown.get(r['integrator'], r['integrator']):<{width}} {r['budget_s']:>8g} "
+                     f"{r['seconds_mean']:>8.3g} {r['spp']:>10d} {r['rel_l2']:>9.4g} {r['rel_l1']:>9.4g}{mark}")
     if off:
         lines.append(f"* took more than {100 * TIME_TOLERANCE:.0f} % more or less than asked")
     lines += [f"warning: {w}" for w in result["warnings"]]

@@ -55,7 +55,8 @@ import math
 
 import numpy as np
 
-from mitsonar._checks import is_number, is_whole, not_allowed
+from mitsonar._checks import is_number, not_allowed
+from mitsonar._limits import LIMITS, check
 from mitsonar.geometry.kinds import MECHANICAL, MULTIBEAM, SonarKind
 from mitsonar.sonar_equation.levels import CALIBRATION_DB
 
@@ -67,7 +68,7 @@ MAX_SWATH = 180.0
 RX_ALONG_FACTOR = 4.0
 #: Transmit fan's across-track gaussian width over the swath.
 TX_ACROSS_FACTOR = 1.5
-MAX_BINS = 65536
+MAX_BINS = int(LIMITS["n_bins"].hi)   # the sensor's bound (`mitsonar._limits`)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -169,14 +170,11 @@ def configure(name, *, swath=None, n_beams=None, range_min=None, range_max=None,
     if multibeam and not lo <= swath <= hi:
         bad("swath", swath, f"{lo:g} to {hi:g} deg for the {s.model}")
     n_beams = s.n_beams if n_beams is None else n_beams
-    if not (is_whole(n_beams) and 1 <= n_beams <= 4096) or (multibeam and n_beams < 2):
-        bad("n_beams", n_beams, "a whole number of receive beams from 2 to 4096")
+    check(WHERE, "n_beams", n_beams, lo=2 if multibeam else None)
     range_min = (0.1 if not multibeam else 0.5) if range_min is None else range_min
     range_max = s.range_max if range_max is None else range_max
-    if not (is_number(range_min) and range_min >= 0):
-        bad("range_min", range_min, "a range >= 0 m")
-    if not (is_number(range_max) and range_max > range_min):
-        bad("range_max", range_max, f"a range > range_min = {range_min:g} m")
+    check(WHERE, "range_min", range_min)
+    check(WHERE, "range_max", range_max, lo=range_min, lo_open=True, lo_text=f"a range > range_min = {range_min:g} m")
     if n_bins is None:
         bin_width = s.bin_width if bin_width is None else bin_width
         if not (is_number(bin_width) and bin_width > 0):
@@ -185,8 +183,8 @@ def configure(name, *, swath=None, n_beams=None, range_min=None, range_max=None,
         if n_bins > MAX_BINS:
             bad("bin_width", bin_width, f"at least {(range_max - range_min) / MAX_BINS:.3g} m for a "
                 f"{range_max - range_min:g} m window (at most {MAX_BINS} bins)")
-    elif not (is_whole(n_bins) and 1 <= n_bins <= MAX_BINS):
-        bad("n_bins", n_bins, f"a whole number of bins from 1 to {MAX_BINS}")
+    else:
+        check(WHERE, "n_bins", n_bins)
     mount = looking_down() if mount is None else np.asarray(mount, dtype=np.float64)
     from mitsonar.geometry.frames import check_rigid
 

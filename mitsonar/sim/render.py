@@ -9,6 +9,7 @@ import warnings
 import numpy as np
 
 from mitsonar._checks import is_whole
+from mitsonar._limits import LIMITS
 from mitsonar.geometry.frames import check_rigid
 from mitsonar.plugins import PLUGINS, module
 from mitsonar.scan import Scan
@@ -83,8 +84,8 @@ def moving_head_poses(sonar, trajectory, start_time, mount=None):
 
 SONAR_INTEGRATORS = tuple(name for kind, name, _, _ in PLUGINS if kind == "integrator")
 SEED_MAX = 2 ** 32 - 1   # the path seed is a 32-bit integer: larger seeds would repeat smaller ones
-SPP_MAX = 2 ** 31 - 1    # paths per ping: a signed 32-bit count
-SPP_ALLOWED = f"a whole number of paths per ping from 1 to {SPP_MAX}"
+SPP_MAX = int(LIMITS["spp"].hi)    # paths per ping: a signed 32-bit count (`mitsonar._limits`)
+SPP_ALLOWED = LIMITS["spp"].allowed()
 SEED_ALLOWED = f"a whole number from 0 to {SEED_MAX}"
 
 

@@ -9,6 +9,10 @@ integrators read ``spp`` as path evaluations per ping, so equal spp is roughly e
 budgets make it equal time. Kernel compilations during timed renders are counted (Dr.Jit's
 kernel history) and reported: an integrator whose kernels depend on spp pays one per new spp.
 
+``sonar_mlt`` runs its Metropolis chains over every echo (``split="off"``, `COMPARE_SETTINGS`)
+unless ``integrator_params`` sets its ``split``: its own default, ``split=0``, is the path
+tracer's scan, and a comparison with it would compare ``sonar_tof`` with itself.
+
 Errors are over range bins: ``rel_l2 = ||est - ref||_2 / ||ref||_2`` and
 ``rel_l1 = sum|est - ref| / sum|ref|``, over the whole scan and per ping. Over repeats they are
 combined as a root mean square (which estimates the expected squared error). The reference has
@@ -53,9 +57,12 @@ field                    meaning
 ``environment``          mitsonar/mitsuba/drjit versions, variant, python, platform, cpu count, date
 ``reference``            integrator, spp, seeds, seconds, max_depth, self_rel_l2, self_rel_l1,
                          regions {name: {self_rel_l2, self_rel_l1}}, file, key, from_cache
-``integrators``          per label: type, params, description (the plugin's ``to_string``),
-                         calibration (points [[spp, seconds], ...]: every timing, the two largest
-                         spp timed several times; warmup_s, compiling)
+``integrators``          per label: type, params (what it ran with: `COMPARE_SETTINGS`'s, then the
+                         user's), shown_as (the label with them, as the printed table has it:
+                         ``sonar_mlt (split=off)``), compare_settings (those the comparison set),
+                         description (the plugin's ``to_string``), calibration (points
+                         [[spp, seconds], ...]: every timing, the two largest spp timed several
+                         times; warmup_s, compiling)
 ``runs``                 one per (integrator, budget): integrator, budget_s (asked), spp, seeds,
                          seconds (each repeat), seconds_mean (achieved), seconds_vs_budget
                          (seconds_mean / budget_s), rel_l2, rel_l1, rel_l2_debiased (RMS over
@@ -64,7 +71,9 @@ field                    meaning
                          {name: {rel_l2, rel_l1, rel_l2_debiased}}, attempts ([[spp, seconds],
                          ...]: the search for the spp that fills the budget; the last one is the
                          first repeat), compiled_kernels and compile_seconds (per repeat:
-                         Dr.Jit kernels compiled while timed), warmup_compiled_kernels (``warm``)
+                         Dr.Jit kernels compiled while timed), warmup_compiled_kernels (``warm``),
+                         plan (the first repeat's ``last_plan``: ``sonar_mlt``'s bootstrap, chains
+                         and mutations per ping, ``sonar_tof``'s allocation)
 ``equal_time``           per budget, for every integrator against the first (the baseline):
                          ``ratio_raw = err_base / err`` and ``ratio_time_adjusted`` (each error
                          scaled by sqrt(its measured seconds), i.e. at exactly equal time for
@@ -85,7 +94,7 @@ from mitsonar.jobs.compare.budget import (BETA_RANGE, BUDGET_TOLERANCE, MAX_ATTE
                      budget_warning, calibrate, off_budget, plan_spp)
 from mitsonar.jobs.compare.common import (CALIBRATION_START_SPP, DEFAULT_BUDGETS, DEFAULT_INTEGRATORS, DEFAULT_REFERENCE_FACTOR,
                      DEFAULT_REPEATS, MAX_SPP, REFERENCE_INTEGRATOR, REFERENCE_NOISE_WARNING, REFERENCE_SEED_OFFSET,
-                     SEED_STRIDE, CompareError, jsonable, labels_for)
+                     SEED_STRIDE, COMPARE_SETTINGS, CompareError, jsonable, labels_for)
 from mitsonar.jobs.compare.engine import compare
 from mitsonar.jobs.compare.figures import plot_convergence, plot_polar_grid, scan_from_histogram
 from mitsonar.jobs.compare.integrators import load_integrator
@@ -112,7 +121,7 @@ def __getattr__(name):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-__all__ = ["BETA_RANGE", "BUDGET_TOLERANCE", "CALIBRATION_START_SPP", "CompareError", "DEFAULT_BUDGETS",
+__all__ = ["BETA_RANGE", "BUDGET_TOLERANCE", "CALIBRATION_START_SPP", "COMPARE_SETTINGS", "CompareError", "DEFAULT_BUDGETS",
            "DEFAULT_INTEGRATORS", "DEFAULT_REFERENCE_FACTOR", "DEFAULT_REPEATS", "KernelWatch", "MAX_ATTEMPTS",
            "MAX_SPP", "PathClock", "REFERENCE_INTEGRATOR", "REFERENCE_NOISE_WARNING", "REFERENCE_SEED_OFFSET",
            "SEED_STRIDE", "TIME_TOLERANCE", "budget_warning", "cached_references", "calibrate", "compare",

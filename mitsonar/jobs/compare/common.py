@@ -12,6 +12,16 @@ import numpy as np
 
 REFERENCE_INTEGRATOR = "sonar_tof"
 DEFAULT_INTEGRATORS = ("sonar_tof", "sonar_mlt")
+#: What a comparison sets on an integrator unless ``--param`` (``integrator_params``) sets it.
+#: ``sonar_mlt``'s own default, ``split=0``, runs no chains (its scan is ``sonar_tof``'s), so
+#: compared as it is, the path tracer was compared with itself. A comparison runs its Metropolis
+#: chains over every echo, ``split="off"``, with its other settings at their defaults (one target
+#: over the scan, about 2^13 chains in all, ``large_step`` 0.1, small steps 1/128 to 1/4: the best
+#: measured on scenes_xml/). Of the splits measured it lost least on ``pile_quay`` (1.4-2.3x
+#: ``sonar_tof``'s error at equal time, ``split="auto"`` 2.1-4x; docs/benchmarks.rst), and it
+#: is the one whose chains run on every scene: a numeric split or ``auto`` chains only the echoes
+#: after a mirror-like bounce, and a scene without mirrors gets no chains.
+COMPARE_SETTINGS = {"sonar_mlt": {"split": "off"}}
 DEFAULT_BUDGETS = (2.0, 4.0, 8.0, 16.0)
 DEFAULT_REPEATS = 2
 #: With automatic reference spp the reference gets this many times the path-tracing work of the
@@ -42,6 +52,18 @@ def labels_for(names) -> list[str]:
         seen[n] = seen.get(n, 0) + 1
         out.append(n if seen[n] == 1 else f"{n}#{seen[n]}")
     return out
+
+
+def run_params(name, given=None) -> dict:
+    """The parameters integrator ``name`` runs with in a comparison: `COMPARE_SETTINGS`'s for it,
+    then ``given`` (the user's ``--param``), which win."""
+    return {**COMPARE_SETTINGS.get(name, {}), **(given or {})}
+
+
+def shown_as(label, params) -> str:
+    """``label`` with the parameters it runs with, for the printed table and the JSON:
+    ``sonar_mlt (split=off)``; the bare label without parameters."""
+    return f"{label} ({', '.join(f'{k}={v}' for k, v in params.items())})" if params else label
 
 
 def jsonable(obj):

@@ -19,7 +19,7 @@ import numpy as np
 from mitsonar.jobs.compare.budget import KernelWatch, PathClock, budget_warning, calibrate, plan_spp, search_spp
 from mitsonar.jobs.compare.common import (CALIBRATION_START_SPP, DEFAULT_BUDGETS, DEFAULT_INTEGRATORS, DEFAULT_REFERENCE_FACTOR,
                      DEFAULT_REPEATS, MAX_SPP, REFERENCE_INTEGRATOR, REFERENCE_NOISE_WARNING, SEED_STRIDE, WARM_SEED,
-                     CompareError, labels_for)
+                     COMPARE_SETTINGS, CompareError, labels_for, run_params, shown_as)
 from mitsonar.jobs.compare.figures import plot_convergence, plot_polar_grid
 from mitsonar.jobs.compare.integrators import describe, load_integrator, min_spp
 from mitsonar.jobs.compare.metrics import equal_time_ratios, region_mask, score, self_errors, summarise
@@ -49,6 +49,8 @@ class Settings:
     warm: bool
     plots: bool
     paths_per_second: float | None = None
+    #: label -> the parameters it runs with (`run_params`: the comparison's settings, then ``params``)
+    run_params: dict | None = None
 
 
 def check_settings(scene_path, integrators, budgets, output_dir, reference_spp, seed, repeats, max_depth,
@@ -89,7 +91,8 @@ def check_settings(scene_path, integrators, budgets, output_dir, reference_spp, 
     check_output_folder(output_dir)
     return Settings(scene_path, names, labels, budgets, output_dir, reference_spp, int(seed), int(repeats),
                     max_depth, params, regions, float(reference_factor), calibration_seconds, bool(warm), bool(plots),
-                    None if paths_per_second is None else float(paths_per_second))
+                    None if paths_per_second is None else float(paths_per_second),
+                    {lab: run_params(n, params.get(lab)) for lab, n in zip(labels, names)})
 
 
 @dataclass
@@ -129,7 +132,7 @@ def load_bench(s: Settings) -> Bench:
     max_depth = s.max_depth
     if max_depth is None:
         max_depth = int(getattr(scene.integrator(), "max_depth", 5) or 5)
-    objs = {lab: load_integrator(n, s.params.get(lab)) for lab, n in zip(s.labels, s.names)}
+    objs = {lab: load_integrator(n, s.run_params[lab]) for lab, n in zip(s.labels, s.names)}
     cal = s.calibration_seconds if s.calibration_seconds is not None else min(0.5, s.budgets[0] / 2)
     clock = time.perf_counter if s.paths_per_second is None else PathClock(s.paths_per_second)
     return Bench(scene, sensor, scene_bytes, int(max_depth), objs,
@@ -168,7 +171,8 @@ def time_runs(bench: Bench, s: Settings, calibrations, say) -> list:
                 t0 = bench.clock()
                 hist = bench.render(obj, spp, seed)
                 dt = bench.clock() - t0
-            return hist, dt, watch.compiled, watch.compile_seconds, seed
+            # what the render ran (sonar_mlt: its chains; sonar_tof: its allocation)
+            return hist, dt, watch.compiled, watch.compile_seconds, seed, dict(getattr(obj, "last_plan", None) or {})
 
         def warm_up(spp, obj=obj):
             # Some integrators compile more kernels on a second call than on the first.
@@ -194,7 +198,7 @@ def time_runs(bench: Bench, s: Settings, calibrations, say) -> list:
                             "hists": [r[0] for r in renders], "compiled_kernels": [r[2] for r in renders],
                             "compile_seconds": [r[3] for r in renders],
                             "warmup_compiled_kernels": found["warmup_compiled_kernels"],
-                            "attempts": found["attempts"]})
+                            "attempts": found["attempts"], "plan": renders[0][5]})
             n_compiled = sum(r[2] for r in renders)
             say(f"{lab}: budget {budget:g} s -> {spp} spp, {float(np.mean([r[1] for r in renders])):.3g} s"
                 + (f" ({len(found['attempts'])} tries)" if len(found["attempts"]) > 1 else "")
@@ -208,7 +212,7 @@ def reference_spp_for(bench: Bench, s: Settings, pending) -> tuple:
     up to a power of two."""
     if s.reference_spp is not None:
         return int(s.reference_spp), False
-    plain = [lab for lab, n in zip(s.labels, s.names) if n == REFERENCE_INTEGRATOR and not s.params.get(lab)]
+    plain = [lab for lab, n in zip(s.labels, s.names) if n == REFERENCE_INTEGRATOR and not s.run_params[lab]]
     if plain:
         reached = max(p["spp"] for p in pending if p["integrator"] == plain[0])
     else:
@@ -230,7 +234,8 @@ def score_runs(pending, ref, ref_info, masks, say) -> tuple:
         metrics = [score(h, ref, self_l2, masks, region_self) for h in hists]
         first_renders[(p["integrator"], p["budget_s"])] = hists[0]
         run = summarise(p["integrator"], p["budget_s"], p["spp"], p["seeds"], p["seconds"], metrics, masks)
-        run.update({k: p[k] for k in ("compiled_kernels", "compile_seconds", "warmup_compiled_kernels", "attempts")})
+        run.update({k: p[k] for k in ("compiled_kernels", "compile_seconds", "warmup_compiled_kernels", "attempts",
+                                      "plan")})
         runs.append(run)
         say(f"{run['integrator']}: budget {run['budget_s']:g} s, {run['spp']} spp: rel L2 {run['rel_l2']:.4g}, "
             f"rel L1 {run['rel_l1']:.4g}")
@@ -293,7 +298,9 @@ def build_result(s: Settings, bench: Bench, calibrations, ref_info, auto, runs, 
                         "platform": platform.platform(), "cpu_count": os.cpu_count(),
                         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")},
         "reference": ref_info,
-        "integrators": {lab: {"type": n, "params": s.params.get(lab, {}),
+        "integrators": {lab: {"type": n, "params": s.run_params[lab], "shown_as": shown_as(lab, s.run_params[lab]),
+                              "compare_settings": {k: v for k, v in COMPARE_SETTINGS.get(n, {}).items()
+                                                   if k not in s.params.get(lab, {})},
                               "description": describe(bench.integrators[lab]), "calibration": calibrations[lab]}
                         for lab, n in zip(s.labels, s.names)},
         "runs": runs,
@@ -343,7 +350,9 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
                         seed + k * 2^20 + r; the reference uses seeds from 2^30 + 2 seed
     repeats             renders per (integrator, budget), each with its own seed
     max_depth           surface bounces for every render; None: the scene integrator's (or 5)
-    integrator_params   ``{label: {name: value}}`` extra plugin parameters
+    integrator_params   ``{label: {name: value}}`` extra plugin parameters; they win over the
+                        comparison's own (`COMPARE_SETTINGS`: ``sonar_mlt`` runs its chains,
+                        ``split="off"``)
     regions             ``{name: (lo, hi)}`` range windows (metres) also scored on their own
     reference_factor    see ``reference_spp``
     calibration_seconds length of the longest calibration render; None: min(0.5, budget_min / 2)
@@ -357,7 +366,8 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
                         reproducible on any machine and load; for tests). Every field is as
                         with the wall clock; ``seconds`` are then modelled, not measured
     log                 callable taking one line of progress, or None; with it, a progress bar
-                        is drawn on stderr while the reference renders (on a terminal only)
+                        is drawn on stderr while the reference renders (on a terminal only).
+                        The warnings are the result's ``warnings``, not logged
     =================== =======================================================================
 
     Returns the dict written to ``output_dir/compare.json`` (fields in `mitsonar.jobs.compare`'s
@@ -380,9 +390,8 @@ def compare(scene_path, integrators=DEFAULT_INTEGRATORS, budgets=DEFAULT_BUDGETS
         ref_info["regions"] = {rn: self_errors(ref, ref_diff, m) for rn, m in masks.items()}
         runs, first_renders = score_runs(pending, ref, ref_info, masks, say)
         warnings = collect_warnings(runs, s.labels, ref_info["self_rel_l2"], s.warm)
+        # the warnings are the result's (the command line prints them once, with its table)
         result = build_result(s, bench, calibrations, ref_info, auto, runs, warnings)
-        for w in warnings:
-            say(f"warning: {w}")
         write_outputs(folder, result, bench, ref, first_renders, s.plots)
     return result
 

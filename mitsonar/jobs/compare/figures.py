@@ -36,7 +36,7 @@ def plot_convergence(result, path):
             t = [r["seconds_mean"] for r in rows]
             e = [r["regions"][key.split(":", 1)[1]]["rel_l2"] if key.startswith("region:") else r[key]
                  for r in rows]
-            ax.plot(t, e, "o-", label=lab)
+            ax.plot(t, e, "o-", label=result.get("integrators", {}).get(lab, {}).get("shown_as", lab))
             for ti, ei, r in zip(t, e, rows):
                 ax.annotate(f"{r['spp']}", (ti, ei), textcoords="offset points", xytext=(3, 3), fontsize=6)
         all_t = [r["seconds_mean"] for r in result["runs"]]

@@ -45,6 +45,7 @@ import re
 import numpy as np
 
 from mitsonar._checks import first_line, is_number, is_whole
+from mitsonar._limits import PATHS_MAX
 
 FORMAT = "mitsonar-dataset/1"
 SPECS = ("uniform", "randint", "choice")
@@ -221,7 +222,7 @@ def check_config(cfg, base=".") -> dict:
     if "scenes" not in cfg:
         raise DatasetError("dataset config 'scenes': missing (a list of scenes: {xml: FILE} or {terrain: {...}})")
     for key, lo, hi, default in (("seed", 0, SEED_MAX, 0), ("samples", 1, 10 ** 12, None),
-                                 ("shard_size", 1, 10 ** 6, 16), ("spp", 1, 2 ** 31 - 1, 1024)):
+                                 ("shard_size", 1, 10 ** 6, 16), ("spp", 1, PATHS_MAX, 1024)):
         cfg.setdefault(key, default)
         if not (is_whole(cfg[key]) and lo <= cfg[key] <= hi):
             _fail(key, cfg[key], f"a whole number from {lo} to {hi}")
