@@ -7,8 +7,9 @@ interpolation between the two samples), NaN where no such crossing is found in t
 (shadows, unsurveyed cells). With walls in the map (quays, piles) a column through a wall's face
 reports the top of what the sonar saw of it: a digital *surface* model, as multibeam grids are.
 
-The affine transform maps (col, row) of a cell's corner to world x, y (GDAL order ``a, b, c, d, e,
-f``: ``x = c + a col + b row``, ``y = f + d col + e row``), here ``(res, 0, x0, 0, -res, y1)``.
+The affine transform maps (col, row) of a cell's corner to world x, y (rasterio's ``Affine``
+order ``a, b, c, d, e, f``: ``x = c + a col + b row``, ``y = f + d col + e row``), here
+``(res, 0, x0, 0, -res, y1)``.
 """
 from __future__ import annotations
 
@@ -20,8 +21,8 @@ import numpy as np
 
 @dataclass
 class ElevationGrid:
-    """``elevation`` (rows, cols) metres (NaN: unknown), ``transform`` the 6 GDAL coefficients,
-    ``resolution`` metres."""
+    """``elevation`` (rows, cols) metres (NaN: unknown), ``transform`` the 6 coefficients in
+    rasterio's ``Affine`` order, ``resolution`` metres."""
 
     elevation: np.ndarray
     transform: tuple

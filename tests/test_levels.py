@@ -2,6 +2,8 @@
 sonar-equation report, against closed forms (Urick 1983, eqs. 2.1, 2.2)."""
 import math
 import os
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -246,22 +248,28 @@ def test_echo_level_round_trips_and_is_derived(mitsonar_mod, tmp_path):
                                atol=1e-4)
 
 
-def test_a_source_level_below_150_db_is_explained():
+def test_a_source_level_below_150_db_is_explained(mitsonar_mod):
     from mitsonar.receiver.electronics import Electronics
 
     with pytest.raises(ValueError) as err:
         Electronics(source_level=52.0)
     msg = str(err.value)
     assert "\n" not in msg
-    assert msg.startswith("sonar 'source_level': 52 dB is not allowed: since mitsonar 0.3")
-    assert "dB re 1 uPa at 1 m" in msg and "receiver_sensitivity=-148" in msg
+    assert msg.startswith("sonar 'source_level': 52 dB is not allowed: it is the head's source level in dB re 1 uPa at 1 m")
+    assert "receiver_sensitivity=-148" in msg
+    # the release it names is one the changelog records, not a later one than this package
+    quoted = re.search(r"up to mitsonar (\d+\.\d+(?:\.\d+)?)", msg).group(1)
+    released = re.findall(r"^## \[(\d+\.\d+\.\d+)\]", (Path(ROOT) / "CHANGELOG.md").read_text(), flags=re.M)
+    assert quoted in released, (quoted, released)
+    version = tuple(int(x) for x in mitsonar_mod.__version__.split(".")[:3])
+    assert tuple(int(x) for x in quoted.split(".")) <= version
     with pytest.raises(ValueError, match="'source_level': 270 dB is not allowed"):
         Electronics(source_level=270.0)
 
 
 def test_xml_and_set_source_level_below_150_db_give_one_line(mitsonar_mod, tmp_path):
     scene = scene_xml(sonar_xml(source_level=52.0), sphere_xml((2, 0, 0), 0.1, acoustic_xml(0.5)))
-    with pytest.raises(Exception, match="since mitsonar 0.3 it is the head's source level"):
+    with pytest.raises(Exception, match="52 dB is not allowed: it is the head's source level"):
         mitsonar_mod.load_scene(scene)
     with pytest.raises(ValueError, match="source_level': 52 dB is not allowed"):
         mitsonar_mod.render_scan(mitsonar_mod.load_scene(os.path.join(ROOT, "scenes_xml", "box.xml")), spp=1,
@@ -270,7 +278,7 @@ def test_xml_and_set_source_level_below_150_db_give_one_line(mitsonar_mod, tmp_p
 
     proc = run("render", os.path.join(ROOT, "scenes_xml", "box.xml"), "-o", str(tmp_path / "a.exr"),
                "--set", "source_level=52")
-    assert_one_line_error(proc, "--set 'source_level': 52 dB is not allowed: since mitsonar 0.3")
+    assert_one_line_error(proc, "--set 'source_level': 52 dB is not allowed: it is the head's source level")
     assert not (tmp_path / "a.exr").exists()
 
 

@@ -32,10 +32,10 @@ def ring_scan(n_pings=36, n_bins=10, step_deg=10.0, rmax=10.0, bright=()):
 
 
 def pixel(fig, png, x, y):
-    """RGB of the saved PNG at data point (x, y) of the figure's first axes."""
+    """RGB of the saved PNG's pixel that holds data point (x, y) of the figure's first axes."""
     img = mimage.imread(png)
     px, py = fig.axes[0].transData.transform((x, y))
-    return img[int(round(img.shape[0] - py)), int(round(px)), :3]
+    return img[int(math.floor(img.shape[0] - py)), int(math.floor(px)), :3]
 
 
 def close(rgb, colour, tol=0.12):
@@ -183,7 +183,8 @@ def test_track_frames_a_straight_run_and_draws_the_ground_truth_at_its_depth(tmp
     assert min(x1 - x0, y1 - y0) >= plots.TRACK_MIN_ASPECT * max(x1 - x0, y1 - y0)
     assert close(pixel(fig, png, 20.0, 0.0), "tab:green", tol=0.2)
     assert close(pixel(fig, png, 15.0, -14.0), "tab:red", tol=0.2)
-    assert any("z = -2" in t.get_text() for t in ax.get_legend().get_texts())
+    legend = ax.get_legend() or fig.legends[0]     # below the axes, placed by the layout engine
+    assert any("z = -2" in t.get_text() for t in legend.get_texts())
 
 
 def test_mesh_section():
@@ -236,3 +237,117 @@ def test_title_has_key_settings_and_bad_arguments_raise(tmp_path):
         plots.plot_polar(scan, use="bytes")
     with pytest.raises(IndexError):
         plots.plot_ascan(scan, 36)
+
+
+def fan_scan(n_beams=16, step_deg=1.0236, beamwidth=1.0, n_bins=20, rmax=20.0, upright=True):
+    """A multibeam frame at the origin: beams ``step_deg`` apart (wider than ``beamwidth``, as the
+    harbour head's 1.0236 deg steps of 1 deg beams), boresight world +x at the middle beam. With
+    ``upright`` False the head keeps a driver's default identity mounting (scan axis world +y)."""
+    bearings = np.radians(step_deg * (np.arange(n_beams) - (n_beams - 1) / 2.0))
+    scan = ring_scan(n_pings=n_beams, n_bins=n_bins, rmax=rmax)
+    poses = np.tile(np.eye(4), (n_beams, 1, 1))
+    for k, b in enumerate(bearings):
+        R = np.array([[math.cos(b), 0.0, math.sin(b)], [0.0, 1.0, 0.0], [-math.sin(b), 0.0, math.cos(b)]])
+        mount = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]) if upright else np.eye(3)
+        poses[k, :3, :3] = mount @ R
+    scan.poses, scan.bearings, scan.beamwidth_h = poses, bearings, beamwidth
+    scan.data[:] = 200
+    return scan
+
+
+def test_cartesian_fan_beams_share_their_edges():
+    """Adjacent beams of a frame share the edge half-way between them (their wedges were each
+    ``beamwidth_h`` wide: 1 deg beams 1.0236 deg apart left gaps, drawn as white radial dashes):
+    the meshes drawn hold n + 1 distinct edge bearings spaced one step apart; with an explicit
+    ``ping_width`` every beam keeps its own two edges."""
+    from matplotlib.collections import QuadMesh
+
+    def edge_bearings(fig):
+        far = [np.asarray(m.get_coordinates())[:, -1] for m in fig.axes[0].collections
+               if isinstance(m, QuadMesh)]                          # corners at the far range, (x, y)
+        return np.unique(np.round(np.degrees(np.arctan2(np.concatenate(far)[:, 1],
+                                                        np.concatenate(far)[:, 0])), 9))
+
+    scan = fan_scan()
+    edges = edge_bearings(plots.plot_cartesian(scan, figsize=(4, 4), dpi=50))
+    assert len(edges) == scan.n_pings + 1
+    np.testing.assert_allclose(np.diff(edges), 1.0236, atol=1e-6)
+    assert edges[0] == pytest.approx(-8 * 1.0236, abs=1e-6)
+    own = edge_bearings(plots.plot_cartesian(scan, ping_width=1.0, figsize=(4, 4), dpi=50))
+    assert len(own) == 2 * scan.n_pings
+
+
+def test_polar_fan_has_no_gap_between_beams():
+    """The polar display's fan is painted without gaps between beams 1.0236 deg apart whose beams
+    are 1 deg wide (the gaps showed the background as radial lines)."""
+    scan = fan_scan()
+    fig = plots.plot_polar(scan, figsize=(4, 4), dpi=50, resolution=400)
+    image = np.ma.filled(fig.axes[0].images[0].get_array(), np.nan)
+    n = image.shape[0]
+    mid = (np.arange(n) + 0.5) / n * 2.0 * scan.range_max - scan.range_max
+    x, y = np.meshgrid(mid, mid[::-1])
+    r, bearing = np.hypot(x, y), np.degrees(np.arctan2(-x, y))
+    inner = (r > 2.0) & (r < scan.range_max - 1.0) & (np.abs(bearing) < 7.5 * 1.0236)
+    assert inner.sum() > 1000 and np.isfinite(image[inner]).all()
+
+
+def test_cartesian_warns_when_the_sweep_is_vertical():
+    """A scan with a driver's default identity mounting sweeps a vertical plane: seen from above
+    it has no width; the plot says so (it was an empty picture without a word)."""
+    with pytest.warns(UserWarning, match=r"scan axis of every ping \(poses\[k\]\[:3, 1\]\) is horizontal.*pose"):
+        plots.plot_cartesian(fan_scan(upright=False), figsize=(3, 3), dpi=50)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        plots.plot_cartesian(fan_scan(), figsize=(3, 3), dpi=50)
+
+
+def _overlaps(boxes):
+    return [(a, b) for i, a in enumerate(boxes) for b in boxes[i + 1:] if a.overlaps(b)]
+
+
+def test_polar_range_labels_sit_inside_their_rings():
+    """Each range label lies inside its ring (the outer label sat on the rim of the fan, crossing
+    it), measured on the drawn text's bounding box."""
+    scan = ring_scan(rmax=12.0)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = plots.plot_polar(scan, figsize=(7, 6.4), dpi=100, resolution=200)
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    ax = fig.axes[0]
+    labels = [t for t in ax.texts if t.get_text().endswith(" m")]
+    assert [t.get_text() for t in labels][-1] == "12 m"
+    for t in labels:
+        ring = float(t.get_text()[:-2])
+        box = ax.transData.inverted().transform(t.get_window_extent(renderer).corners())
+        assert np.hypot(box[:, 0], box[:, 1]).max() < ring, t.get_text()
+        assert np.hypot(box[:, 0], box[:, 1]).min() > ring - 2.0, t.get_text()
+
+
+def convergence_result(seconds=(2.0, 5.0, 16.0)):
+    """What `plot_convergence` reads of a comparison: two integrators, three budgets whose
+    seconds span less than a decade (the labels of a short log axis ran into each other)."""
+    runs = [{"integrator": lab, "budget_s": s, "seconds_mean": s * f, "spp": int(1000 * s),
+             "rel_l2": 1e-3 / math.sqrt(s), "rel_l1": 2e-3 / math.sqrt(s),
+             "regions": {"far": {"rel_l2": 1.5e-3 / math.sqrt(s)}}}
+            for lab, f in (("sonar_tof", 1.0), ("sonar_mlt", 1.05)) for s in seconds]
+    return {"settings": {"integrators": ["sonar_tof", "sonar_mlt"], "regions": {"far": [3.0, 8.0]},
+                         "scene": "scenes_xml/slot_chamber.xml", "repeats": 2},
+            "reference": {"self_rel_l2": 1e-4, "spp": 1 << 19}, "runs": runs}
+
+
+def test_convergence_tick_labels_do_not_overlap(tmp_path):
+    """No two tick labels of a panel's axis overlap, nor the panels' titles and labels (placed
+    by the layout engine), in the picture of a comparison over less than a decade of seconds."""
+    from mitsonar.jobs.compare.figures import plot_convergence
+
+    fig = plot_convergence(convergence_result(), str(tmp_path / "convergence.png"))
+    renderer = fig.canvas.get_renderer()
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            boxes = [t.get_window_extent(renderer) for t in axis.get_ticklabels(which="both")
+                     if t.get_visible() and t.get_text()]
+            assert len(boxes) >= 2
+            assert not _overlaps(boxes), [t.get_text() for t in axis.get_ticklabels(which="both") if t.get_text()]
+    titles = [ax.title.get_window_extent(renderer) for ax in fig.axes]
+    assert not _overlaps(titles + [fig._suptitle.get_window_extent(renderer)])

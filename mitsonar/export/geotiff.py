@@ -4,7 +4,7 @@ mosaic, the depth grid, the seabed elevation grid, and (with GDAL's BAG driver) 
     from mitsonar.export.geotiff import write_depth_geotiff
     write_depth_geotiff("depth.tif", grid, frame)     # grid: a mitsonar.products.soundings.DepthGrid
 
-Every grid is float32 bands on a north-up grid of cells (GDAL's affine ``a, b, c, d, e, f``: ``x =
+Every grid is float32 bands on a north-up grid of cells (rasterio's ``Affine`` ``a, b, c, d, e, f``: ``x =
 c + a col + b row``, ``y = f + d col + e row``, in world metres), NaN nodata unless stated, each
 band with a description and a unit. With a `GeoFrame` the cells are shifted by the origin's
 easting and northing (``c + E0``, ``f + N0``) and ``frame.crs`` is written as the GeoTIFF's

@@ -1,5 +1,5 @@
-"""North-up grids with a GDAL-style affine transform ``(a, 0, c, 0, e, f)`` (``a`` > 0 m per
-column, ``e`` = -``a``, ``(c, f)`` the top-left corner): the cell of a point, and the running sum
+"""North-up grids with an affine transform in rasterio's ``Affine`` order ``(a, 0, c, 0, e, f)``
+(``a`` > 0 m per column, ``e`` = -``a``, ``(c, f)`` the top-left corner): the cell of a point, and the running sum
 and count per cell that a mean grid is made of (the side-scan mosaic, the depth grid). Imports
 nothing from mitsonar."""
 from __future__ import annotations

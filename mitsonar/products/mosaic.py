@@ -8,9 +8,10 @@ side), and is spread along the track over half the distance to the neighbouring 
 channel on each side, so consecutive pings tile the seabed without gaps. A cell's value is the mean
 of the samples that fall in it; cells no ping reached are NaN.
 
-The grid is north-up: row 0 is the largest y. Its affine transform follows GDAL / rasterio
-(``x = a col + b row + c``, ``y = d col + e row + f`` for a pixel's top-left corner, ``(a, b, c,
-d, e, f) = (res, 0, x_min, 0, -res, y_max)``), so the ``.npz`` array and the PNG can be handed to GIS
+The grid is north-up: row 0 is the largest y. Its affine transform is in rasterio's
+``Affine`` order (``x = a col + b row + c``, ``y = d col + e row + f`` for a pixel's top-left
+corner, ``(a, b, c, d, e, f) = (res, 0, x_min, 0, -res, y_max)``: ``rasterio.Affine(*transform)``;
+GDAL's ``GetGeoTransform()`` lists the same numbers as ``(c, a, b, f, d, e)``), so the ``.npz`` array and the PNG can be handed to GIS
 tools (`Mosaic.save` also writes a ``.pgw`` world file beside the PNG).
 """
 from __future__ import annotations

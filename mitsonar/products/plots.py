@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,7 @@ from matplotlib.figure import Figure
 #: Colour map of the sonar pictures: dark open water, bright echoes (a classic sonar palette).
 DEFAULT_CMAP = "copper"
 DEFAULT_DYNAMIC_RANGE = 60.0  # dB shown below the brightest intensity when db=True
+RING_LABEL_SIZE = 7.0  # points: the range labels of `plot_polar`
 
 
 # ----------------------------------------------------------------------------------------------
@@ -127,10 +129,57 @@ def _settings_line(scan) -> str:
 
 
 def _new_figure(ax, figsize, dpi):
+    """The figure and axes to draw into: ``ax``'s, or a new figure whose titles, labels, colour bar
+    and legend matplotlib's constrained layout places."""
     if ax is not None:
         return ax.figure, ax
-    fig = Figure(figsize=figsize, dpi=dpi)
+    fig = Figure(figsize=figsize, dpi=dpi, layout="constrained")
     return fig, fig.add_subplot(1, 1, 1)
+
+
+def _legend_below(fig, ax, own_figure: bool, ncol: int) -> None:
+    """The legend under the axes (inside, it covers the echoes or the track): on a figure of our
+    own the layout engine makes room for it; in a caller's axes it goes where it covers least."""
+    if own_figure:
+        fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncol=ncol, fontsize=7,
+                   frameon=False)
+    else:
+        ax.legend(loc="best", fontsize=7)
+
+
+#: Adjacent rows share their wedge's edge (`wedge_edges`) when their boresights are at most this
+#: many beamwidths apart; rows further apart keep their own beamwidth.
+TILE_MAX_STEP = 2.0
+
+
+def wedge_edges(step, width: float):
+    """``(lo, hi)``: the angles (radians) of each row's wedge edges from its boresight, ``lo < 0 <
+    hi``, so that rows next to each other tile the fan with no gap and no overlap.
+
+    ``step`` (n - 1,) is the signed angle from row k's boresight to row k + 1's, NaN where the two
+    are not neighbours (another head position or scan axis). Neighbours at most `TILE_MAX_STEP`
+    times ``width`` apart share the edge half-way between their boresights; a row with such a
+    neighbour on one side only mirrors that edge on its other side (the ends of a fan); any other
+    side is ``width / 2`` from the boresight.
+    """
+    step = np.asarray(step, dtype=np.float64)
+    n = step.size + 1
+    lo, hi = np.full(n, -width / 2.0), np.full(n, width / 2.0)
+    shared_lo, shared_hi = np.zeros(n, bool), np.zeros(n, bool)
+    for k, s in enumerate(step):
+        if not (np.isfinite(s) and 0.0 < abs(s) <= TILE_MAX_STEP * width):
+            continue
+        if s > 0:
+            hi[k], lo[k + 1] = s / 2.0, -s / 2.0
+            shared_hi[k] = shared_lo[k + 1] = True
+        else:
+            lo[k], hi[k + 1] = s / 2.0, -s / 2.0
+            shared_lo[k] = shared_hi[k + 1] = True
+    one = shared_lo & ~shared_hi
+    hi[one] = -lo[one]
+    one = shared_hi & ~shared_lo
+    lo[one] = -hi[one]
+    return lo, hi
 
 
 def _save(fig: Figure, path) -> None:
@@ -155,8 +204,11 @@ def plot_polar(scan, path=None, ax=None, db: bool = False, cmap: str = DEFAULT_C
                resolution: int = 900, figsize=(7.0, 6.4), dpi: int = 150, title: str | None = None) -> Figure:
     """Sonar fan display (thesis Fig. 2.15/2.16): range outward, bearing around the head.
 
-    Each ping is a wedge ``ping_width`` wide centred on its bearing, drawn in ping order so later
-    pings cover earlier ones where they overlap (3 deg wedges at 1.8 deg steps). Bearing 0 is at
+    Each ping is a wedge about its bearing, drawn in ping order so later pings cover earlier ones
+    where they overlap. By default consecutive pings (a multibeam frame's beams, a mechanical
+    head's steps) share the edge half-way between their bearings, so the fan has neither gaps nor
+    overlaps (`wedge_edges`); with ``ping_width`` every wedge is that wide, centred on its bearing
+    (3 deg wedges at 1.8 deg steps overlap). Bearing 0 is at
     the top and bearings increase counter-clockwise (for a head whose scan axis points up and
     whose boresight at bearing 0 is world +x, this is the world seen from above with +x up).
 
@@ -174,7 +226,8 @@ def plot_polar(scan, path=None, ax=None, db: bool = False, cmap: str = DEFAULT_C
     use : ``data`` or ``intensity``
         Device bytes or noise-free echo energy.
     ping_width : float, optional
-        Wedge width in degrees; default the scan's ``beamwidth_h``.
+        Wedge width in degrees; default: consecutive pings tile the fan, a ping without neighbours
+        is the scan's ``beamwidth_h`` wide.
     vmin, vmax : float, optional
         Colour limits (defaults: 0..255, the A/D window, or the data range).
     dynamic_range : float
@@ -194,15 +247,18 @@ def plot_polar(scan, path=None, ax=None, db: bool = False, cmap: str = DEFAULT_C
     values, lo, hi, label = _values(scan, use, db, dynamic_range, vmin, vmax)
     width = math.radians(scan.beamwidth_h if ping_width is None else ping_width)
     rmax = scan.range_max
+    bearings = np.asarray(scan.bearings, dtype=np.float64)
+    step = (np.diff(bearings) + math.pi) % (2.0 * math.pi) - math.pi
+    edge_lo, edge_hi = wedge_edges(step if ping_width is None else np.full(step.shape, np.nan), width)
 
     # Which ping is visible in each direction: paint a fine angular grid in ping order.
     n_cells = 3600
     cell = 2.0 * math.pi / n_cells
     centres = (np.arange(n_cells) + 0.5) * cell
     owner = np.full(n_cells, -1)
-    for k, b in enumerate(scan.bearings):
-        diff = np.abs((centres - b + math.pi) % (2.0 * math.pi) - math.pi)
-        owner[diff <= width / 2.0] = k
+    for k, b in enumerate(bearings):
+        diff = (centres - b + math.pi) % (2.0 * math.pi) - math.pi
+        owner[(diff >= edge_lo[k]) & (diff <= edge_hi[k])] = k
 
     # Display coordinates: x right, y up; bearing 0 up, counter-clockwise positive.
     edges = np.linspace(-rmax, rmax, resolution + 1)
@@ -224,9 +280,15 @@ def plot_polar(scan, path=None, ax=None, db: bool = False, cmap: str = DEFAULT_C
     t = np.linspace(0, 2 * math.pi, 361)
     for rr in np.arange(ring_step, rmax + 1e-9, ring_step):
         ax.plot(-rr * np.sin(t), rr * np.cos(t), color="0.6", lw=0.4, alpha=0.7)
-        # Labelled between the 0 and 330 deg spokes, clear of the bearing labels.
-        ax.text(rr * math.sin(math.radians(15)), rr * math.cos(math.radians(15)), f"{rr:g} m", color="0.75",
-                fontsize=7, ha="center", va="center")
+        # Labelled between the 0 and 330 deg spokes, clear of the bearing labels, just inside
+        # their ring (the outer one is the rim of the fan: a label on it would cross it): centred
+        # under a point of the ring, lowered by what the ring drops (slope tan 15 deg) across
+        # half the label's width (about 0.6 em a character).
+        text = f"{rr:g} m"
+        drop = 1.5 + math.tan(math.radians(20)) * 0.3 * RING_LABEL_SIZE * len(text)
+        ax.annotate(text, (rr * math.sin(math.radians(15)), rr * math.cos(math.radians(15))),
+                    xytext=(0, -drop), textcoords="offset points", color="0.75", fontsize=RING_LABEL_SIZE,
+                    ha="center", va="top")
     for deg in range(0, 360, 30):
         a = math.radians(deg)
         ax.plot([0, -rmax * math.sin(a)], [0, rmax * math.cos(a)], color="0.6", lw=0.4, alpha=0.7)
@@ -256,8 +318,14 @@ def plot_cartesian(scan, mesh=None, path=None, ax=None, db: bool = False, cmap: 
 
     Bin j of ping k sits at ``position_k + ranges[j] * boresight_k``, from the ping's own pose
     (a scan rendered in motion shows its distortion, and the head's path), seen from above; each
-    ping is drawn as a wedge ``ping_width`` wide about its scan axis. A tilted head's wedges are
-    their beam-axis positions seen from above (slant range shortened by the tilt's cosine).
+    ping is drawn as a wedge about its scan axis: consecutive pings from one position and scan axis
+    (a multibeam frame's beams, a still mechanical head's steps) share the edge half-way between
+    their boresights, so the fan has no gaps (`wedge_edges`); others, or all with ``ping_width``,
+    are that wide (default ``beamwidth_h``). A tilted head's wedges are their beam-axis positions
+    seen from above (slant range shortened by the tilt's cosine). A head whose sweep is a vertical
+    plane (its scan axis, ``poses[k][:3, 1]``, horizontal for every ping: a real head's driver
+    with the default identity ``pose`` looks up from the origin) has no width seen from above: a
+    `UserWarning` says so and names the pose.
 
     Parameters
     ----------
@@ -275,24 +343,27 @@ def plot_cartesian(scan, mesh=None, path=None, ax=None, db: bool = False, cmap: 
     -------
     matplotlib.figure.Figure
     """
+    own_figure = ax is None
     fig, ax = _new_figure(ax, figsize, dpi)
     values, lo, hi, label = _values(scan, use, db, dynamic_range, vmin, vmax)
     width = math.radians(scan.beamwidth_h if ping_width is None else ping_width)
+    poses = np.asarray(scan.poses, dtype=np.float64)
+    if scan.n_pings and np.abs(poses[:, 2, 1]).max() < 1e-6:
+        warnings.warn(f"plot_cartesian: the scan axis of every ping (poses[k][:3, 1]) is horizontal, so each "
+                      f"sweep is a vertical plane with no width seen from above and the picture shows no "
+                      f"echoes; give the head a pose whose scan axis points up (a driver's pose=..., not the "
+                      f"default identity), or draw it with plot_polar", UserWarning, stacklevel=2)
 
     r_edges = scan.range_min + np.arange(scan.n_bins + 1) * scan.bin_width
     mesh_artist = None
-    for k in range(scan.n_pings):
-        pose = scan.poses[k]
+    for rows, angles in _wedge_runs(poses, width, tile=ping_width is None):
+        # One mesh per run of neighbouring pings, so that they share the vertices of their edges.
+        pose = poses[rows.start]
         pos, xb, zb = pose[:3, 3], pose[:3, 0], pose[:3, 2]
-        # The wedge edges: the boresight turned by -/+ width/2 about the ping's scan axis.
-        corners = []
-        for phi in (-width / 2.0, width / 2.0):
-            d = math.cos(phi) * zb + math.sin(phi) * xb
-            p = pos[None, :] + r_edges[:, None] * d[None, :]
-            corners.append(p[:, :2])
-        quad = np.stack(corners, 0)  # (2, n_bins + 1, 2): world x, y
-        mesh_artist = ax.pcolormesh(quad[..., 0], quad[..., 1], values[k][None, :], cmap=cmap,
-                                    vmin=lo, vmax=hi, shading="flat", rasterized=True)
+        d = np.cos(angles)[:, None] * zb + np.sin(angles)[:, None] * xb         # (m + 1, 3) edge directions
+        p = pos + r_edges[None, :, None] * d[:, None, :]                        # (m + 1, n_bins + 1, 3)
+        mesh_artist = ax.pcolormesh(p[..., 0], p[..., 1], values[rows], cmap=cmap, vmin=lo, vmax=hi,
+                                    shading="flat", rasterized=True)
     pos2 = np.asarray(scan.positions)[:, :2]
     if np.ptp(pos2, axis=0).max() > 1e-6:   # a head that moved during the scan: its path, ping 0 marked
         ax.plot(pos2[:, 0], pos2[:, 1], "-", color="tab:cyan", lw=1.2, label="sonar (moving)")
@@ -313,13 +384,45 @@ def plot_cartesian(scan, mesh=None, path=None, ax=None, db: bool = False, cmap: 
     ax.set_facecolor("0.85")
     ax.set_xlabel(X_LABEL)
     ax.set_ylabel(Y_LABEL)
-    # below the axes, as in plot_track: inside, it covered the echoes
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, fontsize=7, frameon=False)
+    _legend_below(fig, ax, own_figure, ncol=2)
     if mesh_artist is not None:
         fig.colorbar(mesh_artist, ax=ax, label=label, shrink=0.85)
     ax.set_title(_settings_line(scan) if title is None else title, fontsize=7)
     _save(fig, path)
     return fig
+
+
+def _wedge_runs(poses, width: float, tile: bool):
+    """``(rows, angles)`` for each run of consecutive pings drawn as one mesh: ``rows`` a slice,
+    ``angles`` (m + 1,) the run's wedge edges in radians about its first ping's scan axis, from its
+    boresight towards its x axis. Consecutive pings at one position with one scan axis, turning
+    the same way, form a run whose edges `wedge_edges` shares; without ``tile`` every ping is its
+    own run, ``width`` wide."""
+    n = len(poses)
+    step = np.full(max(n - 1, 0), np.nan)
+    if tile and n > 1:
+        a, b = poses[:-1], poses[1:]
+        same = ((np.linalg.norm(a[:, :3, 3] - b[:, :3, 3], axis=1) <= 1e-9 * max(1.0, np.abs(poses[:, :3, 3]).max()))
+                & (np.linalg.norm(a[:, :3, 1] - b[:, :3, 1], axis=1) <= 1e-9))
+        turn = np.arctan2(np.einsum("ki,ki->k", b[:, :3, 2], a[:, :3, 0]),
+                          np.einsum("ki,ki->k", b[:, :3, 2], a[:, :3, 2]))
+        step = np.where(same, turn, np.nan)
+    lo, hi = wedge_edges(step, width)
+    joined = np.isfinite(step) & (np.abs(step) > 0) & (np.abs(step) <= TILE_MAX_STEP * width)
+    k0 = 0
+    while k0 < n:
+        k1 = k0 + 1
+        sign = 0.0
+        while k1 < n and joined[k1 - 1] and (sign == 0.0 or np.sign(step[k1 - 1]) == sign):
+            sign = np.sign(step[k1 - 1])
+            k1 += 1
+        centres = np.concatenate([[0.0], np.cumsum(step[k0:k1 - 1])])   # boresights about ping k0's axis
+        if sign >= 0:
+            angles = np.concatenate([[lo[k0]], centres + hi[k0:k1]])
+        else:
+            angles = np.concatenate([[hi[k0]], centres + lo[k0:k1]])
+        yield slice(k0, k1), angles
+        k0 = k1
 
 
 #: `beam_ground_truth` cuts the scene at most this many depths (round steps, see `_depth_step`).
@@ -422,6 +525,7 @@ def plot_track(trajectory, path=None, ax=None, scans=(), mesh=None, *, figsize=(
     mesh : (vertices (V, 3), faces (F, 3)), optional
         Ground-truth triangles (e.g. ``mitsonar.scene_mesh(scene)``), as in `plot_cartesian`.
     """
+    own_figure = ax is None
     fig, ax = _new_figure(ax, figsize, dpi)
     p = np.asarray(trajectory.positions)
     framed = [p[:, :2]] + [np.asarray(s.positions)[:, :2] for s in scans]
@@ -453,7 +557,7 @@ def plot_track(trajectory, path=None, ax=None, scans=(), mesh=None, *, figsize=(
     ax.set_xlabel(X_LABEL)
     ax.set_ylabel(Y_LABEL)
     # below the axes: inside, it covered the track's end on every straight run
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=5, fontsize=7, frameon=False)
+    _legend_below(fig, ax, own_figure, ncol=5)
     lo, hi = trajectory.span
     ax.set_title(f"track: {len(p)} poses, {hi - lo:.6g} s, {np.sum(np.linalg.norm(np.diff(p, axis=0), axis=1)):.6g} m"
                  if title is None else title, fontsize=8)
@@ -484,7 +588,6 @@ def plot_ascan(scan, ping: int, path=None, ax=None, db: bool = False, *,
     if not -scan.n_pings <= ping < scan.n_pings:
         raise IndexError(f"plot_ascan: {scan.row_name[:-1]} {ping} is out of range for a scan of "
                          f"{scan.n_pings} {scan.row_name}")
-    own_figure = ax is None
     fig, ax = _new_figure(ax, figsize, dpi)
     inten = scan.intensity[ping].astype(np.float64)
     if db:
@@ -513,8 +616,6 @@ def plot_ascan(scan, ping: int, path=None, ax=None, db: bool = False, *,
         where = f"{scan.row_name[:-1]} {row}, bearing {fmt(math.degrees(scan.bearings[ping]))} deg"
     ax.set_title((where + "\n" + _settings_line(scan))
                  if title is None else title, fontsize=7)
-    if own_figure:
-        fig.tight_layout()  # a long settings line wraps the title to three lines: keep it on the page
     _save(fig, path)
     return fig
 

@@ -10,7 +10,8 @@ gridded depth map (an array with its affine transform; GeoTIFF when ``rasterio``
 Depth is positive down from z = 0 (the sea surface of the survey scenes): ``depth = -z``. The
 grid is north-up like a GeoTIFF: row 0 is the cell row with the largest y, and a cell's centre is
 at ``x = c + a (col + 0.5)``, ``y = f + e (row + 0.5)`` with ``transform = (a, b, c, d, e, f) =
-(cell, 0, x_min, 0, -cell, y_max)`` (GDAL / rasterio ``Affine`` order). Each cell holds the mean
+(cell, 0, x_min, 0, -cell, y_max)`` (rasterio's ``Affine`` order; GDAL's geotransform lists them as
+``(c, a, b, f, d, e)``). Each cell holds the mean
 depth of the soundings in it (NaN where none) and ``count`` their number.
 """
 from __future__ import annotations

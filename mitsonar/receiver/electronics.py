@@ -102,7 +102,7 @@ class Electronics:
                                    axis); 150..260 allowed
     receiver_sensitivity -148.0    dB: the receiver's response referred to the A/D's dB scale
                                    (``SL + receiver_sensitivity`` = 52 dB, the calibration constant
-                                   called ``source_level`` before version 0.3)
+                                   called ``source_level`` up to version 0.2.0)
     noise_level          42.0      dB re 1 uPa^2/Hz: ambient plus self noise at the receiver
                                    (thermal noise at 700 kHz: `sonar_equation.ambient_noise_level`)
     receiver_bandwidth   0.0       Hz, the receiver's noise bandwidth; 0 means ``1 / pulse_length``

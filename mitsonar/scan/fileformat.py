@@ -15,8 +15,10 @@ channel       pixel type content
 ``intensity`` FLOAT      ``Scan.intensity``: noise-free echo energy per bin (float32, bit-exact)
 ``data``      UINT       ``Scan.data``: device bytes 0..255 (EXR has no 8-bit type; stored as uint32)
 ``Y``         FLOAT      a copy of ``intensity`` under the luminance name, so that EXR tools that know
-                         only RGB/Y images (OpenCV's ``imread``, image viewers) open the scan as a
-                         grey float image; files written before it have no ``Y`` and read the same
+                         only RGB/Y images (image viewers; OpenCV's ``imread`` once
+                         ``OPENCV_IO_ENABLE_OPENEXR=1`` is in the environment before ``import cv2``,
+                         as its EXR codec is off by default) open the scan as a grey float image;
+                         files written before it have no ``Y`` and read the same
 ============= ========== ===========================================================================
 
 Everything else lives in one string header attribute, ``mitsonar``, holding JSON (the OpenEXR
@@ -35,7 +37,7 @@ times               list of floats: seconds of each ping from the scan start (ab
                     written before scans had times: they load with times None, i.e. zeros)
 range_min/max, beam_pattern, beamwidth_h, beamwidth_v, kind, sound_speed, absorption
 electronics, meta   the Scan's dicts (numpy arrays, numpy scalars and tuples are tagged and restored);
-                    an ``electronics`` written before mitsonar 0.3 (a ``source_level`` below 150 dB
+                    an ``electronics`` written by mitsonar 0.2.0 (a ``source_level`` below 150 dB
                     and no ``receiver_sensitivity``: the old calibration constant) is read as
                     source level 200 dB and the sensitivity that keeps their sum
 checksums           CRC-32 of the intensity (float32, little endian) and data (uint8) bytes
@@ -261,7 +263,7 @@ def _build(path: str, head: dict[str, Any], intensity, data, arrays: dict[str, A
     try:
         n_pings, n_bins = head["n_pings"], head["n_bins"]
         scalars = {name: _decode(head[name]) for name in _SCALARS}
-        # Files from before mitsonar 0.3 hold the calibration constant as 'source_level'.
+        # Files of mitsonar 0.2.0 hold the calibration constant as 'source_level'.
         electronics = migrate_settings(_decode(head["electronics"]))
         meta = _decode(head["meta"])
         checks = head["checksums"]

@@ -18,15 +18,16 @@ import math
 
 import numpy as np
 
-#: The version whose ``source_level`` is dB re 1 uPa at 1 m (before: a calibration constant).
-SOURCE_LEVEL_SINCE = "0.3"
+#: The last release whose ``source_level`` was a calibration constant (CHANGELOG.md: the change to
+#: dB re 1 uPa at 1 m came after it).
+CALIBRATION_UNTIL = "0.2.0"
 #: Source levels a head may be given, dB re 1 uPa at 1 m (real heads: 180..230).
 SOURCE_LEVELS = (150.0, 260.0)
 #: Micron defaults. Tritech does not publish the Micron's source level: 200 dB re 1 uPa at 1 m is
 #: typical of a small 700 kHz imaging head (Urick 1983, sec. 4.3: ``SL = 170.8 + 10 log10 P + DI``,
 #: about 1 W acoustic into the 3 x 35 deg beam's DI of 26 dB gives 197 dB).
 DEFAULT_SOURCE_LEVEL = 200.0
-#: The calibration constant of mitsonar before 0.3 (``source_level`` then): SL + sensitivity.
+#: The calibration constant of mitsonar up to `CALIBRATION_UNTIL` (``source_level`` then): SL + sensitivity.
 CALIBRATION_DB = 52.0
 #: dB: the receiver's response referred to the A/D's dB scale (an equivalent constant: the A/D
 #: level of a 0 dB re 1 uPa echo after the head's fixed gains), chosen so that SL + sensitivity
@@ -40,9 +41,9 @@ DEFAULT_NOISE_LEVEL = 42.0
 def source_level_error(source: str, value) -> str:
     """The one line refusing a ``source_level`` outside `SOURCE_LEVELS` (most likely an old
     calibration constant such as 52)."""
-    return (f"{source} 'source_level': {value:g} dB is not allowed: since mitsonar {SOURCE_LEVEL_SINCE} it is the "
-            f"head's source level in dB re 1 uPa at 1 m ({SOURCE_LEVELS[0]:g}..{SOURCE_LEVELS[1]:g}; real heads "
-            f"180..230); the old calibration constant is now source_level + receiver_sensitivity "
+    return (f"{source} 'source_level': {value:g} dB is not allowed: it is the head's source level in dB re "
+            f"1 uPa at 1 m ({SOURCE_LEVELS[0]:g}..{SOURCE_LEVELS[1]:g}; real heads 180..230); the calibration "
+            f"constant it was up to mitsonar {CALIBRATION_UNTIL} is now source_level + receiver_sensitivity "
             f"(e.g. source_level={DEFAULT_SOURCE_LEVEL:g}, receiver_sensitivity={value - DEFAULT_SOURCE_LEVEL:g})")
 
 
@@ -65,7 +66,7 @@ def rename_settings(settings: dict) -> dict:
 
 
 def migrate_settings(settings: dict) -> dict:
-    """Electronics settings recorded before `SOURCE_LEVEL_SINCE` (a scan file's), in today's
+    """Electronics settings recorded by mitsonar up to `CALIBRATION_UNTIL` (a scan file's), in today's
     meaning: a number ``source_level`` below `SOURCE_LEVELS` with no ``receiver_sensitivity``
     was the calibration constant; it becomes `DEFAULT_SOURCE_LEVEL` plus the sensitivity that
     keeps the sum, so re-applying the electronics gives the same bytes; renamed fields take their

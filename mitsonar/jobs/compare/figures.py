@@ -7,13 +7,32 @@ import os
 import numpy as np
 
 
-def _figure(figsize, dpi=110):
+def _figure(figsize, dpi=110, layout=None):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=figsize, dpi=dpi)
+    fig = Figure(figsize=figsize, dpi=dpi, layout=layout)
     FigureCanvasAgg(fig)
     return fig
+
+
+def _log_ticks(axis) -> None:
+    """Tick labels of a log axis as plain numbers (0.5, 2, 16; 2e-04 below 1e-3), the minor ticks
+    labelled only at 2 and 5 times a power of ten and only where the axis spans less than two
+    decades: matplotlib's default labels of a short log axis (``3 x 10^0``, ``4 x 10^0``) run into
+    each other."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    def plain(v, _pos=None):
+        return f"{v:g}"
+
+    lo, hi = sorted(axis.get_view_interval())
+    axis.set_major_formatter(FuncFormatter(plain))
+    if lo > 0 and math.log10(hi / lo) < 2.0:
+        axis.set_minor_locator(LogLocator(base=10.0, subs=(2.0, 5.0)))
+        axis.set_minor_formatter(FuncFormatter(plain))
+    else:
+        axis.set_minor_formatter(NullFormatter())
 
 
 def plot_convergence(result, path):
@@ -27,7 +46,7 @@ def plot_convergence(result, path):
     panels = [("rel_l2", "relative L2 error (whole scan)"), ("rel_l1", "relative L1 error (whole scan)")]
     panels += [(f"region:{rn}", f"relative L2 error, {rn} ({result['settings']['regions'][rn][0]:g}-"
                                 f"{result['settings']['regions'][rn][1]:g} m)") for rn in regions]
-    fig = _figure((5.0 * len(panels), 4.2))
+    fig = _figure((5.0 * len(panels), 4.2), layout="constrained")
     self_l2 = result["reference"].get("self_rel_l2")
     for i, (key, title) in enumerate(panels):
         ax = fig.add_subplot(1, len(panels), i + 1)
@@ -49,6 +68,8 @@ def plot_convergence(result, path):
             ax.axhline(self_l2, color="0.5", ls=":", lw=0.8, label="reference's own error")
         ax.set_xscale("log")
         ax.set_yscale("log")
+        _log_ticks(ax.xaxis)
+        _log_ticks(ax.yaxis)
         ax.set_xlabel("measured seconds per render")
         ax.set_ylabel(title.split(" (")[0].split(",")[0])
         ax.set_title(title, fontsize=9)
@@ -57,7 +78,6 @@ def plot_convergence(result, path):
     scene = os.path.basename(result["settings"]["scene"])
     fig.suptitle(f"{scene}: error against a {result['reference']['spp']}-spp sonar_tof reference "
                  f"(spp labelled; {result['settings']['repeats']} repeat(s), RMS)", fontsize=9)
-    fig.tight_layout()
     fig.savefig(path)
     return fig
 
