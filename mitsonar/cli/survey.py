@@ -84,6 +84,9 @@ def cmd_survey(args):
     from mitsonar._files import check_output_folder
 
     check_counts(args, CLIError)
+    from mitsonar.geometry.geodesy import frame_from_args
+
+    frame_from_args(args)                           # a bad --origin/--crs: refused before the scene loads
     traj = trajectory_from_args(args)               # a bad file: one line, nothing written
     if getattr(args, "surface", False):             # + a flat specular sea surface at z = 0
         from mitsonar.scenes.sea_surface import load_survey_scene
