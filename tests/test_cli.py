@@ -401,3 +401,27 @@ def test_virtual_sonar_and_bathymetry_take_a_sensor(tmp_path):
     assert proc.returncode == 0, proc.stderr
     summary = json.loads((out / "errors.json").read_text())
     assert summary["sensor"] == "multibeam" and summary["preset"] is None and summary["sonar"]["beams"] == 128
+
+
+# ----------------------------------------------------------------------------- --version, a folder as a scene
+def test_version_prints_the_package_version(capsys):
+    from mitsonar._version import __version__
+    from mitsonar.cli import main
+
+    with pytest.raises(SystemExit) as exit:
+        main(["--version"])
+    assert exit.value.code == 0
+    assert capsys.readouterr().out == f"mitsonar {__version__}\n"
+
+
+@pytest.mark.parametrize("command", [["render", "{dir}", "-o", "{dir}/a.npz"], ["levels", "{dir}"],
+                                     ["survey", "{dir}", "-o", "{dir}/s", "--lawnmower", "0", "1", "0", "1",
+                                      "--depth", "1"]])
+def test_a_folder_given_as_the_scene_is_called_a_folder(tmp_path, capsys, command):
+    from mitsonar.cli import main
+
+    assert main([a.format(dir=tmp_path) for a in command]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "does not exist" not in err and "no such file" not in err, err
+    assert f"{tmp_path}" in err and "is a directory; expected a scene XML file" in err, err
+    assert sorted(os.listdir(tmp_path)) == []

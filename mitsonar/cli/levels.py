@@ -37,6 +37,8 @@ def cmd_levels(args):
             "not_writable": "-o {path!r}: folder {folder!r} is not writable"})
     if args.spp < 1 or args.rows < 0 or args.sensor < 0:
         raise LevelsCLIError("--spp must be >= 1, --rows and --sensor >= 0")
+    if os.path.isdir(args.scene):
+        raise LevelsCLIError(f"{args.scene}: is a directory; expected a scene XML file or a scan file (.exr/.npz)")
     if not os.path.isfile(args.scene):
         raise LevelsCLIError(f"{args.scene}: no such file")
     report = sonar_equation_report(args.scene, spp=args.spp, seed=args.seed, sensor=args.sensor)

@@ -295,7 +295,11 @@ KIND_HELP = ("picture kind: polar (default), cartesian or ascan for a mechanical
 def build_parser():
     from mitsonar.cli.common import add_force, add_sensor
 
+    from mitsonar._version import __version__
+
     p = argparse.ArgumentParser(prog="mitsonar", description="Physically based imaging-sonar simulation.")
+    p.add_argument("--version", action="version", version=f"mitsonar {__version__}",
+                   help="print the version and exit")
     p.add_argument("--variant", help="Mitsuba variant: llvm_ad_mono (default), cuda_ad_mono or auto "
                                      "(same as MITSONAR_VARIANT)")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")

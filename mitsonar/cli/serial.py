@@ -97,9 +97,9 @@ def _head(args):
 # ---- virtual-sonar ----
 
 def _virtual_sonar(args) -> int:
+    from mitsonar.sim.scene import check_scene_file
     scene_path = Path(args.scene)
-    if not scene_path.is_file():
-        raise FileNotFoundError(f"scene file not found: {scene_path}")
+    check_scene_file(scene_path)
     head = _head(args)
     import mitsonar
     from mitsonar.cli.common import check_counts, sensor_of
