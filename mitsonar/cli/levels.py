@@ -22,7 +22,10 @@ def add_subcommands(sub):
     s.add_argument("--spp", type=int, default=256, help="paths per ping (default 256)")
     s.add_argument("--seed", type=int, default=0, help="seed of the paths (default 0)")
     s.add_argument("--rows", type=int, default=20, help="pings listed, evenly spaced (default 20; 0: all)")
-    s.add_argument("-o", "--output", help="figure of echo level and noise against range (.png/.pdf/.svg)")
+    from mitsonar.cli.common import add_force, add_output
+
+    add_output(s, "-o", "--output", help="figure of echo level and noise against range (.png/.pdf/.svg)")
+    add_force(s)
     s.set_defaults(func=cmd_levels)
 
 
