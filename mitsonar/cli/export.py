@@ -79,7 +79,7 @@ def add_xtf_options(parser):
     from mitsonar.cli.common import add_output
 
     add_output(parser, "--xtf", metavar="OUT", help="also write the side-scan pings as an XTF file (needs --origin, "
-                                                     "or scans whose metadata hold one)")
+                                                    "or scans whose metadata hold one)")
     add_geo_options(parser)
 
 
