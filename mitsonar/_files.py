@@ -18,19 +18,14 @@ def _umask() -> int:
 _UMASK = _umask()
 
 
-def check_output_folder(folder, error, *, holds=None, what="", option="-o", force=False, writable=False) -> None:
-    """Refuse, with one line raised as ``error``, an output folder that is a file, or one that
-    already holds a run (``holds(folder)`` true; ``what`` names the run: "already holds {what};
-    choose a new or empty folder", and, when the command takes ``--force`` (``force`` True),
-    "or --force to replace it"); with ``writable``, also one this process could not create or
-    write in (its nearest existing ancestor is a file, or not writable). Creates nothing:
-    `make_output_folder` does."""
+def check_output_folder(folder, error, *, option="-o", writable=False) -> None:
+    """Refuse, with one line raised as ``error``, an output folder that is a file; with
+    ``writable``, also one this process could not create or write in (its nearest existing
+    ancestor is a file, or not writable). Creates nothing: `make_output_folder` does. (A folder
+    that holds an earlier run: `mitsonar.cli.common.check_outputs`, the ``--force`` policy.)"""
     folder = os.fspath(folder)
     if os.path.exists(folder) and not os.path.isdir(folder):
         raise error(f"{option} {folder!r} is a file, not a folder")
-    if holds is not None and os.path.isdir(folder) and holds(folder):
-        raise error(f"{option} {folder!r} already holds {what}; choose a new or empty folder"
-                    + (", or --force to replace it" if force else ""))
     if writable:
         parent = os.path.abspath(folder)
         while not os.path.exists(parent):

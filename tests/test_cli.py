@@ -256,25 +256,26 @@ def test_survey_of_a_two_sonar_scene_warns_once(tmp_path):
 
 
 # ----------------------------------------------------------------------------- existing outputs, exit codes
-def test_overwriting_warns_for_one_release_and_force_silences_it(tmp_path, mitsonar_mod):
+def test_an_existing_output_is_refused_and_force_overwrites_it(tmp_path, mitsonar_mod):
     scan = tmp_path / "s.npz"
     mitsonar_mod.render_scan(mitsonar_mod.load_scene(BOX), spp=1).save(str(scan))
     png = tmp_path / "p.png"
     png.write_bytes(b"old")
     proc = run("plot", str(scan), "-o", str(png))
-    assert proc.returncode == 0
-    assert proc.stderr.splitlines() == [
-        f"mitsonar: warning: {png} exists; overwriting; from the next release this needs --force"]
-    png_size(png)
+    assert proc.returncode == 1 and proc.stdout == ""
+    assert proc.stderr.splitlines() == [f"mitsonar: error: -o {png}: exists; --force to overwrite"]
+    assert png.read_bytes() == b"old"
     proc = run("plot", str(scan), "-o", str(png), "--force")
     assert proc.returncode == 0 and proc.stderr == ""
-    proc = run("render", BOX, "-o", str(scan), "--spp", "1", "-q")
-    assert proc.returncode == 0
-    assert proc.stderr.splitlines() == [
-        f"mitsonar: warning: {scan} exists; overwriting; from the next release this needs --force"]
+    png_size(png)
+    before = scan.read_bytes()
+    proc = run("render", BOX, "-o", str(tmp_path / "new.npz"), "--plot", str(png), "--spp", "1", "-q")
+    assert proc.returncode == 1
+    assert proc.stderr.splitlines() == [f"mitsonar: error: --plot {png}: exists; --force to overwrite"]
+    assert not (tmp_path / "new.npz").exists() and scan.read_bytes() == before
     for command in (["render", BOX, "-o", "x.npz"], ["plot", "x.npz", "-o", "x.png"], ["demo"], ["record", "P", "-o", "x"],
                     ["replay", "l", "-o", "x.npz"], ["map", "x.npz", "-o", "m.npz"], ["survey", BOX, "-o", "x"],
-                    ["bathymetry", BOX, "-o", "x"], ["export", "x.npz"]):
+                    ["bathymetry", BOX, "-o", "x"], ["export", "x.npz"], ["levels", BOX], ["live", BOX]):
         assert "--force" in run(*command, "--help").stdout, command
 
 
@@ -370,24 +371,6 @@ def test_failed_bathymetry_leaves_no_empty_folder(tmp_path):
     assert not (tmp_path / "new").exists()
 
 
-def test_overwrite_warning_is_one_line_for_many_outputs(tmp_path):
-    import warnings
-
-    from mitsonar.cli.common import warn_overwrite
-
-    paths = [tmp_path / f"{k}.png" for k in range(3)]
-    for p in paths[:3]:
-        p.write_bytes(b"")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        warn_overwrite(paths + [tmp_path / "new.png", None], force=False)
-        warn_overwrite(paths, force=True)
-        warn_overwrite([tmp_path / "new.png"], force=False)
-    assert [str(w.message) for w in caught] == [
-        f"{paths[0]} and 2 more outputs exist; overwriting; from the next release this needs --force"]
-    assert caught[0].category is FutureWarning
-
-
 def test_virtual_sonar_and_bathymetry_take_a_sensor(tmp_path):
     import json
 
@@ -401,3 +384,27 @@ def test_virtual_sonar_and_bathymetry_take_a_sensor(tmp_path):
     assert proc.returncode == 0, proc.stderr
     summary = json.loads((out / "errors.json").read_text())
     assert summary["sensor"] == "multibeam" and summary["preset"] is None and summary["sonar"]["beams"] == 128
+
+
+# ----------------------------------------------------------------------------- --version, a folder as a scene
+def test_version_prints_the_package_version(capsys):
+    from mitsonar._version import __version__
+    from mitsonar.cli import main
+
+    with pytest.raises(SystemExit) as exit:
+        main(["--version"])
+    assert exit.value.code == 0
+    assert capsys.readouterr().out == f"mitsonar {__version__}\n"
+
+
+@pytest.mark.parametrize("command", [["render", "{dir}", "-o", "{dir}/a.npz"], ["levels", "{dir}"],
+                                     ["survey", "{dir}", "-o", "{dir}/s", "--lawnmower", "0", "1", "0", "1",
+                                      "--depth", "1"]])
+def test_a_folder_given_as_the_scene_is_called_a_folder(tmp_path, capsys, command):
+    from mitsonar.cli import main
+
+    assert main([a.format(dir=tmp_path) for a in command]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "does not exist" not in err and "no such file" not in err, err
+    assert f"{tmp_path}" in err and "is a directory; expected a scene XML file" in err, err
+    assert sorted(os.listdir(tmp_path)) == []

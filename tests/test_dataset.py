@@ -482,3 +482,25 @@ def test_the_config_fixes_or_draws_the_speckle_seed():
                        (-1, "'electronics.speckle_seed': -1 is not allowed (a whole number >= 0")):
         with pytest.raises(DatasetError, match=re.escape(words)):
             check_config(small_config(electronics={"speckle_seed": bad}))
+
+
+@pytest.mark.parametrize("workers, engine, allowed", [
+    ("-2", "local", "a whole number >= 1 of worker processes, or 0 to render in this process"),
+    ("-1", "auto", "a whole number >= 1 of worker processes, or 0 to render in this process"),
+    ("0", "ray", "Ray actors: a whole number >= 1"),
+])
+def test_workers_out_of_range_are_one_line_with_the_allowed_values(tmp_path, capsys, workers, engine, allowed):
+    """``--workers 0`` renders in this process (documented); below 0 (or 0 on Ray) is refused in
+    one line naming the allowed values, before the folder is made."""
+    import yaml
+
+    cfg_path = tmp_path / "small.yaml"
+    cfg_path.write_text(yaml.safe_dump(small_config()))
+    out = tmp_path / "ds"
+    assert main(["dataset", str(cfg_path), "-o", str(out), "--workers", workers, "--engine", engine, "-q"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == f"mitsonar: error: --workers {workers} is not allowed ({allowed})", err
+    assert not out.exists()
+    with pytest.raises(SystemExit):
+        main(["dataset", "--help"])
+    assert "0: render in this process" in " ".join(capsys.readouterr().out.split())

@@ -44,6 +44,40 @@ def test_bad_origin_or_crs_is_one_line_naming_the_flag(origin, crs, message):
         GeoFrame.make(origin, crs)
 
 
+@pytest.mark.parametrize("crs, message", [
+    # UTM zone 1 for a point of zone 31: its grid was 14e6 m north and a GeoTIFF flipped north-south
+    ("EPSG:32601", r"^--crs EPSG:32601: the origin 52 N 4.5 E is outside the area of use of WGS 84 / UTM zone 1N "
+                   r"\(lon -180..-174, lat 0..84\); use the origin's UTM zone, EPSG:32631$"),
+    ("EPSG:2154", r"^--crs EPSG:2154: the origin 52 N 4.5 E is outside the area of use of RGF93 v1 / Lambert-93 "),
+    ("EPSG:4326", r"^--crs EPSG:4326: WGS 84 is geographic, without a projection to a grid in metres"),
+    # Web Mercator: 1/cos(52 deg) = 1.62 (1.625 along the meridian on the ellipsoid)
+    ("EPSG:3857", r"^--crs EPSG:3857: WGS 84 / Pseudo-Mercator has a scale error of \+63 % at the origin 52 N 4.5 E "
+                  r"\(Web Mercator stretches distances by 1/cos\(lat\)\); surveys need true metres: use the "
+                  r"origin's UTM zone, EPSG:32631$"),
+    ("EPSG:2263", r"^--crs EPSG:2263: NAD83 / New York Long Island \(ftUS\) has its grid in US survey foot; "
+                  r"surveys need metres"),
+])
+def test_a_crs_that_cannot_hold_the_origin_is_refused(crs, message):
+    with pytest.raises(GeoError, match=message):
+        GeoFrame.make((52.0, 4.5), crs)
+
+
+@pytest.mark.parametrize("origin, crs", [((52.0, 4.5), "EPSG:32631"), ((52.0, 4.5), "EPSG:25831"),
+                                         ((52.0, 4.5), "EPSG:28992"), ((-33.9, 18.4), "EPSG:32734"),
+                                         ((0.0, 180.0), None), ((0.0, -180.0), None)])
+def test_a_crs_that_holds_the_origin_is_accepted(origin, crs):
+    frame = GeoFrame.make(origin, crs)
+    assert frame.crs == (crs or utm_epsg(*origin))
+
+
+def test_polar_origins_default_to_ups():
+    """North of 84 N and south of 80 S UTM's zones end (their area of use): the default is UPS."""
+    assert GeoFrame.make((86.0, 10.0)).crs == "EPSG:32661" and GeoFrame.make((-85.0, 10.0)).crs == "EPSG:32761"
+    with pytest.raises(GeoError, match=r"^--crs EPSG:32632: the origin 86 N 10 E is outside .*use the origin's "
+                                       r"UPS grid, EPSG:32661$"):
+        GeoFrame.make((86.0, 10.0), "EPSG:32632")
+
+
 def test_scan_meta_carries_origin_and_crs_through_files(tmp_path):
     from mitsonar.scan.model import Scan
 
@@ -387,6 +421,8 @@ def test_one_geotiff_writer_serves_every_grid():
     (["--origin", "95", "4"], "--origin 95 4: off the Earth"),
     (["--origin", "52", "4", "--crs", "EPSG:1"], "--crs EPSG:1: unknown EPSG code"),
     (["--origin", "52", "4", "--crs", "EPSG:4326"], "--crs EPSG:4326: WGS 84 is geographic"),
+    (["--origin", "52", "4.5", "--crs", "EPSG:32601"], "--crs EPSG:32601: the origin 52 N 4.5 E is outside"),
+    (["--origin", "52", "4.5", "--crs", "EPSG:3857"], "--crs EPSG:3857: WGS 84 / Pseudo-Mercator has a scale error"),
 ])
 def test_bathymetry_refuses_bad_geo_flags_in_one_line(tmp_path, capsys, flags, message):
     import os

@@ -464,7 +464,7 @@ def test_bad_output_flags_are_one_line_before_the_scene_loads_and_leave_no_file(
     port = busy.getsockname()[1]
     try:
         for argv, words in [(("--mcap", tmp_path / "x.bag"), "must end in .mcap"),
-                            (("--mcap", tmp_path / "old.mcap"), "exists; refusing to overwrite it"),
+                            (("--mcap", tmp_path / "old.mcap"), "exists; --force to overwrite"),
                             (("--mcap", tmp_path / "no" / "x.mcap"), "does not exist"),
                             (("--mcap", tmp_path), "is a folder"),
                             (("--mcap", tmp_path / "new.mcap", "--foxglove", port), f"--foxglove {port}: cannot listen")]:

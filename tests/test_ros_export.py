@@ -169,7 +169,7 @@ def test_cli_export_round_trip_and_refusals(tmp_path, capsys):
     before = out.read_bytes()
     assert main(["export", files[0], "--mcap", str(out)]) == 1
     err = capsys.readouterr().err.strip()
-    assert err == f"mitsonar: error: {out}: exists; refusing to overwrite it (use --force)"
+    assert err == f"mitsonar: error: --mcap {out}: exists; --force to overwrite"
     assert out.read_bytes() == before
     assert main(["export", files[0], "--mcap", str(out), "--force"]) == 0
     # a bad scan among good ones: one line naming the file, nothing written

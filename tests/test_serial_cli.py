@@ -88,7 +88,10 @@ def test_rendered_box_scan_survives_the_wire(mitsonar_mod):
 
 def test_virtual_sonar_cli_errors_are_one_line(tmp_path, capsys, monkeypatch):
     assert cli("virtual-sonar", tmp_path / "missing.xml") == 1
-    assert "scene file not found" in one_error_line(capsys, "virtual-sonar")
+    assert f"scene file {str(tmp_path / 'missing.xml')!r} does not exist" in one_error_line(capsys, "virtual-sonar")
+    assert cli("virtual-sonar", tmp_path) == 1       # a folder: said, not "does not exist"
+    assert (f"scene file {str(tmp_path)!r} is a directory; expected a scene XML file"
+            in one_error_line(capsys, "virtual-sonar"))
     scene = tmp_path / "bad.xml"
     scene.write_text("<scene/>")
 

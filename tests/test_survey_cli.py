@@ -30,7 +30,8 @@ def test_survey_writes_scans_trajectory_and_pictures(tmp_path, capsys):
     assert "wrote 2 scans" in capsys.readouterr().out
     # a second survey into the same folder would mix two surveys: refused
     assert main(["survey", BOX, "--trajectory", str(out / "trajectory.tum"), "-q", "-o", str(out)]) == 1
-    assert "already holds a survey" in capsys.readouterr().err
+    assert capsys.readouterr().err.strip() == (f"mitsonar: error: -o {out}: already holds scan_00000.npz and 4 more "
+                                               "of its outputs; --force to overwrite")
 
 
 @pytest.mark.parametrize("content, words", [

@@ -77,7 +77,7 @@ def test_map_incremental_cli(floor_scan, tmp_path):
     proc = _run("map", str(empty), "--incremental", "-o", str(tmp_path / "m2.npz"))
     assert proc.returncode != 0 and "Traceback" not in proc.stderr
     assert proc.stderr.strip().count("\n") == 0 and "the survey is empty" in proc.stderr
-    proc = _run("map", str(survey / "scan_00000.npz"), "-o", str(tmp_path / "m3.npz"), "--elevation", str(elev))
+    proc = _run("map", str(survey / "scan_00000.npz"), "-o", str(tmp_path / "m3.npz"), "--elevation", str(tmp_path / "e3.npz"))
     assert proc.returncode != 0 and "--elevation needs --incremental" in proc.stderr
     assert not (tmp_path / "m2.npz").exists() and not (tmp_path / "m3.npz").exists()
 

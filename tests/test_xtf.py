@@ -260,6 +260,8 @@ def test_survey_xtf_and_export_xtf_agree_with_the_scans(tmp_path, capsys):
     (["--xtf", "{t}/s.xtf", "--origin", "95", "4"], "--origin 95 4: off the Earth"),
     (["--xtf", "{t}/s.xtf", "--origin", "52", "4", "--crs", "EPSG:4326"], "--crs EPSG:4326: WGS 84 is geographic"),
     (["--xtf", "{t}/s.xtf", "--origin", "52", "4", "--crs", "EPSG:1"], "--crs EPSG:1: unknown EPSG code"),
+    (["--origin", "52", "4.5", "--crs", "EPSG:32601"], "--crs EPSG:32601: the origin 52 N 4.5 E is outside"),
+    (["--origin", "52", "4.5", "--crs", "EPSG:3857"], "--crs EPSG:3857: WGS 84 / Pseudo-Mercator has a scale error"),
     (["--xtf", "{t}/s.xyz", "--origin", "52", "4"], "the file name must end in .xtf"),
     (["--crs", "EPSG:32631"], "--crs EPSG:32631: needs --origin"),
 ])
@@ -312,6 +314,8 @@ def test_survey_along_a_lat_lon_csv_track(tmp_path, capsys):
     (["--origin", "95", "4"], "--origin 95 4: off the Earth"),
     (["--origin", "52", "4", "--crs", "EPSG:1"], "--crs EPSG:1: unknown EPSG code"),
     (["--origin", "52", "4", "--crs", "EPSG:4326"], "--crs EPSG:4326: WGS 84 is geographic"),
+    (["--origin", "52", "4.5", "--crs", "EPSG:32601"], "--crs EPSG:32601: the origin 52 N 4.5 E is outside"),
+    (["--origin", "52", "4.5", "--crs", "EPSG:3857"], "--crs EPSG:3857: WGS 84 / Pseudo-Mercator has a scale error"),
     (["--crs", "EPSG:32631"], "--crs EPSG:32631: needs --origin"),
 ])
 def test_export_refuses_bad_geo_flags_in_one_line_and_writes_nothing(tmp_path, capsys, output, flags, message):

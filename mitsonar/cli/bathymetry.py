@@ -136,9 +136,7 @@ def cmd_bathymetry(args):
     scene = load_survey_scene(args.scene, surface=args.surface,
                               sonar=None if head is None else echosounders.sonar_xml(head))
     sensor = sensor_of(scene, args, BathymetryCLIError)
-    check_output_folder(args.output, BathymetryCLIError, what="a bathymetry run", force=True,
-                        holds=None if args.force else
-                        lambda out: any(os.path.exists(os.path.join(out, f)) for f in OUTPUTS + GEO_OUTPUTS))
+    check_output_folder(args.output, BathymetryCLIError)   # a file is no folder; a run in it: check_outputs
     with _output_folder(args.output):   # made now; removed again if the run fails and leaves it empty
         return _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_ply, StagedFiles, water,
                     frame)
@@ -269,7 +267,9 @@ def add_subcommands(sub):
                                    "scene's sonar, mounted looking down at the vehicle's origin) and write "
                                    "the soundings, the depth grid and the depth errors per beam angle.")
     s.add_argument("scene", help="scene XML file (its sonar is replaced by the preset)")
-    s.add_argument("-o", "--output", required=True, help="output folder")
+    from mitsonar.cli.common import add_output, files_in_folder
+
+    add_output(s, "-o", "--output", required=True, help="output folder", existing=files_in_folder(OUTPUTS + GEO_OUTPUTS))
     s.add_argument("--preset", choices=sorted(PRESETS), help="echo sounder (default r2sonic_2024)")
     s.add_argument("--sensor", metavar="ID|INDEX",
                    help="survey with the scene's own sensor (its XML id or index) instead of a preset head")

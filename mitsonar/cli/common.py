@@ -2,16 +2,17 @@
 count flags (``--spp``, ``--seed``, ``--max-scans``, ``--max-depth``) in the flags' own words, and
 ``--sensor``. Imports no command module, so each of them may use it.
 
-Existing outputs (docs/howto/command_line.rst, "Existing outputs"): a command that writes a file refuses one that
-exists unless ``--force``. Commands that overwrote silently before (``render``, ``plot``,
-``demo``, ``record``, ``replay``, ``map``) still overwrite for one release, with one warning line
-(`warn_overwrite`); ``survey``, ``bathymetry`` and ``export`` refuse already. Folders that a
-command resumes or caches into (``dataset``, ``compare``'s cached reference) keep doing so.
+Existing outputs (docs/howto/command_line.rst, "Existing outputs"): every option that names
+something a command writes is added with `add_output`, and `check_outputs` (run by ``mitsonar``'s
+main on the parsed arguments, before the command starts) refuses one that would overwrite an
+existing file unless ``--force``, in one line: ``-o out.png: exists; --force to overwrite``.
+Folders that a command resumes or caches into (``dataset -o``, ``compare -o``) are added with
+``reused=True`` and never refused.
 """
 from __future__ import annotations
 
 import os
-import warnings
+import re
 
 FORCE_HELP = "overwrite existing outputs"
 
@@ -21,16 +22,59 @@ def add_force(parser, help=FORCE_HELP):
     parser.add_argument("--force", action="store_true", help=help)
 
 
-def warn_overwrite(paths, force) -> None:
-    """One warning line for the outputs among ``paths`` that exist, unless ``force``: they are
-    overwritten this release; from the next one the command will refuse them without ``--force``."""
-    existing = [os.fspath(p) for p in paths if p and os.path.exists(p)]
-    if existing and not force:
-        what = (existing[0] if len(existing) == 1 else " and ".join(existing) if len(existing) == 2
-                else f"{existing[0]} and {len(existing) - 1} more outputs")
-        verb = "exists" if len(existing) == 1 else "exist"
-        warnings.warn(f"{what} {verb}; overwriting; from the next release this needs --force", FutureWarning,
-                      stacklevel=2)
+def existing_file(path, args) -> list:
+    """What writing the file ``path`` overwrites: ``[path]`` if a file (not a folder) is there."""
+    return [path] if os.path.lexists(path) and not os.path.isdir(path) else []
+
+
+def files_in_folder(names=(), pattern=None):
+    """An ``existing`` for `add_output` of an output folder: the files in it named in ``names``
+    or matching the regular expression ``pattern`` (the files the command writes there), sorted."""
+    match = re.compile(pattern).fullmatch if pattern else (lambda name: False)
+
+    def existing(folder, args) -> list:
+        if not os.path.isdir(folder):
+            return []
+        return sorted(f for f in os.listdir(folder) if f in names or match(f))
+    return existing
+
+
+def add_output(parser, *flags, existing=existing_file, reused=False, **kwargs):
+    """Add an option (``add_argument(*flags, **kwargs)``) naming something the command writes, under
+    the ``--force`` policy (module doc; the parser needs `add_force`): `check_outputs` refuses it
+    when ``existing(path, args)`` lists files it would overwrite. ``existing``: `existing_file`
+    (default) or `files_in_folder` (an output folder), or any function of (path, args) listing
+    them. ``reused``: a folder the command resumes or caches into on purpose, never refused.
+    Returns the argparse action."""
+    action = parser.add_argument(*flags, **kwargs)
+    action.existing = None if reused else existing
+    parser.set_defaults(outputs_=(*(parser.get_default("outputs_") or ()), action))
+    return action
+
+
+def overwrite_refusal(action, path, found) -> str:
+    """The one line of `check_outputs`: the flag, the output, what exists, ``--force to overwrite``."""
+    flag = action.option_strings[0] if action.option_strings else action.dest.upper()
+    path = os.fspath(path)
+    if found == [path]:
+        return f"{flag} {path}: exists; --force to overwrite"
+    more = f" and {len(found) - 1} more of its outputs" if len(found) > 1 else ""
+    return f"{flag} {path}: already holds {found[0]}{more}; --force to overwrite"
+
+
+def check_outputs(args, error=ValueError) -> None:
+    """Refuse, raised as ``error`` in one line (`overwrite_refusal`), the first output of ``args``
+    (those added with `add_output`) that would overwrite existing files, unless ``--force``.
+    Looks at the file system only: run it before any work."""
+    if getattr(args, "force", False):
+        return
+    for action in getattr(args, "outputs_", ()):
+        path = getattr(args, action.dest, None)
+        if path is None or action.existing is None:
+            continue
+        found = action.existing(os.fspath(path), args)
+        if found:
+            raise error(overwrite_refusal(action, path, found))
 
 
 def _max_depth():

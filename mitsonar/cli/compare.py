@@ -23,7 +23,10 @@ def add_subcommands(subparsers):
     c.add_argument("--integrators", default="sonar_tof,sonar_mlt",
                    help="comma-separated integrator plugins; the first is the baseline (default sonar_tof,sonar_mlt)")
     c.add_argument("--budget", default="2,4,8,16", help="seconds per render, comma-separated (default 2,4,8,16)")
-    c.add_argument("-o", "--output", default="cmp", help="output folder (default cmp/)")
+    from mitsonar.cli.common import add_output
+
+    add_output(c, "-o", "--output", default="cmp", reused=True,
+               help="output folder (default cmp/; its cached reference is reused, its results replaced)")
     c.add_argument("--reference-spp", type=int,
                    help="paths per ping of the reference (default: --reference-factor times the spp sonar_tof "
                         "reached at the largest budget, or a larger cached reference)")

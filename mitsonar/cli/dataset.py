@@ -24,8 +24,13 @@ def add_subcommands(sub):
                                    "WebDataset shards with a manifest. The same command resumes an interrupted "
                                    "run; any number of workers writes the same samples.")
     d.add_argument("config", help="dataset config (.yaml, .yml or .toml; see examples/dataset_small.yaml)")
-    d.add_argument("-o", "--output", required=True, help="dataset folder (created; resumed when it holds this config's dataset)")
-    d.add_argument("--workers", type=int, default=None, help="worker processes or Ray actors (default: the cores)")
+    from mitsonar.cli.common import add_output
+
+    add_output(d, "-o", "--output", required=True, reused=True,
+               help="dataset folder (created; resumed when it holds this config's dataset)")
+    d.add_argument("--workers", type=int, default=None,
+                   help="worker processes or Ray actors (default: the cores); 0: render in this process, without "
+                        "worker processes (local engine; for debugging and profiling)")
     d.add_argument("--threads", type=int, default=None, help="render threads per worker (default: cores / workers)")
     d.add_argument("--address", default=None, metavar="RAY_ADDRESS",
                    help="run on this Ray cluster: HEAD:PORT of `ray start --head --port PORT` (from a node of the "

@@ -76,8 +76,10 @@ def add_xtf_options(parser):
     """``--xtf OUT`` and the georeference flags (``--origin``, ``--crs``)."""
     from mitsonar.geometry.geodesy import add_geo_options
 
-    parser.add_argument("--xtf", metavar="OUT", help="also write the side-scan pings as an XTF file (needs --origin, "
-                                                     "or scans whose metadata hold one)")
+    from mitsonar.cli.common import add_output
+
+    add_output(parser, "--xtf", metavar="OUT", help="also write the side-scan pings as an XTF file (needs --origin, "
+                                                    "or scans whose metadata hold one)")
     add_geo_options(parser)
 
 
@@ -88,7 +90,9 @@ def add_subcommands(sub):
                                    "waterfall as sensor_msgs/Image, detections as PointCloud2, /tf, /tf_static and /odom, and with "
                                    "an origin (--origin, or the scans' metadata) NavSatFix on /fix.")
     e.add_argument("scans", nargs="+", help="scan files (.npz or .exr), in time order")
-    e.add_argument("--mcap", metavar="OUT", help="output file (.mcap)")
+    from mitsonar.cli.common import add_output
+
+    add_output(e, "--mcap", metavar="OUT", help="output file (.mcap)")
     e.add_argument("--trajectory", metavar="TUM", help="the vehicle's trajectory (a survey's trajectory.tum): "
                                                        "/tf gets map -> base_link -> sonar and /odom the vehicle")
     add_mcap_options(e)

@@ -22,7 +22,10 @@ def add_subcommands(sub):
     s.add_argument("--spp", type=int, default=256, help="paths per ping (default 256)")
     s.add_argument("--seed", type=int, default=0, help="seed of the paths (default 0)")
     s.add_argument("--rows", type=int, default=20, help="pings listed, evenly spaced (default 20; 0: all)")
-    s.add_argument("-o", "--output", help="figure of echo level and noise against range (.png/.pdf/.svg)")
+    from mitsonar.cli.common import add_force, add_output
+
+    add_output(s, "-o", "--output", help="figure of echo level and noise against range (.png/.pdf/.svg)")
+    add_force(s)
     s.set_defaults(func=cmd_levels)
 
 
@@ -37,6 +40,8 @@ def cmd_levels(args):
             "not_writable": "-o {path!r}: folder {folder!r} is not writable"})
     if args.spp < 1 or args.rows < 0 or args.sensor < 0:
         raise LevelsCLIError("--spp must be >= 1, --rows and --sensor >= 0")
+    if os.path.isdir(args.scene):
+        raise LevelsCLIError(f"{args.scene}: is a directory; expected a scene XML file or a scan file (.exr/.npz)")
     if not os.path.isfile(args.scene):
         raise LevelsCLIError(f"{args.scene}: no such file")
     report = sonar_equation_report(args.scene, spp=args.spp, seed=args.seed, sensor=args.sensor)

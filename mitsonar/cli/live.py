@@ -181,7 +181,7 @@ def _outputs(args):
     if args.foxglove is None and args.mcap is None and args.dds is None:
         return None
     from mitsonar.devices.outputs import open_outputs
-    return open_outputs(foxglove=args.foxglove, mcap=args.mcap, dds=args.dds)
+    return open_outputs(foxglove=args.foxglove, mcap=args.mcap, dds=args.dds, force=args.force)
 
 
 def _said(output) -> str:
@@ -270,7 +270,7 @@ def cmd_live(args) -> int:
 
 
 def add_subcommands(subparsers) -> None:
-    from mitsonar.cli.common import add_sensor
+    from mitsonar.cli.common import add_force, add_output, add_sensor
     from mitsonar.devices import registry
     p = subparsers.add_parser(
         "live", help="a live head or multibeam: pings rendered when they fire, from the vehicle's pose then",
@@ -313,7 +313,7 @@ def add_subcommands(subparsers) -> None:
                         "time, transmit and motor step; a frame's period)")
     p.add_argument("--ping-rate", type=_positive(float), default=None, metavar="HZ",
                    help="multibeam frames per second (default: 1 / the sensor's ping_period)")
-    p.add_argument("--records", default=None, metavar="FILE.csv|FILE.jsonl",
+    add_output(p, "--records", default=None, metavar="FILE.csv|FILE.jsonl",
                    help="write one line per ping: ping, t, pose_time, bearing, paths, error, render_ms, "
                         "latency_ms, budget_ms (written as FILE.part, renamed at the end)")
     p.add_argument("--seed", type=int, default=0, help="seed of ping 0; ping k uses seed + k (default 0)")
@@ -325,11 +325,12 @@ def add_subcommands(subparsers) -> None:
                    help="serve the sonar picture, the raw pings, the frames (map, base_link, sonar) and the "
                         "vehicle pose to Foxglove over WebSocket on ws://127.0.0.1:PORT (default 8765; 0 picks "
                         "one); needs foxglove-sdk (the live extra)")
-    p.add_argument("--mcap", default=None, metavar="FILE.mcap",
+    add_output(p, "--mcap", default=None, metavar="FILE.mcap",
                    help="record the same channels into this MCAP file (complete when the session stops: "
                         "--seconds, SIGINT, SIGTERM); needs foxglove-sdk (the live extra)")
     p.add_argument("--dds", type=_domain, nargs="?", const=0, default=None, metavar="DOMAIN",
                    help="publish the same topics as ROS 2 messages over DDS on this domain (default 0), "
                         "so ROS 2 nodes subscribe without a bridge; needs cyclonedds (the live extra)")
     add_sensor(p)
+    add_force(p)
     p.set_defaults(func=cmd_live)

@@ -149,7 +149,7 @@ def make_output_folder(path, option="-o"):
 
 # ----------------------------------------------------------------------------- commands
 def cmd_render(args):
-    from mitsonar.cli.common import check_counts, warn_overwrite
+    from mitsonar.cli.common import check_counts
 
     _check_output(args.output, (".exr", ".npz"))
     if args.plot:
@@ -166,11 +166,10 @@ def cmd_render(args):
             raise CLIError(str(exc)) from None
     kind = args.kind
 
-    def before_render(sonar):       # the picture's kind, checked against the head's; then the outputs
+    def before_render(sonar):       # the picture's kind, checked against the head's
         nonlocal kind
         if args.plot:
             kind = plot_kind(sonar.kind, kind)
-        warn_overwrite([args.output, args.plot], args.force)
         return bool(args.plot) and kind == "cartesian"
 
     _, scan, mesh = _render(args.scene, args.spp, args.seed, args.max_depth, settings, args.quiet,
@@ -188,12 +187,9 @@ def cmd_render(args):
 def cmd_plot(args):
     import mitsonar
 
-    from mitsonar.cli.common import warn_overwrite
-
     _check_output(args.output, (".png", ".pdf", ".svg"))
     scan = mitsonar.load_scan(args.scan)
     plot_kind(scan.kind, args.kind)      # before the scene's mesh is made
-    warn_overwrite([args.output], args.force)
     mesh = None
     if args.scene:
         mesh = mitsonar.scene_mesh(mitsonar.load_scene(args.scene))
@@ -260,15 +256,15 @@ def _scenes_dir():
 #: The files `mitsonar demo` writes (besides the harbour survey's pictures).
 DEMO_SCENES = ("box", "intake", "box_fls")
 DEMO_FILES = tuple(f"{n}{x}" for n in DEMO_SCENES for x in (".exr", "_polar.png", "_cartesian.png", "_ascan.png"))
+#: The harbour survey's pictures among them (`mitsonar.cli.survey.demo_survey`).
+DEMO_HARBOUR = r"harbour_(mechanical_\d+|multibeam_\d+s|track)\.png"
 
 
 def cmd_demo(args):
-    from mitsonar.cli.common import check_counts, warn_overwrite
+    from mitsonar.cli.common import check_counts
 
     check_counts(args, CLIError)
     scenes = _scenes_dir()
-    warn_overwrite([os.path.join(args.output, f) for f in DEMO_FILES] if os.path.isdir(args.output) else [],
-                   args.force)
     make_output_folder(args.output)
     for name in DEMO_SCENES:
         path = os.path.join(scenes, f"{name}.xml")
@@ -293,9 +289,13 @@ KIND_HELP = ("picture kind: polar (default), cartesian or ascan for a mechanical
 
 
 def build_parser():
-    from mitsonar.cli.common import add_force, add_sensor
+    from mitsonar.cli.common import add_force, add_output, add_sensor, files_in_folder
+
+    from mitsonar._version import __version__
 
     p = argparse.ArgumentParser(prog="mitsonar", description="Physically based imaging-sonar simulation.")
+    p.add_argument("--version", action="version", version=f"mitsonar {__version__}",
+                   help="print the version and exit")
     p.add_argument("--variant", help="Mitsuba variant: llvm_ad_mono (default), cuda_ad_mono or auto "
                                      "(same as MITSONAR_VARIANT)")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
@@ -303,14 +303,14 @@ def build_parser():
     r = sub.add_parser("render", help="render a scene to a scan file (EXR or NPZ)",
                        description="Render the sonar scan of a Mitsuba XML scene.")
     r.add_argument("scene", help="scene XML file")
-    r.add_argument("-o", "--output", required=True, help="scan file to write (.exr or .npz)")
+    add_output(r, "-o", "--output", required=True, help="scan file to write (.exr or .npz)")
     r.add_argument("--spp", type=int, default=4096, help="paths per ping (default 4096)")
     r.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     r.add_argument("--max-depth", type=int, help="surface bounces (default: the scene's integrator)")
     add_sensor(r)
     r.add_argument("--set", action="append", metavar="NAME=VALUE",
                    help="override an electronics setting, e.g. --set gain=30 (repeatable)")
-    r.add_argument("--plot", help="also write a picture (.png/.pdf/.svg)")
+    add_output(r, "--plot", help="also write a picture (.png/.pdf/.svg)")
     r.add_argument("--kind", choices=ALL_PLOT_KINDS, help=KIND_HELP)
     r.add_argument("--db", action="store_true", help="plot in dB")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
@@ -319,7 +319,7 @@ def build_parser():
 
     pl = sub.add_parser("plot", help="draw a scan file", description="Draw a scan as a sonar display.")
     pl.add_argument("scan", help="scan file (.exr or .npz)")
-    pl.add_argument("-o", "--output", required=True, help="picture to write (.png/.pdf/.svg)")
+    add_output(pl, "-o", "--output", required=True, help="picture to write (.png/.pdf/.svg)")
     pl.add_argument("--kind", choices=ALL_PLOT_KINDS, help=KIND_HELP)
     pl.add_argument("--ping", type=int, default=0, help="ping of the A-scan")
     pl.add_argument("--use", default="data", choices=("data", "intensity"))
@@ -337,7 +337,8 @@ def build_parser():
                                    "box_fls.xml (a multibeam frame): EXR + polar, cartesian and "
                                    "A-scan pictures; then harbour.xml's mechanical and multibeam "
                                    "heads along harbour_survey.tum, in world coordinates.")
-    d.add_argument("-o", "--output", default="out", help="output folder (default out/)")
+    add_output(d, "-o", "--output", default="out", help="output folder (default out/)",
+               existing=files_in_folder(DEMO_FILES, DEMO_HARBOUR))
     d.add_argument("--spp", type=int, default=4096)
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("-q", "--quiet", action="store_true")
@@ -367,6 +368,9 @@ def main(argv=None):
         parser.print_help()
         return EXIT_USAGE
     try:
+        from mitsonar.cli.common import check_outputs
+
+        check_outputs(args, CLIError)      # an output that exists, without --force: before any work
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print("mitsonar: interrupted", file=sys.stderr)

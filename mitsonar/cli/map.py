@@ -24,20 +24,22 @@ EXIT_USAGE = EXIT_ERROR
 
 
 def add_subcommands(subparsers) -> None:
+    from mitsonar.cli.common import add_force, add_output
+
     m = subparsers.add_parser(
         "map", help="learn a 3-D occupancy map (Hilbert map) from scan files",
         description="Learn a continuous 3-D occupancy map (Hilbert map, thesis chapter 4) from scans "
                     "(.exr or .npz written by `mitsonar render` or Scan.save, or .bin raw SeaNet logs "
                     "written by `mitsonar record`) and save it as .npz.")
     m.add_argument("scans", nargs="+", help="scan files (.exr or .npz) or raw SeaNet logs (.bin) from `mitsonar record`")
-    m.add_argument("-o", "--output", required=True, help="map file to write (.npz)")
+    add_output(m, "-o", "--output", required=True, help="map file to write (.npz)")
     m.add_argument("--inducing", type=int, default=3000, help="Nystroem inducing points (default 3000)")
     m.add_argument("--passes", type=int, default=None, help="SGD passes over the samples (default: the map's)")
     m.add_argument("--source", choices=("auto", "data", "intensity"), default="auto",
                    help="what the bins are classified on (default auto: data unless all zero)")
     m.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    m.add_argument("--plot", help="also write cross-sections through the sonar (.png/.pdf/.svg)")
-    m.add_argument("--mesh", help="also write the surface as a triangle mesh (.ply or .obj)")
+    add_output(m, "--plot", help="also write cross-sections through the sonar (.png/.pdf/.svg)")
+    add_output(m, "--mesh", help="also write the surface as a triangle mesh (.ply or .obj)")
     m.add_argument("--surface", choices=("ridge", "level"), default="ridge",
                    help="surface of --mesh: the probability ridge (default) or the 0.5 level")
     m.add_argument("--resolution", type=float, default=None,
@@ -51,11 +53,11 @@ def add_subcommands(subparsers) -> None:
                    help="--incremental: lattice pitch of the map's nodes in metres (default 0.15)")
     m.add_argument("--max-nodes", type=int, default=200000,
                    help="--incremental: at most this many nodes; the least recently used are forgotten")
-    m.add_argument("--elevation", help="--incremental: also write the seabed elevation grid (.tif GeoTIFF with "
+    add_output(m, "--elevation", help="--incremental: also write the seabed elevation grid (.tif GeoTIFF with "
                                        "rasterio, or .npz with 'elevation' and its 'transform')")
     m.add_argument("--elevation-resolution", type=float, default=0.25, help="elevation grid cell in metres")
     m.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
-    m.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    add_force(m)
     m.set_defaults(func=cmd_map)
 
 
@@ -360,9 +362,6 @@ def _write(args, hm, n_scans: int, V, F, outputs: StagedFiles, stages: _Stages) 
     """Write the map, mesh and plot under temporary names; 0, or the exit code of a failure."""
     from hilbertmap import write_mesh
 
-    from mitsonar.cli.common import warn_overwrite
-
-    warn_overwrite([args.output, args.mesh, args.plot, getattr(args, "elevation", None)], args.force)
     option, path = "-o", args.output
     try:
         if args.plot:   # timed on its own: the survey plan view samples the map

@@ -15,7 +15,8 @@ Every failure ends in one line on stderr and a non-zero exit code, never a trace
 ====  ===================================================
 
 Outputs (``record``'s log, ``replay``'s scans) are checked within a second of launch, before
-any port is opened or log read (folder exists and is writable, the path is no folder), and
+any port is opened or log read (folder exists and is writable, the path is no folder; one that
+exists is refused without ``--force``, `mitsonar.cli.common.check_outputs`), and
 written under temporary names renamed at the end, so a failure leaves no partial file.
 ``virtual-sonar`` writes no file.
 """
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -97,9 +99,9 @@ def _head(args):
 # ---- virtual-sonar ----
 
 def _virtual_sonar(args) -> int:
+    from mitsonar.sim.scene import check_scene_file
     scene_path = Path(args.scene)
-    if not scene_path.is_file():
-        raise FileNotFoundError(f"scene file not found: {scene_path}")
+    check_scene_file(scene_path)
     head = _head(args)
     import mitsonar
     from mitsonar.cli.common import check_counts, sensor_of
@@ -130,11 +132,9 @@ def cmd_virtual_sonar(args) -> int:
 # ---- record ----
 
 def _record(args) -> int:
-    from mitsonar.cli.common import warn_overwrite
     _check_output(args.output)
     head = _head(args)
     settings = head.settings(args)
-    warn_overwrite([args.output], args.force)
     return _recorded(args, head.record(args, settings), head.ping_word)
 
 
@@ -175,11 +175,9 @@ def _replay(args) -> int:
                     warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     if not scans:
         raise ValueError(f"{log}: no complete scan in the log")
-    from mitsonar.cli.common import warn_overwrite
     if args.all:
         # All or nothing: every scan under a temporary name first, renamed once all are written.
         paths = [out.with_name(f"{out.stem}_{k:03d}{out.suffix}") for k in range(len(scans))]
-        warn_overwrite(paths, args.force)
         with StagedFiles() as files:
             for scan, path in zip(scans, paths):
                 scan.save(files.temporary(path))
@@ -187,10 +185,21 @@ def _replay(args) -> int:
         return 0
     if not -len(scans) <= args.index < len(scans):
         raise ValueError(f"{log}: --index {args.index} but the log holds {len(scans)} scan(s)")
-    warn_overwrite([out], args.force)
     scans[args.index].save(str(out))       # Scan.save writes a temporary file and renames it
     print(f"scan {args.index % len(scans)} of {len(scans)} from {log} written to {out}")
     return 0
+
+
+def _replayed(path, args) -> list:
+    """What ``replay -o PATH`` would overwrite (`mitsonar.cli.common.add_output`): the file, or
+    with ``--all`` the files ``STEM_NNN.EXT`` beside it."""
+    from mitsonar.cli.common import existing_file, files_in_folder
+    if not args.all:
+        return existing_file(path, args)
+    stem, ext = os.path.splitext(os.path.basename(path))
+    folder = os.path.dirname(path) or "."
+    found = files_in_folder(pattern=re.escape(stem) + r"_\d{3,}" + re.escape(ext))(folder, args)
+    return [os.path.join(os.path.dirname(path), f) for f in found]
 
 
 def cmd_replay(args) -> int:
@@ -225,7 +234,7 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--fast", action="store_true", help="answer at once (no timing model)")
     p.add_argument("--no-dst", action="store_true", help="behave as a pre-DST Micron (--head micron)")
     p.add_argument("--seconds", type=_positive(float), default=None, help="stop after T seconds")
-    from mitsonar.cli.common import add_force, add_sensor
+    from mitsonar.cli.common import add_force, add_output, add_sensor
     add_sensor(p)
     p.set_defaults(func=cmd_virtual_sonar)
 
@@ -238,7 +247,7 @@ def add_subcommands(subparsers) -> None:
                     "Ctrl-C); a recording without any packet from the head leaves no file.")
     p.add_argument("port", metavar="PORT", help="serial device or pyserial URL (socket://HOST:PORT, ...); "
                                                 "a Ping360 also udp://HOST:PORT")
-    p.add_argument("-o", "--output", required=True, metavar="LOG", help="raw log to write")
+    add_output(p, "-o", "--output", required=True, metavar="LOG", help="raw log to write")
     p.add_argument("--head", choices=registry.names(), default=registry.DEFAULT,
                    help="the head on PORT: Tritech Micron (default) or Blue Robotics Ping360")
     p.add_argument("--seconds", type=_positive(float), default=None, help="stop after T seconds")
@@ -272,7 +281,8 @@ def add_subcommands(subparsers) -> None:
         description="Assemble the scans of a raw log (as the driver did while recording; the "
                     "log says which head) and save one, or all, with Scan.save (.exr or .npz).")
     p.add_argument("log", metavar="LOG", help="raw log written by `mitsonar record`")
-    p.add_argument("-o", "--output", required=True, metavar="SCAN", help="output file (.exr, .npz)")
+    add_output(p, "-o", "--output", required=True, metavar="SCAN", help="output file (.exr, .npz)",
+               existing=_replayed)
     p.add_argument("--index", type=int, default=0, help="which scan to save (default 0; -1 the last)")
     p.add_argument("--all", action="store_true", help="save every scan as OUTPUT_NNN.ext")
     p.add_argument("--sound-speed", type=_sound_speed, default=None,

@@ -84,6 +84,9 @@ def cmd_survey(args):
     from mitsonar._files import check_output_folder
 
     check_counts(args, CLIError)
+    from mitsonar.geometry.geodesy import frame_from_args
+
+    frame_from_args(args)                           # a bad --origin/--crs: refused before the scene loads
     traj = trajectory_from_args(args)               # a bad file: one line, nothing written
     if getattr(args, "surface", False):             # + a flat specular sea surface at z = 0
         from mitsonar.scenes.sea_surface import load_survey_scene
@@ -93,8 +96,7 @@ def cmd_survey(args):
         scene = mitsonar.load_scene(args.scene)
     sensor = sensor_of(scene, args)                 # --sensor, or the first sonar (one warning if several)
     out = args.output
-    check_output_folder(out, CLIError, what="a survey's scans", force=True,
-                        holds=None if args.force else lambda out: any(f.startswith("scan_") for f in os.listdir(out)))
+    check_output_folder(out, CLIError)              # a file is no folder; one holding a survey: check_outputs
     if args.mcap is not None:   # refused before any render (its folder may be the one -o makes)
         from mitsonar.export.ros.bag import check_output
 
@@ -201,12 +203,18 @@ def _draw(args, scene, traj, out, scans, bag, mosaic=None):
     return n
 
 
+#: The files a survey writes in its folder besides the scans and their pictures (`_survey_files`).
+SURVEY_FILES = ("trajectory.tum", "track.png", "mosaic.png", "mosaic.pgw", "mosaic.npz", "mosaic.tif")
+#: Its scans and the pictures named after them.
+SCAN_FILES = r"scan_\d{5}(\.npz|\.exr|_world\.png|_waterfall\.png)"
+
+
 def _survey_files(folder) -> list:
     """The files of a survey in ``folder``: its scans and the pictures named after them."""
     import re
 
-    pattern = re.compile(r"scan_\d{5}(\.npz|\.exr|_world\.png|_waterfall\.png)$")
-    return [f for f in os.listdir(folder) if pattern.match(f)] if os.path.isdir(folder) else []
+    pattern = re.compile(SCAN_FILES)
+    return [f for f in os.listdir(folder) if pattern.fullmatch(f)] if os.path.isdir(folder) else []
 
 
 #: Most cells of a survey's mosaic: its cell grows beyond the sonar's range bin to stay under this.
@@ -276,7 +284,10 @@ def add_subcommands(sub):
                        description="Render a survey: the scene's sonar (its to_world is the mount on "
                                    "the vehicle, x forward, y port, z up) pinging along a trajectory.")
     s.add_argument("scene", help="scene XML file")
-    s.add_argument("-o", "--output", required=True, help="output folder (scans, trajectory.tum, track.png)")
+    from mitsonar.cli.common import add_output, files_in_folder
+
+    add_output(s, "-o", "--output", required=True, help="output folder (scans, trajectory.tum, track.png)",
+               existing=files_in_folder(SURVEY_FILES, SCAN_FILES))
     add_trajectory_options(s)
     s.add_argument("--surface", action="store_true",
                    help="add a flat specular sea surface at z = 0 (shallow-water multipath; off by default)")
@@ -288,7 +299,7 @@ def add_subcommands(sub):
     add_sensor(s)
     s.add_argument("--format", default="npz", choices=("npz", "exr"), help="scan file format (default npz)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
-    s.add_argument("--mcap", metavar="OUT", help="also write the survey as a ROS 2 bag (MCAP; see mitsonar export)")
+    add_output(s, "--mcap", metavar="OUT", help="also write the survey as a ROS 2 bag (MCAP; see mitsonar export)")
     from mitsonar.cli.export import add_mcap_options
 
     add_mcap_options(s, force_help="replace a survey already in the output folder (its scan files are removed "

@@ -14,7 +14,14 @@ metadata (``meta.origin`` = [lat, lon, height], ``meta.crs`` = ``"EPSG:NNNN"``);
 
 The conversions go through pyproj (PROJ; the ``geo`` extra). The default UTM zone is the plain
 6-degree zone of the origin's longitude, ``floor((lon + 180) / 6) + 1`` (EPSG 326zz north of the
-equator, 327zz south; the Norway and Svalbard exceptions are not applied: give ``--crs`` there).
+equator, 327zz south; the Norway and Svalbard exceptions are not applied: give ``--crs`` there);
+north of 84 N or south of 80 S, outside UTM, the default is the polar stereographic UPS North
+(EPSG:32661) or South (EPSG:32761).
+
+A CRS must hold the origin (`check_crs` with ``origin``): the origin inside the CRS's area of use
+(pyproj's ``area_of_use``), a grid in metres, and a scale error at the origin of at most
+`SCALE_ERROR_ALLOWED` (Web Mercator, EPSG:3857, stretches distances by 1/cos(lat): +62 % at
+52 N). Otherwise it is refused in one line that suggests the origin's own zone (`suggested_crs`).
 Grid north differs from true north by the meridian convergence: `GeoFrame.true_heading` turns a
 direction in the grid into an azimuth from true north (pyproj's geodesic on the WGS 84 ellipsoid).
 """
@@ -50,6 +57,50 @@ def utm_epsg(lat: float, lon: float) -> str:
     return f"EPSG:{(32600 if lat >= 0 else 32700) + zone}"
 
 
+def suggested_crs(lat: float, lon: float) -> str:
+    """The default CRS of an origin: its UTM zone (`utm_epsg`) between 80 S and 84 N (UTM's
+    extent), else UPS North (EPSG:32661) or South (EPSG:32761)."""
+    if -80.0 <= lat <= 84.0:
+        return utm_epsg(lat, lon)
+    return "EPSG:32661" if lat > 0 else "EPSG:32761"
+
+
+#: The largest scale error of a grid at the origin (distance on the grid / distance on the
+#: ellipsoid - 1): UTM's is under 0.1 % within its zones, a national grid's under 0.5 %.
+SCALE_ERROR_ALLOWED = 0.01
+
+
+def _where_on_earth(lat, lon) -> str:
+    return f"{abs(lat):g} {'N' if lat >= 0 else 'S'} {abs(lon):g} {'E' if lon >= 0 else 'W'}"
+
+
+def _covers(bounds, lat, lon) -> bool:
+    """Whether pyproj's area of use ``(west, south, east, north)`` holds (lat, lon); an area
+    across the antimeridian has west > east."""
+    west, south, east, north = bounds
+    if not south <= lat <= north:
+        return False
+    return west <= lon <= east if west <= east else (lon >= west or lon <= east)
+
+
+def _scale(obj, lat, lon) -> float:
+    """Distance on the grid of ``obj`` over distance on the WGS 84 ellipsoid, 100 m from the
+    origin east and north (the larger error of the two)."""
+    pyproj = _pyproj("crs")
+    to_grid = pyproj.Transformer.from_crs(WGS84, obj, always_xy=True)
+    geod = pyproj.Geod(ellps="WGS84")
+    e0, n0 = to_grid.transform(lon, lat, errcheck=False)
+    worst = 1.0
+    for azimuth in (0.0, 90.0):
+        lon1, lat1, _ = geod.fwd(lon, lat, azimuth, 100.0)
+        e1, n1 = to_grid.transform(lon1, lat1, errcheck=False)
+        k = math.hypot(e1 - e0, n1 - n0) / 100.0
+        if not math.isfinite(k):
+            return k
+        worst = k if abs(k - 1.0) > abs(worst - 1.0) else worst
+    return worst
+
+
 def check_origin(origin, where="--origin") -> tuple[float, float, float]:
     """``(lat, lon, height)`` of ``origin`` (2 or 3 numbers), or a `GeoError` naming ``where``."""
     try:
@@ -65,9 +116,12 @@ def check_origin(origin, where="--origin") -> tuple[float, float, float]:
     return lat, lon, values[2] if len(values) == 3 else 0.0
 
 
-def check_crs(crs, where="--crs"):
+def check_crs(crs, where="--crs", origin=None):
     """The `pyproj.CRS` of ``crs`` (``"EPSG:NNNN"``, or an int), refused unless it is a known EPSG
-    code of a projected CRS; returns ``(name "EPSG:NNNN", pyproj.CRS)``."""
+    code of a projected CRS with its grid in metres; with ``origin`` (lat, lon), also unless the
+    origin lies in the CRS's area of use and the grid's scale error there is at most
+    `SCALE_ERROR_ALLOWED` (the refusal suggests `suggested_crs`). Returns ``(name "EPSG:NNNN",
+    pyproj.CRS)``. The one check of an output CRS: `GeoFrame.make` runs it for every command."""
     pyproj = _pyproj(where)
     text = f"EPSG:{crs}" if isinstance(crs, (int, np.integer)) else str(crs).strip()
     head, _, code = text.partition(":")
@@ -81,7 +135,34 @@ def check_crs(crs, where="--crs"):
         kind = "geographic" if obj.is_geographic else "not projected"
         raise GeoError(f"{where} {crs}: {obj.name} is {kind}, without a projection to a grid in metres "
                        f"({CRS_ALLOWED})")
-    return f"EPSG:{int(code)}", obj
+    units = sorted({a.unit_name for a in obj.axis_info if a.unit_name != "metre"})
+    if units:
+        raise GeoError(f"{where} {crs}: {obj.name} has its grid in {' and '.join(units)}; surveys need metres "
+                       f"({CRS_ALLOWED})")
+    name = f"EPSG:{int(code)}"
+    if origin is not None:
+        _check_holds(name, obj, float(origin[0]), float(origin[1]), where)
+    return name, obj
+
+
+def _check_holds(name, obj, lat, lon, where) -> None:
+    """Refuse a CRS whose area of use leaves out the origin, or whose scale error there exceeds
+    `SCALE_ERROR_ALLOWED`, naming the origin's own CRS."""
+    own = suggested_crs(lat, lon)
+    instead = f"use the origin's {'UPS grid' if own in ('EPSG:32661', 'EPSG:32761') else 'UTM zone'}, {own}"
+    at = _where_on_earth(lat, lon)
+    area = obj.area_of_use
+    if area is not None and not _covers(area.bounds, lat, lon):
+        w, s, e, n = area.bounds
+        raise GeoError(f"{where} {name}: the origin {at} is outside the area of use of {obj.name} "
+                       f"(lon {w:g}..{e:g}, lat {s:g}..{n:g}); {instead}")
+    k = _scale(obj, lat, lon)
+    if not (math.isfinite(k) and abs(k - 1.0) <= SCALE_ERROR_ALLOWED):
+        error = "no finite scale" if not math.isfinite(k) else f"a scale error of {100 * (k - 1):+.0f} %"
+        why = " (Web Mercator stretches distances by 1/cos(lat))" if "Pseudo Mercator" in (
+            getattr(obj.coordinate_operation, "method_name", "") or "") else ""
+        raise GeoError(f"{where} {name}: {obj.name} has {error} at the origin {at}{why}; surveys need true "
+                       f"metres: {instead}")
 
 
 @dataclass(frozen=True)
@@ -98,9 +179,10 @@ class GeoFrame:
 
     @classmethod
     def make(cls, origin, crs=None, where=("--origin", "--crs")) -> "GeoFrame":
-        """Checked: ``origin`` (lat, lon[, height]), ``crs`` (None: the origin's UTM zone)."""
+        """Checked: ``origin`` (lat, lon[, height]), ``crs`` (None: the origin's UTM zone,
+        `suggested_crs`), the CRS against the origin (`check_crs`)."""
         lat, lon, h = check_origin(origin, where[0])
-        name, _ = check_crs(utm_epsg(lat, lon) if crs is None else crs, where[1])
+        name, _ = check_crs(suggested_crs(lat, lon) if crs is None else crs, where[1], origin=(lat, lon))
         pyproj = _pyproj(where[1])
         e0, n0 = pyproj.Transformer.from_crs(WGS84, name, always_xy=True).transform(lon, lat, errcheck=False)
         if not (math.isfinite(e0) and math.isfinite(n0)):

@@ -110,6 +110,15 @@ def single_threaded_build(enabled=True):
         dr.set_thread_count(threads)
 
 
+def check_scene_file(path) -> None:
+    """Refuse, in one `SceneError` line, a scene path that is a directory or does not exist."""
+    text = os.fspath(path)
+    if os.path.isdir(text):
+        raise SceneError(f"scene file {text!r} is a directory; expected a scene XML file")
+    if not os.path.isfile(text):
+        raise SceneError(f"scene file {text!r} does not exist")
+
+
 def load_scene(path_or_xml: str, **params):
     """Load a Mitsuba XML scene (a file path, or an XML string starting with ``<``).
 
@@ -124,8 +133,8 @@ def load_scene(path_or_xml: str, **params):
 
     text = str(path_or_xml)
     is_xml = text.lstrip().startswith("<")
-    if not is_xml and not os.path.isfile(text):
-        raise SceneError(f"scene file {text!r} does not exist")
+    if not is_xml:
+        check_scene_file(text)
     take_failure()  # forget failures of earlier loads
     try:
         # Serial loading: Mitsuba 3.9's parallel instantiation of Python plugins now and then

@@ -14,16 +14,16 @@ from mitsonar.devices.outputs.base import LiveOutput, LiveOutputs, OutputError
 __all__ = ["LiveOutput", "LiveOutputs", "OutputError", "open_outputs"]
 
 
-def open_outputs(*, foxglove=None, mcap=None, dds=None, out=None, maxsize: int = 8) -> LiveOutputs:
+def open_outputs(*, foxglove=None, mcap=None, dds=None, out=None, maxsize: int = 8, force=False) -> LiveOutputs:
     """`LiveOutputs` to a Foxglove server on ``127.0.0.1:foxglove`` (a port; None: none), an MCAP
-    recording ``mcap`` (a path) and ROS 2 topics on DDS domain ``dds`` (None: none), sharing one
-    picture of each ping. An output that cannot open raises `OutputError` (one line) after those
+    recording ``mcap`` (a path; an existing file is refused unless ``force``) and ROS 2 topics on
+    DDS domain ``dds`` (None: none), sharing one picture of each ping. An output that cannot open raises `OutputError` (one line) after those
     already open are discarded."""
     from mitsonar.devices.outputs.pictures import Pictures
 
     if mcap is not None:
         from mitsonar.devices.outputs.mcapfile import check_mcap_path
-        check_mcap_path(mcap)
+        check_mcap_path(mcap, force)
     if dds is not None:
         from mitsonar.devices.outputs.dds import check_domain
         check_domain(dds)
@@ -35,7 +35,7 @@ def open_outputs(*, foxglove=None, mcap=None, dds=None, out=None, maxsize: int =
             opened.append(FoxgloveServer(foxglove, pictures))
         if mcap is not None:
             from mitsonar.devices.outputs.mcapfile import McapRecording
-            opened.append(McapRecording(mcap, pictures))
+            opened.append(McapRecording(mcap, pictures, force=force))
         if dds is not None:
             from mitsonar.devices.outputs.dds import DdsOutput
             opened.append(DdsOutput(dds, pictures))

@@ -16,24 +16,25 @@ __all__ = ["McapRecording", "check_mcap_path"]
 
 _WORDS = {"directory": "--mcap {path}: is a folder; give an .mcap file name",
           "extension": "--mcap {path}: the file name must end in .mcap",
-          "exists": "--mcap {path}: exists; refusing to overwrite it (remove it or give another name)",
+          "exists": "--mcap {path}: exists; --force to overwrite",
           "no_folder": "--mcap {path}: the folder {folder} does not exist",
           "not_writable": "--mcap {path}: the folder {folder} is not writable"}
 
 
-def check_mcap_path(path) -> str:
+def check_mcap_path(path, force=False) -> str:
     """``path`` as a string, or `OutputError` (one line) if it cannot be the recording: a folder,
-    not ``.mcap``, an existing file, a missing or read-only folder; or foxglove-sdk missing."""
+    not ``.mcap``, an existing file (unless ``force``), a missing or read-only folder; or
+    foxglove-sdk missing."""
     require_foxglove("--mcap")
-    return check_output_file(path, OutputError, extensions=(".mcap",), force=False, words=_WORDS)
+    return check_output_file(path, OutputError, extensions=(".mcap",), force=force, words=_WORDS)
 
 
 class McapRecording(FoxgloveChannels):
     """The live channels recorded into ``path`` (module doc); `close` puts the file in place,
     `discard` removes it. ``count``: pings recorded."""
 
-    def __init__(self, path, pictures: Pictures | None = None):
-        self.path = check_mcap_path(path)
+    def __init__(self, path, pictures: Pictures | None = None, force=False):
+        self.path = check_mcap_path(path, force)
         super().__init__(pictures, flag="--mcap")
         self._staged = StagedFiles()
         tmp = self._staged.temporary(self.path)

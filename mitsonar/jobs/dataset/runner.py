@@ -221,6 +221,10 @@ def _inline(cfg, coord, todo, threads):
         renderer.close()
 
 
+#: What ``--workers`` (``workers``) may be on local processes (Ray takes 1 or more actors).
+WORKERS_ALLOWED = "a whole number >= 1 of worker processes, or 0 to render in this process"
+
+
 def generate_dataset(config, output, workers=None, address=None, threads=None, progress=True, engine=None):
     """Render the samples of ``config`` (a file or a checked dict) into the folder ``output``.
 
@@ -228,7 +232,7 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
     config       a YAML/TOML file (`config.read_config`) or a dict (`config.check_config`)
     output       the dataset folder; a folder holding part of this config's dataset is resumed
     workers      worker processes or Ray actors (default: the number of cores); 0 renders in this
-                 process
+                 process, without worker processes (local engine only; debugging, profiling)
     address      a Ray cluster's address (``HEAD:6379``, ``auto``, ``ray://HEAD:10001``): runs there, on
                  Ray (see `ray_engine`: token authentication, this machine a node of it)
     threads      Dr.Jit render threads per worker (default cores // workers, at least 1)
@@ -255,8 +259,9 @@ def generate_dataset(config, output, workers=None, address=None, threads=None, p
         workers = _cores()
     if engine == "auto":
         engine = "ray" if address else "local"
-    if not (isinstance(workers, int) and workers >= 0) or (engine == "ray" and workers < 1):
-        raise DatasetError(f"--workers {workers!r} is not allowed (a whole number >= 1)")
+    if not (isinstance(workers, int) and not isinstance(workers, bool) and workers >= 0) or (engine == "ray" and workers < 1):
+        raise DatasetError(f"--workers {workers!r} is not allowed ("
+                           + ("Ray actors: a whole number >= 1)" if engine == "ray" else WORKERS_ALLOWED + ")"))
     if threads is None:
         threads = max(1, _cores() // max(1, workers))
     if engine == "ray":
