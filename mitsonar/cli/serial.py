@@ -103,15 +103,21 @@ def _virtual_sonar(args) -> int:
     head = _head(args)
     import mitsonar
     from mitsonar.cli.common import check_counts, sensor_of
-    from mitsonar.devices.transports import check_port
     from mitsonar.devices.micron.seanet.settings import require_mechanical
     check_counts(args, ValueError)
     # A port that cannot be opened fails now, not after the render.
-    check_port(args.port_url, args.baud)
+    head.check_serve(args)
     scene = mitsonar.load_scene(str(scene_path))
     sensor = sensor_of(scene, args)      # --sensor, or the first sonar (one warning if several)
     # Refuse before the render, not after it: a multibeam scene can take a while to render.
-    require_mechanical(sensor, f"virtual-sonar {scene_path.name}", f"no {head.serves} to serve")
+    if head.frames:
+        from mitsonar.geometry import kinds
+        if not getattr(kinds.lookup(getattr(sensor, "kind", kinds.DEFAULT)), "transmit_fan", False):
+            raise ValueError(f"virtual-sonar {scene_path.name}: --head {head.name} is a multibeam head; a "
+                             f"{getattr(sensor, 'kind', kinds.DEFAULT)!r} sonar (kind must be "
+                             f"{kinds.which('transmit_fan')}) has no {head.serves} to serve")
+    else:
+        require_mechanical(sensor, f"virtual-sonar {scene_path.name}", f"no {head.serves} to serve")
     kw = {"seed": args.seed, "sensor": sensor}
     if args.spp is not None:
         kw["spp"] = args.spp
@@ -217,13 +223,19 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--port-url", default=None, metavar="URL",
                    help="where to serve: a new pseudo-terminal (default), socket://HOST:PORT "
                         "(listen for pyserial socket:// clients), udp://127.0.0.1:PORT (Ping360 "
-                        "over UDP, loopback only), or a pyserial URL/device to sit on")
+                        "over UDP, loopback only), or a pyserial URL/device to sit on; --head oculus: "
+                        "tcp://HOST:PORT (default tcp://127.0.0.1:52100)")
     p.add_argument("--spp", type=_positive(int), default=None, help="paths per ping (render_scan's default)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the render (default 0)")
     p.add_argument("--baud", type=_positive(int), default=None,
                    help="baud rate of the timing model (default the head's, 115200)")
     p.add_argument("--fast", action="store_true", help="answer at once (no timing model)")
     p.add_argument("--no-dst", action="store_true", help="behave as a pre-DST Micron (--head micron)")
+    p.add_argument("--model", choices=("M750d", "M1200d", "M3000d"), default=None,
+                   help="which Oculus to be (--head oculus; default M1200d)")
+    p.add_argument("--status-port", type=int, default=None, metavar="PORT",
+                   help="UDP port of the status broadcast, sent to the served address (--head oculus; "
+                        "default 52102)")
     p.add_argument("--seconds", type=_positive(float), default=None, help="stop after T seconds")
     from mitsonar.cli.common import add_force, add_sensor
     add_sensor(p)

@@ -21,7 +21,8 @@ __all__ = ["BUILTIN", "DEFAULT", "register", "unregister", "get", "names", "head
 
 #: name -> module defining ``HEAD`` (imported on first use)
 BUILTIN = {"micron": "mitsonar.devices.micron.registration",
-           "ping360": "mitsonar.devices.ping360.registration"}
+           "ping360": "mitsonar.devices.ping360.registration",
+           "oculus": "mitsonar.devices.oculus.registration"}
 #: the head of ``--head``'s default
 DEFAULT = "micron"
 

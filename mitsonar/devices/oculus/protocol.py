@@ -470,10 +470,12 @@ class StreamParser:
             out.append(m)
             self.raw.append(raw)
 
-    def flush(self) -> None:
-        """Drop what is buffered (an incomplete message at the end of a stream)."""
+    def flush(self) -> list:
+        """Drop what is buffered (an incomplete message at the end of a stream); returns []
+        (no whole message is left)."""
         if self._buf:
             self._drop(len(self._buf), "an incomplete message at the end")
+        return []
 
     @property
     def pending(self) -> int:

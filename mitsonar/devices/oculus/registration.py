@@ -1,0 +1,113 @@
+"""The Blueprint Subsea Oculus M-series as `mitsonar.devices.registry` knows it: ``--head
+oculus``, and the head of raw logs whose header says ``head: oculus``.
+
+Unlike the serial heads it talks Ethernet (TCP 52100 for fire messages and ping results, UDP
+52102 for the status broadcast) and is a multibeam: its scans are of kind ``multibeam``
+(`frames`). Imports its codec, driver and virtual head only when asked for them.
+"""
+from __future__ import annotations
+
+from mitsonar.devices.head import Head
+
+__all__ = ["OculusHead", "HEAD", "parse_tcp_url"]
+
+
+def parse_tcp_url(url: str | None, default_host: str = "127.0.0.1", default_port: int = 52100) -> tuple[str, int]:
+    """``tcp://HOST:PORT`` (or ``HOST:PORT``, ``HOST``, or None for the defaults) as ``(host,
+    port)``; ValueError naming the URL and the allowed form."""
+    if url is None:
+        return default_host, default_port
+    text = url[len("tcp://"):] if url.startswith("tcp://") else url
+    if ":" not in text and text:
+        return text, default_port
+    host, sep, port = text.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise ValueError(f"--port-url {url!r} is not allowed for an Oculus (tcp://HOST:PORT, port 0..65535)")
+    return host, int(port)
+
+
+class OculusHead(Head):
+    name = "oculus"
+    description = "Blueprint Subsea Oculus M-series multibeam (Ethernet)"
+    log_tag = "oculus"
+    protocol = "Oculus"
+    packet = "Oculus message"
+    ping_word = "pings"
+    serves = "Oculus pings"
+    frames = True
+    options = (("model", "--model"), ("status_port", "--status-port"))
+
+    # ---- parts ----
+
+    def parser(self):
+        from mitsonar.devices.oculus.protocol import StreamParser
+        return StreamParser()
+
+    def driver(self):
+        from mitsonar.devices.oculus.driver import OculusSonar
+        return OculusSonar
+
+    def virtual(self):
+        from mitsonar.devices.oculus.virtual import VirtualOculus
+        return VirtualOculus
+
+    def assembler(self, settings):
+        from mitsonar.devices.oculus.head import OculusAssembler
+        return OculusAssembler(settings)
+
+    def is_command(self, message) -> bool:
+        from mitsonar.devices.oculus.protocol import FireMessage
+        return isinstance(message, FireMessage)
+
+    def usable(self, message, command) -> bool:
+        from mitsonar.devices.oculus.protocol import PingResult
+        return isinstance(message, PingResult) and command.ping_rate != 5
+
+    # ---- actions ----
+
+    def settings(self, args=None):
+        """The fire message `record` sends (`mitsonar.devices.oculus.driver.fire_message`)."""
+        from mitsonar.devices.oculus.driver import fire_message
+        kw = {}
+        if getattr(args, "range", None) is not None:
+            kw["range"] = args.range
+        if getattr(args, "sound_speed", None) is not None:
+            kw["speed_of_sound"] = args.sound_speed
+        return fire_message(**kw)
+
+    def log_settings(self, meta: dict, sound_speed, path):
+        return None
+
+    def check_serve(self, args) -> None:
+        """The address of ``--port-url`` parses and its TCP port can be bound now."""
+        import socket
+        host, port = parse_tcp_url(getattr(args, "port_url", None))
+        status = getattr(args, "status_port", None)
+        if status is not None and not 0 < status <= 65535:
+            raise ValueError(f"--status-port {status} is not allowed (1..65535)")
+        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((host, port))
+        except OSError as e:
+            raise OSError(f"--port-url tcp://{host}:{port}: cannot listen there ({e.strerror or e})") from None
+        finally:
+            s.close()
+
+    def serve(self, scan, args) -> int:
+        from mitsonar.devices.oculus.protocol import UDP_PORT
+        from mitsonar.devices.oculus.virtual import VirtualOculus
+        host, port = parse_tcp_url(getattr(args, "port_url", None))
+        status = getattr(args, "status_port", None)
+        head = VirtualOculus(scan, model=getattr(args, "model", None) or "M1200d", host=host, tcp_port=port,
+                             udp_port=UDP_PORT if status is None else status, realtime=not args.fast)
+        return head.serve(args.seconds, None, "virtual Oculus")
+
+    def record(self, args, settings) -> dict:
+        from mitsonar.devices.oculus.driver import record
+        host, port = parse_tcp_url(args.port, default_port=52100)
+        return record(host, args.output, args.seconds, pings=args.pings or args.scans, tcp_port=port,
+                      fire=settings, timeout=args.timeout)
+
+
+HEAD = OculusHead()
