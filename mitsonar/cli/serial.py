@@ -97,6 +97,10 @@ def _head(args):
 # ---- virtual-sonar ----
 
 def _virtual_sonar(args) -> int:
+    if getattr(args, "log", None) is not None:
+        return _virtual_sonar_log(args)
+    if args.scene is None:
+        raise ValueError("give SCENE.xml to render (or --log LOG with --head oculus)")
     scene_path = Path(args.scene)
     if not scene_path.is_file():
         raise FileNotFoundError(f"scene file not found: {scene_path}")
@@ -125,6 +129,23 @@ def _virtual_sonar(args) -> int:
     print(f"rendered {scene_path.name}: {scan.n_pings} pings x {scan.n_bins} bins, "
           f"{scan.range_min:g}..{scan.range_max:g} m", flush=True)
     return head.serve(scan, args)
+
+
+def _virtual_sonar_log(args) -> int:
+    """``virtual-sonar --log LOG``: serve the scans of a log (`mitsonar.devices.recording.replay`)."""
+    head = _head(args)          # refuses --log for a head that does not take it
+    if args.scene is not None:
+        raise ValueError(f"give SCENE.xml or --log LOG, not both (got {args.scene} and {args.log})")
+    log = Path(args.log)
+    if not log.is_file():
+        raise FileNotFoundError(f"--log: log file not found: {log}")
+    head.check_serve(args)
+    from mitsonar.devices.recording import replay
+    scans = replay(log)
+    if not scans:
+        raise ValueError(f"--log {log}: no ping in the log")
+    print(f"read {log.name}: {len(scans)} frames", flush=True)
+    return head.serve(scans, args)
 
 
 def cmd_virtual_sonar(args) -> int:
@@ -211,15 +232,22 @@ def add_subcommands(subparsers) -> None:
     (``--head`` offers the heads of `mitsonar.devices.registry` at this moment)."""
     from mitsonar.devices import registry
     p = subparsers.add_parser(
-        "virtual-sonar", help="serve a rendered scene as a Tritech Micron or a Ping360 on a pseudo-terminal",
+        "virtual-sonar", help="serve a rendered scene as a Tritech Micron, a Ping360 or an Oculus multibeam",
         description="Render SCENE.xml once and answer the SeaNet protocol with its scan, like a "
                     "Micron on a serial line (--head ping360: ping-protocol, like a Blue Robotics "
-                    "Ping360, on a pseudo-terminal or udp://127.0.0.1:PORT). Prints the port to "
-                    "open (e.g. with `mitsonar record`), then serves until Ctrl-C.")
-    p.add_argument("scene", metavar="SCENE.xml", help="Mitsuba scene with a `sonar` sensor")
+                    "Ping360, on a pseudo-terminal or udp://127.0.0.1:PORT; --head oculus: a "
+                    "Blueprint Oculus M-series multibeam on TCP 127.0.0.1:52100 with its status on "
+                    "UDP 52102). Prints the port to open (e.g. with `mitsonar record`), then serves "
+                    "until Ctrl-C.")
+    p.add_argument("scene", metavar="SCENE.xml", nargs="?", default=None,
+                   help="Mitsuba scene with a `sonar` sensor (none with --log)")
+    p.add_argument("--log", default=None, metavar="LOG",
+                   help="serve the frames of a log instead of a render (--head oculus: a .oculus log or "
+                        "its raw log; ping k is frame k of the log, from the first again at the end)")
     p.add_argument("--head", choices=registry.names(), default=registry.DEFAULT,
-                   help="which head to be: a Tritech Micron (SeaNet, default) or a Blue Robotics "
-                        "Ping360 (ping-protocol; prints 'virtual Ping360 on PORT')")
+                   help="which head to be: a Tritech Micron (SeaNet, default), a Blue Robotics "
+                        "Ping360 (ping-protocol; prints 'virtual Ping360 on PORT') or an Oculus "
+                        "(a multibeam scene; prints 'virtual Oculus MODEL on tcp://HOST:PORT')")
     p.add_argument("--port-url", default=None, metavar="URL",
                    help="where to serve: a new pseudo-terminal (default), socket://HOST:PORT "
                         "(listen for pyserial socket:// clients), udp://127.0.0.1:PORT (Ping360 "

@@ -97,6 +97,15 @@ class Head:
         given; raises ValueError naming ``path`` when they are unusable."""
         return self.settings(None)
 
+    def reads_file(self, path) -> bool:
+        """Is ``path`` a log of the head's own format (not a `mitsonar.devices.rawlog` raw log),
+        which `replay_file` reads? (default: no such format)"""
+        return False
+
+    def replay_file(self, path, *, pose=None, partial=False) -> list:
+        """The scans of a log of the head's own format (`reads_file`)."""
+        raise NotImplementedError(f"head {self.name!r} has no log format of its own")
+
     def check_serve(self, args) -> None:
         """Fail now, before a render, if `serve` could not open ``args.port_url`` (OSError or
         ValueError naming it)."""

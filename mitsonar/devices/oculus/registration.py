@@ -35,7 +35,7 @@ class OculusHead(Head):
     ping_word = "pings"
     serves = "Oculus pings"
     frames = True
-    options = (("model", "--model"), ("status_port", "--status-port"))
+    options = (("model", "--model"), ("status_port", "--status-port"), ("log", "--log"))
 
     # ---- parts ----
 
@@ -77,6 +77,15 @@ class OculusHead(Head):
 
     def log_settings(self, meta: dict, sound_speed, path):
         return None
+
+    def reads_file(self, path) -> bool:
+        from mitsonar.devices.oculus.logfile import is_oculus_log
+        return is_oculus_log(path)
+
+    def replay_file(self, path, *, pose=None, partial=False) -> list:
+        """The frames of a ``.oculus`` log (`mitsonar.devices.oculus.logfile.read_scans`)."""
+        from mitsonar.devices.oculus.logfile import read_scans
+        return read_scans(path, pose)
 
     def check_serve(self, args) -> None:
         """The address of ``--port-url`` parses and its TCP port can be bound now."""

@@ -131,7 +131,8 @@ class VirtualOculus:
     """A simulated Oculus on TCP and UDP (see the module's text).
 
     ===============  ========================================================================
-    scan             the multibeam `Scan` to serve
+    scan             the multibeam `Scan` to serve, or a list of them (a log: ping k is
+                     scan ``k mod len(scans)``)
     model            ``"M750d"``, ``"M1200d"`` (default), ``"M3000d"`` or a part number
     host             address to bind and to carry in the status (default 127.0.0.1)
     tcp_port         52100 (0: any free port; `tcp_port` then says which)
@@ -148,15 +149,20 @@ class VirtualOculus:
     def __init__(self, scan: Scan, *, model="M1200d", host: str = "127.0.0.1", tcp_port: int = TCP_PORT,
                  udp_port: int | None = UDP_PORT, status_period: float = 1.0, realtime: bool = True,
                  water: dict | None = None, device_id: int = 1):
-        if not isinstance(scan, Scan):
-            raise TypeError(f"scan must be a Scan, got {type(scan).__name__}")
-        if not scan.sonar_kind.transmit_fan:
-            raise ValueError(f"VirtualOculus: a {scan.kind} scan has no Oculus pings to serve "
-                             f"(an Oculus is a multibeam head)")
+        scans = list(scan) if isinstance(scan, (list, tuple)) else [scan]
+        if not scans:
+            raise ValueError("VirtualOculus: no scan to serve")
+        for s in scans:
+            if not isinstance(s, Scan):
+                raise TypeError(f"scan must be a Scan or a list of them, got {type(s).__name__}")
+            if not s.sonar_kind.transmit_fan:
+                raise ValueError(f"VirtualOculus: a {s.kind} scan has no Oculus pings to serve "
+                                 f"(an Oculus is a multibeam head)")
         for name, port in (("tcp_port", tcp_port), ("udp_port", udp_port)):
             if port is not None and not (isinstance(port, int) and 0 <= port <= 65535):
                 raise ValueError(f"VirtualOculus: {name} = {port!r} is not allowed (0..65535)")
-        self.scan = scan
+        self.scans = scans
+        self.scan = scans[0]
         self.model = presets.model(model)
         self.host = host
         self.tcp_port = tcp_port
@@ -173,14 +179,20 @@ class VirtualOculus:
         self._thread = None
         self._stop = threading.Event()
         self._t0 = time.monotonic()
-        b = np.asarray(scan.bearings, np.float64)
-        order = np.argsort(b)
-        self._rows, self._b = order, b[order]
-        gaps = np.diff(self._b)
-        half = np.zeros(len(self._b))
-        if len(self._b) > 1:
-            half = np.maximum(np.r_[gaps[0], gaps], np.r_[gaps, gaps[-1]]) / 2
-        self._half = half
+        self._fans: dict = {}
+
+    def _fan(self, i: int):
+        """Scan ``i``'s rows sorted by bearing, the bearings, and half the row spacing at each."""
+        if i not in self._fans:
+            b = np.asarray(self.scans[i].bearings, np.float64)
+            order = np.argsort(b)
+            b = b[order]
+            gaps = np.diff(b)
+            half = np.zeros(len(b))
+            if len(b) > 1:
+                half = np.maximum(np.r_[gaps[0], gaps], np.r_[gaps, gaps[-1]]) / 2
+            self._fans[i] = (order, b, half)
+        return self._fans[i]
 
     # ---- pings ----
     def sound_speed(self, fire: FireMessage) -> float:
@@ -192,14 +204,16 @@ class VirtualOculus:
         return float(sound_speed(self.water["temperature"], fire.salinity, depth))
 
     def ping(self, fire: FireMessage, ping_id: int = 0, now: float = 0.0) -> PingResult:
-        """The simple ping result the head sends for ``fire`` (checked with `check_fire`)."""
+        """The simple ping result the head sends for ``fire`` (checked with `check_fire`) as its
+        ping ``ping_id``: from scan ``ping_id mod len(scans)``."""
         problem = check_fire(fire, self.model)
         if problem:
             raise OculusError(problem)
         mode = self.model.mode(fire.master_mode)
         c = self.sound_speed(fire)
-        image, bearings, res = self._image(fire, mode, c)
-        scan = self.scan
+        i = ping_id % len(self.scans)
+        image, bearings, res = self._image(fire, mode, c, i)
+        scan = self.scans[i]
         pose = scan.poses[0] if scan.n_pings else np.eye(4)
         heading, pitch, roll = attitude(pose)
         depth = max(0.0, -float(pose[2, 3]))
@@ -209,11 +223,12 @@ class VirtualOculus:
                           pressure=depth * 1025.0 * 9.80665 / 1e5, heading=heading, pitch=pitch, roll=roll,
                           speed_of_sound_used=c, ping_start_time=now, src=self.device_id)
 
-    def _image(self, fire, mode, c):
-        key = (fire.master_mode, _range(fire, mode), fire.n_beams, c, fire.gain, fire.gamma, fire.data_bytes)
+    def _image(self, fire, mode, c, i=0):
+        key = (fire.master_mode, _range(fire, mode), fire.n_beams, c, fire.gain, fire.gamma, fire.data_bytes, i)
         if key in self._cache:
             return self._cache[key]
-        scan = self.scan
+        scan = self.scans[i]
+        rows_of, fan_b, fan_half = self._fan(i)
         bearings = presets.bearing_table(mode.aperture, fire.n_beams)
         stretch = c / scan.sound_speed
         res = scan.bin_width * stretch
@@ -223,15 +238,15 @@ class VirtualOculus:
         level = np.zeros((n_r, fire.n_beams), np.float64)
         if scan.n_pings:
             want = np.radians(bearings / 100.0)
-            k = np.clip(np.searchsorted(self._b, want), 1, max(1, len(self._b) - 1)) if len(self._b) > 1 \
+            k = np.clip(np.searchsorted(fan_b, want), 1, max(1, len(fan_b) - 1)) if len(fan_b) > 1 \
                 else np.zeros(len(want), int)
-            if len(self._b) > 1:
-                k = np.where(np.abs(self._b[k - 1] - want) <= np.abs(self._b[k] - want), k - 1, k)
-            inside = np.abs(self._b[k] - want) <= self._half[k] + 1e-12
+            if len(fan_b) > 1:
+                k = np.where(np.abs(fan_b[k - 1] - want) <= np.abs(fan_b[k] - want), k - 1, k)
+            inside = np.abs(fan_b[k] - want) <= fan_half[k] + 1e-12
             r_scan = (np.arange(n_r) + 0.5) * res / stretch
             idx = np.floor((r_scan - scan.range_min) / scan.bin_width + 1e-9).astype(np.int64)
             ok = (idx >= 0) & (idx < scan.n_bins)
-            rows = scan.data[self._rows[k]].astype(np.float64)          # (n_beams, n_bins)
+            rows = scan.data[rows_of[k]].astype(np.float64)          # (n_beams, n_bins)
             level[np.ix_(ok, inside)] = rows[inside][:, idx[ok]].T
         level *= fire.gain / 100.0
         if fire.gamma not in (0, 255):
