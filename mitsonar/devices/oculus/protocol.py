@@ -415,7 +415,8 @@ class StreamParser:
     dropped and the search goes on after them. A whole message that does not decode is dropped
     whole. ``packets`` counts the messages returned, ``dropped`` the bytes dropped,
     ``drop_reasons`` why (`collections.Counter`), ``refused`` the messages refused (oversized
-    or malformed), ``last_problem`` the last reason, one line.
+    or malformed), ``last_problem`` the last reason, one line; ``refusals`` lists the last
+    feed's refusals in order, as ``(k, reason)``: after its k-th message returned.
     """
 
     def __init__(self, max_payload: int = 16 << 20):
@@ -427,6 +428,7 @@ class StreamParser:
         self.drop_reasons: Counter = Counter()
         self.last_problem: str | None = None
         self.raw: list = []       # the bytes of each message returned by the last feed
+        self.refusals: list = []
 
     def _drop(self, n: int, reason: str, refused: bool = False) -> None:
         del self._buf[:n]
@@ -435,11 +437,13 @@ class StreamParser:
         if refused:
             self.refused += 1
             self.last_problem = reason
+            self.refusals.append((len(self.raw), reason))
 
     def feed(self, data: bytes) -> list:
         self._buf += data
         out = []
         self.raw = []
+        self.refusals = []
         while True:
             i = self._buf.find(b"\x53\x4f")
             if i < 0:

@@ -180,6 +180,7 @@ class VirtualOculus:
         self._stop = threading.Event()
         self._t0 = time.monotonic()
         self._fans: dict = {}
+        self._drop_all = threading.Event()
 
     def _fan(self, i: int):
         """Scan ``i``'s rows sorted by bearing, the bearings, and half the row spacing at each."""
@@ -339,8 +340,16 @@ class VirtualOculus:
                 self.stats["internal errors"] += 1
                 time.sleep(0.01)
 
+    def drop_clients(self) -> None:
+        """Close every client's connection (a fault, for tests of a driver's reconnect)."""
+        self._drop_all.set()
+
     def _tick(self) -> None:
         now = time.monotonic()
+        if self._drop_all.is_set():
+            self._drop_all.clear()
+            for c in list(self._clients.values()):
+                self._drop(c)
         if self._udp is not None and now >= self._next_status:
             try:
                 self._udp.sendto(self.status().encode(), (self.host, self.udp_port))
@@ -399,15 +408,16 @@ class VirtualOculus:
         if not data:
             self._drop(c)
             return
-        refused = c.parser.refused
         dropped = c.parser.dropped
-        for m in c.parser.feed(data):
-            self._on_message(c, m)
-        if c.parser.refused > refused:
-            self.stats["refused"] += c.parser.refused - refused
-            self.last_problem = c.parser.last_problem
-        elif c.parser.dropped > dropped:
-            self.stats["bytes dropped"] += c.parser.dropped - dropped
+        messages = c.parser.feed(data)
+        refusals = list(c.parser.refusals)
+        for k, m in enumerate(messages + [None]):
+            while refusals and refusals[0][0] == k:        # in the order they came
+                self.stats["refused"] += 1
+                self.last_problem = refusals.pop(0)[1]
+            if m is not None:
+                self._on_message(c, m)
+        self.stats["bytes dropped"] += c.parser.dropped - dropped
 
     def _on_message(self, c: _Client, m) -> None:
         if not isinstance(m, FireMessage):
