@@ -21,7 +21,7 @@ a simple fire message (v1, v2)   the head takes its settings: ``masterMode`` pic
 a field out of range             refused (``stats["refused"]``, ``last_problem`` names the
                                  field and the allowed values); the stream goes on with the
                                  settings before
-a malformed or oversized message refused and counted (``stats["refused"]``); the client
+a malformed, oversized message   refused and counted (``stats["refused"]``); the client
                                  stays connected, the head stays up
 ===============================  ========================================================
 
