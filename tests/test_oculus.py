@@ -450,6 +450,7 @@ def test_virtual_sonar_serves_a_scene_with_the_wall_at_its_range(wall):
                                                                     speed_of_sound=1500.0))
     for p in got:
         np.testing.assert_array_equal(p["image"], expected.image)       # mitsonar's rendered bytes
+        assert p["heading"] == pytest.approx(90.0)                      # looking along +x: east
     centre = np.abs(got[0]["bearings"] / 100.0) < 15
     profile = got[0]["image"][:, centre].mean(axis=1)
     line = 10 + int(np.argmax(profile[10:]))                            # past the ring-down

@@ -41,7 +41,7 @@ quantised to the sample width: 8-bit ``round(y)``, 16-bit ``round(y x 257)``, 32
 ``round(y x 16843009)`` (the same level through a wider A/D). The per-row gain sent (flag bit 2)
 is g/100 as a float32. So at gain 100 and gamma 255 the 8-bit image is the scan's bytes.
 
-``heading``, ``pitch``, ``roll`` (version 2 results) come from the scan's first pose (world x
+``heading``, ``pitch``, ``roll`` (version 2 results) come from the head's pose in the scan (world x
 east, y north, z up: heading clockwise from north of the boresight, pitch its elevation, roll the
 tilt of the fan's axis towards starboard), ``temperature`` from ``water`` (deg C),
 ``pressure`` (bar, gauge) from the head's depth ``-z``.
@@ -201,8 +201,17 @@ class VirtualOculus:
         if fire.speed_of_sound:
             return float(fire.speed_of_sound)
         from mitsonar.acoustics.seawater import sound_speed
-        depth = max(0.0, -float(self.scan.poses[0][2, 3])) if self.scan.n_pings else 0.0
+        depth = max(0.0, -float(self.head_pose(0)[2, 3]))
         return float(sound_speed(self.water["temperature"], fire.salinity, depth))
+
+    def head_pose(self, i: int = 0) -> np.ndarray:
+        """The head's pose (its boresight at bearing 0) of scan ``i``: row 0's pose turned back by
+        row 0's bearing (`mitsonar.geometry.frames.bearing_rotation`)."""
+        from mitsonar.geometry.frames import bearing_rotation
+        scan = self.scans[i]
+        if not scan.n_pings:
+            return np.eye(4)
+        return scan.poses[0] @ bearing_rotation(-float(scan.bearings[0]))
 
     def ping(self, fire: FireMessage, ping_id: int = 0, now: float = 0.0) -> PingResult:
         """The simple ping result the head sends for ``fire`` (checked with `check_fire`) as its
@@ -214,8 +223,7 @@ class VirtualOculus:
         c = self.sound_speed(fire)
         i = ping_id % len(self.scans)
         image, bearings, res = self._image(fire, mode, c, i)
-        scan = self.scans[i]
-        pose = scan.poses[0] if scan.n_pings else np.eye(4)
+        pose = self.head_pose(i)
         heading, pitch, roll = attitude(pose)
         depth = max(0.0, -float(pose[2, 3]))
         gains = np.full(image.shape[0], fire.gain / 100.0, np.float32) if fire.send_gain else None
