@@ -485,3 +485,46 @@ def test_virtual_sonar_refusals_name_the_flag(tmp_path, capsys, wall):
     mech.write_text(WALL.replace('value="multibeam"', 'value="mechanical"'))
     assert main(["virtual-sonar", str(mech), "--head", "oculus", "--port-url", "tcp://127.0.0.1:0"]) == 1
     assert "a 'mechanical' sonar (kind must be 'multibeam') has no Oculus pings to serve" in capsys.readouterr().err
+
+
+def test_live_oculus_renders_each_ping_from_the_pose_then(wall):
+    import json
+    path, _ = wall
+    proc = subprocess.Popen([sys.executable, "-m", "mitsonar", "live", str(path), "--head", "oculus", "--spp", "4",
+                             "--port-url", "tcp://127.0.0.1:0", "--status-port", str(free_udp_port()),
+                             "--pose-url", "udp://127.0.0.1:0", "--seconds", "60"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines = []
+    for line in proc.stdout:
+        lines.append(line)
+        if line.startswith("live "):
+            break
+    text = "".join(lines)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        assert "live Oculus on tcp://127.0.0.1:" in text, text
+        pose_port = int(text.split("poses on udp://127.0.0.1:")[1].split()[0])
+        c = LayoutClient(int(text.split("tcp://127.0.0.1:")[1].split()[0]))
+        c.fire(version=2, rate=2, flags=0x0D, rng=10.0, gain=100.0, c=1500.0)
+
+        def wall_range():
+            p = c.ping()
+            profile = p["image"][:, np.abs(p["bearings"] / 100.0) < 15].mean(axis=1)
+            return (10 + int(np.argmax(profile[10:])) + 0.5) * p["res"], p["res"]
+
+        r, res = wall_range()
+        assert r == pytest.approx(WALL_RANGE, abs=2 * res)
+        tx.sendto(json.dumps({"t": 50.0, "position": [2, 0, 0], "orientation": [0, 0, 0, 1]}).encode(),
+                  ("127.0.0.1", pose_port))
+        got = [wall_range()[0]]
+        for _ in range(50):                 # the pose is applied by another thread: ping until it shows
+            if abs(got[-1] - (WALL_RANGE - 2)) <= 2 * res:
+                break
+            got.append(wall_range()[0])
+        assert got[-1] == pytest.approx(WALL_RANGE - 2, abs=2 * res), got
+        c.close()
+    finally:
+        tx.close()
+        proc.terminate()
+        out, err = proc.communicate(timeout=60)
+    assert "Traceback" not in err and "1 poses applied" in out, (out, err)

@@ -28,7 +28,7 @@ def parse_tcp_url(url: str | None, default_host: str = "127.0.0.1", default_port
 
 class OculusHead(Head):
     name = "oculus"
-    description = "Blueprint Subsea Oculus M-series multibeam (Ethernet)"
+    description = "Blueprint Subsea M-series Oculus (Ethernet multibeam)"
     log_tag = "oculus"
     protocol = "Oculus"
     packet = "Oculus message"
