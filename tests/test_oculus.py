@@ -446,8 +446,15 @@ def test_virtual_sonar_serves_a_scene_with_the_wall_at_its_range(wall):
     finally:
         proc.terminate()
         proc.wait(10)
-    expected = VirtualOculus(rendered, tcp_port=0).ping(FireMessage(flags=0x0D, range=10.0, gain=100.0,
-                                                                    speed_of_sound=1500.0))
+    # each fire message's geometry (M1200d low frequency: 256 beams over 130 deg, 0.6 x 20 deg beams,
+    # 1.2 MHz, 0..10 m) rendered from the scene, as the served head does
+    from mitsonar.devices.oculus.scenes import SceneFrames
+    frames = SceneFrames(path, bin_width=rendered.bin_width, spp=16, seed=0)
+    fire = FireMessage(flags=0x0D, range=10.0, gain=100.0, speed_of_sound=1500.0)
+    frame = frames(presets.model("M1200d").mode(1), 256, 10.0)
+    assert frame.n_pings == 256 and frame.beamwidth_h == pytest.approx(0.6) and frame.meta["frequency"] == 1.2e6
+    assert np.degrees(frame.bearings[[0, -1]]) == pytest.approx([-65 + 65 / 256, 65 - 65 / 256])
+    expected = VirtualOculus(rendered, tcp_port=0, frames=frames).ping(fire)
     for p in got:
         np.testing.assert_array_equal(p["image"], expected.image)       # mitsonar's rendered bytes
         assert p["heading"] == pytest.approx(90.0)                      # looking along +x: east

@@ -50,10 +50,11 @@ _SEED_MAX = 2**31 - 1
 _CALIBRATION_SEED = 1 << 30     # the error model's renders: seeds far from the pings'
 
 
-def live_scene(path: str):
+def live_scene(path: str, edit=None):
     """The scene of ``path`` with every ``sonar`` sensor reduced to one ping at bearing 0
     (`mitsonar.sim.scene.load_scene` of the edited XML, relative paths resolved from the file's
-    folder)."""
+    folder). ``edit``: a function given the XML's root element to change further before the load
+    (`mitsonar.devices.oculus.scenes`)."""
     import mitsuba as mi
 
     from mitsonar.sim.scene import SceneError, load_scene
@@ -71,6 +72,8 @@ def live_scene(path: str):
             if el is None:
                 el = ET.SubElement(sensor, tag, name=name)
             el.set("value", value)
+    if edit is not None:
+        edit(root)
     ensure_variant()
     folder = os.path.dirname(os.path.abspath(path))
     resolver = mi.file_resolver() if hasattr(mi, "file_resolver") else mi.Thread.thread().file_resolver()
@@ -442,8 +445,7 @@ def _ping360():
 
 
 def _oculus():
-    from mitsonar.devices.oculus.registration import parse_tcp_url
-    from mitsonar.devices.oculus.virtual import VirtualOculus
+    from mitsonar.devices.oculus.virtual import VirtualOculus, parse_tcp_url
 
     class LiveOculus(VirtualOculus):
         """A `mitsonar.devices.oculus.virtual.VirtualOculus` whose every ping is a whole frame

@@ -9,21 +9,7 @@ from __future__ import annotations
 
 from mitsonar.devices.head import Head
 
-__all__ = ["OculusHead", "HEAD", "parse_tcp_url"]
-
-
-def parse_tcp_url(url: str | None, default_host: str = "127.0.0.1", default_port: int = 52100) -> tuple[str, int]:
-    """``tcp://HOST:PORT`` (or ``HOST:PORT``, ``HOST``, or None for the defaults) as ``(host,
-    port)``; ValueError naming the URL and the allowed form."""
-    if url is None:
-        return default_host, default_port
-    text = url[len("tcp://"):] if url.startswith("tcp://") else url
-    if ":" not in text and text:
-        return text, default_port
-    host, sep, port = text.rpartition(":")
-    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
-        raise ValueError(f"--port-url {url!r} is not allowed for an Oculus (tcp://HOST:PORT, port 0..65535)")
-    return host, int(port)
+__all__ = ["OculusHead", "HEAD"]
 
 
 class OculusHead(Head):
@@ -90,6 +76,8 @@ class OculusHead(Head):
     def check_serve(self, args) -> None:
         """The address of ``--port-url`` parses and its TCP port can be bound now."""
         import socket
+
+        from mitsonar.devices.oculus.virtual import parse_tcp_url
         host, port = parse_tcp_url(getattr(args, "port_url", None))
         status = getattr(args, "status_port", None)
         if status is not None and not 0 < status <= 65535:
@@ -105,15 +93,24 @@ class OculusHead(Head):
 
     def serve(self, scan, args) -> int:
         from mitsonar.devices.oculus.protocol import UDP_PORT
-        from mitsonar.devices.oculus.virtual import VirtualOculus
+        from mitsonar.devices.oculus.virtual import VirtualOculus, parse_tcp_url
         host, port = parse_tcp_url(getattr(args, "port_url", None))
         status = getattr(args, "status_port", None)
+        frames = None
+        if getattr(args, "scene", None) is not None and not isinstance(scan, (list, tuple)):
+            # each fire message's geometry rendered from the scene (mitsonar.devices.oculus.scenes)
+            from mitsonar.devices.oculus.scenes import SceneFrames
+            from mitsonar.sim.render import DEFAULT_SPP
+            frames = SceneFrames(args.scene, getattr(args, "sensor", None), bin_width=scan.bin_width,
+                                 spp=args.spp or DEFAULT_SPP, seed=args.seed)
         head = VirtualOculus(scan, model=getattr(args, "model", None) or "M1200d", host=host, tcp_port=port,
-                             udp_port=UDP_PORT if status is None else status, realtime=not args.fast)
+                             udp_port=UDP_PORT if status is None else status, realtime=not args.fast,
+                             frames=frames)
         return head.serve(args.seconds, None, "virtual Oculus")
 
     def record(self, args, settings) -> dict:
         from mitsonar.devices.oculus.driver import record
+        from mitsonar.devices.oculus.virtual import parse_tcp_url
         host, port = parse_tcp_url(args.port, default_port=52100)
         return record(host, args.output, args.seconds, pings=args.pings or args.scans, tcp_port=port,
                       fire=settings, timeout=args.timeout)

@@ -25,7 +25,11 @@ a malformed, oversized message   refused and counted (``stats["refused"]``); the
                                  stays connected, the head stays up
 ===============================  ========================================================
 
-Each ping (`VirtualOculus.ping`): the beams are the head's own bearing table
+Each ping (`VirtualOculus.ping`) comes from a scan (`VirtualOculus.scan_for`): with ``frames``
+(`mitsonar.devices.oculus.scenes.SceneFrames`, what ``virtual-sonar SCENE --head oculus``
+uses), the scene rendered at the fire message's geometry (the mode's aperture, frequency and beam
+widths, the beam count, the range); else the scan given (ping k: scan k of a list, in turn).
+The beams are the head's own bearing table
 (`mitsonar.devices.oculus.presets.bearing_table` of the mode's aperture); beam k takes the row of
 the scan whose bearing is nearest (within half the scan's row spacing there; zeros outside the
 scan's fan). The range lines are ``range_resolution = bin width x c_used / c_scan`` apart (the
@@ -66,13 +70,27 @@ from mitsonar.devices.oculus.protocol import (FLAG, PING_RATE_HZ, TCP_PORT, UDP_
                                               PingResult, StatusMessage, StreamParser)
 from mitsonar.scan import Scan
 
-__all__ = ["VirtualOculus", "attitude", "check_fire", "serve"]
+__all__ = ["VirtualOculus", "attitude", "check_fire", "serve", "parse_tcp_url"]
 
 #: a fire message is 89 bytes at most: anything much larger is no message for the head
 MAX_INCOMING_PAYLOAD = 1024
 #: how much a slow client may have waiting before pings for it are skipped
 MAX_BACKLOG = 8 << 20
 _SCALE = {1: 1, 2: 257, 4: 16843009}
+
+
+def parse_tcp_url(url: str | None, default_host: str = "127.0.0.1", default_port: int = 52100) -> tuple[str, int]:
+    """``tcp://HOST:PORT`` (or ``HOST:PORT``, ``HOST``, or None for the defaults) as ``(host,
+    port)``; ValueError naming the URL and the allowed form."""
+    if url is None:
+        return default_host, default_port
+    text = url[len("tcp://"):] if url.startswith("tcp://") else url
+    if ":" not in text and text:
+        return text, default_port
+    host, sep, port = text.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise ValueError(f"--port-url {url!r} is not allowed for an Oculus (tcp://HOST:PORT, port 0..65535)")
+    return host, int(port)
 
 
 def attitude(pose) -> tuple[float, float, float]:
@@ -141,6 +159,9 @@ class VirtualOculus:
     realtime         True: pings at the fire message's rate; False: as fast as written
     water            ``{"temperature": deg C}`` (default 10)
     device_id        the head's ``srcDeviceId`` and ``deviceId`` (default 1)
+    frames           ``frames(mode, n_beams, range) -> Scan``: the scan of each fire
+                     message's geometry (`mitsonar.devices.oculus.scenes.SceneFrames`);
+                     None: the scans given
     ===============  ========================================================================
 
     ``stats`` counts clients, messages, pings and refusals; ``last_problem`` is the last refusal.
@@ -148,7 +169,7 @@ class VirtualOculus:
 
     def __init__(self, scan: Scan, *, model="M1200d", host: str = "127.0.0.1", tcp_port: int = TCP_PORT,
                  udp_port: int | None = UDP_PORT, status_period: float = 1.0, realtime: bool = True,
-                 water: dict | None = None, device_id: int = 1):
+                 water: dict | None = None, device_id: int = 1, frames=None):
         scans = list(scan) if isinstance(scan, (list, tuple)) else [scan]
         if not scans:
             raise ValueError("VirtualOculus: no scan to serve")
@@ -163,6 +184,7 @@ class VirtualOculus:
                 raise ValueError(f"VirtualOculus: {name} = {port!r} is not allowed (0..65535)")
         self.scans = scans
         self.scan = scans[0]
+        self.frames = frames
         self.model = presets.model(model)
         self.host = host
         self.tcp_port = tcp_port
@@ -182,18 +204,29 @@ class VirtualOculus:
         self._fans: dict = {}
         self._drop_all = threading.Event()
 
-    def _fan(self, i: int):
-        """Scan ``i``'s rows sorted by bearing, the bearings, and half the row spacing at each."""
-        if i not in self._fans:
-            b = np.asarray(self.scans[i].bearings, np.float64)
+    def _fan(self, scan: Scan):
+        """``scan``'s rows sorted by bearing, the bearings, and half the row spacing at each."""
+        if id(scan) not in self._fans:
+            if len(self._fans) > 32:
+                self._fans.clear()
+            b = np.asarray(scan.bearings, np.float64)
             order = np.argsort(b)
             b = b[order]
             gaps = np.diff(b)
             half = np.zeros(len(b))
             if len(b) > 1:
                 half = np.maximum(np.r_[gaps[0], gaps], np.r_[gaps, gaps[-1]]) / 2
-            self._fans[i] = (order, b, half)
-        return self._fans[i]
+            self._fans[id(scan)] = (scan, order, b, half)      # the scan kept: its id stays its own
+        return self._fans[id(scan)][1:]
+
+    def scan_for(self, fire: FireMessage, ping_id: int = 0) -> Scan:
+        """The scan ping ``ping_id`` of ``fire`` is taken from: ``frames(mode, n_beams, range)``
+        (a scene rendered at the fire message's geometry) if given, else scan ``ping_id mod
+        len(scans)``."""
+        if self.frames is not None:
+            mode = self.model.mode(fire.master_mode)
+            return self.frames(mode, fire.n_beams, _range(fire, mode))
+        return self.scans[ping_id % len(self.scans)]
 
     # ---- pings ----
     def sound_speed(self, fire: FireMessage) -> float:
@@ -201,29 +234,29 @@ class VirtualOculus:
         if fire.speed_of_sound:
             return float(fire.speed_of_sound)
         from mitsonar.acoustics.seawater import sound_speed
-        depth = max(0.0, -float(self.head_pose(0)[2, 3]))
+        depth = max(0.0, -float(self.head_pose(self.scans[0])[2, 3]))
         return float(sound_speed(self.water["temperature"], fire.salinity, depth))
 
-    def head_pose(self, i: int = 0) -> np.ndarray:
-        """The head's pose (its boresight at bearing 0) of scan ``i``: row 0's pose turned back by
+    @staticmethod
+    def head_pose(scan: Scan) -> np.ndarray:
+        """The head's pose (its boresight at bearing 0) in ``scan``: row 0's pose turned back by
         row 0's bearing (`mitsonar.geometry.frames.bearing_rotation`)."""
         from mitsonar.geometry.frames import bearing_rotation
-        scan = self.scans[i]
         if not scan.n_pings:
             return np.eye(4)
         return scan.poses[0] @ bearing_rotation(-float(scan.bearings[0]))
 
     def ping(self, fire: FireMessage, ping_id: int = 0, now: float = 0.0) -> PingResult:
         """The simple ping result the head sends for ``fire`` (checked with `check_fire`) as its
-        ping ``ping_id``: from scan ``ping_id mod len(scans)``."""
+        ping ``ping_id``, from `scan_for`."""
         problem = check_fire(fire, self.model)
         if problem:
             raise OculusError(problem)
         mode = self.model.mode(fire.master_mode)
         c = self.sound_speed(fire)
-        i = ping_id % len(self.scans)
-        image, bearings, res = self._image(fire, mode, c, i)
-        pose = self.head_pose(i)
+        scan = self.scan_for(fire, ping_id)
+        image, bearings, res = self._image(fire, mode, c, scan)
+        pose = self.head_pose(scan)
         heading, pitch, roll = attitude(pose)
         depth = max(0.0, -float(pose[2, 3]))
         gains = np.full(image.shape[0], fire.gain / 100.0, np.float32) if fire.send_gain else None
@@ -232,12 +265,12 @@ class VirtualOculus:
                           pressure=depth * 1025.0 * 9.80665 / 1e5, heading=heading, pitch=pitch, roll=roll,
                           speed_of_sound_used=c, ping_start_time=now, src=self.device_id)
 
-    def _image(self, fire, mode, c, i=0):
-        key = (fire.master_mode, _range(fire, mode), fire.n_beams, c, fire.gain, fire.gamma, fire.data_bytes, i)
-        if key in self._cache:
-            return self._cache[key]
-        scan = self.scans[i]
-        rows_of, fan_b, fan_half = self._fan(i)
+    def _image(self, fire, mode, c, scan):
+        key = (fire.master_mode, _range(fire, mode), fire.n_beams, c, fire.gain, fire.gamma, fire.data_bytes,
+               id(scan))
+        if key in self._cache and self._cache[key][0] is scan:
+            return self._cache[key][1]
+        rows_of, fan_b, fan_half = self._fan(scan)
         bearings = presets.bearing_table(mode.aperture, fire.n_beams)
         stretch = c / scan.sound_speed
         res = scan.bin_width * stretch
@@ -266,7 +299,7 @@ class VirtualOculus:
         out = (image, bearings, float(res))
         if len(self._cache) > 32:
             self._cache.clear()
-        self._cache[key] = out
+        self._cache[key] = (scan, out)
         return out
 
     def period(self, fire: FireMessage) -> float:
