@@ -184,9 +184,11 @@ def test_a_layout_client_fires_with_several_settings(head):
         np.testing.assert_array_equal(p["gains"], np.ones(90, np.float32))
         c.fire(version=2, flags=0x0D, rng=8.0, ext=0x200)       # 32-bit (extFlags)
         np.testing.assert_array_equal(c.ping(8.0)["image"], data[:80] * 16843009)
-        c.fire(version=2, flags=0x0D, rng=7.0, gain=50.0)       # gain 50 %
+        c.fire(version=2, flags=0x0D, rng=7.0, gain=50.0)       # gain 50 %: -6 dB on the A/D scale
         p = c.ping(7.0)
-        np.testing.assert_array_equal(p["image"], np.round(data[:70] * 0.5))
+        from mitsonar.receiver.electronics import Electronics
+        shift = 20 * math.log10(0.5) * 255 / Electronics.from_dict({}).ad_span
+        np.testing.assert_array_equal(p["image"], np.clip(np.floor(data[:70] + shift + 0.5), 0, 255))
         np.testing.assert_array_equal(p["gains"], np.full(70, 0.5, np.float32))
         c.fire(version=2, flags=0x0D, rng=6.0, gamma=127)       # gamma 0.5
         np.testing.assert_array_equal(c.ping(6.0)["image"], np.round(255 * (data[:60] / 255) ** (127 / 255)))
@@ -228,6 +230,19 @@ def test_period_follows_the_rate_and_the_listening_time(head):
     assert head.period(FireMessage(ping_rate=2, range=30.0, speed_of_sound=1500)) == pytest.approx(0.04)  # 40 m/s^-1
     assert head.period(FireMessage(ping_rate=2, range=40.0, speed_of_sound=1000 * 1.5)) == pytest.approx(80 / 1500)
     assert head.period(FireMessage(ping_rate=5)) == math.inf
+
+
+def test_gain_percent_is_the_receiver_gain_of_a_rendered_scan(wall):
+    from mitsonar.devices.oculus.virtual import VirtualOculus
+    from mitsonar.receiver.electronics import apply_to_scan
+    _, rendered = wall
+    head = VirtualOculus(rendered, tcp_port=0)
+    assert head.received(rendered, 100.0) is rendered.data
+    g = rendered.electronics["gain"]
+    for percent, db in ((50.0, 20 * math.log10(0.5)), (10.0, -20.0), (0.0, -g)):
+        expected = apply_to_scan(rendered, {**rendered.electronics, "gain": g + db}).data
+        np.testing.assert_array_equal(head.received(rendered, percent), expected)
+    assert head.received(rendered, 10.0).astype(int).sum() < rendered.data.astype(int).sum()
 
 
 def test_status_broadcast_carries_the_head_and_its_address():

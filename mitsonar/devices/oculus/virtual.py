@@ -39,11 +39,14 @@ different speed of sound stretches the image as it would a real head's), zeros p
 ``speedOfSound`` 0 means the head's own: `mitsonar.acoustics.seawater.sound_speed` of the
 water's temperature, the fire message's salinity and the head's depth.
 
-Levels: the scan's bytes are the receiver's level at gain 100 %; ``gainPercent`` g scales it by
-g/100, ``gammaCorrection`` G applies ``255 (x/255)^(G/255)`` (G 0 or 255: none), and the level is
+Levels: ``gainPercent`` g is the receiver gain: 100 % the scan's own, g % ``20 log10(g/100)`` dB
+on it (`VirtualOculus.received`: a rendered scan through its receiver chain again, a scan of
+bytes moved on its A/D scale); ``gammaCorrection`` G applies ``255 (x/255)^(G/255)`` (G 0 or
+255: none), and the level is
 quantised to the sample width: 8-bit ``round(y)``, 16-bit ``round(y x 257)``, 32-bit
 ``round(y x 16843009)`` (the same level through a wider A/D). The per-row gain sent (flag bit 2)
-is g/100 as a float32. So at gain 100 and gamma 255 the 8-bit image is the scan's bytes.
+is g/100 (the amplitude gain) as a float32. So at gain 100 and gamma 255 the 8-bit image is the
+scan's bytes.
 
 ``heading``, ``pitch``, ``roll`` (version 2 results) come from the head's pose in the scan (world x
 east, y north, z up: heading clockwise from north of the boresight, pitch its elevation, roll the
@@ -288,9 +291,8 @@ class VirtualOculus:
             r_scan = (np.arange(n_r) + 0.5) * res / stretch
             idx = np.floor((r_scan - scan.range_min) / scan.bin_width + 1e-9).astype(np.int64)
             ok = (idx >= 0) & (idx < scan.n_bins)
-            rows = scan.data[rows_of[k]].astype(np.float64)          # (n_beams, n_bins)
+            rows = self.received(scan, fire.gain)[rows_of[k]].astype(np.float64)      # (n_beams, n_bins)
             level[np.ix_(ok, inside)] = rows[inside][:, idx[ok]].T
-        level *= fire.gain / 100.0
         if fire.gamma not in (0, 255):
             level = 255.0 * (level / 255.0) ** (fire.gamma / 255.0)
         nb = fire.data_bytes
@@ -299,6 +301,30 @@ class VirtualOculus:
         out = (image, bearings, float(res))
         if len(self._cache) > 32:
             self._cache.clear()
+        self._cache[key] = (scan, out)
+        return out
+
+    def received(self, scan: Scan, gain_percent: float) -> np.ndarray:
+        """``scan``'s bytes at the receiver gain ``gain_percent`` asks for: 100 % is the scan's
+        own gain (its bytes); g % is ``20 log10(g / 100)`` dB on it (50 %: -6 dB), within the
+        head's 0..80 dB (`mitsonar.receiver.electronics.HEAD_LIMITS`; 0 %: the least). A rendered
+        scan (with intensity) goes through its receiver chain again at that gain
+        (`mitsonar.receiver.electronics.apply_to_scan`, the same noise seed); a scan of bytes
+        only (a log) has its bytes moved by that many dB on its A/D scale (``ad_span``)."""
+        if gain_percent == 100.0:
+            return scan.data
+        key = ("received", id(scan), float(gain_percent))
+        if key in self._cache and self._cache[key][0] is scan:
+            return self._cache[key][1]
+        from mitsonar.receiver.electronics import HEAD_LIMITS, Electronics, apply_to_scan
+        e = Electronics.from_dict(scan.electronics)
+        lo, hi = HEAD_LIMITS["gain"]
+        db = 20.0 * math.log10(gain_percent / 100.0) if gain_percent > 0 else -math.inf
+        if np.any(scan.intensity):
+            out = apply_to_scan(scan, {**scan.electronics, "gain": float(np.clip(e.gain + db, lo, hi))}).data
+        else:
+            shift = max(db, lo - e.gain) * 255.0 / e.ad_span
+            out = np.clip(np.floor(scan.data.astype(np.float64) + shift + 0.5), 0, 255).astype(np.uint8)
         self._cache[key] = (scan, out)
         return out
 
