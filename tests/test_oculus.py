@@ -550,3 +550,20 @@ def test_live_oculus_renders_each_ping_from_the_pose_then(wall):
         proc.terminate()
         out, err = proc.communicate(timeout=60)
     assert "Traceback" not in err and "1 poses applied" in out, (out, err)
+
+
+def test_record_writes_a_raw_log_or_an_oculus_log_that_replay_reads(tmp_path, head, capsys):
+    url = f"tcp://127.0.0.1:{head.tcp_port}"
+    assert main(["record", url, "--head", "oculus", "-o", str(tmp_path / "r.bin"), "--pings", "2",
+                 "--range", "3"]) == 0
+    assert main(["record", url, "--head", "oculus", "-o", str(tmp_path / "r.oculus"), "--pings", "2",
+                 "--range", "3"]) == 0
+    assert "(2 pings) to" in capsys.readouterr().out
+    from mitsonar.devices.recording import replay
+    for name in ("r.bin", "r.oculus"):
+        scans = replay(tmp_path / name)
+        assert len(scans) >= 2
+        for s in scans:                 # the default fire message: gain 50 % of the scan's bytes
+            np.testing.assert_array_equal(s.data, head.received(head.scan, 50.0)[:, :30])
+    assert main(["record", url, "--head", "oculus", "-o", str(tmp_path / "x.bin"), "--gain", "high"]) == 1
+    assert capsys.readouterr().err.strip() == "mitsonar record: error: --gain is for --head ping360, not oculus"

@@ -277,10 +277,12 @@ def add_subcommands(subparsers) -> None:
                     "under a temporary name in its folder and renamed at the end (also on "
                     "Ctrl-C); a recording without any packet from the head leaves no file.")
     p.add_argument("port", metavar="PORT", help="serial device or pyserial URL (socket://HOST:PORT, ...); "
-                                                "a Ping360 also udp://HOST:PORT")
-    p.add_argument("-o", "--output", required=True, metavar="LOG", help="raw log to write")
+                                                "a Ping360 also udp://HOST:PORT; an Oculus tcp://HOST:PORT, "
+                                                "HOST, or auto (found by its status broadcast)")
+    p.add_argument("-o", "--output", required=True, metavar="LOG",
+                   help="raw log to write (--head oculus: LOG.oculus writes an Oculus log of its pings)")
     p.add_argument("--head", choices=registry.names(), default=registry.DEFAULT,
-                   help="the head on PORT: Tritech Micron (default) or Blue Robotics Ping360")
+                   help="the head on PORT: Tritech Micron (default), Blue Robotics Ping360 or Blueprint Oculus")
     p.add_argument("--seconds", type=_positive(float), default=None, help="stop after T seconds")
     p.add_argument("--scans", type=_positive(int), default=None, help="stop after N complete scans")
     p.add_argument("--pings", type=_positive(int), default=None, help="stop after N scanlines")

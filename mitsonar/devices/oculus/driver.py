@@ -27,7 +27,7 @@ from mitsonar.devices.oculus.protocol import (FLAG, STATUS_SIZE, TCP_PORT, UDP_P
 from mitsonar.devices.recording import check_pose, record_driven
 from mitsonar.devices.transports import SonarError, SonarTimeout
 
-__all__ = ["discover", "fire_message", "OculusSonar", "record", "SonarError", "SonarTimeout"]
+__all__ = ["discover", "fire_message", "OculusSonar", "record", "record_oculus", "SonarError", "SonarTimeout"]
 
 #: pingRate codes by Hz (`mitsonar.devices.oculus.protocol.PING_RATE_HZ`)
 RATE_CODES = {10: 0, 15: 1, 40: 2, 5: 3, 2: 4, 0: 5}
@@ -101,7 +101,8 @@ class OculusSonar:
     ==============  ==========================================================================
 
     ``stats`` counts pings, reconnects and dropped messages; ``parser`` the bytes dropped and why;
-    ``status`` the status message of discovery (None if ``host`` was given).
+    ``status`` the status message of discovery (None if ``host`` was given); ``last_raw`` the
+    bytes of the last ping result read (as the head sent them).
     """
 
     def __init__(self, host: str | None = None, tcp_port: int = TCP_PORT, fire: FireMessage | None = None,
@@ -122,6 +123,7 @@ class OculusSonar:
         self.status: StatusMessage | None = None
         self._sock = None
         self._inbox: deque = deque()
+        self.last_raw: bytes | None = None      # the bytes of the last ping result read
         self._log = None
         if log is not None:
             from mitsonar.devices.rawlog import RawLogWriter
@@ -167,6 +169,7 @@ class OculusSonar:
         except OSError as e:
             raise SonarError(f"{self.port}: write failed ({e.strerror or e})") from None
         self.fire = fire
+        self.stats["bytes out"] += len(data)
         if self._log is not None:
             self._log.tx(data)
         self.stats["fire messages"] += 1
@@ -229,12 +232,13 @@ class OculusSonar:
             if not data:
                 self._reconnect("the head closed the connection")
                 continue
+            self.stats["bytes in"] += len(data)
             if self._log is not None:
                 self._log.rx(data)
             refused, dropped = self.parser.refused, self.parser.dropped
-            for m in self.parser.feed(data):
+            for m, raw in zip(self.parser.feed(data), self.parser.raw):
                 if isinstance(m, PingResult):
-                    self._inbox.append(m)
+                    self._inbox.append((m, raw))
                 else:
                     self.stats["other messages"] += 1
             if self.parser.refused > refused:
@@ -243,7 +247,8 @@ class OculusSonar:
             elif self.parser.dropped > dropped:
                 self._say(f"{self.port}: dropped {self.parser.dropped - dropped} bytes that form no Oculus message")
         self.stats["pings"] += 1
-        return self._inbox.popleft()
+        m, self.last_raw = self._inbox.popleft()
+        return m
 
     def scan(self):
         """The next ping as a multibeam `Scan` (the pose current now; start time the wall clock)."""
@@ -266,3 +271,41 @@ def record(host, path, seconds: float | None = None, *, pings: int | None = None
         return record_driven(sonar, path, seconds, None, pings, sonar.start, "Oculus")
     finally:
         sonar.close()
+
+
+def record_oculus(host, path, seconds: float | None = None, *, pings: int | None = None, tcp_port: int = TCP_PORT,
+                  fire: FireMessage | None = None, **sonar_kwargs) -> dict:
+    """Drive an Oculus and write its ping results, as the head sent them, to a ``.oculus`` log
+    (version 1, `mitsonar.devices.oculus.logfile.OculusLogWriter`), until ``seconds`` or
+    ``pings`` or Ctrl-C. The log is written under a temporary name and renamed at the end; a
+    recording without a ping leaves no file and raises the `SonarError` (or `SonarTimeout`)
+    that ended it. Returns the counts of `record`."""
+    from mitsonar.devices.oculus.logfile import OculusLogWriter
+    for name, v in (("seconds", seconds), ("pings", pings)):
+        if v is not None and not (isinstance(v, (int, float)) and v > 0):
+            raise ValueError(f"record: {name} must be positive, got {v!r}")
+    sonar = OculusSonar(host, tcp_port, fire, start=False, **sonar_kwargs)
+    writer = OculusLogWriter(path)
+    end = None if seconds is None else time.monotonic() + seconds
+    error = None
+    try:
+        sonar.start()
+        while end is None or time.monotonic() < end:
+            sonar.read_ping()
+            writer.add(sonar.last_raw, time.time())
+            if pings is not None and writer.items >= pings:
+                break
+    except KeyboardInterrupt:
+        pass
+    except (SonarError, OSError) as e:
+        error = e
+    finally:
+        sonar.close()
+    if writer.items == 0:
+        writer.discard()
+        raise error if error is not None else SonarTimeout(f"{sonar.port}: no ping result to record")
+    writer.close()
+    if error is not None:
+        raise type(error)(f"{error}; the log keeps the {writer.items} pings received before: {path}") from None
+    return {"bytes_rx": sonar.stats["bytes in"], "bytes_tx": sonar.stats["bytes out"], "pings": writer.items,
+            "scans": 0, "bytes_dropped": int(sonar.parser.dropped)}

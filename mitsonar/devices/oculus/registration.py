@@ -109,11 +109,15 @@ class OculusHead(Head):
         return head.serve(args.seconds, None, "virtual Oculus")
 
     def record(self, args, settings) -> dict:
-        from mitsonar.devices.oculus.driver import record
+        """``record``: drive the Oculus at ``args.port`` (``tcp://HOST:PORT``, ``HOST``; ``auto``:
+        found by its status broadcast) and log to ``args.output``: a ``.oculus`` log (the ping
+        results as sent) when the name ends so, else a raw log of every byte."""
+        from mitsonar.devices.oculus.driver import record, record_oculus
         from mitsonar.devices.oculus.virtual import parse_tcp_url
-        host, port = parse_tcp_url(args.port, default_port=52100)
-        return record(host, args.output, args.seconds, pings=args.pings or args.scans, tcp_port=port,
-                      fire=settings, timeout=args.timeout)
+        host, port = (None, 52100) if args.port == "auto" else parse_tcp_url(args.port, default_port=52100)
+        how = record_oculus if str(args.output).endswith(".oculus") else record
+        return how(host, args.output, args.seconds, pings=args.pings or args.scans, tcp_port=port,
+                   fire=settings, timeout=args.timeout)
 
 
 HEAD = OculusHead()
