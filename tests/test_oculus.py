@@ -204,6 +204,10 @@ def test_a_layout_client_fires_with_several_settings(head):
         p = c.ping(4.0)
         assert p["c"] == pytest.approx(float(sound_speed(10.0, 30.0, 0.0)))
         assert p["res"] == pytest.approx(0.1 * p["c"] / 1500.0) and p["temperature"] == 10.0
+        c.fire(version=2, flags=0x0D, rng=3.5, c=0.0, salinity=0.0)    # fresh water (liboculus's default)
+        p = c.ping(3.5)
+        # Mackenzie (1981) is linear in salinity: 1.340 - 1.025e-2 T m/s per ppt, continued to 0 ppt
+        assert p["c"] == pytest.approx(float(sound_speed(10.0, 35.0, 0.0)) - 35 * (1.340 - 1.025e-2 * 10))
     finally:
         c.close()
     assert head.stats["refused"] == 0 and head.last_error is None

@@ -195,6 +195,11 @@ class VirtualOculus:
         self.status_period = float(status_period)
         self.realtime = bool(realtime)
         self.water = {"temperature": 10.0, **(water or {})}
+        from mitsonar.acoustics.seawater import MACKENZIE_RANGE
+        lo, hi = MACKENZIE_RANGE["temperature"]
+        t = self.water["temperature"]
+        if not (isinstance(t, (int, float)) and lo <= t <= hi):
+            raise ValueError(f"VirtualOculus: water temperature {t!r} is not allowed ({lo:g}..{hi:g} deg C)")
         self.device_id = int(device_id)
         self.stats: Counter = Counter()
         self.last_problem: str | None = None
@@ -233,12 +238,24 @@ class VirtualOculus:
 
     # ---- pings ----
     def sound_speed(self, fire: FireMessage) -> float:
-        """The speed of sound the head uses: the fire message's, or from salinity (speedOfSound 0)."""
+        """The speed of sound the head uses: the fire message's, or (speedOfSound 0) Mackenzie's
+        (`mitsonar.acoustics.seawater.sound_speed`) at the water's temperature, the message's
+        salinity and the head's depth. The equation is linear in salinity: outside its 25..40 ppt
+        (fresh water, 0 ppt, is what liboculus asks by default) it is continued along that line,
+        from its values at the nearest end and one ppt inside."""
         if fire.speed_of_sound:
             return float(fire.speed_of_sound)
-        from mitsonar.acoustics.seawater import sound_speed
+        from mitsonar.acoustics.seawater import MACKENZIE_RANGE, sound_speed
         depth = max(0.0, -float(self.head_pose(self.scans[0])[2, 3]))
-        return float(sound_speed(self.water["temperature"], fire.salinity, depth))
+        t = float(self.water["temperature"])
+        lo, hi = MACKENZIE_RANGE["salinity"]
+        s = float(fire.salinity)
+        if lo <= s <= hi:
+            return float(sound_speed(t, s, depth))
+        end = lo if s < lo else hi
+        inside = end + (1.0 if s < lo else -1.0)
+        c_end, c_in = float(sound_speed(t, end, depth)), float(sound_speed(t, inside, depth))
+        return c_end + (s - end) * (c_end - c_in) / (end - inside)
 
     @staticmethod
     def head_pose(scan: Scan) -> np.ndarray:
@@ -501,7 +518,13 @@ class VirtualOculus:
 
     def _send_ping(self, c: _Client, now: float) -> None:
         pid = self.stats["pings"]
-        data = self.ping(c.fire, pid, now - self._t0).encode()
+        try:
+            data = self.ping(c.fire, pid, now - self._t0).encode()
+        except ValueError as e:          # a ping this head cannot make: said, the stream stopped
+            self.stats["refused"] += 1
+            self.last_problem = f"ping {pid}: {e}"
+            c.fire = None
+            return
         self.stats["pings"] += 1
         c.out += data
         c.due = now + self.period(c.fire)
