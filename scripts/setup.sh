@@ -52,4 +52,8 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install -q --upgrade pip >/dev/null
 .venv/bin/python -m pip install -q -e '.[test]'
+# oculus-python (bps_oculus, the Oculus tests' independent reader) asks for opencv-python, which
+# would replace the opencv-python-headless of the test extra: installed without its dependencies
+# (its readers import numpy, opencv (headless is enough), netCDF4 and rosbags, all in the extra).
+.venv/bin/python -m pip install -q --no-deps 'oculus-python==0.0.2a1'
 echo "setup: done (.venv ready)"

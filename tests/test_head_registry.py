@@ -297,7 +297,7 @@ def test_a_toy_head_is_served_recorded_and_replayed_through_the_cli(toy, tmp_pat
 
 
 def test_a_registered_head_is_a_head_choice_and_refuses_other_heads_options(toy, tmp_path, capsys):
-    assert registry.names() == ("micron", "ping360", "toy") and registry.get("toy") is toy
+    assert registry.names() == ("micron", "ping360", "oculus", "toy") and registry.get("toy") is toy
     assert main(["record", "/dev/null", "--head", "toy", "-o", str(tmp_path / "x.bin"), "--gain", "high"]) == 1
     assert capsys.readouterr().err.strip() == "mitsonar record: error: --gain is for --head ping360, not toy"
     assert not list(tmp_path.iterdir())
@@ -307,14 +307,16 @@ def test_without_registration_toy_is_no_head(capsys):
     with pytest.raises(SystemExit) as e:
         main(["record", "/dev/null", "--head", "toy", "-o", "x.bin"])
     assert e.value.code == 2
-    assert "invalid choice: 'toy' (choose from 'micron', 'ping360')" in capsys.readouterr().err
-    with pytest.raises(ValueError, match=r"^unknown head 'toy': known heads are micron, ping360$"):
+    assert "invalid choice: 'toy' (choose from 'micron', 'ping360', 'oculus')" in capsys.readouterr().err
+    with pytest.raises(ValueError, match=r"^unknown head 'toy': known heads are micron, ping360, oculus$"):
         registry.get("toy")
 
 
 def test_the_builtin_heads_come_from_their_folders():
     micron, ping360 = registry.get("micron"), registry.get("ping360")
     assert type(micron).__module__ == "mitsonar.devices.micron.registration"
+    assert type(registry.get("oculus")).__module__ == "mitsonar.devices.oculus.registration"
+    assert registry.for_log({"head": "oculus"}) is registry.get("oculus")
     assert type(ping360).__module__ == "mitsonar.devices.ping360.registration"
     assert registry.for_log({}) is micron and registry.for_log({"head": "ping360"}) is ping360
     assert micron.driver() is mitsonar.MicronSonar and ping360.driver() is mitsonar.Ping360Sonar
@@ -331,7 +333,7 @@ def test_register_refuses_a_taken_name_a_taken_log_tag_and_no_head():
         registry.register(type("Echo", (ToyHead,), {"name": "echo", "log_tag": "ping360"})())
     with pytest.raises(TypeError, match="a str is no mitsonar.devices.head.Head"):
         registry.register("toy")
-    assert registry.names() == ("micron", "ping360")
+    assert registry.names() == ("micron", "ping360", "oculus")
 
 
 def test_replay_of_a_log_of_an_unknown_head_says_so_in_one_line(tmp_path, capsys):
@@ -342,5 +344,5 @@ def test_replay_of_a_log_of_an_unknown_head_says_so_in_one_line(tmp_path, capsys
     assert main(["replay", str(log), "-o", str(tmp_path / "s.npz")]) == 1
     assert capsys.readouterr().err.strip() == (
         f"mitsonar replay: error: {log}: the log's head 'sidescan9000' is none of the known heads "
-        f"(micron, ping360)")
+        f"(micron, ping360, oculus)")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["other.bin"]

@@ -63,7 +63,6 @@ def _live(args) -> int:
         raise ValueError(f"{' and '.join(sources)} are {len(sources)} sources of poses: give one")
     from mitsonar.cli.common import check_counts, sensor_of
     from mitsonar.devices.micron.seanet.settings import require_mechanical
-    from mitsonar.devices.transports import check_port
     check_counts(args, ValueError)
     if args.records is not None:
         check_records_path(args.records)
@@ -79,7 +78,7 @@ def _live(args) -> int:
     log = loop = live = outputs = None
     try:
         if head is not None:
-            check_port(args.port_url, args.baud)
+            head.check_serve(args)
         outputs = _outputs(args)                      # a bad flag fails before the load, too
         scene = live_scene(str(scene_path))
         sonar = _frame_sensor(scene, args) if frames is not False else sensor_of(scene, args)
@@ -93,8 +92,14 @@ def _live(args) -> int:
                 from mitsonar.devices import registry
                 args.head = registry.DEFAULT
                 head = _head(args)
-                check_port(args.port_url, args.baud)
-        if not frames:
+                head.check_serve(args)
+        if not frames and head.frames:
+            if not sonar.sonar_kind.transmit_fan:
+                from mitsonar.geometry import kinds
+                raise ValueError(f"live {scene_path.name}: --head {head.name} is a multibeam head; a "
+                                 f"{sonar.sonar_kind.name!r} sonar (kind must be {kinds.which('transmit_fan')}) "
+                                 f"has no {head.serves} to serve")
+        elif not frames:
             require_mechanical(sonar, f"live {scene_path.name}", f"no {head.serves} to serve")
         buffer = PoseBuffer() if (sock is not None or args.mavlink) else None
         log = PingLog(args.records) if args.records else PingLog()
@@ -114,6 +119,9 @@ def _live(args) -> int:
             kw = {"baudrate": args.baud, "realtime": not args.fast}
             if "no_dst" in {dest for dest, _ in head.options}:     # a head that can be a pre-DST Micron
                 kw["dst"] = not args.no_dst
+            for dest in ("model", "status_port"):          # an Oculus's model and status port
+                if dest in {d for d, _ in head.options} and getattr(args, dest, None) is not None:
+                    kw[dest] = getattr(args, dest)
             live = LIVE_HEADS[head.name]()(renderer, args.port_url, **kw)
     except BaseException:
         if sock is not None:
@@ -218,10 +226,11 @@ def _refuse_ping_rate(args, scene_path) -> None:
 
 
 def _refuse_head_flags(args, scene_path) -> None:
-    for dest, flag in (("port_url", "--port-url"), ("fast", "--fast"), ("no_dst", "--no-dst"), ("baud", "--baud")):
+    for dest, flag in (("port_url", "--port-url"), ("fast", "--fast"), ("no_dst", "--no-dst"), ("baud", "--baud"),
+                       ("model", "--model"), ("status_port", "--status-port")):
         if getattr(args, dest) not in (None, False):
-            raise ValueError(f"{flag} is for a head (--head micron|ping360); {scene_path.name}'s multibeam "
-                             "publishes frames at --ping-rate")
+            raise ValueError(f"{flag} is for a head (--head micron|ping360|oculus); {scene_path.name}'s "
+                             "multibeam publishes frames at --ping-rate without one")
 
 
 class loop_running:  # noqa: N801 - a context manager, named for its use
@@ -293,7 +302,8 @@ def add_subcommands(subparsers) -> None:
                     "over DDS.")
     p.add_argument("scene", metavar="SCENE.xml", help="Mitsuba scene with a mechanical or multibeam `sonar` sensor")
     p.add_argument("--head", choices=registry.names(), default=None,
-                   help="which head to be: micron (SeaNet) or ping360 (ping-protocol); default: the scene's "
+                   help="which head to be: micron (SeaNet), ping360 (ping-protocol) or oculus (an Oculus "
+                        "multibeam on TCP, its pings rendered when they fire); default: the scene's "
                         "multibeam publishes frames, else micron")
     p.add_argument("--port-url", default=None, metavar="URL",
                    help="where to serve, as virtual-sonar: a pseudo-terminal (default), socket://HOST:PORT, "
@@ -320,6 +330,10 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--baud", type=_positive(int), default=None, help="baud rate of the timing model")
     p.add_argument("--fast", action="store_true", help="answer as soon as rendered (no timing model)")
     p.add_argument("--no-dst", action="store_true", help="behave as a pre-DST Micron (--head micron)")
+    p.add_argument("--model", choices=("M750d", "M1200d", "M3000d"), default=None,
+                   help="which Oculus to be (--head oculus; default M1200d)")
+    p.add_argument("--status-port", type=int, default=None, metavar="PORT",
+                   help="UDP port of the Oculus status broadcast (--head oculus; default 52102)")
     p.add_argument("--seconds", type=_positive(float), default=None, help="stop after T seconds")
     p.add_argument("--foxglove", type=_port, nargs="?", const=8765, default=None, metavar="PORT",
                    help="serve the sonar picture, the raw pings, the frames (map, base_link, sonar) and the "

@@ -100,20 +100,30 @@ def _head(args):
 
 def _virtual_sonar(args) -> int:
     from mitsonar.sim.scene import check_scene_file
+    if getattr(args, "log", None) is not None:
+        return _virtual_sonar_log(args)
+    if args.scene is None:
+        raise ValueError("give SCENE.xml to render (or --log LOG with --head oculus)")
     scene_path = Path(args.scene)
     check_scene_file(scene_path)
     head = _head(args)
     import mitsonar
     from mitsonar.cli.common import check_counts, sensor_of
-    from mitsonar.devices.transports import check_port
     from mitsonar.devices.micron.seanet.settings import require_mechanical
     check_counts(args, ValueError)
     # A port that cannot be opened fails now, not after the render.
-    check_port(args.port_url, args.baud)
+    head.check_serve(args)
     scene = mitsonar.load_scene(str(scene_path))
     sensor = sensor_of(scene, args)      # --sensor, or the first sonar (one warning if several)
     # Refuse before the render, not after it: a multibeam scene can take a while to render.
-    require_mechanical(sensor, f"virtual-sonar {scene_path.name}", f"no {head.serves} to serve")
+    if head.frames:
+        from mitsonar.geometry import kinds
+        if not getattr(kinds.lookup(getattr(sensor, "kind", kinds.DEFAULT)), "transmit_fan", False):
+            raise ValueError(f"virtual-sonar {scene_path.name}: --head {head.name} is a multibeam head; a "
+                             f"{getattr(sensor, 'kind', kinds.DEFAULT)!r} sonar (kind must be "
+                             f"{kinds.which('transmit_fan')}) has no {head.serves} to serve")
+    else:
+        require_mechanical(sensor, f"virtual-sonar {scene_path.name}", f"no {head.serves} to serve")
     kw = {"seed": args.seed, "sensor": sensor}
     if args.spp is not None:
         kw["spp"] = args.spp
@@ -121,6 +131,23 @@ def _virtual_sonar(args) -> int:
     print(f"rendered {scene_path.name}: {scan.n_pings} pings x {scan.n_bins} bins, "
           f"{scan.range_min:g}..{scan.range_max:g} m", flush=True)
     return head.serve(scan, args)
+
+
+def _virtual_sonar_log(args) -> int:
+    """``virtual-sonar --log LOG``: serve the scans of a log (`mitsonar.devices.recording.replay`)."""
+    head = _head(args)          # refuses --log for a head that does not take it
+    if args.scene is not None:
+        raise ValueError(f"give SCENE.xml or --log LOG, not both (got {args.scene} and {args.log})")
+    log = Path(args.log)
+    if not log.is_file():
+        raise FileNotFoundError(f"--log: log file not found: {log}")
+    head.check_serve(args)
+    from mitsonar.devices.recording import replay
+    scans = replay(log)
+    if not scans:
+        raise ValueError(f"--log {log}: no ping in the log")
+    print(f"read {log.name}: {len(scans)} frames", flush=True)
+    return head.serve(scans, args)
 
 
 def cmd_virtual_sonar(args) -> int:
@@ -214,25 +241,38 @@ def add_subcommands(subparsers) -> None:
     (``--head`` offers the heads of `mitsonar.devices.registry` at this moment)."""
     from mitsonar.devices import registry
     p = subparsers.add_parser(
-        "virtual-sonar", help="serve a rendered scene as a Tritech Micron or a Ping360 on a pseudo-terminal",
+        "virtual-sonar", help="serve a rendered scene as a Tritech Micron, a Ping360 or an Oculus multibeam",
         description="Render SCENE.xml once and answer the SeaNet protocol with its scan, like a "
                     "Micron on a serial line (--head ping360: ping-protocol, like a Blue Robotics "
-                    "Ping360, on a pseudo-terminal or udp://127.0.0.1:PORT). Prints the port to "
-                    "open (e.g. with `mitsonar record`), then serves until Ctrl-C.")
-    p.add_argument("scene", metavar="SCENE.xml", help="Mitsuba scene with a `sonar` sensor")
+                    "Ping360, on a pseudo-terminal or udp://127.0.0.1:PORT; --head oculus: a "
+                    "Blueprint Oculus M-series multibeam on TCP 127.0.0.1:52100 with its status on "
+                    "UDP 52102). Prints the port to open (e.g. with `mitsonar record`), then serves "
+                    "until Ctrl-C.")
+    p.add_argument("scene", metavar="SCENE.xml", nargs="?", default=None,
+                   help="Mitsuba scene with a `sonar` sensor (none with --log)")
+    p.add_argument("--log", default=None, metavar="LOG",
+                   help="serve the frames of a log instead of a render (--head oculus: a .oculus log or "
+                        "its raw log; ping k is frame k of the log, from the first again at the end)")
     p.add_argument("--head", choices=registry.names(), default=registry.DEFAULT,
-                   help="which head to be: a Tritech Micron (SeaNet, default) or a Blue Robotics "
-                        "Ping360 (ping-protocol; prints 'virtual Ping360 on PORT')")
+                   help="which head to be: a Tritech Micron (SeaNet, default), a Blue Robotics "
+                        "Ping360 (ping-protocol; prints 'virtual Ping360 on PORT') or an Oculus "
+                        "(a multibeam scene; prints 'virtual Oculus MODEL on tcp://HOST:PORT')")
     p.add_argument("--port-url", default=None, metavar="URL",
                    help="where to serve: a new pseudo-terminal (default), socket://HOST:PORT "
                         "(listen for pyserial socket:// clients), udp://127.0.0.1:PORT (Ping360 "
-                        "over UDP, loopback only), or a pyserial URL/device to sit on")
+                        "over UDP, loopback only), or a pyserial URL/device to sit on; --head oculus: "
+                        "tcp://HOST:PORT (default tcp://127.0.0.1:52100)")
     p.add_argument("--spp", type=_positive(int), default=None, help="paths per ping (render_scan's default)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the render (default 0)")
     p.add_argument("--baud", type=_positive(int), default=None,
                    help="baud rate of the timing model (default the head's, 115200)")
     p.add_argument("--fast", action="store_true", help="answer at once (no timing model)")
     p.add_argument("--no-dst", action="store_true", help="behave as a pre-DST Micron (--head micron)")
+    p.add_argument("--model", choices=("M750d", "M1200d", "M3000d"), default=None,
+                   help="which Oculus to be (--head oculus; default M1200d)")
+    p.add_argument("--status-port", type=int, default=None, metavar="PORT",
+                   help="UDP port of the status broadcast, sent to the served address (--head oculus; "
+                        "default 52102)")
     p.add_argument("--seconds", type=_positive(float), default=None, help="stop after T seconds")
     from mitsonar.cli.common import add_force, add_output, add_sensor
     add_sensor(p)
@@ -246,10 +286,12 @@ def add_subcommands(subparsers) -> None:
                     "under a temporary name in its folder and renamed at the end (also on "
                     "Ctrl-C); a recording without any packet from the head leaves no file.")
     p.add_argument("port", metavar="PORT", help="serial device or pyserial URL (socket://HOST:PORT, ...); "
-                                                "a Ping360 also udp://HOST:PORT")
-    add_output(p, "-o", "--output", required=True, metavar="LOG", help="raw log to write")
+                                                "a Ping360 also udp://HOST:PORT; an Oculus tcp://HOST:PORT, "
+                                                "HOST, or auto (found by its status broadcast)")
+    add_output(p, "-o", "--output", required=True, metavar="LOG",
+               help="raw log to write (--head oculus: LOG.oculus writes an Oculus log of its pings)")
     p.add_argument("--head", choices=registry.names(), default=registry.DEFAULT,
-                   help="the head on PORT: Tritech Micron (default) or Blue Robotics Ping360")
+                   help="the head on PORT: Tritech Micron (default), Blue Robotics Ping360 or Blueprint Oculus")
     p.add_argument("--seconds", type=_positive(float), default=None, help="stop after T seconds")
     p.add_argument("--scans", type=_positive(int), default=None, help="stop after N complete scans")
     p.add_argument("--pings", type=_positive(int), default=None, help="stop after N scanlines")

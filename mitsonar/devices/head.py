@@ -27,6 +27,9 @@ class Head:
     baudrate     default baud rate of its line
     options      ``(dest, flag)`` of the command-line options only this head takes: any
                  other head refuses them in one line
+    frames       True for a head whose pings are whole multibeam frames (a kind with a
+                 transmit fan, `mitsonar.geometry.kinds`); False (default): scanlines of a
+                 mechanically scanned head
     ===========  ===================================================================
 
     Parts (methods, so that a subclass imports its modules only when asked): `parser` (a new
@@ -49,6 +52,7 @@ class Head:
     serves: str = "pings"
     baudrate: int = 115200
     options: tuple = ()
+    frames: bool = False
 
     def __repr__(self):
         return f"<{type(self).__name__} {self.name!r}>"
@@ -92,6 +96,21 @@ class Head:
         """The settings a log was recorded with (its header ``meta``), at ``sound_speed`` if
         given; raises ValueError naming ``path`` when they are unusable."""
         return self.settings(None)
+
+    def reads_file(self, path) -> bool:
+        """Is ``path`` a log of the head's own format (not a `mitsonar.devices.rawlog` raw log),
+        which `replay_file` reads? (default: no such format)"""
+        return False
+
+    def replay_file(self, path, *, pose=None, partial=False) -> list:
+        """The scans of a log of the head's own format (`reads_file`)."""
+        raise NotImplementedError(f"head {self.name!r} has no log format of its own")
+
+    def check_serve(self, args) -> None:
+        """Fail now, before a render, if `serve` could not open ``args.port_url`` (OSError or
+        ValueError naming it)."""
+        from mitsonar.devices.transports import check_port
+        check_port(args.port_url, args.baud)
 
     def serve(self, scan, args) -> int:
         """``virtual-sonar``: serve ``scan`` as this head on ``args.port_url`` until

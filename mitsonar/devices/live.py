@@ -20,7 +20,8 @@ Pieces:
 * `LiveMicron`, `LivePing360`: the virtual heads (`mitsonar.devices.micron.virtual`,
   `mitsonar.devices.ping360.virtual`) with their ``row`` rendering the requested bearing anew
   instead of looking it up in a pre-rendered scan; everything else (protocol, timing model,
-  range resampling) is theirs.
+  range resampling) is theirs. `LiveOculus`: the virtual Oculus
+  (`mitsonar.devices.oculus.virtual`) rendering each ping's whole frame when it fires.
 * `PoseReceiver`: a thread reading pose datagrams (`mitsonar.devices.poses.parse_datagram`) on a
   loopback UDP port into a `PoseBuffer`; a bad datagram is counted and dropped, never fatal.
 """
@@ -41,17 +42,19 @@ import numpy as np
 from mitsonar.devices.poses import DatagramError, DropLog, PoseBuffer, PoseSource, parse_datagram
 from mitsonar.geometry.frames import bearing_rotation
 
-__all__ = ["live_scene", "scene_kinds", "SceneObjects", "PingRenderer", "LiveMicron", "LivePing360", "LIVE_HEADS", "PoseReceiver",
+__all__ = ["live_scene", "scene_kinds", "SceneObjects", "PingRenderer", "LiveMicron", "LivePing360", "LiveOculus",
+           "LIVE_HEADS", "PoseReceiver",
            "pose_socket"]
 
 _SEED_MAX = 2**31 - 1
 _CALIBRATION_SEED = 1 << 30     # the error model's renders: seeds far from the pings'
 
 
-def live_scene(path: str):
+def live_scene(path: str, edit=None):
     """The scene of ``path`` with every ``sonar`` sensor reduced to one ping at bearing 0
     (`mitsonar.sim.scene.load_scene` of the edited XML, relative paths resolved from the file's
-    folder)."""
+    folder). ``edit``: a function given the XML's root element to change further before the load
+    (`mitsonar.devices.oculus.scenes`)."""
     import mitsuba as mi
 
     from mitsonar.sim.scene import SceneError, load_scene
@@ -69,6 +72,8 @@ def live_scene(path: str):
             if el is None:
                 el = ET.SubElement(sensor, tag, name=name)
             el.set("value", value)
+    if edit is not None:
+        edit(root)
     ensure_variant()
     folder = os.path.dirname(os.path.abspath(path))
     resolver = mi.file_resolver() if hasattr(mi, "file_resolver") else mi.Thread.thread().file_resolver()
@@ -439,8 +444,40 @@ def _ping360():
     return LivePing360
 
 
+def _oculus():
+    from mitsonar.devices.oculus.virtual import VirtualOculus, parse_tcp_url
+
+    class LiveOculus(VirtualOculus):
+        """A `mitsonar.devices.oculus.virtual.VirtualOculus` whose every ping is a whole frame
+        rendered when it fires, from the vehicle's pose then, with the stream's ping period as
+        budget; protocol, bearing table, range lines and levels are the virtual head's.
+        ``port_url`` is ``tcp://HOST:PORT`` (default 127.0.0.1:52100); the status goes to UDP
+        ``status_port`` (52102) of HOST."""
+
+        def __init__(self, renderer: PingRenderer, port_url=None, *, baudrate=None, realtime: bool = True,
+                     status_port: int | None = None, model: str | None = None):
+            from mitsonar.devices.oculus.protocol import UDP_PORT
+            self.renderer = renderer
+            host, port = parse_tcp_url(port_url)
+            super().__init__(renderer.warm(), model=model or "M1200d", host=host, tcp_port=port,
+                             udp_port=UDP_PORT if status_port is None else status_port, realtime=realtime)
+
+        def ping(self, fire, ping_id: int = 0, now: float = 0.0):
+            period = self.period(fire)
+            self.scans = [self.renderer.render(None, None, period if 0 < period < math.inf else None)]
+            self.scan = self.scans[0]
+            self._fans.clear()
+            self._cache.clear()
+            record = self.renderer.last_record
+            result = super().ping(fire, ping_id, now)
+            self.renderer.finish(record)
+            return result
+
+    return LiveOculus
+
+
 #: head name -> function returning its live class ``cls(renderer, port_url, **virtual kwargs)``
-LIVE_HEADS = {"micron": _micron, "ping360": _ping360}
+LIVE_HEADS = {"micron": _micron, "ping360": _ping360, "oculus": _oculus}
 
 
 def LiveMicron(*args, **kwargs):  # noqa: N802 - a class made on first use (imports the codec)
@@ -449,6 +486,10 @@ def LiveMicron(*args, **kwargs):  # noqa: N802 - a class made on first use (impo
 
 def LivePing360(*args, **kwargs):  # noqa: N802
     return _ping360()(*args, **kwargs)
+
+
+def LiveOculus(*args, **kwargs):  # noqa: N802
+    return _oculus()(*args, **kwargs)
 
 
 def pose_socket(url: str) -> socket.socket:

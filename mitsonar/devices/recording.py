@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from mitsonar.devices.rawlog import POSE, RX, TX, LogDamageWarning, RawLogWriter, read_log
-from mitsonar.devices.registry import for_log
+from mitsonar.devices.registry import for_file, for_log
 from mitsonar.devices.micron.seanet.settings import SOUND_SPEED_ALLOWED, sound_speed_ok
 from mitsonar.devices.transports import SonarError, SonarTimeout
 from mitsonar.geometry.frames import check_rigid
@@ -129,6 +129,9 @@ def replay(path, *, sound_speed: float | None = None, pose=None, nibble_order: s
     """
     if sound_speed is not None and not sound_speed_ok(sound_speed):
         raise ValueError(f"replay: sound_speed = {sound_speed!r} is out of range: allowed {SOUND_SPEED_ALLOWED}")
+    own = for_file(path)
+    if own is not None:      # a log in the head's own format (an Oculus .oculus log)
+        return own.replay_file(path, pose=pose, partial=partial)
     meta, records = read_log(path)
     options = {k: v for k, v in (("nibble_order", nibble_order), ("revisit", revisit), ("max_turns", max_turns))
                if v is not None}

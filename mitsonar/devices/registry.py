@@ -17,11 +17,12 @@ from __future__ import annotations
 
 import importlib
 
-__all__ = ["BUILTIN", "DEFAULT", "register", "unregister", "get", "names", "heads", "for_log"]
+__all__ = ["BUILTIN", "DEFAULT", "register", "unregister", "get", "names", "heads", "for_log", "for_file"]
 
 #: name -> module defining ``HEAD`` (imported on first use)
 BUILTIN = {"micron": "mitsonar.devices.micron.registration",
-           "ping360": "mitsonar.devices.ping360.registration"}
+           "ping360": "mitsonar.devices.ping360.registration",
+           "oculus": "mitsonar.devices.oculus.registration"}
 #: the head of ``--head``'s default
 DEFAULT = "micron"
 
@@ -91,3 +92,12 @@ def for_log(meta: dict, path=None):
     where = f"{path}: " if path is not None else ""
     raise ValueError(f"{where}the log's head {tag!r} is none of the known heads "
                      f"({', '.join(names())})")
+
+
+def for_file(path):
+    """The head whose own log format ``path`` is in (`mitsonar.devices.head.Head.reads_file`:
+    an Oculus ``.oculus`` log), or None (then it is a raw log, `for_log`)."""
+    for head in heads():
+        if head.reads_file(path):
+            return head
+    return None

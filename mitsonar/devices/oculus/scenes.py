@@ -1,0 +1,92 @@
+"""A scene's multibeam sensor rendered at an Oculus's geometry: `SceneFrames`.
+
+The virtual head (`mitsonar.devices.oculus.virtual.VirtualOculus`, ``frames=``) asks for the frame
+of each fire message's settings: ``frames(mode, n_beams, range)``. `SceneFrames` renders the
+scene file's multibeam ``sonar`` sensor with its XML properties set to the model's mode
+(`mitsonar.devices.oculus.presets.Mode`): ``n_beams`` receive beams evenly spaced across the
+mode's aperture (``bearing_step = aperture / n_beams``, centred), the mode's beam widths
+(``beamwidth_h``, ``beamwidth_v``), a transmit fan as wide as the aperture (``tx_beamwidth_h``,
+``tx_beamwidth_v``), its ``frequency``, and the range window ``0 .. range`` in bins of the given
+width. The sensor takes no table of beam bearings, so the frame's beams are evenly spaced in
+angle and the head serves, for each bearing of its own table (even in sine), the nearest rendered
+beam. Frames are cached by settings (a new setting loads and renders the scene again).
+"""
+from __future__ import annotations
+
+import threading
+import xml.etree.ElementTree as ET
+
+__all__ = ["SceneFrames"]
+
+_ID = "oculus_head"
+
+
+class SceneFrames:
+    """``SceneFrames(path, sensor=None, bin_width=..., spp=..., seed=...)(mode, n_beams, range)``
+    -> the multibeam `mitsonar.scan.Scan` of that geometry.
+
+    ``sensor``: the XML id (or index) of the sonar to render (default: the first ``sonar`` sensor);
+    ``bin_width``: metres per range line (at most 4096 lines); ``spp``, ``seed``: the render's.
+    ``renders`` counts the renders made.
+    """
+
+    def __init__(self, path, sensor=None, *, bin_width: float, spp: int = 64, seed: int = 0, max_cached: int = 8):
+        if not (isinstance(bin_width, (int, float)) and bin_width > 0):
+            raise ValueError(f"SceneFrames: bin_width {bin_width!r} is not allowed (> 0 m)")
+        self.path = str(path)
+        self.sensor = sensor
+        self.bin_width = float(bin_width)
+        self.spp = int(spp)
+        self.seed = int(seed)
+        self.max_cached = int(max_cached)
+        self.renders = 0
+        self._cache: dict = {}
+        self._lock = threading.Lock()
+
+    def __call__(self, mode, n_beams: int, range_m: float):
+        key = (mode, int(n_beams), round(float(range_m), 9))
+        with self._lock:
+            if key not in self._cache:
+                if len(self._cache) >= self.max_cached:
+                    self._cache.pop(next(iter(self._cache)))
+                self._cache[key] = self._render(mode, int(n_beams), float(range_m))
+            return self._cache[key]
+
+    def _render(self, mode, n_beams: int, range_m: float):
+        from mitsonar.devices.live import live_scene
+        from mitsonar.sim.render import render_scan
+
+        n_bins = max(1, min(4096, int(round(range_m / self.bin_width))))
+        step = mode.aperture / n_beams
+        values = {"n_pings": ("integer", n_beams), "bearing_start": ("float", -mode.aperture / 2 + step / 2),
+                  "bearing_step": ("float", step), "range_min": ("float", 0.0), "range_max": ("float", range_m),
+                  "n_bins": ("integer", n_bins), "beamwidth_h": ("float", mode.beamwidth_h),
+                  "beamwidth_v": ("float", mode.beamwidth_v), "tx_beamwidth_h": ("float", mode.aperture),
+                  "tx_beamwidth_v": ("float", mode.beamwidth_v), "frequency": ("float", mode.frequency)}
+
+        def edit(root):
+            sensors = list(root.iter("sensor"))
+            sonars = [s for s in sensors if s.get("type") == "sonar"]
+            if isinstance(self.sensor, int) or (isinstance(self.sensor, str) and self.sensor.isdigit()):
+                k = int(self.sensor)         # an index among the scene's sensors, as --sensor takes it
+                chosen = [sensors[k]] if 0 <= k < len(sensors) and sensors[k].get("type") == "sonar" else []
+            else:
+                chosen = [s for s in sonars if self.sensor is None or s.get("id") == self.sensor][:1]
+            if not chosen:
+                raise ValueError(f"{self.path}: no sonar sensor"
+                                 + (f" with id {self.sensor!r}" if self.sensor is not None else ""))
+            el = chosen[0]
+            if el.get("id") is None:
+                el.set("id", _ID)
+            for name, (tag, value) in values.items():
+                child = next((c for c in el if c.get("name") == name), None)
+                if child is None:
+                    child = ET.SubElement(el, tag, name=name)
+                child.tag = tag
+                child.set("value", str(value))
+            self._id = el.get("id")
+
+        scene = live_scene(self.path, edit)
+        scan = render_scan(scene, spp=self.spp, seed=self.seed, sensor=self._id)
+        self.renders += 1
+        return scan

@@ -1,0 +1,575 @@
+"""A virtual Oculus M-series head: a status broadcast on UDP and a TCP port answering fire
+messages with simple ping results rendered from a multibeam scan.
+
+``VirtualOculus(scan)`` is the head of one model (`mitsonar.devices.oculus.presets`, default the
+M1200d). It binds ``host`` (127.0.0.1 by default; loopback only unless asked) on TCP
+``tcp_port`` (52100) and sends an ``OculusStatusMsg`` carrying ``host`` as its address every
+``status_period`` s to ``host``:``udp_port`` (52102), as a real head broadcasts it on its
+network. Several clients may connect at once; each has its own stream:
+
+===============================  ========================================================
+a simple fire message (v1, v2)   the head takes its settings: ``masterMode`` picks the
+                                 frequency mode (frequency, aperture, vertical beam width,
+                                 largest range of the model), ``pingRate`` the stream
+                                 (2, 5, 10, 15 or 40 Hz; standby: none), ``flags`` the
+                                 units of ``range`` (bit 0: metres, else percent of the
+                                 mode's largest range), 16-bit samples (bit 1), per-row
+                                 gains (bit 2) and 512 beams (bit 6, else 256); version 2
+                                 ``extFlags`` 0x200 asks for 32-bit samples. The head then
+                                 sends a simple ping result of the same version at that
+                                 rate until the next fire message
+a field out of range             refused (``stats["refused"]``, ``last_problem`` names the
+                                 field and the allowed values); the stream goes on with the
+                                 settings before
+a malformed, oversized message   refused and counted (``stats["refused"]``); the client
+                                 stays connected, the head stays up
+===============================  ========================================================
+
+Each ping (`VirtualOculus.ping`) comes from a scan (`VirtualOculus.scan_for`): with ``frames``
+(`mitsonar.devices.oculus.scenes.SceneFrames`, what ``virtual-sonar SCENE --head oculus``
+uses), the scene rendered at the fire message's geometry (the mode's aperture, frequency and beam
+widths, the beam count, the range); else the scan given (ping k: scan k of a list, in turn).
+The beams are the head's own bearing table
+(`mitsonar.devices.oculus.presets.bearing_table` of the mode's aperture); beam k takes the row of
+the scan whose bearing is nearest (within half the scan's row spacing there; zeros outside the
+scan's fan). The range lines are ``range_resolution = bin width x c_used / c_scan`` apart (the
+scan's bins at the scan's sound speed), ``n_ranges = round(range / range_resolution)``; line i
+takes the scan bin holding the range ``(i + 1/2) x range_resolution x c_scan / c_used`` (a
+different speed of sound stretches the image as it would a real head's), zeros past the scan.
+``speedOfSound`` 0 means the head's own: `mitsonar.acoustics.seawater.sound_speed` of the
+water's temperature, the fire message's salinity and the head's depth.
+
+Levels: ``gainPercent`` g is the receiver gain: 100 % the scan's own, g % ``20 log10(g/100)`` dB
+on it (`VirtualOculus.received`: a rendered scan through its receiver chain again, a scan of
+bytes moved on its A/D scale); ``gammaCorrection`` G applies ``255 (x/255)^(G/255)`` (G 0 or
+255: none), and the level is
+quantised to the sample width: 8-bit ``round(y)``, 16-bit ``round(y x 257)``, 32-bit
+``round(y x 16843009)`` (the same level through a wider A/D). The per-row gain sent (flag bit 2)
+is g/100 (the amplitude gain) as a float32. So at gain 100 and gamma 255 the 8-bit image is the
+scan's bytes.
+
+``heading``, ``pitch``, ``roll`` (version 2 results) come from the head's pose in the scan (world x
+east, y north, z up: heading clockwise from north of the boresight, pitch its elevation, roll the
+tilt of the fan's axis towards starboard), ``temperature`` from ``water`` (deg C),
+``pressure`` (bar, gauge) from the head's depth ``-z``.
+
+Timing (``realtime=True``): a stream's pings are ``max(1 / rate, 2 range / c)`` apart;
+``realtime=False`` sends each ping as soon as the last one is written.
+"""
+from __future__ import annotations
+
+import math
+import selectors
+import socket
+import sys
+import threading
+import time
+from collections import Counter
+
+import numpy as np
+
+from mitsonar.devices.oculus import presets
+from mitsonar.devices.oculus.protocol import (FLAG, PING_RATE_HZ, TCP_PORT, UDP_PORT, FireMessage, OculusError,
+                                              PingResult, StatusMessage, StreamParser)
+from mitsonar.scan import Scan
+
+__all__ = ["VirtualOculus", "attitude", "check_fire", "serve", "parse_tcp_url"]
+
+#: a fire message is 89 bytes at most: anything much larger is no message for the head
+MAX_INCOMING_PAYLOAD = 1024
+#: how much a slow client may have waiting before pings for it are skipped
+MAX_BACKLOG = 8 << 20
+_SCALE = {1: 1, 2: 257, 4: 16843009}
+
+
+def parse_tcp_url(url: str | None, default_host: str = "127.0.0.1", default_port: int = 52100) -> tuple[str, int]:
+    """``tcp://HOST:PORT`` (or ``HOST:PORT``, ``HOST``, or None for the defaults) as ``(host,
+    port)``; ValueError naming the URL and the allowed form."""
+    if url is None:
+        return default_host, default_port
+    text = url[len("tcp://"):] if url.startswith("tcp://") else url
+    if ":" not in text and text:
+        return text, default_port
+    host, sep, port = text.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise ValueError(f"--port-url {url!r} is not allowed for an Oculus (tcp://HOST:PORT, port 0..65535)")
+    return host, int(port)
+
+
+def attitude(pose) -> tuple[float, float, float]:
+    """``(heading, pitch, roll)`` in degrees of a beam frame (4x4, ``[:3, 2]`` boresight,
+    ``[:3, 1]`` the fan's axis) in a world with x east, y north, z up."""
+    p = np.asarray(pose, np.float64)
+    b, s = p[:3, 2], p[:3, 1]
+    heading = math.degrees(math.atan2(b[0], b[1])) % 360.0
+    pitch = math.degrees(math.asin(max(-1.0, min(1.0, b[2]))))
+    r = np.cross(b, [0.0, 0.0, 1.0])
+    n = np.linalg.norm(r)
+    if n < 1e-9:
+        return heading, pitch, 0.0
+    r /= n
+    u = np.cross(r, b)
+    return heading, pitch, math.degrees(math.atan2(float(s @ r), float(s @ u)))
+
+
+def check_fire(fire: FireMessage, model) -> str | None:
+    """None, or one line naming the fire message's field that the head refuses and what it allows."""
+    if fire.master_mode not in model.modes:
+        return f"simple fire 'masterMode': {fire.master_mode} is not allowed (1 low or 2 high frequency)"
+    if fire.ping_rate not in PING_RATE_HZ:
+        return f"simple fire 'pingRate': {fire.ping_rate} is not allowed (0..5: 10, 15, 40, 5, 2 Hz, standby)"
+    mode = model.mode(fire.master_mode)
+    r = _range(fire, mode)
+    if not (math.isfinite(r) and presets.MIN_RANGE <= r <= mode.max_range):
+        return (f"simple fire 'range': {fire.range!r} {'m' if fire.flags & FLAG['range_as_meters'] else '%'} "
+                f"is not allowed ({presets.MIN_RANGE:g}..{mode.max_range:g} m for the {model.name} in mode "
+                f"{fire.master_mode})")
+    if not (math.isfinite(fire.gain) and 0 <= fire.gain <= 100):
+        return f"simple fire 'gainPercent': {fire.gain!r} is not allowed (0..100)"
+    if not (fire.speed_of_sound == 0 or (math.isfinite(fire.speed_of_sound) and 1300 <= fire.speed_of_sound <= 1800)):
+        return f"simple fire 'speedOfSound': {fire.speed_of_sound!r} is not allowed (0: from salinity, or 1300..1800 m/s)"
+    if not (math.isfinite(fire.salinity) and 0 <= fire.salinity <= 50):
+        return f"simple fire 'salinity': {fire.salinity!r} is not allowed (0..50 ppt)"
+    return None
+
+
+def _range(fire: FireMessage, mode) -> float:
+    if fire.flags & FLAG["range_as_meters"]:
+        return float(fire.range)
+    return float(fire.range) / 100.0 * mode.max_range
+
+
+class _Client:
+    def __init__(self, sock, addr):
+        self.sock, self.addr = sock, addr
+        self.parser = StreamParser(MAX_INCOMING_PAYLOAD)
+        self.out = bytearray()
+        self.fire: FireMessage | None = None
+        self.due = 0.0
+
+
+class VirtualOculus:
+    """A simulated Oculus on TCP and UDP (see the module's text).
+
+    ===============  ========================================================================
+    scan             the multibeam `Scan` to serve, or a list of them (a log: ping k is
+                     scan ``k mod len(scans)``)
+    model            ``"M750d"``, ``"M1200d"`` (default), ``"M3000d"`` or a part number
+    host             address to bind and to carry in the status (default 127.0.0.1)
+    tcp_port         52100 (0: any free port; `tcp_port` then says which)
+    udp_port         52102: where the status goes (None: no status broadcast)
+    status_period    s between status messages (default 1)
+    realtime         True: pings at the fire message's rate; False: as fast as written
+    water            ``{"temperature": deg C}`` (default 10)
+    device_id        the head's ``srcDeviceId`` and ``deviceId`` (default 1)
+    frames           ``frames(mode, n_beams, range) -> Scan``: the scan of each fire
+                     message's geometry (`mitsonar.devices.oculus.scenes.SceneFrames`);
+                     None: the scans given
+    ===============  ========================================================================
+
+    ``stats`` counts clients, messages, pings and refusals; ``last_problem`` is the last refusal.
+    """
+
+    def __init__(self, scan: Scan, *, model="M1200d", host: str = "127.0.0.1", tcp_port: int = TCP_PORT,
+                 udp_port: int | None = UDP_PORT, status_period: float = 1.0, realtime: bool = True,
+                 water: dict | None = None, device_id: int = 1, frames=None):
+        scans = list(scan) if isinstance(scan, (list, tuple)) else [scan]
+        if not scans:
+            raise ValueError("VirtualOculus: no scan to serve")
+        for s in scans:
+            if not isinstance(s, Scan):
+                raise TypeError(f"scan must be a Scan or a list of them, got {type(s).__name__}")
+            if not s.sonar_kind.transmit_fan:
+                raise ValueError(f"VirtualOculus: a {s.kind} scan has no Oculus pings to serve "
+                                 f"(an Oculus is a multibeam head)")
+        for name, port in (("tcp_port", tcp_port), ("udp_port", udp_port)):
+            if port is not None and not (isinstance(port, int) and 0 <= port <= 65535):
+                raise ValueError(f"VirtualOculus: {name} = {port!r} is not allowed (0..65535)")
+        self.scans = scans
+        self.scan = scans[0]
+        self.frames = frames
+        self.model = presets.model(model)
+        self.host = host
+        self.tcp_port = tcp_port
+        self.udp_port = udp_port
+        self.status_period = float(status_period)
+        self.realtime = bool(realtime)
+        self.water = {"temperature": 10.0, **(water or {})}
+        from mitsonar.acoustics.seawater import MACKENZIE_RANGE
+        lo, hi = MACKENZIE_RANGE["temperature"]
+        t = self.water["temperature"]
+        if not (isinstance(t, (int, float)) and lo <= t <= hi):
+            raise ValueError(f"VirtualOculus: water temperature {t!r} is not allowed ({lo:g}..{hi:g} deg C)")
+        self.device_id = int(device_id)
+        self.stats: Counter = Counter()
+        self.last_problem: str | None = None
+        self.last_error: BaseException | None = None
+        self._clients: dict = {}
+        self._cache: dict = {}
+        self._thread = None
+        self._stop = threading.Event()
+        self._t0 = time.monotonic()
+        self._fans: dict = {}
+        self._drop_all = threading.Event()
+
+    def _fan(self, scan: Scan):
+        """``scan``'s rows sorted by bearing, the bearings, and half the row spacing at each."""
+        if id(scan) not in self._fans:
+            if len(self._fans) > 32:
+                self._fans.clear()
+            b = np.asarray(scan.bearings, np.float64)
+            order = np.argsort(b)
+            b = b[order]
+            gaps = np.diff(b)
+            half = np.zeros(len(b))
+            if len(b) > 1:
+                half = np.maximum(np.r_[gaps[0], gaps], np.r_[gaps, gaps[-1]]) / 2
+            self._fans[id(scan)] = (scan, order, b, half)      # the scan kept: its id stays its own
+        return self._fans[id(scan)][1:]
+
+    def scan_for(self, fire: FireMessage, ping_id: int = 0) -> Scan:
+        """The scan ping ``ping_id`` of ``fire`` is taken from: ``frames(mode, n_beams, range)``
+        (a scene rendered at the fire message's geometry) if given, else scan ``ping_id mod
+        len(scans)``."""
+        if self.frames is not None:
+            mode = self.model.mode(fire.master_mode)
+            return self.frames(mode, fire.n_beams, _range(fire, mode))
+        return self.scans[ping_id % len(self.scans)]
+
+    # ---- pings ----
+    def sound_speed(self, fire: FireMessage) -> float:
+        """The speed of sound the head uses: the fire message's, or (speedOfSound 0) Mackenzie's
+        (`mitsonar.acoustics.seawater.sound_speed`) at the water's temperature, the message's
+        salinity and the head's depth. The equation is linear in salinity: outside its 25..40 ppt
+        (fresh water, 0 ppt, is what liboculus asks by default) it is continued along that line,
+        from its values at the nearest end and one ppt inside."""
+        if fire.speed_of_sound:
+            return float(fire.speed_of_sound)
+        from mitsonar.acoustics.seawater import MACKENZIE_RANGE, sound_speed
+        depth = max(0.0, -float(self.head_pose(self.scans[0])[2, 3]))
+        t = float(self.water["temperature"])
+        lo, hi = MACKENZIE_RANGE["salinity"]
+        s = float(fire.salinity)
+        if lo <= s <= hi:
+            return float(sound_speed(t, s, depth))
+        end = lo if s < lo else hi
+        inside = end + (1.0 if s < lo else -1.0)
+        c_end, c_in = float(sound_speed(t, end, depth)), float(sound_speed(t, inside, depth))
+        return c_end + (s - end) * (c_end - c_in) / (end - inside)
+
+    @staticmethod
+    def head_pose(scan: Scan) -> np.ndarray:
+        """The head's pose (its boresight at bearing 0) in ``scan``: row 0's pose turned back by
+        row 0's bearing (`mitsonar.geometry.frames.bearing_rotation`)."""
+        from mitsonar.geometry.frames import bearing_rotation
+        if not scan.n_pings:
+            return np.eye(4)
+        return scan.poses[0] @ bearing_rotation(-float(scan.bearings[0]))
+
+    def ping(self, fire: FireMessage, ping_id: int = 0, now: float = 0.0) -> PingResult:
+        """The simple ping result the head sends for ``fire`` (checked with `check_fire`) as its
+        ping ``ping_id``, from `scan_for`."""
+        problem = check_fire(fire, self.model)
+        if problem:
+            raise OculusError(problem)
+        mode = self.model.mode(fire.master_mode)
+        c = self.sound_speed(fire)
+        scan = self.scan_for(fire, ping_id)
+        image, bearings, res = self._image(fire, mode, c, scan)
+        pose = self.head_pose(scan)
+        heading, pitch, roll = attitude(pose)
+        depth = max(0.0, -float(pose[2, 3]))
+        gains = np.full(image.shape[0], fire.gain / 100.0, np.float32) if fire.send_gain else None
+        return PingResult(fire, image, bearings, res, gains=gains, ping_id=ping_id, status=0,
+                          frequency=mode.frequency, temperature=float(self.water["temperature"]),
+                          pressure=depth * 1025.0 * 9.80665 / 1e5, heading=heading, pitch=pitch, roll=roll,
+                          speed_of_sound_used=c, ping_start_time=now, src=self.device_id)
+
+    def _image(self, fire, mode, c, scan):
+        key = (fire.master_mode, _range(fire, mode), fire.n_beams, c, fire.gain, fire.gamma, fire.data_bytes,
+               id(scan))
+        if key in self._cache and self._cache[key][0] is scan:
+            return self._cache[key][1]
+        rows_of, fan_b, fan_half = self._fan(scan)
+        bearings = presets.bearing_table(mode.aperture, fire.n_beams)
+        stretch = c / scan.sound_speed
+        res = scan.bin_width * stretch
+        n_r = max(1, min(65535, int(round(key[1] / res))))
+        if n_r > 4096:                       # keep the image a real head's size: coarser lines
+            n_r, res = 4096, key[1] / 4096
+        level = np.zeros((n_r, fire.n_beams), np.float64)
+        if scan.n_pings:
+            want = np.radians(bearings / 100.0)
+            k = np.clip(np.searchsorted(fan_b, want), 1, max(1, len(fan_b) - 1)) if len(fan_b) > 1 \
+                else np.zeros(len(want), int)
+            if len(fan_b) > 1:
+                k = np.where(np.abs(fan_b[k - 1] - want) <= np.abs(fan_b[k] - want), k - 1, k)
+            inside = np.abs(fan_b[k] - want) <= fan_half[k] + 1e-12
+            r_scan = (np.arange(n_r) + 0.5) * res / stretch
+            idx = np.floor((r_scan - scan.range_min) / scan.bin_width + 1e-9).astype(np.int64)
+            ok = (idx >= 0) & (idx < scan.n_bins)
+            rows = self.received(scan, fire.gain)[rows_of[k]].astype(np.float64)      # (n_beams, n_bins)
+            level[np.ix_(ok, inside)] = rows[inside][:, idx[ok]].T
+        if fire.gamma not in (0, 255):
+            level = 255.0 * (level / 255.0) ** (fire.gamma / 255.0)
+        nb = fire.data_bytes
+        dtype = {1: np.uint8, 2: np.uint16, 4: np.uint32}[nb]
+        image = np.round(level * _SCALE[nb]).astype(dtype)
+        out = (image, bearings, float(res))
+        if len(self._cache) > 32:
+            self._cache.clear()
+        self._cache[key] = (scan, out)
+        return out
+
+    def received(self, scan: Scan, gain_percent: float) -> np.ndarray:
+        """``scan``'s bytes at the receiver gain ``gain_percent`` asks for: 100 % is the scan's
+        own gain (its bytes); g % is ``20 log10(g / 100)`` dB on it (50 %: -6 dB), within the
+        head's 0..80 dB (`mitsonar.receiver.electronics.HEAD_LIMITS`; 0 %: the least). A rendered
+        scan (with intensity) goes through its receiver chain again at that gain
+        (`mitsonar.receiver.electronics.apply_to_scan`, the same noise seed); a scan of bytes
+        only (a log) has its bytes moved by that many dB on its A/D scale (``ad_span``)."""
+        if gain_percent == 100.0:
+            return scan.data
+        key = ("received", id(scan), float(gain_percent))
+        if key in self._cache and self._cache[key][0] is scan:
+            return self._cache[key][1]
+        from mitsonar.receiver.electronics import HEAD_LIMITS, Electronics, apply_to_scan
+        e = Electronics.from_dict(scan.electronics)
+        lo, hi = HEAD_LIMITS["gain"]
+        db = 20.0 * math.log10(gain_percent / 100.0) if gain_percent > 0 else -math.inf
+        if np.any(scan.intensity):
+            out = apply_to_scan(scan, {**scan.electronics, "gain": float(np.clip(e.gain + db, lo, hi))}).data
+        else:
+            shift = max(db, lo - e.gain) * 255.0 / e.ad_span
+            out = np.clip(np.floor(scan.data.astype(np.float64) + shift + 0.5), 0, 255).astype(np.uint8)
+        self._cache[key] = (scan, out)
+        return out
+
+    def period(self, fire: FireMessage) -> float:
+        """Seconds between the pings of a stream fired with ``fire`` (inf in standby)."""
+        rate = PING_RATE_HZ[fire.ping_rate]
+        if rate == 0:
+            return math.inf
+        if not self.realtime:
+            return 0.0
+        mode = self.model.mode(fire.master_mode)
+        return max(1.0 / rate, 2.0 * _range(fire, mode) / self.sound_speed(fire))
+
+    # ---- the network ----
+    def status(self) -> StatusMessage:
+        connected = next(iter(self._clients.values())).addr[0] if self._clients else "0.0.0.0"
+        return StatusMessage(device_id=self.device_id, part_number=self.model.part_number, ip=self.host,
+                             connected_ip=connected, src=self.device_id,
+                             temperatures=(float(self.water["temperature"]),) * 8)
+
+    def start(self) -> tuple[str, int]:
+        """Bind the ports and start serving; returns ``(host, tcp_port)``."""
+        if self._thread is not None:
+            return self.host, self.tcp_port
+        srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            srv.bind((self.host, self.tcp_port))
+        except OSError as e:
+            srv.close()
+            raise OSError(f"virtual Oculus: cannot listen on tcp://{self.host}:{self.tcp_port}: {e.strerror or e}") from None
+        srv.listen(8)
+        srv.setblocking(False)
+        self.tcp_port = srv.getsockname()[1]
+        self._server = srv
+        self._udp = None
+        if self.udp_port is not None:
+            self._udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self._udp.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
+        self._sel = selectors.DefaultSelector()
+        self._sel.register(srv, selectors.EVENT_READ, None)
+        self._stop.clear()
+        self._next_status = time.monotonic()
+        self._thread = threading.Thread(target=self._run, name="VirtualOculus", daemon=True)
+        self._thread.start()
+        return self.host, self.tcp_port
+
+    @property
+    def port(self) -> str:
+        return f"tcp://{self.host}:{self.tcp_port}"
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+            self._thread = None
+            for c in list(self._clients.values()):
+                c.sock.close()
+            self._clients.clear()
+            self._server.close()
+            if self._udp is not None:
+                self._udp.close()
+            self._sel.close()
+
+    close = stop
+
+    def __enter__(self):
+        self.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self._tick()
+            except Exception as e:          # the head stays up; the user or test sees last_error
+                self.last_error = e
+                self.stats["internal errors"] += 1
+                time.sleep(0.01)
+
+    def drop_clients(self) -> None:
+        """Close every client's connection (a fault, for tests of a driver's reconnect)."""
+        self._drop_all.set()
+
+    def _tick(self) -> None:
+        now = time.monotonic()
+        if self._drop_all.is_set():
+            self._drop_all.clear()
+            for c in list(self._clients.values()):
+                self._drop(c)
+        if self._udp is not None and now >= self._next_status:
+            try:
+                self._udp.sendto(self.status().encode(), (self.host, self.udp_port))
+                self.stats["status sent"] += 1
+            except OSError:
+                self.stats["status not sent"] += 1
+            self._next_status = now + self.status_period
+        for c in list(self._clients.values()):
+            if c.fire is not None and now >= c.due and len(c.out) < MAX_BACKLOG:
+                self._send_ping(c, now)
+            elif c.fire is not None and now >= c.due:
+                self.stats["pings skipped (client behind)"] += 1
+                c.due = now + self.period(c.fire)
+        wait = self._next_status - now if self._udp is not None else 0.05
+        for c in self._clients.values():
+            if c.fire is not None:
+                wait = min(wait, c.due - now)
+        for key, events in self._sel.select(max(0.0, min(wait, 0.05))):
+            if key.data is None:
+                self._accept()
+            else:
+                c = key.data
+                if events & selectors.EVENT_READ:
+                    self._read(c)
+                if events & selectors.EVENT_WRITE and c.sock.fileno() >= 0:
+                    self._flush(c)
+
+    def _accept(self) -> None:
+        try:
+            sock, addr = self._server.accept()
+        except BlockingIOError:
+            return
+        sock.setblocking(False)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        c = _Client(sock, addr)
+        self._clients[sock.fileno()] = c
+        self._sel.register(sock, selectors.EVENT_READ, c)
+        self.stats["clients"] += 1
+
+    def _drop(self, c: _Client) -> None:
+        self._clients.pop(c.sock.fileno(), None)
+        try:
+            self._sel.unregister(c.sock)
+        except (KeyError, ValueError):
+            pass
+        c.sock.close()
+        self.stats["clients gone"] += 1
+
+    def _read(self, c: _Client) -> None:
+        try:
+            data = c.sock.recv(65536)
+        except BlockingIOError:
+            return
+        except OSError:
+            data = b""
+        if not data:
+            self._drop(c)
+            return
+        dropped = c.parser.dropped
+        messages = c.parser.feed(data)
+        refusals = list(c.parser.refusals)
+        for k, m in enumerate(messages + [None]):
+            while refusals and refusals[0][0] == k:        # in the order they came
+                self.stats["refused"] += 1
+                self.last_problem = refusals.pop(0)[1]
+            if m is not None:
+                self._on_message(c, m)
+        self.stats["bytes dropped"] += c.parser.dropped - dropped
+
+    def _on_message(self, c: _Client, m) -> None:
+        if not isinstance(m, FireMessage):
+            self.stats[f"ignored {type(m).__name__}"] += 1
+            return
+        self.stats["fire messages"] += 1
+        problem = check_fire(m, self.model)
+        if problem:
+            self.stats["refused"] += 1
+            self.last_problem = problem
+            return
+        c.fire = m
+        c.due = time.monotonic()          # the first ping at once, then at the rate
+
+    def _send_ping(self, c: _Client, now: float) -> None:
+        pid = self.stats["pings"]
+        try:
+            data = self.ping(c.fire, pid, now - self._t0).encode()
+        except ValueError as e:          # a ping this head cannot make: said, the stream stopped
+            self.stats["refused"] += 1
+            self.last_problem = f"ping {pid}: {e}"
+            c.fire = None
+            return
+        self.stats["pings"] += 1
+        c.out += data
+        c.due = now + self.period(c.fire)
+        self._flush(c)
+
+    def _flush(self, c: _Client) -> None:
+        if c.out:
+            try:
+                n = c.sock.send(c.out)
+                del c.out[:n]
+            except BlockingIOError:
+                pass
+            except OSError:
+                self._drop(c)
+                return
+        try:
+            self._sel.modify(c.sock, selectors.EVENT_READ | (selectors.EVENT_WRITE if c.out else 0), c)
+        except (KeyError, ValueError):
+            pass
+
+    def serve(self, seconds: float | None = None, out=None, label: str = "virtual Oculus") -> int:
+        """Run in the foreground: print ``LABEL on tcp://HOST:PORT (status on udp://...)``, serve
+        until ``seconds``, Ctrl-C or SIGTERM."""
+        import signal
+        out = sys.stdout if out is None else out
+        stop = threading.Event()
+        previous = {}
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                previous[sig] = signal.signal(sig, lambda *_: stop.set())
+        try:
+            with self:
+                status = f" (status on udp://{self.host}:{self.udp_port})" if self.udp_port is not None else ""
+                print(f"{label} {self.model.name} on {self.port}{status}", file=out, flush=True)
+                end = None if seconds is None else time.monotonic() + seconds
+                while not stop.is_set() and (end is None or time.monotonic() < end):
+                    stop.wait(0.05 if end is None else max(0.0, min(0.05, end - time.monotonic())))
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+        print(f"{label}: {self.stats['pings']} pings to {self.stats['clients']} client(s), "
+              f"{self.stats['refused']} message(s) refused", file=out, flush=True)
+        return 0
+
+
+def serve(scan: Scan, seconds: float | None = None, *, out=None, **kwargs) -> int:
+    """Run a `VirtualOculus` in the foreground (keyword arguments go to it)."""
+    return VirtualOculus(scan, **kwargs).serve(seconds, out)

@@ -1,0 +1,573 @@
+"""The Oculus head over 127.0.0.1: the virtual head (mitsonar.devices.oculus.virtual) against a small
+client written here from the published layout (struct formats of Oculus.h, not mitsonar's codec)
+and against bps_oculus (oculus-python); its status broadcast; refusals; the driver (discovery,
+raw log, replay, reconnect, a malformed message); .oculus logs written by mitsonar read by
+bps_oculus, and one built here from the layout replayed by `mitsonar replay`; the command line
+(`virtual-sonar SCENE --head oculus`, `--log`) with the wall of a test scene at its range."""
+from __future__ import annotations
+
+import io
+import math
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mitsonar.cli.main import main
+from mitsonar.devices.oculus import presets
+from mitsonar.geometry.frames import bearing_rotation
+from mitsonar.scan import Scan
+
+WALL = """<scene version="3.0.0">
+  <integrator type="sonar_tof"><integer name="max_depth" value="1"/></integrator>
+  <sensor type="sonar">
+    <string name="kind" value="multibeam"/>
+    <transform name="to_world"><lookat origin="0,0,0" target="1,0,0" up="0,0,1"/></transform>
+    <float name="range_min" value="0"/><float name="range_max" value="10"/><integer name="n_bins" value="100"/>
+    <float name="bearing_start" value="-65"/><float name="bearing_step" value="2.0"/><integer name="n_pings" value="66"/>
+    <string name="beam_pattern" value="gaussian"/><float name="beamwidth_h" value="2"/><float name="beamwidth_v" value="20"/>
+  </sensor>
+  <bsdf type="acoustic" id="c"><float name="diffuse" value="0.6"/><float name="specular" value="0.0"/></bsdf>
+  <shape type="rectangle"><transform name="to_world"><scale value="30"/>
+    <lookat origin="6,0,0" target="0,0,0" up="0,0,1"/></transform><ref id="c"/></shape>
+</scene>
+"""
+WALL_RANGE = 6.0
+
+# ---- a client from the published layout (Oculus.h, liboculus; independent of mitsonar's codec) ----
+HEADER = "<5HIH"                       # oculusId, src, dst, msgId, msgVersion, payloadSize, spare2
+FIRE1, FIRE2 = "<5B4d", "<5B4d9I"      # masterMode, pingRate, networkSpeed, gamma, flags, range, gain, c, S
+PING1, PING2 = "<2I4dIBd2H3I", "<2I8dBd2H7I"
+
+
+def fire_bytes(version=2, mode=1, rate=2, gamma=255, flags=0x0D, rng=10.0, gain=100.0, c=1500.0, salinity=35.0,
+               ext=0) -> bytes:
+    body = struct.pack(FIRE2, mode, rate, 255, gamma, flags, rng, gain, c, salinity, ext, *([0] * 8)) \
+        if version == 2 else struct.pack(FIRE1, mode, rate, 255, gamma, flags, rng, gain, c, salinity)
+    return struct.pack(HEADER, 0x4F53, 0, 0, 0x15, version, len(body), 0) + body
+
+
+class LayoutClient:
+    """Connects, fires, and reads simple ping results by the published offsets."""
+
+    def __init__(self, port, host="127.0.0.1"):
+        self.sock = socket.create_connection((host, port), timeout=10)
+        self.buf = b""
+
+    def close(self):
+        self.sock.close()
+
+    def fire(self, **kw):
+        self.sock.sendall(fire_bytes(**kw))
+
+    def _read(self, n):
+        while len(self.buf) < n:
+            data = self.sock.recv(1 << 20)
+            if not data:
+                raise ConnectionError("closed")
+            self.buf += data
+        out, self.buf = self.buf[:n], self.buf[n:]
+        return out
+
+    def message(self) -> bytes:
+        head = self._read(16)
+        oid, _src, _dst, mid, ver, size, _ = struct.unpack(HEADER, head)
+        assert oid == 0x4F53
+        return head + self._read(size)
+
+    def ping(self, want_range=None) -> dict:
+        """The next ping result (skipping those of an earlier fire message whose range differs)."""
+        while True:
+            m = self.message()
+            p = parse_ping(m)
+            if want_range is None or p["range"] == want_range:
+                return p
+
+    def drain(self, quiet=0.3) -> int:
+        """Read until nothing comes for ``quiet`` s; the bytes read."""
+        self.sock.settimeout(quiet)
+        n = 0
+        try:
+            while True:
+                data = self.sock.recv(1 << 20)
+                if not data:
+                    break
+                n += len(data)
+        except socket.timeout:
+            pass
+        self.sock.settimeout(10)
+        self.buf = b""
+        return n
+
+
+def parse_ping(m: bytes) -> dict:
+    mid, ver = struct.unpack_from("<2H", m, 6)
+    assert mid == 0x23
+    v = 2 if ver == 2 else 1
+    fire = struct.unpack_from(FIRE2 if v == 2 else FIRE1, m, 16)
+    at = 89 if v == 2 else 53
+    f = struct.unpack_from(PING2 if v == 2 else PING1, m, at)
+    if v == 2:
+        pid, _st, freq, temp, pres, heading, pitch, roll, c, t0, dsize, res, n_r, n_b = f[:14]
+        off, isize, total = f[18:21]
+    else:
+        pid, _st, freq, temp, pres, c, t0, dsize, res, n_r, n_b, off, isize, total = f
+    head = at + struct.calcsize(PING2 if v == 2 else PING1)
+    nb = {0: 1, 1: 2, 3: 4}[dsize]
+    bearings = np.frombuffer(m, "<i2", n_b, head)
+    gain = bool(fire[4] & 0x04)
+    stride = n_b * nb + (4 if gain else 0)
+    assert isize == stride * n_r and total == len(m) == off + isize
+    rows = np.frombuffer(m, np.uint8, isize, off).reshape(n_r, stride)
+    gains = rows[:, :4].copy().view("<f4")[:, 0] if gain else None
+    img = np.ascontiguousarray(rows[:, 4:] if gain else rows).view({1: "<u1", 2: "<u2", 4: "<u4"}[nb])
+    return {"version": v, "id": pid, "frequency": freq, "c": c, "res": res, "n_r": n_r, "n_b": n_b,
+            "bearings": bearings, "image": img, "gains": gains, "range": fire[5], "temperature": temp,
+            "heading": heading if v == 2 else None, "raw": m}
+
+
+def free_udp_port() -> int:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def fan_scan(aperture=130.0, n_b=256, n_r=100, bin_width=0.1, seed=0):
+    """A multibeam scan whose rows lie at the head's own bearing table (so beam k is row k)."""
+    b = np.radians(presets.bearing_table(aperture, n_b) / 100.0)
+    data = np.random.default_rng(seed).integers(0, 256, (n_b, n_r), dtype=np.uint8)
+    return Scan(intensity=np.zeros((n_b, n_r), np.float32), data=data, ranges=(np.arange(n_r) + 0.5) * bin_width,
+                bearings=b, poses=np.eye(4) @ bearing_rotation(b), range_min=0.0, range_max=n_r * bin_width,
+                kind="multibeam", sound_speed=1500.0)
+
+
+@pytest.fixture
+def head():
+    from mitsonar.devices.oculus.virtual import VirtualOculus
+    h = VirtualOculus(fan_scan(), tcp_port=0, udp_port=None)
+    h.start()
+    yield h
+    h.stop()
+
+
+@pytest.fixture(scope="module")
+def wall(tmp_path_factory):
+    import mitsonar
+    path = tmp_path_factory.mktemp("oculus") / "wall.xml"
+    path.write_text(WALL)
+    return path, mitsonar.render_scan(mitsonar.load_scene(str(path)), spp=16, seed=0)
+
+
+# ---- the virtual head ----
+
+def test_a_layout_client_fires_with_several_settings(head):
+    data = head.scan.data.T.astype(np.int64)           # (range lines, beams) at the head's own bearings
+    c = LayoutClient(head.tcp_port)
+    try:
+        c.fire(version=1, flags=0x09, rng=10.0)        # metres, 8-bit, no gains, 256 beams
+        p = c.ping(10.0)
+        assert p["version"] == 1 and (p["n_r"], p["n_b"]) == (100, 256) and p["res"] == pytest.approx(0.1)
+        np.testing.assert_array_equal(p["image"], data)
+        np.testing.assert_array_equal(p["bearings"], presets.bearing_table(130.0, 256))
+        assert p["frequency"] == 1.2e6 and p["gains"] is None
+        c.fire(version=2, flags=0x0F, rng=9.0)         # 16-bit, gains
+        p = c.ping(9.0)
+        np.testing.assert_array_equal(p["image"], data[:90] * 257)
+        np.testing.assert_array_equal(p["gains"], np.ones(90, np.float32))
+        c.fire(version=2, flags=0x0D, rng=8.0, ext=0x200)       # 32-bit (extFlags)
+        np.testing.assert_array_equal(c.ping(8.0)["image"], data[:80] * 16843009)
+        c.fire(version=2, flags=0x0D, rng=7.0, gain=50.0)       # gain 50 %: -6 dB on the A/D scale
+        p = c.ping(7.0)
+        from mitsonar.receiver.electronics import Electronics
+        shift = 20 * math.log10(0.5) * 255 / Electronics.from_dict({}).ad_span
+        np.testing.assert_array_equal(p["image"], np.clip(np.floor(data[:70] + shift + 0.5), 0, 255))
+        np.testing.assert_array_equal(p["gains"], np.full(70, 0.5, np.float32))
+        c.fire(version=2, flags=0x0D, rng=6.0, gamma=127)       # gamma 0.5
+        np.testing.assert_array_equal(c.ping(6.0)["image"], np.round(255 * (data[:60] / 255) ** (127 / 255)))
+        c.fire(version=2, flags=0x4D, rng=5.0, mode=2)          # high frequency, 512 beams
+        p = c.ping(5.0)
+        assert p["n_b"] == 512 and p["frequency"] == 2.1e6
+        assert p["bearings"][0] / 100 == pytest.approx(-30, abs=0.2) and p["bearings"][-1] / 100 == pytest.approx(30, abs=0.2)
+        c.fire(version=2, flags=0x0C, rng=25.0)                 # range in percent of the mode's 40 m
+        p = c.ping(25.0)
+        assert p["n_r"] * p["res"] == pytest.approx(10.0)
+        c.fire(version=2, flags=0x0D, rng=4.0, c=0.0, salinity=30.0)   # the head's own speed of sound
+        from mitsonar.acoustics.seawater import sound_speed
+        p = c.ping(4.0)
+        assert p["c"] == pytest.approx(float(sound_speed(10.0, 30.0, 0.0)))
+        assert p["res"] == pytest.approx(0.1 * p["c"] / 1500.0) and p["temperature"] == 10.0
+        c.fire(version=2, flags=0x0D, rng=3.5, c=0.0, salinity=0.0)    # fresh water (liboculus's default)
+        p = c.ping(3.5)
+        # Mackenzie (1981) is linear in salinity: 1.340 - 1.025e-2 T m/s per ppt, continued to 0 ppt
+        assert p["c"] == pytest.approx(float(sound_speed(10.0, 35.0, 0.0)) - 35 * (1.340 - 1.025e-2 * 10))
+    finally:
+        c.close()
+    assert head.stats["refused"] == 0 and head.last_error is None
+
+
+def test_one_fire_message_streams_at_its_rate_until_standby(head):
+    c = LayoutClient(head.tcp_port)
+    try:
+        c.fire(rate=2, rng=3.0)                        # 40 Hz
+        ids = [c.ping()["id"] for _ in range(4)]
+        assert ids == sorted(ids) and len(set(ids)) == 4
+        c.fire(rate=5, rng=3.0)                        # standby
+        c.drain()
+        n = head.stats["pings"]
+        time.sleep(0.3)
+        assert head.stats["pings"] == n
+    finally:
+        c.close()
+
+
+def test_period_follows_the_rate_and_the_listening_time(head):
+    from mitsonar.devices.oculus.protocol import FireMessage
+    assert head.period(FireMessage(ping_rate=4, range=5.0, speed_of_sound=1500)) == pytest.approx(0.5)   # 2 Hz
+    assert head.period(FireMessage(ping_rate=2, range=30.0, speed_of_sound=1500)) == pytest.approx(0.04)  # 40 m/s^-1
+    assert head.period(FireMessage(ping_rate=2, range=40.0, speed_of_sound=1000 * 1.5)) == pytest.approx(80 / 1500)
+    assert head.period(FireMessage(ping_rate=5)) == math.inf
+
+
+def test_gain_percent_is_the_receiver_gain_of_a_rendered_scan(wall):
+    from mitsonar.devices.oculus.virtual import VirtualOculus
+    from mitsonar.receiver.electronics import apply_to_scan
+    _, rendered = wall
+    head = VirtualOculus(rendered, tcp_port=0)
+    assert head.received(rendered, 100.0) is rendered.data
+    g = rendered.electronics["gain"]
+    for percent, db in ((50.0, 20 * math.log10(0.5)), (10.0, -20.0), (0.0, -g)):
+        expected = apply_to_scan(rendered, {**rendered.electronics, "gain": g + db}).data
+        np.testing.assert_array_equal(head.received(rendered, percent), expected)
+    assert head.received(rendered, 10.0).astype(int).sum() < rendered.data.astype(int).sum()
+
+
+def test_status_broadcast_carries_the_head_and_its_address():
+    from mitsonar.devices.oculus.virtual import VirtualOculus
+    port = free_udp_port()
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", port))
+    rx.settimeout(5)
+    try:
+        with VirtualOculus(fan_scan(n_r=10), model="M3000d", tcp_port=0, udp_port=port, status_period=0.1):
+            data, _ = rx.recvfrom(4096)
+    finally:
+        rx.close()
+    assert len(data) == 142 and struct.unpack_from("<H", data, 0)[0] == 0x4F53
+    _dev, dtype, part, status = struct.unpack_from("<IHHI", data, 16)
+    assert (dtype, part, status & 7) == (1, 2203, 3)
+    assert data[52:56] == socket.inet_aton("127.0.0.1")
+
+
+def test_malformed_oversized_and_refused_messages_are_counted_and_the_head_stays_up(head):
+    a, b = LayoutClient(head.tcp_port), LayoutClient(head.tcp_port)
+    try:
+        b.fire(rng=2.0)
+        a.sock.sendall(b"junk that is no message")
+        a.sock.sendall(struct.pack(HEADER, 0x4F53, 0, 0, 0x15, 2, 10 ** 6, 0))             # oversized
+        a.sock.sendall(struct.pack(HEADER, 0x4F53, 0, 0, 0x15, 2, 8, 0) + b"\0" * 8)      # a cut fire message
+        a.fire(rng=999.0)                                                                  # out of range
+        a.fire(rng=3.0)
+        assert a.ping()["range"] == 3.0
+        assert b.ping()["range"] == 2.0
+        assert head.stats["refused"] == 3 and head.stats["clients"] == 2
+        assert "'range': 999.0 m is not allowed (0.1..40 m for the M1200d in mode 1)" in head.last_problem
+        assert head.last_error is None
+    finally:
+        a.close()
+        b.close()
+
+
+def test_bps_oculus_parses_the_virtual_heads_ping_results(head):
+    core = pytest.importorskip("bps_oculus.core")
+    from mitsonar.devices.oculus.protocol import FireMessage
+    c = LayoutClient(head.tcp_port)
+    try:
+        c.fire(version=2, flags=0x0D, rng=6.0)         # 8-bit with gains (bps_oculus needs them under numpy 2)
+        raw = c.ping()["raw"]
+    finally:
+        c.close()
+    res = core.process_raw(raw)
+    img = core.parse_polar_image(raw, res)
+    expected = head.ping(FireMessage(flags=0x0D, range=6.0, gain=100.0, speed_of_sound=1500.0))
+    np.testing.assert_array_equal(img.polar_image, expected.image)
+    np.testing.assert_array_equal(img.polar_image, head.scan.data.T[:60])
+    np.testing.assert_allclose(img.bearing_table, np.radians(presets.bearing_table(130, 256) / 100))
+    np.testing.assert_allclose(img.ranging_table, np.arange(1, 61) * 0.1)
+
+
+# ---- the driver ----
+
+def test_driver_discovers_records_a_raw_log_that_replays(tmp_path):
+    from mitsonar.devices.oculus.driver import fire_message, record
+    from mitsonar.devices.oculus.virtual import VirtualOculus
+    from mitsonar.devices.recording import replay
+    port = free_udp_port()
+    scan = fan_scan(n_r=40)
+    with VirtualOculus(scan, tcp_port=0, udp_port=port, status_period=0.05) as h:
+        got = record(None, tmp_path / "o.bin", pings=3, tcp_port=h.tcp_port, udp_port=port,
+                     fire=fire_message(rate=40, range=4.0, gain=100, speed_of_sound=1500))
+    assert got["pings"] == 3
+    scans = replay(tmp_path / "o.bin")
+    assert len(scans) >= 3
+    for s in scans:
+        assert s.kind == "multibeam" and s.meta["source"] == "oculus"
+        np.testing.assert_array_equal(s.data, scan.data)
+        np.testing.assert_allclose(s.bearings, scan.bearings, atol=1e-9)
+        np.testing.assert_allclose(s.ranges, scan.ranges)
+
+
+def test_driver_reconnects_after_a_dropped_connection(head):
+    from mitsonar.devices.oculus.driver import OculusSonar, fire_message
+    out = io.StringIO()
+    with OculusSonar("127.0.0.1", head.tcp_port, fire_message(rate=40, range=3.0, gain=100, speed_of_sound=1500),
+                     out=out) as sonar:
+        first = sonar.scan()
+        head.drop_clients()
+        for _ in range(3):
+            s = sonar.scan()
+    assert sonar.stats["reconnects"] == 1 and sonar.stats["fire messages"] == 2
+    assert "the head closed the connection; reconnecting (1 of 3)" in out.getvalue()
+    np.testing.assert_array_equal(s.data, first.data)
+
+
+def test_driver_says_a_malformed_message_in_one_line_and_goes_on():
+    from mitsonar.devices.oculus.driver import OculusSonar
+    from mitsonar.devices.oculus.protocol import FireMessage, PingResult
+    good = PingResult(FireMessage(flags=0x0D), np.ones((3, 4), np.uint8), np.arange(4, dtype=np.int16), 0.5,
+                      gains=np.ones(3, np.float32)).encode()
+    bad = bytearray(good)
+    bad[161] = 7                                    # dataSize
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+
+    def serve():
+        conn, _ = srv.accept()
+        conn.recv(1024)
+        conn.sendall(bytes(bad) + good)
+        time.sleep(0.5)
+        conn.close()
+
+    t = threading.Thread(target=serve, daemon=True)
+    t.start()
+    out = io.StringIO()
+    with OculusSonar("127.0.0.1", srv.getsockname()[1], out=out, reconnects=0) as sonar:
+        p = sonar.read_ping()
+    srv.close()
+    np.testing.assert_array_equal(p.image, np.ones((3, 4)))
+    assert "dropped a malformed message (message 0x23: simple ping result 'dataSize': 7 is not allowed (0..3))" \
+        in out.getvalue()
+
+
+# ---- .oculus logs ----
+
+def test_a_log_written_by_mitsonar_opens_in_bps_oculus_with_every_ping(tmp_path, wall):
+    bio = pytest.importorskip("bps_oculus.io")
+    from mitsonar.devices.oculus.logfile import read_scans, write_log
+    _path, rendered = wall
+    scans = [rendered, fan_scan(n_r=30, seed=1), rendered]
+    log = write_log(tmp_path / "m.oculus", scans)
+    assert bio.logger.check_oculus_log_version(log) == bio.logger.LoggerVersion.BPSv1
+    items = list(bio.ImporterV1(log).generate())
+    assert len(items) == 3
+    for (info, msg, img, _), s in zip(items, scans):
+        np.testing.assert_array_equal(img.polar_image, s.data.T)
+        np.testing.assert_allclose(img.bearing_table, s.bearings, atol=np.radians(0.005))
+        np.testing.assert_allclose(img.ranging_table, (np.arange(s.n_bins) + 1) * s.bin_width)
+    back = read_scans(log)
+    for b, s in zip(back, scans):
+        np.testing.assert_array_equal(b.data, s.data)
+        np.testing.assert_allclose(b.ranges, s.ranges)
+
+
+def _foreign_log(path, pings):
+    """A .oculus log built from the layout alone: file header, one item of another record type,
+    then the pings (hand-packed version 1 and 2 simple ping results)."""
+    out = struct.pack("<2I16s2H4xqd", 0x11223344, 48, b"Oculus", 1, 0, 0, 1.7e9)
+    out += struct.pack("<2I2H4xdH2x2I4x", 0xAABBCCDD, 40, 2, 1, 1.7e9, 0, 3, 3) + b"abc"   # rt_serialPort
+    for k, (version, image, bearings, res) in enumerate(pings):
+        n_r, n_b = image.shape
+        fire = struct.pack(FIRE2 if version == 2 else FIRE1, 1, 0, 255, 255, 0x09, n_r * res, 100.0, 1500.0, 35.0,
+                           *(([0] * 9) if version == 2 else []))
+        head_size = (202 if version == 2 else 122)
+        off = head_size + 2 * n_b
+        total = off + image.size
+        if version == 2:
+            tail = struct.pack(PING2, k, 0, 1.2e6, 10.0, 0.0, 0, 0, 0, 1500.0, 0.0, 0, res, n_r, n_b, 0, 0, 0, 0,
+                               off, image.size, total)
+        else:
+            tail = struct.pack(PING1, k, 0, 1.2e6, 10.0, 0.0, 1500.0, 0, 0, res, n_r, n_b, off, image.size, total)
+        msg = (struct.pack(HEADER, 0x4F53, 1, 0, 0x23, version, total - 16, 0) + fire + tail
+               + np.asarray(bearings, "<i2").tobytes() + image.astype(np.uint8).tobytes())
+        out += struct.pack("<2I2H4xdH2x2I4x", 0xAABBCCDD, 40, 10, 1, 1.7e9 + k, 0, len(msg), len(msg)) + msg
+    path.write_bytes(out)
+
+
+def test_a_log_mitsonar_did_not_write_replays(tmp_path):
+    rng = np.random.default_rng(3)
+    pings = [(v, rng.integers(0, 256, (20, 8)), np.arange(-4, 4) * 500, 0.05) for v in (1, 2)]
+    log = tmp_path / "foreign.oculus"
+    _foreign_log(log, pings)
+    assert main(["replay", str(log), "-o", str(tmp_path / "f.npz"), "--all"]) == 0
+    for k, (_v, image, bearings, res) in enumerate(pings):
+        s = Scan.load(tmp_path / f"f_{k:03d}.npz")
+        assert s.kind == "multibeam"
+        np.testing.assert_array_equal(s.data, image.T)
+        np.testing.assert_allclose(np.degrees(s.bearings), bearings / 100.0)
+        np.testing.assert_allclose(s.ranges, (np.arange(20) + 0.5) * res)
+
+
+def test_a_cut_or_foreign_file_is_refused_naming_the_field(tmp_path):
+    from mitsonar.devices.oculus.logfile import read_log, write_log
+    log = write_log(tmp_path / "c.oculus", [fan_scan(n_r=5)])
+    raw = log.read_bytes()
+    (tmp_path / "cut.oculus").write_bytes(raw[:-10])
+    with pytest.raises(ValueError, match=r"cut\.oculus: byte 48: payloadSize \d+ runs past the end"):
+        read_log(tmp_path / "cut.oculus")
+    (tmp_path / "other.oculus").write_bytes(b"\0" * 60)
+    with pytest.raises(ValueError, match="fileHeader 0x00000000 is not 0x11223344"):
+        read_log(tmp_path / "other.oculus")
+
+
+# ---- the command line ----
+
+def _serve(args):
+    proc = subprocess.Popen([sys.executable, "-m", "mitsonar", "virtual-sonar", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    lines = []
+    for line in proc.stdout:
+        lines.append(line)
+        if line.startswith("virtual Oculus"):
+            return proc, int(line.split("tcp://127.0.0.1:")[1].split()[0])
+    proc.wait()
+    raise AssertionError("".join(lines))
+
+
+def test_virtual_sonar_serves_a_scene_with_the_wall_at_its_range(wall):
+    from mitsonar.devices.oculus.protocol import FireMessage
+    from mitsonar.devices.oculus.virtual import VirtualOculus
+    path, rendered = wall
+    proc, port = _serve([str(path), "--head", "oculus", "--spp", "16", "--port-url", "tcp://127.0.0.1:0",
+                         "--status-port", str(free_udp_port()), "--seconds", "60"])
+    try:
+        c = LayoutClient(port)
+        c.fire(version=2, rate=2, flags=0x0D, rng=10.0, gain=100.0, c=1500.0)
+        got = [c.ping() for _ in range(3)]
+        c.close()
+    finally:
+        proc.terminate()
+        proc.wait(10)
+    # each fire message's geometry (M1200d low frequency: 256 beams over 130 deg, 0.6 x 20 deg beams,
+    # 1.2 MHz, 0..10 m) rendered from the scene, as the served head does
+    from mitsonar.devices.oculus.scenes import SceneFrames
+    frames = SceneFrames(path, bin_width=rendered.bin_width, spp=16, seed=0)
+    fire = FireMessage(flags=0x0D, range=10.0, gain=100.0, speed_of_sound=1500.0)
+    frame = frames(presets.model("M1200d").mode(1), 256, 10.0)
+    assert frame.n_pings == 256 and frame.beamwidth_h == pytest.approx(0.6) and frame.meta["frequency"] == 1.2e6
+    assert np.degrees(frame.bearings[[0, -1]]) == pytest.approx([-65 + 65 / 256, 65 - 65 / 256])
+    expected = VirtualOculus(rendered, tcp_port=0, frames=frames).ping(fire)
+    for p in got:
+        np.testing.assert_array_equal(p["image"], expected.image)       # mitsonar's rendered bytes
+        assert p["heading"] == pytest.approx(90.0)                      # looking along +x: east
+    centre = np.abs(got[0]["bearings"] / 100.0) < 15
+    profile = got[0]["image"][:, centre].mean(axis=1)
+    line = 10 + int(np.argmax(profile[10:]))                            # past the ring-down
+    assert (line + 0.5) * got[0]["res"] == pytest.approx(WALL_RANGE, abs=2 * got[0]["res"])
+
+
+def test_virtual_sonar_serves_a_log(tmp_path):
+    from mitsonar.devices.oculus.logfile import write_log
+    scans = [fan_scan(n_r=20, seed=k) for k in range(2)]
+    log = write_log(tmp_path / "l.oculus", scans)
+    proc, port = _serve(["--log", str(log), "--head", "oculus", "--port-url", "tcp://127.0.0.1:0",
+                         "--status-port", str(free_udp_port()), "--seconds", "60"])
+    try:
+        c = LayoutClient(port)
+        c.fire(version=2, rate=2, flags=0x0D, rng=2.0, gain=100.0, c=1500.0)
+        got = [c.ping() for _ in range(3)]
+        c.close()
+    finally:
+        proc.terminate()
+        proc.wait(10)
+    for p in got:
+        np.testing.assert_array_equal(p["image"], scans[p["id"] % 2].data.T)
+
+
+def test_virtual_sonar_refusals_name_the_flag(tmp_path, capsys, wall):
+    path, _ = wall
+    assert main(["virtual-sonar", "--log", str(tmp_path / "none.oculus"), "--head", "ping360"]) == 1
+    assert capsys.readouterr().err.strip() == "mitsonar virtual-sonar: error: --log is for --head oculus, not ping360"
+    assert main(["virtual-sonar", str(path), "--head", "oculus", "--port-url", "tcp://127.0.0.1:x"]) == 1
+    assert "--port-url 'tcp://127.0.0.1:x' is not allowed for an Oculus (tcp://HOST:PORT" in capsys.readouterr().err
+    mech = tmp_path / "mech.xml"
+    mech.write_text(WALL.replace('value="multibeam"', 'value="mechanical"'))
+    assert main(["virtual-sonar", str(mech), "--head", "oculus", "--port-url", "tcp://127.0.0.1:0"]) == 1
+    assert "a 'mechanical' sonar (kind must be 'multibeam') has no Oculus pings to serve" in capsys.readouterr().err
+
+
+def test_live_oculus_renders_each_ping_from_the_pose_then(wall):
+    import json
+    path, _ = wall
+    proc = subprocess.Popen([sys.executable, "-m", "mitsonar", "live", str(path), "--head", "oculus", "--spp", "4",
+                             "--port-url", "tcp://127.0.0.1:0", "--status-port", str(free_udp_port()),
+                             "--pose-url", "udp://127.0.0.1:0", "--seconds", "60"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines = []
+    for line in proc.stdout:
+        lines.append(line)
+        if line.startswith("live "):
+            break
+    text = "".join(lines)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        assert "live Oculus on tcp://127.0.0.1:" in text, text
+        pose_port = int(text.split("poses on udp://127.0.0.1:")[1].split()[0])
+        c = LayoutClient(int(text.split("tcp://127.0.0.1:")[1].split()[0]))
+        c.fire(version=2, rate=2, flags=0x0D, rng=10.0, gain=100.0, c=1500.0)
+
+        def wall_range():
+            p = c.ping()
+            profile = p["image"][:, np.abs(p["bearings"] / 100.0) < 15].mean(axis=1)
+            return (10 + int(np.argmax(profile[10:])) + 0.5) * p["res"], p["res"]
+
+        r, res = wall_range()
+        assert r == pytest.approx(WALL_RANGE, abs=2 * res)
+        tx.sendto(json.dumps({"t": 50.0, "position": [2, 0, 0], "orientation": [0, 0, 0, 1]}).encode(),
+                  ("127.0.0.1", pose_port))
+        got = [wall_range()[0]]
+        for _ in range(50):                 # the pose is applied by another thread: ping until it shows
+            if abs(got[-1] - (WALL_RANGE - 2)) <= 2 * res:
+                break
+            got.append(wall_range()[0])
+        assert got[-1] == pytest.approx(WALL_RANGE - 2, abs=2 * res), got
+        c.close()
+    finally:
+        tx.close()
+        proc.terminate()
+        out, err = proc.communicate(timeout=60)
+    assert "Traceback" not in err and "1 poses applied" in out, (out, err)
+
+
+def test_record_writes_a_raw_log_or_an_oculus_log_that_replay_reads(tmp_path, head, capsys):
+    url = f"tcp://127.0.0.1:{head.tcp_port}"
+    assert main(["record", url, "--head", "oculus", "-o", str(tmp_path / "r.bin"), "--pings", "2",
+                 "--range", "3"]) == 0
+    assert main(["record", url, "--head", "oculus", "-o", str(tmp_path / "r.oculus"), "--pings", "2",
+                 "--range", "3"]) == 0
+    assert "(2 pings) to" in capsys.readouterr().out
+    from mitsonar.devices.recording import replay
+    for name in ("r.bin", "r.oculus"):
+        scans = replay(tmp_path / name)
+        assert len(scans) >= 2
+        for s in scans:                 # the default fire message: gain 50 % of the scan's bytes
+            np.testing.assert_array_equal(s.data, head.received(head.scan, 50.0)[:, :30])
+    assert main(["record", url, "--head", "oculus", "-o", str(tmp_path / "x.bin"), "--gain", "high"]) == 1
+    assert capsys.readouterr().err.strip() == "mitsonar record: error: --gain is for --head ping360, not oculus"
