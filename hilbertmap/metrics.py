@@ -285,10 +285,8 @@ def slice_metrics(hm, vertices, faces, axis="z", value=None, resolution: float =
     sl = hm.slice(a, value, extent=((lo[others[0]], hi[others[0]]), (lo[others[1]], hi[others[1]])),
                   resolution=resolution)
     fig = plt.figure()
-    cs = plt.contour(sl.u, sl.v, sl.prob, levels=[0.5])
-    paths = [p for p in cs.allsegs[0] if len(p) > 1]
+    P2 = _contour_points(plt.contour(sl.u, sl.v, sl.prob, levels=[0.5]))
     plt.close(fig)
-    P2 = np.concatenate(paths) if paths else np.zeros((0, 2))
     P = np.zeros((len(P2), 3))
     P[:, others[0]], P[:, others[1]] = P2[:, 0], P2[:, 1]
     P[:, a] = value
@@ -358,6 +356,24 @@ def unobserved_depth(hm, vertices, faces, sl, axis, value, truth, step: float = 
     if not pocket.any():
         return 0.0
     return float(geo.point_mesh_distance(P[pocket], vertices, faces).max())
+
+
+def _contour_points(cs) -> np.ndarray:
+    """(n, 2): the points of the first level's lines of the matplotlib contour set ``cs``, lines
+    of a single point left out.
+
+    Read from the level's path (one per level since matplotlib 3.8), split into its lines where a
+    line starts (``MOVETO``), not from ``cs.allsegs``: matplotlib 3.8.0, the floor, gives there
+    the level's points as one array instead of its lines, and later releases deprecate it."""
+    from matplotlib.path import Path
+
+    paths = cs.get_paths()
+    if not paths or len(paths[0].vertices) == 0:
+        return np.zeros((0, 2))
+    path = paths[0]
+    starts = [] if path.codes is None else np.flatnonzero(path.codes == Path.MOVETO)[1:]
+    lines = [p for p in np.split(path.vertices, starts) if len(p) > 1]
+    return np.concatenate(lines) if lines else np.zeros((0, 2))
 
 
 def _water_boundary(sl, contour, sensors) -> np.ndarray:

@@ -89,6 +89,7 @@ import mitsuba as mi
 import numpy as np
 
 from mitsonar._checks import not_allowed
+from mitsonar._compat import trapezoid
 from mitsonar.acoustics.interface import reflection_coefficient
 from mitsonar.acoustics.materials import MATERIALS, WATER_DENSITY, WATER_SOUND_SPEED
 from mitsonar.acoustics.seabed import APL_UW_FREQUENCY_RANGE, SEDIMENTS, apl_uw_backscatter
@@ -257,7 +258,7 @@ class Medium:
         """``a(g_i) = 2 pi int_0^{pi/2} f_d(g_i, g_o) sin g_o cos g_o dg_o`` (trapezoid rule)."""
         g_o = np.linspace(0.0, 0.5 * np.pi, n)
         vals = self.f_diffuse(np.asarray(g_i, float)[..., None], g_o, scale) * np.sin(g_o) * np.cos(g_o)
-        return 2.0 * np.pi * np.trapezoid(vals, g_o, axis=-1)
+        return 2.0 * np.pi * trapezoid(vals, g_o, axis=-1)
 
 
 class AcousticMaterialBSDF(mi.BSDF):

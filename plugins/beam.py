@@ -33,6 +33,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mitsonar._compat import trapezoid
+
 from .jit_arrays import upload
 
 PATTERNS = ("gaussian", "sinc", "uniform", "table")
@@ -300,7 +302,7 @@ class BeamPattern:
         el = np.linspace(el_lo, el_hi, n + 1)
         A, E = np.meshgrid(az, el)
         f = self.eval_np(A, E) * np.cos(E)
-        return float(np.trapezoid(np.trapezoid(f, az, axis=1), el))
+        return float(trapezoid(trapezoid(f, az, axis=1), el))
 
     def directivity_index(self) -> float:
         """dB, ``DI = 10 log10(4 pi / integral of B over the sphere)`` (Urick 1983, eq. 3.10),
@@ -334,7 +336,7 @@ class BeamPattern:
             else:
                 bh_ = self.eval_np(az, np.zeros_like(az))
                 bv_ = self.eval_np(np.zeros_like(el), el)
-            return float(np.trapezoid(bh_, az) * np.trapezoid(bv_ * np.cos(el), el))
+            return float(trapezoid(bh_, az) * trapezoid(bv_ * np.cos(el), el))
         n_az = min(max(1025, int(30 * math.pi / bh)), 20001) | 1
         n_el = min(max(513, int(30 * math.pi / bv)), 20001) | 1
         az = np.linspace(az_lo, az_hi, n_az)
@@ -343,8 +345,8 @@ class BeamPattern:
         step = max(1, 4_000_000 // n_az)
         for k in range(0, n_el, step):
             e = el[k:k + step, None]
-            rows[k:k + step] = np.trapezoid(self.eval_np(az[None, :], e), az, axis=1) * np.cos(e[:, 0])
-        return float(np.trapezoid(rows, el))
+            rows[k:k + step] = trapezoid(self.eval_np(az[None, :], e), az, axis=1) * np.cos(e[:, 0])
+        return float(trapezoid(rows, el))
 
     # ---------------------------------------------------------------- Dr.Jit side
     def _build(self):

@@ -1,5 +1,8 @@
+import contextlib
 import os
+import shutil
 import sys
+import tempfile
 
 import numpy as np
 import pytest
@@ -112,6 +115,63 @@ def jit_kernels(fn, *args, **kwargs):
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
     return [k["hash"] for k in history], [k["hash"] for k in history if not k.get("cache_hit")]
+
+
+def drjit_cache_dir():
+    """Dr.Jit's kernel cache, where it is for this process (``DRJIT_CACHE_DIR``, else ~/.drjit):
+    a process given another HOME keeps using it instead of compiling every kernel again."""
+    return os.environ.get("DRJIT_CACHE_DIR") or os.path.join(os.path.expanduser("~"), ".drjit")
+
+
+@contextlib.contextmanager
+def ray_sandbox():
+    """A HOME and a temp folder of their own for the Ray a test starts, removed after: yields
+    ``(env, home)``, the environment to run Ray in (the caller's without its ``RAY_*`` variables).
+
+    A local ``ray.init()`` writes ``~/.ray/auth_token``, which turns token authentication on for
+    every later Ray head of the user, and keeps its sessions (logs, sockets) under ``/tmp/ray``
+    (``RAY_TMPDIR``): neither may be the user's. The folder is short (``/tmp/mrayXXXXXXXX``): Ray's
+    unix sockets live under it (at most 107 bytes a path). tests/test_dataset_ray.py runs the
+    tests that start Ray (marker ``starts_ray``) with a HOME and RAY_TMPDIR of its own and checks
+    that they stay empty."""
+    root = tempfile.mkdtemp(prefix="mray", dir="/tmp")
+    home = os.path.join(root, "home")
+    os.mkdir(home)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
+    # RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0: Ray otherwise replaces a loopback --node-ip-address by
+    # the machine's routable address and listens on all interfaces; this keeps a head's ports on
+    # 127.0.0.1 (and no other machine could join).
+    env.update(HOME=home, RAY_TMPDIR=root, RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER="0", RAY_USAGE_STATS_ENABLED="0",
+               DRJIT_CACHE_DIR=drjit_cache_dir())
+    try:
+        yield env, home
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+
+
+@pytest.fixture
+def ray_env():
+    """`ray_sandbox` for a Ray started in the test's own process: this process's environment is
+    the sandbox's until the test ends, then the one before it again (with it go the ``RAY_*``
+    variables Ray sets in the process that starts it, such as ``RAY_AUTH_MODE``). The test shuts
+    its Ray down before it returns. Yields the environment, for its subprocesses."""
+    saved = dict(os.environ)
+    with ray_sandbox() as (env, _):
+        try:
+            os.environ.clear()
+            os.environ.update(env)
+            yield env
+        finally:
+            os.environ.clear()
+            os.environ.update(saved)
+
+
+def pytest_collection_modifyitems(items):
+    """A test that uses `ray_env` or tests/test_dataset_ray.py's ``ray_head`` starts Ray: marker
+    ``starts_ray`` (the check that they leave nothing behind runs these)."""
+    for item in items:
+        if {"ray_env", "ray_head"} & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.starts_ray)
 
 
 @pytest.fixture(scope="session")

@@ -322,7 +322,7 @@ def test_torch_sees_an_iterable_dataset(reference):
     assert len(batches) == 6
 
 
-def test_ray_actors_write_what_local_workers_write(reference, tmp_path):
+def test_ray_actors_write_what_local_workers_write(reference, tmp_path, ray_env):
     pytest.importorskip("ray")
     generate_dataset(small_config(), str(tmp_path / "ray"), workers=2, engine="ray", progress=False)
     assert folder_bytes(tmp_path / "ray") == folder_bytes(reference)

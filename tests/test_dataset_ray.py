@@ -12,10 +12,11 @@ import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 import pytest
 import yaml
-from conftest import ROOT
+from conftest import ROOT, drjit_cache_dir, ray_sandbox
 
 from mitsonar.jobs.dataset import generate_dataset
 from test_dataset import folder_bytes, small_config
@@ -46,20 +47,20 @@ def descendants(pid):
 
 
 @pytest.fixture(scope="module")
-def head(tmp_path_factory):
-    """A Ray head on 127.0.0.1 only, with its own temp folder and HOME (whose ~/.ray/auth_token
-    turns token authentication on, as any earlier local ray.init() does); ``env`` is the
-    environment a command joining it runs in. Stopped at the end by killing the processes it
-    started (``ray stop`` would stop every Ray instance of this user on the machine)."""
-    home = tmp_path_factory.mktemp("home")
+def ray_head():
+    """A Ray head on 127.0.0.1 only, in a `ray_sandbox` whose ~/.ray/auth_token turns token
+    authentication on (as any earlier local ray.init() does); ``env`` is the environment a
+    command joining it runs in. Stopped at the end by killing the processes it started (``ray
+    stop`` would stop every Ray instance of this user on the machine)."""
+    with ray_sandbox() as (env, home):
+        yield from _head(env, Path(home))
+
+
+def _head(env, home):
+    """`ray_head`'s head, started in ``env`` (HOME ``home``)."""
     (home / ".ray").mkdir()
     (home / ".ray" / "auth_token").write_text(secrets.token_hex(32))
-    temp = tempfile.mkdtemp(prefix="mray", dir="/tmp")   # short: Ray's unix sockets live under it
-    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
-    # RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0: Ray otherwise replaces a loopback --node-ip-address by
-    # the machine's routable address and listens on all interfaces; this keeps every port on
-    # 127.0.0.1 (and no other machine could join).
-    env.update(HOME=str(home), RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER="0", RAY_USAGE_STATS_ENABLED="0")
+    temp = env["RAY_TMPDIR"]
     port = free_port()
     log_path = home / "head.log"
     cmd = [sys.executable, "-m", "ray.scripts.scripts", "start", "--head", "--node-ip-address", "127.0.0.1",
@@ -91,7 +92,6 @@ def head(tmp_path_factory):
         deadline = time.monotonic() + GONE_WITHIN_S
         while still_running(kids) and time.monotonic() < deadline:
             time.sleep(0.1)
-        shutil.rmtree(temp, ignore_errors=True)
 
 
 @pytest.fixture(scope="module")
@@ -106,11 +106,11 @@ def dataset_command(cfg_path, out, address, *extra):
             "--workers", "2", "--threads", "1", "-q", *extra]
 
 
-def test_the_command_on_a_loopback_head_writes_what_the_local_engine_writes(head, local, tmp_path):
+def test_the_command_on_a_loopback_head_writes_what_the_local_engine_writes(ray_head, local, tmp_path):
     cfg_path = tmp_path / "small.yaml"
     cfg_path.write_text(yaml.safe_dump(small_config()))
     out = tmp_path / "cluster"
-    run = subprocess.run(dataset_command(cfg_path, out, head["address"]), cwd=ROOT, env=head["env"],
+    run = subprocess.run(dataset_command(cfg_path, out, ray_head["address"]), cwd=ROOT, env=ray_head["env"],
                          capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-1500:]
     assert f"{out}: 6 samples (6 rendered now" in run.stdout
@@ -118,21 +118,21 @@ def test_the_command_on_a_loopback_head_writes_what_the_local_engine_writes(head
     assert not (out / ".lock").exists()
 
 
-def test_the_actors_of_a_killed_command_end(head, tmp_path):
+def test_the_actors_of_a_killed_command_end(ray_head, tmp_path):
     """SIGKILL the command (the Ray driver) once a shard is written: the head's actors rendering
     for it end (a job's actors end with its driver); the head itself keeps running."""
     cfg_path = tmp_path / "twelve.yaml"
     cfg_path.write_text(yaml.safe_dump(small_config(samples=12)))
     out = tmp_path / "killed"
-    proc = subprocess.Popen(dataset_command(cfg_path, out, head["address"]), cwd=ROOT, env=head["env"],
+    proc = subprocess.Popen(dataset_command(cfg_path, out, ray_head["address"]), cwd=ROOT, env=ray_head["env"],
                             start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         deadline = time.monotonic() + 300
         while time.monotonic() < deadline and proc.poll() is None and not (out / "shard-000000.tar").exists():
             time.sleep(0.02)
-        actors = {pid: info for pid, info in descendants(head["pid"]).items() if "DatasetActor" in info[1]}
+        actors = {pid: info for pid, info in descendants(ray_head["pid"]).items() if "DatasetActor" in info[1]}
         assert proc.poll() is None, f"the command ended before it was killed: {proc.stderr.read().decode()[-500:]}"
-        assert len(actors) == 2, descendants(head["pid"])
+        assert len(actors) == 2, descendants(ray_head["pid"])
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait()
         deadline = time.monotonic() + GONE_WITHIN_S
@@ -140,7 +140,7 @@ def test_the_actors_of_a_killed_command_end(head, tmp_path):
             time.sleep(0.1)
         left = still_running(actors)
         assert not left, f"still running {GONE_WITHIN_S} s after their driver was killed: {left}"
-        assert process(head["pid"]) is not None
+        assert process(ray_head["pid"]) is not None
     finally:
         try:
             os.killpg(proc.pid, signal.SIGKILL)
@@ -148,18 +148,16 @@ def test_the_actors_of_a_killed_command_end(head, tmp_path):
             pass
 
 
-def test_the_actors_of_a_killed_command_on_its_own_ray_end(tmp_path):
+def test_the_actors_of_a_killed_command_on_its_own_ray_end(ray_env, tmp_path):
     """Without --address, ``--engine ray`` starts Ray for itself: SIGKILL the command once a shard is written, and its actors end with it. (Ray's
     own dashboard and runtime-env agents outlive it by about a minute, their GCS timeout, before
     they exit: Ray's, not this command's; the test ends them.)"""
     cfg_path = tmp_path / "twelve.yaml"
     cfg_path.write_text(yaml.safe_dump(small_config(samples=12)))
     out = tmp_path / "killed"
-    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
-    env.update(HOME=str(tmp_path), RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER="0", RAY_USAGE_STATS_ENABLED="0")
     cmd = [sys.executable, "-m", "mitsonar", "dataset", str(cfg_path), "-o", str(out), "--engine", "ray",
            "--workers", "2", "--threads", "1", "-q"]
-    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, start_new_session=True, stdout=subprocess.DEVNULL,
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=ray_env, start_new_session=True, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE)
     started = {}
     try:
@@ -190,12 +188,12 @@ def test_the_actors_of_a_killed_command_on_its_own_ray_end(tmp_path):
         proc.wait()
 
 
-def test_an_address_without_a_head_is_one_line_and_no_folder(head, tmp_path):
+def test_an_address_without_a_head_is_one_line_and_no_folder(ray_head, tmp_path):
     cfg_path = tmp_path / "small.yaml"
     cfg_path.write_text(yaml.safe_dump(small_config()))
     out = tmp_path / "nowhere"
     address = f"127.0.0.1:{free_port()}"
-    run = subprocess.run(dataset_command(cfg_path, out, address), cwd=ROOT, env=head["env"],
+    run = subprocess.run(dataset_command(cfg_path, out, address), cwd=ROOT, env=ray_head["env"],
                          capture_output=True, text=True, timeout=600)
     assert run.returncode != 0
     errors = [line for line in run.stderr.splitlines() if line.startswith("mitsonar: error:")]
@@ -210,3 +208,25 @@ def test_a_malformed_address_is_one_line_and_no_folder(address, tmp_path):
     with pytest.raises(DatasetError, match=r"--address .* is not allowed \(HOST:PORT of a Ray head"):
         generate_dataset(small_config(), str(tmp_path / "ds"), address=address, workers=2, progress=False)
     assert not (tmp_path / "ds").exists()
+
+
+def test_the_tests_that_start_ray_leave_nothing_in_home_or_ray_tmpdir(tmp_path):
+    """The tests that start Ray (marker ``starts_ray``: `ray_env`, ``ray_head``), run by a pytest
+    of their own whose HOME and RAY_TMPDIR (Ray's /tmp) are empty folders: no ~/.ray (a local
+    ray.init() writes ~/.ray/auth_token, which turns token authentication on for every later Ray
+    head of the user) and nothing in RAY_TMPDIR (Ray's sessions, /tmp/ray/session_* by default)."""
+    home = tmp_path / "home"
+    home.mkdir()
+    ray_tmp = tempfile.mkdtemp(prefix="mrayck", dir="/tmp")   # short, as Ray's sockets would be under it
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
+    env.update(HOME=str(home), RAY_TMPDIR=ray_tmp, DRJIT_CACHE_DIR=drjit_cache_dir())
+    cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-m", "starts_ray",
+           "tests/test_dataset.py", "tests/test_dataset_ray.py"]
+    try:
+        run = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=900)
+        summary = [line for line in run.stdout.splitlines() if " passed" in line or " failed" in line]
+        assert run.returncode == 0 and summary and "skipped" not in summary[-1], run.stdout[-3000:]
+        assert not (home / ".ray").exists(), sorted(map(str, (home / ".ray").rglob("*")))
+        assert os.listdir(ray_tmp) == []
+    finally:
+        shutil.rmtree(ray_tmp, ignore_errors=True)

@@ -7,6 +7,8 @@ import os
 import numpy as np
 import pytest
 
+from mitsonar._compat import trapezoid
+
 from conftest import jit_kernels
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -364,7 +366,7 @@ def test_receive_weighted_emission_weights_integrate_the_fan(mitsonar_mod, tx_ki
     a = np.linspace(0.3, math.pi / 2, 4001)
     e = np.linspace(-math.pi / 2, math.pi / 2, 2001)
     A, E = np.meshgrid(a, e)
-    want = np.trapezoid(np.trapezoid(tx.eval_np(A, E) * np.cos(E), a, axis=1), e)
+    want = trapezoid(trapezoid(tx.eval_np(A, E) * np.cos(E), a, axis=1), e)
     assert (w * part).mean() == pytest.approx(want, rel=0.01)
     swath = np.abs(az) <= math.radians(26.0)
     own = np.abs(np.arctan2(d_tx.x.numpy(), d_tx.z.numpy())) <= math.radians(26.0)

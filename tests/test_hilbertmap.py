@@ -357,7 +357,7 @@ def test_water_boundary_keeps_the_side_of_the_band_facing_the_sonar():
     prob = np.where((r > 2.0) & (r < 2.4), 0.9, 0.1)
     sl = MapSlice(prob=prob, seen=np.ones_like(prob, dtype=bool), u=u, v=v, axis="z", value=0.0, axes=("x", "y"))
     cs = plt.contour(u, v, prob, levels=[0.5])
-    P2 = np.concatenate([p for p in cs.allsegs[0] if len(p) > 1])
+    P2 = metrics._contour_points(cs)
     plt.close("all")
     inner = metrics._water_boundary(sl, P2, np.array([[0.0, 0.0]]))
     rr = np.hypot(P2[:, 0], P2[:, 1])

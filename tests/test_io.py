@@ -195,7 +195,8 @@ def test_tampered_pixels_fail_the_checksum(saved, tmp_path):
 
 
 def test_bad_header(saved, tmp_path):
-    with OpenEXR.File(saved[".exr"], header_only=True) as f:
+    # the whole file, not header_only=True: OpenEXR 3.3.0 (the floor) opens no part with it
+    with OpenEXR.File(saved[".exr"]) as f:
         good = json.loads(f.header()["mitsonar"])
     cases = {"json.exr": ("{not json", "not valid JSON"),
              "marker.exr": (json.dumps({**good, "format": "other"}), "not a mitsonar scan"),
