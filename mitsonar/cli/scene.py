@@ -88,7 +88,7 @@ def add_subcommands(sub):
                                   "first heightmap geometries, with their poses) in a scene; what cannot be converted "
                                   "is listed one line each.")
     w.add_argument("world", help="the .sdf or .world file")
-    w.add_argument("-o", "--output", required=True, help="scene file to write (.xml; meshes go in <stem>_meshes/)")
+    w.add_argument("-o", "--output", required=True, help="scene file to write (.xml; its meshes go beside it as <stem>_mesh_<k>.ply)")
     w.add_argument("--model-path", action="append", default=[], metavar="DIR",
                    help="a folder of models for model:// URIs (repeatable; GAZEBO_MODEL_PATH and "
                         "GZ_SIM_RESOURCE_PATH are searched after)")
