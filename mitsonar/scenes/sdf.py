@@ -366,7 +366,7 @@ class _World:
         try:
             import rasterio
         except ImportError:
-            raise SdfError(f"{self.path}: {where}: a heightmap needs rasterio: pip install 'mitsonar[geo]'") from None
+            raise SdfError(f"{self.path}: {where}: a heightmap needs rasterio: pip install 'mitsonar[world]'") from None
         try:
             with rasterio.open(file) as src:
                 img = src.read(1)
