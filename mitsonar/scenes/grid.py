@@ -5,7 +5,7 @@ grid), through rasterio, turned into a mesh scene in the grid's projected CRS.
     site = seabed_from_grid("site.tif", "site.xml")       # site.xml + site_seabed.ply
     site.frame.crs, site.frame.e0, site.frame.n0           # 'EPSG:32631', 431000.0, 5761000.0
 
-or ``mitsonar scene from-grid site.tif -o site.xml`` (docs/howto/your_world.rst).
+or ``mitsonar scene from-grid site.tif -o site.xml`` (docs/tutorials/your_world.rst).
 
 Frame. The scene's world x, y are offsets in the grid's projected CRS from an origin
 (``x = E - E0``, ``y = N - N0``, the `mitsonar.geometry.geodesy.GeoFrame` of ``--origin`` and
