@@ -12,11 +12,16 @@ rasterio = pytest.importorskip("rasterio")
 pytest.importorskip("pyproj")
 pytest.importorskip("laspy")
 
-from rasterio.transform import from_origin  # noqa: E402
+from rasterio.transform import Affine  # noqa: E402
 
 from mitsonar.cli import main  # noqa: E402
 
 E0, N0 = 431000.0, 5761000.0          # UTM 31N, off the Dutch coast
+
+
+def from_origin(west, north, xsize, ysize):
+    """rasterio's ``from_origin`` without affine's deprecated ``*``."""
+    return Affine(xsize, 0.0, west, 0.0, -ysize, north)
 
 
 def mound(e, n, ec=E0 + 40, nc=N0 + 30):
@@ -227,3 +232,20 @@ def test_bad_grids_are_refused_in_one_line_with_nothing_written(tmp_path, capsys
     out.write_text("mine")
     _refused(capsys, ["scene", "from-grid", str(ok), "-o", str(out)], "exists", "--force")
     assert out.read_text() == "mine"
+
+
+def test_a_bag_is_elevation_without_a_flag(tmp_path):
+    """A BAG's values are elevations (positive up) by the format: no --positive needed, where a
+    GeoTIFF with the same numbers and no metadata is refused."""
+    from mitsonar.scenes.grid import GridError, read_grid
+
+    z = np.full((20, 30), -15.0, np.float32)
+    z[5:8, 4:9] = -12.0
+    with rasterio.open(tmp_path / "t.bag", "w", driver="BAG", width=30, height=20, count=1, dtype="float32",
+                       crs="EPSG:32631", transform=from_origin(E0, N0 + 40, 2.0, 2.0), nodata=1e6) as dst:
+        dst.write(z, 1)
+    g = read_grid(tmp_path / "t.bag")
+    assert g.positive == "up" and g.crs == "EPSG:32631"
+    assert np.array_equal(g.z, z[::-1].astype(np.float64))
+    with pytest.raises(GridError, match="--positive up"):
+        read_grid(write_grid(tmp_path / "t.tif", nx=30, ny=20, cell=2.0, values=z, description=None, north=N0 + 40))

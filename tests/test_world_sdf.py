@@ -187,3 +187,36 @@ def test_bad_worlds_are_refused_in_one_line_with_nothing_written(tmp_path, capsy
     sdf.write_text(world_sdf("x.stl").replace("<pose>5 6 -12 0 0 0</pose>", "<pose>5 6</pose>"))
     _refused(capsys, ["scene", "from-sdf", str(sdf), "-o", str(out)], "model 'buoy'", "is not 6 numbers")
     assert os.listdir(out.parent) == []
+
+
+@pytest.mark.filterwarnings("ignore::rasterio.errors.NotGeoreferencedWarning")
+def test_the_first_heightmap_and_the_worlds_place_on_the_earth(tmp_path, capsys):
+    """The first heightmap becomes a height field over its size (an 8-bit image: pixel / 255 of
+    size z, above pos z); a second is listed; <spherical_coordinates> is the scene's origin."""
+    import mitsuba as mi
+    import rasterio
+
+    import mitsonar
+    from mitsonar.scenes.georef import scene_frame
+
+    img = np.zeros((5, 5), np.uint8)
+    img[0, :] = 255                      # the image's top row: the north (+y) edge
+    with rasterio.open(tmp_path / "h.tif", "w", driver="GTiff", width=5, height=5, count=1, dtype="uint8") as dst:
+        dst.write(img, 1)
+    hm = """<model name="terrain{k}"><static>true</static><link name="l"><visual name="v"><geometry><heightmap>
+      <uri>h.tif</uri><size>8 8 2</size><pos>1 0 -10</pos></heightmap></geometry></visual></link></model>"""
+    sdf = tmp_path / "h.sdf"
+    sdf.write_text(f"""<sdf version="1.9"><world name="w"><spherical_coordinates><latitude_deg>43.5</latitude_deg>
+      <longitude_deg>-8.2</longitude_deg><elevation>0</elevation></spherical_coordinates>
+      {hm.format(k=1)}{hm.format(k=2)}</world></sdf>""")
+    xml = tmp_path / "h.xml"
+    assert main(["scene", "from-sdf", str(sdf), "-o", str(xml)]) == 0
+    assert "not converted: heightmap of terrain2::l::v" in capsys.readouterr().out
+    frame = scene_frame(str(xml))
+    assert (frame.lat, frame.lon, frame.crs) == (43.5, -8.2, "EPSG:32629")
+    scene = mitsonar.load_scene(str(xml))
+    pts = np.array([[1.0, 0.0], [1.0, 3.9], [-2.5, -3.9], [4.9, 1.0]])
+    ray = mi.Ray3f(mi.Point3f(pts[:, 0], pts[:, 1], np.zeros(4)), mi.Vector3f(0, 0, -1))
+    z = np.array(scene.ray_intersect(ray).p.z)
+    # rows 4 m apart in y from -4 to 4: flat at -10 up to y = 2, rising to -8 at y = 4
+    assert np.allclose(z, [-10.0, -10.0 + 2 * 0.95, -10.0, -10.0], atol=1e-4), z

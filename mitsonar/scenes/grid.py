@@ -244,10 +244,9 @@ def read_grid(path, *, bounds=None, resolution=None, resampling="bilinear", crs=
             values = src.read(1, window=window, masked=True).astype(np.float64)
             bad = np.ma.getmaskarray(values) | ~np.isfinite(values.filled(np.nan))
             values = values.filled(np.nan)
-            wt = src.window_transform(window)
-            cell = abs(ta.a)
-            xs = wt.c + (np.arange(values.shape[1]) + 0.5) * wt.a
-            ys = wt.f + (np.arange(values.shape[0]) + 0.5) * wt.e
+            cell = abs(ta.a)       # the window's cells' centres (by hand: affine's `*` is deprecated)
+            xs = ta.c + (c0 + np.arange(values.shape[1]) + 0.5) * ta.a
+            ys = ta.f + (r0 + np.arange(values.shape[0]) + 0.5) * ta.e
         else:
             if resolution is not None:
                 cell = float(resolution)
