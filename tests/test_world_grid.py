@@ -176,18 +176,19 @@ def test_sediment_classes_become_materials_by_area(tmp_path):
     with rasterio.open(sed, "w", driver="GTiff", width=80, height=60, count=1, dtype="int16", crs="EPSG:32631",
                        transform=from_origin(E0, N0 + 60, 1.0, 1.0)) as dst:
         dst.write(classes.astype(np.int16), 1)
-    (tmp_path / "sed.csv").write_text("class,material\n1,seabed_mud\n7,seabed_gravel\n")
+    (tmp_path / "sed.csv").write_text("class,material\n1,seabed_mud\n7,medium sand@100\n")
     xml = tmp_path / "s.xml"
     assert main(["scene", "from-grid", str(tif), "--sediment", str(sed), "--sediment-map", str(tmp_path / "sed.csv"),
                  "-o", str(xml)]) == 0
     scene = mitsonar.load_scene(str(xml))
     shapes = {s.id(): s for s in scene.shapes()}
-    assert set(shapes) == {"seabed_gravel", "seabed_mud"}
-    for name, west in (("seabed_mud", True), ("seabed_gravel", False)):   # cells west of E0 + 40: class 1
+    assert set(shapes) == {"seabed_medium_sand_100", "seabed_mud"}
+    for name, west in (("seabed_mud", True), ("seabed_medium_sand_100", False)):   # west of E0 + 40: class 1
         v = np.array(shapes[name].vertex_positions_buffer()).reshape(-1, 3)
         assert (v[:, 0].max() <= 0.0 + 1e-4) if west else (v[:, 0].min() >= -1.0 - 1e-4)
         assert shapes[name].bsdf().id() == f"{name}_bsdf"
     assert 'id="seabed_mud_bsdf"><string name="preset" value="seabed_mud"/>' in xml.read_text()
+    assert "apl_uw 'medium sand' at 100000 Hz" in str(shapes["seabed_medium_sand_100"].bsdf())
     # the side-scan products take the parts together as the seabed
     from mitsonar.products.sidescan import seabed_of_scene
 

@@ -8,7 +8,9 @@ Material names (``--material``, a sediment mapping's second column, a model patt
   ``water_calm``, ``concrete_good``, ...), written as ``<bsdf type="acoustic">`` with that preset;
 * else a medium of the ``acoustic_material`` BSDF (`mitsonar.acoustics.materials.MATERIALS`:
   ``steel``, ``concrete``, ``gravel``, ``silt``, ``mud``, ``clay``; ``sand`` and ``rock`` are
-  the presets above), its reflection from impedances and its Lambert backscatter;
+  the presets above): its reflection from the impedances, with a Lambert backscatter only where
+  the medium has a Lambert parameter (``mud``; the others are specular, see
+  `mitsonar.acoustics.materials`);
 * else an APL-UW TR 9407 sediment (``medium sand``, ``sandy gravel``, ``clay``, ...:
   `mitsonar.acoustics.seabed.SEDIMENTS`) followed by ``@`` and the head's frequency in kHz
   (``medium sand@100``): the ``acoustic_material`` BSDF with ``sediment`` and that ``frequency``
