@@ -250,3 +250,24 @@ def test_a_bag_is_elevation_without_a_flag(tmp_path):
     assert np.array_equal(g.z, z[::-1].astype(np.float64))
     with pytest.raises(GridError, match="--positive up"):
         read_grid(write_grid(tmp_path / "t.tif", nx=30, ny=20, cell=2.0, values=z, description=None, north=N0 + 40))
+
+
+def test_a_gebco_like_netcdf_in_degrees_goes_to_utm(tmp_path):
+    """A NetCDF grid in WGS 84 degrees (as GEBCO's): reprojected to the UTM zone of its centre,
+    at its cell's size in metres; values that do not say their sense need --positive."""
+    from rasterio.shutil import copy as rio_copy
+
+    from mitsonar.scenes.grid import GridError, read_grid
+
+    nx, ny, d = 60, 50, 1 / 240                   # 15 arc-second cells, GEBCO's
+    z = np.tile(-20.0 + 0.05 * np.arange(nx), (ny, 1)).astype(np.float32)
+    tif = tmp_path / "g.tif"
+    with rasterio.open(tif, "w", driver="GTiff", width=nx, height=ny, count=1, dtype="float32", crs="EPSG:4326",
+                       transform=Affine(d, 0.0, 3.0, 0.0, -d, 52.0 + ny * d)) as dst:
+        dst.write(z, 1)
+    rio_copy(str(tif), str(tmp_path / "g.nc"), driver="netCDF")
+    with pytest.raises(GridError, match="give --positive up"):
+        read_grid(tmp_path / "g.nc")
+    g = read_grid(tmp_path / "g.nc", positive="up")
+    assert g.crs == "EPSG:32631" and 280 < g.cell < 470 and g.lod == 0
+    assert -20.0 <= g.z.min() and g.z.max() <= -20.0 + 0.05 * (nx - 1) + 1e-6

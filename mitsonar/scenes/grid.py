@@ -50,6 +50,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -255,8 +256,10 @@ def read_grid(path, *, bounds=None, resolution=None, resampling="bilinear", crs=
             else:   # the source's cell, measured in the new CRS (its size at the centre)
                 from rasterio.warp import calculate_default_transform
 
-                t, w, h = calculate_default_transform(src.crs, dst_crs.to_wkt(), src.width, src.height,
-                                                      *src.bounds)
+                with warnings.catch_warnings():     # rasterio's own use of affine's deprecated `*`
+                    warnings.filterwarnings("ignore", category=PendingDeprecationWarning, module="affine")
+                    t, _, _ = calculate_default_transform(src.crs, dst_crs.to_wkt(), src.width, src.height,
+                                                          *src.bounds)
                 cell = float(abs(t.a) + abs(t.e)) / 2
             nx = int(math.floor((b[2] - b[0]) / cell + 1e-9))
             ny = int(math.floor((b[3] - b[1]) / cell + 1e-9))
