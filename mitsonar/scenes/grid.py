@@ -257,7 +257,7 @@ def read_grid(path, *, bounds=None, resolution=None, resampling="bilinear", crs=
                 from rasterio.warp import calculate_default_transform
 
                 with warnings.catch_warnings():     # rasterio's own use of affine's deprecated `*`
-                    warnings.filterwarnings("ignore", category=PendingDeprecationWarning, module="affine")
+                    warnings.simplefilter("ignore", PendingDeprecationWarning)
                     t, _, _ = calculate_default_transform(src.crs, dst_crs.to_wkt(), src.width, src.height,
                                                           *src.bounds)
                 cell = float(abs(t.a) + abs(t.e)) / 2
