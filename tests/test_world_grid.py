@@ -271,3 +271,26 @@ def test_a_gebco_like_netcdf_in_degrees_goes_to_utm(tmp_path):
     g = read_grid(tmp_path / "g.nc", positive="up")
     assert g.crs == "EPSG:32631" and 280 < g.cell < 470 and g.lod == 0
     assert -20.0 <= g.z.min() and g.z.max() <= -20.0 + 0.05 * (nx - 1) + 1e-6
+
+
+def test_a_side_scan_survey_over_a_grid_writes_its_mosaic_in_the_grids_crs(tmp_path):
+    """survey over a from-grid scene, no --origin: the scans carry the scene's origin and CRS and
+    the side-scan mosaic is a GeoTIFF at the grid's coordinates."""
+    import mitsonar
+
+    tif = write_grid(tmp_path / "site.tif")
+    head = tmp_path / "ss.xml"
+    head.write_text('<sensor type="sonar"><string name="kind" value="sidescan"/><string name="side" value="both"/>'
+                    '<float name="depression" value="25"/><float name="range_min" value="0"/>'
+                    '<float name="range_max" value="30"/><integer name="n_bins" value="300"/>'
+                    '<integer name="n_pings" value="8"/><float name="beamwidth_h" value="1"/>'
+                    '<float name="beamwidth_v" value="60"/></sensor>')
+    xml = tmp_path / "site.xml"
+    assert main(["scene", "from-grid", str(tif), "--sensor", str(head), "-o", str(xml)]) == 0
+    out = tmp_path / "ss"
+    assert main(["survey", str(xml), "--lawnmower", "-10", "10", "0", "0", "--depth", "5", "--speed", "5",
+                 "--spp", "8", "-q", "-o", str(out)]) == 0
+    assert mitsonar.load_scan(str(out / "scan_00000.npz")).meta.crs == "EPSG:32631"
+    with rasterio.open(out / "mosaic.tif") as src:
+        assert src.crs.to_epsg() == 32631
+        assert src.bounds.left >= E0 - 1 and src.bounds.right <= E0 + 81 and src.bounds.bottom >= N0 - 1
