@@ -122,6 +122,21 @@ def test_a_world_places_each_model_where_its_sdf_puts_it(tmp_path, capsys):
     assert np.allclose(lo, [-8, 3, -11], atol=1e-5) and np.allclose(hi, [12, 10, -9], atol=1e-5)
     materials = {s.bsdf().id() for s in scene.shapes()}
     assert materials == {"mat_steel", "mat_seabed_mud", "mat_rock"}
+    # the sonar (the default echo sounder, looking down) at --sensor-pose
+    to_world = np.array(scene.sensors()[0].world_transform().matrix).reshape(4, 4)
+    assert np.allclose(to_world[:3, 3], [0, 0, -2]) and np.allclose(to_world[:3, 2], [0, 0, -1])
+
+
+def test_materials_from_yaml_by_pattern(tmp_path):
+    from mitsonar.scenes.sdf import SdfError, read_materials
+
+    (tmp_path / "m.yaml").write_text("'pile_*': concrete_good\nwreck: steel\n")
+    assert read_materials(str(tmp_path / "m.yaml")) == [("pile_*", "concrete_good"), ("wreck", "steel")]
+    (tmp_path / "l.yaml").write_text("- {pattern: '*', material: 'medium sand@100'}\n")
+    assert read_materials(str(tmp_path / "l.yaml")) == [("*", "medium sand@100")]
+    (tmp_path / "b.yaml").write_text("wreck: titanium\n")
+    with pytest.raises(SdfError, match="pattern 'wreck': material 'titanium': unknown material"):
+        read_materials(str(tmp_path / "b.yaml"))
 
 
 def render(xml):
