@@ -163,6 +163,11 @@ def test_a_large_grid_gets_a_coarser_level_of_detail(tmp_path):
     assert np.abs(g.z - mound(E, N)).max() < 0.05      # the mean of the 2 x 2 cells under each vertex
     with pytest.raises(GridError, match="--resolution 1: 80 x 60 vertices, over the 1500"):
         read_grid(tif, resolution=1.0, max_vertices=1500)
+    # bounds reaching past the grid keep its part inside them (not a border of nodata)
+    g = read_grid(tif, bounds=(E0 + 40, N0 - 50, E0 + 500, N0 + 30), max_vertices=1500)
+    assert g.lod == 0 and (g.x[0], g.x[-1], g.y[0], g.y[-1]) == (E0 + 40.5, E0 + 79.5, N0 + 0.5, N0 + 29.5)
+    g = read_grid(tif, bounds=(E0 + 40, N0 - 50, E0 + 500, N0 + 30), resolution=2.0)
+    assert (g.x[0], g.x[-1], g.y[0], g.y[-1]) == (E0 + 41, E0 + 79, N0 + 1, N0 + 29)
     site = seabed_from_grid(tif, tmp_path / "s.xml", max_vertices=1500)
     assert "level of detail 1" in site.line() and site.n_triangles == 2 * 29 * 39
 

@@ -220,6 +220,7 @@ def read_grid(path, *, bounds=None, resolution=None, resampling="bilinear", crs=
             if b[2] <= sb.left or b[0] >= sb.right or b[3] <= sb.bottom or b[1] >= sb.top:
                 raise GridError(f"--bounds {' '.join(f'{v:g}' for v in b)}: outside {path} "
                                 f"({sb.left:g} {sb.bottom:g} {sb.right:g} {sb.top:g})")
+            b = [max(b[0], sb.left), max(b[1], sb.bottom), min(b[2], sb.right), min(b[3], sb.top)]   # the overlap
         else:
             b = list(src.bounds)
         ta = src.transform
