@@ -94,7 +94,9 @@ def test_a_world_places_each_model_where_its_sdf_puts_it(tmp_path, capsys):
     (models / "block.sdf").write_text("""<sdf version="1.9"><model name="block"><static>true</static>
       <link name="l"><visual name="v"><geometry><mesh><uri>model://block/meshes/block.dae</uri></mesh></geometry>
       </visual></link></model></sdf>""")
-    include = "<include><uri>model://block</uri><name>block_b</name><pose>8 8 -11 0 0 0</pose></include>"
+    include = ("<include><uri>model://block</uri><name>block_b</name><pose>8 8 -11 0 0 0</pose></include>"
+               "<model name='block_c'><static>true</static><pose>-14 -14 -12 0 0 0</pose><link name='l'><visual name='v'>"
+               "<geometry><mesh><uri>model://block/meshes/block.stl</uri></mesh></geometry></visual></link></model>")
     sdf = tmp_path / "pier.sdf"
     sdf.write_text(world_sdf("model://block/meshes/block.stl", include))
     (tmp_path / "mat.csv").write_text("pattern,material\nblock_*,steel\nbuoy,seabed_mud\n")
@@ -105,11 +107,13 @@ def test_a_world_places_each_model_where_its_sdf_puts_it(tmp_path, capsys):
     for said in ("not converted: <light> 'sun'", "not converted: <plugin> 'gz::sim::systems::Physics'",
                  "sensor 'cam' (camera) of pillar::l", "model 'bluerov': not static"):
         assert said in out, out
+    assert sorted(p.name for p in tmp_path.glob("pier_mesh_*.ply")) == ["pier_mesh_0.ply", "pier_mesh_1.ply"]
     scene = mitsonar.load_scene(str(xml))
     # the block_a STL turned 90 deg about z: its 4 m side along y, from x = -8 to -6, y = 3 to 7
     tops = {(-7.0, 5.0): -9.0, (-5.5, 5.0): -14.0, (-7.0, 2.5): -14.0,       # block_a, beside it
             (5.0, -4.0): -7.0, (5.0, 6.0): -10.5, (-5.0, -5.0): -11.0,    # pillar, buoy, crate
-            (9.9, 9.0): -10.0, (12.5, 9.0): -14.0, (0.0, 0.0): -14.0}     # block_b (DAE), seabed plane
+            (9.9, 9.0): -10.0, (12.5, 9.0): -14.0, (0.0, 0.0): -14.0,     # block_b (DAE), seabed plane
+            (-11, -13.5): -11.0}                                           # block_c: block_a's STL again
     o = np.array([[x, y, 0.0] for x, y in tops])
     ray = mi.Ray3f(mi.Point3f(*o.T.astype(np.float32)), mi.Vector3f(0, 0, -1))
     si = scene.ray_intersect(ray)
@@ -119,7 +123,7 @@ def test_a_world_places_each_model_where_its_sdf_puts_it(tmp_path, capsys):
     steel = [s for s in scene.shapes() if s.bsdf().id() == "mat_steel"]
     lo = np.min([np.array(s.bbox().min) for s in steel], 0)
     hi = np.max([np.array(s.bbox().max) for s in steel], 0)
-    assert np.allclose(lo, [-8, 3, -11], atol=1e-5) and np.allclose(hi, [12, 10, -9], atol=1e-5)
+    assert np.allclose(lo, [-14, -14, -12], atol=1e-5) and np.allclose(hi, [12, 10, -9], atol=1e-5)
     materials = {s.bsdf().id() for s in scene.shapes()}
     assert materials == {"mat_steel", "mat_seabed_mud", "mat_rock"}
     # the sonar (the default echo sounder, looking down) at --sensor-pose

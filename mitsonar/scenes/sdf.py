@@ -17,7 +17,8 @@ with the geometries
   ``disk`` caps), ``plane`` (a ``rectangle`` of its ``size`` facing its ``normal``);
 * ``mesh`` (STL, OBJ, DAE, glTF/GLB, PLY through `mitsonar.scenes.meshes`, times its ``<scale>``;
   STL and OBJ times ``scale`` as well), written as PLY files beside the scene
-  (``<stem>_mesh_<k>.ply``, face normals);
+  (``<stem>_mesh_<k>.ply``, one per mesh file and ``<scale>``, placed again by
+  another transform where the world uses it again; face normals);
 * the first ``heightmap``: its image or DEM (read by rasterio) over ``<size>`` x, y centred at
   ``<pos>``, height ``pos.z + value * size.z`` for an image (``value`` the pixel over its type's
   largest), ``pos.z + value`` for a float DEM;
@@ -166,6 +167,7 @@ class _World:
         self.shapes, self.meshes, self.models, self.skipped = [], [], [], []
         self.heightmaps = 0
         self.bsdfs = set()
+        self.mesh_index = {}     # (file, scale) -> its index in meshes
 
     # ------------------------------------------------------------------ files
     def resolve(self, uri, base, where):
@@ -337,13 +339,19 @@ class _World:
                 raise SdfError(f"{self.path}: {where}: mesh {uri} ({file}) does not exist; fix the URI or give "
                                "--model-path")
             s = _floats(_text(g, "scale", "1 1 1"), 3, f"{self.path}: {where}: <mesh><scale>")
+            if g.find("submesh") is not None:
+                self.skip(f"<submesh> of {where}", "the whole mesh is placed")
+            key = (os.path.realpath(file), tuple(s))
+            if key in self.mesh_index:          # a mesh placed again: one PLY, another transform
+                self.bsdfs.add(bsdf)
+                self.shapes.append(("mesh", self.mesh_index[key], T, bsdf))
+                return
             try:
                 v, f = load_mesh(file, self.scale)
             except MeshError as exc:
                 raise SdfError(f"{self.path}: {where}: {exc}") from None
-            if g.find("submesh") is not None:
-                self.skip(f"<submesh> of {where}", "the whole mesh is placed")
             self.add_mesh(v * s, f, T, bsdf)
+            self.mesh_index[key] = len(self.meshes) - 1
         elif g.tag == "heightmap":
             self.heightmaps += 1
             if self.heightmaps > 1:
@@ -470,15 +478,15 @@ def scene_from_sdf(world, output, *, model_path=(), materials=None, material=Non
     written = []
     with StagedFiles() as files:
         shapes = []
-        for s in w.shapes:
+        for v, f in w.meshes:
+            name = f"{stem}_mesh_{len(written)}.ply"
+            worldxml.write_mesh_ply(files.temporary(os.path.join(folder, name)), v, f,
+                                    comment=f"mitsonar mesh from {os.path.basename(world)}")
+            written.append(os.path.join(folder, name))
+        for i, s in enumerate(w.shapes):
             if isinstance(s, tuple):
                 _, k, to_world, bsdf = s
-                name = f"{stem}_mesh_{k}.ply"
-                v, f = w.meshes[k]
-                worldxml.write_mesh_ply(files.temporary(os.path.join(folder, name)), v, f,
-                                        comment=f"mitsonar mesh from {os.path.basename(world)}")
-                shapes.append(worldxml.ply_shape(f"mesh_{k}", name, bsdf, to_world))
-                written.append(os.path.join(folder, name))
+                shapes.append(worldxml.ply_shape(f"mesh_{i}", os.path.basename(written[k]), bsdf, to_world))
             else:
                 shapes.append(s)
         with open(files.temporary(output), "w", encoding="utf-8") as fh:
