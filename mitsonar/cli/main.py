@@ -22,7 +22,8 @@ HERE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # the mitson
 
 
 #: The modules of `mitsonar.cli` that add subcommands (each has ``add_subcommands(subparsers)``).
-SUBCOMMAND_MODULES = ("serial", "map", "compare", "survey", "export", "bathymetry", "dataset", "levels", "live")
+SUBCOMMAND_MODULES = ("serial", "map", "compare", "survey", "export", "bathymetry", "dataset", "levels", "live",
+                      "scene")
 
 
 class CLIError(Exception):

@@ -195,11 +195,13 @@ def _draw(args, scene, traj, out, scans, bag, mosaic=None):
     plots.plot_track(traj, os.path.join(out, "track.png"), scans=positions, mesh=mesh)
     if mosaic is not None:
         mosaic.result().save(os.path.join(out, "mosaic.png"))
-        if getattr(args, "origin", None) is not None:      # georeferenced: + mosaic.tif in the CRS
-            from mitsonar.export.geotiff import write_mosaic_geotiff
-            from mitsonar.geometry.geodesy import frame_from_args
+        from mitsonar.geometry.geodesy import frame_from_args
 
-            write_mosaic_geotiff(os.path.join(out, "mosaic.tif"), mosaic.result(), frame_from_args(args))
+        frame = frame_from_args(args)                  # --origin, or the frame the scene records
+        if frame is not None:                          # georeferenced: + mosaic.tif in the CRS
+            from mitsonar.export.geotiff import write_mosaic_geotiff
+
+            write_mosaic_geotiff(os.path.join(out, "mosaic.tif"), mosaic.result(), frame)
     return n
 
 

@@ -258,8 +258,23 @@ def add_geo_options(parser):
 
 
 def frame_from_args(args) -> "GeoFrame | None":
-    """The `GeoFrame` of ``--origin``/``--crs`` (None without ``--origin``; ``--crs`` alone is refused)."""
+    """The `GeoFrame` of ``--origin``/``--crs`` (None without ``--origin``; ``--crs`` alone is refused).
+    A command with a scene (``args.scene``) whose XML records a frame (`mitsonar.scenes.georef`)
+    takes it without the flags; flags that name another frame are refused."""
     origin, crs = getattr(args, "origin", None), getattr(args, "crs", None)
+    scene = getattr(args, "scene", None)
+    if isinstance(scene, str):
+        from mitsonar.scenes.georef import scene_frame
+
+        recorded = scene_frame(scene)
+        if recorded is not None:
+            given = None if origin is None else GeoFrame.make(origin, crs)
+            if given is not None and given != recorded or given is None and crs is not None and \
+                    check_crs(crs)[0] != recorded.crs:
+                shown = " ".join(f"{v:.9g}" for v in (recorded.lat, recorded.lon, recorded.height))
+                raise GeoError(f"{scene} records origin {shown} and crs {recorded.crs}; --origin/--crs name another "
+                               "frame: drop them (the scene's frame is used) or convert the scene again")
+            return recorded
     if origin is None:
         if crs is not None:
             raise GeoError(f"--crs {crs}: needs --origin LAT LON [HEIGHT] (the point the world frame starts at)")

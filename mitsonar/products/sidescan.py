@@ -222,13 +222,17 @@ def seabed_from_mesh(vertices, faces=None):
 
 def seabed_of_scene(scene, shape_id="seabed"):
     """`seabed_from_mesh` of the mesh shape ``shape_id`` of a loaded scene (its vertices in world
-    coordinates): the scene's known seabed for `ground_range` and `mitsonar.products.mosaic.mosaic`."""
+    coordinates; without one, of its meshes ``<shape_id>_*`` together: a seabed of several materials): the scene's known seabed for `ground_range` and `mitsonar.products.mosaic.mosaic`."""
     import mitsuba as mi
 
-    for shape in scene.shapes():
-        if shape.id() == shape_id:
-            if not isinstance(shape, mi.Mesh):
-                raise ValueError(f"seabed_of_scene: shape {shape_id!r} is not a mesh (a height field is needed)")
-            return seabed_from_mesh(np.array(shape.vertex_positions_buffer(), dtype=np.float64).reshape(-1, 3))
+    shapes = [s for s in scene.shapes() if s.id() == shape_id]
+    # a seabed of several materials (`mitsonar.scenes.grid`'s sediments): its parts, ``seabed_<material>``
+    shapes = shapes or [s for s in scene.shapes() if s.id().startswith(shape_id + "_") and isinstance(s, mi.Mesh)]
+    for shape in shapes:
+        if not isinstance(shape, mi.Mesh):
+            raise ValueError(f"seabed_of_scene: shape {shape_id!r} is not a mesh (a height field is needed)")
+    if shapes:
+        return seabed_from_mesh(np.concatenate([np.array(s.vertex_positions_buffer(), dtype=np.float64).reshape(-1, 3)
+                                                for s in shapes]))
     ids = ", ".join(repr(s.id()) for s in scene.shapes())
     raise ValueError(f"seabed_of_scene: the scene has no shape {shape_id!r} (its shapes: {ids})")

@@ -54,6 +54,16 @@ def _check_positive(name, value):
     require(is_number(value) and value > 0, WHERE, name, value, "a number > 0")
 
 
+def height_field_faces(ny, nx):
+    """The triangles (int64 (2 (ny-1)(nx-1), 3)) of a height field whose ``ny * nx`` vertices are
+    stored row by row (x fastest, rows along +y): two per cell, counter-clockwise seen from above
+    (normals up); cell ``(j, i)``'s two are rows ``k`` and ``k + (ny-1)(nx-1)``, ``k = j (nx-1) + i``."""
+    idx = np.arange(nx * ny, dtype=np.int64).reshape(ny, nx)
+    a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()        # (i, j), (i+1, j)
+    c, d = idx[1:, :-1].ravel(), idx[1:, 1:].ravel()          # (i, j+1), (i+1, j+1)
+    return np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
+
+
 class Terrain:
     """A seeded seabed height field on ``size = (Lx, Ly)`` metres from ``centre - size / 2``
     (see the module docstring for the model; every length in metres, angles in degrees). The grid
@@ -164,9 +174,7 @@ class Terrain:
         X, Y = np.meshgrid(self.x, self.y)
         verts = np.stack([X.ravel(), Y.ravel(), self.z.ravel()], 1)
         idx = np.arange(nx * ny).reshape(ny, nx)
-        a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()        # (i, j), (i+1, j)
-        c, d = idx[1:, :-1].ravel(), idx[1:, 1:].ravel()          # (i, j+1), (i+1, j+1)
-        faces = [np.stack([a, b, d], 1), np.stack([a, d, c], 1)]  # counter-clockwise from above: up
+        faces = [height_field_faces(ny, nx)]
         if self.closed:
             # The boundary loop, counter-clockwise seen from above, and its copy at the bottom.
             ring = np.concatenate([idx[0, :-1], idx[:-1, -1], idx[-1, :0:-1], idx[:0:-1, 0]])
