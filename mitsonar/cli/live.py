@@ -52,7 +52,8 @@ def _live(args) -> int:
         from mitsonar.devices import registry
         args.head = registry.DEFAULT
     head = _head(args) if args.head is not None else None
-    from mitsonar.devices.live import LIVE_HEADS, PingRenderer, PoseReceiver, SceneObjects, live_scene, pose_socket
+    from mitsonar.devices.live import (LIVE_HEADS, PingRenderer, PoseReceiver, SceneObjects, live_scene, pose_bounds,
+                                       pose_socket)
     from mitsonar.devices.poses import PoseBuffer, TrajectoryReplay
     from mitsonar.devices.realtime import PingLog, check_records_path
     if head is not None and head.name not in LIVE_HEADS:
@@ -96,7 +97,7 @@ def _live(args) -> int:
                 check_port(args.port_url, args.baud)
         if not frames:
             require_mechanical(sonar, f"live {scene_path.name}", f"no {head.serves} to serve")
-        buffer = PoseBuffer() if (sock is not None or args.mavlink) else None
+        buffer = PoseBuffer(bounds=pose_bounds(scene)) if (sock is not None or args.mavlink) else None
         log = PingLog(args.records) if args.records else PingLog()
         budget = None if args.budget_ms is None else args.budget_ms * 1e-3
         renderer = PingRenderer(scene, sonar, buffer, spp=args.spp, seed=args.seed, budget=budget, log=log,
@@ -256,12 +257,17 @@ def _summary(renderer, receiver, mav, loop=None) -> str:
         line += f"; {loop.stats['frames']} frames published of {loop.due} due"
     if receiver is not None:
         st = receiver.stats
-        reasons = ", ".join(f"{n} {r}" for r, n in sorted(receiver.drops.counts.items()))
         moved = f", {st['objects']} object moves" if st["objects"] else ""
-        line += f"; {st['poses']} poses applied{moved}, {st['dropped']} datagrams dropped" + (f" ({reasons})" if reasons else "")
+        line += f"; {st['poses']} poses applied{moved}, {st['dropped']} datagrams dropped" + _reasons(receiver)
     if mav is not None:
-        line += f"; {mav.stats['poses']} MAVLink poses"
+        line += f"; {mav.stats['poses']} MAVLink poses, {mav.stats['dropped']} dropped" + _reasons(mav)
     return line
+
+
+def _reasons(source) -> str:
+    """`` (N reason, ...)`` of a pose source's drops, empty without any."""
+    reasons = ", ".join(f"{n} {r}" for r, n in sorted(source.drops.counts.items()))
+    return f" ({reasons})" if reasons else ""
 
 
 def cmd_live(args) -> int:
