@@ -155,7 +155,7 @@ def _live(args) -> int:
             for o in (outputs.outputs if outputs is not None else ()):
                 print(_said(o), flush=True)
             if loop is not None:
-                print(f"live multibeam {sonar.id() or 'sonar'} at {loop.rate:g} Hz", flush=True)
+                print(f"live {_sensor_name(sonar)} at {loop.rate:g} Hz", flush=True)
             else:
                 label = head.description.split(" (")[0].split()[-1]
                 print(f"live {label} on {live.port}", flush=True)
@@ -175,6 +175,13 @@ def _live(args) -> int:
     print(_summary(renderer, receiver, mav, loop) + (f"; {outputs.summary()}" if outputs is not None else ""),
           flush=True)
     return 0
+
+
+def _sensor_name(sonar) -> str:
+    """The banner's name of a frame sensor: its kind, then its XML id unless that only repeats the
+    kind (harbour.xml's multibeam has the id ``multibeam``) or is empty."""
+    kind, name = sonar.sonar_kind.name, sonar.id()
+    return kind if not name or name.lower() == kind.lower() else f"{kind} {name}"
 
 
 def _outputs(args):
@@ -293,7 +300,7 @@ def add_subcommands(subparsers) -> None:
                     "Each ping's paths, estimated relative error (measured on the scene at start at 16 to "
                     "4096 paths, interpolated) and latency (pose time to last byte written, or frame published) are "
                     "recorded (--records). Prints 'poses on URL' and 'live HEAD on PORT' (or 'live "
-                    "multibeam ID at RATE Hz'), serves until --seconds or SIGINT/SIGTERM, then a "
+                    "multibeam ID at RATE Hz', the sensor's id left out when it is 'multibeam'), serves until --seconds or SIGINT/SIGTERM, then a "
                     "summary line (also on SIGUSR1): latency, paths and error p50/p95/p99. --foxglove, "
                     "--mcap and --dds send each ping (or frame) also to Foxglove, an MCAP file and ROS 2 "
                     "over DDS.")
