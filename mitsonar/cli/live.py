@@ -300,7 +300,8 @@ def add_subcommands(subparsers) -> None:
                     "Each ping's paths, estimated relative error (measured on the scene at start at 16 to "
                     "4096 paths, interpolated) and latency (pose time to last byte written, or frame published) are "
                     "recorded (--records). Prints 'poses on URL' and 'live HEAD on PORT' (or 'live "
-                    "multibeam ID at RATE Hz', the sensor's id left out when it is 'multibeam'), serves until --seconds or SIGINT/SIGTERM, then a "
+                    "multibeam ID at RATE Hz', the sensor's id left out when it only repeats the kind), "
+                    "serves until --seconds or SIGINT/SIGTERM, then a "
                     "summary line (also on SIGUSR1): latency, paths and error p50/p95/p99. --foxglove, "
                     "--mcap and --dds send each ping (or frame) also to Foxglove, an MCAP file and ROS 2 "
                     "over DDS.")
