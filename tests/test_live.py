@@ -60,11 +60,12 @@ def test_a_good_datagram_is_taken_and_its_quaternion_normalised():
     (b'{"position": [1e400, 0, 0], "orientation": [0, 0, 0, 1]}', "not finite"),
     (dgram(position=[0, 0, 0], orientation=[0, 0, 0, 1.01]), "bad quaternion"),
     (dgram(position=[0, 0, 0], orientation=[0, 0, 0, 0]), "bad quaternion"),
+    (dgram(position=[0, 0, 0], orientation=[1e200, 0, 0, 1]), "bad quaternion"),
     (b"{" + b" " * MAX_DATAGRAM + b"}", "too large"),
     (b"[" * 100000, "too large"),
 ])
 def test_bad_datagrams_are_refused_with_their_reason(data, reason):
-    with pytest.raises(DatagramError) as e:
+    with pytest.raises(DatagramError) as e, np.errstate(all="raise"):     # and no numpy warning
         parse_datagram(data)
     assert e.value.reason == reason
 
