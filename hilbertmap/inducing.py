@@ -148,9 +148,12 @@ def kmeans(pts: np.ndarray, k: int, rng: np.random.Generator, n_iter: int = 10) 
     """Lloyd's algorithm from a random subset; empty clusters re-seeded at random points."""
     from scipy.spatial import cKDTree
 
+    from ._threads import interruptible
+
     centres = pts[rng.choice(len(pts), k, replace=False)].copy()
     for _ in range(n_iter):
-        _, lab = cKDTree(centres).query(pts, workers=-1)
+        # its threads joined in a worker: a Ctrl-C must not unwind the query under them
+        _, lab = interruptible(cKDTree(centres).query, pts, workers=-1)
         cnt = np.bincount(lab, minlength=k).astype(np.float64)
         sums = np.zeros((k, 3))
         for a in range(3):

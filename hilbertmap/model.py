@@ -27,6 +27,7 @@ import numpy as np
 
 from . import persistence, sgd, surfaces
 from ._backend import KernelGrid
+from ._threads import interruptible
 from ._checks import as_points, check_params
 from .embedding import Samples, embed_scan, sampling_for
 from .inducing import Coverage, choose_inducing, spacing
@@ -254,44 +255,72 @@ class HilbertMap:
         check_scan(scan, self.source)
         return embed_with(self, scan, rng)
 
-    def embed_all(self, scans, rng: np.random.Generator | None = None) -> Samples:
-        """The samples of one :class:`~hilbertmap.scanlike.ScanLike` scan or a list of them, concatenated."""
+    def embed_all(self, scans, rng: np.random.Generator | None = None, *, progress=None) -> Samples:
+        """The samples of one :class:`~hilbertmap.scanlike.ScanLike` scan or a list of them, concatenated
+        (``progress("embedding", done, total)`` after each scan, as :meth:`fit`'s)."""
         scans = as_scan_list(scans, self.source)
         rng = rng if rng is not None else np.random.default_rng(self.random_state)
-        return Samples.concatenate([self.embed(s, rng) for s in scans])
+        parts = []
+        for k, scan in enumerate(scans):
+            parts.append(self.embed(scan, rng))
+            _report(progress, "embedding", k + 1, len(scans))
+        return Samples.concatenate(parts)
 
     # -- training ----------------------------------------------------------------------------
-    def fit(self, scans, samples: Samples | None = None) -> "HilbertMap":
+    def fit(self, scans, samples: Samples | None = None, *, progress=None) -> "HilbertMap":
         """Learn the map from scratch from a list of scans (or one scan).
 
         ``samples`` (from :meth:`embed_all`) skips the embedding. ``timings_`` records the
         seconds spent embedding, building the features (inducing points, Gram matrix and its
         eigen-decomposition, step-size estimate) and in SGD.
+
+        ``progress``: called as ``progress(stage, done, total)`` as the fit goes: ``"embedding"``
+        after each scan, ``"features"`` (0 of 1, then 1 of 1 once the Gram matrix is decomposed),
+        ``"sgd"`` after each mini-batch of all ``n_passes`` passes, and ``"sgd multi-echo"`` for
+        the refit of ``multi_echo``. A KeyboardInterrupt (Ctrl-C) acts between batches, and during
+        the eigen-decomposition at once (:func:`hilbertmap._threads.interruptible`); the
+        estimator is then partly trained: fit it again before use.
         """
         t_start = time.perf_counter()
         check_params(self)
         self._rng = np.random.default_rng(self.random_state)
         if samples is None:
-            samples = self.embed_all(scans, self._rng)
+            samples = self.embed_all(scans, self._rng, progress=progress)
         samples = self._thin(samples)
         t_embed = time.perf_counter()
         if len(samples.free) + len(samples.occupied) == 0:
             raise ValueError("HilbertMap: the scans gave no samples (no pings, or all bins blanked)")
         self._check_n_inducing(samples, "these scans")
+        _report(progress, "features", 0, 1)
         self._initialise(samples)
+        _report(progress, "features", 1, 1)
         self._set_weights(samples)
         self.n_schedule_ = len(samples.free) + len(samples.occupied)
         self.eta0_ = sgd.initial_step(self, samples)
         t_init = time.perf_counter()
         self.loss_curve_ = []
-        for _ in range(int(self.n_passes)):
-            self.loss_curve_.append(self._sgd_pass(samples))
+        self._passes(samples, "sgd", progress)
         if self.multi_echo and len(samples.between_points()):
-            self._refit_multi_echo(samples)
+            self._refit_multi_echo(samples, progress)
         t_end = time.perf_counter()
         self.timings_ = dict(embed_s=t_embed - t_start, features_s=t_init - t_embed, sgd_s=t_end - t_init,
                              total_s=t_end - t_start)
         return self
+
+    def _passes(self, samples: Samples, stage: str, progress=None) -> None:
+        """``n_passes`` SGD passes over ``samples``, their losses added to ``loss_curve_``, the
+        batches reported as ``stage``."""
+        total = int(self.n_passes) * sgd.n_batches(self, samples)
+        done = 0
+
+        def step():
+            nonlocal done
+            done += 1
+            _report(progress, stage, done, total)
+
+        _report(progress, stage, 0, total)
+        for _ in range(int(self.n_passes)):
+            self.loss_curve_.append(self._sgd_pass(samples, step if progress is not None else None))
 
     def partial_fit(self, scan: ScanLike, samples: Samples | None = None) -> "HilbertMap":
         """Online update with one scan (``partial_passes`` passes over its samples).
@@ -330,7 +359,7 @@ class HilbertMap:
             self.loss_curve_.append(self._sgd_pass(samples))
         return self
 
-    def _refit_multi_echo(self, samples: Samples) -> None:
+    def _refit_multi_echo(self, samples: Samples, progress=None) -> None:
         """Label free the multi-echo candidates the first map shows reached (kept with probability
         their visibility, :mod:`hilbertmap.multiecho`), thin them on the per-voxel budget and learn
         the weights again, from zero, on both kinds of free space (same inducing points)."""
@@ -360,8 +389,7 @@ class HilbertMap:
         self.t_ = 0.0
         self.n_schedule_ = len(merged.free) + len(merged.occupied)
         self.eta0_ = sgd.initial_step(self, merged)
-        for _ in range(int(self.n_passes)):
-            self.loss_curve_.append(self._sgd_pass(merged))
+        self._passes(merged, "sgd multi-echo", progress)
 
     def _check_n_inducing(self, samples: Samples, source: str) -> None:
         # More inducing points than samples leaves the kernel no data to span (the length-scale
@@ -376,9 +404,9 @@ class HilbertMap:
         """Cap the free samples and occupied groups per voxel (:func:`hilbertmap.sgd.thin`)."""
         return sgd.thin(self, samples)
 
-    def _sgd_pass(self, samples: Samples) -> float:
+    def _sgd_pass(self, samples: Samples, step=None) -> float:
         """One pass of mini-batch SGD (:func:`hilbertmap.sgd.sgd_pass`); the mean weighted loss."""
-        return sgd.sgd_pass(self, samples)
+        return sgd.sgd_pass(self, samples, step)
 
     def _set_weights(self, samples: Samples) -> None:
         F, G = len(samples.free), len(samples.occupied)
@@ -432,7 +460,7 @@ class HilbertMap:
     def _build_features(self) -> None:
         """``M = Lambda^(-1/2) Q^T`` from the eigen-decomposition of the Gram matrix (rank cut)."""
         G = self._grid.gram()
-        lam, Q = np.linalg.eigh(G)
+        lam, Q = interruptible(np.linalg.eigh, G)  # Ctrl-C acts at once
         keep = lam > self.eig_floor * lam[-1]
         lam, Q = lam[keep], Q[:, keep]
         self.n_components_ = int(keep.sum())
@@ -582,6 +610,11 @@ class HilbertMap:
         """Read a map written by :meth:`save`. A file that is not one, or whose arrays do not agree
         with each other, is refused with a ValueError naming the file and what is wrong."""
         return persistence.load(cls, path)
+
+
+def _report(progress, stage: str, done: int, total: int) -> None:
+    if progress is not None:
+        progress(stage, done, total)
 
 
 def _unique_rows(a: np.ndarray) -> np.ndarray:

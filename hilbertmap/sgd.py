@@ -102,8 +102,17 @@ def initial_step(hm, samples: Samples, lanes: int = 8192, iters: int = 12) -> fl
     return 1.0 / L
 
 
-def sgd_pass(hm, samples: Samples) -> float:
+def n_batches(hm, samples: Samples) -> int:
+    """The mini-batches of one pass over ``samples`` (``batch_size`` lanes each, an occupied
+    group's points being lanes)."""
+    F, G = len(samples.free), len(samples.occupied)
+    m = samples.occupied.shape[1] if G else 1
+    return max(1, int(math.ceil((F + G * m) / max(int(hm.batch_size), 1))))
+
+
+def sgd_pass(hm, samples: Samples, step=None) -> float:
     """One shuffled pass of mini-batch SGD over ``samples``; returns the mean weighted loss seen.
+    ``step``: called after each mini-batch (``n_batches`` in all; progress).
 
     The two n x n products of a step run on one BLAS thread when ``threadpoolctl`` is
     installed: idle BLAS threads spin and slow the Dr.Jit kernels that follow.
@@ -111,19 +120,18 @@ def sgd_pass(hm, samples: Samples) -> float:
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:
-        return _sgd_pass(hm, samples)
+        return _sgd_pass(hm, samples, step)
     with threadpool_limits(limits=1, user_api="blas"):
-        return _sgd_pass(hm, samples)
+        return _sgd_pass(hm, samples, step)
 
 
-def _sgd_pass(hm, samples: Samples) -> float:
+def _sgd_pass(hm, samples: Samples, step=None) -> float:
     import drjit as dr
 
     grid = hm._grid
     F, G = len(samples.free), len(samples.occupied)
     m = samples.occupied.shape[1] if G else 1
-    lanes_total = F + G * m
-    nb = max(1, int(math.ceil(lanes_total / max(int(hm.batch_size), 1))))
+    nb = n_batches(hm, samples)
     pf = np.array_split(hm._rng.permutation(F), nb)
     pg = np.array_split(hm._rng.permutation(G), nb)
     free = samples.free
@@ -145,6 +153,8 @@ def _sgd_pass(hm, samples: Samples) -> float:
         i_g = i_g[np.argsort(occ_centre_keys[i_g], kind="stable")]
         bf, bg = len(i_f), len(i_g)
         if bf + bg == 0:
+            if step is not None:
+                step()
             continue
         pts = np.concatenate([free[i_f], occ[i_g].reshape(-1, 3)])
         x, y, z = grid.to_lanes(pts)
@@ -191,4 +201,6 @@ def _sgd_pass(hm, samples: Samples) -> float:
             hm.intercept_ -= min(eta, 2.0) * float(g_item.sum())
         hm.t_ += bf + bg
         hm.n_samples_seen_ += bf + bg
+        if step is not None:
+            step()
     return loss_sum / max(wsum_all, 1e-300)

@@ -199,7 +199,7 @@ def test_map_writes_all_outputs_or_none(scan_files, tmp_path, monkeypatch, capsy
 
     out = [str(tmp_path / n) for n in ("m.npz", "m.ply", "s.png")]
     args = _map_args(scan_files[0], "-o", out[0], "--mesh", out[1], "--plot", out[2], "--inducing", "100",
-                     "--passes", "1", "--resolution", "0.3")
+                     "--passes", "1", "--resolution", "0.3", "-q")      # -q: no progress bars on stderr
 
     def full_disk(*a, **k):
         raise OSError(28, "No space left on device")
@@ -225,3 +225,105 @@ def test_map_output_check_reports_an_unwritable_folder(tmp_path, monkeypatch):
     monkeypatch.setattr(map_cli.os, "access", lambda path, mode: False)
     assert map_cli._output_problem("--plot", str(tmp_path / "q.png")) == \
         f"--plot {tmp_path / 'q.png'}: cannot write in the folder {tmp_path} (permission denied)"
+
+
+# ----------------------------------------------------------------------------- progress, Ctrl-C
+
+def test_map_reports_its_progress_on_stderr_and_nothing_with_quiet(scan_files, tmp_path):
+    """Issue 56: a fit of 15-170 s printed nothing. Each stage that takes over half a second has its
+    bar (tqdm, on stderr): here the SGD's, counting the mini-batches of its 8 passes."""
+    import re
+
+    proc = run("map", *scan_files, "-o", str(tmp_path / "m.npz"), "--inducing", "300", "--passes", "8")
+    assert proc.returncode == 0, proc.stderr
+    counts = [(int(a), int(b)) for a, b in re.findall(r"map: SGD: +\d+%\|[^|]*\| *(\d+)/(\d+) \[", proc.stderr)]
+    assert counts and counts[0][1] % 8 == 0 and all(b == counts[0][1] for _, b in counts), proc.stderr
+    assert counts[-1][0] > counts[0][0] and "batch/s" in proc.stderr, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert proc.stdout.startswith("map: 3 scan(s)")
+    proc = run("map", *scan_files, "-o", str(tmp_path / "m.npz"), "--inducing", "300", "--passes", "8", "-q",
+               "--force")
+    assert proc.returncode == 0 and proc.stderr == "" and proc.stdout == "", proc.stderr
+
+
+def test_a_sigint_mid_fit_ends_map_with_130_and_writes_nothing(scan_files, tmp_path):
+    """Ctrl-C during the SGD (1000 passes: the fit would run for minutes) ends the command with
+    exit code 130 before the fit is done, no output left behind."""
+    import re
+    import signal
+    import threading
+
+    out = tmp_path / "m.npz"
+    env = dict(os.environ)
+    env.pop("MITSONAR_DEBUG", None)
+    proc = subprocess.Popen([sys.executable, "-m", "mitsonar.cli", "map", *scan_files, "-o", str(out), "--inducing",
+                             "300", "--passes", "1000", "--plot", str(tmp_path / "s.png")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT, env=env)
+    err = bytearray()
+    in_sgd = threading.Event()
+
+    def read():
+        while chunk := os.read(proc.stderr.fileno(), 4096):
+            err.extend(chunk)
+            if any(int(n) > 0 for n in re.findall(rb"\| *(\d+)/\d+", err.split(b"map: SGD")[-1])) \
+                    and b"map: SGD" in err:
+                in_sgd.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    try:
+        assert in_sgd.wait(300), bytes(err)        # a bound against hanging only
+        proc.send_signal(signal.SIGINT)
+        stdout, _ = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    reader.join(10)
+    text = err.decode(errors="replace")
+    assert proc.returncode == 130, text
+    assert text.rstrip().endswith("mitsonar: interrupted") and "Traceback" not in text
+    done, total = (int(x) for x in text.split("map: SGD")[-1].split("|")[2].split()[0].split("/"))
+    assert 0 < done < total == 1000 * (total // 1000)       # stopped inside the passes
+    assert stdout == b"" and os.listdir(tmp_path) == []
+
+
+def test_ctrl_c_during_the_eigen_decomposition_acts_before_it_returns(monkeypatch):
+    """The Gram matrix's eigen-decomposition is one LAPACK call (seconds to minutes): a Ctrl-C in the
+    thread that made it acted only when it returned. It runs in a worker now, and the interrupt
+    acts while it still runs. Here the call is held until released, SIGINT blocked in its thread
+    as in native code that runs no Python handler."""
+    import signal
+    import threading
+
+    from hilbertmap import HilbertMap
+    from hilbertmap.testing import box_scan, orthogonal_frames
+
+    scan = box_scan(orthogonal_frames()[0], n_pings=20, bearing_step=18.0, seed=0, rays=50)
+    started, release, caught = threading.Event(), threading.Event(), threading.Event()
+    real = np.linalg.eigh
+
+    def held_eigh(G):
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            started.set()
+            release.wait(120)
+            return real(G)
+        finally:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+    def interrupt():
+        started.wait(120)
+        os.kill(os.getpid(), signal.SIGINT)
+        caught.wait(60)         # a bound only: the old code waited here for the call to return
+        release.set()
+
+    monkeypatch.setattr(np.linalg, "eigh", held_eigh)
+    threading.Thread(target=interrupt, daemon=True).start()
+    released_first = None
+    try:
+        HilbertMap(n_inducing=40, n_passes=1, random_state=0).fit([scan])
+    except KeyboardInterrupt:
+        released_first = release.is_set()
+        caught.set()
+    assert released_first is False         # interrupted while the call was still held

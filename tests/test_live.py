@@ -12,6 +12,7 @@ import signal
 import socket
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -59,11 +60,12 @@ def test_a_good_datagram_is_taken_and_its_quaternion_normalised():
     (b'{"position": [1e400, 0, 0], "orientation": [0, 0, 0, 1]}', "not finite"),
     (dgram(position=[0, 0, 0], orientation=[0, 0, 0, 1.01]), "bad quaternion"),
     (dgram(position=[0, 0, 0], orientation=[0, 0, 0, 0]), "bad quaternion"),
+    (dgram(position=[0, 0, 0], orientation=[1e200, 0, 0, 1]), "bad quaternion"),
     (b"{" + b" " * MAX_DATAGRAM + b"}", "too large"),
     (b"[" * 100000, "too large"),
 ])
 def test_bad_datagrams_are_refused_with_their_reason(data, reason):
-    with pytest.raises(DatagramError) as e:
+    with pytest.raises(DatagramError) as e, np.errstate(all="raise"):     # and no numpy warning
         parse_datagram(data)
     assert e.value.reason == reason
 
@@ -372,9 +374,10 @@ def test_mavlink_messages_encoded_by_pymavlink_become_poses():
                 enc.attitude_quaternion_encode(1000, math.cos(h), 0.0, 0.0, math.sin(h), 0, 0, 0),
                 enc.attitude_quaternion_encode(1100, float("nan"), 0.0, 0.0, 1.0, 0, 0, 0)]
         wires = [_encoded(enc, m) for m in msgs]
-        got = [rx.handle(dec.decode(bytearray(w)), 50.0) for w in wires]
-        assert got == [False, True, False] and rx.stats["bad messages"] == 1
-        pose = buf.at(50.0)
+        now = time.monotonic()      # the arrivals on our clock: the socket's below arrive on it too
+        got = [rx.handle(dec.decode(bytearray(w)), now) for w in wires]
+        assert got == [False, True, False] and rx.stats["dropped"] == 1 and rx.drops.counts == {"not finite": 1}
+        pose = buf.at(now)
         np.testing.assert_allclose(pose[:3, 3], [-1.0, 4.0, -2.5])
         np.testing.assert_allclose(pose[:3, :3] @ [1, 0, 0], [1, 0, 0], atol=1e-6)
         # and through the socket, read by the receiver's thread
@@ -429,8 +432,6 @@ def test_stale_ping360_requests_are_coalesced_to_the_newest(box):
 
 
 def test_drops_are_reported_at_most_every_two_seconds_and_a_silent_stream_is_said_once():
-    import time
-
     from mitsonar.devices.live import PoseReceiver
 
     out = io.StringIO()
@@ -455,3 +456,149 @@ def test_drops_are_reported_at_most_every_two_seconds_and_a_silent_stream_is_sai
         assert out.getvalue().count("holding the last one") == 2
     finally:
         rx.sock.close()
+
+
+# ---------------------------------------------------------------- poses that would poison a session
+
+def _wait_for(cond, what):
+    for _ in range(400):
+        if cond():
+            return
+        threading_event_wait(0.025)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+@pytest.mark.parametrize("wild_t", [1e300, -1e300, 10.0 + 3600.0, 10.0 - 3600.0])
+def test_a_wild_time_stamp_over_udp_is_dropped_and_the_good_poses_after_it_are_applied(box, wild_t):
+    """Issue 56: a stamp of 1e300 set the clock offset, and every correctly stamped pose after it
+    was ignored for the rest of the session (0 dropped). Now it is refused, counted by reason, and
+    the offset does not move; the next good pose moves the echo."""
+    import warnings
+
+    from mitsonar.cli.live import _summary
+    from mitsonar.devices.live import PoseReceiver, pose_socket
+
+    box.poses = PoseBuffer()
+    rx = PoseReceiver(pose_socket("udp://127.0.0.1:0"), box.poses, out=io.StringIO()).start()
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    port = int(rx.url.rsplit(":", 1)[1])
+    try:
+        with warnings.catch_warnings(), np.errstate(all="raise"):
+            warnings.simplefilter("error")
+            tx.sendto(dgram(t=10.0, position=[0, 0, 0], orientation=yaw_q(0)), ("127.0.0.1", port))
+            _wait_for(lambda: rx.stats["poses"] == 1, "the first pose")
+            offset = box.poses.offset
+            tx.sendto(dgram(t=wild_t, position=[0.5, 0, 0], orientation=yaw_q(0)), ("127.0.0.1", port))
+            _wait_for(lambda: rx.stats["poses"] + rx.stats["dropped"] == 2, "the wild pose")
+            assert rx.stats["dropped"] == 1 and rx.drops.counts == {"implausible time": 1}
+            assert box.poses.offset == offset and len(box.poses) == 1
+            tx.sendto(dgram(t=10.5, position=[1.5, 0, 0], orientation=yaw_q(0)), ("127.0.0.1", port))
+            _wait_for(lambda: rx.stats["poses"] == 2, "the next good pose")
+            assert abs(peak_range(box.render(0.0)) - 3.5) <= 12.0 / 500     # wall x = 5 from x = 1.5
+        assert "2 poses applied, 1 datagrams dropped (1 implausible time)" in _summary(box, rx, None)
+        assert "'t'" in rx.out.getvalue() and "off the sender's clock" in rx.out.getvalue()
+    finally:
+        tx.close()
+        rx.stop()
+
+
+def test_a_position_beyond_the_scene_is_dropped_and_pings_stay_finite(box):
+    """Issue 56: a position of 1e308 was taken and zeroed every ping with numpy overflow warnings.
+    Now positions outside the scene's box enlarged by BOUNDS_MARGIN are refused."""
+    import warnings
+
+    from mitsonar.devices.live import PoseReceiver
+
+    box.poses = PoseBuffer()            # without a scene's bounds: |x|, |y|, |z| <= MAX_COORDINATE
+    rx = PoseReceiver(socket.socket(socket.AF_INET, socket.SOCK_DGRAM), box.poses, out=io.StringIO())
+    try:
+        with warnings.catch_warnings(), np.errstate(all="raise"):
+            warnings.simplefilter("error")
+            assert not rx.handle(dgram(t=0.0, position=[1e308, 1e308, 1e308], orientation=yaw_q(0)), 100.0)
+            assert len(box.poses) == 0 and rx.drops.counts == {"out of bounds": 1}
+            assert rx.handle(dgram(t=0.5, position=[1.5, 0, 0], orientation=yaw_q(0)), 100.5)
+            scan = box.render(0.0, now=100.5)
+            assert np.all(np.isfinite(scan.intensity)) and abs(peak_range(scan) - 3.5) <= 12.0 / 500
+    finally:
+        rx.sock.close()
+    # with the scene's: its box enlarged by BOUNDS_MARGIN
+    from mitsonar.devices.live import pose_bounds
+    from mitsonar.devices.poses import BOUNDS_MARGIN
+
+    lo, hi = pose_bounds(box.scene)
+    np.testing.assert_allclose(hi - lo, np.array(box.scene.bbox().extents()) + 2 * BOUNDS_MARGIN, rtol=1e-6)
+    box.poses = PoseBuffer(bounds=(lo, hi))
+    rx = PoseReceiver(socket.socket(socket.AF_INET, socket.SOCK_DGRAM), box.poses, out=io.StringIO())
+    try:
+        with warnings.catch_warnings(), np.errstate(all="raise"):
+            warnings.simplefilter("error")
+            for k, position in enumerate([[1e308, 1e308, 1e308], [hi[0] + 1.0, 0, 0], [0, lo[1] - 1.0, 0]]):
+                assert not rx.handle(dgram(t=float(k), position=position, orientation=yaw_q(0)), 100.0 + k)
+            assert len(box.poses) == 0 and rx.drops.counts == {"out of bounds": 3}
+            assert rx.handle(dgram(t=3.0, position=[hi[0] - 1.0, 0, 0], orientation=yaw_q(0)), 103.0)  # inside
+            assert rx.handle(dgram(t=4.0, position=[1.5, 0, 0], orientation=yaw_q(0)), 104.0)
+            scan = box.render(0.0, now=104.0)
+            assert np.all(np.isfinite(scan.intensity)) and abs(peak_range(scan) - 3.5) <= 12.0 / 500
+            # an object's offset is held to MAX_COORDINATE, with the same reason
+            rx.objects = lambda *a: pytest.fail("an out-of-bounds object move was applied")
+            assert not rx.handle(dgram(object="wall_xpos", position=[1e308, 0, 0], orientation=yaw_q(0)), 105.0)
+        assert rx.drops.counts == {"out of bounds": 4} and rx.stats["poses"] == 2
+    finally:
+        rx.sock.close()
+
+
+def test_a_sender_whose_clock_jumped_is_followed_after_clock_resync_poses_in_a_row():
+    """A wild first stamp (nothing to refuse it against yet), or a restarted sender (MAVLink's
+    time_boot_ms starts again at 0): CLOCK_RESYNC poses in a row that agree with each other
+    restart the clock; fewer, or ones that disagree, do not."""
+    from mitsonar.devices.poses import CLOCK_RESYNC
+
+    buf = PoseBuffer()
+    buf.add([9, 9, 0], yaw_q(0), t=1e300, arrival=5.0)         # the first stamp: taken
+    for k in range(CLOCK_RESYNC - 1):
+        with pytest.raises(DatagramError) as e:
+            buf.add([k, 0, 0], yaw_q(0), t=100.0 + 0.1 * k, arrival=5.0 + 0.1 * k)
+        assert e.value.reason == "implausible time"
+        np.testing.assert_allclose(buf.at(6.0)[:3, 3], [9, 9, 0])
+    buf.add([7, 0, 0], yaw_q(0), t=100.0 + 0.1 * CLOCK_RESYNC, arrival=5.0 + 0.1 * CLOCK_RESYNC)
+    assert buf.resyncs == 1 and len(buf) == 1
+    assert buf.offset == pytest.approx(5.0 - 100.0)
+    np.testing.assert_allclose(buf.at(6.0)[:3, 3], [7, 0, 0])
+    # wild stamps that disagree with each other never restart it
+    for k in range(3 * CLOCK_RESYNC):
+        with pytest.raises(DatagramError):
+            buf.add([0, 0, 0], yaw_q(0), t=(-1) ** k * 1e6 * (k + 1), arrival=6.0)
+    assert buf.resyncs == 1 and len(buf) == 1
+
+
+def test_mavlink_poses_off_the_clock_or_the_bounds_are_dropped_with_their_reason():
+    common = _mav()
+    from mitsonar.cli.live import _summary
+    from mitsonar.devices.mavlink import MavlinkReceiver
+
+    buf = PoseBuffer()
+    rx = MavlinkReceiver("udpin:127.0.0.1:0", buf, out=io.StringIO())
+    try:
+        enc = common.MAVLink(None, srcSystem=1, srcComponent=1)
+        dec = common.MAVLink(None)
+        msgs = [enc.attitude_quaternion_encode(1000, 1.0, 0.0, 0.0, 0.0, 0, 0, 0),
+                enc.local_position_ned_encode(1000, 4.0, -1.0, 2.5, 0, 0, 0),            # a pose
+                enc.local_position_ned_encode(4_000_000_000, 5.0, -1.0, 2.5, 0, 0, 0),   # 46 days on
+                enc.local_position_ned_encode(1100, 1e6, -1.0, 2.5, 0, 0, 0),            # 1000 km north
+                enc.local_position_ned_encode(1200, 6.0, -1.0, 2.5, 0, 0, 0)]            # a pose
+        got = [rx.handle(dec.decode(bytearray(_encoded(enc, m))), 50.0 + 0.1 * k) for k, m in enumerate(msgs)]
+        assert got == [False, True, False, False, True]
+        assert rx.drops.counts == {"implausible time": 1, "out of bounds": 1} and rx.stats["poses"] == 2
+        np.testing.assert_allclose(buf.at(1e9)[:3, 3], [-1.0, 6.0, -2.5])
+        assert "2 MAVLink poses, 2 dropped (1 implausible time, 1 out of bounds)" in _summary(
+            PingLogless(), None, rx)
+        assert "dropped a MAVLink message" in rx.out.getvalue()
+    finally:
+        rx.stop()
+
+
+class PingLogless:
+    """A renderer's summary, for `_summary` without a scene."""
+
+    def summary(self):
+        return "0 pings rendered"

@@ -509,3 +509,19 @@ def test_two_threads_sharing_a_renderer_render_distinct_pings_and_read_their_own
     assert sorted(rec["ping"] for rec in seen.values()) == [0, 1]
     assert all(rec["bearing"] == b for b, rec in seen.items())
     assert r.stats["pings"] == 2
+
+
+def test_the_live_banner_names_a_multibeam_once_when_its_id_is_its_kind(tmp_path):
+    """Issue 56: harbour.xml's multibeam (id "multibeam") was announced as "live multibeam
+    multibeam"; the id is said only when it adds something (box_fls's "sonar" still is)."""
+    with open(BOX_FLS, encoding="utf-8") as fh:
+        xml = fh.read()
+    assert '<sensor type="sonar" id="sonar">' in xml
+    scene = tmp_path / "fls_multibeam.xml"
+    scene.write_text(xml.replace('<sensor type="sonar" id="sonar">', '<sensor type="sonar" id="multibeam">'),
+                     encoding="utf-8")
+    proc, text = live_process(str(scene), "--ping-rate", "5", "--spp", "16", "--seconds", "0.2")
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 0, err
+    banner = [line for line in text.splitlines() if line.startswith("live ")]
+    assert banner == ["live multibeam at 5 Hz"], (text, err)

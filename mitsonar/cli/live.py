@@ -52,7 +52,8 @@ def _live(args) -> int:
         from mitsonar.devices import registry
         args.head = registry.DEFAULT
     head = _head(args) if args.head is not None else None
-    from mitsonar.devices.live import LIVE_HEADS, PingRenderer, PoseReceiver, SceneObjects, live_scene, pose_socket
+    from mitsonar.devices.live import (LIVE_HEADS, PingRenderer, PoseReceiver, SceneObjects, live_scene, pose_bounds,
+                                       pose_socket)
     from mitsonar.devices.poses import PoseBuffer, TrajectoryReplay
     from mitsonar.devices.realtime import PingLog, check_records_path
     if head is not None and head.name not in LIVE_HEADS:
@@ -101,7 +102,7 @@ def _live(args) -> int:
                                  f"has no {head.serves} to serve")
         elif not frames:
             require_mechanical(sonar, f"live {scene_path.name}", f"no {head.serves} to serve")
-        buffer = PoseBuffer() if (sock is not None or args.mavlink) else None
+        buffer = PoseBuffer(bounds=pose_bounds(scene)) if (sock is not None or args.mavlink) else None
         log = PingLog(args.records) if args.records else PingLog()
         budget = None if args.budget_ms is None else args.budget_ms * 1e-3
         renderer = PingRenderer(scene, sonar, buffer, spp=args.spp, seed=args.seed, budget=budget, log=log,
@@ -162,7 +163,7 @@ def _live(args) -> int:
             for o in (outputs.outputs if outputs is not None else ()):
                 print(_said(o), flush=True)
             if loop is not None:
-                print(f"live multibeam {sonar.id() or 'sonar'} at {loop.rate:g} Hz", flush=True)
+                print(f"live {_sensor_name(sonar)} at {loop.rate:g} Hz", flush=True)
             else:
                 label = head.description.split(" (")[0].split()[-1]
                 print(f"live {label} on {live.port}", flush=True)
@@ -182,6 +183,13 @@ def _live(args) -> int:
     print(_summary(renderer, receiver, mav, loop) + (f"; {outputs.summary()}" if outputs is not None else ""),
           flush=True)
     return 0
+
+
+def _sensor_name(sonar) -> str:
+    """The banner's name of a frame sensor: its kind, then its XML id unless that only repeats the
+    kind (harbour.xml's multibeam has the id ``multibeam``) or is empty."""
+    kind, name = sonar.sonar_kind.name, sonar.id()
+    return kind if not name or name.lower() == kind.lower() else f"{kind} {name}"
 
 
 def _outputs(args):
@@ -265,12 +273,17 @@ def _summary(renderer, receiver, mav, loop=None) -> str:
         line += f"; {loop.stats['frames']} frames published of {loop.due} due"
     if receiver is not None:
         st = receiver.stats
-        reasons = ", ".join(f"{n} {r}" for r, n in sorted(receiver.drops.counts.items()))
         moved = f", {st['objects']} object moves" if st["objects"] else ""
-        line += f"; {st['poses']} poses applied{moved}, {st['dropped']} datagrams dropped" + (f" ({reasons})" if reasons else "")
+        line += f"; {st['poses']} poses applied{moved}, {st['dropped']} datagrams dropped" + _reasons(receiver)
     if mav is not None:
-        line += f"; {mav.stats['poses']} MAVLink poses"
+        line += f"; {mav.stats['poses']} MAVLink poses, {mav.stats['dropped']} dropped" + _reasons(mav)
     return line
+
+
+def _reasons(source) -> str:
+    """`` (N reason, ...)`` of a pose source's drops, empty without any."""
+    reasons = ", ".join(f"{n} {r}" for r, n in sorted(source.drops.counts.items()))
+    return f" ({reasons})" if reasons else ""
 
 
 def cmd_live(args) -> int:
@@ -296,7 +309,8 @@ def add_subcommands(subparsers) -> None:
                     "Each ping's paths, estimated relative error (measured on the scene at start at 16 to "
                     "4096 paths, interpolated) and latency (pose time to last byte written, or frame published) are "
                     "recorded (--records). Prints 'poses on URL' and 'live HEAD on PORT' (or 'live "
-                    "multibeam ID at RATE Hz'), serves until --seconds or SIGINT/SIGTERM, then a "
+                    "multibeam ID at RATE Hz', the sensor's id left out when it only repeats the kind), "
+                    "serves until --seconds or SIGINT/SIGTERM, then a "
                     "summary line (also on SIGUSR1): latency, paths and error p50/p95/p99. --foxglove, "
                     "--mcap and --dds send each ping (or frame) also to Foxglove, an MCAP file and ROS 2 "
                     "over DDS.")

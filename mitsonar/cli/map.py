@@ -201,6 +201,51 @@ class _Stages:
         return f"{time.perf_counter() - self.start:.1f} s ({parts})"
 
 
+class _FitProgress:
+    """The fit's progress on stderr, one tqdm bar per stage (as ``mitsonar render``'s): called as
+    ``progress(stage, done, total)`` (`hilbertmap.HilbertMap.fit`'s stages, or ``scans`` for
+    --incremental); nothing with --quiet. A bar shows once its stage has taken half a second (a
+    quick stage, or a refusal in one, needs none) and is cleared when the stage ends."""
+
+    WORDS = {"embedding": ("embedding scans", "scan"), "features": ("inducing points and kernel features", "step"),
+             "sgd": ("SGD", "batch"), "sgd multi-echo": ("SGD, multi-echo refit", "batch"),
+             "scans": ("mapping scans", "scan")}
+
+    def __init__(self, quiet: bool = False):
+        self.quiet = quiet
+        self.stage = self.bar = None
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        if self.quiet:
+            return
+        if stage != self.stage:
+            self.close()
+            from tqdm import tqdm
+
+            desc, unit = self.WORDS.get(stage, (stage, "step"))
+            self.stage = stage
+            self.bar = tqdm(total=total, desc=f"map: {desc}", unit=unit, leave=False, file=sys.stderr, delay=0.5)
+        self.bar.update(done - self.bar.n)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+        self.stage = self.bar = None
+
+
+def _leave_if_abandoned() -> None:
+    """Interrupted (Ctrl-C) while the fit's eigen-decomposition still runs in its worker thread
+    (`hilbertmap._threads`): nothing is written yet, so end the process now, exit code 130 as
+    `mitsonar.cli.main`'s, with ``os._exit``: a normal exit could wait forever in OpenBLAS's exit
+    handler for the abandoned call."""
+    from hilbertmap._threads import abandoned
+
+    if abandoned():
+        print("mitsonar: interrupted", file=sys.stderr, flush=True)
+        sys.stdout.flush()
+        os._exit(130)
+
+
 def _elevation_frame(args, scans):
     """(the `GeoFrame` the scans' metadata hold, None without; or None and the one-line reason)
     for a GeoTIFF ``--elevation``: the grid is then written in that CRS. Scans holding different
@@ -291,12 +336,16 @@ def cmd_map(args) -> int:
         if args.passes is not None:
             params["partial_passes"] = args.passes
         hm = IncrementalHilbertMap(**params)
+        progress = _FitProgress(args.quiet)
         try:
-            for path, scan in zip(args.scans, scans):
+            progress("scans", 0, len(scans))
+            for k, (path, scan) in enumerate(zip(args.scans, scans)):
                 try:
                     hm.partial_fit(scan)
                 except ValueError as exc:
                     raise ValueError(f"{path}: {exc}") from None
+                progress("scans", k + 1, len(scans))
+            progress.close()
             hm.n_schedule_ = hm.n_samples_seen_
             stages.done("fit")
             args.elevation_grid = None
@@ -306,16 +355,24 @@ def cmd_map(args) -> int:
                 args.elevation_grid = elevation_grid(hm, resolution=args.elevation_resolution)
                 stages.done("elevation")
         except ValueError as exc:
+            progress.close()
             return _fail(_map_error(exc))
     else:
         params = dict(n_inducing=args.inducing, random_state=args.seed, source=args.source)
         if args.passes is not None:
             params["n_passes"] = args.passes
         hm = HilbertMap(**params)
+        progress = _FitProgress(args.quiet)
         try:
-            hm.fit(scans)
+            hm.fit(scans, progress=progress)
         except ValueError as exc:
             return _fail(_map_error(exc))
+        except KeyboardInterrupt:
+            progress.close()
+            _leave_if_abandoned()
+            raise
+        finally:
+            progress.close()
         stages.done("fit")
     V = F = None
     note = None

@@ -39,11 +39,11 @@ from collections import Counter, deque
 
 import numpy as np
 
-from mitsonar.devices.poses import DatagramError, DropLog, PoseBuffer, PoseSource, parse_datagram
+from mitsonar.devices.poses import BOUNDS_MARGIN, DatagramError, PoseBuffer, PoseSource, parse_datagram
 from mitsonar.geometry.frames import bearing_rotation
 
-__all__ = ["live_scene", "scene_kinds", "SceneObjects", "PingRenderer", "LiveMicron", "LivePing360", "LiveOculus",
-           "LIVE_HEADS", "PoseReceiver",
+__all__ = ["live_scene", "scene_kinds", "pose_bounds", "SceneObjects", "PingRenderer", "LiveMicron", "LivePing360",
+           "LiveOculus", "LIVE_HEADS", "PoseReceiver",
            "pose_socket"]
 
 _SEED_MAX = 2**31 - 1
@@ -105,6 +105,17 @@ def scene_kinds(path: str) -> list:
     except (OSError, ET.ParseError) as e:
         raise SceneError(f"{path}: cannot read the scene XML ({e})") from None
     return [_xml_kind(s) for s in root.iter("sensor") if s.get("type") == "sonar"]
+
+
+def pose_bounds(scene, margin: float = BOUNDS_MARGIN):
+    """``(lo, hi)``: the box a vehicle's position must lie in (`mitsonar.devices.poses.PoseBuffer`),
+    the scene's bounding box enlarged by ``margin`` metres on every side; None for a scene
+    without a finite bounding box (the buffer's default bound then holds)."""
+    bbox = scene.bbox()
+    lo, hi = np.array(bbox.min, np.float64), np.array(bbox.max, np.float64)
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)):
+        return None
+    return lo - margin, hi + margin
 
 
 class SceneObjects:
@@ -522,13 +533,10 @@ class PoseReceiver(PoseSource):
     """
 
     def __init__(self, sock, buffer: PoseBuffer, *, objects=None, out=None, stale_after: float = 2.0):
-        self.sock, self.buffer, self.objects = sock, buffer, objects
-        self.out = sys.stderr if out is None else out
-        self.drops = DropLog(self.out)
-        self.stats: Counter = Counter()
+        self.sock, self.objects = sock, objects
         self.stale_after = float(stale_after)
         self._stale_said = False
-        super().__init__("PoseReceiver")
+        super().__init__("PoseReceiver", buffer, out)
 
     @property
     def url(self) -> str:
@@ -566,7 +574,8 @@ class PoseReceiver(PoseSource):
             if d["object"] is not None:
                 if self.objects is None:
                     raise DatagramError("unknown field", "'object' datagrams are not supported here")
-                from mitsonar.devices.poses import pose_matrix
+                from mitsonar.devices.poses import check_pose, pose_matrix
+                check_pose(d["position"], d["orientation"])     # an offset: held to MAX_COORDINATE
                 try:
                     self.objects(d["object"], pose_matrix(d["position"], d["orientation"]))
                 except (KeyError, ValueError) as e:
@@ -574,11 +583,10 @@ class PoseReceiver(PoseSource):
                 self.stats["objects"] += 1
                 return True
         except DatagramError as e:
-            self.stats["dropped"] += 1
-            self.drops.drop(e, arrival)
+            self.drop(e, arrival)
             return False
-        self.buffer.add(d["position"], d["orientation"], d["t"], arrival)
-        self.stats["poses"] += 1
+        if not self.add(d["position"], d["orientation"], d["t"], arrival):
+            return False
         self._stale_said = False
         return True
 

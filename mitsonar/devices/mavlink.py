@@ -5,7 +5,10 @@ Messages: ``LOCAL_POSITION_NED`` (``x, y, z``: north, east, down of the EKF orig
 ``ATTITUDE_QUATERNION`` (``q1..q4`` = ``w, x, y, z``, the rotation from the body frame, x forward,
 y right, z down (FRD), to NED). Each one, once both have arrived, adds a pose to the
 `mitsonar.devices.poses.PoseBuffer` at ``time_boot_ms`` on the autopilot's clock (the buffer
-estimates the offset to ours), made of it and the latest of the other.
+estimates the offset to ours), made of it and the latest of the other. A message whose numbers
+are not finite (or whose quaternion is not of norm 1) is dropped and its predecessor kept; a pose
+the buffer refuses (out of its bounds, a ``time_boot_ms`` off the clock: `PoseBuffer.add`) is
+dropped too; both counted by reason (``drops.counts``) in the session's summary.
 
 Frames (`ned_to_enu`): mitsonar's world is ENU-like (z up) and its vehicle frame FLU (x forward,
 y port, z up, REP-103), so
@@ -18,13 +21,11 @@ y port, z up, REP-103), so
 """
 from __future__ import annotations
 
-import sys
 import time
-from collections import Counter
 
 import numpy as np
 
-from mitsonar.devices.poses import PoseSource
+from mitsonar.devices.poses import DatagramError, PoseSource, check_pose
 from mitsonar.geometry.trajectory import matrix_to_quat, quat_to_matrix
 
 __all__ = ["NED_TO_ENU", "FLU_TO_FRD", "ned_to_enu", "MavlinkReceiver"]
@@ -46,8 +47,11 @@ def ned_to_enu(position_ned, q_wxyz) -> tuple[np.ndarray, np.ndarray]:
 
 class MavlinkReceiver(PoseSource):
     """Reads ``url`` (a pymavlink connection string: ``udpin:127.0.0.1:14550``, a serial port,
-    ...) in a thread into ``buffer`` until `stop`. ``stats``: messages used, poses added, bad
-    messages (non-finite or zero quaternions) skipped."""
+    ...) in a thread into ``buffer`` until `stop`. ``stats``: messages used, ``poses`` added,
+    ``dropped`` (messages with non-finite numbers or a quaternion not of norm 1, poses the buffer
+    refused; ``drops.counts`` by reason)."""
+
+    what = "a MAVLink message"
 
     def __init__(self, url: str, buffer, *, out=None):
         try:
@@ -58,11 +62,9 @@ class MavlinkReceiver(PoseSource):
             self.conn = mavutil.mavlink_connection(url, source_system=255)
         except Exception as e:      # noqa: BLE001 - pymavlink raises many kinds
             raise ValueError(f"--mavlink {url}: cannot open ({e})") from None
-        self.url, self.buffer = url, buffer
-        self.out = sys.stderr if out is None else out
-        self.stats: Counter = Counter()
+        self.url = url
         self._position = self._attitude = None
-        super().__init__("MavlinkReceiver")
+        super().__init__("MavlinkReceiver", buffer, out)
 
     @property
     def address(self) -> str:
@@ -95,24 +97,20 @@ class MavlinkReceiver(PoseSource):
     def handle(self, m, arrival: float) -> bool:
         """Take one decoded message; True when it added a pose."""
         kind = m.get_type()
-        if kind == "LOCAL_POSITION_NED":
-            v = np.array([m.x, m.y, m.z], np.float64)
-            if not np.all(np.isfinite(v)):
-                self.stats["bad messages"] += 1
+        try:        # each message's numbers checked as a pose's (`check_pose`), the other part neutral
+            if kind == "LOCAL_POSITION_NED":
+                self._position, _, _ = check_pose([m.x, m.y, m.z], [0, 0, 0, 1], bounds=None,
+                                                  names=("LOCAL_POSITION_NED x, y, z", "", ""))
+            elif kind == "ATTITUDE_QUATERNION":
+                self._attitude = check_pose([0, 0, 0], [m.q1, m.q2, m.q3, m.q4], bounds=None,
+                                            names=("", "ATTITUDE_QUATERNION q1..q4", ""))[1]
+            else:
                 return False
-            self._position = v
-        elif kind == "ATTITUDE_QUATERNION":
-            q = np.array([m.q1, m.q2, m.q3, m.q4], np.float64)
-            if not (np.all(np.isfinite(q)) and abs(np.linalg.norm(q) - 1.0) <= 1e-3):
-                self.stats["bad messages"] += 1
-                return False
-            self._attitude = q
-        else:
+        except DatagramError as e:
+            self.drop(e, arrival)
             return False
         self.stats[kind] += 1
         if self._position is None or self._attitude is None:
             return False
         p, q = ned_to_enu(self._position, self._attitude)
-        self.buffer.add(p, q, m.time_boot_ms * 1e-3, arrival)
-        self.stats["poses"] += 1
-        return True
+        return self.add(p, q, m.time_boot_ms * 1e-3, arrival)

@@ -15,18 +15,36 @@ Every number must be finite; no other field is allowed. `parse_datagram` checks 
 raises `DatagramError` (its ``reason`` one of `REASONS`) for anything else: network input is
 untrusted.
 
+Every pose, whatever its source (these datagrams, MAVLink), is checked once more where it enters
+the session, by `PoseBuffer.add` (`check_pose`): finite numbers, a unit quaternion, a position
+within the buffer's ``bounds`` (``mitsonar live``: the scene's bounding box enlarged by
+`BOUNDS_MARGIN` on every side; without a scene, ``|x|, |y|, |z| <= MAX_COORDINATE``), and a time
+consistent with the sender's clock as estimated (below). A refused pose raises `DatagramError`
+and changes nothing: no pose stored, the clock offset unmoved; the pose sources count it as
+dropped, by reason (`PoseSource`). An ``object`` datagram's translation is an offset from the
+shape's place in the scene file: it is held to ``MAX_COORDINATE``.
+
 Clocks (`PoseBuffer`): a datagram sent at ``t`` on the sender's clock arrives at
 ``a = t + offset + delay`` on ours (``time.monotonic``), ``delay >= 0``. The offset is estimated
 as the smallest ``a - t`` of the last `PoseBuffer.window` datagrams (the least delayed one), so a
 ping fired at our time ``T`` uses the pose at ``T - offset`` on the sender's clock: interpolated
 between the two poses that bracket it (position linearly, orientation by slerp, as
 `Trajectory.at`), else the newest pose (held when the stream stops, or when in doubt).
+
+A stamped pose whose ``a - t`` differs from the offset by more than `CLOCK_WINDOW` seconds (sent
+more than that before, or at all after, the time its arrival implies: a wild or stale stamp) is
+refused ("implausible time"), never moving the offset: one bad stamp cannot hide the good poses
+that follow. If `CLOCK_RESYNC` stamped poses in a row are refused so and agree with each other
+within `CLOCK_WINDOW`, the sender's clock has jumped (a restarted autopilot's boot time): the
+buffer forgets its poses and its offset and starts over from the last of them
+(`PoseBuffer.resyncs` counts these).
 """
 from __future__ import annotations
 
 import bisect
 import json
 import math
+import sys
 import threading
 import time
 from collections import Counter, deque
@@ -35,8 +53,9 @@ import numpy as np
 
 from mitsonar.geometry.trajectory import matrix_to_quat, quat_to_matrix, slerp
 
-__all__ = ["MAX_DATAGRAM", "UNIT_TOLERANCE", "REASONS", "DatagramError", "parse_datagram", "pose_matrix",
-           "PoseBuffer", "TrajectoryReplay"]
+__all__ = ["MAX_DATAGRAM", "UNIT_TOLERANCE", "REASONS", "MAX_COORDINATE", "BOUNDS_MARGIN", "CLOCK_WINDOW",
+           "CLOCK_RESYNC", "DatagramError", "parse_datagram", "check_pose", "pose_matrix", "PoseBuffer",
+           "TrajectoryReplay"]
 
 #: the largest datagram taken, bytes (a pose is under 200)
 MAX_DATAGRAM = 4096
@@ -44,12 +63,21 @@ MAX_DATAGRAM = 4096
 UNIT_TOLERANCE = 1e-3
 #: why a datagram was dropped (`DatagramError.reason`)
 REASONS = ("too large", "not JSON", "not an object", "unknown field", "missing field", "wrong type",
-           "not finite", "bad quaternion", "unknown object")
+           "not finite", "bad quaternion", "unknown object", "out of bounds", "implausible time")
+#: metres: the largest coordinate of a position without other bounds (and of an object's offset)
+MAX_COORDINATE = 1e5
+#: metres the scene's bounding box is enlarged by on every side to bound the vehicle's positions
+BOUNDS_MARGIN = 1000.0
+#: seconds a stamped pose's ``arrival - t`` may differ from the clock offset (module doc)
+CLOCK_WINDOW = 5.0
+#: refused stamped poses in a row, consistent with each other, that restart the clock (module doc)
+CLOCK_RESYNC = 5
 _FIELDS = {"t", "position", "orientation", "object"}
 
 
 class DatagramError(ValueError):
-    """A dropped datagram: ``reason`` (one of `REASONS`) and a sentence naming the field."""
+    """A dropped datagram or refused pose: ``reason`` (one of `REASONS`) and a sentence naming the
+    field."""
 
     def __init__(self, reason: str, text: str):
         super().__init__(text)
@@ -60,10 +88,44 @@ def _numbers(value, n: int, field: str) -> np.ndarray:
     if not (isinstance(value, list) and len(value) == n
             and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
         raise DatagramError("wrong type", f"'{field}' must be a list of {n} numbers")
-    a = np.array(value, dtype=np.float64)
+    return np.array(value, dtype=np.float64)
+
+
+def _finite(value, n: int, field: str) -> np.ndarray:
+    a = np.asarray(value, dtype=np.float64)
+    if a.shape != (n,):
+        raise DatagramError("wrong type", f"'{field}' must be {n} numbers")
     if not np.all(np.isfinite(a)):
         raise DatagramError("not finite", f"'{field}' holds a number that is not finite")
     return a
+
+
+def check_pose(position, orientation, t=None, *, bounds=((-MAX_COORDINATE,) * 3, (MAX_COORDINATE,) * 3),
+               names=("position", "orientation", "t")) -> tuple:
+    """``(position (3,), unit quaternion (4,), t)`` of a pose, every field checked: finite numbers,
+    ``orientation`` (``x, y, z, w``) of norm 1 within `UNIT_TOLERANCE` (then normalised),
+    ``position`` within ``bounds`` (``(lo, hi)``, two 3-vectors; None: any finite position), ``t``
+    None or a finite number. `DatagramError` naming the field (``names``: how the source calls
+    them) for anything else."""
+    p = _finite(position, 3, names[0])
+    q = _finite(orientation, 4, names[1])
+    norm = math.hypot(*q.tolist())      # no square overflows (1e200), unlike numpy's dot
+    if abs(norm - 1.0) > UNIT_TOLERANCE:
+        raise DatagramError("bad quaternion", f"'{names[1]}' has norm {norm:.6g}, not 1 within {UNIT_TOLERANCE:g}")
+    if t is not None:
+        t = float(t)
+        if not math.isfinite(t):
+            raise DatagramError("not finite", f"'{names[2]}' is not finite")
+    if bounds is not None:
+        lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+        if not (np.all(p >= lo) and np.all(p <= hi)):
+            box = " x ".join(f"[{a:.6g}, {b:.6g}]" for a, b in zip(lo, hi))
+            raise DatagramError("out of bounds", f"'{names[0]}' {_vector(p)} m is outside {box} m")
+    return p, q / norm, t
+
+
+def _vector(v) -> str:
+    return "[" + ", ".join(f"{x:.6g}" for x in v) + "]"
 
 
 def parse_datagram(data: bytes) -> dict:
@@ -88,20 +150,15 @@ def parse_datagram(data: bytes) -> dict:
             raise DatagramError("missing field", f"no '{field}'")
     position = _numbers(obj["position"], 3, "position")
     q = _numbers(obj["orientation"], 4, "orientation")
-    norm = float(np.linalg.norm(q))
-    if abs(norm - 1.0) > UNIT_TOLERANCE:
-        raise DatagramError("bad quaternion", f"'orientation' has norm {norm:.6g}, not 1 within {UNIT_TOLERANCE:g}")
     t = obj.get("t")
-    if t is not None:
-        if not isinstance(t, (int, float)) or isinstance(t, bool):
-            raise DatagramError("wrong type", "'t' must be a number of seconds")
-        t = float(t)
-        if not math.isfinite(t):
-            raise DatagramError("not finite", "'t' is not finite")
+    if t is not None and (not isinstance(t, (int, float)) or isinstance(t, bool)):
+        raise DatagramError("wrong type", "'t' must be a number of seconds")
     name = obj.get("object")
     if name is not None and not (isinstance(name, str) and 0 < len(name) <= 256):
         raise DatagramError("wrong type", "'object' must be a shape's id (a string)")
-    return {"t": t, "position": position, "orientation": q / norm, "object": name}
+    # the numbers' checks (the bounds are the buffer's: `PoseBuffer.add`)
+    position, q, t = check_pose(position, q, t, bounds=None)
+    return {"t": t, "position": position, "orientation": q, "object": name}
 
 
 def _no_constant(name):
@@ -120,15 +177,24 @@ def pose_matrix(position, orientation) -> np.ndarray:
 class PoseBuffer:
     """The vehicle's recent poses, by the sender's time, and the clock offset (module doc).
 
+    ``bounds``: ``(lo, hi)`` (two 3-vectors, metres) a position must lie in (default
+    ``+-MAX_COORDINATE``); ``clock_window``, ``resync``: `CLOCK_WINDOW`, `CLOCK_RESYNC`.
     `add` is called by the receiving thread, `at` by the head's: both under one lock.
     """
 
-    def __init__(self, size: int = 512, window: int = 256):
+    def __init__(self, size: int = 512, window: int = 256, *, bounds=None, clock_window: float = CLOCK_WINDOW,
+                 resync: int = CLOCK_RESYNC):
         self.size = int(size)
         self.window = int(window)
+        self.bounds = ((-MAX_COORDINATE,) * 3, (MAX_COORDINATE,) * 3) if bounds is None else \
+            tuple(tuple(float(v) for v in b) for b in bounds)
+        self.clock_window = float(clock_window)
+        self.resync = int(resync)
+        self.resyncs = 0            # times the sender's clock jumped and the buffer started over
         self._t: list = []          # sender times, increasing
         self._p: list = []          # (position (3,), quaternion (4,))
         self._lags: deque = deque(maxlen=self.window)
+        self._doubted: list = []    # the lags of the stamped poses refused in a row (consistent ones)
         self._lock = threading.Lock()
         self.last_arrival: float | None = None
 
@@ -142,15 +208,17 @@ class PoseBuffer:
 
     def add(self, position, orientation, t: float | None = None, arrival: float | None = None) -> None:
         """A pose sent at ``t`` (sender's clock; None: its arrival) that arrived at ``arrival``
-        (our clock, default now)."""
+        (our clock, default now); `DatagramError` if refused (`check_pose`, the clock's window:
+        module doc), and then nothing changes."""
+        position, orientation, t = check_pose(position, orientation, t, bounds=self.bounds)
         arrival = time.monotonic() if arrival is None else float(arrival)
         with self._lock:
             if t is None:
                 t = arrival - self.offset
             else:
-                self._lags.append(arrival - float(t))
-            t = float(t)
-            sample = (np.asarray(position, np.float64), np.asarray(orientation, np.float64))
+                self._check_time(t, arrival)
+                self._lags.append(arrival - t)
+            sample = (position, orientation)
             k = bisect.bisect_left(self._t, t)
             if k < len(self._t) and self._t[k] == t:
                 self._p[k] = sample
@@ -160,6 +228,26 @@ class PoseBuffer:
             if len(self._t) > self.size:
                 del self._t[0], self._p[0]
             self.last_arrival = arrival
+
+    def _check_time(self, t: float, arrival: float) -> None:
+        """Refuse a stamp ``t`` off the estimated clock, or restart the clock (module doc); under the lock."""
+        lag = arrival - t
+        if not self._lags or abs(lag - self.offset) <= self.clock_window:
+            self._doubted = []
+            return
+        if all(abs(lag - d) <= self.clock_window for d in self._doubted):
+            self._doubted.append(lag)
+        else:
+            self._doubted = [lag]
+        if len(self._doubted) >= self.resync:      # the sender's clock jumped: start over from this pose
+            self._t.clear(), self._p.clear(), self._lags.clear()
+            self._doubted = []
+            self.resyncs += 1
+            return
+        expected = arrival - self.offset
+        raise DatagramError("implausible time", f"'t' {t:.9g} s is {t - expected:+.3g} s off the sender's clock "
+                                                f"as estimated ({expected:.9g} s at its arrival; allowed: within "
+                                                f"{self.clock_window:g} s)")
 
     def at(self, now: float | None = None) -> np.ndarray | None:
         """4x4 vehicle pose at our time ``now`` (default now), None before any pose."""
@@ -199,9 +287,18 @@ class TrajectoryReplay:
 
 class PoseSource:
     """A thread feeding a `PoseBuffer` until `stop`: subclasses read in ``_run`` (checking
-    ``self._stop`` at least every 0.1 s) and release their input in ``_close``."""
+    ``self._stop`` at least every 0.1 s) and release their input in ``_close``; each pose goes
+    through `add` (or a refusal of their own through `drop`), which counts it: ``stats["poses"]``
+    applied, ``stats["dropped"]`` refused, ``drops.counts`` by reason."""
 
-    def __init__(self, name: str):
+    #: what the source's inputs are, in its warnings ("dropped a pose datagram: ...")
+    what = "a pose datagram"
+
+    def __init__(self, name: str, buffer=None, out=None):
+        self.buffer = buffer
+        self.out = sys.stderr if out is None else out
+        self.drops = DropLog(self.out, what=self.what)
+        self.stats: Counter = Counter()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
 
@@ -215,6 +312,26 @@ class PoseSource:
             self._thread.join(5.0)
         self._close()
 
+    def add(self, position, orientation, t, arrival: float) -> bool:
+        """Give a pose to the buffer (which checks it: `PoseBuffer.add`); False (counted, logged)
+        if refused. Says once when the sender's clock jumped (the buffer started over)."""
+        resyncs = self.buffer.resyncs
+        try:
+            self.buffer.add(position, orientation, t, arrival)
+        except DatagramError as e:
+            self.drop(e, arrival)
+            return False
+        if self.buffer.resyncs != resyncs:
+            print(f"mitsonar live: warning: the sender's clock jumped ({self.buffer.resync} poses in a row off it, "
+                  "consistent with each other): poses start over from the newest", file=self.out, flush=True)
+        self.stats["poses"] += 1
+        return True
+
+    def drop(self, err: DatagramError, arrival: float | None = None) -> None:
+        """Count and log an input refused with ``err``."""
+        self.stats["dropped"] += 1
+        self.drops.drop(err, arrival)
+
     def _run(self) -> None:
         raise NotImplementedError
 
@@ -226,9 +343,10 @@ class DropLog:
     """Counts dropped datagrams by reason and prints at most one line per ``every`` seconds
     (the first of a burst at once, then how many more since)."""
 
-    def __init__(self, out, every: float = 2.0):
+    def __init__(self, out, every: float = 2.0, what: str = "a pose datagram"):
         self.out = out
         self.every = float(every)
+        self.what = what
         self.counts: Counter = Counter()
         self._last = -math.inf
         self._since = 0
@@ -239,7 +357,7 @@ class DropLog:
         self._since += 1
         if now - self._last >= self.every:
             more = f" ({self._since - 1} more dropped since the last report)" if self._since > 1 else ""
-            print(f"mitsonar live: warning: dropped a pose datagram: {err}{more}", file=self.out, flush=True)
+            print(f"mitsonar live: warning: dropped {self.what}: {err}{more}", file=self.out, flush=True)
             self._last, self._since = now, 0
 
 
