@@ -58,7 +58,7 @@ def test_survey_over_a_grid_exports_soundings_at_the_grids_coordinates(tmp_path,
     soundings within 0.1 % of depth + 2 cm of the grid's surface, and the LAS in the grid's CRS."""
     import laspy
 
-    from mitsonar.scenes.georef import scene_frame
+    from mitsonar.geometry.geodesy import scene_frame
 
     tif = write_grid(tmp_path / "site.tif")
     xml = tmp_path / "site.xml"

@@ -216,7 +216,7 @@ def test_the_first_heightmap_and_the_worlds_place_on_the_earth(tmp_path, capsys)
     import rasterio
 
     import mitsonar
-    from mitsonar.scenes.georef import scene_frame
+    from mitsonar.geometry.geodesy import scene_frame
 
     img = np.zeros((5, 5), np.uint8)
     img[0, :] = 255                      # the image's top row: the north (+y) edge

@@ -28,6 +28,8 @@ direction in the grid into an azimuth from true north (pyproj's geodesic on the 
 from __future__ import annotations
 
 import math
+import os
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -259,13 +261,11 @@ def add_geo_options(parser):
 
 def frame_from_args(args) -> "GeoFrame | None":
     """The `GeoFrame` of ``--origin``/``--crs`` (None without ``--origin``; ``--crs`` alone is refused).
-    A command with a scene (``args.scene``) whose XML records a frame (`mitsonar.scenes.georef`)
+    A command with a scene (``args.scene``) whose XML records a frame (`scene_frame`)
     takes it without the flags; flags that name another frame are refused."""
     origin, crs = getattr(args, "origin", None), getattr(args, "crs", None)
     scene = getattr(args, "scene", None)
     if isinstance(scene, str):
-        from mitsonar.scenes.georef import scene_frame
-
         recorded = scene_frame(scene)
         if recorded is not None:
             given = None if origin is None else GeoFrame.make(origin, crs)
@@ -280,3 +280,56 @@ def frame_from_args(args) -> "GeoFrame | None":
             raise GeoError(f"--crs {crs}: needs --origin LAT LON [HEIGHT] (the point the world frame starts at)")
         return None
     return GeoFrame.make(origin, crs)
+
+
+# ---- the frame a scene records ----
+#
+# Where a scene keeps its place on the Earth: two Mitsuba ``<default>`` parameters.
+#
+# A scene written by ``mitsonar scene from-grid`` or ``from-sdf`` (`mitsonar.scenes.grid`,
+# `mitsonar.scenes.sdf`) carries the origin and CRS of its world frame (the
+# `mitsonar.geometry.geodesy.GeoFrame` that ``--origin``/``--crs`` give the survey and export
+# commands) as two parameter defaults at the top of its XML::
+#
+#     <default name="mitsonar_origin" value="52.0000000001 4.49999999 0"/>   <!-- lat lon height -->
+#     <default name="mitsonar_crs" value="EPSG:32631"/>
+#
+# Mitsuba's parser takes a ``<default>`` of any name and uses it only where the scene says
+# ``$mitsonar_origin`` (nowhere), so the file stays a plain Mitsuba scene (an attribute on
+# ``<scene>`` would be refused: "unexpected attribute"). `scene_frame` reads them back;
+# `frame_from_args` falls back on it when a command that takes a scene
+# (``survey``, ``bathymetry``) gets no ``--origin``, so the products come out in the scene's CRS.
+
+ORIGIN_PARAM = "mitsonar_origin"
+CRS_PARAM = "mitsonar_crs"
+
+
+def frame_defaults(frame) -> str:
+    """The two ``<default>`` elements that record ``frame`` (a `GeoFrame`) in a scene."""
+    lat, lon, h = (repr(float(v)) for v in (frame.lat, frame.lon, frame.height))
+    return (f'<default name="{ORIGIN_PARAM}" value="{lat} {lon} {h}"/>\n'
+            f'    <default name="{CRS_PARAM}" value="{frame.crs}"/>')
+
+
+def scene_frame(path_or_xml):
+    """The `GeoFrame` a scene file (or XML text) records (`frame_defaults`), or None when it
+    records none (or is not readable XML: loading it says why). A recorded origin or CRS that is
+    not allowed is refused in one line naming the file and the parameter."""
+    text = str(path_or_xml)
+    where = "XML string"
+    if not text.lstrip().startswith("<"):
+        if not os.path.isfile(text):
+            return None
+        where = text
+        with open(text, "rb") as f:
+            text = f.read()
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError:
+        return None
+    values = {el.get("name"): el.get("value", "") for el in root.findall("default")}
+    if ORIGIN_PARAM not in values:
+        return None
+    origin = values[ORIGIN_PARAM].split()
+    return GeoFrame.make(origin, values.get(CRS_PARAM),
+                         (f"{where}: <default name=\"{ORIGIN_PARAM}\">", f"{where}: <default name=\"{CRS_PARAM}\">"))

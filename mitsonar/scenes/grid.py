@@ -10,7 +10,7 @@ or ``mitsonar scene from-grid site.tif -o site.xml`` (docs/tutorials/your_world.
 Frame. The scene's world x, y are offsets in the grid's projected CRS from an origin
 (``x = E - E0``, ``y = N - N0``, the `mitsonar.geometry.geodesy.GeoFrame` of ``--origin`` and
 ``--crs``); the origin is the grid's centre rounded to the metre unless ``origin`` says otherwise,
-and the scene records it (`mitsonar.scenes.georef`), so ``survey`` and ``bathymetry`` over the
+and the scene records it (`mitsonar.geometry.geodesy.scene_frame`), so ``survey`` and ``bathymetry`` over the
 scene write their products (LAS, GeoTIFF, BAG, XTF, kmall) at the grid's own coordinates without
 ``--origin``. z = 0 is the sea surface: a vertex's z is the grid's height (``positive="up"``) or
 minus its depth (``"down"``) plus ``vertical_offset`` (the height of the grid's vertical datum

@@ -38,7 +38,7 @@ anything is written: a mesh file that does not exist or cannot be read, a ``mode
 no model path resolves, a pose that is not six numbers.
 
 The world's ``<spherical_coordinates>`` (latitude, longitude, elevation) becomes the scene's
-recorded origin (`mitsonar.scenes.georef`) when ``origin`` is not given, its x, y taken as offsets
+recorded origin (`mitsonar.geometry.geodesy.scene_frame`) when ``origin`` is not given, its x, y taken as offsets
 in the origin's UTM grid (``crs``), which differ from Gazebo's east/north by the meridian
 convergence (under a degree within a UTM zone's middle; give ``crs`` for another grid).
 """

@@ -117,9 +117,9 @@ def sensor_xml(sensor, pose=None) -> str:
 
 
 def scene_text(shapes, bsdfs, frame=None, sensor=None) -> str:
-    """A Mitsuba scene: the frame's ``<default>`` parameters (`mitsonar.scenes.georef`), the
+    """A Mitsuba scene: the frame's ``<default>`` parameters (`mitsonar.geometry.geodesy.scene_frame`), the
     ``sonar_tof`` integrator, ``sensor`` (XML text or None), the ``<bsdf>`` elements and the shapes."""
-    from mitsonar.scenes.georef import frame_defaults
+    from mitsonar.geometry.geodesy import frame_defaults
 
     head = [frame_defaults(frame)] if frame is not None else []
     parts = ['<scene version="3.0.0">', *("    " + h for h in head),
