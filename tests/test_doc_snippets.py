@@ -90,6 +90,7 @@ NOT_RUN = {
     "docs/tutorials/mapping.rst:from hilbertmap import IncrementalHilbertMap":
         "renders and maps a whole survey of the rocky slope (minutes)",
     "docs/gallery.rst:from hilbertmap import HilbertMap": "fits a Hilbert map to a full box scan (about 40 s on 2 cores)",
+    "docs/tutorials/your_world.rst:import laspy": "reads the soundings the bathymetry command above it writes",
 }
 
 
