@@ -133,6 +133,10 @@ def _piece(dz, c1, s1, c2, s2, a, g):
     ``y = g dz K / (c1 (1 + s2))``, ``K = (1 + s1) + c1 a^2 (c1 + c2) / (s1 + s2)``: no cancellation
     as ``g -> 0`` (then ``dt = dz / (c sin theta)``, a straight ray).
     """
+    # float64 arrays, not Python floats: a zero-length piece (a ray launched horizontally where it
+    # turns, ``s1 = s2 = 0``) divides 0 by 0 under errstate and is then set to 0 below, instead of
+    # raising ZeroDivisionError from a scalar division
+    dz, c1, s1, c2, s2, a, g = (np.asarray(v, dtype=np.float64) for v in (dz, c1, s1, c2, s2, a, g))
     with np.errstate(divide="ignore", invalid="ignore"):
         ssum = s1 + s2
         dx = a * dz * (c1 + c2) / ssum
