@@ -52,4 +52,6 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install -q --upgrade pip >/dev/null
 .venv/bin/python -m pip install -q -e '.[test]'
+# Bellhop, the reference ray/beam model the propagation tests compare with (.bellhop/, gitignored)
+.venv/bin/python scripts/fetch_bellhop.py
 echo "setup: done (.venv ready)"

@@ -2,6 +2,7 @@
 (horizontal where the profile turns them at once, vertical), receivers at a turning depth and
 profiles of one sample trace to the closed forms of a circular arc or a straight line."""
 import math
+import re
 import warnings
 
 import numpy as np
@@ -75,3 +76,118 @@ def test_a_profile_of_one_sample_is_straight_rays_even_horizontal():
 def test_repeated_depths_are_refused_in_one_line():
     with pytest.raises(ProfileError, match=r"sample 2: depth 10.0 m is not greater than the previous 10.0 m"):
         SoundSpeedProfile([0.0, 10.0, 10.0], [1500.0, 1490.0, 1480.0])
+
+
+# ---------------------------------------------------------------------------------------------
+# eigenrays against closed forms
+
+
+def test_isovelocity_eigenrays_are_the_image_sources_with_spherical_spreading():
+    c, zs, zr, D, R, alpha, rb = 1500.0, 20.0, 60.0, 100.0, 300.0, 0.002, 0.5
+    table = SoundSpeedProfile.constant(c).eigenrays(zs, zr, R, water_depth=D, bottom=rb, absorption=alpha,
+                                                    max_bounces=2)
+    # (surface, bottom) bounces -> the image's depth below the receiver's (positive: the ray
+    # arrives heading down) and the reflection coefficient's product
+    images = {(0, 0): (zr - zs, 1.0), (1, 0): (zr + zs, -1.0), (0, 1): (-(2 * D - zs - zr), rb),
+              (1, 1): None, (1, 1, "sb"): (-(2 * D + zs - zr), -rb), (1, 1, "bs"): (2 * D - zs + zr, -rb)}
+    assert table.size == 5
+    seen = set()
+    for row in table:
+        key = (int(row["surface_bounces"]), int(row["bottom_bounces"]))
+        if key == (1, 1):
+            key = key + ("sb" if row["launch"] < 0 else "bs",)
+        seen.add(key)
+        dz, refl = images[key]
+        L = math.hypot(R, dz)
+        assert row["time"] == pytest.approx(L / c, rel=1e-12)
+        assert row["length"] == pytest.approx(L, rel=1e-9)
+        assert row["arrival"] == pytest.approx(math.atan2(dz, R), abs=1e-9)
+        assert abs(row["launch"]) == pytest.approx(abs(row["arrival"]), abs=1e-9)
+        assert row["spreading_loss"] == pytest.approx(20 * math.log10(L), abs=1e-5)
+        assert row["absorption_loss"] == pytest.approx(alpha * L, rel=1e-9)
+        assert row["boundary_loss"] == pytest.approx(-20 * math.log10(abs(refl)), abs=1e-12)
+        assert row["transmission_loss"] == pytest.approx(20 * math.log10(L) + alpha * L
+                                                         - 20 * math.log10(abs(refl)), abs=1e-5)
+        assert row["phase"] == pytest.approx(0.0 if refl > 0 else math.pi, abs=1e-12)
+    assert len(seen) == 5
+    assert np.all(np.diff(table["time"]) >= 0)
+
+
+def _linear_family(zs, zr, c0=1480.0, g=0.05):
+    """x(theta0), t(theta0) and dx/dtheta0 of the rays of c = c0 + g z from zs to their first
+    crossing of zr > zs heading down (``up=False``) or, after the turn, heading up (``up=True``):
+    circular arcs, ``x = (s0 -+ s_r) / (a g)``, ``t = (atanh s0 -+ atanh s_r) / g`` (Jensen et al. 2011,
+    sec. 3.2), and the derivative of x in closed form."""
+    cs, cr = c0 + g * zs, c0 + g * zr
+
+    def family(theta0, up):
+        a = math.cos(theta0) / cs
+        da = -math.sin(theta0) / cs
+        s0 = math.sin(theta0)
+        sr = math.sqrt(1 - (a * cr) ** 2)
+        sign = 1.0 if up else -1.0
+        x = (s0 + sign * sr) / (a * g)
+        dsr = -a * cr * cr * da / sr
+        dx = (math.cos(theta0) + sign * dsr) / (a * g) - x * da / a
+        t = (math.atanh(s0) + sign * math.atanh(sr)) / g
+        return x, t, dx, -sign * sr        # the signed sine at the receiver (positive: heading down)
+
+    return family, cs, cr
+
+
+@pytest.mark.parametrize("up, R", [(False, 1500.0), (True, 5000.0)])
+def test_linear_gradient_eigenrays_are_arcs_with_the_closed_form_ray_tube(up, R):
+    from scipy.optimize import brentq
+
+    zs, zr = 100.0, 300.0
+    profile = SoundSpeedProfile([0.0, 2000.0], [1480.0, 1580.0])
+    family, cs, cr = _linear_family(zs, zr)
+    table = profile.eigenrays(zs, zr, R, max_bounces=0, absorption=0.0)
+    row = table[(table["arrival"] < 0) == up]
+    assert row.size == 1
+    # the closed form's eigenray: x(theta0) = R on the family
+    guess = float(row["launch"][0])
+    theta0 = brentq(lambda th: family(th, up)[0] - R, guess - 1e-3, guess + 1e-3, xtol=1e-15)
+    x, t, dx, sr = family(theta0, up)
+    assert row["launch"][0] == pytest.approx(theta0, abs=1e-10)
+    assert row["time"][0] == pytest.approx(t, rel=1e-10)
+    a = math.cos(theta0) / cs
+    assert row["arrival"][0] == pytest.approx(math.atan2(sr, a * cr), abs=1e-9)
+    tl = 10 * math.log10(cs * R * abs(dx * sr) / (cr * math.cos(theta0)))
+    assert row["spreading_loss"][0] == pytest.approx(tl, abs=1e-4)
+
+
+def test_transmission_loss_sums_the_eigenrays_intensities_and_a_shadow_is_silent():
+    from mitsonar.acoustics import transmission_loss
+
+    profile = SoundSpeedProfile([0.0, 2000.0], [1480.0, 1580.0])
+    table = profile.eigenrays(100.0, 300.0, 1500.0, max_bounces=0)
+    tl = transmission_loss(profile, 100.0, 300.0, 1500.0, max_bounces=0)
+    assert tl == pytest.approx(-10 * math.log10(np.sum(10 ** (-table["transmission_loss"] / 10))), abs=1e-9)
+    assert profile.transmission_loss(100.0, 300.0, 1500.0, max_bounces=0) == tl
+    # a thermocline refracts down: no ray from 10 m reaches 5 m at 3 km in 100 m of water with 3
+    # bounces (a ray shallow enough to come back from the bottom turns below 28 m), some with 12
+    thermocline = SoundSpeedProfile([0.0, 30.0, 100.0], [1520.0, 1480.0, 1480.0])
+    assert thermocline.eigenrays(10.0, 5.0, 3000.0, water_depth=100.0, max_bounces=3).size == 0
+    assert transmission_loss(thermocline, 10.0, 5.0, 3000.0, water_depth=100.0, max_bounces=3) == math.inf
+    many = thermocline.eigenrays(10.0, 5.0, 3000.0, water_depth=100.0, max_bounces=12)
+    assert many.size > 0 and np.all(many["surface_bounces"] + many["bottom_bounces"] >= 4)
+    listed = profile.arrivals(100.0, 300.0, 1500.0, max_bounces=0)
+    assert [r["time"] for r in listed] == list(table["time"])
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(range=-1.0), "range -1.0 is not allowed"),
+    (dict(water_depth=0.0), "water_depth 0.0 is not allowed"),
+    (dict(bottom=2.0), "bottom 2.0 is not allowed"),
+    (dict(bottom="sand"), "bottom 'sand' is not a reflection coefficient"),
+    (dict(max_bounces=-1), "max_bounces -1 is not allowed"),
+    (dict(angles=(10.0, -10.0)), "angles (10.0, -10.0) is not allowed"),
+    (dict(receiver_depth=150.0, water_depth=100.0), "receiver_depth 150.0 is not allowed"),
+])
+def test_bad_eigenray_arguments_are_one_line(kwargs, message):
+    args = dict(source_depth=10.0, receiver_depth=20.0, range=100.0)
+    args.update({k: kwargs.pop(k) for k in list(kwargs) if k in args})
+    with pytest.raises(ProfileError, match=re.escape(message)):
+        SoundSpeedProfile.constant(1500.0).eigenrays(args["source_depth"], args["receiver_depth"], args["range"],
+                                                     **kwargs)

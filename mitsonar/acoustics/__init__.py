@@ -6,7 +6,10 @@
   with the handbook's sediments in :data:`SEDIMENTS` and :func:`bistatic_mean_grazing`;
 * material presets (:data:`MATERIALS`, :func:`material`);
 * sound-speed profiles (:class:`SoundSpeedProfile`): refracted rays, travel times and their inverse
-  (`SoundSpeedProfile.trace`, `SoundSpeedProfile.locate`); `raydiagram.ray_diagram` draws them.
+  (`SoundSpeedProfile.trace`, `SoundSpeedProfile.locate`); `raydiagram.ray_diagram` draws them;
+* eigenrays, arrivals and one-way transmission loss (:func:`eigenrays`, :func:`arrivals`,
+  :func:`transmission_loss`, :func:`transmission_loss_field`; `mitsonar.acoustics.propagation`),
+  and Bellhop's files to check them with (`mitsonar.acoustics.bellhop`).
 
 Every function refuses an input outside the range its source was fitted over, before any work,
 with one line naming the field and the range. Angles are grazing angles in radians.
@@ -14,11 +17,14 @@ with one line naming the field and the range. Angles are grazing angles in radia
 from mitsonar.acoustics.interface import critical_angle, loss_parameter, reflection_coefficient
 from mitsonar.acoustics.materials import MATERIALS, Material, material
 from mitsonar.acoustics.profile import ProfileError, RayPath, SoundSpeedProfile
+from mitsonar.acoustics.propagation import (ARRIVAL_DTYPE, FluidBottom, arrivals, eigenrays, transmission_loss,
+                                            transmission_loss_field)
 from mitsonar.acoustics.seabed import (APL_UW_FREQUENCY_RANGE, SEDIMENTS, Sediment, apl_uw_backscatter, bistatic_mean_grazing,
                      lambert, sediment)
 from mitsonar.acoustics.seawater import FRANCOIS_GARRISON_RANGE, MACKENZIE_RANGE, absorption, sound_speed
 
-__all__ = ["APL_UW_FREQUENCY_RANGE", "FRANCOIS_GARRISON_RANGE", "MACKENZIE_RANGE", "MATERIALS", "Material",
+__all__ = ["ARRIVAL_DTYPE", "FluidBottom", "arrivals", "eigenrays", "transmission_loss", "transmission_loss_field",
+           "APL_UW_FREQUENCY_RANGE", "FRANCOIS_GARRISON_RANGE", "MACKENZIE_RANGE", "MATERIALS", "Material",
            "ProfileError", "RayPath", "SEDIMENTS", "Sediment", "SoundSpeedProfile", "absorption",
            "apl_uw_backscatter", "bistatic_mean_grazing", "critical_angle", "lambert", "loss_parameter", "material",
            "reflection_coefficient", "sediment", "sound_speed"]

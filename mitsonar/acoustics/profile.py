@@ -360,6 +360,29 @@ class SoundSpeedProfile:
         z2 = np.clip(z + dz, self._top[j], self._bottom[j])
         return dx, z2, s2, cos2
 
+    def eigenrays(self, source_depth, receiver_depth, range, **kwargs):
+        """Every ray joining the source and the receiver at horizontal ``range`` (m), with travel
+        time, launch and arrival angles, one-way transmission loss and phase (float64): a table of
+        `mitsonar.acoustics.propagation.ARRIVAL_DTYPE`; keywords (``water_depth``, ``bottom``,
+        ``absorption``, ``max_bounces``, ...) as in `mitsonar.acoustics.propagation.eigenrays`."""
+        from mitsonar.acoustics.propagation import eigenrays
+
+        return eigenrays(self, source_depth, receiver_depth, range, **kwargs)
+
+    def arrivals(self, source_depth, receiver_depth, range, **kwargs):
+        """`eigenrays` as a list of dicts, one per arrival in time order
+        (`mitsonar.acoustics.propagation.arrivals`)."""
+        from mitsonar.acoustics.propagation import arrivals
+
+        return arrivals(self, source_depth, receiver_depth, range, **kwargs)
+
+    def transmission_loss(self, source_depth, receiver_depth, range, **kwargs):
+        """One-way incoherent transmission loss, dB re 1 m
+        (`mitsonar.acoustics.propagation.transmission_loss`)."""
+        from mitsonar.acoustics.propagation import transmission_loss
+
+        return transmission_loss(self, source_depth, receiver_depth, range, **kwargs)
+
     def locate(self, depth, grazing, travel_time):
         """Where rays are after a one-way ``travel_time`` (s): ``(x, depth)``, horizontal distance
         from the launch point and depth (m), broadcast over ``depth`` (start depth, m),

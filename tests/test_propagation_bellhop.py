@@ -1,0 +1,99 @@
+"""Eigenrays, arrivals and TL against Bellhop (M. B. Porter's ray/beam model, the Acoustics
+Toolbox; issue 58): the environment written by `mitsonar.acoustics.bellhop.write_env`, Bellhop's
+arrivals (run type A, its fan refined to 0.001 deg around each of mitsonar's eigenrays) and its
+incoherent geometric-beam TL (run type I) read back, on a shallow thermocline and a Munk profile.
+
+Bellhop's binary comes from the ``aubellhop`` wheel, fetched by ``scripts/setup.sh``
+(``scripts/fetch_bellhop.py``) into ``.bellhop/``; these tests fail, not skip, without it.
+"""
+import math
+import os
+import subprocess
+
+import numpy as np
+import pytest
+
+from mitsonar.acoustics import FluidBottom, SoundSpeedProfile, eigenrays, transmission_loss_field
+from mitsonar.acoustics.bellhop import read_arrivals, read_shd, write_env
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+THERMOCLINE = SoundSpeedProfile([0.0, 30.0, 100.0], [1520.0, 1480.0, 1480.0])
+_MZ = np.linspace(0.0, 5000.0, 51)
+_ETA = 2.0 * (_MZ - 1300.0) / 1300.0
+#: Munk's canonical profile (Munk 1974; Jensen et al. 2011, eq. 5.66), sampled every 100 m
+MUNK = SoundSpeedProfile(_MZ, 1500.0 * (1.0 + 0.00737 * (_ETA - 1.0 + np.exp(-_ETA))))
+
+
+@pytest.fixture(scope="session")
+def bellhop():
+    exe = os.environ.get("MITSONAR_BELLHOP") or os.path.join(ROOT, ".bellhop", "aubellhop", "bin", "bellhop.exe")
+    if not (os.path.isfile(exe) and os.access(exe, os.X_OK)):
+        pytest.fail(f"Bellhop is missing ({exe}): run scripts/setup.sh (scripts/fetch_bellhop.py fetches it "
+                    "from the aubellhop wheel) or set MITSONAR_BELLHOP to a bellhop.exe")
+
+    def run(folder, *args, **kwargs):
+        path = write_env(os.path.join(folder, "case.env"), *args, **kwargs)
+        done = subprocess.run([exe, "case"], cwd=folder, capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+        return path[:-4]
+
+    return run
+
+
+CASES = [  # profile, source depth, receiver depth, range, water depth, bottom
+    (THERMOCLINE, 10.0, 20.0, 500.0, 100.0, 1.0),
+    (THERMOCLINE, 10.0, 20.0, 2000.0, 100.0, 1.0),
+    (THERMOCLINE, 10.0, 50.0, 1000.0, 100.0, FluidBottom(1600.0, 1.5, 0.5)),
+    (MUNK, 1000.0, 800.0, 2000.0, 5000.0, 1.0),
+]
+
+
+@pytest.mark.parametrize("case", range(len(CASES)))
+def test_eigenrays_match_bellhops_arrivals_in_time_angle_and_level(case, bellhop, tmp_path):
+    profile, zs, zr, R, D, bottom = CASES[case]
+    table = eigenrays(profile, zs, zr, R, water_depth=D, bottom=bottom, max_bounces=3, angles=(-30.0, 30.0))
+    assert table.size >= 1
+    kinds = set()
+    for k, row in enumerate(table):
+        launch = math.degrees(row["launch"])
+        folder = tmp_path / f"ray{k}"
+        folder.mkdir()
+        # Bellhop's fan refined to 0.001 deg around the ray
+        base = bellhop(str(folder), profile, zs, zr, R, water_depth=D, bottom=bottom, run_type="A",
+                       angles=(launch - 0.05, launch + 0.05), beams=101, step=D / 200.0)
+        ref = read_arrivals(base + ".arr")
+        ref = ref[(ref["surface_bounces"] == row["surface_bounces"]) & (ref["bottom_bounces"] == row["bottom_bounces"])]
+        assert ref.size, f"Bellhop has no arrival like {row}"
+        b = ref[np.argmin(np.abs(ref["time"] - row["time"]))]
+        assert row["time"] == pytest.approx(b["time"], rel=1e-6)
+        assert launch == pytest.approx(b["launch"], abs=0.01)
+        assert math.degrees(row["arrival"]) == pytest.approx(b["arrival"], abs=0.05)
+        assert row["transmission_loss"] == pytest.approx(-20.0 * math.log10(b["amplitude"]), abs=0.5)
+        kinds.add((row["surface_bounces"] > 0, row["bottom_bounces"] > 0))
+    if profile is THERMOCLINE and R == 500.0:
+        # surface- and bottom-reflected rays among them
+        assert (True, True) in kinds and (False, True) in kinds
+
+
+@pytest.mark.parametrize("profile, zs, D, depths, ranges", [
+    (THERMOCLINE, 10.0, 100.0, [5.0, 20.0, 50.0, 80.0], [200.0, 500.0, 1000.0, 1500.0, 2000.0]),
+    (MUNK, 1000.0, 5000.0, [800.0, 1000.0, 1500.0], [500.0, 1000.0, 1500.0, 2000.0]),
+])
+def test_the_tl_field_matches_bellhops_incoherent_geometric_beams(profile, zs, D, depths, ranges, bellhop, tmp_path):
+    base = bellhop(str(tmp_path), profile, zs, depths, ranges, water_depth=D, run_type="I", angles=(-30.0, 30.0),
+                   beams=4001, step=D / 200.0)
+    bd, br, p = read_shd(base + ".shd")
+    assert np.allclose(bd, depths) and np.allclose(br, ranges)
+    with np.errstate(divide="ignore"):
+        ref = -20.0 * np.log10(np.abs(p))
+    field = transmission_loss_field(profile, zs, depths, ranges, water_depth=D, angles=(-30.0, 30.0), rays=4001,
+                                    max_bounces=20)
+    # outside the +-30 deg fan (steeper than it) both are silent; elsewhere within 0.5 dB
+    assert np.isfinite(ref).sum() >= ref.size - 2
+    np.testing.assert_array_equal(np.isfinite(field), np.isfinite(ref))
+    np.testing.assert_allclose(field[np.isfinite(ref)], ref[np.isfinite(ref)], atol=0.5)
+    # and the eigenrays' incoherent sum at a point of the field
+    one = eigenrays(profile, zs, depths[1], ranges[2], water_depth=D, angles=(-30.0, 30.0), max_bounces=20)
+    total = -10.0 * math.log10(np.sum(10.0 ** (-one["transmission_loss"] / 10.0)))
+    assert total == pytest.approx(ref[1, 2], abs=0.5)
