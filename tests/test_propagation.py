@@ -191,3 +191,18 @@ def test_bad_eigenray_arguments_are_one_line(kwargs, message):
     with pytest.raises(ProfileError, match=re.escape(message)):
         SoundSpeedProfile.constant(1500.0).eigenrays(args["source_depth"], args["receiver_depth"], args["range"],
                                                      **kwargs)
+
+
+def test_the_two_way_loss_is_renamed_and_the_old_name_warns():
+    from mitsonar.sonar_equation import transmission_loss as old, two_way_transmission_loss
+
+    r = np.array([10.0, 100.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        new = two_way_transmission_loss(r, 0.01)
+    np.testing.assert_array_equal(new, 40 * np.log10(r) + 2 * 0.01 * r)
+    with pytest.warns(DeprecationWarning, match="two_way_transmission_loss"):
+        np.testing.assert_array_equal(old(r, 0.01), new)
+    # the one-way loss of straight water without absorption is half of it: 20 log10 of the path
+    one = SoundSpeedProfile.constant(1500.0).transmission_loss(10.0, 110.0, 100.0, max_bounces=0)
+    assert one == pytest.approx(two_way_transmission_loss(math.hypot(100.0, 100.0)) / 2, abs=1e-5)

@@ -36,7 +36,9 @@ with the Jacobian ``J = (r / sin theta) (dr/d theta0)`` of the ray map - and Por
 beams Bellhop uses). ``(dx/d theta0)_z`` is the derivative of the eigenray's range along its own
 family at the receiver depth, taken by central differences of exact ray ranges (``h = 1e-6``
 rad); in an isovelocity ocean the formula gives ``1 / L^2`` (spherical spreading over the path
-length ``L``), in a linear gradient the closed-form arcs' derivative.
+length ``L``), in a linear gradient the closed-form arcs' derivative. An eigenray that is
+horizontal at the receiver's depth (source and receiver at one depth in water of constant speed,
+or a receiver exactly at a ray's turning depth) crosses that depth tangentially and is not found.
 
 At a caustic ``q`` vanishes and geometrical acoustics predicts an infinite level. Here ``|q|`` is
 floored at the width of a Fresnel zone, ``sqrt(lambda L)`` per radian (``lambda = c(z_s) / f``):
