@@ -21,7 +21,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 THERMOCLINE = SoundSpeedProfile([0.0, 30.0, 100.0], [1520.0, 1480.0, 1480.0])
 _MZ = np.linspace(0.0, 5000.0, 51)
 _ETA = 2.0 * (_MZ - 1300.0) / 1300.0
-#: Munk's canonical profile (Munk 1974; Jensen et al. 2011, eq. 5.66), sampled every 100 m
+#: Munk's canonical profile (Munk 1974, "Sound channel in an exponentially stratified ocean", JASA 55;
+#: c = 1500 (1 + 0.00737 (eta - 1 + exp(-eta))), eta = 2 (z - 1300) / 1300), sampled every 100 m
 MUNK = SoundSpeedProfile(_MZ, 1500.0 * (1.0 + 0.00737 * (_ETA - 1.0 + np.exp(-_ETA))))
 
 

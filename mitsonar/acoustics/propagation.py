@@ -8,9 +8,7 @@ flat bottom of given reflection coefficient; `transmission_loss` sums them incoh
 `mitsonar.acoustics.bellhop` writes the same geometry as a Bellhop ``.env`` file and reads
 Bellhop's arrivals back, so the answers can be checked against the reference ray/beam model.
 
-Rays
-----
-Rays are traced layer by layer with the closed forms of `mitsonar.acoustics.profile` (circular
+**Rays.** Rays are traced layer by layer with the closed forms of `mitsonar.acoustics.profile` (circular
 arcs in each layer of constant gradient; exact, no step size). The source and receiver depths,
 the surface and the bottom are added to the profile's samples (the speed is interpolated there,
 so the profile is unchanged), so that every crossing of the receiver depth and every reflection
@@ -19,21 +17,19 @@ range at which a ray launched at ``theta0`` crosses the receiver depth for the `
 given number of surface and bottom bounces and a given heading, bracketed on a fan of launch
 angles and refined by bisection to 1e-13 rad.
 
-Amplitude: ray-tube spreading
------------------------------
-The energy launched between ``theta0`` and ``theta0 + d theta0`` (solid angle ``2 pi cos(theta0)
+**Amplitude: ray-tube spreading.** The energy launched between ``theta0`` and ``theta0 + d theta0`` (solid angle ``2 pi cos(theta0)
 d theta0`` at 1 m) flows along the ray tube; at the receiver the tube's section is ``2 pi r |q|
 d theta0`` with ``q = (dx/d theta0)_z sin(theta_r)`` (the tube's horizontal width at the receiver
 depth projected normal to the ray). With the intensity ``p^2 / (rho c)``, the pressure re its
-value at 1 m is
+value at 1 m is ::
 
     |p|^2 = c(z_r) cos(theta0) / (c(z_s) r |q|)
 
-(Jensen, Kuperman, Porter & Schmidt, *Computational Ocean Acoustics*, 2nd ed. 2011, eqs. 3.56
-and 3.66 - the geometrical-acoustics amplitude ``A = (1/4pi) |c cos(theta0) / (c0 J)|^(1/2)``
-with the Jacobian ``J = (r / sin theta) (dr/d theta0)`` of the ray map - and Porter & Bucker 1987,
-"Gaussian beam tracing for computing ocean acoustic fields", JASA 82(4), eq. 15, whose geometric
-beams Bellhop uses). ``(dx/d theta0)_z`` is the derivative of the eigenray's range along its own
+(Jensen, Kuperman, Porter & Schmidt, *Computational Ocean Acoustics*, 2nd ed. 2011, ch. 3: the
+geometrical-acoustics amplitude from the transport equation, ``A = (1/4pi) |c cos(theta0) /
+(c0 J)|^(1/2)`` with ``J = (r / sin theta) (dr/d theta0)`` the Jacobian of the ray map; Porter &
+Bucker 1987, "Gaussian beam tracing for computing ocean acoustic fields", JASA 82(4), 1349-1359,
+whose geometric beams Bellhop uses; the tests compare with Bellhop to 0.5 dB). ``(dx/d theta0)_z`` is the derivative of the eigenray's range along its own
 family at the receiver depth, taken by central differences of exact ray ranges (``h = 1e-6``
 rad); in an isovelocity ocean the formula gives ``1 / L^2`` (spherical spreading over the path
 length ``L``), in a linear gradient the closed-form arcs' derivative. An eigenray that is
@@ -46,8 +42,8 @@ the focusing gain over spherical spreading is capped at ``5 log10(L / lambda)`` 
 and 1.5 m), a documented cap in the spirit of a Gaussian beam's finite waist (Porter & Bucker
 1987). Shadow zones have no eigenrays: `transmission_loss` is ``inf`` there.
 
-Losses
-------
+**Losses.**
+
 * absorption: ``alpha L`` with ``alpha`` in dB/m (e.g. `mitsonar.acoustics.absorption`) and ``L``
   the path length (``d theta / (a g)`` per layer, ``c dt`` where the arc is straight);
 * surface: pressure release, ``R = -1`` (a phase of pi, no loss);
@@ -92,7 +88,7 @@ class FluidBottom:
     """A fluid half-space seabed: compressional ``sound_speed`` (m/s), ``density_ratio`` (seabed
     over water) and ``attenuation`` (dB per wavelength); its plane-wave reflection coefficient is
     `mitsonar.acoustics.reflection_coefficient` against the water's speed at the bottom (Jensen et
-    al. 2011, eq. 1.58), as Bellhop's acousto-elastic half-space ``'A'`` without shear."""
+    al. 2011, ch. 1), as Bellhop's acousto-elastic half-space ``'A'`` without shear."""
 
     sound_speed: float
     density_ratio: float
