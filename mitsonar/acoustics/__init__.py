@@ -1,6 +1,7 @@
 """Acoustics of sea water and the seabed in physical units (NumPy, no Mitsuba).
 
-* :func:`sound_speed` (Mackenzie 1981) and :func:`absorption` (Francois and Garrison 1982);
+* :func:`sound_speed` (Mackenzie 1981, UNESCO/Chen-Millero, Del Grosso by ``model=``) and
+  :func:`absorption` (Francois and Garrison 1982, Ainslie and McColm 1998, fresh water);
 * :func:`reflection_coefficient` and :func:`critical_angle` of a fluid-fluid interface;
 * seabed backscattering strength: :func:`lambert` and :func:`apl_uw_backscatter` (APL-UW TR 9407),
   with the handbook's sediments in :data:`SEDIMENTS` and :func:`bistatic_mean_grazing`;
@@ -11,8 +12,9 @@
   :func:`transmission_loss`, :func:`transmission_loss_field`; `mitsonar.acoustics.propagation`),
   and Bellhop's files to check them with (`mitsonar.acoustics.bellhop`).
 
-Every function refuses an input outside the range its source was fitted over, before any work,
-with one line naming the field and the range. Angles are grazing angles in radians.
+Sound speed and absorption outside their equation's range warn once (``strict=True`` refuses);
+the other functions refuse an input outside the range their source was fitted over, before any
+work, with one line naming the field and the range. Angles are grazing angles in radians.
 """
 from mitsonar.acoustics.interface import critical_angle, loss_parameter, reflection_coefficient
 from mitsonar.acoustics.materials import MATERIALS, Material, material
@@ -21,10 +23,11 @@ from mitsonar.acoustics.propagation import (ARRIVAL_DTYPE, FluidBottom, arrivals
                                             transmission_loss_field)
 from mitsonar.acoustics.seabed import (APL_UW_FREQUENCY_RANGE, SEDIMENTS, Sediment, apl_uw_backscatter, bistatic_mean_grazing,
                      lambert, sediment)
-from mitsonar.acoustics.seawater import FRANCOIS_GARRISON_RANGE, MACKENZIE_RANGE, absorption, sound_speed
+from mitsonar.acoustics.seawater import (FRANCOIS_GARRISON_RANGE, MACKENZIE_RANGE, OutOfRangeWarning, absorption,
+                                         ainslie_mccolm, depth_to_pressure, sound_speed)
 
 __all__ = ["ARRIVAL_DTYPE", "FluidBottom", "arrivals", "eigenrays", "transmission_loss", "transmission_loss_field",
            "APL_UW_FREQUENCY_RANGE", "FRANCOIS_GARRISON_RANGE", "MACKENZIE_RANGE", "MATERIALS", "Material",
-           "ProfileError", "RayPath", "SEDIMENTS", "Sediment", "SoundSpeedProfile", "absorption",
+           "OutOfRangeWarning", "ProfileError", "RayPath", "ainslie_mccolm", "depth_to_pressure", "SEDIMENTS", "Sediment", "SoundSpeedProfile", "absorption",
            "apl_uw_backscatter", "bistatic_mean_grazing", "critical_angle", "lambert", "loss_parameter", "material",
            "reflection_coefficient", "sediment", "sound_speed"]

@@ -48,6 +48,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mitsonar.acoustics._checks import ProfileError
+
 __all__ = ["SoundSpeedProfile", "ProfileError", "RayPath", "SPEED_RANGE", "DEPTH_RANGE"]
 
 #: Sound speeds this module accepts, m/s: every sea and fresh water there is (0 to 40 deg C,
@@ -57,11 +59,6 @@ SPEED_RANGE = (1300.0, 1700.0)
 DEPTH_RANGE = (0.0, 12000.0)
 
 _FIELDS = ("depth", "sound_speed")
-
-
-class ProfileError(ValueError):
-    """A sound-speed profile that is not allowed: one line naming the file (or the call), the row
-    (or sample) and the field."""
 
 
 @dataclass(frozen=True)
@@ -200,13 +197,15 @@ class SoundSpeedProfile:
         return cls([0.0], [speed], source="SoundSpeedProfile.constant")
 
     @classmethod
-    def from_ctd(cls, depths, temperature, salinity):
-        """A profile from a CTD cast: sound speed at each sample by Mackenzie (1981)
-        (`mitsonar.acoustics.sound_speed`; temperature in deg C, salinity in ppt, depth in m)."""
+    def from_ctd(cls, depths, temperature, salinity, *, model="mackenzie", latitude=45.0, strict=False):
+        """A profile from a CTD cast: sound speed at each sample by Mackenzie (1981), or the
+        ``model`` named (`mitsonar.acoustics.sound_speed`: ``"unesco"``, ``"del_grosso"``, at
+        ``latitude``; temperature in deg C, salinity in ppt, depth in m). A sample outside the
+        equation's range warns once (refused with ``strict=True``)."""
         from mitsonar.acoustics.seawater import sound_speed
 
         try:
-            c = sound_speed(temperature, salinity, depths)
+            c = sound_speed(temperature, salinity, depths, model=model, latitude=latitude, strict=strict)
         except ValueError as exc:
             raise ProfileError(f"SoundSpeedProfile.from_ctd: {exc}") from None
         d = np.broadcast_to(np.asarray(depths, dtype=float), np.shape(c))

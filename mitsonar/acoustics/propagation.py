@@ -66,7 +66,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mitsonar.acoustics.profile import ProfileError, SoundSpeedProfile
+# the profile's own class is taken from the profile given (type(profile)): the profile module
+# imports this one for SoundSpeedProfile.eigenrays, so this one does not import it
+from mitsonar.acoustics._checks import ProfileError
 
 __all__ = ["ARRIVAL_DTYPE", "FluidBottom", "eigenrays", "arrivals", "transmission_loss", "transmission_loss_field"]
 
@@ -116,7 +118,7 @@ class _Ocean:
     """The profile with the source, receiver, surface and bottom depths as samples."""
 
     def __init__(self, func, profile, source_depth, receiver_depth, water_depth, bottom, frequency, absorption):
-        if not isinstance(profile, SoundSpeedProfile):
+        if not (hasattr(profile, "_step") and hasattr(profile, "depths")):
             raise ProfileError(f"{func}: profile {type(profile).__name__} is not a SoundSpeedProfile")
         self.D = None if water_depth is None else _number(func, "water_depth", water_depth, 0.0, 12000.0)
         if self.D is not None and not self.D > 0:
@@ -146,7 +148,7 @@ class _Ocean:
         d = np.union1d(p.depths, extra)
         if self.D is not None:
             d = d[d <= self.D]
-        self.aug = SoundSpeedProfile(d, p.speed(d), source=p.source)
+        self.aug = type(p)(d, p.speed(d), source=p.source)
         self.zr = zr
 
     def reflect_bottom(self, grazing):
