@@ -58,8 +58,8 @@ What a path does (`common.SonarIntegrator._sample_primal` calls these when a pro
   rays launched ``TUBE_STEP`` either side, advanced in closed form (`advance`) for the same time,
   are ``2 TUBE_STEP q`` apart across the ray (at equal time the wavefront is normal to the ray).
   By reciprocity the tube from the transducer gives the way back's level. In uniform water it is
-  ``1 / L^2``; focusing and defocusing by the profile (a thermocline's 9.8 dB at 2 km for
-  near-horizontal rays) are in it. At a caustic ``q`` is floored at a Fresnel zone,
+  ``1 / L^2``; focusing and defocusing by the profile (up to about 10 dB within 2 km in a shallow
+  thermocline) are in it. At a caustic ``q`` is floored at a Fresnel zone,
   ``sqrt(lambda L)`` (``lambda`` at the sensor's ``frequency``; the focusing gain over spherical
   spreading is capped at ``5 log10(L / lambda)`` dB); shadow zones have no eigenray and stay
   silent. The outgoing legs need no such weight: their rays are sampled over the launch directions,

@@ -56,6 +56,7 @@ def test_eigenrays_match_bellhops_arrivals_in_time_angle_and_level(case, bellhop
     table = eigenrays(profile, zs, zr, R, water_depth=D, bottom=bottom, max_bounces=3, angles=(-30.0, 30.0))
     assert table.size >= 1
     kinds = set()
+    caustics = 0
     for k, row in enumerate(table):
         launch = math.degrees(row["launch"])
         folder = tmp_path / f"ray{k}"
@@ -71,10 +72,16 @@ def test_eigenrays_match_bellhops_arrivals_in_time_angle_and_level(case, bellhop
         assert launch == pytest.approx(b["launch"], abs=0.01)
         assert math.degrees(row["arrival"]) == pytest.approx(b["arrival"], abs=0.05)
         assert row["transmission_loss"] == pytest.approx(-20.0 * math.log10(b["amplitude"]), abs=0.5)
+        # phases (boundaries and caustics; Bellhop prints the opposite sign) to a degree
+        turn = (math.degrees(row["phase"]) + b["phase"]) % 360.0
+        assert min(turn, 360.0 - turn) < 1.0
+        caustics += int(row["caustics"])
         kinds.add((row["surface_bounces"] > 0, row["bottom_bounces"] > 0))
     if profile is THERMOCLINE and R == 500.0:
         # surface- and bottom-reflected rays among them
         assert (True, True) in kinds and (False, True) in kinds
+    if profile is THERMOCLINE and R == 2000.0:
+        assert caustics >= 1          # a ray through a caustic: Bellhop's phase has its -pi/2
 
 
 @pytest.mark.parametrize("profile, zs, D, depths, ranges", [

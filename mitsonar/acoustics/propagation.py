@@ -52,8 +52,10 @@ and 1.5 m), a documented cap in the spirit of a Gaussian beam's finite waist (Po
   `mitsonar.acoustics.reflection_coefficient`).
 
 ``phase`` is the sum of the boundary reflections' phases (pi per surface bounce, ``arg R`` per
-bottom bounce); the ``-pi/2`` of each caustic a ray has passed (its KMAH index) is **not**
-included.
+bottom bounce) and ``-pi/2`` per caustic the ray has passed (``caustics``, its KMAH index: the sign
+changes of its ray-tube width along it; Jensen et al. 2011, ch. 3), with the time dependence
+``exp(-i omega t)`` of `mitsonar.acoustics.reflection_coefficient`. Bellhop's arrivals file prints
+the opposite sign.
 
 Out of scope: range-dependent profiles and bathymetry (the water is horizontally stratified and
 the bottom flat), coherent TL (phases are given per eigenray, `transmission_loss` sums
@@ -74,10 +76,11 @@ __all__ = ["ARRIVAL_DTYPE", "FluidBottom", "eigenrays", "arrivals", "transmissio
 
 #: The fields of `eigenrays`' table (a NumPy structured array, sorted by arrival time): times in s,
 #: angles in rad from the horizontal (positive downward; ``arrival`` is the ray's heading at the
-#: receiver), losses in dB (one way, re 1 m), ``phase`` in rad, ``amplitude`` the pressure re 1 m,
-#: ``length`` the path length in m.
+#: receiver), ``caustics`` the caustics passed, losses in dB (one way, re 1 m), ``phase`` in rad,
+#: ``amplitude`` the pressure re 1 m, ``length`` the path length in m.
 ARRIVAL_DTYPE = np.dtype([("time", "f8"), ("launch", "f8"), ("arrival", "f8"), ("surface_bounces", "i4"),
-                          ("bottom_bounces", "i4"), ("transmission_loss", "f8"), ("spreading_loss", "f8"),
+                          ("bottom_bounces", "i4"), ("caustics", "i4"), ("transmission_loss", "f8"),
+                          ("spreading_loss", "f8"),
                           ("absorption_loss", "f8"), ("boundary_loss", "f8"), ("phase", "f8"),
                           ("amplitude", "f8"), ("length", "f8")])
 
@@ -160,11 +163,14 @@ class _Ocean:
             return np.asarray(self.bottom(np.abs(grazing)), dtype=complex) * np.ones_like(grazing)
         return np.full(np.shape(grazing), self.bottom, dtype=complex)
 
-    def fan(self, theta, r_max, max_bounces):
+    def fan(self, theta, r_max, max_bounces, steps=None):
         """Trace rays launched at ``theta`` (rad) until they pass ``r_max`` or ``max_bounces``
         boundary reflections: every crossing of the receiver depth as arrays ``ray, x, t, s (signed
         sine there), ns, nb, length, refl (complex product of the reflection coefficients), m``
-        (``m``: the crossing's rank among the ray's crossings with the same bounces and heading)."""
+        (``m``: the crossing's rank among the ray's crossings with the same bounces and heading),
+        ``step`` (the index of the layer traversal it ends). With ``steps`` a list, every
+        traversal's end is appended to it as ``(x, s, ns + nb)`` arrays over all rays (NaN for a
+        ray no longer traced)."""
         aug, zr, D = self.aug, self.zr, self.D
         theta = np.asarray(theta, dtype=float)
         z, s, a = aug._start("eigenrays", np.full(theta.shape, self.zs), theta)
@@ -175,7 +181,8 @@ class _Ocean:
         ns, nb = np.zeros(n, int), np.zeros(n, int)
         refl = np.ones(n, complex)
         idle = np.zeros(n, int)
-        ev = {k: [] for k in ("ray", "x", "t", "s", "ns", "nb", "L", "refl")}
+        ev = {k: [] for k in ("ray", "x", "t", "s", "ns", "nb", "L", "refl", "step")}
+        n_step = 0
         todo = np.arange(n)
 
         def boundaries(k):
@@ -218,14 +225,20 @@ class _Ocean:
             if hit.any():
                 i = k[hit]
                 for key, v in (("ray", i), ("x", x[i]), ("t", t[i]), ("s", s[i]), ("ns", ns[i]), ("nb", nb[i]),
-                               ("L", L[i]), ("refl", refl[i])):
+                               ("L", L[i]), ("refl", refl[i]), ("step", np.full(i.size, n_step))):
                     ev[key].append(np.array(v))
+            if steps is not None:
+                row = np.full((3, n), np.nan)
+                row[0, k], row[1, k], row[2, k] = x[k], s[k], ns[k] + nb[k]
+                steps.append(row)
+            n_step += 1
             boundaries(k)
             alive = ok & (x[k] <= r_max) & (ns[k] + nb[k] <= max_bounces) & (idle[k] < 3)
             todo = k[alive]
         out = {key: (np.concatenate(v) if v else np.zeros(0, complex if key == "refl" else float))
                for key, v in ev.items()}
         out["ray"] = out["ray"].astype(int)
+        out["step"] = out["step"].astype(int)
         out["ns"] = out["ns"].astype(int)
         out["nb"] = out["nb"].astype(int)
         out["dir"] = (out["s"] > 0).astype(int)
@@ -265,6 +278,41 @@ def _launch_fan(func, angles, rays):
     if not (isinstance(rays, (int, np.integer)) and 2 <= rays <= 1_000_000):
         raise ProfileError(f"{func}: rays {rays!r} is not allowed (a count, 2 to 1000000)")
     return np.radians(np.linspace(lo, hi, int(rays)))
+
+
+def _caustics(ocean, theta, keys, r_max, max_bounces):
+    """How many caustics each eigenray (launch ``theta``, family ``keys``) has passed before the
+    receiver: the sign changes of its signed ray-tube width ``q = -(dx/d theta0)_z sin(theta)``
+    (the neighbours' separation across the ray at each layer boundary it crosses, by central
+    differences of ``_H``), counted in the frame that a boundary reflection mirrors (the sign of
+    ``q`` flips with it there, without a caustic). ``q`` starts positive at the source. A pair of
+    caustics inside one layer traversal is not seen."""
+    n = theta.size
+    if not n:
+        return np.zeros(0, int)
+    steps = []
+    ev = ocean.fan(np.concatenate([theta, theta + _H, theta - _H]), r_max, max_bounces, steps=steps)
+    out = np.zeros(n, int)
+    if not steps:
+        return out
+    S = np.stack(steps)                          # (step, 3, 3 n)
+    x, s, bounces = S[:, 0], S[:, 1], S[:, 2]
+    match = ((ev["ns"] == keys[ev["ray"] % n, 0]) & (ev["nb"] == keys[ev["ray"] % n, 1])
+             & (ev["dir"] == keys[ev["ray"] % n, 2]) & (ev["m"] == keys[ev["ray"] % n, 3]) & (ev["ray"] < n))
+    last = np.full(n, -1)
+    last[ev["ray"][match]] = ev["step"][match]
+    for r in range(n):
+        k = last[r]
+        if k < 0:
+            continue
+        xp, xm = x[:k + 1, n + r], x[:k + 1, 2 * n + r]
+        same = bounces[:k + 1, r] == bounces[:k + 1, n + r]
+        same &= bounces[:k + 1, r] == bounces[:k + 1, 2 * n + r]
+        q = -(xp - xm) / (2 * _H) * s[:k + 1, r] * np.where(bounces[:k + 1, r] % 2 == 1, -1.0, 1.0)
+        q = q[same & np.isfinite(q) & (np.abs(s[:k + 1, r]) > 1e-9)]
+        sign = np.sign(q[q != 0])
+        out[r] = int(np.sum(sign[1:] != sign[:-1]) + (sign.size > 0 and sign[0] < 0))
+    return out
 
 
 def _codes(ev):
@@ -368,8 +416,9 @@ def eigenrays(profile, source_depth, receiver_depth, range, *, water_depth=None,
     xm = ocean.ranges_of(th - _H, keys, r_max * 1.5, max_bounces)[0]
     dxdth = np.where(np.isfinite(xp) & np.isfinite(xm), (xp - xm) / (2 * _H),
                      np.where(np.isfinite(xp), (xp - x0) / _H, (x0 - xm) / _H))
+    caustics = _caustics(ocean, th, keys, r_max * 1.5, max_bounces)
     i = i0[found]
-    th, dxdth = th[found], dxdth[found]
+    th, dxdth, caustics = th[found], dxdth[found], caustics[found]
     out = np.zeros(i.size, ARRIVAL_DTYPE)
     if not i.size:
         return out
@@ -397,7 +446,8 @@ def eigenrays(profile, source_depth, receiver_depth, range, *, water_depth=None,
     out["absorption_loss"] = absorb
     out["boundary_loss"] = boundary
     out["transmission_loss"] = spreading + absorb + boundary
-    out["phase"] = np.angle(refl) % (2 * np.pi)
+    out["caustics"] = caustics
+    out["phase"] = (np.angle(refl) - 0.5 * np.pi * caustics) % (2 * np.pi)
     out["amplitude"] = 10.0 ** (-out["transmission_loss"] / 20.0)
     out["length"] = L
     return np.sort(out, order="time")
