@@ -184,6 +184,8 @@ def test_transmission_loss_sums_the_eigenrays_intensities_and_a_shadow_is_silent
     (dict(max_bounces=-1), "max_bounces -1 is not allowed"),
     (dict(angles=(10.0, -10.0)), "angles (10.0, -10.0) is not allowed"),
     (dict(receiver_depth=150.0, water_depth=100.0), "receiver_depth 150.0 is not allowed"),
+    (dict(bottom_slope=2.0), "bottom_slope 2.0 needs a water_depth"),
+    (dict(bottom_slope=40.0, water_depth=100.0), "bottom_slope 40.0 is not allowed (-30 to 30 deg)"),
 ])
 def test_bad_eigenray_arguments_are_one_line(kwargs, message):
     args = dict(source_depth=10.0, receiver_depth=20.0, range=100.0)
@@ -206,3 +208,29 @@ def test_the_two_way_loss_is_renamed_and_the_old_name_warns():
     # the one-way loss of straight water without absorption is half of it: 20 log10 of the path
     one = SoundSpeedProfile.constant(1500.0).transmission_loss(10.0, 110.0, 100.0, max_bounces=0)
     assert one == pytest.approx(two_way_transmission_loss(math.hypot(100.0, 100.0)) / 2, abs=1e-5)
+
+
+@pytest.mark.parametrize("slope", [-3.0, 2.0, 5.0])
+def test_a_sloping_bottom_reflects_as_the_image_in_its_plane(slope):
+    """Uniform water over a bottom z = D + x tan(slope): the bottom-reflected eigenray comes from
+    the source's image in that line, with its time L/c and angles, and the 2-D model's cylindrical
+    spreading ``R L / cos(theta0)`` (R the horizontal range, L the image's distance)."""
+    c, zs, zr, R, D = 1500.0, 20.0, 30.0, 800.0, 100.0
+    tb = math.tan(math.radians(slope))
+    table = SoundSpeedProfile.constant(c).eigenrays(zs, zr, R, water_depth=D, bottom_slope=slope, max_bounces=1)
+    row = table[(table["bottom_bounces"] == 1) & (table["surface_bounces"] == 0)]
+    assert row.size == 1
+    n = np.array([-tb, 1.0]) / math.hypot(tb, 1.0)
+    image = np.array([0.0, zs]) - 2.0 * (zs - D) / math.hypot(tb, 1.0) * n
+    to_rx = np.array([R, zr]) - image
+    L = float(np.linalg.norm(to_rx))
+    v = to_rx / L
+    before = v - 2.0 * (v @ n) * n
+    theta0 = math.atan2(before[1], before[0])
+    assert row["time"][0] == pytest.approx(L / c, rel=1e-12)
+    assert row["launch"][0] == pytest.approx(theta0, abs=1e-10)
+    assert row["arrival"][0] == pytest.approx(math.atan2(v[1], v[0]), abs=1e-10)
+    assert row["spreading_loss"][0] == pytest.approx(10 * math.log10(R * L / math.cos(theta0)), abs=1e-6)
+    # the flat bottom's direct path is there too, unchanged
+    assert table[(table["bottom_bounces"] == 0) & (table["surface_bounces"] == 0)]["time"][0] == pytest.approx(
+        math.hypot(R, zr - zs) / c, rel=1e-12)

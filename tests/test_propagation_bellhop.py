@@ -144,3 +144,33 @@ def test_a_rendered_echo_through_a_thermocline_follows_the_sonar_equation_with_b
     L = math.hypot(X, zt - head)
     rendered = 10.0 * math.log10(render(math.radians(launch), THERMOCLINE) / render(math.atan2(zt - head, X), None))
     assert rendered == pytest.approx(-2.0 * (tl - 20.0 * math.log10(L)), abs=1.0)
+
+
+def test_a_sloping_bottom_matches_bellhop_with_its_bathymetry_file(bellhop, tmp_path):
+    """The thermocline over a bottom deepening at 3 deg (Bellhop: a two-point .bty file): eigenrays
+    in time, launch angle, TL and phase, and the incoherent TL field (a 2 deg upslope too)."""
+    table = eigenrays(THERMOCLINE, 10.0, 20.0, 800.0, water_depth=100.0, bottom_slope=3.0, max_bounces=3,
+                      angles=(-30.0, 30.0))
+    assert np.any(table["bottom_bounces"] > 0)
+    for k, row in enumerate(table):
+        launch = math.degrees(row["launch"])
+        folder = tmp_path / f"ray{k}"
+        folder.mkdir()
+        base = bellhop(str(folder), THERMOCLINE, 10.0, 20.0, 800.0, water_depth=100.0, bottom_slope=3.0,
+                       run_type="A", angles=(launch - 0.05, launch + 0.05), beams=101, step=0.5)
+        ref = read_arrivals(base + ".arr")
+        ref = ref[(ref["surface_bounces"] == row["surface_bounces"]) & (ref["bottom_bounces"] == row["bottom_bounces"])]
+        b = ref[np.argmin(np.abs(ref["time"] - row["time"]))]
+        assert row["time"] == pytest.approx(b["time"], rel=1e-6)
+        assert launch == pytest.approx(b["launch"], abs=0.01)
+        assert row["transmission_loss"] == pytest.approx(-20.0 * math.log10(b["amplitude"]), abs=0.5)
+    depths, ranges = np.array([10.0, 20.0, 50.0]), np.array([300.0, 600.0, 900.0])
+    for slope in (3.0, -2.0):
+        folder = tmp_path / f"field{slope:+g}"
+        folder.mkdir()
+        base = bellhop(str(folder), THERMOCLINE, 10.0, depths, ranges, water_depth=100.0, bottom_slope=slope,
+                       run_type="I", angles=(-30.0, 30.0), beams=4001, step=0.5)
+        p = read_shd(base + ".shd")[2]
+        field = transmission_loss_field(THERMOCLINE, 10.0, depths, ranges, water_depth=100.0, bottom_slope=slope,
+                                        angles=(-30.0, 30.0), rays=4001, max_bounces=20)
+        np.testing.assert_allclose(field, -20.0 * np.log10(np.abs(p)), atol=0.5)

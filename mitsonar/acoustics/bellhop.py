@@ -1,12 +1,13 @@
 """Cross-checks with Bellhop, M. B. Porter's Gaussian/geometric beam model (the Acoustics Toolbox).
 
 `write_env` writes a `SoundSpeedProfile` and a geometry (source depth, receiver depths and
-ranges, a flat bottom) as a Bellhop environment file; run ``bellhop.exe NAME`` on it; read its
+ranges, a flat or sloping bottom) as a Bellhop environment file; run ``bellhop.exe NAME`` on it; read its
 arrivals (run type ``'A'``) with `read_arrivals` and its transmission-loss field (run types ``'C'``,
 ``'I'``, ``'S'``) with `read_shd`, and compare with `mitsonar.acoustics.eigenrays` and
-`transmission_loss_field`. The formats follow Porter, *The BELLHOP Manual and User's Guide:
-Preliminary Draft* (HLS Research, 2011), sec. "The environmental file" and "Arrivals", as the
-Acoustics Toolbox's ``read_arrivals_asc.m`` and ``read_shd_bin.m`` read them.
+`transmission_loss_field`. The formats are Bellhop's environment, ASCII arrivals and binary shade
+files as the Acoustics Toolbox documents them (Porter, *The BELLHOP Manual and User's Guide:
+Preliminary Draft*, HLS Research, 2011) and its Python wrapper ``aubellhop`` reads them; the
+tests run the ``bellhop.exe`` of ``aubellhop`` 0.2.1 on what `write_env` writes.
 
 What is written: the profile interpolated c-linearly (``'C'``, as mitsonar's), a vacuum surface
 (``'V'``), volume absorption in dB/m (``'M'``) on the profile's first line, the profile's samples
@@ -45,14 +46,17 @@ def _values(values):
 
 
 def write_env(path, profile, source_depth, receiver_depths, ranges, *, water_depth, bottom=1.0, frequency=1000.0,
-              absorption=0.0, run_type="A", angles=(-89.0, 89.0), beams=2001, step=0.0, title="mitsonar"):
-    """Write ``path`` (``NAME.env``) for ``bellhop.exe NAME``: the profile, a flat bottom at
+              absorption=0.0, run_type="A", angles=(-89.0, 89.0), beams=2001, step=0.0, title="mitsonar",
+              bottom_slope=0.0):
+    """Write ``path`` (``NAME.env``) for ``bellhop.exe NAME``: the profile, a bottom at
     ``water_depth`` (m) with reflection coefficient ``bottom`` (as in
     `mitsonar.acoustics.eigenrays`), one source depth, receiver depths (m) and ranges (m), the run
     type (``'A'`` arrivals, ``'I'`` incoherent TL, ``'C'`` coherent TL, ``'E'`` eigenrays, ``'R'``
     rays; geometric hat-shaped beams in Cartesian coordinates), the fan (``angles`` in degrees,
     ``beams`` rays) and Bellhop's ray step (m; 0: its default, a tenth of the depth). Returns the
-    path written. A tabulated bottom goes to ``NAME.brc`` alongside."""
+    path written. A tabulated bottom goes to ``NAME.brc`` alongside; a ``bottom_slope`` (deg,
+    positive deepening with range; ``water_depth`` is then the depth at the source) to a
+    bathymetry file ``NAME.bty`` (linear between its two ends)."""
     func = "write_env"
     path = os.fspath(path)
     if not path.endswith(".env"):
@@ -67,8 +71,13 @@ def write_env(path, profile, source_depth, receiver_depths, ranges, *, water_dep
         raise ProfileError(f"{func}: water_depth {water_depth!r} is not allowed (a depth > 0 m)")
     rd = np.atleast_1d(np.asarray(receiver_depths, dtype=float))
     rr = np.atleast_1d(np.asarray(ranges, dtype=float))
-    if not (0 <= source_depth <= D) or (rd < 0).any() or (rd > D).any():
+    if not (0 <= source_depth <= D) or (rd < 0).any() or (rd > D + max(0.0, float(rr.max()) * math.tan(math.radians(
+            float(bottom_slope))))).any():
         raise ProfileError(f"{func}: source and receiver depths must lie between 0 and water_depth {D:g} m")
+    r_end = float(rr.max()) * 1.02
+    tanb = math.tan(math.radians(float(bottom_slope)))
+    D0 = D
+    D = max(D0, D0 + r_end * tanb)                   # the profile down to the deepest bottom
     d = profile.depths[profile.depths < D]
     z = np.concatenate([[0.0] if d.size == 0 or d[0] > 0 else [], d, [D]])
     c = profile.speed(z)
@@ -77,13 +86,17 @@ def write_env(path, profile, source_depth, receiver_depths, ranges, *, water_dep
     for k, (zk, ck) in enumerate(zip(z, c)):
         zk, ck = float(zk), float(ck)
         lines.append(f"{zk!r} {ck!r} 0.0 1.0 {float(absorption)!r} /" if k == 0 else f"{zk!r} {ck!r} /")
+    star = "*" if bottom_slope else ""
+    if star:
+        with open(base + ".bty", "w") as f:
+            f.write(f"'LS'\n2\n0.0 {D0!r}\n{r_end / 1000.0!r} {D0 + r_end * tanb!r}\n")
     if isinstance(bottom, FluidBottom):
         att = bottom.attenuation * float(frequency) / bottom.sound_speed        # dB/wavelength -> dB/m
-        lines += ["'A' 0.0", f"{D!r} {bottom.sound_speed!r} 0.0 {bottom.density_ratio!r} {att!r} /"]
+        lines += [f"'A{star}' 0.0", f"{D!r} {bottom.sound_speed!r} 0.0 {bottom.density_ratio!r} {att!r} /"]
     elif not callable(bottom) and complex(bottom) == 1.0:
-        lines.append("'R' 0.0")
+        lines.append(f"'R{star}' 0.0")
     else:
-        lines.append("'F' 0.0")
+        lines.append(f"'F{star}' 0.0")
         grazing = np.linspace(0.0, 90.0, 901)
         r = (np.asarray(bottom(np.radians(grazing)), complex) * np.ones(grazing.shape) if callable(bottom)
              else np.full(grazing.shape, complex(bottom)))

@@ -3,7 +3,7 @@
 The questions an acoustician asks a propagation model first: which rays join this source and this
 receiver, when do they arrive, at what angles and at what level. `eigenrays` answers them for a
 `SoundSpeedProfile` between a flat sea surface (pressure release, ``R = -1``) and, optionally, a
-flat bottom of given reflection coefficient; `transmission_loss` sums them incoherently;
+flat or uniformly sloping bottom of given reflection coefficient; `transmission_loss` sums them incoherently;
 `transmission_loss_field` gives the incoherent TL over a grid of ranges and depths for a plot.
 `mitsonar.acoustics.bellhop` writes the same geometry as a Bellhop ``.env`` file and reads
 Bellhop's arrivals back, so the answers can be checked against the reference ray/beam model.
@@ -57,8 +57,13 @@ changes of its ray-tube width along it; Jensen et al. 2011, ch. 3), with the tim
 ``exp(-i omega t)`` of `mitsonar.acoustics.reflection_coefficient`. Bellhop's arrivals file prints
 the opposite sign.
 
-Out of scope: range-dependent profiles and bathymetry (the water is horizontally stratified and
-the bottom flat), coherent TL (phases are given per eigenray, `transmission_loss` sums
+A sloping bottom (``bottom_slope``) is not a sample: a traversal that goes below the line
+``z = D + x tan(slope)`` is sampled and bisected to where it meets it, and the ray leaves at
+``2 slope - theta`` (the image in the bottom's plane; checked against the closed form and
+Bellhop's bathymetry file).
+
+Out of scope: range-dependent profiles and bathymetry other than one uniform slope (the water is
+horizontally stratified), coherent TL (phases are given per eigenray, `transmission_loss` sums
 intensities), and a layered or elastic seabed beyond its plane-wave reflection coefficient.
 """
 from __future__ import annotations
@@ -120,15 +125,22 @@ def _number(func, field, value, lo=None, hi=None, unit="m"):
 class _Ocean:
     """The profile with the source, receiver, surface and bottom depths as samples."""
 
-    def __init__(self, func, profile, source_depth, receiver_depth, water_depth, bottom, frequency, absorption):
+    def __init__(self, func, profile, source_depth, receiver_depth, water_depth, bottom, frequency, absorption,
+                 bottom_slope=0.0, reach=0.0):
         if not (hasattr(profile, "_step") and hasattr(profile, "depths")):
             raise ProfileError(f"{func}: profile {type(profile).__name__} is not a SoundSpeedProfile")
         self.D = None if water_depth is None else _number(func, "water_depth", water_depth, 0.0, 12000.0)
         if self.D is not None and not self.D > 0:
             raise ProfileError(f"{func}: water_depth {water_depth!r} is not allowed (a depth > 0 m)")
+        slope = _number(func, "bottom_slope", bottom_slope, -30.0, 30.0, "deg")
+        if slope and self.D is None:
+            raise ProfileError(f"{func}: bottom_slope {bottom_slope!r} needs a water_depth (the depth at the source)")
+        self.tanb = math.tan(math.radians(slope))
+        self.reach = float(reach)
         top = 12000.0 if self.D is None else self.D
         self.zs = _number(func, "source_depth", source_depth, 0.0, top)
-        self.zr = _number(func, "receiver_depth", receiver_depth, 0.0, top) if receiver_depth is not None else None
+        top_r = top if self.D is None else min(12000.0, self.D + max(self.tanb, 0.0) * self.reach)
+        self.zr = _number(func, "receiver_depth", receiver_depth, 0.0, top_r) if receiver_depth is not None else None
         self.frequency = _number(func, "frequency", frequency, 1e-3, 1e7, "Hz")
         self.alpha = _number(func, "absorption", absorption, 0.0, 10.0, "dB/m")
         if callable(bottom) or isinstance(bottom, FluidBottom):
@@ -147,21 +159,48 @@ class _Ocean:
 
     def _build(self, zr):
         p = self.profile
-        extra = [0.0, self.zs] + ([] if zr is None else [zr]) + ([] if self.D is None else [self.D])
+        # with a sloping bottom its deepest point within reach is the last sample (the bottom
+        # itself is not a sample: rays are cut where they meet it, `_slope_hit`)
+        deepest = None if self.D is None else self.D + max(self.tanb, 0.0) * self.reach
+        extra = [0.0, self.zs] + ([] if zr is None else [zr]) + ([] if deepest is None else [deepest])
         d = np.union1d(p.depths, extra)
-        if self.D is not None:
-            d = d[d <= self.D]
+        if deepest is not None:
+            d = d[d <= deepest]
         self.aug = type(p)(d, p.speed(d), source=p.source)
         self.zr = zr
 
-    def reflect_bottom(self, grazing):
+    def reflect_bottom(self, grazing, water_speed=None):
         if self.D is None:
             return np.ones_like(grazing, dtype=complex)
         if isinstance(self.bottom, FluidBottom):
-            return np.asarray(self.bottom.reflection(np.abs(grazing), float(self.profile.speed(self.D))), complex)
+            c = self.profile.speed(self.D) if water_speed is None else water_speed
+            return np.asarray(self.bottom.reflection(np.abs(grazing), c), complex) * np.ones_like(grazing)
         if callable(self.bottom):
             return np.asarray(self.bottom(np.abs(grazing)), dtype=complex) * np.ones_like(grazing)
         return np.full(np.shape(grazing), self.bottom, dtype=complex)
+
+    def _slope_hit(self, j, z, s, a, x, dt, samples=16, iterations=60):
+        """Where the traversals from ``(z, s)`` (signed sine) at range ``x`` in layers ``j`` lasting
+        ``dt`` first go below the sloping bottom ``z = D + x tan(beta)``: ``(hit, tau)``. The
+        traversal (a circular arc, `SoundSpeedProfile._inside`) is sampled at ``samples`` times
+        and the first crossing bisected."""
+        aug = self.aug
+        cap = np.where(np.isfinite(dt), dt, 2.0 * self.reach / np.interp(z, aug.depths, aug.speeds))
+        frac = np.arange(1, samples + 1) / samples
+        tau = cap[:, None] * frac[None, :]
+        dx, z2, _, _ = aug._inside(j[:, None], z[:, None], s[:, None], a[:, None], tau)
+        below = z2 > self.D + (x[:, None] + dx) * self.tanb
+        hit = below.any(axis=1)
+        first = np.argmax(below, axis=1)
+        hi = np.where(hit, tau[np.arange(z.size), first], 0.0)
+        lo = np.where(hit & (first > 0), tau[np.arange(z.size), np.maximum(first - 1, 0)], 0.0)
+        for _ in range(iterations):
+            mid = 0.5 * (lo + hi)
+            dxm, zm, _, _ = aug._inside(j, z, s, a, mid)
+            under = zm > self.D + (x + dxm) * self.tanb
+            hi = np.where(under, mid, hi)
+            lo = np.where(under, lo, mid)
+        return hit, hi
 
     def fan(self, theta, r_max, max_bounces, steps=None):
         """Trace rays launched at ``theta`` (rad) until they pass ``r_max`` or ``max_bounces``
@@ -181,7 +220,7 @@ class _Ocean:
         ns, nb = np.zeros(n, int), np.zeros(n, int)
         refl = np.ones(n, complex)
         idle = np.zeros(n, int)
-        ev = {k: [] for k in ("ray", "x", "t", "s", "ns", "nb", "L", "refl", "step")}
+        ev = {k: [] for k in ("ray", "x", "t", "s", "ns", "nb", "L", "refl", "step", "a")}
         n_step = 0
         todo = np.arange(n)
 
@@ -192,7 +231,7 @@ class _Ocean:
                 i = k[up_s]
                 down[i], s[i], ns[i] = True, np.abs(s[i]), ns[i] + 1
                 refl[i] *= -1.0
-            if D is not None:
+            if D is not None and not self.tanb:
                 at_b = (z[k] == D) & down[k]
                 if at_b.any():
                     i = k[at_b]
@@ -216,16 +255,44 @@ class _Ocean:
             with np.errstate(divide="ignore", invalid="ignore"):
                 arc = dth / (a[k] * g)
             ds = np.where((np.abs(dth) > 1e-4) & (a[k] * g != 0), arc, 0.5 * (c0 + c1) * dt)
+            if self.tanb:
+                # a sloping bottom z = D + x tan(beta) met inside this traversal: cut it there
+                sb, tau_b = self._slope_hit(j, z[k], np.where(down[k], np.abs(s[k]), -np.abs(s[k])), a[k], x[k], dt)
+                ok |= sb
+                dt = np.where(sb, tau_b, dt)
+                dxb, zb_, s2b, _ = aug._inside(j, z[k], np.where(down[k], np.abs(s[k]), -np.abs(s[k])), a[k],
+                                               np.where(sb, tau_b, 0.0))
+                dx = np.where(sb, dxb, dx)
+                z_e = np.where(sb, zb_, z_e)
+                s_e = np.where(sb, s2b, s_e)
+                c1 = np.interp(z_e, aug.depths, aug.speeds)
+                th1 = np.arctan2(s_e, a[k] * c1)
+                dth = th0 - th1
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    arc = dth / (a[k] * g)
+                ds = np.where((np.abs(dth) > 1e-4) & (a[k] * g != 0), arc, 0.5 * (c0 + c1) * dt)
             x[k] += np.where(ok, dx, 0.0)
             t[k] += np.where(ok, dt, 0.0)
             L[k] += np.where(ok, ds, 0.0)
             z[k], s[k], down[k] = np.where(ok, z_e, z[k]), np.where(ok, s_e, s[k]), np.where(ok, d_e, down[k])
+            if self.tanb and sb.any():
+                # reflect off the slope: theta' = 2 beta - theta, the grazing angle theta - beta
+                i = k[sb]
+                c = np.interp(z[i], aug.depths, aug.speeds)
+                th = np.arctan2(s[i], a[i] * c)
+                beta = math.atan(self.tanb)
+                refl[i] *= self.reflect_bottom(np.clip(th - beta, 0.0, np.pi / 2), c)
+                th2 = 2.0 * beta - th
+                back = np.cos(th2) <= 0                      # reflected backwards: not followed
+                s[i], a[i] = np.sin(th2), np.maximum(np.cos(th2), 0.0) / c
+                down[i], nb[i] = s[i] > 0, nb[i] + 1
+                ok[sb] &= ~back
             idle[k] = np.where(dt == 0, idle[k] + 1, 0)
             hit = ok & (dt > 0) & (z[k] == zr) & (x[k] <= r_max)
             if hit.any():
                 i = k[hit]
                 for key, v in (("ray", i), ("x", x[i]), ("t", t[i]), ("s", s[i]), ("ns", ns[i]), ("nb", nb[i]),
-                               ("L", L[i]), ("refl", refl[i]), ("step", np.full(i.size, n_step))):
+                               ("L", L[i]), ("refl", refl[i]), ("step", np.full(i.size, n_step)), ("a", a[i])):
                     ev[key].append(np.array(v))
             if steps is not None:
                 row = np.full((3, n), np.nan)
@@ -252,7 +319,6 @@ class _Ocean:
             start = np.maximum.accumulate(np.where(new, np.arange(order.size), 0))
             m[order] = np.arange(order.size) - start
         out["m"] = m
-        out["a"] = a
         return out
 
     def ranges_of(self, theta, keys, r_max, max_bounces):
@@ -343,14 +409,14 @@ def _refined_fan(ocean, theta, r_max, max_bounces, R, passes=2, split=16, most=4
         rank = np.empty(order.size, int)
         rank[order] = np.arange(order.size)
         ev_new["ray"] = ev_new["ray"] + theta.size
-        ev = {k: (np.concatenate([ev[k], ev_new[k]]) if k != "a" else None) for k in ev}
+        ev = {k: np.concatenate([ev[k], ev_new[k]]) for k in ev}
         ev["ray"] = rank[ev["ray"]]
         theta = merged[order]
     return theta, ev
 
 
 def eigenrays(profile, source_depth, receiver_depth, range, *, water_depth=None, bottom=1.0, frequency=1000.0,
-              absorption=0.0, max_bounces=4, angles=(-89.0, 89.0), rays=2001):
+              absorption=0.0, max_bounces=4, angles=(-89.0, 89.0), rays=2001, bottom_slope=0.0):
     """Every ray joining a source at ``source_depth`` and a receiver at ``receiver_depth`` (m) at
     horizontal ``range`` (m), with at most ``max_bounces`` surface and bottom reflections together:
     a structured array of `ARRIVAL_DTYPE`, one row per eigenray, sorted by arrival time.
@@ -360,7 +426,12 @@ def eigenrays(profile, source_depth, receiver_depth, range, *, water_depth=None,
     profile : SoundSpeedProfile
         The water's sound speed against depth.
     water_depth : float, optional
-        Depth of a flat bottom (m); None: no bottom (rays that go down are lost).
+        Depth of the bottom at the source (m); None: no bottom (rays that go down are lost).
+    bottom_slope : float
+        The bottom's slope, degrees, positive where it deepens with range (-30 to 30; 0: flat): the
+        bottom is ``z = water_depth + x tan(slope)`` at horizontal distance ``x`` from the source
+        in every direction (the cylindrical symmetry of a 2-D model such as Bellhop's). A ray the
+        slope reflects back towards the source is not followed.
     bottom : complex, callable or FluidBottom
         The bottom's plane-wave reflection coefficient: a number (default 1, rigid), a function of
         the grazing angle (rad) or a `FluidBottom`.
@@ -377,10 +448,14 @@ def eigenrays(profile, source_depth, receiver_depth, range, *, water_depth=None,
     The module docstring gives the equations (ray-tube spreading, losses) and what is left out.
     """
     func = "eigenrays"
-    ocean = _Ocean(func, profile, source_depth, receiver_depth, water_depth, bottom, frequency, absorption)
     R = _number(func, "range", range, 0.0, 1.0e6)
     if not R > 0:
         raise ProfileError(f"{func}: range {range!r} is not allowed (a horizontal distance > 0 m)")
+    ocean = _Ocean(func, profile, source_depth, receiver_depth, water_depth, bottom, frequency, absorption,
+                   bottom_slope, 1.5 * R)
+    if ocean.D is not None and ocean.zr > ocean.D + R * ocean.tanb:
+        raise ProfileError(f"{func}: receiver_depth {receiver_depth!r} is not allowed (below the bottom, "
+                           f"{ocean.D + R * ocean.tanb:g} m at range {R:g} m)")
     if not (isinstance(max_bounces, (int, np.integer)) and 0 <= max_bounces <= 1000):
         raise ProfileError(f"{func}: max_bounces {max_bounces!r} is not allowed (a count, 0 to 1000)")
     theta = _launch_fan(func, angles, rays)
@@ -422,7 +497,7 @@ def eigenrays(profile, source_depth, receiver_depth, range, *, water_depth=None,
     out = np.zeros(i.size, ARRIVAL_DTYPE)
     if not i.size:
         return out
-    a = ev0["a"][found]
+    a = ev0["a"][i]
     c_r = float(profile.speed(ocean.zr))
     c_s = float(profile.speed(ocean.zs))
     s_r = ev0["s"][i]
@@ -474,7 +549,7 @@ def transmission_loss(profile, source_depth, receiver_depth, range, **kwargs):
 
 
 def transmission_loss_field(profile, source_depth, depths, ranges, *, water_depth=None, bottom=1.0, frequency=1000.0,
-                            absorption=0.0, max_bounces=4, angles=(-89.0, 89.0), rays=2001):
+                            absorption=0.0, max_bounces=4, angles=(-89.0, 89.0), rays=2001, bottom_slope=0.0):
     """Incoherent one-way TL (dB re 1 m) over ``depths`` x ``ranges`` (m): an array of shape
     ``(len(depths), len(ranges))`` for a plot (``inf`` in shadow).
 
@@ -495,10 +570,12 @@ def transmission_loss_field(profile, source_depth, depths, ranges, *, water_dept
     r_sorted = np.sort(r)
     r_max = float(r_sorted[-1])
     out = np.full((d.size, r.size), 0.0)
-    ocean = _Ocean(func, profile, source_depth, float(d[0]), water_depth, bottom, frequency, absorption)
+    ocean = _Ocean(func, profile, source_depth, None, water_depth, bottom, frequency, absorption, bottom_slope,
+                   1.5 * r_max)
     c_s = float(profile.speed(ocean.zs))
     for row, zr in enumerate(d):
-        ocean.zr = _number(func, "depths", zr, 0.0, 12000.0 if ocean.D is None else ocean.D)
+        deepest = 12000.0 if ocean.D is None else ocean.D + max(ocean.tanb, 0.0) * ocean.reach
+        ocean.zr = _number(func, "depths", zr, 0.0, deepest)
         ocean._build(ocean.zr)
         c_r = float(profile.speed(zr))
         ev = ocean.fan(theta, r_max * 1.5, max_bounces)
@@ -512,7 +589,7 @@ def transmission_loss_field(profile, source_depth, depths, ranges, *, water_dept
         x1, x2 = ev["x"][p], ev["x"][q]
         dth = theta[ev["ray"][q]] - theta[ev["ray"][p]]
         slope = (x2 - x1) / dth
-        th_r1, th_r2 = (np.arctan2(ev["s"][v], ev["a"][ev["ray"][v]] * c_r) for v in (p, q))
+        th_r1, th_r2 = (np.arctan2(ev["s"][v], ev["a"][v] * c_r) for v in (p, q))
         xa, xb = np.minimum(x1, x2), np.maximum(x1, x2)
         ia = np.searchsorted(r_sorted, xa, side="left")
         ib = np.searchsorted(r_sorted, xb, side="left")      # grid ranges in [xa, xb)
