@@ -234,3 +234,11 @@ def test_a_sloping_bottom_reflects_as_the_image_in_its_plane(slope):
     # the flat bottom's direct path is there too, unchanged
     assert table[(table["bottom_bounces"] == 0) & (table["surface_bounces"] == 0)]["time"][0] == pytest.approx(
         math.hypot(R, zr - zs) / c, rel=1e-12)
+
+
+def test_a_source_on_the_surface_launches_each_ray_once():
+    # a ray launched up from 0 m is the downward ray's reflected twin: one arrival per path
+    table = SoundSpeedProfile.constant(1500.0).eigenrays(0.0, 20.0, 300.0, water_depth=100.0, max_bounces=1)
+    assert sorted(np.round(table["time"] * 1500.0, 6)) == pytest.approx([math.hypot(300.0, 20.0),
+                                                                         math.hypot(300.0, 180.0)])
+    assert np.all(table["surface_bounces"] == 0)

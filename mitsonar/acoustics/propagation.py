@@ -222,7 +222,10 @@ class _Ocean:
         idle = np.zeros(n, int)
         ev = {k: [] for k in ("ray", "x", "t", "s", "ns", "nb", "L", "refl", "step", "a")}
         n_step = 0
-        todo = np.arange(n)
+        # a source on a boundary: a ray launched into it is its reflected twin (launched away from
+        # it), which is traced; tracing both would count the one ray twice
+        into = ((z == 0.0) & (s < 0)) | ((D is not None) & (z == (D if D is not None else -1.0)) & (s > 0))
+        todo = np.arange(n)[~into]
 
         def boundaries(k):
             nonlocal todo
@@ -239,7 +242,6 @@ class _Ocean:
                     refl[i] *= self.reflect_bottom(np.arctan2(np.abs(s[i]), a[i] * c))
                     down[i], s[i], nb[i] = False, -np.abs(s[i]), nb[i] + 1
 
-        boundaries(todo)
         for _ in range(100000):
             if not todo.size:
                 break
