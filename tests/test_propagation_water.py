@@ -94,3 +94,15 @@ def test_auto_absorption_keeps_francois_garrison_in_range_and_falls_back_to_ains
     assert got[0] == absorption(100e3, 10.0, 35.0, 10.0)
     assert got[1] == ainslie_mccolm(100e3, 28.0, 35.0, 10.0)
     assert got[2] == ainslie_mccolm(100e3, 10.0, 7.0, 10.0)
+
+
+def test_arlpys_published_values_of_the_same_equations():
+    # arlpy 1.9 (uwa.absorption, uwa.soundspeed: Francois-Garrison and Mackenzie) documents
+    # absorption(50000) = 0.2914 as the linear amplitude over 1 km at 27 deg C, 35 ppt, 10 m, pH
+    # 8.1 (arlpy takes F&G beyond its 22 deg C), soundspeed() = 1539.1 m/s at 27 deg C, 35 ppt, 10 m
+    # and soundspeed(temperature=25, depth=20) = 1534.6 m/s
+    with pytest.warns(OutOfRangeWarning):
+        alpha = absorption(50e3, 27.0, 35.0, 10.0, 8.1)
+    assert 10.0 ** (-alpha * 1000.0 / 20.0) == pytest.approx(0.2914, abs=5e-5)
+    assert sound_speed(27.0, 35.0, 10.0) == pytest.approx(1539.1, abs=0.05)
+    assert sound_speed(25.0, 35.0, 20.0) == pytest.approx(1534.6, abs=0.05)
