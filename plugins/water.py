@@ -22,8 +22,8 @@ from __future__ import annotations
 import math
 
 from mitsonar._checks import not_allowed
-from mitsonar.acoustics.seawater import (AINSLIE_MCCOLM_RANGE, FRANCOIS_GARRISON_RANGE, MACKENZIE_RANGE, UNESCO_RANGE,
-                                         absorption, depth_to_pressure, sound_speed)
+from mitsonar.acoustics.seawater import (AINSLIE_MCCOLM_RANGE, MACKENZIE_RANGE, UNESCO_RANGE, absorption,
+                                         depth_to_pressure, sound_speed)
 
 from .props import number, text
 

@@ -242,3 +242,11 @@ def test_a_source_on_the_surface_launches_each_ray_once():
     assert sorted(np.round(table["time"] * 1500.0, 6)) == pytest.approx([math.hypot(300.0, 20.0),
                                                                          math.hypot(300.0, 180.0)])
     assert np.all(table["surface_bounces"] == 0)
+
+
+def test_a_fan_ray_landing_on_the_receiver_gives_one_eigenray():
+    # the fan -45, -22.5, ..., 67.5 deg: the 45 deg ray reaches 20 m at exactly 10 m in uniform water,
+    # so the pairs on both sides of it bracket the same eigenray
+    table = SoundSpeedProfile.constant(1500.0).eigenrays(10.0, 20.0, 10.0, angles=(-45.0, 67.5), rays=6,
+                                                         max_bounces=0)
+    assert table.size == 1 and table["launch"][0] == pytest.approx(math.pi / 4, abs=1e-12)

@@ -228,7 +228,6 @@ class _Ocean:
         todo = np.arange(n)[~into]
 
         def boundaries(k):
-            nonlocal todo
             up_s = (z[k] == 0.0) & ~down[k]
             if up_s.any():
                 i = k[up_s]
@@ -487,6 +486,10 @@ def eigenrays(profile, source_depth, receiver_depth, range, *, water_depth=None,
         if np.all(mid == lo) and np.all(mid == hi):
             break
     th = 0.5 * (lo + hi)
+    # a fan ray landing exactly on r brackets its eigenray from both sides: keep one
+    _, first = np.unique(np.column_stack([keys, np.round(th, 9)]), axis=0, return_index=True)
+    first = np.sort(first)
+    th, keys = th[first], keys[first]
     x0, i0, ev0 = ocean.ranges_of(th, keys, r_max * 1.5, max_bounces)
     found = np.isfinite(x0) & (np.abs(x0 - R) <= 1e-6 * max(R, 1.0))
     xp = ocean.ranges_of(th + _H, keys, r_max * 1.5, max_bounces)[0]
