@@ -78,6 +78,28 @@ def main(only=()) -> None:
         hm = HilbertMap(random_state=0).fit([scan])                 # about 40 s on 2 cores
         plot_slices(hm, truth=mitsonar.scene_mesh(scene), path=tmp / "g.png")
         save_small(tmp / "g.png", "box_map.png")
+    if want("tl_thermocline.png"):
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        from mitsonar.acoustics import SoundSpeedProfile, transmission_loss_field
+
+        thermocline = SoundSpeedProfile([0.0, 30.0, 100.0], [1520.0, 1480.0, 1480.0])
+        depths, ranges = np.linspace(0.5, 99.5, 100), np.linspace(10.0, 2000.0, 200)
+        tl = transmission_loss_field(thermocline, 10.0, depths, ranges, water_depth=100.0, frequency=10e3,
+                                     angles=(-80.0, 80.0), rays=4001, max_bounces=20)
+        fig, ax = plt.subplots(figsize=(6.4, 3.4), dpi=100)
+        im = ax.pcolormesh(ranges, depths, tl, vmin=40, vmax=70, cmap="jet_r", shading="nearest")
+        ax.invert_yaxis()
+        ax.set_xlabel("range (m)")
+        ax.set_ylabel("depth (m)")
+        ax.set_title("incoherent TL, source at 10 m, 1520 to 1480 m/s over 30 m")
+        fig.colorbar(im, ax=ax, label="TL (dB re 1 m)")
+        fig.tight_layout()
+        fig.savefig(tmp / "h.png")
+        plt.close(fig)
+        save_small(tmp / "h.png", "tl_thermocline.png", 160)
 
 
 if __name__ == "__main__":

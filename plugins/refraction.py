@@ -47,8 +47,23 @@ What a path does (`common.SonarIntegrator._sample_primal` calls these when a pro
   depth in a gradient) gives no echo. Visibility is tested along chords of that ray, with the
   same ``dt``.
 * Travel times, not lengths, set the range: ``range = c_sensor (t_out + t_back) / 2``.
-  Absorption runs over the curved length (chord lengths out, the exact arc length back); the
-  spreading back is ``1 / L^2`` with ``L`` the eigenray's arc length (ray-tube focusing ignored).
+  Absorption runs over the curved length (chord lengths out, the exact arc length back).
+* **Spreading back along the ray tube** (`Refraction.tube`): the way back (the first bounce's
+  reversed ray, a later bounce's eigenray) is weighted by the pressure of a point source re 1 m
+  carried along its ray tube, ``|p|^2 = c_p cos(theta_o) / (c_o x q)`` (Jensen, Kuperman, Porter &
+  Schmidt 2011, ch. 3, the geometrical-acoustics amplitude; Porter & Bucker 1987, JASA 82(4),
+  1349-1359; `mitsonar.acoustics.propagation` derives it), where ``theta_o`` is the ray's angle
+  at the transducer, ``x`` the horizontal distance, ``c_p``, ``c_o`` the speeds at the two ends
+  and ``q`` the tube's width per radian of launch angle normal to the ray at the far end: the two
+  rays launched ``TUBE_STEP`` either side, advanced in closed form (`advance`) for the same time,
+  are ``2 TUBE_STEP q`` apart across the ray (at equal time the wavefront is normal to the ray).
+  By reciprocity the tube from the transducer gives the way back's level. In uniform water it is
+  ``1 / L^2``; focusing and defocusing by the profile (up to about 10 dB within 2 km in a shallow
+  thermocline) are in it. At a caustic ``q`` is floored at a Fresnel zone,
+  ``sqrt(lambda L)`` (``lambda`` at the sensor's ``frequency``; the focusing gain over spherical
+  spreading is capped at ``5 log10(L / lambda)`` dB); shadow zones have no eigenray and stay
+  silent. The outgoing legs need no such weight: their rays are sampled over the launch directions,
+  and how many reach an area is their tube's spreading already.
 """
 from __future__ import annotations
 
@@ -67,6 +82,12 @@ EXTRA_CROSSINGS = 4
 MERGE_TOL = 0.01
 #: Default chords per range window (XML ``svp_chords``).
 DEFAULT_CHORDS = 4
+#: rad: the half-step in launch angle of the ray tube's central difference (`Refraction.tube`).
+TUBE_STEP = 2e-3
+#: Weigh the way back by its ray tube (`Refraction.tube`); False gives the ``1 / L^2`` of before
+#: (``benchmarks/ray_tube.py`` times both). Read when a render makes its `Refraction` (kept on it
+#: as ``ray_tube``, so that a frozen pass recorded with the other setting is not replayed).
+RAY_TUBE = True
 
 
 #: Below this ``|y|``, `log1p_over` sums the series instead of dividing ``log(1 + y)`` (CUDA).
@@ -152,7 +173,7 @@ class Refraction:
     the values do not, so another profile of as many samples reuses the compiled kernels), with
     the chord time step of one render."""
 
-    def __init__(self, depths, speeds, sensor_speed, range_max, chords=DEFAULT_CHORDS):
+    def __init__(self, depths, speeds, sensor_speed, range_max, chords=DEFAULT_CHORDS, frequency=700e3):
         d = [float(v) for v in depths]
         c = [float(v) for v in speeds]
         n = len(d)
@@ -176,6 +197,9 @@ class Refraction:
         self.chords = int(chords)
         self.dt = dr.opaque(mi.Float, float(range_max) / (self.chords * self.sensor_speed))
         self.t_window = dr.opaque(mi.Float, 2.0 * float(range_max) / self.sensor_speed)
+        self.ray_tube = bool(RAY_TUBE)
+        # the caustic floor of the ray tube's width: sqrt(lambda L), lambda at the sensor's frequency
+        self.wavelength = dr.opaque(mi.Float, self.sensor_speed / float(frequency))
 
     # ------------------------------------------------------------------------------- the medium
     def speed(self, z):
@@ -356,6 +380,35 @@ class Refraction:
         return si, t_hit, l_hit
 
     # ----------------------------------------------------------------------------- the way back
+    def tube(self, o, launch, tau, x_far, s_far, z_far, length, active):
+        """``|p|^2`` re 1 m at the far end of the ray launched from ``o`` along unit ``launch``
+        that arrives after ``tau`` s at horizontal distance ``x_far`` and depth ``z_far`` heading
+        with sine ``s_far`` (positive down): ``c_p cos(theta_o) / (c_o x q)``, ``q`` the tube's
+        width across the ray per radian of launch angle, from the rays launched ``TUBE_STEP``
+        either side advanced for the same ``tau`` (module docstring), floored at ``sqrt(lambda
+        length)``. ``1 / length^2`` where the ray is vertical or a neighbour is lost (a channel
+        axis)."""
+        horiz = dr.sqrt(dr.square(launch.x) + dr.square(launch.y))
+        z_o = -o.z
+        c_o = self.speed(z_o)
+        c_p = self.speed(z_far)
+        s_o = -launch.z
+        theta = dr.atan2(s_o, horiz)
+        ends = []
+        for sign in (1.0, -1.0):
+            th = theta + sign * TUBE_STEP
+            sn, cs = dr.sin(th), dr.cos(th)
+            dx, z2, _, _, ok, _ = self.advance(z_o, sn, sn >= 0, dr.abs(cs) / c_o, tau, active)
+            ends.append((dx, z2, ok))
+        (xp, zp, okp), (xm, zm, okm) = ends
+        a = horiz / c_o
+        cos_p = dr.minimum(a * c_p, 1.0)
+        q = dr.abs((xp - xm) * s_far - (zp - zm) * cos_p) * (0.5 / TUBE_STEP)
+        q = dr.maximum(q, dr.sqrt(self.wavelength * length))
+        p2 = c_p * a / (dr.maximum(x_far, 1e-30) * q)
+        good = okp & okm & (horiz > 1e-4) & (x_far > 0) & dr.isfinite(p2)
+        return dr.select(good, p2, dr.rcp(dr.square(length)))
+
     def reversed_at(self, si, o, launch):
         """Unit direction leaving the surface point of ``si`` back along the ray launched from
         ``o`` along unit ``launch`` that reached it (`trace`): the exact tangent there by Snell,
@@ -500,7 +553,8 @@ def from_profile(profile, sensor, chords=None):
         return None
     chords = DEFAULT_CHORDS if chords is None else check_chords(chords, "sound_speed_profile")
     depths, speeds = merge_layers([float(v) for v in profile.depths], speeds)
-    return Refraction(depths, speeds, sensor.sound_speed, sensor.range_max, chords)
+    return Refraction(depths, speeds, sensor.sound_speed, sensor.range_max, chords,
+                      float(getattr(sensor, "frequency", 700e3)))
 
 
 def merge_layers(depths, speeds, tol=MERGE_TOL):
@@ -602,10 +656,17 @@ def sample_path(setup, ping, samples, record, active=True):
             back, rx = refr.reversed_at(si, origin, ray_d), mi.Vector3f(ray_d)
         else:
             ok, t_back, l_back, back, rx = refr.eigenray(si.p, origin, active)
+        # the way back's spreading along its ray tube (the ray from the transducer along rx that
+        # arrives at si.p heading -back, by reciprocity), instead of 1 / l_back^2
+        if refr.ray_tube:
+            x_far = dr.sqrt(dr.square(si.p.x - origin.x) + dr.square(si.p.y - origin.y))
+            spread = refr.tube(origin, rx, t_back, x_far, back.z, -si.p.z, l_back, active & ok)
+        else:
+            spread = dr.rcp(dr.square(l_back))
         bsdf = si.bsdf()
         f = bsdf.eval(ctx, si, si.to_local(back), active).x
         gain = c_beam.eval_dir(mi.Vector3f(dr.dot(rx, cx), dr.dot(rx, cy), dr.dot(rx, cz)))
-        energy = throughput * f * gain / dr.square(l_back) * dr.exp2(-atten * (l_path + l_back))
+        energy = throughput * f * gain * spread * dr.exp2(-atten * (l_path + l_back))
         echo = active & ok & (energy > 0)
         if ~first:
             echo &= refr.visible(scene, si.spawn_ray(back).o, back, origin, t_back, echo)
@@ -632,4 +693,4 @@ def sample_path(setup, ping, samples, record, active=True):
         active &= (depth < max_depth) & (throughput > 0)
 
 
-__all__ = ["Refraction", "from_profile", "merge_layers", "MERGE_TOL", "check_chords", "read_profile", "sample_path", "DEFAULT_CHORDS"]
+__all__ = ["Refraction", "RAY_TUBE", "TUBE_STEP", "from_profile", "merge_layers", "MERGE_TOL", "check_chords", "read_profile", "sample_path", "DEFAULT_CHORDS"]

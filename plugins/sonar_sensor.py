@@ -97,9 +97,11 @@ class SonarSensor(mi.Sensor):
                                   (sidescan: the across-track fan, default 50)
     beam_table       (none)       CSV (axis, angle_deg, gain_db) for ``table``
     sound_speed      1500         m/s; or ``<string value="auto"/>``: Mackenzie (1981) at the
-                                  head's depth ``surface_z - z`` (z of ``to_world``'s origin)
+                                  head's depth ``surface_z - z`` (z of ``to_world``'s origin),
+                                  UNESCO (Chen and Millero) outside Mackenzie's range
     absorption       0            dB/m, applied to the whole two-way path; or ``auto``: Francois
-                                  and Garrison (1982) at ``frequency`` and the head's depth
+                                  and Garrison (1982) at ``frequency`` and the head's depth,
+                                  Ainslie and McColm (1998) outside F&G's range
     frequency        700e3        Hz, the head's carrier: the centre of its band (``bandwidth``),
                                   the ``sinc`` pattern's and ``absorption`` ``auto``'s frequency
     bandwidth        frequency/Q  Hz, the transducer's band ``frequency +- bandwidth / 2``: the
@@ -110,10 +112,10 @@ class SonarSensor(mi.Sensor):
                                   checked when the scene loads; `mitsonar.render_echoes` uses
                                   them when its ``elements`` is None (default: one element at
                                   the transmitter)
-    temperature      10           deg C, the water (only with ``auto``; F&G: -2 to 22,
-                                  Mackenzie: -2 to 30)
-    salinity         35           ppt, the water (only with ``auto``; F&G: 30 to 35,
-                                  Mackenzie: 25 to 40)
+    temperature      10           deg C, the water (only with ``auto``; absorption -6 to 35,
+                                  sound speed -2 to 40)
+    salinity         35           ppt, the water (only with ``auto``; absorption 5 to 50,
+                                  sound speed 0 to 40)
     ph               8            pH of the water (``absorption`` ``auto``; 7.7 to 8.3)
     surface_z        0            m, world z of the sea surface (only with ``auto``); a
                                   render given a ``pose`` (trajectory) refuses ``auto``

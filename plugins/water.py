@@ -2,25 +2,28 @@
 
 ``<string name="absorption" value="auto"/>`` computes the head's absorption, dB/m, from its
 ``frequency`` and the water's ``temperature``, ``salinity`` and ``ph`` at the head's depth with
-Francois and Garrison (1982) (`mitsonar.acoustics.seawater.absorption`); ``sound_speed`` ``auto``
-is Mackenzie (1981)'s nine-term equation there (`mitsonar.acoustics.seawater.sound_speed`). World
-z is up and the sea surface is the plane ``z = surface_z``, so the depth is ``surface_z - z`` of
-the origin of the sensor's ``to_world``.
+Francois and Garrison (1982) inside its range and Ainslie and McColm (1998) outside it (warm or
+brackish water; `mitsonar.acoustics.seawater.absorption` ``model="auto"``); ``sound_speed``
+``auto`` is Mackenzie (1981)'s nine-term equation there inside its range and Chen and Millero
+(UNESCO 1983, pressure at 45 deg latitude) outside it (`mitsonar.acoustics.seawater.sound_speed`).
+World z is up and the sea surface is the plane ``z = surface_z``, so the depth is ``surface_z - z``
+of the origin of the sensor's ``to_world``.
 
 The head's depth is the one of ``to_world``: a render given a ``pose`` (a trajectory, a moving
 head) is refused while either is ``auto`` (`check_pose`), rather than quietly keeping the
 water of a place the head has left; give numbers for a survey.
 
-Every out-of-range value is refused before the scene loads, in one line naming the sensor field
-and the range of the equation, e.g. ``sonar 'temperature': 35 deg C is outside Francois and
-Garrison (1982)'s -2 to 22 deg C (absorption 'auto')``.
+A value outside both equations' ranges is refused before the scene loads, in one line naming the
+sensor field and the ranges, e.g. ``sonar 'temperature': 40 deg C is outside Ainslie and McColm
+(1998)'s -6 to 35 deg C (absorption 'auto')``.
 """
 from __future__ import annotations
 
 import math
 
 from mitsonar._checks import not_allowed
-from mitsonar.acoustics.seawater import FRANCOIS_GARRISON_RANGE, MACKENZIE_RANGE, absorption, sound_speed
+from mitsonar.acoustics.seawater import (AINSLIE_MCCOLM_RANGE, MACKENZIE_RANGE, UNESCO_RANGE, absorption,
+                                         depth_to_pressure, sound_speed)
 
 from .props import number, text
 
@@ -29,8 +32,9 @@ WATER_DEFAULTS = {"temperature": 10.0, "salinity": 35.0, "ph": 8.0, "surface_z":
 WATER_FIELDS = tuple(WATER_DEFAULTS)
 AUTO = "auto"
 _UNITS = {"temperature": "deg C", "salinity": "ppt", "ph": "", "depth": "m", "frequency": "Hz"}
-_SOURCES = {"absorption": ("Francois and Garrison (1982)", FRANCOIS_GARRISON_RANGE),
+_SOURCES = {"absorption": ("Ainslie and McColm (1998)", AINSLIE_MCCOLM_RANGE),
             "sound_speed": ("Mackenzie (1981)", MACKENZIE_RANGE)}
+_UNESCO = "Chen and Millero (UNESCO 1983)"
 
 
 def number_or_auto(props, name: str, default):
@@ -76,16 +80,29 @@ def resolve(water: dict | None, absorption_value, sound_speed_value, frequency: 
     depth = water["surface_z"] - z
     where = dict(label="the head's depth ", note=f" (surface_z {water['surface_z']:g} - the head's z {z:g})")
     if sound_speed_value == AUTO:
-        for f in ("temperature", "salinity"):
-            _check(f, water[f], "sound_speed", f)
-        _check("depth", depth, "sound_speed", "surface_z", **where)
-        sound_speed_value = float(sound_speed(water["temperature"], water["salinity"], depth))
+        t, sal = water["temperature"], water["salinity"]
+        if depth < 0:
+            _check("depth", depth, "sound_speed", "surface_z", **where)
+        bar = float(depth_to_pressure(depth)) / 10.0
+        rows = (("temperature", t, "deg C", t, "deg C", {}, MACKENZIE_RANGE["temperature"], UNESCO_RANGE["temperature"]),
+                ("salinity", sal, "ppt", sal, "ppt", {}, MACKENZIE_RANGE["salinity"], UNESCO_RANGE["salinity"]),
+                ("surface_z", depth, "m", bar, "bar", where, MACKENZIE_RANGE["depth"], UNESCO_RANGE["pressure"]))
+        if all(mk[0] <= v <= mk[1] for _, v, _, _, _, _, mk, _ in rows):
+            sound_speed_value = float(sound_speed(t, sal, depth))
+        else:
+            for field, v, unit, u, unit_u, w, mk, un in rows:
+                if not un[0] <= u <= un[1]:
+                    raise ValueError(f"sonar '{field}': {w.get('label', '')}{v:g} {unit}{w.get('note', '')} is outside "
+                                     f"Mackenzie (1981)'s {mk[0]:g} to {mk[1]:g} {unit} and {_UNESCO}'s {un[0]:g} to "
+                                     f"{un[1]:g} {unit_u} (sound_speed 'auto')")
+            sound_speed_value = float(sound_speed(t, sal, depth, model="unesco"))
     if absorption_value == AUTO:
         for f in ("temperature", "salinity", "ph"):
             _check(f, water[f], "absorption", f)
         _check("frequency", frequency, "absorption", "frequency")
         _check("depth", depth, "absorption", "surface_z", **where)
-        absorption_value = float(absorption(frequency, water["temperature"], water["salinity"], depth, water["ph"]))
+        absorption_value = float(absorption(frequency, water["temperature"], water["salinity"], depth, water["ph"],
+                                            model="auto"))
     return absorption_value, sound_speed_value
 
 

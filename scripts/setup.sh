@@ -56,4 +56,7 @@ fi
 # would replace the opencv-python-headless of the test extra: installed without its dependencies
 # (its readers import numpy, opencv (headless is enough), netCDF4 and rosbags, all in the extra).
 .venv/bin/python -m pip install -q --no-deps 'oculus-python==0.0.2a1'
+# Bellhop, the reference ray/beam model the propagation tests compare with (.bellhop/, gitignored)
+.venv/bin/python scripts/fetch_bellhop.py ||
+  echo "setup: Bellhop was not fetched (no network?); tests/test_propagation_bellhop.py will fail until it is" >&2
 echo "setup: done (.venv ready)"

@@ -176,7 +176,10 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
               "mitsonar.receiver.jitchain",
               "mitsonar.sonar_equation.levels",
               "mitsonar.acoustics._checks", "mitsonar.acoustics.seawater", "mitsonar.acoustics.interface",
-              "mitsonar.acoustics.seabed", "mitsonar.acoustics.materials", "mitsonar.geometry.elements"}
+              "mitsonar.acoustics.seabed", "mitsonar.acoustics.materials", "mitsonar.geometry.elements",
+              # eigenrays and TL (SoundSpeedProfile.eigenrays calls it; it imports only the checks
+              # and the interface)
+              "mitsonar.acoustics.propagation"}
     for low in (allowed | leaves) - {"mitsonar._checks", "mitsonar.geometry.kinds"}:
         assert not {t for t in edges[low] if t.startswith("mitsonar")} - leaves, low
     # the kinds (numpy only) rotate rows with the frames' rotations

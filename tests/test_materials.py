@@ -270,6 +270,16 @@ def sensor_of(mitsonar_mod, xml):
     return mitsonar_mod.load_scene(scene_xml(xml)).sensors()[0]
 
 
+def test_auto_water_falls_back_to_wide_range_equations_outside_the_default_ones(mitsonar_mod):
+    from mitsonar.acoustics.seawater import ainslie_mccolm, sound_speed
+
+    # tropical water (28 deg C) is outside Francois-Garrison's and, at 35 deg C, Mackenzie's range
+    s = sensor_of(mitsonar_mod, water_sensor(-20.0, absorption="auto", frequency=200e3, temperature=28.0))
+    assert s.absorption == pytest.approx(ainslie_mccolm(200e3, 28.0, 35.0, 20.0, 8.0), rel=1e-12)
+    s = sensor_of(mitsonar_mod, water_sensor(-20.0, sound_speed="auto", temperature=35.0, salinity=5.0))
+    assert s.sound_speed == pytest.approx(sound_speed(35.0, 5.0, 20.0, model="unesco"), rel=1e-12)
+
+
 def test_auto_absorption_is_francois_garrison_at_the_heads_depth(mitsonar_mod):
     from mitsonar.acoustics import absorption
 
@@ -294,18 +304,20 @@ def test_auto_sound_speed_is_mackenzie_at_the_heads_depth(mitsonar_mod):
 
 
 @pytest.mark.parametrize("params, message", [
-    (dict(absorption="auto", temperature=35.0),
-     "sonar 'temperature': 35 deg C is outside Francois and Garrison (1982)'s -2 to 22 deg C (absorption 'auto')"),
-    (dict(sound_speed="auto", temperature=35.0),
-     "sonar 'temperature': 35 deg C is outside Mackenzie (1981)'s -2 to 30 deg C (sound_speed 'auto')"),
-    (dict(absorption="auto", salinity=20.0), "sonar 'salinity': 20 ppt is outside Francois and Garrison (1982)'s"),
-    (dict(absorption="auto", ph=9.0), "sonar 'ph': 9 is outside Francois and Garrison (1982)'s 7.7 to 8.3"),
-    (dict(absorption="auto", frequency=2e6), "sonar 'frequency': 2e+06 Hz is outside Francois and Garrison (1982)'s "
-                                             "200 to 1e+06 Hz"),
+    (dict(absorption="auto", temperature=40.0),
+     "sonar 'temperature': 40 deg C is outside Ainslie and McColm (1998)'s -6 to 35 deg C (absorption 'auto')"),
+    (dict(sound_speed="auto", temperature=45.0),
+     "sonar 'temperature': 45 deg C is outside Mackenzie (1981)'s -2 to 30 deg C and Chen and Millero (UNESCO 1983)'s "
+     "0 to 40 deg C (sound_speed 'auto')"),
+    (dict(absorption="auto", salinity=60.0), "sonar 'salinity': 60 ppt is outside Ainslie and McColm (1998)'s"),
+    (dict(absorption="auto", ph=9.0), "sonar 'ph': 9 is outside Ainslie and McColm (1998)'s 7.7 to 8.3"),
+    (dict(absorption="auto", frequency=2e6), "sonar 'frequency': 2e+06 Hz is outside Ainslie and McColm (1998)'s "
+                                             "100 to 1e+06 Hz"),
     (dict(absorption="auto", surface_z=-30.0), "sonar 'surface_z': the head's depth -10 m (surface_z -30 - the "
-                                               "head's z -20) is outside Francois and Garrison (1982)'s 0 to 3500 m"),
-    (dict(sound_speed="auto", surface_z=9000.0), "sonar 'surface_z': the head's depth 9020 m (surface_z 9000 - the "
-                                                 "head's z -20) is outside Mackenzie (1981)'s 0 to 8000 m"),
+                                               "head's z -20) is outside Ainslie and McColm (1998)'s 0 to 7000 m"),
+    (dict(sound_speed="auto", surface_z=11000.0), "sonar 'surface_z': the head's depth 11020 m (surface_z 11000 - the "
+                                                  "head's z -20) is outside Mackenzie (1981)'s 0 to 8000 m and Chen and "
+                                                  "Millero (UNESCO 1983)'s 0 to 1000 bar"),
     (dict(absorption="lots"), "sonar 'absorption': 'lots' is not a number (expected <float> or <string value=\"auto\"/>)"),
     (dict(sound_speed="1500"), "sonar 'sound_speed': expected <float> or <string value=\"auto\"/>, got <string> '1500'"),
     (dict(temperature=12.0), "sonar 'temperature': only used with absorption or sound_speed 'auto'"),

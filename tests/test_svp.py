@@ -289,7 +289,7 @@ def test_bad_csv_is_one_line_naming_the_file_row_and_field(tmp_path, text, messa
     (lambda: SoundSpeedProfile([], []), "SoundSpeedProfile: no samples"),
     (lambda: SoundSpeedProfile([0, 1], [1500]), "must be 1-D arrays of one length"),
     (lambda: SoundSpeedProfile.constant(343.0), "sound_speed 343 m/s is outside 1300 to 1700 m/s"),
-    (lambda: SoundSpeedProfile.from_ctd([0, 10], [45, 10], 35), "from_ctd: sound_speed: temperature 45"),
+    (lambda: SoundSpeedProfile.from_ctd([0, 10], [45, 10], 35, strict=True), "from_ctd: sound_speed: temperature 45"),
     (lambda: LAYERS.locate(-1.0, 0.5, 0.1), "locate: depth -1 m is above the sea surface"),
     (lambda: LAYERS.locate(1.0, 2.0, 0.1), "locate: grazing 2.0 is not allowed"),
     (lambda: LAYERS.locate(1.0, 0.5, -0.1), "locate: travel_time -0.1 is not allowed"),

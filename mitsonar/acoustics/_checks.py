@@ -7,6 +7,12 @@ from __future__ import annotations
 import numpy as np
 
 
+class ProfileError(ValueError):
+    """A sound-speed profile (or a propagation request) that is not allowed: one line naming the
+    file (or the call), the row (or sample) and the field. (`mitsonar.acoustics.ProfileError`;
+    defined here so that `mitsonar.acoustics.propagation` need not import the profile module.)"""
+
+
 def as_array(func: str, field: str, value) -> np.ndarray:
     """``value`` as a float array, or a ValueError naming ``func`` and ``field``."""
     try:

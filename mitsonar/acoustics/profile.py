@@ -48,6 +48,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mitsonar.acoustics._checks import ProfileError
+
 __all__ = ["SoundSpeedProfile", "ProfileError", "RayPath", "SPEED_RANGE", "DEPTH_RANGE"]
 
 #: Sound speeds this module accepts, m/s: every sea and fresh water there is (0 to 40 deg C,
@@ -57,11 +59,6 @@ SPEED_RANGE = (1300.0, 1700.0)
 DEPTH_RANGE = (0.0, 12000.0)
 
 _FIELDS = ("depth", "sound_speed")
-
-
-class ProfileError(ValueError):
-    """A sound-speed profile that is not allowed: one line naming the file (or the call), the row
-    (or sample) and the field."""
 
 
 @dataclass(frozen=True)
@@ -133,6 +130,10 @@ def _piece(dz, c1, s1, c2, s2, a, g):
     ``y = g dz K / (c1 (1 + s2))``, ``K = (1 + s1) + c1 a^2 (c1 + c2) / (s1 + s2)``: no cancellation
     as ``g -> 0`` (then ``dt = dz / (c sin theta)``, a straight ray).
     """
+    # float64 arrays, not Python floats: a zero-length piece (a ray launched horizontally where it
+    # turns, ``s1 = s2 = 0``) divides 0 by 0 under errstate and is then set to 0 below, instead of
+    # raising ZeroDivisionError from a scalar division
+    dz, c1, s1, c2, s2, a, g = (np.asarray(v, dtype=np.float64) for v in (dz, c1, s1, c2, s2, a, g))
     with np.errstate(divide="ignore", invalid="ignore"):
         ssum = s1 + s2
         dx = a * dz * (c1 + c2) / ssum
@@ -196,13 +197,15 @@ class SoundSpeedProfile:
         return cls([0.0], [speed], source="SoundSpeedProfile.constant")
 
     @classmethod
-    def from_ctd(cls, depths, temperature, salinity):
-        """A profile from a CTD cast: sound speed at each sample by Mackenzie (1981)
-        (`mitsonar.acoustics.sound_speed`; temperature in deg C, salinity in ppt, depth in m)."""
+    def from_ctd(cls, depths, temperature, salinity, *, model="mackenzie", latitude=45.0, strict=False):
+        """A profile from a CTD cast: sound speed at each sample by Mackenzie (1981), or the
+        ``model`` named (`mitsonar.acoustics.sound_speed`: ``"unesco"``, ``"del_grosso"``, at
+        ``latitude``; temperature in deg C, salinity in ppt, depth in m). A sample outside the
+        equation's range warns once (refused with ``strict=True``)."""
         from mitsonar.acoustics.seawater import sound_speed
 
         try:
-            c = sound_speed(temperature, salinity, depths)
+            c = sound_speed(temperature, salinity, depths, model=model, latitude=latitude, strict=strict)
         except ValueError as exc:
             raise ProfileError(f"SoundSpeedProfile.from_ctd: {exc}") from None
         d = np.broadcast_to(np.asarray(depths, dtype=float), np.shape(c))
@@ -355,6 +358,29 @@ class SoundSpeedProfile:
         cos2 = (a * c) / den
         z2 = np.clip(z + dz, self._top[j], self._bottom[j])
         return dx, z2, s2, cos2
+
+    def eigenrays(self, source_depth, receiver_depth, range, **kwargs):
+        """Every ray joining the source and the receiver at horizontal ``range`` (m), with travel
+        time, launch and arrival angles, one-way transmission loss and phase (float64): a table of
+        `mitsonar.acoustics.propagation.ARRIVAL_DTYPE`; keywords (``water_depth``, ``bottom``,
+        ``absorption``, ``max_bounces``, ...) as in `mitsonar.acoustics.propagation.eigenrays`."""
+        from mitsonar.acoustics.propagation import eigenrays
+
+        return eigenrays(self, source_depth, receiver_depth, range, **kwargs)
+
+    def arrivals(self, source_depth, receiver_depth, range, **kwargs):
+        """`eigenrays` as a list of dicts, one per arrival in time order
+        (`mitsonar.acoustics.propagation.arrivals`)."""
+        from mitsonar.acoustics.propagation import arrivals
+
+        return arrivals(self, source_depth, receiver_depth, range, **kwargs)
+
+    def transmission_loss(self, source_depth, receiver_depth, range, **kwargs):
+        """One-way incoherent transmission loss, dB re 1 m
+        (`mitsonar.acoustics.propagation.transmission_loss`)."""
+        from mitsonar.acoustics.propagation import transmission_loss
+
+        return transmission_loss(self, source_depth, receiver_depth, range, **kwargs)
 
     def locate(self, depth, grazing, travel_time):
         """Where rays are after a one-way ``travel_time`` (s): ``(x, depth)``, horizontal distance

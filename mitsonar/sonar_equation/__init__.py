@@ -5,10 +5,11 @@
 """
 from mitsonar.sonar_equation.levels import (CALIBRATION_DB, DEFAULT_NOISE_LEVEL, DEFAULT_RECEIVER_SENSITIVITY, DEFAULT_SOURCE_LEVEL,
                      SOURCE_LEVELS, ambient_noise_level, echo_level, migrate_settings, noise_band_level,
-                     phong_sphere_cross_section, pulse_boxcar, transmission_loss)
+                     phong_sphere_cross_section, pulse_boxcar, transmission_loss,
+                     two_way_transmission_loss)
 from mitsonar.sonar_equation.report import plot_levels, sonar_equation_report
 
 __all__ = ["CALIBRATION_DB", "DEFAULT_NOISE_LEVEL", "DEFAULT_RECEIVER_SENSITIVITY", "DEFAULT_SOURCE_LEVEL",
            "SOURCE_LEVELS", "ambient_noise_level", "echo_level", "migrate_settings", "noise_band_level",
            "phong_sphere_cross_section", "plot_levels", "pulse_boxcar", "sonar_equation_report",
-           "transmission_loss"]
+           "transmission_loss", "two_way_transmission_loss"]

@@ -113,12 +113,25 @@ def echo_level(intensity, ranges, source_level: float, pulse_length: float, soun
     return level[0] if np.ndim(intensity) == 1 else level
 
 
-def transmission_loss(ranges, absorption: float = 0.0) -> np.ndarray:
+def two_way_transmission_loss(ranges, absorption: float = 0.0) -> np.ndarray:
     """dB, two-way: ``40 log10 r + 2 alpha r`` (spherical spreading out and back, Urick 1983,
-    eq. 5.3, with absorption ``alpha`` in dB/m over both legs)."""
+    eq. 5.3, with absorption ``alpha`` in dB/m over both legs). In refracting water, the one-way
+    loss along the eigenrays is `mitsonar.acoustics.transmission_loss`."""
     r = np.asarray(ranges, dtype=np.float64)
     with np.errstate(divide="ignore"):
         return 40.0 * np.log10(r) + 2.0 * absorption * r
+
+
+def transmission_loss(ranges, absorption: float = 0.0) -> np.ndarray:
+    """Deprecated name of `two_way_transmission_loss` (the same two-way loss, with a
+    DeprecationWarning): "transmission loss" is one way in the literature, as
+    `mitsonar.acoustics.transmission_loss` is."""
+    import warnings
+
+    warnings.warn("mitsonar.sonar_equation.transmission_loss is the two-way loss and is renamed "
+                  "two_way_transmission_loss; the one-way loss in refracting water is "
+                  "mitsonar.acoustics.transmission_loss", DeprecationWarning, stacklevel=2)
+    return two_way_transmission_loss(ranges, absorption)
 
 
 def ambient_noise_level(frequency, wind_speed: float = 5.0, shipping: float = 0.5) -> np.ndarray:

@@ -17,7 +17,7 @@ import os
 
 import numpy as np
 
-from mitsonar.sonar_equation.levels import transmission_loss
+from mitsonar.sonar_equation.levels import two_way_transmission_loss
 
 #: Echoes nearer than this are left out of "the strongest echo" (TL -> -inf at r -> 0).
 MIN_RANGE = 0.05
@@ -27,7 +27,8 @@ MIN_RANGE = 0.05
 class SonarEquationReport:
     """The terms of the sonar equation for one scan (dB; ranges in m). ``pings`` holds one dict
     per ping: ``ping``, ``bearing`` (deg), ``range`` (the strongest echo's bin centre, NaN without
-    echo), ``echo_level``, ``transmission_loss``, ``target`` (``EL - SL + TL``: TS, or S_b + 10 log A)
+    echo), ``echo_level``, ``transmission_loss`` (two-way, `two_way_transmission_loss`), ``target``
+    (``EL - SL + TL``: TS, or S_b + 10 log A)
     and ``snr``."""
 
     source_level: float
@@ -91,7 +92,7 @@ def sonar_equation_report(scene_or_scan, *, spp: int = 256, seed: int = 0, senso
             pings.append(dict(ping=k, bearing=float(bearings[k]), range=math.nan, echo_level=-math.inf,
                               transmission_loss=math.nan, target=math.nan, snr=-math.inf))
             continue
-        tl = float(transmission_loss(ranges[j], scan.absorption))
+        tl = float(two_way_transmission_loss(ranges[j], scan.absorption))
         pings.append(dict(ping=k, bearing=float(bearings[k]), range=float(ranges[j]), echo_level=float(row[j]),
                           transmission_loss=tl, target=float(row[j] - e.source_level + tl),
                           snr=float(row[j] - noise)))
