@@ -281,8 +281,6 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     ranges = sonar.bin_centres()
     try:
         sonar.head_pose(pose)
-        # the receiver noise depends on the seed and the scan's shape only: drawn during the render
-        model.prefetch_noise((int(sonar.n_pings), int(sonar.n_bins)), ranges, sonar.sound_speed, eseed)
         with _profile_of(integrator, sound_speed_profile):
             hist = integrator.render_histogram(scene, sonar, seed=seed, spp=spp, pose=pose, max_depth=max_depth,
                                                progress=progress)
@@ -291,7 +289,7 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
 
     intensity = hist.astype(np.float32)
     poses = sonar.ping_poses(pose)
-    speckle = None if model.speckle == "off" else model.scene_speckle(poses, ranges, **speckle_geometry(sonar))
+    speckle = None if model.speckle == "off" else model.scene_speckle_field(poses, ranges, **speckle_geometry(sonar))
     data = model.apply(intensity, ranges, absorption=sonar.absorption, sound_speed=sonar.sound_speed, seed=eseed,
                        speckle=speckle)
     from mitsonar._version import __version__
