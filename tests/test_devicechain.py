@@ -209,3 +209,47 @@ def test_bad_seeds_and_variants_are_refused_in_one_line(mitsonar_mod, monkeypatc
     with pytest.raises(ValueError, match=r"^electronics: the receiver chain runs as Dr.Jit kernels of an llvm or "
                                          r"cuda variant; the active Mitsuba variant is scalar_rgb$"):
         Electronics().apply(inten, ranges)
+
+
+def test_render_frame_keeps_the_frame_on_the_device_and_is_render_scans_scan(mitsonar_mod):
+    """`render_frame` hands Dr.Jit arrays of the active variant (intensity float32, bytes uint8)
+    that are, brought to the host, `render_scan`'s intensity and bytes bit for bit."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from mitsonar.sim.render import render_frame
+
+    scene = mitsonar_mod.load_scene(QUAY)
+    frame = render_frame(scene, spp=4, seed=3)
+    assert isinstance(frame.intensity, mi.Float32) and isinstance(frame.data, mi.UInt8)
+    assert dr.width(frame.data) == frame.shape[0] * frame.shape[1]
+    scan = mitsonar_mod.render_scan(scene, spp=4, seed=3)
+    inten, data = frame.numpy()
+    assert frame.shape == scan.intensity.shape
+    np.testing.assert_array_equal(inten.view(np.uint32), scan.intensity.view(np.uint32))
+    np.testing.assert_array_equal(data, scan.data)
+    assert data.any()
+
+
+@pytest.mark.parametrize("kw", [dict(n_bins=1, n_pings=3), dict(kind="multibeam", n_pings=1, n_bins=300),
+                                dict(n_bins=20000, n_pings=2)])
+def test_edge_frames_render_on_the_device(mitsonar_mod, kw):
+    """A frame of one bin, of one beam, of 20 000 bins renders through the device chain."""
+    from conftest import scene_xml, sonar_xml
+
+    from mitsonar.sim.render import render_frame
+
+    scene = mitsonar_mod.load_scene(scene_xml(sonar_xml(**kw)))
+    frame = render_frame(scene, spp=2, seed=1)
+    inten, data = frame.numpy()
+    assert data.shape == inten.shape == frame.shape and frame.shape[1] == kw["n_bins"]
+    np.testing.assert_array_equal(data, render_frame(scene, spp=2, seed=1).numpy()[1])
+
+
+def test_16384_beams_are_refused_in_one_line_before_any_work(mitsonar_mod):
+    from conftest import scene_xml, sonar_xml
+
+    with pytest.raises(Exception) as err:
+        mitsonar_mod.load_scene(scene_xml(sonar_xml(kind="multibeam", n_pings=16384, bearing_step=0.005)))
+    msg = str(err.value)
+    assert "\n" not in msg and "'n_pings': 16384 is not allowed (a whole number of receive beams from 1 to 4096" in msg
