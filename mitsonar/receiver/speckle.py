@@ -229,12 +229,14 @@ def _field(poses, ranges, seed, beamwidth_h, aperture_h, resolution, n_features)
         b = lane - r * nb
         # float32 phasors summed in float32 (fused multiply-adds, features in order): a bin's
         # speckle is accurate to 1e-6 of its mean amplitude, twice the speed of float64 on a CPU
-        re, im = mi.Float32(0.0), mi.Float32(0.0)
-        for k in range(m):   # unrolled: one kernel
+        def body(k, re, im):
             ar, ai = dr.gather(mi.Float32, rc32, r * mm + k), dr.gather(mi.Float32, rs32, r * mm + k)
             br, bi = dr.gather(mi.Float32, bc, b + k * nb), dr.gather(mi.Float32, bs, b + k * nb)
-            re = dr.fma(ar, br, dr.fma(-ai, bi, re))
-            im = dr.fma(ar, bi, dr.fma(ai, br, im))
+            return k + 1, dr.fma(ar, br, dr.fma(-ai, bi, re)), dr.fma(ar, bi, dr.fma(ai, br, im))
+
+        zero = dr.zeros(mi.Float32, n_rows * n_bins)
+        _, re, im = dr.while_loop((dr.zeros(mi.UInt32, n_rows * n_bins), zero, zero),
+                                  lambda k, re, im: k < mm, body, mode="symbolic")   # one small kernel
         re, im = mi.Float64(re), mi.Float64(im)
         scale = 1.0 / math.sqrt(m)
         re, im = re * scale, im * scale
