@@ -253,3 +253,10 @@ def test_16384_beams_are_refused_in_one_line_before_any_work(mitsonar_mod):
         mitsonar_mod.load_scene(scene_xml(sonar_xml(kind="multibeam", n_pings=16384, bearing_step=0.005)))
     msg = str(err.value)
     assert "\n" not in msg and "'n_pings': 16384 is not allowed (a whole number of receive beams from 1 to 4096" in msg
+
+
+def test_an_empty_frame_gives_empty_bytes(mitsonar_mod):
+    from mitsonar.receiver.electronics import Electronics
+
+    data = Electronics().apply(np.zeros((0, 5)), np.linspace(1.0, 2.0, 5), seed=1)
+    assert data.shape == (0, 5) and data.dtype == np.uint8

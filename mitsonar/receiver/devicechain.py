@@ -247,6 +247,8 @@ def received_bytes(inten, n_rows, n_bins, *, kernel, corr, g, g_seed, weibull, r
     import drjit as dr
     import mitsuba as mi
 
+    if n_rows * n_bins == 0:   # an empty frame: no kernels
+        return mi.UInt8()
     calibration, gain, tvg = levels
     ad_low, ad_span, bit_depth = ad
     scale = 15.0 if bit_depth == 4 else 255.0
