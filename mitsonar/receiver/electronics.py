@@ -33,7 +33,9 @@ The chain follows thesis sections 2.1.2 and 2.4.1 and the Tritech Micron's conve
    the way the SeaNet driver reports packed 4-bit bins.
 
 With ``speckle='off'``, ``noise_floor=-inf``, ``ringdown=0``, ``pulse_length=0`` and
-``range_jitter=0`` the level is exactly the formula of step 2 (same floating-point operations).
+``range_jitter=0`` the level is the formula of step 2 (its logarithm computed as ``log2(I) log10(2)``:
+a byte can differ from NumPy's ``log10`` only where a level lies within a few units in the last
+place of a quantisation step's half).
 
 All randomness comes from a counter-based generator (Philox4x32) keyed by the seed and counted
 by bin (`mitsonar.receiver.devicechain`): the same seed gives the same bytes for any thread
