@@ -3,6 +3,7 @@ the NumPy oracle's (tests/numpy_chain.py, the chain before version 0.3) given th
 speckle; its counter-based noise is a unit circular complex Gaussian, the same for any thread
 count; a new seed or frame replays the compiled kernels."""
 import math
+import os
 
 import numpy as np
 import pytest
@@ -260,3 +261,15 @@ def test_an_empty_frame_gives_empty_bytes(mitsonar_mod):
 
     data = Electronics().apply(np.zeros((0, 5)), np.linspace(1.0, 2.0, 5), seed=1)
     assert data.shape == (0, 5) and data.dtype == np.uint8
+
+
+def test_a_scene_without_shapes_renders_after_another_scene(mitsonar_mod):
+    """An empty scene's frozen pass, recorded after another scene's render, dispatched its ray
+    casts over that scene's shapes, which Dr.Jit refused to record: such a scene is traced."""
+    from conftest import scene_xml, sonar_xml
+
+    box = mitsonar_mod.load_scene(os.path.join(os.path.dirname(QUAY), "box.xml"))
+    mitsonar_mod.render_scan(box, spp=4, seed=3)
+    empty = mitsonar_mod.load_scene(scene_xml(sonar_xml(n_bins=50, n_pings=3)))
+    scan = mitsonar_mod.render_scan(empty, spp=2, seed=1)
+    assert scan.data.shape == (3, 50) and not scan.intensity.any()
