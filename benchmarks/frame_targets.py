@@ -26,10 +26,11 @@ Prints one JSON object:
   * ``fixed_cost``: the quay frame at spp 1 (`render_scan` and `render_histogram`, medians) and
     the intercept of the seconds-per-spp line of the sweep; target < 2 ms.
 
-``--chain``: the receiver chain (`mitsonar.receiver.jitchain`; ``auto``: one Dr.Jit kernel for
-frames of 4096 bins or more, NumPy below; ``jit``; ``numpy``).
+Issue 55's ratios (``targets``): the quay frame's rate at 5 % over the rate its rays alone allow
+(``ray_casting_bound_frames_per_s``; target 0.6 at ``max_depth`` 3, 0.45 at 1), and the fixed
+cost, the frame at spp 1 over the frame at 5 % (target at most 0.1).
 
-Usage: python benchmarks/frame_targets.py [--repeats 5] [--ref-spp 8192] [--big-spp 8192] [--quick] [--chain auto]
+Usage: python benchmarks/frame_targets.py [--repeats 5] [--ref-spp 8192] [--big-spp 8192] [--quick]
 """
 from __future__ import annotations
 
@@ -195,20 +196,14 @@ def main(argv=None):
     ap.add_argument("--ref-spp", type=int, default=8192, help="quay reference paths per beam (both emissions)")
     ap.add_argument("--big-spp", type=int, default=8192, help="box scan paths per ping for the segment ratio")
     ap.add_argument("--quick", action="store_true", help="fewer sweep points and repeats (a smoke run)")
-    ap.add_argument("--chain", choices=("auto", "jit", "numpy"), default="auto",
-                    help="the receiver chain: one Dr.Jit kernel (jit), NumPy, or auto (the kernel for frames)")
     args = ap.parse_args(argv)
     import drjit as dr
-
-    from mitsonar.receiver import jitchain
-
-    jitchain.CHAIN = args.chain
 
     quay_spps = [64, 256] if args.quick else [64, 128, 256, 512]
     box_spps = [256, 1024] if args.quick else [128, 256, 512, 1024, 2048]
     repeats = 3 if args.quick else args.repeats
     out = {"cores": os.cpu_count(), "dr_threads": dr.thread_count(), "load_avg_start": os.getloadavg(),
-           "variant": mi.variant(), "receiver_chain": "jit" if jitchain.use_jit() else "numpy"}
+           "variant": mi.variant(), "receiver_chain": "dr.jit"}
     scene, out["quay_frame"] = quay_frame(quay_spps, repeats, args.ref_spp)
     out["box_scan"], out["segments"] = box_scan(box_spps, repeats, 16, args.big_spp)
     fits = {f"max_depth_{d}_{e}": out["quay_frame"][f"max_depth_{d}"][e]["fit"]["overhead_s"]
@@ -237,6 +232,15 @@ def main(argv=None):
         # the bare ray casting alone at 5 % (max_depth 3, the faster emission), over 85 frames/s
         "quay_ray_casting_bound_over_85": round(best["ray_casting_bound_frames_per_s"] / TARGET_FPS, 4),
     }
+    # issue 55: the frame at 5 % over the rate its rays alone allow, and the fixed cost's share
+    for depth, want in ((3, 0.6), (1, 0.45)):
+        rows = out["quay_frame"][f"max_depth_{depth}"]
+        share = max(rows[e]["frames_per_s"] / rows[e]["ray_casting_bound_frames_per_s"] for e in EMISSIONS)
+        out["targets"][f"max_depth_{depth}_frame_over_ray_bound"] = round(share, 4)
+        out["targets"][f"max_depth_{depth}_frame_over_ray_bound_target"] = want
+    spp1_ms = out["fixed_cost"]["render_scan_spp1"]["ms_median"]
+    out["targets"]["fixed_cost_share_of_5pct_frame"] = round(spp1_ms * best["frames_per_s"] / 1e3, 4)
+    out["targets"]["fixed_cost_share_target"] = 0.1
     out["load_avg_end"] = os.getloadavg()
     print(json.dumps(out, indent=1))
 

@@ -19,6 +19,8 @@ What makes a replay give the same numbers as tracing again:
 * a scene that holds textures anywhere (`has_textures`) is traced every pass (`Context.freezable`): a replay after
   texels changed through ``mi.traverse`` read the old texels (tests/test_gradients.py's
   per-texel finite difference found it);
+* so is a scene without shapes (its ray casts dispatch over shapes of other scenes, which its
+  recording cannot name: Dr.Jit refused it);
 * so is a scene whose meshes move (`trace_every_pass`, called by ``scan_parameters`` for vertex
   positions): a replay casts rays at the acceleration structure it recorded, not at the one
   ``params.update()`` rebuilt;
@@ -130,7 +132,13 @@ class Context:
         # for a texture a C++ BSDF holds (an acoustic BSDF in a twosided, Mitsuba's diffuse with a
         # bitmap), which the walk above does not reach: the scene's own traversal says.
         moving = scene is not None and _moving.get(id(scene)) is scene
-        self.freezable = not textured and not moving and not any(isinstance(v, mi.Texture) for v in self.values)
+        # A scene without shapes is traced too: its ray casts still dispatch over the shapes
+        # Dr.Jit has registered (another scene's, loaded earlier), which no input of its
+        # recording names: Dr.Jit refused the recording ("virtual function call ... no such
+        # object instance was found in the function's inputs").
+        empty = scene is not None and len(scene.shapes()) == 0
+        self.freezable = (not textured and not moving and not empty
+                          and not any(isinstance(v, mi.Texture) for v in self.values))
 
     def __hash__(self):
         return hash(self.key)

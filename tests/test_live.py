@@ -173,11 +173,14 @@ def test_the_live_micron_answers_the_seanet_driver_from_the_new_pose(box):
 
 
 def leading_edge(samples, width):
-    """Range of the first sample past 1 m at half scale or more: where the wall's echo starts
-    (the strongest sample is no use through the head's 8 bits, which the wall saturates)."""
+    """Range of the first of three samples in a row past 1 m at half scale or more: where the
+    wall's echo starts (the strongest sample is no use through the head's 8 bits, which the wall
+    saturates; the wall's echo spans many samples, while the receiver's noise alone reaches half
+    scale in one or two samples of about one ping in 15 before the wall)."""
     samples = np.asarray(samples)
     i = np.arange(samples.size)
-    hit = np.flatnonzero(((i + 0.5) * width > 1.0) & (samples >= 128))
+    up = ((i + 0.5) * width > 1.0) & (samples >= 128)
+    hit = np.flatnonzero(up[:-2] & up[1:-1] & up[2:])
     return (hit[0] + 0.5) * width if hit.size else math.inf
 
 

@@ -33,9 +33,16 @@ The chain follows thesis sections 2.1.2 and 2.4.1 and the Tritech Micron's conve
    the way the SeaNet driver reports packed 4-bit bins.
 
 With ``speckle='off'``, ``noise_floor=-inf``, ``ringdown=0``, ``pulse_length=0`` and
-``range_jitter=0`` the level is exactly the formula of step 2 (same floating-point operations).
+``range_jitter=0`` the level is the formula of step 2 (its logarithm computed as ``log2(I) log10(2)``:
+a byte can differ from NumPy's ``log10`` only where a level lies within a few units in the last
+place of a quantisation step's half).
 
-All randomness comes from ``numpy.random.default_rng(seed)``; the same seed gives the same bytes.
+All randomness comes from a counter-based generator (Philox4x32) keyed by the seed and counted
+by bin (`mitsonar.receiver.devicechain`): the same seed gives the same bytes for any thread
+count. The chain runs as Dr.Jit kernels of the active variant (on the GPU for ``cuda``): NumPy
+intensities are uploaded (`Electronics.apply`), a render's stay on the device
+(`Electronics.device_bytes`, `mitsonar.sim.render.render_frame`). Before version 0.3 the noise
+was NumPy's PCG64 normals and the chain NumPy's: the same laws and statistics, other bytes.
 The input intensity is never modified.
 
 Default settings (Micron-like). The A/D window ``ad_low = 12.5 dB``, ``ad_span = 24 dB`` and
@@ -66,7 +73,7 @@ from typing import Any
 import numpy as np
 
 from mitsonar._checks import is_number, not_a, not_allowed
-import mitsonar.receiver.fastchain as fastchain, mitsonar.receiver.jitchain as jitchain  # noqa: E401
+import mitsonar.receiver.devicechain as devicechain
 from mitsonar.sonar_equation.levels import (DEFAULT_NOISE_LEVEL, DEFAULT_RECEIVER_SENSITIVITY, DEFAULT_SOURCE_LEVEL,
                                     SOURCE_LEVELS, echo_level, rename_settings, source_level_error)
 
@@ -87,7 +94,6 @@ HEAD_LIMITS = {"gain": (0.0, HEAD_DB_SCALE), "ad_low": (0.0, HEAD_DB_SCALE),
 
 #: Ranges below this are clamped in the TVG so that a bin centre at r = 0 stays finite.
 MIN_TVG_RANGE = 1e-3
-FAST = True   # `apply` through `mitsonar.receiver.fastchain` (False: the straightforward chain, same bytes)
 
 
 @dataclass
@@ -329,7 +335,7 @@ class Electronics:
         ndarray float64 (2 m + 1,)
             Weights summing to 1 (to rounding); index ``m`` is offset 0.
         """
-        return np.array(_spread_kernel(sound_speed * self.pulse_length / 2.0, self.range_jitter, bin_width))
+        return np.array(devicechain.spread_kernel(sound_speed * self.pulse_length / 2.0, self.range_jitter, bin_width))
 
     def spread(self, intensity, ranges, sound_speed: float = 1500.0) -> np.ndarray:
         """Spread echo energy along range by the pulse and the range jitter (step 1 of the chain).
@@ -350,10 +356,17 @@ class Electronics:
         """
         inten = np.array(intensity, dtype=np.float64)
         bin_width = _bin_width(ranges)
-        if bin_width == 0.0:
+        if bin_width == 0.0 or inten.size == 0:
             return inten
         kernel = self.range_kernel(bin_width, sound_speed)
-        return fastchain.convolve_range(inten, kernel) if kernel.size > 1 else inten
+        if kernel.size == 1:
+            return inten
+        import mitsuba as mi
+
+        devicechain.check_variant()
+        rows = inten.reshape(-1, inten.shape[-1])
+        out = devicechain.spread(mi.Float64(rows.reshape(-1)), rows.shape[0], rows.shape[1], kernel)
+        return out.numpy().reshape(inten.shape)
 
     def echo_level(self, intensity, ranges, sound_speed: float = 1500.0) -> np.ndarray:
         """The noise-free echo level at the receiver, dB re 1 uPa, per bin (``Scan.echo_level``):
@@ -373,14 +386,16 @@ class Electronics:
             return sound_speed / (2.0 * bin_width)
         raise ValueError("electronics: no bandwidth (receiver_bandwidth 0, pulse_length 0 and no range bins)")
 
-    def speckle_factors(self, shape, rng: np.random.Generator, corr_bins: np.ndarray | None = None) -> np.ndarray:
-        """Mean-one multiplicative speckle of the given ``(n_pings, n_bins)`` shape.
+    def speckle_factors(self, shape, seed, corr_bins: np.ndarray | None = None) -> np.ndarray:
+        """Mean-one multiplicative speckle of the given ``(n_pings, n_bins)`` shape: ``|g|^2`` of
+        the speckle `apply` draws from its seed when no scene speckle is given.
 
         Parameters
         ----------
         shape : tuple
             Output shape; the last axis is range.
-        rng : numpy.random.Generator
+        seed : int or numpy.random.Generator
+            The seed of the draws (`mitsonar.receiver.devicechain`); a Generator gives one.
         corr_bins : ndarray or None
             Amplitude weights of the pulse along range (see `range_kernel`); the complex field
             is filtered with them so that speckle is correlated over the resolution cell. The
@@ -394,13 +409,14 @@ class Electronics:
         shape = tuple(shape)
         if self.speckle == "off":
             return np.ones(shape)
-        z = _complex_gaussian(shape, rng, corr_bins)
-        e = z.real ** 2 + z.imag ** 2  # Exp(1): a unit complex Gaussian's power
-        if self.speckle == "rayleigh":
-            return e
-        shape_k = self.speckle_shape
-        # E^(1/k) of an Exp(1) is Weibull(k, 1); its mean is Gamma(1 + 1/k).
-        return e ** (1.0 / shape_k) / math.gamma(1.0 + 1.0 / shape_k)
+        devicechain.check_variant()
+        if isinstance(seed, np.random.Generator):
+            seed = int(seed.integers(0, 2 ** 63))
+        rows = math.prod(shape[:-1])
+        # |g|^2 of a unit complex Gaussian is Exp(1); reshaped, |g|^2 = E^(1/k) / Gamma(1 + 1/k),
+        # Weibull(k) of mean 1
+        e = devicechain.drawn_speckle_power(_seed(seed), rows, shape[-1], corr_bins, self._weibull())
+        return e.numpy().reshape(shape)
 
     def scene_speckle(self, poses, ranges, *, sound_speed: float, beamwidth_h: float,
                       aperture_h: float) -> np.ndarray:
@@ -409,14 +425,21 @@ class Electronics:
         seeded by ``speckle_seed``; its range resolution is the pulse's ``c pulse_length / 2``
         (at least one bin), its aperture the head's across the narrow beam (``aperture_h``, m:
         the beam's ``across_aperture()``, recorded by `render_scan` in ``meta['aperture_h']``)."""
-        from mitsonar.receiver.speckle import cell_speckle
+        return self.scene_speckle_field(poses, ranges, sound_speed=sound_speed, beamwidth_h=beamwidth_h,
+                                        aperture_h=aperture_h).numpy()
 
+    def scene_speckle_field(self, poses, ranges, *, sound_speed: float, beamwidth_h: float,
+                            aperture_h: float):
+        """`scene_speckle` on the device: a `mitsonar.receiver.speckle.Field` for `device_bytes`."""
+        from mitsonar.receiver.speckle import field
+
+        devicechain.check_variant()
         ranges = np.asarray(ranges, dtype=np.float64)
         resolution = max(sound_speed * self.pulse_length / 2.0, _bin_width(ranges))
         if resolution <= 0:   # one bin and no pulse: cells are told apart by pose only
             resolution = 1.0
-        return cell_speckle(poses, ranges, seed=self.speckle_seed, beamwidth_h=beamwidth_h, aperture_h=aperture_h,
-                            resolution=resolution)
+        return field(poses, ranges, seed=self.speckle_seed, beamwidth_h=beamwidth_h, aperture_h=aperture_h,
+                     resolution=resolution)
 
     def ringdown_db(self, ranges) -> np.ndarray:
         """The transducer's ring-down on the A/D level scale, per range (``-inf`` without one).
@@ -463,7 +486,9 @@ class Electronics:
         speckle ``g``), the transducer's ring-down and the receiver's noise ``n`` (a unit circular
         complex Gaussian, correlated over the pulse like the matched filter's output); its power
         ``|sqrt(I) g + sqrt(R) + sqrt(N) n|^2`` (``R``, ``N`` the ring-down and noise floor referred
-        back through the chain) goes through the chain and the A/D window.
+        back through the chain) goes through the chain and the A/D window. The intensity is
+        uploaded and the chain run as Dr.Jit kernels (`device_bytes`), on any ``llvm`` or ``cuda``
+        variant.
 
         Parameters
         ----------
@@ -476,10 +501,11 @@ class Electronics:
         sound_speed : float
             m/s, turns ``pulse_length`` into range.
         seed : int
-            Seed of ``numpy.random.default_rng`` for the receiver's noise (and for the speckle
-            when ``speckle`` is None); the same seed gives the same bytes (``None`` draws fresh
-            entropy).
-        speckle : complex array_like or None
+            Seed of the receiver's noise (and of the speckle when ``speckle`` is None), a whole
+            number from 0 to 2^64 - 1: the key of the counter-based generator
+            (`mitsonar.receiver.devicechain`); the same seed gives the same bytes (``None`` draws
+            fresh entropy).
+        speckle : complex array_like, mitsonar.receiver.speckle.Field or None
             The scene's complex speckle amplitude per bin (`mitsonar.receiver.speckle`, mean power 1),
             shaped like ``intensity``; ``speckle`` = ``weibull`` reshapes its modulus to the
             Weibull law, ``off`` ignores it. None: drawn from ``seed`` (independent per bin,
@@ -492,102 +518,100 @@ class Electronics:
         Raises
         ------
         ValueError
-            Mismatched shapes, negative or non-finite intensity, uneven ranges, bad absorption
-            or sound speed.
+            Mismatched shapes, negative or non-finite intensity, uneven ranges, bad absorption,
+            sound speed or seed, or a variant without Dr.Jit kernels.
         """
         intensity = np.asarray(intensity)
         ranges = np.asarray(ranges, dtype=np.float64)
         one_ping = intensity.ndim == 1
-        inten = np.array(intensity, dtype=np.float64, ndmin=2) if not FAST else fastchain.scratch_copy(intensity)
-        if inten.ndim != 2 or inten.shape[-1] != ranges.shape[0] or ranges.ndim != 1:
+        if intensity.dtype == object or intensity.dtype.kind not in "biuf":
+            raise ValueError(f"electronics: intensity of dtype {intensity.dtype} is not allowed (real numbers)")
+        inten = intensity.reshape(1, -1) if one_ping else intensity
+        if inten.ndim != 2 or ranges.ndim != 1 or inten.shape[-1] != ranges.shape[0]:
             raise ValueError(f"electronics: intensity {np.shape(intensity)} and ranges {ranges.shape} do not match "
                              "(expected (n_pings, n_bins) and (n_bins,))")
         if not np.all(np.isfinite(inten)) or np.any(inten < 0):
             raise ValueError("electronics: intensity must be finite and >= 0")
+        if speckle is not None and not hasattr(speckle, "re"):
+            speckle = np.asarray(speckle, dtype=np.complex128)
+            speckle = speckle[None] if speckle.ndim == 1 else speckle
+            if speckle.shape != inten.shape:
+                raise ValueError(f"electronics: speckle {speckle.shape} does not match intensity {inten.shape}")
+        devicechain.check_variant()
+        import mitsuba as mi
+
+        src = np.ascontiguousarray(inten, dtype=np.float32 if inten.dtype == np.float32 else np.float64)
+        up = (mi.Float32 if src.dtype == np.float32 else mi.Float64)(src.reshape(-1))
+        data = self.device_bytes(up, inten.shape, ranges, absorption=absorption, sound_speed=sound_speed,
+                                 seed=seed, speckle=speckle)
+        data = data.numpy().reshape(inten.shape)
+        return data[0] if one_ping else data
+
+    def device_bytes(self, intensity, shape, ranges, absorption=0.0, sound_speed=1500.0, seed=0, speckle=None):
+        """`apply` on the device: ``intensity`` a Dr.Jit array (``mi.Float32`` or ``mi.Float64``
+        of ``shape = (n_rows, n_bins)`` values, row-major, >= 0 and finite: not checked here, a
+        render's histogram), the bytes a ``mi.UInt8`` array of the same layout, computed as
+        Dr.Jit kernels of the active variant without a NumPy array on the way (the per-bin
+        settings tables are computed once per settings and ranges). ``speckle``: a
+        `mitsonar.receiver.speckle.Field` (or a complex NumPy array, uploaded) or None; the other
+        arguments as `apply`'s."""
         if not (math.isfinite(absorption) and absorption >= 0):
             raise ValueError(f"electronics: absorption {absorption!r} is not a finite value >= 0 dB/m")
         if not (math.isfinite(sound_speed) and sound_speed > 0):
             raise ValueError(f"electronics: sound_speed {sound_speed!r} is not a speed > 0 m/s")
-        if speckle is not None:
-            speckle = (np.asarray if FAST else np.array)(speckle, dtype=np.complex128)   # read only
-            speckle = speckle[None] if speckle.ndim == 1 else speckle
-            if speckle.shape != inten.shape:
-                raise ValueError(f"electronics: speckle {speckle.shape} does not match intensity {inten.shape}")
-        rng = np.random.default_rng(seed)
-        if FAST and self.speckle != "off":
-            data = self._apply_fast(inten, ranges, absorption, sound_speed, rng, speckle, seed)
-            return data[0] if one_ping else data
+        devicechain.check_variant()
+        seed = _seed(seed)
+        n_rows, n_bins = (int(n) for n in shape)
+        t = self._tables(np.asarray(ranges, dtype=np.float64), float(absorption), float(sound_speed))
+        g = None
+        if self.speckle != "off" and speckle is not None:
+            if hasattr(speckle, "re"):
+                if tuple(speckle.shape) != (n_rows, n_bins):
+                    raise ValueError(f"electronics: speckle {tuple(speckle.shape)} does not match intensity "
+                                     f"{(n_rows, n_bins)}")
+                g = (speckle.re, speckle.im)
+            else:
+                import mitsuba as mi
 
-        corr = self._noise_corr(_bin_width(ranges), sound_speed)
-        inten = self.spread(inten, ranges, sound_speed)
+                sp = np.ascontiguousarray(speckle, dtype=np.complex128).reshape(-1)
+                g = (mi.Float64(sp.view(np.float64)),)
+        return devicechain.received_bytes(
+            intensity, n_rows, n_bins, kernel=t["kernel"], corr=t["corr"], g=g,
+            g_seed=seed if self.speckle != "off" and g is None else None, weibull=self._weibull(),
+            ring=t["ring"], f=t["f"], noise_seed=seed, levels=(t["calibration"], self.gain, t["tvg"]),
+            ad=(self.ad_low, self.ad_span, self.bit_depth))
 
-        # SL + sensitivity first: with the defaults (200 - 148) it is exactly the old constant 52,
-        # so the same floating-point operations as before give the same bytes.
-        calibration = self.source_level + self.receiver_sensitivity
-        chain = calibration + self.gain + self.tvg_db(ranges, absorption)  # dB, per bin
-        if self.speckle == "off":
-            g = np.ones(inten.shape)
-        else:
-            g = self._speckle(speckle if speckle is not None else _complex_gaussian(inten.shape, rng, corr))
-        if self.ringdown <= 0 and self.noise_floor == -math.inf:
-            total = inten * (np.abs(g) ** 2 if np.iscomplexobj(g) else g)
-        else:
-            total = self._received_power(inten, g, chain, ranges, rng, corr)
-        with np.errstate(divide="ignore"):
-            level = 10.0 * np.log10(total) + calibration + self.gain + self.tvg_db(ranges, absorption)
-        data = self.quantise(level)
-        return data[0] if one_ping else data
+    def _weibull(self):
+        """The Weibull shape of the speckle's intensity (None: fully developed, or no speckle)."""
+        return self.speckle_shape if self.speckle == "weibull" else None
 
-    def _apply_fast(self, inten, ranges, absorption, sound_speed, rng, speckle, seed=None):
-        """`apply`'s chain (speckle on) in `mitsonar.receiver.fastchain`: the same bytes as the
-        straightforward chain; the random draws first, for the whole scan, in its order."""
+    def _tables(self, ranges, absorption, sound_speed):
+        """The chain's per-bin settings on the device (TVG, ring-down and noise amplitudes) and
+        its kernels, computed once per settings, ranges, absorption and sound speed (`MAX_CACHED`)."""
+        key = ("tables", devicechain.variant(), tuple(self.to_dict().items()), ranges.shape, ranges.tobytes(),
+               absorption, sound_speed)
+        hit = devicechain.cached(key)
+        if hit is not None:
+            return hit
+        import mitsuba as mi
+
         bin_width = _bin_width(ranges)
-        corr = self._noise_corr(bin_width, sound_speed)
-        kernel = self.range_kernel(bin_width, sound_speed) if bin_width > 0 else np.ones(1)
         calibration = self.source_level + self.receiver_sensitivity
         tvg = self.tvg_db(ranges, absorption)
         chain = calibration + self.gain + tvg
-        g = self._speckle(speckle if speckle is not None else _complex_gaussian(inten.shape, rng, corr))
-        quiet = self.ringdown <= 0 and self.noise_floor == -math.inf
-        ring = np.sqrt(10.0 ** ((self.ringdown_db(ranges) - chain) / 10.0)) if self.ringdown > 0 else None
-        z, taps, f = None, None, None
-        if not quiet and self.noise_floor > -math.inf:
-            drawn = fastchain.take_draws(inten.shape, seed, corr) if speckle is not None else None   # rng's 1st use
-            z, taps = drawn if drawn is not None else fastchain.gaussian_draws(inten.shape, rng, corr)
-            f = math.sqrt(10.0 ** (self.noise_floor / 10.0)) * 10.0 ** (-chain / 20.0)
-        return (jitchain if jitchain.use_jit(inten.size) else fastchain).received_bytes(   # the same bytes
-            inten, g, kernel, quiet, ring, z, taps, f, (calibration, self.gain, tvg), (self.ad_low, self.ad_span, self.bit_depth))
+        out = {"kernel": self.range_kernel(bin_width, sound_speed) if bin_width > 0 else np.ones(1),
+               "corr": self._noise_corr(bin_width, sound_speed), "calibration": calibration,
+               "tvg": mi.Float64(tvg), "ring": None, "f": None}
+        if self.ringdown > 0:
+            out["ring"] = mi.Float64(np.sqrt(10.0 ** ((self.ringdown_db(ranges) - chain) / 10.0)))
+        if self.noise_floor > -math.inf:
+            out["f"] = mi.Float64(math.sqrt(10.0 ** (self.noise_floor / 10.0)) * 10.0 ** (-chain / 20.0))
+        return devicechain.keep(key, out)
 
     def _noise_corr(self, bin_width, sound_speed):
         """The receiver noise's correlation over the pulse (amplitude taps), None for one bin."""
-        pulse = _spread_kernel(sound_speed * self.pulse_length / 2.0, 0.0, bin_width) if bin_width > 0 else np.ones(1)
+        pulse = devicechain.spread_kernel(sound_speed * self.pulse_length / 2.0, 0.0, bin_width) if bin_width > 0 else np.ones(1)
         return pulse if pulse.size > 1 else None
-
-    def prefetch_noise(self, shape, ranges, sound_speed: float, seed: int) -> None:
-        """Start drawing `apply`'s receiver noise for ``seed`` on a worker thread (`fastchain.prefetch_draws`)."""
-        if FAST and self.speckle != "off" and self.noise_floor > -math.inf:
-            fastchain.prefetch_draws(tuple(shape), seed, self._noise_corr(_bin_width(ranges), sound_speed))
-
-    def _speckle(self, g):
-        """The complex speckle ``g`` with its modulus reshaped to the Weibull law (``weibull``)."""
-        if self.speckle != "weibull":
-            return g
-        power = np.abs(g) ** 2
-        k = self.speckle_shape
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return g * np.where(power > 0, power ** (0.5 / k - 0.5), 0.0) / math.sqrt(math.gamma(1.0 + 1.0 / k))
-
-    def _received_power(self, inten, g, chain, ranges, rng, corr):
-        """``|sqrt(I) g + sqrt(R) + sqrt(N) n|^2`` referred back through ``chain`` (see `apply`)."""
-        amplitude = np.sqrt(inten) * g
-        # The background is referred back through the chain so that the noise-free path is exactly
-        # 10 log10(I) + source_level + receiver_sensitivity + gain + TVG.
-        if self.ringdown > 0:
-            amplitude = amplitude + np.sqrt(10.0 ** ((self.ringdown_db(ranges) - chain) / 10.0))
-        if self.noise_floor > -math.inf:
-            noise = _complex_gaussian(inten.shape, rng, corr)
-            amplitude = amplitude + math.sqrt(10.0 ** (self.noise_floor / 10.0)) * 10.0 ** (-chain / 20.0) * noise
-        return amplitude.real ** 2 + amplitude.imag ** 2 if np.iscomplexobj(amplitude) else amplitude ** 2
 
 
 def apply_to_scan(scan, electronics: "Electronics | dict | None" = None, seed: int | None = None):
@@ -638,7 +662,13 @@ def has_scene_speckle(scan) -> bool:
     return scan.meta.speckle == "scene" and scan.meta.aperture_h is not None
 
 
-_complex_gaussian = fastchain.complex_gaussian
+def _seed(seed) -> int:
+    """A noise seed: a whole number from 0 to 2^64 - 1 (None: fresh entropy)."""
+    if seed is None:
+        return int(np.random.SeedSequence().entropy) & devicechain.SEED_MAX
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or not 0 <= seed <= devicechain.SEED_MAX:
+        raise ValueError(f"electronics: seed {seed!r} is not allowed (a whole number from 0 to 2^64 - 1, or None)")
+    return int(seed)
 
 
 def _round_half_up(v: np.ndarray) -> np.ndarray:
@@ -659,36 +689,6 @@ def _bin_width(ranges) -> float:
     if not (math.isfinite(width) and width > 0) or not np.allclose(np.diff(r), width, rtol=1e-6, atol=0.0):
         raise ValueError("electronics: ranges must be evenly spaced increasing bin centres")
     return float(width)
-
-
-def _spread_kernel(length: float, sigma: float, bin_width: float) -> np.ndarray:
-    """Bin weights of U[0, length) + N(0, sigma^2) for an echo at a bin centre (see range_kernel),
-    computed once per setting when `FAST` (read-only)."""
-    key = (float(length), float(sigma), float(bin_width))
-    return fastchain.cached(key, _spread_kernel_computed) if FAST else _spread_kernel_computed(*key)
-
-
-def _spread_kernel_computed(length: float, sigma: float, bin_width: float) -> np.ndarray:
-    if length <= 0 and sigma <= 0:
-        return np.ones(1)
-    m = int(math.ceil((length + 6.0 * sigma) / bin_width)) + 1
-    edges = (np.arange(-m, m + 2) - 0.5) * bin_width
-    w = np.maximum(np.diff([_box_gauss_cdf(x, length, sigma) for x in edges]), 0.0)
-    return w / w.sum()
-
-
-def _box_gauss_cdf(x: float, length: float, sigma: float) -> float:
-    """CDF at x of U[0, length) + N(0, sigma^2) (either part may be absent)."""
-    if sigma <= 0:
-        return min(max(x / length, 0.0), 1.0)
-    if length <= 0:
-        return 0.5 * (1.0 + math.erf(x / (sigma * math.sqrt(2.0))))
-
-    def g(u):  # integral of the normal CDF: u Phi(u/s) + s phi(u/s)
-        t = u / sigma
-        return u * 0.5 * (1.0 + math.erf(t / math.sqrt(2.0))) + sigma * math.exp(-0.5 * t * t) / math.sqrt(2.0 * math.pi)
-
-    return (g(x) - g(x - length)) / length
 
 
 def check_head_settings(settings: dict, source: str) -> None:

@@ -69,6 +69,21 @@ def _check_start_time(trajectory, start_time):
     return float(start_time)
 
 
+class Frame:
+    """What `render_frame` returns: ``intensity`` (``mi.Float32``, the noise-free echo energy per
+    bin) and ``data`` (``mi.UInt8``, the device's bytes), Dr.Jit arrays of ``shape = (n_rows,
+    n_bins)`` values in row-major order; ``numpy()`` gives both as NumPy arrays of that shape."""
+
+    __slots__ = ("intensity", "data", "shape", "_scan")
+
+    def __init__(self, intensity, data, shape):
+        self.intensity, self.data, self.shape, self._scan = intensity, data, tuple(shape), None
+
+    def numpy(self):
+        """(intensity float32, data uint8), each ``shape``."""
+        return self.intensity.numpy().reshape(self.shape), self.data.numpy().reshape(self.shape)
+
+
 def moving_head_poses(sonar, trajectory, start_time, mount=None):
     """(n_pings, 4, 4) head pose of each row, ``trajectory.at(start_time + times[k]) @ mount``
     (``mount``: the sensor's ``to_world`` unless given), refused with one sentence naming the
@@ -166,10 +181,17 @@ def _integrator(scene, integrator):
     return integrator
 
 
-def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integrator=None, sensor=0,
-                max_depth=None, electronics=None, electronics_seed=None, progress=None, trajectory=None,
-                start_time=None, speckle_seed=None, sound_speed_profile=None) -> Scan:
-    """Render one scan of ``scene`` and pass it through the head's electronics.
+def render_frame(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integrator=None, sensor=0,
+                 max_depth=None, electronics=None, electronics_seed=None, progress=None, trajectory=None,
+                 start_time=None, speckle_seed=None, sound_speed_profile=None) -> "Frame":
+    """Render one frame of ``scene`` and pass it through the head's electronics, keeping the
+    result on the device: a `Frame` whose ``intensity`` (``mi.Float32``) and ``data``
+    (``mi.UInt8``) are Dr.Jit arrays of the active variant (on the GPU for ``cuda``), row-major
+    ``shape = (n_rows, n_bins)``. `render_scan` is this frame brought to the host as a `Scan`;
+    a caller that feeds the frame to more Dr.Jit work (a learning pipeline, a display) skips
+    that transfer. The receiver chain runs as Dr.Jit kernels from the render's histogram to the
+    bytes (`mitsonar.receiver.devicechain`); the histogram itself is summed over the render's
+    passes on the host by the integrators and uploaded once.
 
     Parameters
     ----------
@@ -214,19 +236,9 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
 
     Returns
     -------
-    Scan
-        The noise-free ``intensity`` and the device's ``data``, with the ranges, bearings,
-        poses and times of every row.
-
-    Notes
-    -----
-    With a trajectory, row k is pinged at ``start_time + scan.times[k]`` (the sensor's
-    ``ping_period`` schedule) from ``scan.poses[k] = trajectory.at(start_time + times[k]) @ mount
-    @ bearing_rotation(bearings[k])``, all rows in one wavefront as for a static head. The head
-    is taken as still during one ping's flight ``T = 2 range_max / sound_speed``: moving at ``v``,
-    an echo's range differs from the range measured at the ping's pose by at most ``v T / 2``
-    (1.6 cm at 2 m/s and 12 m, under one 2.4 cm bin of the default 500 bins).
-    The same arguments give the same scan, bit for bit.
+    Frame
+        ``intensity`` and ``data`` as Dr.Jit arrays, and ``shape``; the same arguments give the
+        same arrays, bit for bit (``intensity`` is `render_scan`'s, ``data`` its bytes).
     """
     ensure_variant()
     import mitsuba as mi
@@ -281,8 +293,6 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     ranges = sonar.bin_centres()
     try:
         sonar.head_pose(pose)
-        # the receiver noise depends on the seed and the scan's shape only: drawn during the render
-        model.prefetch_noise((int(sonar.n_pings), int(sonar.n_bins)), ranges, sonar.sound_speed, eseed)
         with _profile_of(integrator, sound_speed_profile):
             hist = integrator.render_histogram(scene, sonar, seed=seed, spp=spp, pose=pose, max_depth=max_depth,
                                                progress=progress)
@@ -291,9 +301,53 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
 
     intensity = hist.astype(np.float32)
     poses = sonar.ping_poses(pose)
-    speckle = None if model.speckle == "off" else model.scene_speckle(poses, ranges, **speckle_geometry(sonar))
-    data = model.apply(intensity, ranges, absorption=sonar.absorption, sound_speed=sonar.sound_speed, seed=eseed,
-                       speckle=speckle)
+    speckle = None if model.speckle == "off" else model.scene_speckle_field(poses, ranges, **speckle_geometry(sonar))
+    shape = (int(sonar.n_pings), int(sonar.n_bins))
+    on_device = mi.Float32(intensity.reshape(-1))    # the one upload: the integrators sum on the host
+    data = model.device_bytes(on_device, shape, ranges, absorption=sonar.absorption, sound_speed=sonar.sound_speed,
+                              seed=eseed, speckle=speckle)
+    frame = Frame(intensity=on_device, data=data, shape=shape)
+    frame._scan = (scene, sonar, integrator, model, intensity, ranges, poses, seed, spp, max_depth, eseed,
+                   trajectory, start_time)
+    return frame
+
+
+def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integrator=None, sensor=0,
+                max_depth=None, electronics=None, electronics_seed=None, progress=None, trajectory=None,
+                start_time=None, speckle_seed=None, sound_speed_profile=None) -> Scan:
+    """Render one scan of ``scene`` and pass it through the head's electronics.
+
+    Parameters
+    ----------
+    scene, spp, seed, pose, integrator, sensor, max_depth, electronics, electronics_seed, progress,
+    trajectory, start_time, speckle_seed, sound_speed_profile
+        As `render_frame`'s (below).
+
+    Returns
+    -------
+    Scan
+        The noise-free ``intensity`` and the device's ``data``, with the ranges, bearings,
+        poses and times of every row: `render_frame`'s arrays brought to the host (one transfer).
+
+    Notes
+    -----
+    With a trajectory, row k is pinged at ``start_time + scan.times[k]`` (the sensor's
+    ``ping_period`` schedule) from ``scan.poses[k] = trajectory.at(start_time + times[k]) @ mount
+    @ bearing_rotation(bearings[k])``, all rows in one wavefront as for a static head. The head
+    is taken as still during one ping's flight ``T = 2 range_max / sound_speed``: moving at ``v``,
+    an echo's range differs from the range measured at the ping's pose by at most ``v T / 2``
+    (1.6 cm at 2 m/s and 12 m, under one 2.4 cm bin of the default 500 bins).
+    The same arguments give the same scan, bit for bit.
+    """
+    import mitsuba as mi
+
+    frame = render_frame(scene, spp=spp, seed=seed, pose=pose, integrator=integrator, sensor=sensor,
+                         max_depth=max_depth, electronics=electronics, electronics_seed=electronics_seed,
+                         progress=progress, trajectory=trajectory, start_time=start_time,
+                         speckle_seed=speckle_seed, sound_speed_profile=sound_speed_profile)
+    (scene, sonar, integrator, model, intensity, ranges, poses, seed, spp, max_depth, eseed, trajectory,
+     start_time) = frame._scan
+    data = frame.data.numpy().reshape(frame.shape)
     from mitsonar._version import __version__
 
     meta = {

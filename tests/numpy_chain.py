@@ -1,7 +1,8 @@
-"""The receiver chain's arithmetic in reused buffers (issue "Frame overhead"); NumPy only.
+"""A test oracle: the receiver chain's arithmetic in NumPy (the runtime chain before version 0.3,
+`mitsonar.receiver.fastchain`; now only tests/test_devicechain.py runs it, against the Dr.Jit
+kernels of `mitsonar.receiver.devicechain` given the same draws and speckle).
 
-`mitsonar.receiver.electronics.Electronics.apply` with ``electronics.FAST`` (the default) hands
-its per-bin work here: the range spread, the receiver noise's filter, the received power, the dB
+It did the range spread, the receiver noise's filter, the received power, the dB
 levels and the A/D quantisation, a block of `ROW_BLOCK` rows at a time so that the block's
 float64 arrays stay in the CPU's cache, with the random draws and the working copy in buffers
 kept per thread. Every bin goes through the same floating-point operations in the same order as
@@ -15,7 +16,6 @@ faults).
 from __future__ import annotations
 
 import math
-import os
 import threading
 
 import numpy as np
@@ -86,56 +86,6 @@ def gaussian_draws(shape, rng: np.random.Generator, corr_bins=None):
     h = _taps(corr_bins)
     z = _buffer("draws", _draws_shape(shape, h))
     rng.standard_normal(out=z)
-    z *= math.sqrt(0.5)
-    return z, h
-
-
-#: `prefetch_draws` draws on a worker thread (False: `Electronics.apply` draws; the same numbers).
-PREFETCH = True
-#: Fewest normals worth a worker (about 1 ms of draws): handing a one-row ping's 1 200 draws to a
-#: thread cost more than drawing them (the worker's wake-up and its turn with the GIL: the live
-#: harbour ping took 14-21 ms instead of 9-10 ms, benchmarks/frame_profile.py --fixed-only).
-PREFETCH_MIN = 1 << 17
-_drawer = None          # (process id, one worker thread) drawing prefetched noise (`prefetch_draws`)
-_prefetched: dict = {}  # calling thread -> ((seed, shape), future)
-
-
-def prefetch_draws(shape, seed: int, corr_bins=None) -> None:
-    """Start drawing `gaussian_draws`' numbers for ``(shape, default_rng(seed), corr_bins)`` on a
-    worker thread, for the calling thread's next `take_draws` with the same seed and shape.
-    ``render_scan`` calls it before its render: NumPy draws without holding the GIL, so on a
-    second core the draws (the quay frame: 0.5 M normals, 5 ms) overlap the render's Python
-    set-up and kernels instead of following them. The same numbers: a fresh generator of that
-    seed whose first use is this fill, as in `Electronics.apply`."""
-    global _drawer
-    if not PREFETCH or isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        return
-    if _drawer is None or _drawer[0] != os.getpid():   # a forked child has no worker thread: a new one
-        from concurrent.futures import ThreadPoolExecutor
-
-        _prefetched.clear()
-        _drawer = (os.getpid(), ThreadPoolExecutor(max_workers=1, thread_name_prefix="mitsonar-draws"))
-    size = _draws_shape(shape, _taps(corr_bins))
-    if math.prod(size) < PREFETCH_MIN:
-        return
-    key = (int(seed), size)
-    _prefetched[threading.get_ident()] = (key, _drawer[1].submit(_draw, key[0], size))
-
-
-def _draw(seed, size):
-    z = np.empty(size)
-    np.random.default_rng(seed).standard_normal(out=z)
-    return z
-
-
-def take_draws(shape, seed, corr_bins=None):
-    """`gaussian_draws(shape, np.random.default_rng(seed), corr_bins)` from the calling thread's
-    `prefetch_draws` when it drew that seed and shape (then forgotten), else None."""
-    pending = _prefetched.pop(threading.get_ident(), None)
-    h = _taps(corr_bins)
-    if pending is None or pending[0] != (seed, _draws_shape(shape, h)):
-        return None
-    z = pending[1].result()
     z *= math.sqrt(0.5)
     return z, h
 
