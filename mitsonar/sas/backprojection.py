@@ -25,8 +25,8 @@ The processed beam: ``s_rj(p)``, the sine of the squint, the mean of the along-t
 target's along-track -3 dB width is ``k_w lambda / (4 sin(theta_p / 2))``
 (`mitsonar.sas.StripMap.along_track_resolution`).
 
-Memory: the pixels are processed in chunks of at most ``chunk`` lanes; per chunk only the pairs
-whose processed beam can reach it are looped over (a conservative test on the chunk's corners), in
+Memory: the pixels are processed in square tiles of at most ``chunk`` lanes; per tile only the
+pairs whose processed beam can reach it are looped over (a conservative test on the chunk's corners), in
 one symbolic loop (`drjit.while_loop`), every value that changes between chunks opaque, so one
 kernel serves every chunk and call. Geometry is in float32 relative to the chunk's centre
 (millimetre-exact at kilometres). The same code runs on the CUDA variants (a GPU).
@@ -172,27 +172,33 @@ def form_image(echoes, grid, *, navigation=None, sound_speed=None, beamwidth=Non
     axis = poses[:, :3, 0]
     smax = math.sin(0.5 * float(beamwidth))
 
-    pts = grid.points()
-    out = np.zeros(len(pts), np.complex64)
+    out = np.zeros(grid.shape, np.complex64)
     t0 = time.perf_counter()
     kernel = _Kernel(data, fs_up, echoes.carrier, c, smax, window)
     pairs_done = 0
     tau_max = n_up / fs_up
-    for a in range(0, len(pts), int(chunk)):
-        p = pts[a:a + int(chunk)]
-        centre = 0.5 * (p.min(axis=0) + p.max(axis=0))
-        rows, els = _pairs(p, tx, rx, axis, vel, smax, tau_max)
-        if not len(rows):
-            continue
-        out[a:a + len(p)] = kernel(p - centre, tx[rows] - centre, rx[rows, els] - centre, vel[rows], axis[rows],
-                                   rows * n_el + els)
-        pairs_done += len(p) * len(rows)
+    n_x, n_y = grid.shape
+    side = max(1, int(math.isqrt(int(chunk))))             # square tiles: the tightest pair selection
+    t_y = min(n_y, side)
+    t_x = max(1, int(chunk) // t_y)
+    for i0 in range(0, n_x, t_x):
+        for j0 in range(0, n_y, t_y):
+            X, Y = np.meshgrid(grid.x[i0:i0 + t_x], grid.y[j0:j0 + t_y], indexing="ij")
+            p = np.stack([X.ravel(), Y.ravel(), np.full(X.size, float(grid.z))], axis=1)
+            centre = 0.5 * (p.min(axis=0) + p.max(axis=0))
+            rows, els = _pairs(p, tx, rx, axis, vel, smax, tau_max)
+            if not len(rows):
+                continue
+            val = kernel(p - centre, tx[rows] - centre, rx[rows, els] - centre, vel[rows], axis[rows],
+                         rows * n_el + els)
+            out[i0:i0 + t_x, j0:j0 + t_y] = val.reshape(X.shape)
+            pairs_done += len(p) * len(rows)
     seconds = time.perf_counter() - t0
     meta = {"beamwidth": float(beamwidth), "window": window, "sound_speed": c, "upsample": int(n_up // echoes.n_samples),
             "navigation": "given" if navigation is not None else "rendered poses",
             "pixel_pairs": int(pairs_done), "seconds": seconds,
             "pixel_pairs_per_second": pairs_done / seconds if seconds > 0 else float("nan")}
-    return SASImage(out.reshape(grid.shape), grid, meta)
+    return SASImage(out, grid, meta)
 
 
 def _pairs(p, tx, rx, axis, vel, smax, tau_max):
