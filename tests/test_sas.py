@@ -182,11 +182,11 @@ def test_form_image_refusals_and_one_kernel_for_every_call(sas_run):
     with pytest.raises(ValueError, match="'navigation'.*span"):
         sas.form_image(echoes, grid, navigation=short)
     data = sas.compressed(echoes)
-    sas.form_image(echoes, grid, data=data)
-    other = sas.Grid.around(targets[2].position, 0.03, 0.01, 0.003)
-    _, fresh = jit_kernels(sas.form_image, echoes, other, data=data, chunk=7, sound_speed=1490.0,
+    first, _ = jit_kernels(sas.form_image, echoes, grid, data=data)
+    other = sas.Grid.around(targets[2].position, 0.03, 0.01, 0.003)      # tiles of 1 to 6 points
+    again, _ = jit_kernels(sas.form_image, echoes, other, data=data, chunk=7, sound_speed=1490.0,
                            navigation=track, beamwidth=0.2)
-    assert fresh == []
+    assert again and set(again) <= set(first)
     # chunking (each chunk its own float32 origin and its own pairs) changes the image only by the
     # float32 rounding of the geometry: a few 1e-3 rad of phase
     a = sas.form_image(echoes, other, data=data).image

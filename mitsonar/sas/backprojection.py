@@ -27,9 +27,9 @@ target's along-track -3 dB width is ``k_w lambda / (4 sin(theta_p / 2))``
 
 Memory: the pixels are processed in square tiles of at most ``chunk`` lanes; per tile only the
 pairs whose processed beam can reach it are looped over (a conservative test on the chunk's corners), in
-one symbolic loop (`drjit.while_loop`), every value that changes between chunks opaque, so one
-kernel serves every chunk and call. Geometry is in float32 relative to the chunk's centre
-(millimetre-exact at kilometres). The same code runs on the CUDA variants (a GPU).
+one symbolic loop (`mitsonar.signals.focusing.FocusKernel`, shared with the 3D imaging sonar's
+focused beamformer), every value that changes between tiles opaque, so one kernel serves every
+tile and call. The same code runs on the CUDA variants (a GPU).
 """
 from __future__ import annotations
 
@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from mitsonar.sas.config import WINDOW_FACTORS
+from mitsonar.signals.focusing import FocusKernel, compressed
 
 #: Pixels of one kernel launch: bounds the memory (a few dozen bytes per pixel) whatever the grid.
 CHUNK = 1 << 18
@@ -113,27 +114,6 @@ def row_geometry(echoes, navigation=None):
     return navigation.at(t) @ meta["mounts"], _velocities(navigation, t, t.shape)
 
 
-def compressed(echoes, upsample=8):
-    """complex64 (n_rows, n_elements, n_samples * upsample): matched-filtered element data at
-    ``upsample`` times the sample rate (spectrum zero-padded: exact band-limited interpolation)."""
-    from scipy import fft as sfft
-
-    from mitsonar.signals.processing import matched_filter
-
-    n = echoes.n_samples
-    m = n * int(upsample)
-    out = np.empty(echoes.signal.shape[:2] + (m,), np.complex64)
-    for r in range(echoes.signal.shape[0]):
-        y = matched_filter(echoes.signal[r], echoes.pulse, echoes.sample_rate)
-        spec = sfft.fft(y, axis=-1)
-        pad = np.zeros(y.shape[:-1] + (m,), np.complex128)
-        h = (n + 1) // 2
-        pad[..., :h] = spec[..., :h]
-        pad[..., m - (n - h):] = spec[..., h:]
-        out[r] = (sfft.ifft(pad, axis=-1) * upsample).astype(np.complex64)
-    return out
-
-
 def form_image(echoes, grid, *, navigation=None, sound_speed=None, beamwidth=None, window="uniform",
                upsample=8, chunk=CHUNK, data=None) -> SASImage:
     """Backproject strip-map `Echoes` (rendered along a trajectory) onto ``grid`` (module docstring).
@@ -174,7 +154,7 @@ def form_image(echoes, grid, *, navigation=None, sound_speed=None, beamwidth=Non
 
     out = np.zeros(grid.shape, np.complex64)
     t0 = time.perf_counter()
-    kernel = _Kernel(data, fs_up, echoes.carrier, c, smax, window)
+    kernel = FocusKernel(data, fs_up, echoes.carrier, c, smax, window)
     pairs_done = 0
     tau_max = n_up / fs_up
     n_x, n_y = grid.shape
@@ -220,82 +200,3 @@ def _pairs(p, tx, rx, axis, vel, smax, tau_max):
     keep = near <= smax / math.sqrt(1.0 - smax * smax) * rho + slack
     r, j = np.nonzero(keep)
     return r, j
-
-
-class _Kernel:
-    """The backprojection loop as one Dr.Jit kernel (module docstring)."""
-
-    def __init__(self, data, fs_up, carrier, c, smax, window):
-        import drjit as dr
-        import mitsuba as mi
-
-        from mitsonar.sim.variant import ensure_variant
-
-        ensure_variant()
-        self.dr, self.mi = dr, mi
-        flat = data.reshape(-1)
-        self.re = mi.Float(np.ascontiguousarray(flat.real, dtype=np.float32))
-        self.im = mi.Float(np.ascontiguousarray(flat.imag, dtype=np.float32))
-        self.n_up = int(data.shape[-1])
-        self.scalars = (fs_up, carrier / c, 1.0 / c, 1.0 / smax)
-        self.hann = window == "hann"
-
-    def __call__(self, p, tx, rx, vel, axis, pair_index):
-        dr, mi = self.dr, self.mi
-        Float, UInt32 = mi.Float, mi.UInt32
-        V3 = mi.Vector3f
-        f32 = lambda a: Float(np.ascontiguousarray(a, dtype=np.float32))  # noqa: E731
-        P = V3(f32(p[:, 0]), f32(p[:, 1]), f32(p[:, 2]))
-        T = [f32(tx[:, k]) for k in range(3)]
-        R = [f32(rx[:, k]) for k in range(3)]
-        Vv = [f32(vel[:, k]) for k in range(3)]
-        A = [f32(axis[:, k]) for k in range(3)]
-        base = UInt32(np.ascontiguousarray(pair_index * self.n_up, dtype=np.uint32))
-        fs, k_cyc, inv_c, inv_s = (dr.opaque(Float, v) for v in self.scalars)
-        n_pairs = dr.opaque(UInt32, len(tx))
-        n_up = dr.opaque(UInt32, self.n_up)
-        re_data, im_data, hann = self.re, self.im, self.hann
-
-        def body(i, acc_re, acc_im):
-            g = lambda arr: dr.gather(Float, arr, i)  # noqa: E731
-            t = V3(*(g(a) for a in T))
-            e0 = V3(*(g(a) for a in R))
-            v = V3(*(g(a) for a in Vv))
-            ax = V3(*(g(a) for a in A))
-            dt = P - t
-            rt = dr.norm(dt)
-            tau0 = (rt + dr.norm(P - e0)) * inv_c
-            de = P - (e0 + v * tau0)
-            re_ = dr.norm(de)
-            dist = rt + re_
-            tau = dist * inv_c
-            s = 0.5 * (dr.dot(dt, ax) / rt + dr.dot(de, ax) / re_)
-            u = dr.abs(s) * inv_s
-            k = tau * fs
-            k0 = dr.floor(k)
-            frac = k - k0
-            ki = UInt32(dr.maximum(k0, 0.0))
-            ok = (u < 1.0) & (k0 >= 0.0) & (ki + 1 < n_up)
-            idx = dr.gather(UInt32, base, i) + ki
-            a_re = dr.gather(Float, re_data, idx, ok)
-            b_re = dr.gather(Float, re_data, idx + 1, ok)
-            a_im = dr.gather(Float, im_data, idx, ok)
-            b_im = dr.gather(Float, im_data, idx + 1, ok)
-            y_re = dr.lerp(a_re, b_re, frac)
-            y_im = dr.lerp(a_im, b_im, frac)
-            cyc = dist * k_cyc
-            sn, cs = dr.sincos(2.0 * math.pi * (cyc - dr.round(cyc)))
-            w = 0.5 + 0.5 * dr.cos(math.pi * u) if hann else Float(1.0)
-            w = dr.select(ok, w, 0.0)
-            acc_re = dr.fma(w, y_re * cs - y_im * sn, acc_re)
-            acc_im = dr.fma(w, y_re * sn + y_im * cs, acc_im)
-            return i + 1, acc_re, acc_im
-
-        n = dr.width(P.x)
-        i = dr.zeros(UInt32, n)
-        acc_re, acc_im = dr.zeros(Float, n), dr.zeros(Float, n)
-        with dr.suspend_grad():
-            i, acc_re, acc_im = dr.while_loop((i, acc_re, acc_im), lambda i, a, b: i < n_pairs, body,
-                                              label="sas_backprojection")
-            dr.eval(acc_re, acc_im)
-        return (acc_re.numpy() + 1j * acc_im.numpy()).astype(np.complex64)
