@@ -3,7 +3,9 @@
 ``cw``/``lfm`` make a `Pulse`; `mitsonar.render_echoes` renders the complex baseband pressure at
 each receive element of a head (`Echoes`); `matched_filter`, `delay_and_sum`, `beamform`,
 `arrival_angle` and `sidescan_bathymetry` process it; `PointTarget` is an isotropic, deterministic
-point scatterer of a given target strength (calibration targets, closed-form checks). Which to use when, coherent or incoherent:
+point scatterer of a given target strength (calibration targets, closed-form checks);
+`Volumetric`, `beamform_3d` and `point_cloud` make a 3D imaging sonar's volume and point cloud from a
+planar array's echoes (`mitsonar.signals.volumetric`). Which to use when, coherent or incoherent:
 `mitsonar.signals.processing`. The pulses and the processing are numpy only; the renderer loads
 Mitsuba on first use.
 """
@@ -18,7 +20,8 @@ from mitsonar.signals.synthesis import synthesize
 from mitsonar.signals.targets import PointTarget
 
 _LAZY = {"Echoes": "echoes", "render_echoes": "echoes", "beamform": "products",
-         "sidescan_bathymetry": "products"}
+         "sidescan_bathymetry": "products", "beamform_3d": "volumetric", "point_cloud": "volumetric",
+         "Volumetric": "volumetric"}
 
 
 def __getattr__(name):
