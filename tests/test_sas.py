@@ -235,3 +235,28 @@ def test_dpca_micronavigation_recovers_the_sway_and_refocuses(mitsonar_mod):
                                        start_time=0.0, targets=[target])
     with pytest.raises(ValueError, match="micronavigation 'echoes'.*whole number"):
         sas.micronavigation(moved)
+
+
+def test_sas_image_as_geotiff_in_the_surveys_crs(sas_run, tmp_path):
+    """North-up, pixel centres where the grid's are, the peak's dB value at the target's cell, the
+    frame's CRS and origin."""
+    import rasterio
+
+    from mitsonar import sas
+    from mitsonar.geometry.geodesy import GeoFrame
+
+    _, _, targets, _, echoes = sas_run
+    grid = sas.Grid(XT + np.arange(-10, 11) * 0.01, targets[1].position[1] + np.arange(-5, 8) * 0.01, 0.0)
+    image = sas.form_image(echoes, grid)
+    frame = GeoFrame.make((43.0, 5.0), "EPSG:32631")
+    sas.write_sas_geotiff(tmp_path / "sas.tif", image, frame)
+    with rasterio.open(tmp_path / "sas.tif") as src:
+        band = src.read(1)
+        assert src.crs.to_epsg() == 32631 and band.shape == (13, 21)
+        i, j = np.unravel_index(int(np.argmax(np.abs(image.image))), image.image.shape)
+        row, col = src.index(grid.x[i] + frame.e0, grid.y[j] + frame.n0)
+        assert band[row, col] == pytest.approx(20 * np.log10(np.abs(image.image[i, j])), abs=1e-3)
+        assert band[row, col] == np.nanmax(band)
+        assert src.descriptions == ("intensity",)
+    with pytest.raises(ValueError, match="'image'"):
+        sas.write_sas_geotiff(tmp_path / "x.tif", sas.SASImage(image.image[:1], sas.Grid(grid.x[:1], grid.y), {}))

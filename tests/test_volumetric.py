@@ -113,3 +113,37 @@ def test_volumetric_refusals_and_presets():
     assert (scope.n_azimuth, scope.n_elevation, scope.fov_azimuth, scope.fov_elevation) == (128, 128, 50.0, 50.0)
     assert len(scope.azimuths()) == 128 and np.degrees(np.ptp(scope.azimuths())) == pytest.approx(50 * 127 / 128)
     assert scope.elements().shape == (48 * 48, 3)
+
+
+def test_point_cloud_as_las_and_as_pointcloud2(tmp_path):
+    """A cloud's LAS (in a GeoFrame's CRS) reads back its points, beam indices and ranges; its
+    PointCloud2 message decodes, field by field, to the same records."""
+    import laspy
+
+    from mitsonar.geometry.geodesy import GeoFrame
+    from mitsonar.signals.volumetric import POINT_DTYPE, point_cloud_message, write_point_cloud_las
+
+    rng = np.random.default_rng(0)
+    pts = np.zeros(50, POINT_DTYPE)
+    for k in ("x", "y", "z", "range"):
+        pts[k] = rng.uniform(-5, 5, 50)
+    pts["intensity"] = rng.uniform(1e-6, 1e-3, 50)
+    pts["elevation_index"], pts["azimuth_index"] = rng.integers(0, 128, 50), rng.integers(0, 128, 50)
+    frame = GeoFrame.make((43.0, 5.0, -2.0), "EPSG:32631")
+    assert write_point_cloud_las(tmp_path / "c.las", pts, frame) == 50
+    las = laspy.read(tmp_path / "c.las")
+    assert np.allclose(las.x, pts["x"] + frame.e0, atol=1e-3) and np.allclose(las.y, pts["y"] + frame.n0, atol=1e-3)
+    assert np.allclose(las.z, pts["z"] + frame.height, atol=1e-3)
+    assert np.array_equal(las.elevation_index, pts["elevation_index"])
+    assert np.array_equal(las.azimuth_index, pts["azimuth_index"]) and np.allclose(las.range, pts["range"])
+    assert las.header.parse_crs().to_epsg() == 32631
+    assert las.intensity[np.argmax(pts["intensity"])] == 65535 and las.intensity[np.argmin(pts["intensity"])] == 0
+    msg = point_cloud_message(pts, stamp_ns=1_500_000_000, frame="sonar")
+    assert msg["header"] == {"stamp": {"sec": 1, "nanosec": 500_000_000}, "frame_id": "sonar"}
+    assert msg["width"] * msg["point_step"] == msg["row_step"] == len(msg["data"])
+    raw = np.frombuffer(msg["data"], np.uint8).reshape(50, msg["point_step"])
+    kinds = {7: "<f4", 5: "<i4"}
+    for f in msg["fields"]:
+        got = raw[:, f["offset"]:f["offset"] + 4].copy().view(kinds[f["datatype"]]).ravel()
+        assert np.array_equal(got, pts[f["name"]]), f["name"]
+    assert [f["name"] for f in msg["fields"]][:4] == ["x", "y", "z", "intensity"]
