@@ -158,9 +158,10 @@ def _centres(fov_deg, n):
 
 #: 3D sonars by name, with their published figures. ``echoscope``: the Coda Octopus Echoscope, a
 #: field of view of 50 x 50 deg in 128 x 128 beams (16384; up to 12 pings a second: QPS, Qinsy
-#: driver notes "CodaOctopus Echoscope", quoting the maker) at 375 kHz, to 120 m. Its array and band
-#: are not published: 48 x 48 elements at half a wavelength (2.1 deg beams at broadside, which the
-#: 0.4 deg beam spacing oversamples) and a 10 % band are this preset's assumptions.
+#: driver notes "CodaOctopus Echoscope", quoting the maker), to 120 m. Its carrier (375 kHz, the
+#: maker's standard model, not checked against a data sheet here), its array (48 x 48 elements at
+#: half a wavelength: 2.1 deg beams at broadside, which the 0.4 deg beam spacing oversamples) and
+#: its 10 % band are this preset's assumptions.
 PRESETS = {
     "echoscope": Volumetric(rows=48, columns=48, frequency=375e3, bandwidth=37.5e3, n_azimuth=128,
                             n_elevation=128, fov_azimuth=50.0, fov_elevation=50.0, range_max=120.0, n_bins=1000),
