@@ -169,7 +169,9 @@ class StripMap:
         if beam_pattern not in ("sinc", "uniform"):
             raise ValueError(f"StripMap.sensor_xml 'beam_pattern': {beam_pattern!r} is not allowed (sinc or uniform)")
         bw_h = math.degrees(self.beamwidth) if beam_pattern == "sinc" else 2.0 * math.degrees(self.beamwidth)
-        items = {"kind": "sidescan", "side": side, "depression": float(depression), "range_max": self.range_max,
+        from mitsonar.geometry.kinds import SIDESCAN
+
+        items = {"kind": SIDESCAN.name, "side": side, "depression": float(depression), "range_max": self.range_max,
                  "n_bins": 200, "n_pings": int(n_pings), "beam_pattern": beam_pattern, "beamwidth_h": bw_h,
                  "beamwidth_v": float(beamwidth_v), "frequency": self.frequency, "bandwidth": self.bandwidth,
                  "ping_period": self.ping_period, "sound_speed": self.sound_speed, "absorption": 0.0,

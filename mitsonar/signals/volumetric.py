@@ -130,7 +130,9 @@ class Volumetric:
         """A ``<sensor type="sonar">`` (kind ``multibeam``) for `mitsonar.render_echoes`: a uniform
         transmit fan over the field of view (plus a tenth), the band, the range; ``to_world`` a
         4x4 beam frame (default identity)."""
-        items = {"kind": "multibeam", "range_min": float(self.range_min), "range_max": float(self.range_max),
+        from mitsonar.geometry.kinds import MULTIBEAM
+
+        items = {"kind": MULTIBEAM.name, "range_min": float(self.range_min), "range_max": float(self.range_max),
                  "n_bins": int(self.n_bins), "n_pings": 2, "bearing_start": -1.0, "bearing_step": 2.0,
                  "beam_pattern": "uniform", "beamwidth_h": 2.0, "beamwidth_v": min(179.0, 1.1 * self.fov_elevation),
                  "tx_pattern": "uniform", "tx_beamwidth_h": min(179.0, 1.1 * self.fov_azimuth),
