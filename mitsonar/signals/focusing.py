@@ -66,8 +66,8 @@ class FocusKernel:
         from mitsonar.plugins.jit_arrays import upload
 
         self.upload = upload
-        self.re = upload(mi.Float, flat.real, np.float32)
-        self.im = upload(mi.Float, flat.imag, np.float32)
+        # interleaved (re, im, re, im, ...): one packet gather of both parts per sample
+        self.data = upload(mi.Float, np.ascontiguousarray(flat.astype(np.complex64)).view(np.float32), np.float32)
         self.n_up = int(data.shape[-1])
         self.scalars = (fs_up, carrier / c, 1.0 / c, 1.0 / smax)
         self.hann = window == "hann"
@@ -90,7 +90,7 @@ class FocusKernel:
         fs, k_cyc, inv_c, inv_s = (dr.opaque(Float, v) for v in self.scalars)
         n_pairs = dr.opaque(UInt32, len(tx))
         n_up = dr.opaque(UInt32, self.n_up)
-        re_data, im_data, hann = self.re, self.im, self.hann
+        data, hann = self.data, self.hann
 
         def body(i, acc_re, acc_im):
             g = lambda arr: dr.gather(Float, arr, i)  # noqa: E731
@@ -113,12 +113,10 @@ class FocusKernel:
             ki = UInt32(dr.maximum(k0, 0.0))
             ok = (u < 1.0) & (k0 >= 0.0) & (ki + 1 < n_up)
             idx = dr.gather(UInt32, base, i) + ki
-            a_re = dr.gather(Float, re_data, idx, ok)
-            b_re = dr.gather(Float, re_data, idx + 1, ok)
-            a_im = dr.gather(Float, im_data, idx, ok)
-            b_im = dr.gather(Float, im_data, idx + 1, ok)
-            y_re = dr.lerp(a_re, b_re, frac)
-            y_im = dr.lerp(a_im, b_im, frac)
+            a = dr.gather(mi.Vector2f, data, idx, ok)
+            b = dr.gather(mi.Vector2f, data, idx + 1, ok)
+            y_re = dr.lerp(a.x, b.x, frac)
+            y_im = dr.lerp(a.y, b.y, frac)
             cyc = dist * k_cyc
             sn, cs = dr.sincos(2.0 * math.pi * (cyc - dr.round(cyc)))
             w = 0.5 + 0.5 * dr.cos(math.pi * u) if hann else Float(1.0)
