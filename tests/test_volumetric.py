@@ -147,3 +147,29 @@ def test_point_cloud_as_las_and_as_pointcloud2(tmp_path):
         got = raw[:, f["offset"]:f["offset"] + 4].copy().view(kinds[f["datatype"]]).ravel()
         assert np.array_equal(got, pts[f["name"]]), f["name"]
     assert [f["name"] for f in msg["fields"]][:4] == ["x", "y", "z", "intensity"]
+
+
+def test_point_clouds_go_into_an_mcap_bag_on_sonar_points(tmp_path):
+    """`McapBag.add_point_cloud`: /sonar/points holds the cloud, decoded by the ROS 2 decoder of
+    mcap-ros2-support, at the stamp asked for, with every field."""
+    pytest.importorskip("mcap_ros2")
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from mitsonar.export.ros.bag import McapBag
+    from mitsonar.signals.volumetric import POINT_DTYPE
+
+    pts = np.zeros(5, POINT_DTYPE)
+    pts["x"], pts["intensity"], pts["azimuth_index"] = np.arange(5), np.linspace(1, 2, 5), [3, 1, 4, 1, 5]
+    with McapBag(tmp_path / "cloud.mcap", start=2.0) as bag:
+        bag.add_point_cloud(pts, t=0.5)
+    assert bag.written() == {"/sonar/points": 1}
+    with open(tmp_path / "cloud.mcap", "rb") as fh:
+        got = [(c.topic, m.log_time, d) for _, c, m, d in
+               make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages()]
+    assert [(t, ns) for t, ns, _ in got] == [("/sonar/points", 2_500_000_000)]
+    msg = got[0][2]
+    assert msg.header.frame_id == "map" and msg.width == 5 and msg.point_step == POINT_DTYPE.itemsize
+    assert [f.name for f in msg.fields] == list(POINT_DTYPE.names)
+    back = np.frombuffer(bytes(msg.data), POINT_DTYPE)
+    assert np.array_equal(back, pts)
