@@ -194,22 +194,27 @@ def test_form_image_refusals_and_one_kernel_for_every_call(sas_run):
     assert np.abs(a - b).max() < 5e-3 * np.abs(a).max()
 
 
-def test_dpca_micronavigation_recovers_the_sway_and_refocuses(mitsonar_mod):
+@pytest.mark.parametrize("side", ["port", "starboard"])
+def test_dpca_micronavigation_recovers_the_sway_and_refocuses(mitsonar_mod, side):
     """0.18 m per ping (6 half receivers: 2 shared phase centres a ping), a field of weak point
     scatterers on the seabed and a unit target at 8 m, the track swaying lambda / 4 over the synthetic
     aperture: the straight navigation loses more than 3 dB; the DPCA estimate follows the true sway
     within lambda / 20 and brings the peak back within 1 dB of the true navigation's. Advances that
-    share no phase centre are refused."""
+    share no phase centre are refused. On either side (a starboard channel's beam frame x points
+    aft)."""
     from mitsonar import sas
     from mitsonar.signals import PointTarget
 
     cfg = strip_map(speed=3.6)
     assert cfg.overlap == 2
-    scene = mitsonar_mod.load_scene(scene_xml(cfg.sensor_xml(beam_pattern="uniform", n_pings=36, depression=30.0,
-                                                             beamwidth_v=80.0)))
+    sign = 1.0 if side == "port" else -1.0
+    scene = mitsonar_mod.load_scene(scene_xml(cfg.sensor_xml(side=side, beam_pattern="uniform", n_pings=36,
+                                                             depression=30.0, beamwidth_v=80.0)))
     rng = np.random.default_rng(1)
-    field = [PointTarget((x, y, 0.0), -20.0) for x, y in zip(rng.uniform(-1, 8, 200), rng.uniform(4, 14, 200))]
-    target = target_at(8.0)
+    field = [PointTarget((x, sign * y, 0.0), -20.0)
+             for x, y in zip(rng.uniform(-1, 8, 200), rng.uniform(4, 14, 200))]
+    t8 = target_at(8.0)
+    target = PointTarget((t8.position[0], sign * t8.position[1], 0.0), 0.0)
     L = cfg.synthetic_aperture(8.0)
     straight = cfg.track(1.9, start=(0.0, 0.0, H))
     swaying = cfg.track(1.9, start=(0.0, 0.0, H),

@@ -59,6 +59,8 @@ class Grid:
     @classmethod
     def around(cls, centre, half_along, half_across, pixel):
         """A grid of ``pixel`` m spacing over ``centre`` +- (half_along, half_across) m at its z."""
+        if not (isinstance(pixel, (int, float, np.integer, np.floating)) and math.isfinite(pixel) and pixel > 0):
+            raise ValueError(f"Grid.around 'pixel': {pixel!r} is not allowed (a spacing > 0 m)")
         cx, cy, cz = (float(v) for v in centre)
         na, nc = int(round(2 * half_along / pixel)) + 1, int(round(2 * half_across / pixel)) + 1
         return cls(cx + (np.arange(na) - (na - 1) / 2) * pixel, cy + (np.arange(nc) - (nc - 1) / 2) * pixel, cz)
@@ -128,8 +130,10 @@ def form_image(echoes, grid, *, navigation=None, sound_speed=None, beamwidth=Non
 
     _check("grid", type(grid).__name__, isinstance(grid, Grid), "a mitsonar.sas.Grid")
     _check("window", window, window in WINDOWS, " or ".join(WINDOWS))
-    c = float(echoes.sound_speed if sound_speed is None else sound_speed)
-    _check("sound_speed", sound_speed, math.isfinite(c) and c > 0, "a speed > 0 m/s")
+    c = echoes.sound_speed if sound_speed is None else sound_speed
+    _check("sound_speed", sound_speed, isinstance(c, (int, float, np.integer, np.floating)) and not isinstance(c, bool)
+           and math.isfinite(c) and c > 0, "a speed > 0 m/s")
+    c = float(c)
     e = np.asarray(echoes.elements, dtype=np.float64)
     if beamwidth is None:
         d = np.diff(np.sort(e[:, 0]))

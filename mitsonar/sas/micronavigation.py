@@ -49,9 +49,10 @@ def micronavigation(echoes, navigation=None, *, seabed_z=0.0, block=32, min_rang
     spacing = float(np.median(np.diff(e[order, 0])))
     adv = np.einsum("ri,ri->r", poses[1:, :3, 3] - poses[:-1, :3, 3], poses[:-1, :3, 0])
     steps = 2.0 * adv / spacing
-    k_adv = int(round(float(np.median(steps))))
+    k_signed = int(round(float(np.median(steps))))
+    k_adv = abs(k_signed)           # a starboard channel's beam frame x points aft: the advance is negative
     n_el = len(e)
-    if not 1 <= k_adv < n_el or np.max(np.abs(steps - k_adv)) > 0.15:
+    if not 1 <= k_adv < n_el or np.max(np.abs(steps - k_signed)) > 0.15:
         raise ValueError(f"micronavigation 'echoes': pings advancing {float(np.median(adv)):.4g} m with receivers "
                          f"{spacing:.4g} m apart are not allowed (a whole number k of half receivers per ping, "
                          f"1 <= k < {n_el}, so phase centres overlap)")
@@ -69,7 +70,8 @@ def micronavigation(echoes, navigation=None, *, seabed_z=0.0, block=32, min_rang
         g = np.sqrt(np.maximum(slant ** 2 - h * h, 0.0))
         rows_a, rows_b = [], []
         for j in range(n_el - k_adv):
-            a, b = order[j], order[j + k_adv]       # ping r+1's receiver a over ping r's receiver b
+            # ping r+1's receiver a over ping r's receiver b: x_b - x_a = 2 x advance
+            a, b = (order[j], order[j + k_adv]) if k_signed > 0 else (order[j + k_adv], order[j])
             cross = (y[r + 1, a] * np.conj(y[r, b]))[:nb * block].reshape(nb, block).sum(axis=1)
             # what the navigation predicts for a seabed point at each block's range, straight to port
             across = _across(poses[r])
