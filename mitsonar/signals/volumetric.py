@@ -16,7 +16,9 @@ range x azimuth x elevation, not a fan image that collapses elevation:
 * `point_cloud` keeps the strongest (or the first) return per beam above a threshold: x, y, z
   (world), intensity (float32), the beam's elevation and azimuth indices and its range; written
   as PLY (`write_point_cloud_ply`), LAS (`write_point_cloud_las`) and as a ROS 2
-  sensor_msgs/PointCloud2 message (`point_cloud_message`).
+  sensor_msgs/PointCloud2 message (`point_cloud_message`);
+* `render_volume` is the incoherent fast path: the echo paths scored into every beam by the
+  array's pattern, the speckle-averaged mean of the focused beams without element data.
 
 Beam widths (Van Trees, *Optimum Array Processing*, 2002, ch. 2-4, the uniform line and planar
 arrays): a uniform aperture of ``N`` elements at pitch ``d`` has the -3 dB width
@@ -351,3 +353,81 @@ def point_cloud_message(points, stamp_ns=0, frame="map") -> dict:
     return {"header": header(int(stamp_ns), frame), "height": 1, "width": len(pts), "fields": fields,
             "is_bigendian": False, "point_step": step, "row_step": step * len(pts), "data": pts.tobytes(),
             "is_dense": True}
+
+
+def array_factor(head, directions, look) -> np.ndarray:
+    """``|AF|^2`` (n, m): the narrowband receive pattern at the carrier of the head's uniform planar
+    array steered to ``look`` (m, 3) beam-frame unit vectors, at ``directions`` (n, 3):
+    ``D_C(k d (u_x - u0_x))^2 D_R(k d (u_y - u0_y))^2`` with the Dirichlet kernel
+    ``D_N(psi) = sin(N psi / 2) / (N sin(psi / 2))`` (Van Trees 2002, ch. 4, the uniform
+    rectangular array: separable in the direction cosines), 1 in the look direction."""
+    k = 2.0 * math.pi / head.wavelength * head.spacing
+    u = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    u0 = np.asarray(look, dtype=np.float64).reshape(-1, 3)
+
+    def dirichlet(n, psi):
+        half = 0.5 * psi
+        s = np.sin(half)
+        small = np.abs(s) < 1e-9
+        return np.where(small, np.cos(n * half) / np.where(small, np.cos(half), 1.0),
+                        np.sin(n * half) / (n * np.where(small, 1.0, s)))
+
+    dx = dirichlet(head.columns, k * (u[:, None, 0] - u0[None, :, 0]))
+    dy = dirichlet(head.rows, k * (u[:, None, 1] - u0[None, :, 1]))
+    return (dx * dy) ** 2
+
+
+def render_volume(scene, head, *, spp=4096, seed=0, pose=None, sensor=0, max_depth=None, chunk=4096) -> Volume:
+    """The incoherent fast path: the mean volume of ``head`` (a `Volumetric`) over ``scene``, its
+    ``intensity`` the echo energy per bin and beam (the units of `mitsonar.render_scan`), without
+    element data.
+
+    The echo paths are `mitsonar.render_echoes`'s (``sonar_tof`` from the scene's sensor, a
+    multibeam head whose transmit fan is the head's, `Volumetric.sensor_xml`), merged into
+    scatterers of energy ``E`` at ``x``; each scores ``E |AF_b(u)|^2`` into the bin of its range in
+    every beam ``b`` (`array_factor` of its direction ``u`` from the array), so the volume is the
+    expectation over speckle of the focused beams' energy (`beamform_3d`): each beam's energy
+    summed over range agrees with the coherent path's speckle-averaged one, which spreads it over
+    the bins by the pulse's autocorrelation. Cost: scatterers x beams (numpy, ``chunk`` scatterers
+    at a time); no pulse, no elements."""
+    from mitsonar.signals.echoes import _trace
+    from mitsonar.sim.render import SEED_ALLOWED, SEED_MAX, SPP_ALLOWED, SPP_MAX, _check_pose, _whole
+    from mitsonar.sim.scene import SceneError, sonar_of
+    from mitsonar.sim.variant import ensure_variant
+
+    ensure_variant()
+    where = "render_volume"
+    if not isinstance(head, Volumetric):
+        raise SceneError(f"{where} 'head': {type(head).__name__} is not allowed (a Volumetric)")
+    spp = _whole("spp", spp, 1, SPP_MAX, SPP_ALLOWED, where)
+    seed = _whole("seed", seed, 0, SEED_MAX, SEED_ALLOWED, where)
+    if pose is not None:
+        pose = _check_pose(pose)
+    sonar = sonar_of(scene, sensor)
+    if not sonar.sonar_kind.transmit_fan:
+        raise SceneError(f"{where} 'scene': its sensor is not allowed (a head with a transmit fan: "
+                         "Volumetric.sensor_xml)")
+    heads = sonar.head_pose(pose)
+    row_poses = (heads[:1] if heads.ndim == 3 else heads[None]).copy()
+    ranges = head.ranges()
+    width = (head.range_max - head.range_min) / head.n_bins
+    amp, pos, out, _ = _trace(scene, sonar, row_poses, spp, seed, max_depth, 0.5 * width, width, 0, omni=True)[0]
+    o = row_poses[0, :3, 3]
+    d = pos - o
+    dist = np.linalg.norm(d, axis=1)
+    local = (d / np.maximum(dist, 1e-12)[:, None]) @ row_poses[0, :3, :3]
+    r = 0.5 * (out + dist)
+    j = np.floor((r - head.range_min) / width).astype(np.int64)
+    ok = (j >= 0) & (j < head.n_bins)
+    energy = np.abs(amp[ok]) ** 2
+    local, j = local[ok], j[ok]
+    look = directions(head.azimuths(), head.elevations()).reshape(-1, 3)
+    n_beams = len(look)
+    acc = np.zeros(n_beams * head.n_bins)
+    for a in range(0, len(j), int(chunk)):
+        w = energy[a:a + chunk, None] * array_factor(head, local[a:a + chunk], look)        # (m, beams)
+        idx = np.arange(n_beams)[None, :] * head.n_bins + j[a:a + chunk, None]
+        acc += np.bincount(idx.ravel(), weights=w.ravel(), minlength=len(acc))
+    intensity = acc.reshape(head.n_elevation, head.n_azimuth, head.n_bins).astype(np.float32)
+    return Volume(intensity, head.azimuths(), head.elevations(), ranges, row_poses[0], float(sonar.sound_speed),
+                  {"source": "render_volume", "spp": spp, "seed": seed, "n_scatterers": int(ok.sum())})
