@@ -265,3 +265,17 @@ def test_sas_image_as_geotiff_in_the_surveys_crs(sas_run, tmp_path):
         assert src.descriptions == ("intensity",)
     with pytest.raises(ValueError, match="'image'"):
         sas.write_sas_geotiff(tmp_path / "x.tif", sas.SASImage(image.image[:1], sas.Grid(grid.x[:1], grid.y), {}))
+
+
+def test_psf_figure_is_written(sas_run, tmp_path):
+    from mitsonar import sas
+
+    _, _, targets, _, echoes = sas_run
+    image = sas.form_image(echoes, sas.Grid.around(targets[0].position, 0.08, 0.08, 0.004))
+    fig = sas.plot_psf(image, tmp_path / "psf.png", title="4 m")
+    assert (tmp_path / "psf.png").stat().st_size > 1000
+    legend = [t.get_text() for t in fig.axes[1].get_legend().get_texts()]
+    assert legend[0].startswith("along: ") and "PSLR" in legend[1]
+    with pytest.raises(ValueError, match="extension"):
+        sas.plot_psf(image, tmp_path / "psf.txt")
+    assert not (tmp_path / "psf.txt").exists()
