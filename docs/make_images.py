@@ -82,6 +82,12 @@ def main(only=()) -> None:
         save_small(_sas_psf(tmp / "h.png"), "sas_psf.png")
     if want("volumetric_widths.png"):
         save_small(_volumetric_widths(tmp / "i.png"), "volumetric_widths.png")
+    if want("sas_cylinder.png"):
+        sys.path.insert(0, str(ROOT / "examples"))
+        import sas_cylinder
+
+        sas_cylinder.main([str(tmp)])                                # about 20 s on 2 cores
+        save_small(tmp / "sas_cylinder.png", "sas_cylinder.png", 24)
 
 
 def _sas_psf(path):
