@@ -21,6 +21,7 @@ import numpy as np
 
 
 def main(argv=None):
+    """Run the example; returns the `SASImage`."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", nargs="?", default=".")
     ap.add_argument("--spp", type=int, default=1 << 16)
@@ -68,6 +69,7 @@ def main(argv=None):
     fig.savefig(os.path.join(args.out, "sas_cylinder.png"), dpi=100)
     print(f"render_echoes {t_render:.1f} s ({echoes.meta['n_scatterers']} scatterers, {echoes.signal.shape}), "
           f"image {t_image:.1f} s ({grid.shape[0]} x {grid.shape[1]} pixels)")
+    return image
 
 
 if __name__ == "__main__":
