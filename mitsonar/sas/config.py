@@ -163,7 +163,7 @@ class StripMap:
     def sensor_xml(self, *, side="port", depression=20.0, beamwidth_v=60.0, beam_pattern="sinc", n_pings=64,
                    source_level=200.0) -> str:
         """A ``<sensor type="sonar">`` of kind ``sidescan`` for this configuration: its transmit
-        beam ``sinc`` of aperture ``D`` along track (or ``uniform`` over ``lambda / D``, flat
+        beam ``sinc`` of aperture ``D`` along track (or ``uniform`` over twice ``lambda / D``, flat
         across the processed beam: for closed-form checks), ``beamwidth_v`` deg across track, its
         band, ping period and range."""
         if beam_pattern not in ("sinc", "uniform"):
