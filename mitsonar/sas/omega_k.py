@@ -101,7 +101,8 @@ def omega_k(echoes, grid, *, navigation=None, beamwidth=None, window="uniform", 
     rho_lo, rho_hi = float(rho.min()), float(rho.max())
     pad = 0.5 * np.max(np.abs(base)) + 8 * c / (2 * echoes.pulse.bandwidth)
     t_lo = 2 * max(rho_lo - pad, 0.0) / c
-    t_hi = 2 * (math.hypot(rho_hi, 0.5 * smax / math.sqrt(1 - smax * smax) * rho_hi + 0.5 * np.ptp(grid.x)) + pad) / c
+    tan_p = min(smax, 0.99) / math.sqrt(1.0 - min(smax, 0.99) ** 2)        # the migration at the beam's edge
+    t_hi = 2 * (math.hypot(rho_hi, tan_p * rho_hi + 0.5 * np.ptp(grid.x)) + pad) / c
     k_lo, k_hi = int(math.floor(t_lo * fs)), min(echoes.n_samples, int(math.ceil(t_hi * fs)) + 1)
     t = np.arange(k_lo, k_hi) / fs
     rows, els = np.divmod(pick, len(e))
