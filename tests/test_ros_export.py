@@ -61,7 +61,7 @@ def test_multibeam_and_mechanical_round_trip(tmp_path):
     by_topic = {}
     for topic, schema, log_time, decoded in msgs:
         by_topic.setdefault(topic, []).append((schema, log_time, decoded))
-    assert set(by_topic) == set(TOPICS) - {"/tf_static", "/fix"}    # no trajectory, no side-scan, no origin
+    assert set(by_topic) == set(TOPICS) - {"/tf_static", "/fix", "/sonar/points"}    # no trajectory, side-scan, origin, 3D cloud
     assert {t: len(v) for t, v in by_topic.items()} == counts
     for topic, items in by_topic.items():
         assert {s for s, _, _ in items} == {TOPICS[topic]}

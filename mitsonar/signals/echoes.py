@@ -55,6 +55,7 @@ import mitsonar.geometry.kinds as kinds
 from mitsonar.signals.arrays import check_elements, interferometer, line_array
 from mitsonar.signals.pulses import Pulse
 from mitsonar.signals.synthesis import synthesize
+from mitsonar.signals.targets import check_targets, target_scatterers
 
 DEFAULT_SPP = 1024
 #: ``elements`` by name, built at the pulse's carrier and the head's sound speed (`mitsonar.signals.arrays`):
@@ -164,7 +165,7 @@ def _phase(cells, seed):
 
 def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_SPP, seed=0, speckle_seed=None,
                   pose=None, trajectory=None, start_time=None, sensor=0, max_depth=None,
-                  scatterer_spacing=None, element_pattern=None, velocities=None) -> Echoes:
+                  scatterer_spacing=None, element_pattern=None, velocities=None, targets=None) -> Echoes:
     """Render the element data of one scan of ``scene`` for a transmitted ``pulse`` (module docstring).
 
     A row is one transmission: one per ping for a mechanical or side-scan head, one per frame for a
@@ -179,7 +180,12 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
     (a mechanical or side-scan head's transducer used as its own receiver: its echoes then carry the
     two-way pattern of `mitsonar.render_scan`, the setting in which the two agree on average);
     ``velocities`` {shape id: (vx, vy, vz)} m/s in the world, the shapes that move (their echoes'
-    Doppler shift; module docstring), each finite and slower than a tenth of the sound speed.
+    Doppler shift; module docstring), each finite and slower than a tenth of the sound speed;
+    ``targets`` a `mitsonar.signals.PointTarget` or a list of them: isotropic, deterministic point
+    scatterers of a given target strength summed coherently with the scene's echoes
+    (`mitsonar.signals.targets`). With a ``trajectory``, ``meta`` holds ``start_time`` and
+    ``mounts`` (n_rows, 4, 4), each row's beam frame in the vehicle frame, and ``velocities``
+    (n_rows, 3) m/s, the platform's, so a processor can place the rows along another trajectory (`mitsonar.sas.form_image`'s ``navigation``).
     Refused in one line before any rendering: non-finite or overlapping elements, a sample rate
     below the pulse's bandwidth, a pulse longer than the two-way window ``2 range_max / c``, a
     carrier outside the head's band (`head_band`).
@@ -193,6 +199,7 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
     where = "render_echoes"
     try:
         _check_pulse(pulse)
+        target_pos, target_ts = check_targets(targets, where)
         e = None if isinstance(elements, str) and elements in PRESETS else _elements(elements, where)
     except ValueError as exc:
         raise SceneError(str(exc)) from None
@@ -258,10 +265,17 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
                         omni=element_pattern is None, moving=None if moving is None else moving.any(axis=1))
     scale = 10.0 ** (float(sonar.electronics_model.source_level) / 20.0)
     signal = np.zeros((n_rows, len(e), n_samples), dtype=np.complex64)
+    gain = _beam_gain(sonar.transmit if sonar.sonar_kind.transmit_fan else sonar.beam)
     for r in range(n_rows):
         amp, pos, out, shape = scatterers[r]
         R, o = row_poses[r, :3, :3], row_poses[r, :3, 3]
         w = None if moving is None else moving[shape]
+        if len(target_pos):
+            ta, tp, to = target_scatterers(target_pos, target_ts, row_poses[r], gain, float(sonar.absorption),
+                                           two_way=element_pattern == "beam")
+            amp, pos, out = np.concatenate([amp, ta]), np.concatenate([pos, tp]), np.concatenate([out, to])
+            if w is not None:
+                w = np.concatenate([w, np.zeros((len(ta), 3))])
         signal[r] = synthesize(amp * scale, pos, out, e @ R.T + o, o, pulse, fs, n_samples, c,
                                velocity=velocity[r], scatterer_velocity=w).astype(np.complex64)
     meta = {"spp": spp, "seed": seed, "speckle_seed": speckle_seed, "scatterer_spacing": float(h),
@@ -270,10 +284,26 @@ def render_echoes(scene, pulse, *, elements=None, sample_rate=None, spp=DEFAULT_
             "bearing_start": float(sonar.bearing_start), "bearing_step": float(sonar.bearing_step)}
     if sonar.sonar_kind.sided:
         meta.update(side=sonar.side, depression=float(sonar.depression))
+    if len(target_pos):
+        meta["n_targets"] = len(target_pos)
+    if trajectory is not None:
+        vehicle = trajectory.at(start_time + times)
+        meta.update(start_time=float(start_time), mounts=np.linalg.inv(vehicle) @ row_poses, velocities=velocity)
     return Echoes(signal=signal, elements=e, sample_rate=fs, carrier=pulse.carrier, pulse=pulse, times=times,
                   poses=row_poses, sound_speed=c, kind=sonar.kind, range_min=float(sonar.range_min),
                   range_max=float(sonar.range_max), bearings=np.radians(sonar.bearings_deg()),
                   n_bins=int(sonar.n_bins), meta=meta)
+
+
+def _beam_gain(beam):
+    """numpy (n, 3) beam-frame unit directions -> (n,) one-way gain of ``beam`` (a plugin beam)."""
+    def gain(d):
+        import mitsuba as mi
+
+        d = np.asarray(d, dtype=np.float64)
+        return np.asarray(beam.eval_dir(mi.Vector3f(d[:, 0], d[:, 1], d[:, 2])).numpy(), dtype=np.float64)
+
+    return gain
 
 
 def _shape_tables(scene):

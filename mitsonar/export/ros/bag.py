@@ -12,6 +12,8 @@ Topics (see docs/howto/ros2_bags.rst):
                                                               for side-scan: a line has no fan)
 ``/sonar/waterfall`` sensor_msgs/Image (mono8)                one per scan, rows x bins
 ``/sonar/detections`` sensor_msgs/PointCloud2                 one per scan, frame ``map``
+``/sonar/points``   sensor_msgs/PointCloud2                   a 3D sonar's point clouds
+                                                              (`McapBag.add_point_cloud`), frame ``map``
 ``/tf``             tf2_msgs/TFMessage                        one per ping: ``map -> sonar``, or
                                                               ``map -> base_link`` with a trajectory
 ``/tf_static``      tf2_msgs/TFMessage                        the fixed mounts (``base_link ->
@@ -41,7 +43,7 @@ from mitsonar.scan.meta import ScanMeta
 from mitsonar.scan.model import as_scans
 
 TOPICS = {"/sonar/image": M.PROJECTED, "/sonar/fan": M.IMAGE, "/sonar/waterfall": M.IMAGE,
-          "/sonar/detections": M.CLOUD, "/tf": M.TF, "/tf_static": M.TF, "/odom": M.ODOMETRY, "/fix": M.NAVSATFIX}
+          "/sonar/detections": M.CLOUD, "/sonar/points": M.CLOUD, "/tf": M.TF, "/tf_static": M.TF, "/odom": M.ODOMETRY, "/fix": M.NAVSATFIX}
 
 #: The QoS ``ros2 bag`` records for a latched static-transform topic (rosbag2's
 #: ``offered_qos_profiles`` channel metadata; rmw enums: history 1 keep-last, reliability 1
@@ -218,6 +220,16 @@ class McapBag:
         last = M.stamp_ns(self.start + base + groups[-1][0])
         pts, levels = M.detections(scan, self.threshold)
         self._write("/sonar/detections", M.point_cloud(pts, levels, last), last)
+
+    def add_point_cloud(self, points, t=0.0) -> None:
+        """Write a 3D sonar's point cloud (`mitsonar.signals.volumetric.point_cloud`: world x, y, z,
+        intensity, beam indices, range) on ``/sonar/points`` at ``start + t`` s, frame ``map``."""
+        from mitsonar.signals.volumetric import point_cloud_message
+
+        if not (isinstance(t, (int, float)) and math.isfinite(t) and t >= 0):
+            raise ExportError(f"add_point_cloud t: {t!r} is not allowed (seconds, finite and 0 or more)")
+        ns = M.stamp_ns(self.start + t)
+        self._write("/sonar/points", point_cloud_message(points, ns, M.WORLD_FRAME), ns)
 
     def close(self) -> dict:
         """Finish the file and rename it into place; returns the message count per topic written.
