@@ -55,6 +55,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mitsonar._checks import first_line
 from mitsonar.scenes.terrain import MAX_VERTICES, height_field_faces
 
 RESAMPLING = ("bilinear", "nearest", "cubic", "average")
@@ -176,7 +177,7 @@ def read_grid(path, *, bounds=None, resolution=None, resampling="bilinear", crs=
     try:
         src = rasterio.open(path)
     except rasterio.errors.RasterioError as exc:
-        raise GridError(f"{path}: not a raster GDAL reads ({str(exc).splitlines()[0]})") from None
+        raise GridError(f"{path}: not a raster GDAL reads ({first_line(exc)})") from None
     with src:
         if src.crs is None:
             raise GridError(f"{path}: has no CRS; give the file its projected CRS first "
@@ -366,7 +367,7 @@ def sediment_classes(path, grid: Grid, mapping: dict) -> np.ndarray:
     try:
         src = rasterio.open(path)
     except rasterio.errors.RasterioError as exc:
-        raise GridError(f"--sediment {path}: not a raster GDAL reads ({str(exc).splitlines()[0]})") from None
+        raise GridError(f"--sediment {path}: not a raster GDAL reads ({first_line(exc)})") from None
     with src:
         if src.crs is None:
             raise GridError(f"--sediment {path}: has no CRS; give the file one first (gdal_edit.py -a_srs EPSG:NNNN)")

@@ -22,6 +22,8 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
+from mitsonar._checks import first_line
+
 FORMATS = (".stl", ".obj", ".dae", ".gltf", ".glb", ".ply")
 #: Y up -> Z up (a +90 deg turn about x) and X up -> Z up (-90 deg about y).
 Y_UP = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
@@ -78,7 +80,7 @@ def load_mesh(path, scale=1.0):
     try:
         mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh and its readers raise many kinds
-        raise MeshError(f"{path}: not a readable {ext[1:].upper()} mesh ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+        raise MeshError(f"{path}: not a readable {ext[1:].upper()} mesh ({first_line(exc)})") from None
     vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), np.float64)
     faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), np.int64)
     if len(faces) == 0:

@@ -53,6 +53,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mitsonar._checks import first_line
+
 DEFAULT_MATERIAL = "rock"
 #: World children that are settings, not things: nothing to convert, nothing to say.
 SETTINGS = ("physics", "gravity", "magnetic_field", "atmosphere", "scene", "gui", "wind", "spherical_coordinates",
@@ -132,7 +134,7 @@ def read_materials(path):
             try:
                 data = yaml.safe_load(f)
             except yaml.YAMLError as exc:
-                raise SdfError(f"--materials {path}: not readable YAML ({str(exc).splitlines()[0]})") from None
+                raise SdfError(f"--materials {path}: not readable YAML ({first_line(exc)})") from None
         if isinstance(data, dict):
             pairs = [(str(k), str(v)) for k, v in data.items()]
         elif isinstance(data, list) and all(isinstance(d, dict) and {"pattern", "material"} <= set(d) for d in data):
@@ -379,7 +381,7 @@ class _World:
             with rasterio.open(file) as src:
                 img = src.read(1)
         except rasterio.errors.RasterioError as exc:
-            raise SdfError(f"{file}: not an image or DEM GDAL reads ({str(exc).splitlines()[0]})") from None
+            raise SdfError(f"{file}: not an image or DEM GDAL reads ({first_line(exc)})") from None
         if np.issubdtype(img.dtype, np.integer):
             z = pz + img.astype(np.float64) / np.iinfo(img.dtype).max * sz
         else:
