@@ -178,15 +178,9 @@ class StripMap:
                  "source_level": float(source_level)}
         if beam_pattern == "sinc":
             items.update(aperture_h=self.element_length)
-        out = []
-        for k, v in items.items():
-            if isinstance(v, str):
-                out.append(f'<string name="{k}" value="{v}"/>')
-            elif isinstance(v, int):
-                out.append(f'<integer name="{k}" value="{v}"/>')
-            else:
-                out.append(f'<float name="{k}" value="{float(v):.17g}"/>')
-        return '<sensor type="sonar">' + "".join(out) + "</sensor>"
+        from mitsonar.sim.sensor_xml import sensor_xml
+
+        return sensor_xml(items)
 
     def track(self, duration, *, start=(0.0, 0.0, 0.0), sway=None, step=None):
         """A `mitsonar.Trajectory` at ``speed`` along world +x from ``start`` for ``duration`` s,

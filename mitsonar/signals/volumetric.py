@@ -141,18 +141,9 @@ class Volumetric:
                  "tx_beamwidth_v": min(179.0, 1.1 * self.fov_elevation),
                  "frequency": float(self.frequency), "bandwidth": float(self.bandwidth),
                  "sound_speed": float(self.sound_speed), "absorption": 0.0, "source_level": float(source_level)}
-        out = []
-        if to_world is not None:
-            m = " ".join(f"{v:.17g}" for v in np.asarray(to_world, dtype=np.float64).ravel())
-            out.append(f'<transform name="to_world"><matrix value="{m}"/></transform>')
-        for k, v in items.items():
-            if isinstance(v, str):
-                out.append(f'<string name="{k}" value="{v}"/>')
-            elif isinstance(v, int):
-                out.append(f'<integer name="{k}" value="{v}"/>')
-            else:
-                out.append(f'<float name="{k}" value="{v:.17g}"/>')
-        return '<sensor type="sonar">' + "".join(out) + "</sensor>"
+        from mitsonar.sim.sensor_xml import sensor_xml
+
+        return sensor_xml(items, None if to_world is None else np.asarray(to_world, dtype=np.float64).ravel())
 
 
 def _centres(fov_deg, n):
