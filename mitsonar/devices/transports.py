@@ -365,33 +365,39 @@ class ServedHead:
 
     def serve(self, seconds: float | None = None, out=None, label: str = "virtual head") -> int:
         """Run in the foreground: print ``LABEL on PORT``, serve until ``seconds``, Ctrl-C (SIGINT)
-        or SIGTERM, then close the port and return 0.
-
-        From the main thread the two signals are caught for the time of serving (the handlers
-        before are put back): a head started in the background by a shell, which starts it with
-        SIGINT ignored (and Python then installs no KeyboardInterrupt), or stopped by a service
-        manager's SIGTERM, still closes its port and ends cleanly."""
-        import signal
-
-        out = sys.stdout if out is None else out
-        stop = threading.Event()
-        previous = {}
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                previous[sig] = signal.signal(sig, lambda *_: stop.set())
-        try:
-            with self:
-                print(f"{label} on {self.port}", file=out, flush=True)
-                end = None if seconds is None else time.monotonic() + seconds
-                try:
-                    while not stop.is_set() and (end is None or time.monotonic() < end):
-                        stop.wait(0.05 if end is None else max(0.0, min(0.05, end - time.monotonic())))
-                except KeyboardInterrupt:  # serving from another thread: Python's own handler
-                    pass
-        finally:
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
+        or SIGTERM, then close the port and return 0 (`serve_in_foreground`)."""
+        serve_in_foreground(self, seconds, lambda: f"{label} on {self.port}", out)
         return 0
+
+
+def serve_in_foreground(head, seconds: float | None, banner, out=None) -> None:
+    """Serve ``head`` (a context manager that opens its ports on entry and closes them on exit):
+    print ``banner()`` (called once the ports are open: a port 0 has its number then), then wait until ``seconds`` have passed, Ctrl-C (SIGINT) or SIGTERM.
+
+    From the main thread the two signals are caught for the time of serving (the handlers
+    before are put back): a head started in the background by a shell, which starts it with
+    SIGINT ignored (and Python then installs no KeyboardInterrupt), or stopped by a service
+    manager's SIGTERM, still closes its port and ends cleanly."""
+    import signal
+
+    out = sys.stdout if out is None else out
+    stop = threading.Event()
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, lambda *_: stop.set())
+    try:
+        with head:
+            print(banner(), file=out, flush=True)
+            end = None if seconds is None else time.monotonic() + seconds
+            try:
+                while not stop.is_set() and (end is None or time.monotonic() < end):
+                    stop.wait(0.05 if end is None else max(0.0, min(0.05, end - time.monotonic())))
+            except KeyboardInterrupt:  # serving from another thread: Python's own handler
+                pass
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 class _PtyTransport:

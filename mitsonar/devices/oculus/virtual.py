@@ -547,24 +547,17 @@ class VirtualOculus:
 
     def serve(self, seconds: float | None = None, out=None, label: str = "virtual Oculus") -> int:
         """Run in the foreground: print ``LABEL on tcp://HOST:PORT (status on udp://...)``, serve
-        until ``seconds``, Ctrl-C or SIGTERM."""
-        import signal
+        until ``seconds``, Ctrl-C or SIGTERM (`mitsonar.devices.transports.serve_in_foreground`),
+        then print what was served."""
+        from mitsonar.devices.transports import serve_in_foreground
+
         out = sys.stdout if out is None else out
-        stop = threading.Event()
-        previous = {}
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                previous[sig] = signal.signal(sig, lambda *_: stop.set())
-        try:
-            with self:
-                status = f" (status on udp://{self.host}:{self.udp_port})" if self.udp_port is not None else ""
-                print(f"{label} {self.model.name} on {self.port}{status}", file=out, flush=True)
-                end = None if seconds is None else time.monotonic() + seconds
-                while not stop.is_set() and (end is None or time.monotonic() < end):
-                    stop.wait(0.05 if end is None else max(0.0, min(0.05, end - time.monotonic())))
-        finally:
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
+
+        def banner():
+            status = f" (status on udp://{self.host}:{self.udp_port})" if self.udp_port is not None else ""
+            return f"{label} {self.model.name} on {self.port}{status}"
+
+        serve_in_foreground(self, seconds, banner, out)
         print(f"{label}: {self.stats['pings']} pings to {self.stats['clients']} client(s), "
               f"{self.stats['refused']} message(s) refused", file=out, flush=True)
         return 0
