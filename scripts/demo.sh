@@ -3,6 +3,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-.venv/bin/mitsonar demo -o out "$@"
+# --force: the demo renders its own pictures again on every run (out/ is its folder)
+.venv/bin/mitsonar demo -o out --force "$@"
 # Side-scan: a lawnmower survey over the wreck, its waterfall and georeferenced mosaic (out/wreck_sidescan_*).
 .venv/bin/python -m mitsonar.scenes.sidescan_demo -o out -q
