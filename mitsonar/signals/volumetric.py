@@ -5,9 +5,11 @@ planar array of ``rows x columns`` elements at ``pitch`` in its beam frame's x (
 the columns) and y (elevation, across the rows), facing +z. One transmission gives a volume of
 range x azimuth x elevation, not a fan image that collapses elevation:
 
-* `render_echoes` renders the element data: the head is a ``multibeam`` sensor whose transmit fan
-  covers the field of view (`Volumetric.sensor_xml`) and whose elements are the planar array
-  (`Volumetric.elements`); one row, the frame's transmission;
+* `render_echoes` renders the element data: the head is a ``volumetric`` sensor (its rows the
+  beam grid, `mitsonar.geometry.kinds.Volumetric`) whose transmit fan covers the field of view
+  (`Volumetric.sensor_xml`) and whose elements are the planar array (`Volumetric.elements`); one
+  row, the frame's transmission; `mitsonar.render_scan` of that sensor renders each beam's echo
+  energy straight from its receive beam (`mitsonar.scan.Scan.volume` gives the volume);
 * `beamform_3d` focuses it: for every voxel ``q = r u(az, el)`` (``u = (cos el sin az, sin el,
   cos el cos az)``, the beam frame's azimuth ``atan2(x, z)`` and elevation ``asin(y)``) the exact
   two-way delay of every element (`mitsonar.signals.focusing`: focused near-field delay-and-sum,
@@ -129,14 +131,20 @@ class Volumetric:
         return lfm(self.frequency - 0.5 * self.bandwidth, self.frequency + 0.5 * self.bandwidth, T)
 
     def sensor_xml(self, to_world=None, source_level=210.0) -> str:
-        """A ``<sensor type="sonar">`` (kind ``multibeam``) for `mitsonar.render_echoes`: a uniform
-        transmit fan over the field of view (plus a tenth), the band, the range; ``to_world`` a
-        4x4 beam frame (default identity)."""
-        from mitsonar.geometry.kinds import MULTIBEAM
+        """A ``<sensor type="sonar">`` of kind ``volumetric`` (`mitsonar.geometry.kinds.Volumetric`)
+        for `mitsonar.render_echoes`, `render_volume` and `mitsonar.render_scan`: its rows the
+        ``n_elevation x n_azimuth`` beams at `elevations` x `azimuths`, each a gaussian receive beam
+        of the array's broadside widths (`beamwidths`), a uniform transmit fan over the field of
+        view (plus a tenth), the band, the range; ``to_world`` a 4x4 beam frame (default identity)."""
+        from mitsonar.geometry.kinds import VOLUMETRIC
 
-        items = {"kind": MULTIBEAM.name, "range_min": float(self.range_min), "range_max": float(self.range_max),
-                 "n_bins": int(self.n_bins), "n_pings": 2, "bearing_start": -1.0, "bearing_step": 2.0,
-                 "beam_pattern": "uniform", "beamwidth_h": 2.0, "beamwidth_v": min(179.0, 1.1 * self.fov_elevation),
+        az, el = np.degrees(self.azimuths()), np.degrees(self.elevations())
+        w_az, w_el = (min(179.0, math.degrees(w)) for w in self.beamwidths())
+        items = {"kind": VOLUMETRIC.name, "range_min": float(self.range_min), "range_max": float(self.range_max),
+                 "n_bins": int(self.n_bins), "n_azimuth": int(self.n_azimuth), "n_elevation": int(self.n_elevation),
+                 "bearing_start": float(az[0]), "bearing_step": float(self.fov_azimuth / self.n_azimuth),
+                 "elevation_start": float(el[0]), "elevation_step": float(self.fov_elevation / self.n_elevation),
+                 "beam_pattern": "gaussian", "beamwidth_h": float(w_az), "beamwidth_v": float(w_el),
                  "tx_pattern": "uniform", "tx_beamwidth_h": min(179.0, 1.1 * self.fov_azimuth),
                  "tx_beamwidth_v": min(179.0, 1.1 * self.fov_elevation),
                  "frequency": float(self.frequency), "bandwidth": float(self.bandwidth),
@@ -374,13 +382,14 @@ def render_volume(scene, head, *, spp=4096, seed=0, pose=None, sensor=0, max_dep
     element data.
 
     The echo paths are `mitsonar.render_echoes`'s (``sonar_tof`` from the scene's sensor, a
-    multibeam head whose transmit fan is the head's, `Volumetric.sensor_xml`), merged into
+    ``volumetric`` head whose transmit fan is the head's, `Volumetric.sensor_xml`), merged into
     scatterers of energy ``E`` at ``x``; each scores ``E |AF_b(u)|^2`` into the bin of its range in
     every beam ``b`` (`array_factor` of its direction ``u`` from the array), so the volume is the
     expectation over speckle of the focused beams' energy (`beamform_3d`): each beam's energy
     summed over range agrees with the coherent path's speckle-averaged one, which spreads it over
     the bins by the pulse's autocorrelation. Cost: scatterers x beams (numpy, ``chunk`` scatterers
     at a time); no pulse, no elements."""
+    from mitsonar.geometry import kinds
     from mitsonar.signals.echoes import _trace
     from mitsonar.sim.render import SEED_ALLOWED, SEED_MAX, SPP_ALLOWED, SPP_MAX, _check_pose, _whole
     from mitsonar.sim.scene import SceneError, sonar_of
@@ -395,9 +404,12 @@ def render_volume(scene, head, *, spp=4096, seed=0, pose=None, sensor=0, max_dep
     if pose is not None:
         pose = _check_pose(pose)
     sonar = sonar_of(scene, sensor)
-    if not sonar.sonar_kind.transmit_fan:
-        raise SceneError(f"{where} 'scene': its sensor is not allowed (a head with a transmit fan: "
-                         "Volumetric.sensor_xml)")
+    if not sonar.sonar_kind.grid:
+        raise SceneError(f"{where} 'scene': its sensor of kind {sonar.kind!r} is not allowed (kind "
+                         f"{kinds.which('grid')}: Volumetric.sensor_xml)")
+    if (sonar.n_elevation, sonar.n_azimuth) != (head.n_elevation, head.n_azimuth):
+        raise SceneError(f"{where} 'head': its {head.n_elevation} x {head.n_azimuth} beams are not allowed (the "
+                         f"scene's sensor's grid, n_elevation x n_azimuth = {sonar.n_elevation} x {sonar.n_azimuth})")
     heads = sonar.head_pose(pose)
     row_poses = (heads[:1] if heads.ndim == 3 else heads[None]).copy()
     ranges = head.ranges()

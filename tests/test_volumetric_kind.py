@@ -1,0 +1,95 @@
+"""The ``volumetric`` sensor kind (`mitsonar.geometry.kinds.Volumetric`): rows are beams over an
+elevation x azimuth grid, each turned in both angles; a sonar_tof render lights the row of a
+target's (azimuth, elevation); ``Scan.volume`` reshapes a frame to (n_elevation, n_azimuth, n_bins)
+and the scan files keep the kind and the grid."""
+import math
+
+import numpy as np
+import pytest
+
+from conftest import acoustic_xml, scene_xml, sonar_xml, sphere_xml
+
+GRID = dict(kind="volumetric", n_azimuth=9, n_elevation=7, bearing_start=-16.0, bearing_step=4.0,
+            elevation_start=-12.0, elevation_step=4.0, beamwidth_h=3.0, beamwidth_v=3.0, range_max=5.0, n_bins=100)
+
+
+def test_rows_are_the_grid_turned_in_azimuth_and_elevation(mitsonar_mod):
+    """Row i n_azimuth + j's boresight is (cos el sin az, sin el, cos el cos az) at azimuth j and
+    elevation i of the grid: `volumetric.directions`."""
+    from mitsonar.signals.volumetric import directions
+    from mitsonar.sim.scene import sonar_of
+
+    scene = mitsonar_mod.load_scene(scene_xml(sonar_xml(**GRID)))
+    s = sonar_of(scene, 0)
+    assert s.n_pings == 63 and s.sonar_kind.name == "volumetric"
+    az = np.radians(-16.0 + 4.0 * np.arange(9))
+    el = np.radians(-12.0 + 4.0 * np.arange(7))
+    z = s.ping_poses()[:, :3, 2].reshape(7, 9, 3)
+    assert np.allclose(z, directions(az, el), atol=1e-12)
+    assert np.allclose(np.radians(s.bearings_deg()).reshape(7, 9), az[None, :])
+
+
+@pytest.mark.parametrize("az_deg, el_deg", [(8.0, -4.0), (-12.0, 8.0)])
+def test_a_sphere_lights_its_rows_cell_and_the_scan_round_trips(mitsonar_mod, tmp_path, az_deg, el_deg):
+    """A sphere 3 m away at a grid cell's (azimuth, elevation): the brightest row of a sonar_tof
+    render is that cell's (i, j) in `Scan.volume`, at the sphere's range; the EXR file keeps the
+    kind and the grid."""
+    from mitsonar.signals.volumetric import directions
+
+    az, el = math.radians(az_deg), math.radians(el_deg)
+    centre = 3.0 * directions([az], [el])[0, 0]
+    scene = mitsonar_mod.load_scene(scene_xml(sonar_xml(**GRID), sphere_xml(centre, 0.1, acoustic_xml(1.0))))
+    scan = mitsonar_mod.render_scan(scene, spp=256, seed=1)
+    assert scan.kind == "volumetric" and scan.row_name == "beams"
+    vol = scan.volume()
+    assert vol.shape == (7, 9, 100)
+    energy = vol.sum(axis=2)
+    i, j = np.unravel_index(int(np.argmax(energy)), energy.shape)
+    assert (i, j) == (round((el_deg + 12.0) / 4.0), round((az_deg + 16.0) / 4.0))
+    assert abs(scan.ranges[int(np.argmax(vol[i, j]))] - 2.9) <= 0.1
+    path = tmp_path / "vol.exr"
+    scan.save(path)
+    back = type(scan).load(path)
+    assert back.kind == "volumetric" and (back.meta.n_elevation, back.meta.n_azimuth) == (7, 9)
+    assert np.array_equal(back.volume(), vol)
+
+
+def test_volumetric_refusals(mitsonar_mod):
+    from mitsonar.sim.scene import SceneError
+
+    def load(**kw):
+        return mitsonar_mod.load_scene(scene_xml(sonar_xml(**{**GRID, **kw})))
+
+    with pytest.raises(Exception, match="'n_pings': not used with kind 'volumetric'"):
+        load(n_pings=10)
+    with pytest.raises(Exception, match="'n_azimuth': only used with kind 'volumetric'"):
+        mitsonar_mod.load_scene(scene_xml(sonar_xml(kind="multibeam", n_azimuth=4)))
+    with pytest.raises(Exception, match="'elevation_step'.*inside \\(-90, 90\\)"):
+        load(elevation_step=20.0)
+    with pytest.raises(Exception, match="share_beams': only for a sensor of kind 'multibeam'"):
+        scene = mitsonar_mod.load_scene(scene_xml(sonar_xml(**GRID),
+                                                  integrator='<integrator type="sonar_tof">'
+                                                             '<boolean name="share_beams" value="true"/></integrator>'))
+        mitsonar_mod.render_scan(scene, spp=1)
+    scan = mitsonar_mod.render_scan(mitsonar_mod.load_scene(scene_xml(sonar_xml(kind="multibeam", n_pings=4))), spp=1)
+    with pytest.raises(ValueError, match="Scan.volume: a 'multibeam' scan has no volume"):
+        scan.volume()
+    assert SceneError
+
+
+def test_the_3d_heads_sensor_is_of_kind_volumetric_and_render_volume_asks_for_one(mitsonar_mod):
+    """`Volumetric.sensor_xml` is a ``volumetric`` head whose rows look along the config's beam
+    grid; `render_volume` refuses a multibeam scene and a grid other than its head's."""
+    from mitsonar.signals.volumetric import Volumetric, directions, render_volume
+    from mitsonar.sim.scene import SceneError, sonar_of
+
+    cfg = Volumetric(rows=8, columns=8, frequency=200e3, bandwidth=20e3, n_azimuth=5, n_elevation=3,
+                     fov_azimuth=30.0, fov_elevation=18.0, range_max=3.0, n_bins=50)
+    s = sonar_of(mitsonar_mod.load_scene(scene_xml(cfg.sensor_xml())), 0)
+    assert s.kind == "volumetric" and (s.n_elevation, s.n_azimuth, s.n_pings) == (3, 5, 15)
+    assert np.allclose(s.ping_poses()[:, :3, 2].reshape(3, 5, 3), directions(cfg.azimuths(), cfg.elevations()))
+    with pytest.raises(SceneError, match="render_volume 'scene': its sensor of kind 'multibeam' is not allowed"):
+        render_volume(mitsonar_mod.load_scene(scene_xml(sonar_xml(kind="multibeam", n_pings=4))), cfg, spp=1)
+    other = Volumetric(**{**cfg.__dict__, "n_azimuth": 7})
+    with pytest.raises(SceneError, match="render_volume 'head': its 3 x 7 beams are not allowed"):
+        render_volume(mitsonar_mod.load_scene(scene_xml(cfg.sensor_xml())), other, spp=1)
