@@ -93,3 +93,29 @@ def test_the_3d_heads_sensor_is_of_kind_volumetric_and_render_volume_asks_for_on
     other = Volumetric(**{**cfg.__dict__, "n_azimuth": 7})
     with pytest.raises(SceneError, match="render_volume 'head': its 3 x 7 beams are not allowed"):
         render_volume(mitsonar_mod.load_scene(scene_xml(cfg.sensor_xml())), other, spp=1)
+
+
+@pytest.mark.parametrize("name, f, fov, rmax, res, res_h, res_v, sep_h", [
+    ("sonar3d15_navigation", 1.2e6, 90.0, 15.0, 0.004, 0.6, 2.4, 0.35),
+    ("sonar3d15_inspection", 2.4e6, 40.0, 4.0, 0.0015, 0.4, 1.1, 0.16)])
+def test_water_linked_sonar_3d15_presets_hold_the_published_figures(mitsonar_mod, name, f, fov, rmax, res, res_h,
+                                                                     res_v, sep_h):
+    """The Sonar 3D-15's modes as published (carrier, 256 x 64 beams over fov x 40 deg, 0.2 m to the
+    maximum range): its compressed pulse resolves the published range resolution, its beams' -3 dB
+    widths are the published angular resolutions within 2 %, the beam separation rounds to the
+    published one, and its sensor loads as a volumetric head of 64 x 256 rows."""
+    import dataclasses
+
+    from mitsonar.signals.volumetric import PRESETS
+    from mitsonar.sim.scene import sonar_of
+
+    p = PRESETS[name]
+    assert (p.frequency, p.n_azimuth, p.n_elevation, p.fov_azimuth, p.fov_elevation) == (f, 256, 64, fov, 40.0)
+    assert (p.range_min, p.range_max) == (0.2, rmax)
+    assert p.pulse().range_resolution(p.sound_speed) == pytest.approx(res)
+    w_h, w_v = (math.degrees(w) for w in p.beamwidths())
+    assert w_h == pytest.approx(res_h, rel=0.02) and w_v == pytest.approx(res_v, rel=0.02)
+    assert round(fov / 256, 2) == sep_h and round(40.0 / 64, 1) == 0.6
+    s = sonar_of(mitsonar_mod.load_scene(scene_xml(dataclasses.replace(p, n_bins=8).sensor_xml())), 0)
+    assert s.kind == "volumetric" and (s.n_elevation, s.n_azimuth) == (64, 256)
+    assert s.beam.frequency == f
