@@ -119,3 +119,77 @@ def test_water_linked_sonar_3d15_presets_hold_the_published_figures(mitsonar_mod
     s = sonar_of(mitsonar_mod.load_scene(scene_xml(dataclasses.replace(p, n_bins=8).sensor_xml())), 0)
     assert s.kind == "volumetric" and (s.n_elevation, s.n_azimuth) == (64, 256)
     assert s.beam.frequency == f
+
+
+@pytest.fixture(scope="module")
+def sphere_frame(mitsonar_mod):
+    """A rendered volumetric frame of a sphere 3 m away at azimuth 8, elevation -4 deg, the head
+    at (1, 2, -3) turned 30 deg about z."""
+    from mitsonar.signals.volumetric import directions
+
+    m = np.eye(4)
+    c, s = math.cos(math.radians(30)), math.sin(math.radians(30))
+    m[:3, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]
+    m[:3, 3] = (1.0, 2.0, -3.0)
+    centre = m[:3, :3] @ (3.0 * directions([math.radians(8.0)], [math.radians(-4.0)])[0, 0]) + m[:3, 3]
+    scene = mitsonar_mod.load_scene(scene_xml(sonar_xml(m, **GRID), sphere_xml(centre, 0.1, acoustic_xml(1.0))))
+    return mitsonar_mod.render_scan(scene, spp=256, seed=1), m, centre
+
+
+def test_a_volumetric_frame_is_a_pointcloud2_in_the_live_mcap(mitsonar_mod, sphere_frame, tmp_path):
+    """`mitsonar live --mcap`: a volumetric frame adds one sensor_msgs/PointCloud2 on /sonar/points
+    (ros2msg schema, CDR), read back with the mcap reader and mcap-ros2-support's decoder: the
+    frame's point cloud (`point_cloud` of `scan_volume`) record for record, its strongest point at
+    the sphere's near side in ``map``; the CDR is the one mcap-ros2-support's encoder writes."""
+    pytest.importorskip("foxglove")
+    mcap_ros2 = pytest.importorskip("mcap_ros2")
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from mitsonar.devices.outputs import open_outputs
+    from mitsonar.devices.outputs.messages import POINTS_THRESHOLD_DB, frame_points, pointcloud2_cdr
+    from mitsonar.export.ros import msgdefs
+    from mitsonar.signals.volumetric import POINT_DTYPE, point_cloud, scan_volume
+
+    scan, m, centre = sphere_frame
+    vol = scan_volume(scan)
+    assert np.allclose(vol.pose, m, atol=1e-9) and vol.intensity.shape == (7, 9, 100)
+    pts = point_cloud(vol, POINTS_THRESHOLD_DB)
+    top = pts[np.argmax(pts["intensity"])]
+    assert (top["elevation_index"], top["azimuth_index"]) == (2, 6)
+    near = centre - 0.1 * (centre - m[:3, 3]) / np.linalg.norm(centre - m[:3, 3])
+    assert np.linalg.norm(np.array([top["x"], top["y"], top["z"]]) - near) < 0.1
+    outs = open_outputs(mcap=tmp_path / "vol.mcap")
+    outs.publish(7_250_000_000, np.eye(4), m, scan)
+    outs.close()
+    with open(tmp_path / "vol.mcap", "rb") as fh:
+        got = [(c.topic, s.name, s.encoding, c.message_encoding, msg.log_time, d) for s, c, msg, d in
+               make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=["/sonar/points"])]
+    assert [g[:5] for g in got] == [("/sonar/points", "sensor_msgs/msg/PointCloud2", "ros2msg", "cdr",
+                                     7_250_000_000)]
+    msg = got[0][5]
+    assert msg.header.frame_id == "map" and (msg.header.stamp.sec, msg.header.stamp.nanosec) == (7, 250_000_000)
+    assert [f.name for f in msg.fields] == list(POINT_DTYPE.names) and msg.width == len(pts) > 0
+    assert np.array_equal(np.frombuffer(bytes(msg.data), POINT_DTYPE), pts)
+    cloud = frame_points(7_250_000_000, scan)
+    encode = mcap_ros2._dynamic.serialize_dynamic("sensor_msgs/msg/PointCloud2",
+                                                  msgdefs.definition("sensor_msgs/msg/PointCloud2"))
+    assert pointcloud2_cdr(cloud) == bytes(encode["sensor_msgs/msg/PointCloud2"](cloud))
+    multibeam = mitsonar_mod.render_scan(mitsonar_mod.load_scene(scene_xml(sonar_xml(kind="multibeam", n_pings=4))),
+                                         spp=1)
+    assert frame_points(0, multibeam) is None                   # other kinds have no cloud
+
+
+def test_the_dds_pointcloud2_serialises_as_ros_2_does(sphere_frame):
+    """`mitsonar live --dds`: the rt/sonar/points struct of a frame serialises to the same CDR as the
+    MCAP's /sonar/points (what rclcpp reads)."""
+    pytest.importorskip("cyclonedds")
+    from mitsonar.devices.outputs.dds import POINT_TOPICS, point_cloud2, ros_types
+    from mitsonar.devices.outputs.messages import frame_points, pointcloud2_cdr
+
+    T = ros_types()
+    cloud = frame_points(1_000_000_001, sphere_frame[0])
+    header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=1, nanosec=1), frame_id="map")
+    msg = point_cloud2(T, cloud, header)
+    assert type(msg) is T[POINT_TOPICS["rt/sonar/points"]]
+    assert msg.serialize() == pointcloud2_cdr(cloud)

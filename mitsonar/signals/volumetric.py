@@ -273,6 +273,21 @@ def _one_row(echoes, row):
     return dataclasses.replace(echoes, signal=echoes.signal[row:row + 1])
 
 
+def scan_volume(scan) -> Volume:
+    """The `Volume` of a frame of a ``volumetric`` `mitsonar.scan.Scan` (`mitsonar.render_scan` of
+    a `Volumetric.sensor_xml` head, a live frame): ``intensity`` its rows' echo energy per bin
+    (``Scan.volume``), the grid's azimuths (``Scan.bearings``) and elevations (``meta``), ``pose``
+    the head frame in the world (row 0's pose turned back by its own rotation)."""
+    intensity = scan.volume()
+    n_el, n_az = intensity.shape[:2]
+    az = np.asarray(scan.bearings[:n_az], dtype=np.float64)
+    el = np.radians(scan.meta.elevation_start + np.arange(n_el) * scan.meta.elevation_step)
+    turn = scan.sonar_kind.rotations(np.degrees(az[:1]), None, None, np.degrees(el[:1]))[0]
+    pose = np.asarray(scan.poses[0], dtype=np.float64) @ turn.T     # a pure rotation: its inverse
+    return Volume(intensity, az, el, np.asarray(scan.ranges, np.float64), pose, float(scan.sound_speed),
+                  {"source": "scan", "kind": scan.kind})
+
+
 #: Fields of a point of `point_cloud` (PLY vertex properties, in this order).
 POINT_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4"),
                         ("elevation_index", "<i4"), ("azimuth_index", "<i4"), ("range", "<f4")])
