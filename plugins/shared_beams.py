@@ -62,8 +62,8 @@ def window(sensor):
     """(W radians, m beams either side of the nearest) of ``sensor``'s receive beams, or a
     ValueError naming ``share_beams`` when sharing cannot apply to this head."""
     beam = sensor.beam
-    if not sensor.sonar_kind.transmit_fan:
-        raise ValueError(f"sonar_tof 'share_beams': only for a sensor of kind {kinds.which('transmit_fan')} "
+    if not sensor.sonar_kind.share_beams:   # receive beams in one fan (a volumetric grid's are not)
+        raise ValueError(f"sonar_tof 'share_beams': only for a sensor of kind {kinds.which('share_beams')} "
                          f"(kind is {sensor.kind!r})")
     if beam.kind == "sinc":
         raise ValueError("sonar_tof 'share_beams': a 'sinc' receive beam has side lobes over the whole half-space; "

@@ -56,6 +56,11 @@ class SonarSensor(mi.Sensor):
     elevation). ``side`` picks the channels: with ``both`` the rows are the ``n_pings`` port pings then
     the ``n_pings`` starboard pings (2 n_pings rows, `channels` says which is which), with one side
     row k is ping k. ``preset`` sets the defaults of a commercial head (`sidescan_heads.PRESETS`).
+    ``kind='volumetric'`` (3D imaging sonar): a multibeam head whose receive beams form an
+    ``n_elevation x n_azimuth`` grid (`mitsonar.geometry.kinds.Volumetric`): row ``k = i n_azimuth + j``
+    is turned by bearing ``bearing_start + j bearing_step`` about +y, then by elevation
+    ``elevation_start + i elevation_step`` towards +y; ``Scan.volume`` reshapes a frame to
+    ``(n_elevation, n_azimuth, n_bins)``. ``sonar_tof`` traces its rows per row (no shared beams).
 
     Ping schedule: a mechanical head fires ping ``k`` at ``k * ping_period`` seconds from the scan
     start; a multibeam head fires all rows of a frame at once, and frames ``ping_period`` apart;
@@ -70,18 +75,29 @@ class SonarSensor(mi.Sensor):
     Parameter        Default      Meaning
     ================ ============ ===============================================================
     kind             mechanical   ``mechanical`` (mechanically scanned imaging sonar, MSIS),
-                                  ``multibeam`` (rows = receive beams across one transmit fan) or
-                                  ``sidescan`` (rows = port then starboard pings)
+                                  ``multibeam`` (rows = receive beams across one transmit fan),
+                                  ``sidescan`` (rows = port then starboard pings) or
+                                  ``volumetric`` (rows = beams over an elevation x azimuth grid)
     to_world         identity     beam frame in the world (rigid)
     range_min        0            m, start of the range window (0 to 100 km)
     range_max        12           m, end of the range window (echoes beyond are dropped);
                                   at most 100 km (`mitsonar._limits`: the bounds and why)
     n_bins           500          range bins between ``range_min`` and ``range_max`` (1 to
                                   65536)
-    bearing_start    0            deg, bearing of the first ping
-    bearing_step     1.8          deg between pings (Micron: 200 steps per turn)
+    bearing_start    0            deg, bearing of the first ping (volumetric: the first
+                                  column's azimuth)
+    bearing_step     1.8          deg between pings (Micron: 200 steps per turn; volumetric:
+                                  between the grid's columns)
     n_pings          200          pings in a scan (sidescan: per channel), 1 to 100000; a
-                                  multibeam's receive beams, 1 to 4096
+                                  multibeam's receive beams, 1 to 4096 (volumetric: refused,
+                                  the rows are ``n_elevation x n_azimuth``)
+    n_azimuth        64           volumetric: the grid's columns (azimuths), 1 to 4096
+    n_elevation      32           volumetric: the grid's rows (elevations), 1 to 4096; row
+                                  ``k = i n_azimuth + j`` is elevation i, azimuth j, and the
+                                  rows number at most 100000
+    elevation_start  -15.5        volumetric: deg, the first grid row's elevation (towards +y);
+                                  every row's inside (-90, 90) deg
+    elevation_step   1            volumetric: deg between the grid's rows
     side             both         sidescan: ``port``, ``starboard`` or ``both`` channels
     depression       15           sidescan: deg, each channel's boresight below the horizontal
     preset           (none)       sidescan: a commercial head's defaults (``klein3000_100k``,
@@ -123,6 +139,8 @@ class SonarSensor(mi.Sensor):
     tx_beamwidth_h   swath        deg, full -3 dB width of the fan across the swath; default the
                                   swath, ``|bearing_step| (n_pings - 1) + beamwidth_h``
     tx_beamwidth_v   beamwidth_v  deg, full -3 dB width of the fan along the scan axis
+                                  (volumetric: the elevation span, ``|elevation_step|
+                                  (n_elevation - 1) + beamwidth_v``)
     aperture_h/_v    derived      m (``sinc``); from the beam widths when absent
     electronics      see below    the fields of ``mitsonar.receiver.electronics.Electronics``
                                   (``source_level`` in dB re 1 uPa at 1 m,
@@ -148,12 +166,19 @@ class SonarSensor(mi.Sensor):
         if self.sonar_kind is None:
             raise not_allowed("sonar", "kind", self.kind, "one of " + ", ".join(kinds.names()))
         preset = self._sidescan(props)
-        self.pings = count(props, "n_pings", 200, "sonar")
+        self._grid(props)
+        self.pings = count(props, "n_pings", 200, "sonar") if self.n_azimuth is None else \
+            self.n_azimuth * self.n_elevation
         # Checked before the film is made: without one, Mitsuba makes its default RGB film and
         # prints a warning above our error.
         for name in ("n_bins", "n_pings"):
             check("sonar", name, self.n_bins if name == "n_bins" else self.pings)
-        if self.sonar_kind.transmit_fan:   # the rows are receive beams formed across one fan
+        if self.n_azimuth is None:
+            self.n_azimuth, self.n_elevation = self.pings, 1   # one fan (or one ping per row)
+        elif self.sonar_kind.transmit_fan:   # a grid's beams: each axis within a multibeam's count
+            for name in ("n_azimuth", "n_elevation"):
+                check("sonar", name, getattr(self, name), "n_beams", suffix=f" for kind {self.kind!r}")
+        if self.sonar_kind.transmit_fan and not self.sonar_kind.grid:   # receive beams formed across one fan
             check("sonar", "n_pings", self.pings, "n_beams", suffix=f" for kind {self.kind!r}")
         # The rows of a scan: a side-scan head with both channels has two per ping.
         self.n_pings = self.pings * (2 if self.side == "both" else 1)
@@ -250,6 +275,33 @@ class SonarSensor(mi.Sensor):
             raise not_allowed("sonar", "depression", self.depression, "an angle from 0 to 90 deg below the horizontal")
         return preset
 
+    def _grid(self, props):
+        """Read the elevation x azimuth grid of a kind whose rows are one (``n_azimuth``,
+        ``n_elevation``, ``elevation_start``, ``elevation_step``; ``n_pings`` is then refused: the
+        rows are the grid's), refused with any other kind. ``n_azimuth`` None without a grid."""
+        names = ("n_azimuth", "n_elevation", "elevation_start", "elevation_step")
+        self.elevation_start, self.elevation_step = 0.0, 0.0
+        if not self.sonar_kind.grid:
+            given = [n for n in names if n in props]
+            if given:
+                raise ValueError(f"sonar '{given[0]}': only used with kind {kinds.which('grid')} "
+                                 f"(kind is {self.kind!r})")
+            self.n_azimuth = self.n_elevation = None
+            return
+        if "n_pings" in props:
+            raise ValueError(f"sonar 'n_pings': not used with kind {self.kind!r} (its rows are the beam grid: set "
+                             "'n_azimuth' and 'n_elevation')")
+        self.n_azimuth = count(props, "n_azimuth", 64, "sonar")
+        self.n_elevation = count(props, "n_elevation", 32, "sonar")
+        self.elevation_start = number(props, "elevation_start", -15.5, "sonar")
+        self.elevation_step = number(props, "elevation_step", 1.0, "sonar")
+        last = self.elevation_start + (self.n_elevation - 1) * self.elevation_step
+        for name, value in (("elevation_start", self.elevation_start), ("elevation_step", last)):
+            if not (math.isfinite(value) and abs(value) < 90.0):
+                raise not_allowed("sonar", name, getattr(self, name), "elevations inside (-90, 90) deg: "
+                                  "elevation_start + (n_elevation - 1) elevation_step = "
+                                  f"{last:g} deg for the last row")
+
     def _check(self):
         def bad(name, value, allowed):
             raise not_allowed("sonar", name, value, allowed)
@@ -260,7 +312,7 @@ class SonarSensor(mi.Sensor):
         for name in ("bearing_start", "bearing_step"):
             if not (math.isfinite(getattr(self, name)) and abs(getattr(self, name)) <= 360.0):
                 bad(name, getattr(self, name), "an angle in [-360, 360] deg")
-        swath = abs(self.bearing_step) * (self.n_pings - 1)
+        swath = abs(self.bearing_step) * (self.n_azimuth - 1)
         top = self.sonar_kind.max_swath
         if top is not None and swath > top:
             bad("bearing_step", self.bearing_step, f"for kind {self.kind!r} the receive beams span |bearing_step| "
@@ -286,9 +338,9 @@ class SonarSensor(mi.Sensor):
         kind = tx.get("tx_pattern", "gaussian")
         if kind not in TX_PATTERNS:
             raise not_allowed("sonar", "tx_pattern", kind, f"one of {', '.join(TX_PATTERNS)}")
-        swath = abs(self.bearing_step) * (self.n_pings - 1) + bw_h
+        swath = abs(self.bearing_step) * (self.n_azimuth - 1) + bw_h
         h = float(tx.get("tx_beamwidth_h", min(swath, 360.0)))
-        v = float(tx.get("tx_beamwidth_v", bw_v))
+        v = float(tx.get("tx_beamwidth_v", min(abs(self.elevation_step) * (self.n_elevation - 1) + bw_v, 180.0)))
         for name, value, hi in (("tx_beamwidth_h", h, 360.0), ("tx_beamwidth_v", v, 180.0)):
             if not (math.isfinite(value) and 0.0 < value <= hi):
                 raise not_allowed("sonar", name, value, f"a width in (0, {hi:g}] deg")
@@ -303,7 +355,15 @@ class SonarSensor(mi.Sensor):
         return self.range_min + (np.arange(self.n_bins) + 0.5) * self.bin_width
 
     def bearings_deg(self) -> np.ndarray:
+        if self.sonar_kind.grid:   # row i n_azimuth + j: azimuth j
+            return self.sonar_kind.bearings_deg(self.bearing_start, self.bearing_step, self.n_pings, self.n_azimuth)
         return self.sonar_kind.bearings_deg(self.bearing_start, self.bearing_step, self.n_pings)
+
+    def elevations_deg(self) -> np.ndarray:
+        """(n_pings,) deg: each row's elevation (zeros but for a grid's rows: row i n_azimuth + j at
+        ``elevation_start + i elevation_step``)."""
+        return self.sonar_kind.elevations_deg(self.elevation_start, self.elevation_step, self.n_pings,
+                                              self.n_azimuth)
 
     def channels(self) -> np.ndarray:
         """(n_pings,) channel of each row of a side-scan head (0 port, 1 starboard): the port pings,
@@ -338,8 +398,11 @@ class SonarSensor(mi.Sensor):
 
     def ping_poses(self, pose=None) -> np.ndarray:
         """(n_pings, 4, 4) world transform of each ping's beam frame (float64): the head pose (or
-        row k's head pose) @ the rotation to row k's bearing (side-scan: to row k's channel)."""
-        return self.head_pose(pose) @ self.sonar_kind.rotations(self.bearings_deg(), self.channels(), self.depression)
+        row k's head pose) @ the rotation to row k's bearing (side-scan: to row k's channel;
+        volumetric: to row k's bearing, then its elevation)."""
+        el = self.elevations_deg() if self.sonar_kind.grid else None
+        return self.head_pose(pose) @ self.sonar_kind.rotations(self.bearings_deg(), self.channels(), self.depression,
+                                                                *(() if el is None else (el,)))
 
     def connection(self, pose=None):
         """What weights an echo's connection back to the transducer, for `SonarIntegrator.sample`.

@@ -249,10 +249,11 @@ def test_heads_are_chosen_only_through_the_registry():
 
 
 # ----------------------------------------------------------------------------- sonar kinds
-KIND_NAMES = ("mechanical", "multibeam", "sidescan")
+KIND_NAMES = ("mechanical", "multibeam", "sidescan", "volumetric")
 KINDS_MODULE = os.path.join(ROOT, "mitsonar", "geometry", "kinds.py")
-# mitsonar.sidescan is the old flat path of the products.sidescan module: a module name, no kind.
-NOT_KINDS = {os.path.join(ROOT, "mitsonar", "_aliases.py")}
+# mitsonar.sidescan is the old flat path of the products.sidescan module, and mitsonar.signals'
+# lazy names point into its volumetric module: module names, no kind.
+NOT_KINDS = {os.path.join(ROOT, "mitsonar", "_aliases.py"), os.path.join(ROOT, "mitsonar", "signals", "__init__.py")}
 
 
 def _docstrings(tree):

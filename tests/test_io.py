@@ -359,7 +359,7 @@ def _scaled_pose(poses):
 def test_file_with_bad_content_names_file_and_field(saved, tmp_path, ext):
     stored = "channel" if ext == ".exr" else "array"
     cases = [({"sound_speed": "fast"}, None, "header 'sound_speed': 'fast' is not a number"),
-             ({"kind": "fanbeam"}, None, "header 'kind': 'fanbeam' is not allowed (one of mechanical, multibeam, sidescan)"),
+             ({"kind": "fanbeam"}, None, "header 'kind': 'fanbeam' is not allowed (one of mechanical, multibeam, sidescan, volumetric)"),
              ({"range_min": 50}, None, "header 'range_max': 12.0 is not allowed (a range > range_min = 50 m)"),
              ({"n_bins": -3}, None, "header 'n_bins': -3 is not allowed (a count >= 1)"),
              ({"n_pings": 7.0}, None, "header 'n_pings': 7.0 is not allowed (a count >= 1)"),

@@ -58,6 +58,23 @@ def bearing_rotation(bearing) -> np.ndarray:
     return m
 
 
+def elevation_rotation(elevation) -> np.ndarray:
+    """4x4 rotation(s) of the beam frame for elevation(s) in radians: about the frame's +x axis,
+    turning +z (the boresight) towards +y, so ``bearing_rotation(az) @ elevation_rotation(el)``
+    points +z along ``(cos el sin az, sin el, cos el cos az)`` (a volumetric head's beam grid,
+    `mitsonar.signals.volumetric.directions`)."""
+    e = np.asarray(elevation, dtype=np.float64)
+    c, s = np.cos(e), np.sin(e)
+    m = np.zeros(e.shape + (4, 4))
+    m[..., 0, 0] = 1.0
+    m[..., 1, 1] = c
+    m[..., 1, 2] = s
+    m[..., 2, 1] = -s
+    m[..., 2, 2] = c
+    m[..., 3, 3] = 1.0
+    return m
+
+
 def _not_rigid(m: np.ndarray) -> np.ndarray:
     """Which of the finite (..., 4, 4) matrices are not rigid: rotation + translation, with the
     tolerances of ``np.allclose`` (a float32 rotation passes, a scale of 1.001 does not)."""

@@ -12,7 +12,7 @@ mitsonar or of its plugins compares a kind string or keeps a table keyed by kind
 A new kind is a subclass of `SonarKind` with its ``name`` and the attributes and methods that
 differ, made known with `register`: the sensor plugin, `Scan`, the files and the CLI then accept
 it. `names` lists the registered kinds in registration order (``mechanical``, ``multibeam``,
-``sidescan``: the tuple the old ``mitsonar.geometry.frames.KINDS`` held, which moved here and is
+``sidescan``, ``volumetric``; the first three are the tuple the old ``mitsonar.geometry.frames.KINDS`` held, which moved here and is
 still importable as ``mitsonar.geometry.kinds.KINDS``, a tuple of today's names).
 
 The echo sounders of `mitsonar.scenes.echosounders` are not kinds of their own: they differ from
@@ -30,9 +30,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from mitsonar.geometry.frames import STARBOARD, bearing_rotation, sidescan_rotation
+from mitsonar.geometry.frames import STARBOARD, bearing_rotation, elevation_rotation, sidescan_rotation
 
-__all__ = ["SonarKind", "Mechanical", "Multibeam", "Sidescan", "MECHANICAL", "MULTIBEAM", "SIDESCAN",
+__all__ = ["SonarKind", "Mechanical", "Multibeam", "Sidescan", "Volumetric", "MECHANICAL", "MULTIBEAM", "SIDESCAN",
+           "VOLUMETRIC",
            "DEFAULT", "register", "unregister", "lookup", "get", "kind_of", "names", "which", "by_name"]
 
 
@@ -62,6 +63,11 @@ class SonarKind:
     mosaic             a survey makes waterfalls and a mosaic of it
     head_frame_mount   ``to_world`` is the head frame itself (x forward, y port, z up), so the
                        dataset jobs mount it with the identity
+    share_beams        the receive beams lie in one fan about +y, so ``sonar_tof`` may score a
+                       frame's shared transmit paths into them (`plugins/shared_beams.py`)
+    grid               rows are beams over an elevation x azimuth grid (the sensor reads
+                       ``n_azimuth``, ``n_elevation``, ``elevation_start``, ``elevation_step``;
+                       ``Scan.volume`` reshapes the rows)
     ================== ==============================================================================
     """
 
@@ -81,6 +87,8 @@ class SonarKind:
     world_picture = False
     mosaic = False
     head_frame_mount = False
+    share_beams = False
+    grid = False
 
     # ------------------------------------------------------------------ rows
     def bearings_deg(self, start: float, step: float, n_rows: int) -> np.ndarray:
@@ -100,10 +108,16 @@ class SonarKind:
         """Seconds from one scan's start to the next one's: ``pings`` pings."""
         return ping_period * pings
 
-    def rotations(self, bearings_deg, channels, depression) -> np.ndarray:
+    def elevations_deg(self, start: float, step: float, n_rows: int, n_azimuth: int) -> np.ndarray:
+        """(n_rows,) deg: each row's elevation; zeros, the rows lie in the plane of bearings."""
+        return np.zeros(n_rows)
+
+    def rotations(self, bearings_deg, channels, depression, elevations_deg=None) -> np.ndarray:
         """(n_rows, 4, 4) rotation from the head's frame to each row's beam frame: the bearing
-        rotation (`mitsonar.geometry.frames.bearing_rotation`)."""
-        return bearing_rotation(np.radians(bearings_deg))
+        rotation (`mitsonar.geometry.frames.bearing_rotation`), then the elevation's
+        (`mitsonar.geometry.frames.elevation_rotation`) where rows have one."""
+        r = bearing_rotation(np.radians(bearings_deg))
+        return r if elevations_deg is None else r @ elevation_rotation(np.radians(elevations_deg))
 
     def ascan_row(self, n_rows: int) -> int:
         """The row an A-scan picture shows when none is asked for."""
@@ -142,6 +156,7 @@ class Multibeam(SonarKind):
     max_swath = 360.0
     bathymetry_method = "centroid"
     max_sounding_fan = 180.0
+    share_beams = True
 
     def ping_times(self, ping_period, pings, n_rows):
         """Zeros: the rows of a frame fire together."""
@@ -194,6 +209,39 @@ class Sidescan(SonarKind):
         return meta
 
 
+class Volumetric(Multibeam):
+    """A 3D imaging head (e.g. Coda Octopus Echoscope, Water Linked Sonar 3D-15): one wide transmit
+    beam and a receive beam per row over an elevation x azimuth grid, all fired at once (a frame,
+    like a multibeam's). Row ``k = i n_azimuth + j`` looks at azimuth ``bearing_start + j
+    bearing_step`` and elevation ``elevation_start + i elevation_step``: its beam frame is the
+    head's turned by ``bearing_rotation(az) @ elevation_rotation(el)``, so its boresight is
+    ``(cos el sin az, sin el, cos el cos az)`` in the head frame
+    (`mitsonar.signals.volumetric.directions`). A frame's rows reshape to the volume
+    ``(n_elevation, n_azimuth, n_bins)`` (``Scan.volume``). The rows do not lie in one fan:
+    ``sonar_tof`` traces them per row (no shared beams) and there is no fan image to draw."""
+
+    name = "volumetric"
+    grid = True
+    share_beams = False
+    has_fan = False
+    plot_kinds = ("ascan",)
+    max_sounding_fan = None
+
+    def bearings_deg(self, start, step, n_rows, n_azimuth=None):
+        """Row ``i n_azimuth + j``'s azimuth: ``start + j step``."""
+        n = n_rows if n_azimuth is None else int(n_azimuth)
+        return start + (np.arange(n_rows) % n) * step
+
+    def elevations_deg(self, start, step, n_rows, n_azimuth):
+        """Row ``i n_azimuth + j``'s elevation: ``start + i step``."""
+        return start + (np.arange(n_rows) // int(n_azimuth)) * step
+
+    def render_meta(self, sonar):
+        """The grid: ``n_azimuth``, ``n_elevation``, ``elevation_start``, ``elevation_step``."""
+        return dict(n_azimuth=int(sonar.n_azimuth), n_elevation=int(sonar.n_elevation),
+                    elevation_start=float(sonar.elevation_start), elevation_step=float(sonar.elevation_step))
+
+
 _REGISTRY: dict = {}
 
 
@@ -214,8 +262,8 @@ def unregister(name: str) -> None:
     _REGISTRY.pop(name, None)
 
 
-MECHANICAL, MULTIBEAM, SIDESCAN = Mechanical(), Multibeam(), Sidescan()
-for _k in (MECHANICAL, MULTIBEAM, SIDESCAN):
+MECHANICAL, MULTIBEAM, SIDESCAN, VOLUMETRIC = Mechanical(), Multibeam(), Sidescan(), Volumetric()
+for _k in (MECHANICAL, MULTIBEAM, SIDESCAN, VOLUMETRIC):
     register(_k)
 #: The kind of a head (and a `Scan`) that names none.
 DEFAULT = MECHANICAL.name

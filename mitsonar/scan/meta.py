@@ -84,7 +84,8 @@ class ScanMeta(MutableMapping):
     (``"scene"``: the echoes' speckle comes from the scene), ``bearing_start``/``bearing_step``
     (deg), ``ping_period`` (s), ``frequency`` (Hz), ``aperture_h`` (m), ``directivity_index`` (dB);
     side-scan ``side``, ``depression`` (deg), ``pings_per_channel``, ``preset``; multibeam
-    ``tx_pattern``, ``tx_beamwidth_h``/``tx_beamwidth_v`` (deg); surveys ``survey_index``,
+    ``tx_pattern``, ``tx_beamwidth_h``/``tx_beamwidth_v`` (deg); volumetric ``n_azimuth``,
+    ``n_elevation``, ``elevation_start``/``elevation_step`` (deg); surveys ``survey_index``,
     ``survey_seed``.
 
     Georeference (`mitsonar.geometry.geodesy`): ``origin`` ([lat, lon, height], WGS 84 deg and m)
@@ -130,6 +131,11 @@ class ScanMeta(MutableMapping):
     tx_pattern: str | None = _f("str", "the transmit beam's pattern")
     tx_beamwidth_h: float | None = _f("number", "deg", positive=True)
     tx_beamwidth_v: float | None = _f("number", "deg", positive=True)
+    # volumetric: the rows' elevation x azimuth grid (`Scan.volume`)
+    n_azimuth: int | None = _f("int", "beams across azimuth", positive=True)
+    n_elevation: int | None = _f("int", "beams across elevation", positive=True)
+    elevation_start: float | None = _f("number", "deg")
+    elevation_step: float | None = _f("number", "deg")
     # time and surveys
     start_time: float | None = _f("number", "seconds")
     end_time: float | None = _f("number", "seconds")

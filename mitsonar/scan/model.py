@@ -234,6 +234,19 @@ class Scan:
             return None
         return sidescan_channels("both" if self.meta.side is None else self.meta.side, self.n_pings)
 
+    def volume(self) -> np.ndarray:
+        """(n_elevation, n_azimuth, n_bins) float32: a volumetric scan's rows (one frame) as its
+        volume, row ``i n_azimuth + j`` at ``[i, j]`` (`mitsonar.geometry.kinds.Volumetric`; the grid
+        is ``meta.n_elevation`` x ``meta.n_azimuth``). A ValueError for the other kinds, or for a
+        scan whose rows are not that grid."""
+        if not self.sonar_kind.grid:
+            raise ValueError(f"Scan.volume: a {self.kind!r} scan has no volume (kind {kinds.which('grid')})")
+        n_el, n_az = self.meta.n_elevation, self.meta.n_azimuth
+        if n_el is None or n_az is None or n_el * n_az != self.n_pings:
+            raise ScanFieldError("meta", f"n_elevation x n_azimuth = {n_el} x {n_az} is not allowed (the scan's "
+                                         f"{self.n_pings} rows)")
+        return self.intensity.reshape(n_el, n_az, self.n_bins)
+
     @property
     def n_bins(self) -> int:
         return int(self.intensity.shape[1])

@@ -5,9 +5,11 @@ planar array of ``rows x columns`` elements at ``pitch`` in its beam frame's x (
 the columns) and y (elevation, across the rows), facing +z. One transmission gives a volume of
 range x azimuth x elevation, not a fan image that collapses elevation:
 
-* `render_echoes` renders the element data: the head is a ``multibeam`` sensor whose transmit fan
-  covers the field of view (`Volumetric.sensor_xml`) and whose elements are the planar array
-  (`Volumetric.elements`); one row, the frame's transmission;
+* `render_echoes` renders the element data: the head is a ``volumetric`` sensor (its rows the
+  beam grid, `mitsonar.geometry.kinds.Volumetric`) whose transmit fan covers the field of view
+  (`Volumetric.sensor_xml`) and whose elements are the planar array (`Volumetric.elements`); one
+  row, the frame's transmission; `mitsonar.render_scan` of that sensor renders each beam's echo
+  energy straight from its receive beam (`mitsonar.scan.Scan.volume` gives the volume);
 * `beamform_3d` focuses it: for every voxel ``q = r u(az, el)`` (``u = (cos el sin az, sin el,
   cos el cos az)``, the beam frame's azimuth ``atan2(x, z)`` and elevation ``asin(y)``) the exact
   two-way delay of every element (`mitsonar.signals.focusing`: focused near-field delay-and-sum,
@@ -129,14 +131,20 @@ class Volumetric:
         return lfm(self.frequency - 0.5 * self.bandwidth, self.frequency + 0.5 * self.bandwidth, T)
 
     def sensor_xml(self, to_world=None, source_level=210.0) -> str:
-        """A ``<sensor type="sonar">`` (kind ``multibeam``) for `mitsonar.render_echoes`: a uniform
-        transmit fan over the field of view (plus a tenth), the band, the range; ``to_world`` a
-        4x4 beam frame (default identity)."""
-        from mitsonar.geometry.kinds import MULTIBEAM
+        """A ``<sensor type="sonar">`` of kind ``volumetric`` (`mitsonar.geometry.kinds.Volumetric`)
+        for `mitsonar.render_echoes`, `render_volume` and `mitsonar.render_scan`: its rows the
+        ``n_elevation x n_azimuth`` beams at `elevations` x `azimuths`, each a gaussian receive beam
+        of the array's broadside widths (`beamwidths`), a uniform transmit fan over the field of
+        view (plus a tenth), the band, the range; ``to_world`` a 4x4 beam frame (default identity)."""
+        from mitsonar.geometry.kinds import VOLUMETRIC
 
-        items = {"kind": MULTIBEAM.name, "range_min": float(self.range_min), "range_max": float(self.range_max),
-                 "n_bins": int(self.n_bins), "n_pings": 2, "bearing_start": -1.0, "bearing_step": 2.0,
-                 "beam_pattern": "uniform", "beamwidth_h": 2.0, "beamwidth_v": min(179.0, 1.1 * self.fov_elevation),
+        az, el = np.degrees(self.azimuths()), np.degrees(self.elevations())
+        w_az, w_el = (min(179.0, math.degrees(w)) for w in self.beamwidths())
+        items = {"kind": VOLUMETRIC.name, "range_min": float(self.range_min), "range_max": float(self.range_max),
+                 "n_bins": int(self.n_bins), "n_azimuth": int(self.n_azimuth), "n_elevation": int(self.n_elevation),
+                 "bearing_start": float(az[0]), "bearing_step": float(self.fov_azimuth / self.n_azimuth),
+                 "elevation_start": float(el[0]), "elevation_step": float(self.fov_elevation / self.n_elevation),
+                 "beam_pattern": "gaussian", "beamwidth_h": float(w_az), "beamwidth_v": float(w_el),
                  "tx_pattern": "uniform", "tx_beamwidth_h": min(179.0, 1.1 * self.fov_azimuth),
                  "tx_beamwidth_v": min(179.0, 1.1 * self.fov_elevation),
                  "frequency": float(self.frequency), "bandwidth": float(self.bandwidth),
@@ -157,9 +165,33 @@ def _centres(fov_deg, n):
 #: maker's standard model, not checked against a data sheet here), its array (48 x 48 elements at
 #: half a wavelength: 2.1 deg beams at broadside, which the 0.4 deg beam spacing oversamples) and
 #: its 10 % band are this preset's assumptions.
+#:
+#: ``sonar3d15_navigation`` and ``sonar3d15_inspection``: the Water Linked Sonar 3D-15's two modes, as
+#: the maker's documentation publishes them (docs.waterlinked.com, "Sonar 3D-15" specifications and
+#: "Integration API Sonar 3D-15"): navigation 1.2 MHz, 90 x 40 deg, 0.2 to 15 m, range resolution 4 mm,
+#: angular resolution 0.6 deg (H) x 2.4 deg (V), 5 Hz; inspection 2.4 MHz, 40 x 40 deg, 0.2 to 4 m,
+#: 1.5 mm, 0.4 x 1.1 deg, 20 Hz; both 256 x 64 beams (the range image's width x height; beam
+#: separation 0.35 / 0.16 deg by 0.6 deg) and 1491 m/s (the head's default sound speed). Derived here:
+#: the band ``c / (2 resolution)`` (the compressed pulse's cell, `mitsonar.signals.pulses.Pulse.range_resolution`)
+#: and the bins, one per range resolution cell. Assumed here (the maker publishes no array): a filled
+#: array at half a wavelength whose 0.886 lambda / (N d) widths (`Volumetric.beamwidths`) are the published
+#: angular resolutions, N = 0.886 / (0.5 resolution in rad), rounded.
+_WL_C = 1491.0
+
+
+def _sonar3d15(frequency, fov_azimuth, range_max, resolution, res_h, res_v):
+    n = lambda res: int(round(0.886 / (0.5 * math.radians(res))))  # noqa: E731
+    return Volumetric(rows=n(res_v), columns=n(res_h), frequency=frequency, bandwidth=_WL_C / (2.0 * resolution),
+                      n_azimuth=256, n_elevation=64, fov_azimuth=fov_azimuth, fov_elevation=40.0,
+                      range_max=range_max, n_bins=int(round((range_max - 0.2) / resolution)), sound_speed=_WL_C,
+                      range_min=0.2)
+
+
 PRESETS = {
     "echoscope": Volumetric(rows=48, columns=48, frequency=375e3, bandwidth=37.5e3, n_azimuth=128,
                             n_elevation=128, fov_azimuth=50.0, fov_elevation=50.0, range_max=120.0, n_bins=1000),
+    "sonar3d15_navigation": _sonar3d15(1.2e6, 90.0, 15.0, 0.004, 0.6, 2.4),
+    "sonar3d15_inspection": _sonar3d15(2.4e6, 40.0, 4.0, 0.0015, 0.4, 1.1),
 }
 
 
@@ -239,6 +271,21 @@ def _one_row(echoes, row):
     import dataclasses
 
     return dataclasses.replace(echoes, signal=echoes.signal[row:row + 1])
+
+
+def scan_volume(scan) -> Volume:
+    """The `Volume` of a frame of a ``volumetric`` `mitsonar.scan.Scan` (`mitsonar.render_scan` of
+    a `Volumetric.sensor_xml` head, a live frame): ``intensity`` its rows' echo energy per bin
+    (``Scan.volume``), the grid's azimuths (``Scan.bearings``) and elevations (``meta``), ``pose``
+    the head frame in the world (row 0's pose turned back by its own rotation)."""
+    intensity = scan.volume()
+    n_el, n_az = intensity.shape[:2]
+    az = np.asarray(scan.bearings[:n_az], dtype=np.float64)
+    el = np.radians(scan.meta.elevation_start + np.arange(n_el) * scan.meta.elevation_step)
+    turn = scan.sonar_kind.rotations(np.degrees(az[:1]), None, None, np.degrees(el[:1]))[0]
+    pose = np.asarray(scan.poses[0], dtype=np.float64) @ turn.T     # a pure rotation: its inverse
+    return Volume(intensity, az, el, np.asarray(scan.ranges, np.float64), pose, float(scan.sound_speed),
+                  {"source": "scan", "kind": scan.kind})
 
 
 #: Fields of a point of `point_cloud` (PLY vertex properties, in this order).
@@ -374,13 +421,14 @@ def render_volume(scene, head, *, spp=4096, seed=0, pose=None, sensor=0, max_dep
     element data.
 
     The echo paths are `mitsonar.render_echoes`'s (``sonar_tof`` from the scene's sensor, a
-    multibeam head whose transmit fan is the head's, `Volumetric.sensor_xml`), merged into
+    ``volumetric`` head whose transmit fan is the head's, `Volumetric.sensor_xml`), merged into
     scatterers of energy ``E`` at ``x``; each scores ``E |AF_b(u)|^2`` into the bin of its range in
     every beam ``b`` (`array_factor` of its direction ``u`` from the array), so the volume is the
     expectation over speckle of the focused beams' energy (`beamform_3d`): each beam's energy
     summed over range agrees with the coherent path's speckle-averaged one, which spreads it over
     the bins by the pulse's autocorrelation. Cost: scatterers x beams (numpy, ``chunk`` scatterers
     at a time); no pulse, no elements."""
+    from mitsonar.geometry import kinds
     from mitsonar.signals.echoes import _trace
     from mitsonar.sim.render import SEED_ALLOWED, SEED_MAX, SPP_ALLOWED, SPP_MAX, _check_pose, _whole
     from mitsonar.sim.scene import SceneError, sonar_of
@@ -395,9 +443,12 @@ def render_volume(scene, head, *, spp=4096, seed=0, pose=None, sensor=0, max_dep
     if pose is not None:
         pose = _check_pose(pose)
     sonar = sonar_of(scene, sensor)
-    if not sonar.sonar_kind.transmit_fan:
-        raise SceneError(f"{where} 'scene': its sensor is not allowed (a head with a transmit fan: "
-                         "Volumetric.sensor_xml)")
+    if not sonar.sonar_kind.grid:
+        raise SceneError(f"{where} 'scene': its sensor of kind {sonar.kind!r} is not allowed (kind "
+                         f"{kinds.which('grid')}: Volumetric.sensor_xml)")
+    if (sonar.n_elevation, sonar.n_azimuth) != (head.n_elevation, head.n_azimuth):
+        raise SceneError(f"{where} 'head': its {head.n_elevation} x {head.n_azimuth} beams are not allowed (the "
+                         f"scene's sensor's grid, n_elevation x n_azimuth = {sonar.n_elevation} x {sonar.n_azimuth})")
     heads = sonar.head_pose(pose)
     row_poses = (heads[:1] if heads.ndim == 3 else heads[None]).copy()
     ranges = head.ranges()

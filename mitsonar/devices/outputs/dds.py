@@ -9,6 +9,9 @@ type ``package::msg::dds_::Type_``) and its default QoS (reliable, volatile, kee
                        ``/sonar/image`` (`mitsonar.export.ros.messages.projected_image`)
 ``rt/tf``              tf2_msgs/msg/TFMessage: ``map -> base_link -> sonar``
 ``rt/vehicle/pose``    geometry_msgs/msg/PoseStamped: the vehicle in ``map``
+``rt/sonar/points``    sensor_msgs/msg/PointCloud2: a volumetric frame's point cloud in ``map``
+                       (`mitsonar.devices.outputs.messages.frame_points`; its writer made at the
+                       first volumetric frame, `POINT_TOPICS`)
 ====================== ===========================================================================
 
 The message types are declared below as ``cyclonedds.idl`` structs, field for field the ROS 2
@@ -23,11 +26,13 @@ from mitsonar.devices.outputs.messages import (SONAR_FRAME, VEHICLE_FRAME, WORLD
                                                translation_rotation)
 from mitsonar.devices.outputs.pictures import Pictures
 
-__all__ = ["DdsOutput", "TOPICS", "check_domain", "ros_types"]
+__all__ = ["DdsOutput", "TOPICS", "POINT_TOPICS", "check_domain", "ros_types"]
 
 #: DDS topic -> ROS 2 type of each live topic (module doc).
 TOPICS = {"rt/sonar/fan": "sensor_msgs/msg/Image", "rt/sonar/image": "marine_acoustic_msgs/msg/ProjectedSonarImage",
           "rt/tf": "tf2_msgs/msg/TFMessage", "rt/vehicle/pose": "geometry_msgs/msg/PoseStamped"}
+#: The topics of volumetric frames only, written from the first such frame on.
+POINT_TOPICS = {"rt/sonar/points": "sensor_msgs/msg/PointCloud2"}
 
 
 def check_domain(domain) -> int:
@@ -77,9 +82,11 @@ class DdsOutput:
         qos = ros_qos()
         self.writers = {name: DataWriter(self.participant, Topic(self.participant, name, self.types[ros]), qos=qos)
                         for name, ros in TOPICS.items()}
+        self._qos = qos
         self.count = 0
 
     def publish(self, t_ns: int, vehicle, mount, scan) -> None:
+        from mitsonar.devices.outputs.messages import frame_points
         from mitsonar.export.ros.messages import mono8, projected_image
 
         T = self.types
@@ -114,8 +121,25 @@ class DdsOutput:
         self.writers["rt/vehicle/pose"].write(T["geometry_msgs/msg/PoseStamped"](
             header=header(WORLD_FRAME),
             pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=x, y=y, z=z), orientation=q)))
+        cloud = frame_points(t_ns, scan)
+        if cloud is not None:
+            if "rt/sonar/points" not in self.writers:
+                from cyclonedds.pub import DataWriter
+                from cyclonedds.topic import Topic
+
+                name = "rt/sonar/points"
+                self.writers[name] = DataWriter(self.participant, Topic(self.participant, name,
+                                                                        T[POINT_TOPICS[name]]), qos=self._qos)
+            self.writers["rt/sonar/points"].write(point_cloud2(T, cloud, header(cloud["header"]["frame_id"])))
         self.count += 1
 
     def close(self) -> None:
         self.writers = {}
         self.participant = None       # cyclonedds deletes the entities with their last reference
+
+
+def point_cloud2(types, cloud: dict, header):
+    """The ``sensor_msgs/msg/PointCloud2`` IDL struct of a `frame_points` dict, with ``header``."""
+    fields = [types["sensor_msgs/msg/PointField"](**f) for f in cloud["fields"]]
+    return types["sensor_msgs/msg/PointCloud2"](**{**cloud, "header": header, "fields": fields,
+                                                   "data": list(cloud["data"])})

@@ -8,6 +8,9 @@
 ``/sonar/fan``        foxglove.RawImage (protobuf), mono8     the picture (`mitsonar.devices.outputs.
                                                               pictures`), frame ``sonar``
 ``/sonar/ping``       mitsonar.SonarPing (JSON)               the raw ping: device bytes, ranges, bearings
+``/sonar/points``     sensor_msgs/msg/PointCloud2 (ros2msg,   a volumetric frame's point cloud in ``map``
+                      CDR)                                    (`messages.frame_points`); advertised at the
+                                                              first volumetric frame
 ``/tf``               foxglove.FrameTransforms (protobuf)     ``map -> base_link -> sonar``
 ``/vehicle/pose``     foxglove.PoseInFrame (protobuf)         the vehicle in ``map``
 ===================== ======================================= =========================================
@@ -19,8 +22,9 @@ Every message's timestamp and log time are the ping's time (ns since the Unix ep
 from __future__ import annotations
 
 from mitsonar.devices.outputs.base import OutputError
-from mitsonar.devices.outputs.messages import (PING_SCHEMA, SONAR_FRAME, VEHICLE_FRAME, WORLD_FRAME, ping_message,
-                                               sonar_in_vehicle, translation_rotation)
+from mitsonar.devices.outputs.messages import (PING_SCHEMA, SONAR_FRAME, VEHICLE_FRAME, WORLD_FRAME, frame_points,
+                                               ping_message, pointcloud2_cdr, sonar_in_vehicle,
+                                               translation_rotation)
 from mitsonar.devices.outputs.pictures import Pictures
 
 __all__ = ["DEFAULT_PORT", "FoxgloveChannels", "FoxgloveServer", "require_foxglove"]
@@ -55,7 +59,18 @@ class FoxgloveChannels:
         self.ping = fg.Channel("/sonar/ping", schema=PING_SCHEMA, context=self.context)
         self.tf = ch.FrameTransformsChannel("/tf", context=self.context)
         self.pose = ch.PoseInFrameChannel("/vehicle/pose", context=self.context)
+        self.points = None      # /sonar/points, made at the first volumetric frame
         self.count = 0
+
+    def _points_channel(self):
+        if self.points is None:
+            from mitsonar.export.ros import msgdefs
+
+            name = "sensor_msgs/msg/PointCloud2"
+            schema = self._fg.Schema(name=name, encoding="ros2msg", data=msgdefs.definition(name).encode("utf-8"))
+            self.points = self._fg.Channel("/sonar/points", schema=schema, message_encoding="cdr",
+                                           context=self.context)
+        return self.points
 
     def publish(self, t_ns: int, vehicle, mount, scan) -> None:
         m = self._fg.messages
@@ -65,6 +80,9 @@ class FoxgloveChannels:
         self.fan.log(m.RawImage(timestamp=stamp, frame_id=SONAR_FRAME, width=w, height=h, encoding="mono8",
                                 step=w, data=pixels.tobytes()), log_time=t_ns)
         self.ping.log(ping_message(t_ns, scan), log_time=t_ns)
+        cloud = frame_points(t_ns, scan)
+        if cloud is not None:
+            self._points_channel().log(pointcloud2_cdr(cloud), log_time=t_ns)
 
         def tf(pose, parent, child):
             (x, y, z), (qx, qy, qz, qw) = translation_rotation(pose)

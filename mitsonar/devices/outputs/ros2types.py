@@ -116,6 +116,27 @@ class ProjectedSonarImage(IdlStruct, typename=ros("marine_acoustic_msgs/msg/Proj
     image: SonarImageData
 
 
+@dataclass
+class PointField(IdlStruct, typename=ros("sensor_msgs/msg/PointField")):
+    name: str
+    offset: uint32
+    datatype: uint8
+    count: uint32
+
+
+@dataclass
+class PointCloud2(IdlStruct, typename=ros("sensor_msgs/msg/PointCloud2")):
+    header: Header
+    height: uint32
+    width: uint32
+    fields: sequence[PointField]
+    is_bigendian: bool
+    point_step: uint32
+    row_step: uint32
+    data: sequence[uint8]
+    is_dense: bool
+
+
 #: ROS 2 name -> IDL struct.
 TYPES = {name: c for name, c in (
     ("builtin_interfaces/msg/Time", Time), ("std_msgs/msg/Header", Header), ("sensor_msgs/msg/Image", Image),
@@ -124,4 +145,5 @@ TYPES = {name: c for name, c in (
     ("geometry_msgs/msg/TransformStamped", TransformStamped), ("tf2_msgs/msg/TFMessage", TFMessage),
     ("geometry_msgs/msg/Pose", Pose), ("geometry_msgs/msg/PoseStamped", PoseStamped),
     ("marine_acoustic_msgs/msg/PingInfo", PingInfo), ("marine_acoustic_msgs/msg/SonarImageData", SonarImageData),
-    ("marine_acoustic_msgs/msg/ProjectedSonarImage", ProjectedSonarImage))}
+    ("marine_acoustic_msgs/msg/ProjectedSonarImage", ProjectedSonarImage),
+    ("sensor_msgs/msg/PointField", PointField), ("sensor_msgs/msg/PointCloud2", PointCloud2))}
