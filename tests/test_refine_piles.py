@@ -159,7 +159,12 @@ def test_seabed_search_finds_a_faint_mud_seabed_beside_a_bright_pile():
 def test_attribute_groups_puts_each_echo_on_the_model_not_on_its_arc(targets):
     """A 20 deg fan spreads each echo of the pile over an arc (in front of it by up to r (1 - cos
     e), and below the seabed); given the true model, every attributed group lies on the pile's or
-    the seabed's surface within a bin's width, and at least 80 % of them are explained."""
+    the seabed's surface within a bin's width, and most of them are explained.
+
+    A scan holds about 20 groups, so one seed's explained share swings from 0.68 to 0.94 with the
+    receiver's noise (the same spread with NumPy's and with the counter-based generator): the
+    arcs' distances and the share are pooled over six seeds (0.83 with either generator, a binomial standard deviation of
+    about 0.035) and must reach 0.75."""
     from hilbertmap import IncrementalHilbertMap
     from mitsonar.jobs.refine_piles import attribute_groups
     from mitsonar.scan.model import Scan
@@ -167,23 +172,30 @@ def test_attribute_groups_puts_each_echo_on_the_model_not_on_its_arc(targets):
     import mitsonar
 
     scene = _scene(PILE, SEABED)
-    scan = mitsonar.render_scan(scene, spp=64, seed=3, pose=POSES[1], sensor="head")
-    assert isinstance(scan, Scan)
-    hm = IncrementalHilbertMap(random_state=0, max_free_per_ping=24, near_free=8, occupied_samples=8)
-    smp = hm.embed(scan, np.random.default_rng(0))
-    assert len(smp.occupied) > 10
 
     def dist(P):
         d_pile = np.abs(np.hypot(P[..., 0] - PILE[0, 0], P[..., 1] - PILE[0, 1]) - PILE[0, 2])
         return np.minimum(d_pile, np.abs(P[..., 2] - SEABED))
 
     bw = (HEAD["range_max"] - HEAD["range_min"]) / HEAD["n_bins"]
-    assert np.median(dist(smp.occupied)) > 3 * bw  # the arcs, before
-    out, share = attribute_groups(scene, scan, smp, np.random.default_rng(1), rays=256, drop_unexplained=True)
-    # (the pulse spreads an echo over a bin or two beyond the surface: those groups stay unexplained)
-    assert share >= 0.8 and len(out.occupied) == round(share * len(smp.occupied))
-    # faceted pile (24 sides): its faces lie up to r (1 - cos(pi / 24)) = 2.6 mm inside the circle
-    assert dist(out.occupied).max() < bw + 0.003, dist(out.occupied).max()
+    explained = groups = 0
+    before = []
+    for seed in range(6):
+        scan = mitsonar.render_scan(scene, spp=64, seed=seed, pose=POSES[1], sensor="head")
+        assert isinstance(scan, Scan)
+        hm = IncrementalHilbertMap(random_state=0, max_free_per_ping=24, near_free=8, occupied_samples=8)
+        smp = hm.embed(scan, np.random.default_rng(0))
+        assert len(smp.occupied) > 10
+        before.append(dist(smp.occupied).ravel())
+        out, share = attribute_groups(scene, scan, smp, np.random.default_rng(1), rays=256, drop_unexplained=True)
+        # (the pulse spreads an echo over a bin or two beyond the surface: those groups stay unexplained)
+        assert len(out.occupied) == round(share * len(smp.occupied))
+        # faceted pile (24 sides): its faces lie up to r (1 - cos(pi / 24)) = 2.6 mm inside the circle
+        assert dist(out.occupied).max() < bw + 0.003, (seed, dist(out.occupied).max())
+        explained += len(out.occupied)
+        groups += len(smp.occupied)
+    assert np.median(np.concatenate(before)) > 3 * bw  # the arcs, before
+    assert explained / groups >= 0.75, (explained, groups)
     assert len(out.occupied_ping) == len(out.occupied)
 
 
