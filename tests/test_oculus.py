@@ -472,11 +472,13 @@ def test_virtual_sonar_serves_a_scene_with_the_wall_at_its_range(wall):
     fire = FireMessage(flags=0x0D, range=10.0, gain=100.0, speed_of_sound=1500.0)
     frame = frames(presets.model("M1200d").mode(1), 256, 10.0)
     assert frame.n_pings == 256 and frame.beamwidth_h == pytest.approx(0.6) and frame.meta["frequency"] == 1.2e6
-    assert np.degrees(frame.bearings[[0, -1]]) == pytest.approx([-65 + 65 / 256, 65 - 65 / 256])
+    # rendered at the head's own (sine-spaced) bearing table: row k is beam k
+    np.testing.assert_allclose(np.degrees(frame.bearings), presets.bearing_table(130, 256) / 100.0, atol=1e-9)
     expected = VirtualOculus(rendered, tcp_port=0, frames=frames).ping(fire)
     for p in got:
         np.testing.assert_array_equal(p["image"], expected.image)       # mitsonar's rendered bytes
         assert p["heading"] == pytest.approx(90.0)                      # looking along +x: east
+        np.testing.assert_array_equal(p["bearings"], presets.bearing_table(130, 256))
     centre = np.abs(got[0]["bearings"] / 100.0) < 15
     profile = got[0]["image"][:, centre].mean(axis=1)
     line = 10 + int(np.argmax(profile[10:]))                            # past the ring-down

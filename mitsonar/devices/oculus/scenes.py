@@ -4,12 +4,13 @@ The virtual head (`mitsonar.devices.oculus.virtual.VirtualOculus`, ``frames=``) 
 of each fire message's settings: ``frames(mode, n_beams, range)``. `SceneFrames` renders the
 scene file's multibeam ``sonar`` sensor with its XML properties set to the model's mode
 (`mitsonar.devices.oculus.presets.Mode`): ``n_beams`` receive beams evenly spaced across the
-mode's aperture (``bearing_step = aperture / n_beams``, centred), the mode's beam widths
-(``beamwidth_h``, ``beamwidth_v``), a transmit fan as wide as the aperture (``tx_beamwidth_h``,
-``tx_beamwidth_v``), its ``frequency``, and the range window ``0 .. range`` in bins of the given
-width. The sensor takes no table of beam bearings, so the frame's beams are evenly spaced in
-angle and the head serves, for each bearing of its own table (even in sine), the nearest rendered
-beam. Frames are cached by settings (a new setting loads and renders the scene again).
+mode's aperture at the head's own bearing table (the sensor's ``bearings``:
+`mitsonar.devices.oculus.presets.bearing_table`, even in sine, in place of the XML's ``n_pings``,
+``bearing_start`` and ``bearing_step``), the mode's beam widths (``beamwidth_h``,
+``beamwidth_v``), a transmit fan as wide as the aperture (``tx_beamwidth_h``, ``tx_beamwidth_v``),
+its ``frequency``, and the range window ``0 .. range`` in bins of the given width: row k of the
+frame is beam k of the ping result. Frames are cached by settings (a new setting loads and renders
+the scene again).
 """
 from __future__ import annotations
 
@@ -56,10 +57,12 @@ class SceneFrames:
         from mitsonar.devices.live import live_scene
         from mitsonar.sim.render import render_scan
 
+        from mitsonar.devices.oculus.presets import bearing_table
+
         n_bins = max(1, min(4096, int(round(range_m / self.bin_width))))
-        step = mode.aperture / n_beams
-        values = {"n_pings": ("integer", n_beams), "bearing_start": ("float", -mode.aperture / 2 + step / 2),
-                  "bearing_step": ("float", step), "range_min": ("float", 0.0), "range_max": ("float", range_m),
+        table = bearing_table(mode.aperture, n_beams) / 100.0
+        values = {"bearings": ("string", " ".join(f"{b:.2f}" for b in table)),
+                  "range_min": ("float", 0.0), "range_max": ("float", range_m),
                   "n_bins": ("integer", n_bins), "beamwidth_h": ("float", mode.beamwidth_h),
                   "beamwidth_v": ("float", mode.beamwidth_v), "tx_beamwidth_h": ("float", mode.aperture),
                   "tx_beamwidth_v": ("float", mode.beamwidth_v), "frequency": ("float", mode.frequency)}
@@ -78,6 +81,8 @@ class SceneFrames:
             el = chosen[0]
             if el.get("id") is None:
                 el.set("id", _ID)
+            for child in [c for c in el if c.get("name") in ("n_pings", "bearing_start", "bearing_step")]:
+                el.remove(child)             # the table says them
             for name, (tag, value) in values.items():
                 child = next((c for c in el if c.get("name") == name), None)
                 if child is None:
