@@ -128,7 +128,7 @@ def parse_ping(m: bytes) -> dict:
     gains = rows[:, :4].copy().view("<f4")[:, 0] if gain else None
     img = np.ascontiguousarray(rows[:, 4:] if gain else rows).view({1: "<u1", 2: "<u2", 4: "<u4"}[nb])
     return {"version": v, "id": pid, "frequency": freq, "c": c, "res": res, "n_r": n_r, "n_b": n_b,
-            "bearings": bearings, "image": img, "gains": gains, "range": fire[5], "temperature": temp,
+            "bearings": bearings, "image": img, "gains": gains, "range": fire[5], "temperature": temp, "pressure": pres,
             "heading": heading if v == 2 else None, "raw": m}
 
 
@@ -483,6 +483,28 @@ def test_virtual_sonar_serves_a_scene_with_the_wall_at_its_range(wall):
     profile = got[0]["image"][:, centre].mean(axis=1)
     line = 10 + int(np.argmax(profile[10:]))                            # past the ring-down
     assert (line + 0.5) * got[0]["res"] == pytest.approx(WALL_RANGE, abs=2 * got[0]["res"])
+
+
+def test_virtual_sonar_takes_the_scenes_water_temperature_and_surface(tmp_path):
+    from mitsonar.acoustics.seawater import sound_speed
+    path = tmp_path / "warm.xml"
+    path.write_text(WALL.replace('<string name="beam_pattern"', '<string name="sound_speed" value="auto"/>'
+                                 '<float name="temperature" value="20"/><float name="surface_z" value="5"/>'
+                                 '<string name="beam_pattern"'))
+    proc, port = _serve([str(path), "--head", "oculus", "--spp", "4", "--port-url", "tcp://127.0.0.1:0",
+                         "--status-port", str(free_udp_port()), "--seconds", "60"])
+    try:
+        c = LayoutClient(port)
+        c.fire(version=2, rate=2, flags=0x0D, rng=10.0, gain=100.0, c=0.0, salinity=35.0)   # the head's own c
+        p = c.ping()
+        c.close()
+    finally:
+        proc.terminate()
+        proc.wait(10)
+    # the head at z = 0 is 5 m below a surface at z = 5, in water at 20 deg C
+    assert p["temperature"] == pytest.approx(20.0)
+    assert p["pressure"] == pytest.approx(5.0 * 1025.0 * 9.80665 / 1e5)
+    assert p["c"] == pytest.approx(float(sound_speed(20.0, 35.0, 5.0)))
 
 
 def test_virtual_sonar_serves_a_log(tmp_path):

@@ -470,8 +470,10 @@ def _oculus():
             from mitsonar.devices.oculus.protocol import UDP_PORT
             self.renderer = renderer
             host, port = parse_tcp_url(port_url)
+            from mitsonar.devices.oculus.virtual import scene_water
             super().__init__(renderer.warm(), model=model or "M1200d", host=host, tcp_port=port,
-                             udp_port=UDP_PORT if status_port is None else status_port, realtime=realtime)
+                             udp_port=UDP_PORT if status_port is None else status_port, realtime=realtime,
+                             water=scene_water(renderer.sonar))
 
         def ping(self, fire, ping_id: int = 0, now: float = 0.0):
             period = self.period(fire)

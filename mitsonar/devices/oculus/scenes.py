@@ -53,6 +53,33 @@ class SceneFrames:
                 self._cache[key] = self._render(mode, int(n_beams), float(range_m))
             return self._cache[key]
 
+    def _choose(self, root):
+        """The XML element of the sonar to render (given an id if it has none; ``_id`` says it)."""
+        sensors = list(root.iter("sensor"))
+        sonars = [s for s in sensors if s.get("type") == "sonar"]
+        if isinstance(self.sensor, int) or (isinstance(self.sensor, str) and self.sensor.isdigit()):
+            k = int(self.sensor)         # an index among the scene's sensors, as --sensor takes it
+            chosen = [sensors[k]] if 0 <= k < len(sensors) and sensors[k].get("type") == "sonar" else []
+        else:
+            chosen = [s for s in sonars if self.sensor is None or s.get("id") == self.sensor][:1]
+        if not chosen:
+            raise ValueError(f"{self.path}: no sonar sensor"
+                             + (f" with id {self.sensor!r}" if self.sensor is not None else ""))
+        el = chosen[0]
+        if el.get("id") is None:
+            el.set("id", _ID)
+        self._id = el.get("id")
+        return el
+
+    def water(self) -> dict:
+        """The rendered sensor's water (`mitsonar.devices.oculus.virtual.scene_water`: its
+        ``temperature`` and ``surface_z``), from the scene as it loads."""
+        from mitsonar.devices.live import live_scene
+        from mitsonar.devices.oculus.virtual import scene_water
+
+        scene = live_scene(self.path, self._choose)
+        return scene_water(next(s for s in scene.sensors() if s.id() == self._id))
+
     def _render(self, mode, n_beams: int, range_m: float):
         from mitsonar.devices.live import live_scene
         from mitsonar.sim.render import render_scan
@@ -68,19 +95,7 @@ class SceneFrames:
                   "tx_beamwidth_v": ("float", mode.beamwidth_v), "frequency": ("float", mode.frequency)}
 
         def edit(root):
-            sensors = list(root.iter("sensor"))
-            sonars = [s for s in sensors if s.get("type") == "sonar"]
-            if isinstance(self.sensor, int) or (isinstance(self.sensor, str) and self.sensor.isdigit()):
-                k = int(self.sensor)         # an index among the scene's sensors, as --sensor takes it
-                chosen = [sensors[k]] if 0 <= k < len(sensors) and sensors[k].get("type") == "sonar" else []
-            else:
-                chosen = [s for s in sonars if self.sensor is None or s.get("id") == self.sensor][:1]
-            if not chosen:
-                raise ValueError(f"{self.path}: no sonar sensor"
-                                 + (f" with id {self.sensor!r}" if self.sensor is not None else ""))
-            el = chosen[0]
-            if el.get("id") is None:
-                el.set("id", _ID)
+            el = self._choose(root)
             for child in [c for c in el if c.get("name") in ("n_pings", "bearing_start", "bearing_step")]:
                 el.remove(child)             # the table says them
             for name, (tag, value) in values.items():
@@ -89,7 +104,6 @@ class SceneFrames:
                     child = ET.SubElement(el, tag, name=name)
                 child.tag = tag
                 child.set("value", str(value))
-            self._id = el.get("id")
 
         scene = live_scene(self.path, edit)
         scan = render_scan(scene, spp=self.spp, seed=self.seed, sensor=self._id)

@@ -37,7 +37,7 @@ scan's bins at the scan's sound speed), ``n_ranges = round(range / range_resolut
 takes the scan bin holding the range ``(i + 1/2) x range_resolution x c_scan / c_used`` (a
 different speed of sound stretches the image as it would a real head's), zeros past the scan.
 ``speedOfSound`` 0 means the head's own: `mitsonar.acoustics.seawater.sound_speed` of the
-water's temperature, the fire message's salinity and the head's depth.
+water's temperature, the fire message's salinity and the head's depth below ``surface_z``.
 
 Levels: ``gainPercent`` g is the receiver gain: 100 % the scan's own, g % ``20 log10(g/100)`` dB
 on it (`VirtualOculus.received`: a rendered scan through its receiver chain again, a scan of
@@ -51,7 +51,8 @@ scan's bytes.
 ``heading``, ``pitch``, ``roll`` (version 2 results) come from the head's pose in the scan (world x
 east, y north, z up: heading clockwise from north of the boresight, pitch its elevation, roll the
 tilt of the fan's axis towards starboard), ``temperature`` from ``water`` (deg C),
-``pressure`` (bar, gauge) from the head's depth ``-z``.
+``pressure`` (bar, gauge) from the head's depth ``surface_z - z`` (``water``: a scene's own,
+`scene_water`, with ``virtual-sonar SCENE`` and ``live``).
 
 Timing (``realtime=True``): a stream's pings are ``max(1 / rate, 2 range / c)`` apart;
 ``realtime=False`` sends each ping as soon as the last one is written.
@@ -160,7 +161,9 @@ class VirtualOculus:
     udp_port         52102: where the status goes (None: no status broadcast)
     status_period    s between status messages (default 1)
     realtime         True: pings at the fire message's rate; False: as fast as written
-    water            ``{"temperature": deg C}`` (default 10)
+    water            ``{"temperature": deg C, "surface_z": m}`` (default 10 and 0, the
+                     sensor's defaults; `scene_water` reads a scene sensor's): the head's
+                     temperature, and its depth ``surface_z - z``
     device_id        the head's ``srcDeviceId`` and ``deviceId`` (default 1)
     frames           ``frames(mode, n_beams, range) -> Scan``: the scan of each fire
                      message's geometry (`mitsonar.devices.oculus.scenes.SceneFrames`);
@@ -194,12 +197,15 @@ class VirtualOculus:
         self.udp_port = udp_port
         self.status_period = float(status_period)
         self.realtime = bool(realtime)
-        self.water = {"temperature": 10.0, **(water or {})}
+        self.water = {"temperature": 10.0, "surface_z": 0.0, **(water or {})}
         from mitsonar.acoustics.seawater import MACKENZIE_RANGE
         lo, hi = MACKENZIE_RANGE["temperature"]
         t = self.water["temperature"]
         if not (isinstance(t, (int, float)) and lo <= t <= hi):
             raise ValueError(f"VirtualOculus: water temperature {t!r} is not allowed ({lo:g}..{hi:g} deg C)")
+        z = self.water["surface_z"]
+        if not (isinstance(z, (int, float)) and math.isfinite(z)):
+            raise ValueError(f"VirtualOculus: water surface_z {z!r} is not allowed (a finite world z, m)")
         self.device_id = int(device_id)
         self.stats: Counter = Counter()
         self.last_problem: str | None = None
@@ -246,7 +252,7 @@ class VirtualOculus:
         if fire.speed_of_sound:
             return float(fire.speed_of_sound)
         from mitsonar.acoustics.seawater import MACKENZIE_RANGE, sound_speed
-        depth = max(0.0, -float(self.head_pose(self.scans[0])[2, 3]))
+        depth = self.depth(self.head_pose(self.scans[0]))
         t = float(self.water["temperature"])
         lo, hi = MACKENZIE_RANGE["salinity"]
         s = float(fire.salinity)
@@ -256,6 +262,10 @@ class VirtualOculus:
         inside = end + (1.0 if s < lo else -1.0)
         c_end, c_in = float(sound_speed(t, end, depth)), float(sound_speed(t, inside, depth))
         return c_end + (s - end) * (c_end - c_in) / (end - inside)
+
+    def depth(self, pose) -> float:
+        """m below the water's surface (``surface_z``) of a head at ``pose``; 0 above it."""
+        return max(0.0, float(self.water["surface_z"]) - float(pose[2, 3]))
 
     @staticmethod
     def head_pose(scan: Scan) -> np.ndarray:
@@ -278,7 +288,7 @@ class VirtualOculus:
         image, bearings, res = self._image(fire, mode, c, scan)
         pose = self.head_pose(scan)
         heading, pitch, roll = attitude(pose)
-        depth = max(0.0, -float(pose[2, 3]))
+        depth = self.depth(pose)
         gains = np.full(image.shape[0], fire.gain / 100.0, np.float32) if fire.send_gain else None
         return PingResult(fire, image, bearings, res, gains=gains, ping_id=ping_id, status=0,
                           frequency=mode.frequency, temperature=float(self.water["temperature"]),
@@ -566,3 +576,12 @@ class VirtualOculus:
 def serve(scan: Scan, seconds: float | None = None, *, out=None, **kwargs) -> int:
     """Run a `VirtualOculus` in the foreground (keyword arguments go to it)."""
     return VirtualOculus(scan, **kwargs).serve(seconds, out)
+
+
+def scene_water(sensor) -> dict:
+    """``{"temperature", "surface_z"}`` of a scene's ``sonar`` sensor (its ``water``, the XML's
+    ``temperature`` and ``surface_z`` with ``auto`` water; the sensor's defaults otherwise), for
+    `VirtualOculus`'s ``water``."""
+    from mitsonar.plugins.water import WATER_DEFAULTS
+    water = getattr(sensor, "water", None) or WATER_DEFAULTS
+    return {"temperature": float(water["temperature"]), "surface_z": float(water["surface_z"])}
