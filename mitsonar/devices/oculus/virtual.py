@@ -41,10 +41,12 @@ water's temperature, the fire message's salinity and the head's depth below ``su
 
 Levels: ``gainPercent`` g is the receiver gain: 100 % the scan's own, g % ``20 log10(g/100)`` dB
 on it (`VirtualOculus.received`: a rendered scan through its receiver chain again, a scan of
-bytes moved on its A/D scale); ``gammaCorrection`` G applies ``255 (x/255)^(G/255)`` (G 0 or
-255: none), and the level is
-quantised to the sample width: 8-bit ``round(y)``, 16-bit ``round(y x 257)``, 32-bit
-``round(y x 16843009)`` (the same level through a wider A/D). The per-row gain sent (flag bit 2)
+bytes moved on its A/D scale); ``gammaCorrection`` G applies ``T (x/T)^(G/255)`` (G 0 or
+255: none) to the codes x of full scale T. 8-bit samples are the scan's bytes; 16- and 32-bit
+ones the same levels through a wider A/D: a rendered scan's receiver chain again at ``bit_depth``
+16 or 32 (`mitsonar.receiver.electronics.Electronics`: ``round((2^bits - 1) x)`` of the A/D
+window's fraction x, so the 8-bit byte is the 16-bit code / 257 up to rounding); a log's bytes
+times 257 and 16843009 (it has no finer levels). The per-row gain sent (flag bit 2)
 is g/100 (the amplitude gain) as a float32. So at gain 100 and gamma 255 the 8-bit image is the
 scan's bytes.
 
@@ -80,7 +82,6 @@ __all__ = ["VirtualOculus", "attitude", "check_fire", "serve", "parse_tcp_url"]
 MAX_INCOMING_PAYLOAD = 1024
 #: how much a slow client may have waiting before pings for it are skipped
 MAX_BACKLOG = 8 << 20
-_SCALE = {1: 1, 2: 257, 4: 16843009}
 
 
 def parse_tcp_url(url: str | None, default_host: str = "127.0.0.1", default_port: int = 52100) -> tuple[str, int]:
@@ -307,6 +308,9 @@ class VirtualOculus:
         n_r = max(1, min(65535, int(round(key[1] / res))))
         if n_r > 4096:                       # keep the image a real head's size: coarser lines
             n_r, res = 4096, key[1] / 4096
+        from mitsonar.receiver.electronics import AD_CODES
+        bits = 8 * fire.data_bytes
+        top, _, dtype = AD_CODES[bits]
         level = np.zeros((n_r, fire.n_beams), np.float64)
         if scan.n_pings:
             want = np.radians(bearings / 100.0)
@@ -318,40 +322,43 @@ class VirtualOculus:
             r_scan = (np.arange(n_r) + 0.5) * res / stretch
             idx = np.floor((r_scan - scan.range_min) / scan.bin_width + 1e-9).astype(np.int64)
             ok = (idx >= 0) & (idx < scan.n_bins)
-            rows = self.received(scan, fire.gain)[rows_of[k]].astype(np.float64)      # (n_beams, n_bins)
+            rows = self.received(scan, fire.gain, bits)[rows_of[k]].astype(np.float64)      # (n_beams, n_bins)
             level[np.ix_(ok, inside)] = rows[inside][:, idx[ok]].T
         if fire.gamma not in (0, 255):
-            level = 255.0 * (level / 255.0) ** (fire.gamma / 255.0)
-        nb = fire.data_bytes
-        dtype = {1: np.uint8, 2: np.uint16, 4: np.uint32}[nb]
-        image = np.round(level * _SCALE[nb]).astype(dtype)
+            level = top * (level / top) ** (fire.gamma / 255.0)
+        image = np.round(level).astype(dtype)
         out = (image, bearings, float(res))
         if len(self._cache) > 32:
             self._cache.clear()
         self._cache[key] = (scan, out)
         return out
 
-    def received(self, scan: Scan, gain_percent: float) -> np.ndarray:
-        """``scan``'s bytes at the receiver gain ``gain_percent`` asks for: 100 % is the scan's
-        own gain (its bytes); g % is ``20 log10(g / 100)`` dB on it (50 %: -6 dB), within the
-        head's 0..80 dB (`mitsonar.receiver.electronics.HEAD_LIMITS`; 0 %: the least). A rendered
-        scan (with intensity) goes through its receiver chain again at that gain
-        (`mitsonar.receiver.electronics.apply_to_scan`, the same noise seed); a scan of bytes
-        only (a log) has its bytes moved by that many dB on its A/D scale (``ad_span``)."""
-        if gain_percent == 100.0:
+    def received(self, scan: Scan, gain_percent: float, bits: int = 8) -> np.ndarray:
+        """``scan``'s codes from a ``bits``-bit A/D (8: bytes, uint8; 16, 32: uint16, uint32) at
+        the receiver gain ``gain_percent`` asks for: 100 % is the scan's own gain; g % is
+        ``20 log10(g / 100)`` dB on it (50 %: -6 dB), within the head's 0..80 dB
+        (`mitsonar.receiver.electronics.HEAD_LIMITS`; 0 %: the least). A rendered scan (with
+        intensity) goes through its receiver chain again at that gain and A/D width
+        (`mitsonar.receiver.electronics.apply_to_scan`, the same noise seed: its 8-bit codes are
+        its bytes at 100 %); a scan of codes only (a log) has them moved by that many dB on its
+        A/D scale (``ad_span``) and scaled to the width asked (a byte b is ``257 b`` at 16 bits)."""
+        from mitsonar.receiver.electronics import AD_CODES, HEAD_LIMITS, Electronics, apply_to_scan
+        top, _, dtype = AD_CODES[bits]
+        if gain_percent == 100.0 and scan.data.dtype == dtype:
             return scan.data
-        key = ("received", id(scan), float(gain_percent))
+        key = ("received", id(scan), float(gain_percent), bits)
         if key in self._cache and self._cache[key][0] is scan:
             return self._cache[key][1]
-        from mitsonar.receiver.electronics import HEAD_LIMITS, Electronics, apply_to_scan
         e = Electronics.from_dict(scan.electronics)
         lo, hi = HEAD_LIMITS["gain"]
         db = 20.0 * math.log10(gain_percent / 100.0) if gain_percent > 0 else -math.inf
         if np.any(scan.intensity):
-            out = apply_to_scan(scan, {**scan.electronics, "gain": float(np.clip(e.gain + db, lo, hi))}).data
+            gain = e.gain if gain_percent == 100.0 else float(np.clip(e.gain + db, lo, hi))
+            out = apply_to_scan(scan, {**scan.electronics, "gain": gain, "bit_depth": bits}).data
         else:
-            shift = max(db, lo - e.gain) * 255.0 / e.ad_span
-            out = np.clip(np.floor(scan.data.astype(np.float64) + shift + 0.5), 0, 255).astype(np.uint8)
+            shift = 0.0 if gain_percent == 100.0 else max(db, lo - e.gain) * top / e.ad_span
+            codes = scan.data.astype(np.float64) * (top / np.iinfo(scan.data.dtype).max)
+            out = np.clip(np.floor(codes + shift + 0.5), 0, top).astype(dtype)
         self._cache[key] = (scan, out)
         return out
 
