@@ -106,7 +106,7 @@ def _live(args) -> int:
         log = PingLog(args.records) if args.records else PingLog()
         budget = None if args.budget_ms is None else args.budget_ms * 1e-3
         renderer = PingRenderer(scene, sonar, buffer, spp=args.spp, seed=args.seed, budget=budget, log=log,
-                                outputs=outputs)
+                                outputs=outputs, source=(str(scene_path), getattr(args, "sensor", None)))
         if frames:
             from mitsonar.devices.framing import FrameLoop
             rate = args.ping_rate

@@ -80,32 +80,65 @@ class SceneFrames:
         scene = live_scene(self.path, self._choose)
         return scene_water(next(s for s in scene.sensors() if s.id() == self._id))
 
-    def _render(self, mode, n_beams: int, range_m: float):
-        from mitsonar.devices.live import live_scene
-        from mitsonar.sim.render import render_scan
-
+    def _values(self, mode, n_beams: int, range_m: float) -> dict:
+        """The sensor's XML properties for a mode, a beam count and a range: {name: (tag, value)}."""
         from mitsonar.devices.oculus.presets import bearing_table
 
         n_bins = max(1, min(4096, int(round(range_m / self.bin_width))))
         table = bearing_table(mode.aperture, n_beams) / 100.0
-        values = {"bearings": ("string", " ".join(f"{b:.2f}" for b in table)),
-                  "range_min": ("float", 0.0), "range_max": ("float", range_m),
-                  "n_bins": ("integer", n_bins), "beamwidth_h": ("float", mode.beamwidth_h),
-                  "beamwidth_v": ("float", mode.beamwidth_v), "tx_beamwidth_h": ("float", mode.aperture),
-                  "tx_beamwidth_v": ("float", mode.beamwidth_v), "frequency": ("float", mode.frequency)}
+        return {"bearings": ("string", " ".join(f"{b:.2f}" for b in table)),
+                "range_min": ("float", 0.0), "range_max": ("float", range_m),
+                "n_bins": ("integer", n_bins), "beamwidth_h": ("float", mode.beamwidth_h),
+                "beamwidth_v": ("float", mode.beamwidth_v), "tx_beamwidth_h": ("float", mode.aperture),
+                "tx_beamwidth_v": ("float", mode.beamwidth_v), "frequency": ("float", mode.frequency)}
 
-        def edit(root):
-            el = self._choose(root)
-            for child in [c for c in el if c.get("name") in ("n_pings", "bearing_start", "bearing_step")]:
-                el.remove(child)             # the table says them
-            for name, (tag, value) in values.items():
-                child = next((c for c in el if c.get("name") == name), None)
-                if child is None:
-                    child = ET.SubElement(el, tag, name=name)
-                child.tag = tag
-                child.set("value", str(value))
+    def _edit(self, root, values):
+        """Set ``values`` on the chosen sonar's element of ``root``; returns the element."""
+        el = self._choose(root)
+        for child in [c for c in el if c.get("name") in ("n_pings", "bearing_start", "bearing_step")]:
+            el.remove(child)             # the table says them
+        for name, (tag, value) in values.items():
+            child = next((c for c in el if c.get("name") == name), None)
+            if child is None:
+                child = ET.SubElement(el, tag, name=name)
+            child.tag = tag
+            child.set("value", str(value))
+        return el
 
-        scene = live_scene(self.path, edit)
+    def sensor_at(self, mode, n_beams: int, range_m: float):
+        """The scene's sonar sensor alone at that geometry (a new sensor object, cached per
+        setting), for rendering the scene as loaded (`mitsonar.devices.live.LiveOculus`: the shapes
+        it moves stay moved)."""
+        key = ("sensor", mode, int(n_beams), round(float(range_m), 9))
+        with self._lock:
+            if key not in self._cache:
+                if len(self._cache) >= self.max_cached:
+                    self._cache.pop(next(iter(self._cache)))
+                self._cache[key] = self._load_sensor(mode, int(n_beams), float(range_m))
+            return self._cache[key]
+
+    def _load_sensor(self, mode, n_beams: int, range_m: float):
+        import mitsuba as mi
+
+        from mitsonar.devices.live import scene_folder
+        from mitsonar.sim.variant import ensure_variant
+
+        try:
+            root = ET.parse(self.path).getroot()
+        except (OSError, ET.ParseError) as e:
+            raise ValueError(f"{self.path}: cannot read the scene XML ({e})") from None
+        el = self._edit(root, self._values(mode, n_beams, range_m))
+        el.set("version", root.get("version", "3.0.0"))
+        ensure_variant()
+        scene_folder(self.path)
+        return mi.load_string(ET.tostring(el, encoding="unicode"))
+
+    def _render(self, mode, n_beams: int, range_m: float):
+        from mitsonar.devices.live import live_scene
+        from mitsonar.sim.render import render_scan
+
+        values = self._values(mode, n_beams, range_m)
+        scene = live_scene(self.path, lambda root: self._edit(root, values))
         scan = render_scan(scene, spp=self.spp, seed=self.seed, sensor=self._id)
         self.renders += 1
         return scan

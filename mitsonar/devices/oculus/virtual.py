@@ -239,9 +239,13 @@ class VirtualOculus:
         (a scene rendered at the fire message's geometry) if given, else scan ``ping_id mod
         len(scans)``."""
         if self.frames is not None:
-            mode = self.model.mode(fire.master_mode)
-            return self.frames(mode, fire.n_beams, _range(fire, mode))
+            return self.frames(*self.geometry_of(fire))
         return self.scans[ping_id % len(self.scans)]
+
+    def geometry_of(self, fire: FireMessage) -> tuple:
+        """``(mode, n_beams, range m)`` a fire message asks for (`mitsonar.devices.oculus.presets.Mode`)."""
+        mode = self.model.mode(fire.master_mode)
+        return mode, fire.n_beams, _range(fire, mode)
 
     # ---- pings ----
     def sound_speed(self, fire: FireMessage) -> float:
