@@ -180,17 +180,14 @@ class PingRenderer:
     estimated error, render time, ...); these three are the calling thread's own last ping's
     (a frame loop and a head may render with one renderer at once);
     ``error``: the scene's `mitsonar.devices.realtime.ErrorModel` (measured by `warm`, with
-    ``calibration`` renders at each of its numbers of paths). ``source``: ``(scene file, sensor
-    id or index or None)`` the scene and ``sonar`` came from, for a head that renders the sensor
-    at another geometry (`LiveOculus`); None: not known.
+    ``calibration`` renders at each of its numbers of paths).
     """
 
     def __init__(self, scene, sonar, poses=None, *, spp: int | None = 64, seed: int = 0, out=None,
-                 budget: float | None = None, log=None, calibration: int = 8, outputs=None, source=None):
+                 budget: float | None = None, log=None, calibration: int = 8, outputs=None):
         from mitsonar.devices.realtime import ErrorModel, PathBudget, PingLog
 
         self.scene, self.sonar = scene, sonar
-        self.source = source
         #: `mitsonar.devices.outputs.LiveOutputs` (or any ``publish(t_ns, vehicle, mount, scan)``)
         #: given each ping (or frame) after it is rendered: its time (ns, Unix epoch), the
         #: vehicle's pose, the mount and the scan; None: none.
@@ -477,23 +474,19 @@ def _oculus():
         ``status_port`` (52102) of HOST.
 
         Each ping renders the fire message's geometry (the mode's aperture, frequency and beam
-        widths, 256 or 512 beams at the head's bearing table, the range asked): the scene's sensor
-        at that geometry (`mitsonar.devices.oculus.scenes.SceneFrames.sensor_at`, range lines as wide
-        as the scene sensor's bins), in the scene as loaded (so moved shapes stay moved), when the
-        renderer knows the file it came from (``renderer.source``); else the scene sensor's own
+        widths, 256 or 512 beams at the head's bearing table, the range asked): ``geometry(mode,
+        n_beams, range)`` gives the sensor of that geometry (`mitsonar.devices.oculus.scenes.
+        SceneFrames.sensor_at`, what ``mitsonar live --head oculus`` passes), which renders the
+        scene as loaded (so moved shapes stay moved); without ``geometry``, the scene sensor's own
         fan and range."""
 
         def __init__(self, renderer: PingRenderer, port_url=None, *, baudrate=None, realtime: bool = True,
-                     status_port: int | None = None, model: str | None = None):
+                     status_port: int | None = None, model: str | None = None, geometry=None):
             from mitsonar.devices.oculus.protocol import UDP_PORT
             self.renderer = renderer
             host, port = parse_tcp_url(port_url)
             from mitsonar.devices.oculus.virtual import scene_water
-            self.geometry = None
-            if renderer.source is not None:
-                from mitsonar.devices.oculus.scenes import SceneFrames
-                self.geometry = SceneFrames(renderer.source[0], renderer.source[1],
-                                            bin_width=renderer.sonar.bin_width).sensor_at
+            self.geometry = geometry
             super().__init__(renderer.warm(), model=model or "M1200d", host=host, tcp_port=port,
                              udp_port=UDP_PORT if status_port is None else status_port, realtime=realtime,
                              water=scene_water(renderer.sonar))

@@ -252,7 +252,7 @@ def received_bytes(inten, n_rows, n_bins, *, kernel, corr, g, g_seed, weibull, r
         return mi.UInt8() if ad[2] <= 8 else mi.UInt32()
     calibration, gain, tvg = levels
     ad_low, ad_span, bit_depth = ad
-    scale = {4: 15.0, 8: 255.0, 16: 65535.0, 32: 4294967295.0}[bit_depth]
+    scale = float(AD_CODES[bit_depth][0])
     h = taps(corr)
     width = n_bins + h.size - 1
     with dr.suspend_grad():
@@ -300,6 +300,17 @@ def received_bytes(inten, n_rows, n_bins, *, kernel, corr, g, g_seed, weibull, r
         out = mi.UInt32(q) if bit_depth > 8 else mi.UInt8(mi.UInt32(q))
         dr.eval(out)
     return out
+
+
+#: each A/D width's codes: (full scale, step between reported codes, NumPy type of the data)
+AD_CODES = {8: (255, 1, np.uint8), 4: (15, 17, np.uint8), 16: (65535, 1, np.uint16),
+            32: (4294967295, 1, np.uint32)}
+
+
+def host_codes(data, shape, bit_depth: int) -> np.ndarray:
+    """`received_bytes`'s array as NumPy of ``shape`` in the A/D's type (uint8; uint16 or
+    uint32 at 16 or 32 bits)."""
+    return data.numpy().reshape(shape).astype(AD_CODES[bit_depth][2], copy=False)
 
 
 def spread_kernel(length: float, sigma: float, bin_width: float) -> np.ndarray:

@@ -348,7 +348,8 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
                          speckle_seed=speckle_seed, sound_speed_profile=sound_speed_profile)
     (scene, sonar, integrator, model, intensity, ranges, poses, seed, spp, max_depth, eseed, trajectory,
      start_time) = frame._scan
-    data = model.host_data(frame.data, frame.shape)
+    from mitsonar.receiver import devicechain
+    data = devicechain.host_codes(frame.data, frame.shape, model.bit_depth)
     from mitsonar._version import __version__
 
     meta = {

@@ -109,6 +109,13 @@ class OculusHead(Head):
                              frames=frames, water=water)
         return head.serve(args.seconds, None, "virtual Oculus")
 
+    def live_geometry(self, path: str, sensor, sonar):
+        """``mitsonar live``: the scene sensor ``sonar`` (of ``path``, ``--sensor``) at each fire
+        message's geometry, ``(mode, n_beams, range) -> sensor``, range lines as wide as its bins
+        (`mitsonar.devices.oculus.scenes.SceneFrames.sensor_at`)."""
+        from mitsonar.devices.oculus.scenes import SceneFrames
+        return SceneFrames(path, sensor, bin_width=sonar.bin_width).sensor_at
+
     def record(self, args, settings) -> dict:
         """``record``: drive the Oculus at ``args.port`` (``tcp://HOST:PORT``, ``HOST``; ``auto``:
         found by its status broadcast) and log to ``args.output``: a ``.oculus`` log (the ping

@@ -312,7 +312,7 @@ class VirtualOculus:
         n_r = max(1, min(65535, int(round(key[1] / res))))
         if n_r > 4096:                       # keep the image a real head's size: coarser lines
             n_r, res = 4096, key[1] / 4096
-        from mitsonar.receiver.electronics import AD_CODES
+        from mitsonar.receiver.devicechain import AD_CODES
         bits = 8 * fire.data_bytes
         top, _, dtype = AD_CODES[bits]
         level = np.zeros((n_r, fire.n_beams), np.float64)
@@ -346,7 +346,8 @@ class VirtualOculus:
         (`mitsonar.receiver.electronics.apply_to_scan`, the same noise seed: its 8-bit codes are
         its bytes at 100 %); a scan of codes only (a log) has them moved by that many dB on its
         A/D scale (``ad_span``) and scaled to the width asked (a byte b is ``257 b`` at 16 bits)."""
-        from mitsonar.receiver.electronics import AD_CODES, HEAD_LIMITS, Electronics, apply_to_scan
+        from mitsonar.receiver.devicechain import AD_CODES
+        from mitsonar.receiver.electronics import HEAD_LIMITS, Electronics, apply_to_scan
         top, _, dtype = AD_CODES[bits]
         if gain_percent == 100.0 and scan.data.dtype == dtype:
             return scan.data
