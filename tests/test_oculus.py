@@ -618,6 +618,17 @@ def test_live_oculus_renders_each_fire_messages_geometry(wall):
         assert lit.sum() > 20 and same.mean() < 0.2, same.mean()
 
 
+def test_the_scene_sensor_at_a_fire_geometry_takes_the_scenes_defaults(tmp_path):
+    from mitsonar.devices.oculus.scenes import SceneFrames
+    path = tmp_path / "defaults.xml"
+    path.write_text(WALL.replace('<scene version="3.0.0">', '<scene version="3.0.0"><default name="bw" value="20"/>')
+                    .replace('name="beamwidth_v" value="20"', 'name="beamwidth_v" value="$bw"'))
+    mode = presets.model("M1200d").mode(1)
+    sensor = SceneFrames(path, bin_width=0.1).sensor_at(mode, 512, 8.0)
+    assert (sensor.n_pings, sensor.n_bins, sensor.range_max) == (512, 80, 8.0)
+    np.testing.assert_allclose(sensor.bearings_deg(), presets.bearing_table(mode.aperture, 512) / 100.0)
+
+
 def test_record_writes_a_raw_log_or_an_oculus_log_that_replay_reads(tmp_path, head, capsys):
     url = f"tcp://127.0.0.1:{head.tcp_port}"
     assert main(["record", url, "--head", "oculus", "-o", str(tmp_path / "r.bin"), "--pings", "2",

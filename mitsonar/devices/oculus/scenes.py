@@ -131,7 +131,10 @@ class SceneFrames:
         el.set("version", root.get("version", "3.0.0"))
         ensure_variant()
         scene_folder(self.path)
-        return mi.load_string(ET.tostring(el, encoding="unicode"))
+        text = ET.tostring(el, encoding="unicode")
+        # the scene's <default> $parameters the sensor uses (Mitsuba refuses unused ones)
+        defaults = {d.get("name"): d.get("value") for d in root.iter("default") if f"${d.get('name')}" in text}
+        return mi.load_string(text, **defaults)
 
     def _render(self, mode, n_beams: int, range_m: float):
         from mitsonar.devices.live import live_scene
