@@ -11,7 +11,10 @@ pose time to the last byte written or the frame published) and a real client:
 * ``ping360``: the same head as a Ping360 over UDP, pinged by Blue Robotics' ``brping`` client
   (``transmitAngle``, one gradian a step, the scene's range in 600 samples);
 * ``multibeam256``: scenes_xml/harbour.xml's multibeam widened to 256 beams (half the bearing
-  step), whole frames at 10 Hz (``--ping-rate 10``), budget 100 ms a frame.
+  step), whole frames at 10 Hz (``--ping-rate 10``), budget 100 ms a frame;
+* ``oculus512``: that multibeam as an Oculus M1200d (``--head oculus``: 512 beams at its own
+  sine-spaced bearing table, 0..10 m), fired at 10 Hz by the project's driver while poses arrive
+  over UDP at 20 Hz; budget one ping period.
 
 For each: pings (frames) answered per second, latency / paths / relative error p50, p95, p99
 and, for the multibeam, frames published and late frames skipped.
@@ -24,6 +27,7 @@ slope (MB/min, least squares over the samples after the warm-up).
 Usage::
 
     python benchmarks/live.py --seconds 30 [--out live.json]
+    python benchmarks/live.py --cases oculus512 --seconds 30
     python benchmarks/live.py --soak [600]
 """
 from __future__ import annotations
@@ -201,6 +205,56 @@ def multibeam(seconds, tmp, beams=256, rate=10.0):
     return summarise(f"multibeam{beams}", rows, dt, summary, rate_hz=rate, frames_skipped=skipped)
 
 
+def oculus(seconds, tmp, beams=512, rate=10.0, range_m=10.0, pose_rate=20.0):
+    """``mitsonar live --head oculus``: the harbour's multibeam at an M1200d's low-frequency mode (its
+    own sine-spaced table of ``beams`` bearings, 0..``range_m``), fired at ``rate`` Hz by the
+    project's driver while poses arrive over UDP at ``pose_rate`` Hz; each ping's budget is its
+    period. Latency: from the ping's time (its render's start) to the ping result written."""
+    from mitsonar.devices.oculus import presets
+    from mitsonar.devices.oculus.driver import OculusSonar, fire_message
+
+    mode = presets.model("M1200d").mode(1)
+    root = ET.parse(HARBOUR).getroot()
+    mb = next(e for e in root.iter("sensor") if e.get("id") == "multibeam")
+    for c in [c for c in mb if c.get("name") in ("n_pings", "bearing_start", "bearing_step", "range_min", "range_max",
+                                                  "n_bins", "beamwidth_h", "beamwidth_v", "frequency")]:
+        mb.remove(c)
+    table = presets.bearing_table(mode.aperture, beams) / 100.0
+    ET.SubElement(mb, "string", name="bearings", value=" ".join(f"{b:.2f}" for b in table))
+    for name, value, tag in (("range_min", 0.0, "float"), ("range_max", range_m, "float"), ("n_bins", 400, "integer"),
+                             ("beamwidth_h", mode.beamwidth_h, "float"), ("beamwidth_v", mode.beamwidth_v, "float"),
+                             ("frequency", mode.frequency, "float")):
+        ET.SubElement(mb, tag, name=name, value=str(value))
+    scene = os.path.join(tmp, f"harbour_oculus{beams}.xml")
+    ET.ElementTree(root).write(scene)
+    records = os.path.join(tmp, "oculus.csv")
+    udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    udp.bind(("127.0.0.1", 0))
+    status_port = udp.getsockname()[1]
+    udp.close()
+    proc, text = start(scene, "--head", "oculus", "--sensor", "multibeam", "--port-url", "tcp://127.0.0.1:0",
+                       "--status-port", str(status_port), "--pose-url", "udp://127.0.0.1:0", "--records", records)
+    stop_poses = threading.Event()
+    frames = 0
+    try:
+        pose_port = int(text.split("poses on udp://127.0.0.1:")[1].split()[0])
+        poses = threading.Thread(target=send_poses, args=(pose_port, pose_rate, stop_poses), daemon=True)
+        poses.start()
+        port = int(text.split("tcp://127.0.0.1:")[1].split()[0])
+        with OculusSonar("127.0.0.1", port, fire=fire_message(rate=rate, range=range_m, gain=100, beams=beams),
+                         timeout=30.0) as sonar:
+            t0 = time.monotonic()
+            while time.monotonic() - t0 < seconds:
+                sonar.scan()
+                frames += 1
+            dt = time.monotonic() - t0
+    finally:
+        stop_poses.set()
+        summary = stop(proc)
+    return summarise(f"oculus{beams}", read_records(records), dt, summary, rate_hz=rate, range_m=range_m,
+                     pose_rate_hz=pose_rate, frames_read=frames)
+
+
 def send_poses(port, rate, stop_event):
     """Poses at ``rate`` Hz: the vehicle circling slowly in the basin (yaw turning)."""
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -254,7 +308,7 @@ def main(argv=None) -> int:
         if args.soak is not None:
             result = {"benchmark": "live soak", "cpus": os.cpu_count(), **soak(args.soak, args.warmup, tmp)}
         else:
-            cases = {"micron": micron, "ping360": ping360, "multibeam256": multibeam}
+            cases = {"micron": micron, "ping360": ping360, "multibeam256": multibeam, "oculus512": oculus}
             result = {"benchmark": "live", "cpus": os.cpu_count(), "scene": "scenes_xml/harbour.xml",
                       "cases": [cases[c](args.seconds, tmp) for c in args.cases.split(",")]}
     text = json.dumps(result, indent=1)

@@ -40,6 +40,7 @@ import numpy as np
 
 import mitsonar.geometry.kinds as kinds
 
+from .jit_arrays import upload
 from .range_bins import RangeBins
 from .sonar_sensor import PingFrames
 
@@ -73,15 +74,20 @@ def window(sensor):
     else:
         lo, hi, _, _ = beam.support()
         w = max(-lo, hi)
+    bearings = np.radians(sensor.bearings_deg())
+    # the narrowest spacing of the rows (a head's own table may be uneven: more beams per degree
+    # near its boresight), so that the window either side of the nearest covers W everywhere
     step = abs(math.radians(sensor.bearing_step))
-    swath = step * (sensor.n_pings - 1)
+    if len(bearings) > 1 and not np.allclose(np.abs(np.diff(bearings)), step, rtol=0.0, atol=1e-12):
+        step = float(np.min(np.abs(np.diff(bearings))))
+    swath = float(bearings.max() - bearings.min())
     if swath + 2 * w >= 2 * math.pi:
         raise ValueError("sonar_tof 'share_beams': the receive beams' windows overlap across a full turn "
                          f"(swath {math.degrees(swath):g} deg + 2 x {math.degrees(w):g} deg); use share_beams false")
     m = sensor.n_pings if step == 0 else int(math.ceil(w / step))
     if min(2 * m + 1, sensor.n_pings) > MAX_BEAMS:
         raise ValueError(f"sonar_tof 'share_beams': each echo would reach {2 * m + 1} receive beams (beam "
-                         f"{beam.beamwidth_h:g} deg, step {sensor.bearing_step:g} deg), more than {MAX_BEAMS}; "
+                         f"{beam.beamwidth_h:g} deg, step {math.degrees(step):g} deg), more than {MAX_BEAMS}; "
                          "use share_beams false")
     return w, m
 
@@ -144,6 +150,11 @@ class SharedFrame:
         self.origin = _opaque(mi.Point3f, head[:3, 3])
         self.start = dr.opaque(mi.Float, bearings[0])
         self.step = float(math.radians(sensor.bearing_step))
+        # An uneven table of bearings (the head's own, `sonar_sensor` ``bearings``): the nearest
+        # row is found by a binary search and row k's bearing read from the table; an even one
+        # scores as ``start + k step`` does.
+        even = np.allclose(np.diff(bearings), self.step, rtol=0.0, atol=1e-12) if len(bearings) > 1 else True
+        self.table = None if even else upload(mi.Float, bearings, np.float32)
         self.inv_step = dr.opaque(mi.Float, 0.0 if self.step == 0 else 1.0 / self.step)
         self.step_o = dr.opaque(mi.Float, self.step)
         self.w_o = dr.opaque(mi.Float, self.w)
@@ -167,14 +178,17 @@ class SharedFrame:
         x, y, z = (dr.dot(d, a) for a in self.axes)
         az, el = dr.atan2(x, z), dr.safe_asin(y)
         az = self.centre + _wrap(az - self.centre)
-        nearest = dr.round((az - self.start) * self.inv_step)
+        if self.table is None:
+            nearest = dr.round((az - self.start) * self.inv_step)
+        else:
+            nearest = self._nearest(az)
         b, valid = self.bins.index(rng, valid)
         energy = energy * self.inv_rows
         # The window either side of the nearest beam, or every row when that is fewer.
         every = 2 * self.m + 1 >= self.n_rows
         for o in (range(self.n_rows) if every else range(-self.m, self.m + 1)):
             k = mi.Float(o) if every else nearest + o
-            off = az - (self.start + k * self.step_o)
+            off = az - self._bearing(k)
             use = valid & (k >= 0) & (k <= self.last_row) & (dr.abs(off) <= self.w_o)
             gain = beam.eval(off, el)
             use &= gain > 0
@@ -184,6 +198,21 @@ class SharedFrame:
                 gain = dr.select(faint, self.roulette, gain)
             row = mi.UInt32(dr.maximum(k, 0.0))
             hist.add(energy * gain, self.bins.flat(row, b), use, mode=getattr(dr.ReduceMode, self.scatter_mode))
+
+
+    def _bearing(self, k):
+        """Row ``k``'s bearing (rad; k a Float, clamped to the rows for the table's gather)."""
+        if self.table is None:
+            return self.start + k * self.step_o
+        return dr.gather(mi.Float, self.table, mi.UInt32(dr.clip(k, 0.0, self.last_row)))
+
+    def _nearest(self, az):
+        """The row of the table whose bearing is nearest ``az`` (a Float row index)."""
+        last = self.n_rows - 1
+        hi = dr.binary_search(0, last, lambda j: dr.gather(mi.Float, self.table, j) < az)
+        lo = mi.UInt32(dr.maximum(mi.Int32(hi) - 1, 0))
+        below = dr.abs(az - dr.gather(mi.Float, self.table, lo)) < dr.abs(dr.gather(mi.Float, self.table, hi) - az)
+        return mi.Float(dr.select(below, lo, hi))
 
 
 def _opaque(cls, values):

@@ -88,6 +88,10 @@ class SonarSensor(mi.Sensor):
                                   column's azimuth)
     bearing_step     1.8          deg between pings (Micron: 200 steps per turn; volumetric:
                                   between the grid's columns)
+    bearings         (none)       multibeam: the head's own table of beam bearings, deg, one per
+                                  receive beam (comma- or space-separated, strictly increasing,
+                                  each in [-180, 180]); sets ``n_pings``, and takes the place of
+                                  ``bearing_start``/``bearing_step`` (refused with them)
     n_pings          200          pings in a scan (sidescan: per channel), 1 to 100000; a
                                   multibeam's receive beams, 1 to 4096 (volumetric: refused,
                                   the rows are ``n_elevation x n_azimuth``)
@@ -167,8 +171,12 @@ class SonarSensor(mi.Sensor):
             raise not_allowed("sonar", "kind", self.kind, "one of " + ", ".join(kinds.names()))
         preset = self._sidescan(props)
         self._grid(props)
-        self.pings = count(props, "n_pings", 200, "sonar") if self.n_azimuth is None else \
-            self.n_azimuth * self.n_elevation
+        self.bearing_table = self._bearing_table(props)
+        if self.bearing_table is not None:
+            self.pings = len(self.bearing_table)
+        else:
+            self.pings = count(props, "n_pings", 200, "sonar") if self.n_azimuth is None else \
+                self.n_azimuth * self.n_elevation
         # Checked before the film is made: without one, Mitsuba makes its default RGB film and
         # prints a warning above our error.
         for name in ("n_bins", "n_pings"):
@@ -191,8 +199,13 @@ class SonarSensor(mi.Sensor):
         check("sonar", "sample_count", int(self.sampler().sample_count()), "spp")
         self.range_min = num("range_min", 0.0)
         self.range_max = num("range_max", preset.get("range_max", 12.0))
-        self.bearing_start = num("bearing_start", 0.0)
-        self.bearing_step = num("bearing_step", 1.8)
+        if self.bearing_table is None:
+            self.bearing_start = num("bearing_start", 0.0)
+            self.bearing_step = num("bearing_step", 1.8)
+        else:   # the first bearing, and the mean step (what a swath or a window asks of a table)
+            t = self.bearing_table
+            self.bearing_start = float(t[0])
+            self.bearing_step = float((t[-1] - t[0]) / (len(t) - 1)) if len(t) > 1 else 0.0
         # A number, or 'auto': the water's equations at the head's depth (plugins/water.py).
         self.sound_speed = number_or_auto(props, "sound_speed", 1500.0)
         self.absorption = number_or_auto(props, "absorption", 0.0)
@@ -302,6 +315,31 @@ class SonarSensor(mi.Sensor):
                                   "elevation_start + (n_elevation - 1) elevation_step = "
                                   f"{last:g} deg for the last row")
 
+    def _bearing_table(self, props):
+        """The XML ``bearings`` (deg, float64), checked; None without one. Only a
+        ``transmit_fan`` kind takes one, and not with ``bearing_start``, ``bearing_step`` or
+        ``n_pings`` (the table says them all)."""
+        if "bearings" not in props:
+            return None
+        raw = text(props, "bearings", "", "sonar")
+        if not self.sonar_kind.transmit_fan or self.sonar_kind.grid:
+            raise ValueError(f"sonar 'bearings': only used with kind {kinds.which('transmit_fan')} "
+                             f"(kind is {self.kind!r})")
+        given = [n for n in ("bearing_start", "bearing_step", "n_pings") if n in props]
+        if given:
+            raise ValueError(f"sonar '{given[0]}': not used with 'bearings' (the table gives every beam's bearing "
+                             "and their number)")
+        allowed = "a comma- or space-separated list of strictly increasing bearings in [-180, 180] deg"
+        try:
+            table = np.array([float(v) for v in raw.replace(",", " ").split()], dtype=np.float64)
+        except ValueError:
+            raise not_allowed("sonar", "bearings", raw[:60], allowed) from None
+        if (table.size == 0 or not np.all(np.isfinite(table)) or np.any(np.abs(table) > 180.0)
+                or np.any(np.diff(table) <= 0)):
+            raise not_allowed("sonar", "bearings", raw[:60], allowed)
+        check("sonar", "n_pings", int(table.size), "n_beams", suffix=f" for kind {self.kind!r}")
+        return table
+
     def _check(self):
         def bad(name, value, allowed):
             raise not_allowed("sonar", name, value, allowed)
@@ -312,7 +350,7 @@ class SonarSensor(mi.Sensor):
         for name in ("bearing_start", "bearing_step"):
             if not (math.isfinite(getattr(self, name)) and abs(getattr(self, name)) <= 360.0):
                 bad(name, getattr(self, name), "an angle in [-360, 360] deg")
-        swath = abs(self.bearing_step) * (self.n_azimuth - 1)
+        swath = self.swath_deg()
         top = self.sonar_kind.max_swath
         if top is not None and swath > top:
             bad("bearing_step", self.bearing_step, f"for kind {self.kind!r} the receive beams span |bearing_step| "
@@ -338,7 +376,7 @@ class SonarSensor(mi.Sensor):
         kind = tx.get("tx_pattern", "gaussian")
         if kind not in TX_PATTERNS:
             raise not_allowed("sonar", "tx_pattern", kind, f"one of {', '.join(TX_PATTERNS)}")
-        swath = abs(self.bearing_step) * (self.n_azimuth - 1) + bw_h
+        swath = self.swath_deg() + bw_h
         h = float(tx.get("tx_beamwidth_h", min(swath, 360.0)))
         v = float(tx.get("tx_beamwidth_v", min(abs(self.elevation_step) * (self.n_elevation - 1) + bw_v, 180.0)))
         for name, value, hi in (("tx_beamwidth_h", h, 360.0), ("tx_beamwidth_v", v, 180.0)):
@@ -355,7 +393,11 @@ class SonarSensor(mi.Sensor):
         return self.range_min + (np.arange(self.n_bins) + 0.5) * self.bin_width
 
     def bearings_deg(self) -> np.ndarray:
-        if self.sonar_kind.grid:   # row i n_azimuth + j: azimuth j
+        """(n_pings,) deg: each row's bearing, the XML ``bearings`` table or the kind's
+        ``bearing_start + k bearing_step`` (a grid's row i n_azimuth + j: azimuth j)."""
+        if self.bearing_table is not None:
+            return self.bearing_table.copy()
+        if self.sonar_kind.grid:
             return self.sonar_kind.bearings_deg(self.bearing_start, self.bearing_step, self.n_pings, self.n_azimuth)
         return self.sonar_kind.bearings_deg(self.bearing_start, self.bearing_step, self.n_pings)
 
@@ -364,6 +406,12 @@ class SonarSensor(mi.Sensor):
         ``elevation_start + i elevation_step``)."""
         return self.sonar_kind.elevations_deg(self.elevation_start, self.elevation_step, self.n_pings,
                                               self.n_azimuth)
+
+    def swath_deg(self) -> float:
+        """deg from the first column's bearing to the last one's (the table's span with ``bearings``)."""
+        if self.bearing_table is not None:
+            return float(self.bearing_table[-1] - self.bearing_table[0])
+        return abs(self.bearing_step) * (self.n_azimuth - 1)
 
     def channels(self) -> np.ndarray:
         """(n_pings,) channel of each row of a side-scan head (0 port, 1 starboard): the port pings,

@@ -128,7 +128,7 @@ def parse_ping(m: bytes) -> dict:
     gains = rows[:, :4].copy().view("<f4")[:, 0] if gain else None
     img = np.ascontiguousarray(rows[:, 4:] if gain else rows).view({1: "<u1", 2: "<u2", 4: "<u4"}[nb])
     return {"version": v, "id": pid, "frequency": freq, "c": c, "res": res, "n_r": n_r, "n_b": n_b,
-            "bearings": bearings, "image": img, "gains": gains, "range": fire[5], "temperature": temp,
+            "bearings": bearings, "image": img, "gains": gains, "range": fire[5], "temperature": temp, "pressure": pres,
             "heading": heading if v == 2 else None, "raw": m}
 
 
@@ -472,15 +472,39 @@ def test_virtual_sonar_serves_a_scene_with_the_wall_at_its_range(wall):
     fire = FireMessage(flags=0x0D, range=10.0, gain=100.0, speed_of_sound=1500.0)
     frame = frames(presets.model("M1200d").mode(1), 256, 10.0)
     assert frame.n_pings == 256 and frame.beamwidth_h == pytest.approx(0.6) and frame.meta["frequency"] == 1.2e6
-    assert np.degrees(frame.bearings[[0, -1]]) == pytest.approx([-65 + 65 / 256, 65 - 65 / 256])
+    # rendered at the head's own (sine-spaced) bearing table: row k is beam k
+    np.testing.assert_allclose(np.degrees(frame.bearings), presets.bearing_table(130, 256) / 100.0, atol=1e-9)
     expected = VirtualOculus(rendered, tcp_port=0, frames=frames).ping(fire)
     for p in got:
         np.testing.assert_array_equal(p["image"], expected.image)       # mitsonar's rendered bytes
         assert p["heading"] == pytest.approx(90.0)                      # looking along +x: east
+        np.testing.assert_array_equal(p["bearings"], presets.bearing_table(130, 256))
     centre = np.abs(got[0]["bearings"] / 100.0) < 15
     profile = got[0]["image"][:, centre].mean(axis=1)
     line = 10 + int(np.argmax(profile[10:]))                            # past the ring-down
     assert (line + 0.5) * got[0]["res"] == pytest.approx(WALL_RANGE, abs=2 * got[0]["res"])
+
+
+def test_virtual_sonar_takes_the_scenes_water_temperature_and_surface(tmp_path):
+    from mitsonar.acoustics.seawater import sound_speed
+    path = tmp_path / "warm.xml"
+    path.write_text(WALL.replace('<string name="beam_pattern"', '<string name="sound_speed" value="auto"/>'
+                                 '<float name="temperature" value="20"/><float name="surface_z" value="5"/>'
+                                 '<string name="beam_pattern"'))
+    proc, port = _serve([str(path), "--head", "oculus", "--spp", "4", "--port-url", "tcp://127.0.0.1:0",
+                         "--status-port", str(free_udp_port()), "--seconds", "60"])
+    try:
+        c = LayoutClient(port)
+        c.fire(version=2, rate=2, flags=0x0D, rng=10.0, gain=100.0, c=0.0, salinity=35.0)   # the head's own c
+        p = c.ping()
+        c.close()
+    finally:
+        proc.terminate()
+        proc.wait(10)
+    # the head at z = 0 is 5 m below a surface at z = 5, in water at 20 deg C
+    assert p["temperature"] == pytest.approx(20.0)
+    assert p["pressure"] == pytest.approx(5.0 * 1025.0 * 9.80665 / 1e5)
+    assert p["c"] == pytest.approx(float(sound_speed(20.0, 35.0, 5.0)))
 
 
 def test_virtual_sonar_serves_a_log(tmp_path):
@@ -554,6 +578,55 @@ def test_live_oculus_renders_each_ping_from_the_pose_then(wall):
         proc.terminate()
         out, err = proc.communicate(timeout=60)
     assert "Traceback" not in err and "1 poses applied" in out, (out, err)
+
+
+def test_live_oculus_renders_each_fire_messages_geometry(wall):
+    path, _ = wall
+    proc = subprocess.Popen([sys.executable, "-m", "mitsonar", "live", str(path), "--head", "oculus", "--spp", "16",
+                             "--port-url", "tcp://127.0.0.1:0", "--status-port", str(free_udp_port()),
+                             "--seconds", "60"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines = []
+    for line in proc.stdout:
+        lines.append(line)
+        if line.startswith("live "):
+            break
+    text = "".join(lines)
+    try:
+        assert "live Oculus on tcp://127.0.0.1:" in text, text
+        c = LayoutClient(int(text.split("tcp://127.0.0.1:")[1].split()[0]))
+        got = {}
+        for mode, flags, rng in ((1, 0x4D, 8.0), (2, 0x0D, 7.0)):     # 512 beams over 130 deg; 256 over 60 deg
+            c.fire(version=2, mode=mode, rate=2, flags=flags, rng=rng, gain=100.0, c=1500.0)
+            for _ in range(3):                     # a ping of the earlier settings may be in flight
+                p = c.ping()
+                if p["n_b"] == (512 if flags & 0x40 else 256) and p["range"] == rng:
+                    break
+            got[mode] = p
+        c.close()
+    finally:
+        proc.terminate()
+        proc.communicate(timeout=60)
+    for mode, p in got.items():
+        aperture = presets.model("M1200d").mode(mode).aperture
+        np.testing.assert_array_equal(p["bearings"], presets.bearing_table(aperture, p["n_b"]))
+        assert p["n_r"] == round(p["range"] / 0.1)          # lines as wide as the scene sensor's bins
+        img = p["image"][:, np.abs(p["bearings"] / 100.0) < 25].astype(np.int64)
+        lit = img[10:].any(axis=0)
+        # every beam its own rendered row: neighbours differ (the scene's own 2 deg fan served
+        # beam by nearest row repeats each row over several beams)
+        same = np.all(img[:, 1:] == img[:, :-1], axis=0)[lit[1:] & lit[:-1]]
+        assert lit.sum() > 20 and same.mean() < 0.2, same.mean()
+
+
+def test_the_scene_sensor_at_a_fire_geometry_takes_the_scenes_defaults(tmp_path):
+    from mitsonar.devices.oculus.scenes import SceneFrames
+    path = tmp_path / "defaults.xml"
+    path.write_text(WALL.replace('<scene version="3.0.0">', '<scene version="3.0.0"><default name="bw" value="20"/>')
+                    .replace('name="beamwidth_v" value="20"', 'name="beamwidth_v" value="$bw"'))
+    mode = presets.model("M1200d").mode(1)
+    sensor = SceneFrames(path, bin_width=0.1).sensor_at(mode, 512, 8.0)
+    assert (sensor.n_pings, sensor.n_bins, sensor.range_max) == (512, 80, 8.0)
+    np.testing.assert_allclose(sensor.bearings_deg(), presets.bearing_table(mode.aperture, 512) / 100.0)
 
 
 def test_record_writes_a_raw_log_or_an_oculus_log_that_replay_reads(tmp_path, head, capsys):

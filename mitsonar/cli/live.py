@@ -123,6 +123,8 @@ def _live(args) -> int:
             for dest in ("model", "status_port"):          # an Oculus's model and status port
                 if dest in {d for d, _ in head.options} and getattr(args, dest, None) is not None:
                     kw[dest] = getattr(args, dest)
+            if hasattr(head, "live_geometry"):      # a head rendering each fire message's geometry (Oculus)
+                kw["geometry"] = head.live_geometry(str(scene_path), getattr(args, "sensor", None), sonar)
             live = LIVE_HEADS[head.name]()(renderer, args.port_url, **kw)
     except BaseException:
         if sock is not None:

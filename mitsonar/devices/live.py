@@ -55,8 +55,6 @@ def live_scene(path: str, edit=None):
     (`mitsonar.sim.scene.load_scene` of the edited XML, relative paths resolved from the file's
     folder). ``edit``: a function given the XML's root element to change further before the load
     (`mitsonar.devices.oculus.scenes`)."""
-    import mitsuba as mi
-
     from mitsonar.sim.scene import SceneError, load_scene
     from mitsonar.sim.variant import ensure_variant
 
@@ -75,15 +73,23 @@ def live_scene(path: str, edit=None):
     if edit is not None:
         edit(root)
     ensure_variant()
-    folder = os.path.dirname(os.path.abspath(path))
-    resolver = mi.file_resolver() if hasattr(mi, "file_resolver") else mi.Thread.thread().file_resolver()
-    if folder not in [str(p) for p in resolver]:
-        resolver.prepend(folder)
+    scene_folder(path)
     # optimize=False: shapes keep their ids (no merging of those sharing a BSDF), so that an
     # ``object`` datagram can move one
     scene = load_scene(ET.tostring(root, encoding="unicode"), optimize=False)
     scene.set_id(os.path.basename(path))
     return scene
+
+
+def scene_folder(path: str) -> None:
+    """Put the folder of the scene file ``path`` first on Mitsuba's file resolver (relative paths
+    in its XML are found from there)."""
+    import mitsuba as mi
+
+    folder = os.path.dirname(os.path.abspath(path))
+    resolver = mi.file_resolver() if hasattr(mi, "file_resolver") else mi.Thread.thread().file_resolver()
+    if folder not in [str(p) for p in resolver]:
+        resolver.prepend(folder)
 
 
 def _xml_kind(sensor):
@@ -244,12 +250,14 @@ class PingRenderer:
         self.paths.per_path = float(np.median([t for k, t in times if k == n])) / n
         return first
 
-    def render(self, bearing: float | None, now: float | None = None, budget: float | None = None):
+    def render(self, bearing: float | None, now: float | None = None, budget: float | None = None, sonar=None):
         """A one-row `Scan` of the ping at ``bearing`` (radians, the simulator's convention) fired
         at ``now`` (``time.monotonic``, default now); its ``bearings`` is ``[bearing]``.
         ``bearing`` None: the sensor's whole frame (every row) at the vehicle's pose.
         ``budget``: seconds this ping may take (the head's ping period), used when the renderer has
-        no ``budget`` of its own (``--budget-ms``, which wins); ignored with a fixed ``spp``."""
+        no ``budget`` of its own (``--budget-ms``, which wins); ignored with a fixed ``spp``.
+        ``sonar``: another sensor object of the same mount to render with (a head's geometry of the
+        moment, `LiveOculus`); default the renderer's."""
         from mitsonar.sim.render import render_scan
 
         t0 = time.monotonic()
@@ -266,7 +274,7 @@ class PingRenderer:
             self.stats["pings"] += 1
             t1 = time.monotonic()
             scan = render_scan(self.scene, spp=paths, seed=(self.seed + k) % _SEED_MAX, pose=pose,
-                               sensor=self.sonar)
+                               sensor=self.sonar if sonar is None else sonar)
             spent = time.monotonic() - t1
             if self.spp is None:
                 self.paths.measured(paths, spent)
@@ -463,19 +471,32 @@ def _oculus():
         rendered when it fires, from the vehicle's pose then, with the stream's ping period as
         budget; protocol, bearing table, range lines and levels are the virtual head's.
         ``port_url`` is ``tcp://HOST:PORT`` (default 127.0.0.1:52100); the status goes to UDP
-        ``status_port`` (52102) of HOST."""
+        ``status_port`` (52102) of HOST.
+
+        Each ping renders the fire message's geometry (the mode's aperture, frequency and beam
+        widths, 256 or 512 beams at the head's bearing table, the range asked): ``geometry(mode,
+        n_beams, range)`` gives the sensor of that geometry (`mitsonar.devices.oculus.scenes.
+        SceneFrames.sensor_at`, what ``mitsonar live --head oculus`` passes), which renders the
+        scene as loaded (so moved shapes stay moved); without ``geometry``, the scene sensor's own
+        fan and range."""
 
         def __init__(self, renderer: PingRenderer, port_url=None, *, baudrate=None, realtime: bool = True,
-                     status_port: int | None = None, model: str | None = None):
+                     status_port: int | None = None, model: str | None = None, geometry=None):
             from mitsonar.devices.oculus.protocol import UDP_PORT
             self.renderer = renderer
             host, port = parse_tcp_url(port_url)
+            from mitsonar.devices.oculus.virtual import scene_water
+            self.geometry = geometry
             super().__init__(renderer.warm(), model=model or "M1200d", host=host, tcp_port=port,
-                             udp_port=UDP_PORT if status_port is None else status_port, realtime=realtime)
+                             udp_port=UDP_PORT if status_port is None else status_port, realtime=realtime,
+                             water=scene_water(renderer.sonar))
 
         def ping(self, fire, ping_id: int = 0, now: float = 0.0):
             period = self.period(fire)
-            self.scans = [self.renderer.render(None, None, period if 0 < period < math.inf else None)]
+            sonar = None
+            if self.geometry is not None:
+                sonar = self.geometry(*self.geometry_of(fire))
+            self.scans = [self.renderer.render(None, None, period if 0 < period < math.inf else None, sonar)]
             self.scan = self.scans[0]
             self._fans.clear()
             self._cache.clear()

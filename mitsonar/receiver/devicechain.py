@@ -232,7 +232,8 @@ def drawn_speckle_power(seed, n_rows, n_bins, corr, weibull):
 
 
 def received_bytes(inten, n_rows, n_bins, *, kernel, corr, g, g_seed, weibull, ring, f, noise_seed, levels, ad):
-    """Device bytes (``mi.UInt8``, ``n_rows x n_bins`` row-major) of the chain.
+    """Device bytes (``mi.UInt8``, ``n_rows x n_bins`` row-major) of the chain; a 16- or
+    32-bit A/D's codes as ``mi.UInt32`` (``bit_depth`` 16, 32: the same levels on ``2^bits - 1``).
 
     ``inten`` the intensity (``mi.Float64`` or ``mi.Float32``, row-major; not modified);
     ``kernel`` the range spread's weights (NumPy, offsets ``-m..m``); ``corr`` the pulse's
@@ -248,10 +249,10 @@ def received_bytes(inten, n_rows, n_bins, *, kernel, corr, g, g_seed, weibull, r
     import mitsuba as mi
 
     if n_rows * n_bins == 0:   # an empty frame: no kernels
-        return mi.UInt8()
+        return mi.UInt8() if ad[2] <= 8 else mi.UInt32()
     calibration, gain, tvg = levels
     ad_low, ad_span, bit_depth = ad
-    scale = 15.0 if bit_depth == 4 else 255.0
+    scale = float(AD_CODES[bit_depth][0])
     h = taps(corr)
     width = n_bins + h.size - 1
     with dr.suspend_grad():
@@ -296,9 +297,20 @@ def received_bytes(inten, n_rows, n_bins, *, kernel, corr, g, g_seed, weibull, r
         q = dr.select(level - q >= 0.5, q + 1.0, q)
         if bit_depth == 4:
             q = q * 17.0
-        out = mi.UInt8(mi.UInt32(q))
+        out = mi.UInt32(q) if bit_depth > 8 else mi.UInt8(mi.UInt32(q))
         dr.eval(out)
     return out
+
+
+#: each A/D width's codes: (full scale, step between reported codes, NumPy type of the data)
+AD_CODES = {8: (255, 1, np.uint8), 4: (15, 17, np.uint8), 16: (65535, 1, np.uint16),
+            32: (4294967295, 1, np.uint32)}
+
+
+def host_codes(data, shape, bit_depth: int) -> np.ndarray:
+    """`received_bytes`'s array as NumPy of ``shape`` in the A/D's type (uint8; uint16 or
+    uint32 at 16 or 32 bits)."""
+    return data.numpy().reshape(shape).astype(AD_CODES[bit_depth][2], copy=False)
 
 
 def spread_kernel(length: float, sigma: float, bin_width: float) -> np.ndarray:

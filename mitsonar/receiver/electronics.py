@@ -29,8 +29,8 @@ The chain follows thesis sections 2.1.2 and 2.4.1 and the Tritech Micron's conve
    swamp the far field, while the thesis figures and Micron displays show open water alike at
    all ranges.
 5. **Quantisation.** ``data = round(255 clip((level_db - ad_low) / ad_span, 0, 1))`` (halves
-   round up), or at 4 bits ``17 round(15 clip(...))``: values 0..15 scaled onto 0..255
-   the way the SeaNet driver reports packed 4-bit bins.
+   round up), or at 4 bits ``17 round(15 clip(...))`` (0..15 onto 0..255, as the SeaNet driver
+   reports packed 4-bit bins); 16, 32 bits (a wider A/D): ``round((2^bits - 1) clip(...))``.
 
 With ``speckle='off'``, ``noise_floor=-inf``, ``ringdown=0``, ``pulse_length=0`` and
 ``range_jitter=0`` the level is the formula of step 2 (its logarithm computed as ``log2(I) log10(2)``:
@@ -79,7 +79,7 @@ from mitsonar.sonar_equation.levels import (DEFAULT_NOISE_LEVEL, DEFAULT_RECEIVE
 
 TVG_LAWS = {"off": 0, "20log": 20, "30log": 30, "40log": 40}
 SPECKLE_MODELS = ("off", "rayleigh", "weibull")
-BIT_DEPTHS = (8, 4)
+BIT_DEPTHS = tuple(devicechain.AD_CODES)   # 8, 4, 16, 32
 
 #: What a real head accepts for the settings a user gives it: the Micron's gain and A/D window on
 #: its 0..80 dB scale, ADSpan at least one byte (80 / 255 dB, rounded). A sonar's XML electronics
@@ -120,7 +120,8 @@ class Electronics:
     gain                 28.0      dB, receiver gain (SeaNet IGain 0x49)
     ad_low               12.5      dB mapped to byte 0 (SeaNet ADLow)
     ad_span              24.0      dB mapped onto 0..255 above ``ad_low`` (SeaNet ADSpan), > 0
-    bit_depth            8         8, or 4 (values 0..15 reported as multiples of 17)
+    bit_depth            8         8, or 4 (values 0..15 reported as multiples of 17), or 16 or 32
+                                   (a wider A/D: the same levels on uint16 or uint32 codes)
     pulse_length         100e-6    s, transmit pulse; spreads echoes over ``c pulse_length / 2`` in range
     range_jitter         0.02      m, standard deviation of the Gaussian range jitter
     speckle              rayleigh  ``off``, ``rayleigh`` (exponential intensity), ``weibull``
@@ -219,7 +220,7 @@ class Electronics:
         if not (math.isfinite(self.ad_span) and self.ad_span > 0):
             bad("ad_span", self.ad_span, "a span > 0 dB")
         if self.bit_depth not in BIT_DEPTHS:
-            bad("bit_depth", self.bit_depth, "one of 8, 4")
+            bad("bit_depth", self.bit_depth, "one of 8, 4, 16, 32")
         if not (math.isfinite(self.pulse_length) and 0 <= self.pulse_length <= 0.1):
             bad("pulse_length", self.pulse_length, "a duration in [0, 0.1] s")
         if not (math.isfinite(self.range_jitter) and self.range_jitter >= 0):
@@ -304,17 +305,16 @@ class Electronics:
 
         Returns
         -------
-        ndarray uint8
+        ndarray uint8 (uint16, uint32 at 16, 32 bits)
             ``round(255 x)`` with ``x = clip((level_db - ad_low) / ad_span, 0, 1)``, halves
-            rounded up; at ``bit_depth=4``, ``17 round(15 x)``.
+            rounded up; at ``bit_depth=4``, ``17 round(15 x)``; at 16, 32: ``round((2^bits - 1) x)``.
         """
         level = np.asarray(level_db, dtype=np.float64)
         x = np.clip((level - self.ad_low) / self.ad_span, 0.0, 1.0)
         # NaN would become byte 0 silently; apply() never produces one, callers must not either.
         x = np.where(np.isnan(x), 0.0, x)
-        if self.bit_depth == 4:
-            return (_round_half_up(15.0 * x) * 17.0).astype(np.uint8)
-        return _round_half_up(255.0 * x).astype(np.uint8)
+        top, step, dtype = devicechain.AD_CODES[self.bit_depth]
+        return (_round_half_up(float(top) * x) * float(step)).astype(dtype)
 
     def range_kernel(self, bin_width: float, sound_speed: float = 1500.0) -> np.ndarray:
         """Weights that spread one bin's echo energy over bins 0, 1, ... (offsets ``-m .. +m``).
@@ -513,7 +513,7 @@ class Electronics:
 
         Returns
         -------
-        ndarray uint8, the shape of ``intensity``
+        ndarray uint8 (uint16, uint32 at ``bit_depth`` 16, 32), the shape of ``intensity``
 
         Raises
         ------
@@ -544,14 +544,14 @@ class Electronics:
         up = (mi.Float32 if src.dtype == np.float32 else mi.Float64)(src.reshape(-1))
         data = self.device_bytes(up, inten.shape, ranges, absorption=absorption, sound_speed=sound_speed,
                                  seed=seed, speckle=speckle)
-        data = data.numpy().reshape(inten.shape)
+        data = devicechain.host_codes(data, inten.shape, self.bit_depth)
         return data[0] if one_ping else data
 
     def device_bytes(self, intensity, shape, ranges, absorption=0.0, sound_speed=1500.0, seed=0, speckle=None):
         """`apply` on the device: ``intensity`` a Dr.Jit array (``mi.Float32`` or ``mi.Float64``
         of ``shape = (n_rows, n_bins)`` values, row-major, >= 0 and finite: not checked here, a
-        render's histogram), the bytes a ``mi.UInt8`` array of the same layout, computed as
-        Dr.Jit kernels of the active variant without a NumPy array on the way (the per-bin
+        render's histogram), the bytes a ``mi.UInt8`` array of the same layout (16 or 32 bits:
+        ``mi.UInt32``), computed as Dr.Jit kernels of the active variant, no NumPy array on the way (the per-bin
         settings tables are computed once per settings and ranges). ``speckle``: a
         `mitsonar.receiver.speckle.Field` (or a complex NumPy array, uploaded) or None; the other
         arguments as `apply`'s."""

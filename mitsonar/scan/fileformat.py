@@ -40,10 +40,14 @@ electronics, meta   the Scan's dicts (numpy arrays, numpy scalars and tuples are
                     an ``electronics`` written by mitsonar 0.2.0 (a ``source_level`` below 150 dB
                     and no ``receiver_sensitivity``: the old calibration constant) is read as
                     source level 200 dB and the sensitivity that keeps their sum
-checksums           CRC-32 of the intensity (float32, little endian) and data (uint8) bytes
+data_type           ``"uint16"`` or ``"uint32"`` for a scan of a wider A/D (``bit_depth`` 16 or 32);
+                    absent for bytes (uint8)
+checksums           CRC-32 of the intensity (float32, little endian) and data (its type, little
+                    endian) bytes
 =================== ====================================================================================
 
-The ``.npz`` file holds the arrays ``intensity`` (float32), ``data`` (uint8), ``ranges``,
+The ``.npz`` file holds the arrays ``intensity`` (float32), ``data`` (uint8, or the header's
+``data_type``), ``ranges``,
 ``bearings``, ``poses``, ``times`` (float64; ``times`` optional, as above) natively, the same JSON (without the arrays) in the 0-d
 string array ``header`` and its CRC-32 in the 0-d uint32 array ``header_crc32``; it loads with
 ``numpy.load(path, allow_pickle=False)``.
@@ -142,6 +146,9 @@ def read(path) -> tuple[dict[str, Any], str]:
 # ----------------------------------------------------------------------------------------------
 # header
 
+#: the types a scan's ``data`` may have: bytes, or the codes of a 16- or 32-bit A/D
+DATA_TYPES = ("uint8", "uint16", "uint32")
+
 def extension(path: str) -> str:
     """The lower-case extension of a scan file, ``.exr`` or ``.npz`` (else `ScanFileError`)."""
     ext = os.path.splitext(path)[1].lower()
@@ -164,13 +171,15 @@ def _header(scan, with_arrays: bool, path: str) -> dict[str, Any]:
         head["times"] = scan.times.tolist()
     head["electronics"] = _encode(dict(scan.electronics), f"{path}: electronics")
     head["meta"] = _encode(dict(scan.meta), f"{path}: meta")
+    if scan.data.dtype != np.uint8:
+        head["data_type"] = str(scan.data.dtype)
     head["checksums"] = _checksums(scan.intensity, scan.data)
     return head
 
 
 def _checksums(intensity: np.ndarray, data: np.ndarray) -> dict[str, int]:
     return {"intensity": zlib.crc32(np.ascontiguousarray(intensity, dtype="<f4").tobytes()),
-            "data": zlib.crc32(np.ascontiguousarray(data, dtype=np.uint8).tobytes())}
+            "data": zlib.crc32(np.ascontiguousarray(data, dtype=data.dtype.newbyteorder("<")).tobytes())}
 
 
 def _encode(obj, where: str):
@@ -277,9 +286,13 @@ def _build(path: str, head: dict[str, Any], intensity, data, arrays: dict[str, A
                             f"{n_pings} pings x {n_bins} bins")
     if intensity.dtype != np.float32:
         raise ScanFileError(f"{path}: channel 'intensity' is {intensity.dtype}, expected float32")
-    if data.dtype.kind not in "ui" or (data.size and (data.min() < 0 or data.max() > 255)):
-        raise ScanFileError(f"{path}: channel 'data' does not hold bytes 0..255")
-    data = data.astype(np.uint8)
+    kind = head.get("data_type", "uint8")
+    if kind not in DATA_TYPES:
+        raise ScanFileError(f"{path}: header 'data_type': {kind!r} is not allowed (one of {', '.join(DATA_TYPES)})")
+    top = np.iinfo(kind).max
+    if data.dtype.kind not in "ui" or (data.size and (data.min() < 0 or data.max() > top)):
+        raise ScanFileError(f"{path}: channel 'data' does not hold {kind} values 0..{top}")
+    data = data.astype(kind)
     if _checksums(intensity, data) != checks:
         raise ScanFileError(f"{path}: pixel data do not match their checksums (corrupt file)")
     return dict(intensity=intensity, data=data, electronics=electronics, meta=meta, **arrays, **scalars), stored_as
@@ -366,7 +379,7 @@ def _c_output_silenced():
 
 def _write_npz(scan, text: str, path: str) -> None:
     with open(path, "wb") as fh:
-        np.savez_compressed(fh, intensity=scan.intensity.astype(np.float32), data=scan.data.astype(np.uint8),
+        np.savez_compressed(fh, intensity=scan.intensity.astype(np.float32), data=scan.data,
                             ranges=scan.ranges, bearings=scan.bearings, poses=scan.poses, times=scan.times,
                             header=np.array(text),
                             header_crc32=np.array(_crc_text(text), dtype=np.uint32))
@@ -398,6 +411,6 @@ def _read_npz(path: str) -> tuple[dict[str, Any], str]:
         if arrays[name].dtype != np.float64:
             raise ScanFileError(f"{path}: array '{name}' is {arrays[name].dtype}, expected float64")
     intensity, data = arrays.pop("intensity"), arrays.pop("data")
-    if data.dtype != np.uint8:
-        raise ScanFileError(f"{path}: array 'data' is {data.dtype}, expected uint8")
+    if data.dtype != np.dtype(head.get("data_type", "uint8")):
+        raise ScanFileError(f"{path}: array 'data' is {data.dtype}, expected {head.get('data_type', 'uint8')}")
     return _build(path, head, intensity, data, arrays, "array")

@@ -72,6 +72,8 @@ def _array(name: str, value, dtype) -> np.ndarray:
 
 def _device_bytes(value) -> np.ndarray:
     a = _array("data", value, None)
+    if a.dtype in (np.uint16, np.uint32):   # the codes of a wider A/D (bit_depth 16 or 32), kept
+        return a
     if a.dtype != np.uint8:
         # Casting would wrap 256 to 0 or cut 3.7 to 3: only exact bytes convert.
         bad = ~(np.isfinite(a) & (a >= 0) & (a <= 255) & (a == np.round(a)))
@@ -98,8 +100,10 @@ class Scan:
     intensity : float32 (n_pings, n_bins)
         Noise-free linear echo energy per bin (on-axis source intensity 1 W/sr, on-axis
         receive aperture 1 m^2). Zero for scans read from a device, which only sends `data`.
-    data : uint8 (n_pings, n_bins)
-        What the device outputs: level after TVG, gain, noise and 8/4-bit quantisation.
+    data : uint8, uint16 or uint32 (n_pings, n_bins)
+        What the device outputs: level after TVG, gain, noise and 8/4-bit quantisation (uint8);
+        uint16 or uint32 for a wider A/D (electronics ``bit_depth`` 16 or 32: the same levels on
+        0..65535 or 0..4294967295). Other integer arrays are taken as bytes 0..255.
     ranges : float64 (n_bins,)
         Bin-centre ranges in metres.
     bearings : float64 (n_pings,)

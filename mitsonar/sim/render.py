@@ -71,7 +71,8 @@ def _check_start_time(trajectory, start_time):
 
 class Frame:
     """What `render_frame` returns: ``intensity`` (``mi.Float32``, the noise-free echo energy per
-    bin) and ``data`` (``mi.UInt8``, the device's bytes), Dr.Jit arrays of ``shape = (n_rows,
+    bin) and ``data`` (``mi.UInt8``, the device's bytes; ``mi.UInt32`` codes of a 16- or 32-bit
+    A/D), Dr.Jit arrays of ``shape = (n_rows,
     n_bins)`` values in row-major order; ``numpy()`` gives both as NumPy arrays of that shape."""
 
     __slots__ = ("intensity", "data", "shape", "_scan")
@@ -347,7 +348,8 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
                          speckle_seed=speckle_seed, sound_speed_profile=sound_speed_profile)
     (scene, sonar, integrator, model, intensity, ranges, poses, seed, spp, max_depth, eseed, trajectory,
      start_time) = frame._scan
-    data = frame.data.numpy().reshape(frame.shape)
+    from mitsonar.receiver import devicechain
+    data = devicechain.host_codes(frame.data, frame.shape, model.bit_depth)
     from mitsonar._version import __version__
 
     meta = {

@@ -96,17 +96,25 @@ class OculusHead(Head):
         from mitsonar.devices.oculus.virtual import VirtualOculus, parse_tcp_url
         host, port = parse_tcp_url(getattr(args, "port_url", None))
         status = getattr(args, "status_port", None)
-        frames = None
+        frames, water = None, None
         if getattr(args, "scene", None) is not None and not isinstance(scan, (list, tuple)):
             # each fire message's geometry rendered from the scene (mitsonar.devices.oculus.scenes)
             from mitsonar.devices.oculus.scenes import SceneFrames
             from mitsonar.sim.render import DEFAULT_SPP
             frames = SceneFrames(args.scene, getattr(args, "sensor", None), bin_width=scan.bin_width,
                                  spp=args.spp or DEFAULT_SPP, seed=args.seed)
+            water = frames.water()           # the head's temperature and surface: the scene's
         head = VirtualOculus(scan, model=getattr(args, "model", None) or "M1200d", host=host, tcp_port=port,
                              udp_port=UDP_PORT if status is None else status, realtime=not args.fast,
-                             frames=frames)
+                             frames=frames, water=water)
         return head.serve(args.seconds, None, "virtual Oculus")
+
+    def live_geometry(self, path: str, sensor, sonar):
+        """``mitsonar live``: the scene sensor ``sonar`` (of ``path``, ``--sensor``) at each fire
+        message's geometry, ``(mode, n_beams, range) -> sensor``, range lines as wide as its bins
+        (`mitsonar.devices.oculus.scenes.SceneFrames.sensor_at`)."""
+        from mitsonar.devices.oculus.scenes import SceneFrames
+        return SceneFrames(path, sensor, bin_width=sonar.bin_width).sensor_at
 
     def record(self, args, settings) -> dict:
         """``record``: drive the Oculus at ``args.port`` (``tcp://HOST:PORT``, ``HOST``; ``auto``:

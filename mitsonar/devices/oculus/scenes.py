@@ -4,12 +4,13 @@ The virtual head (`mitsonar.devices.oculus.virtual.VirtualOculus`, ``frames=``) 
 of each fire message's settings: ``frames(mode, n_beams, range)``. `SceneFrames` renders the
 scene file's multibeam ``sonar`` sensor with its XML properties set to the model's mode
 (`mitsonar.devices.oculus.presets.Mode`): ``n_beams`` receive beams evenly spaced across the
-mode's aperture (``bearing_step = aperture / n_beams``, centred), the mode's beam widths
-(``beamwidth_h``, ``beamwidth_v``), a transmit fan as wide as the aperture (``tx_beamwidth_h``,
-``tx_beamwidth_v``), its ``frequency``, and the range window ``0 .. range`` in bins of the given
-width. The sensor takes no table of beam bearings, so the frame's beams are evenly spaced in
-angle and the head serves, for each bearing of its own table (even in sine), the nearest rendered
-beam. Frames are cached by settings (a new setting loads and renders the scene again).
+mode's aperture at the head's own bearing table (the sensor's ``bearings``:
+`mitsonar.devices.oculus.presets.bearing_table`, even in sine, in place of the XML's ``n_pings``,
+``bearing_start`` and ``bearing_step``), the mode's beam widths (``beamwidth_h``,
+``beamwidth_v``), a transmit fan as wide as the aperture (``tx_beamwidth_h``, ``tx_beamwidth_v``),
+its ``frequency``, and the range window ``0 .. range`` in bins of the given width: row k of the
+frame is beam k of the ping result. Frames are cached by settings (a new setting loads and renders
+the scene again).
 """
 from __future__ import annotations
 
@@ -52,41 +53,95 @@ class SceneFrames:
                 self._cache[key] = self._render(mode, int(n_beams), float(range_m))
             return self._cache[key]
 
+    def _choose(self, root):
+        """The XML element of the sonar to render (given an id if it has none; ``_id`` says it)."""
+        sensors = list(root.iter("sensor"))
+        sonars = [s for s in sensors if s.get("type") == "sonar"]
+        if isinstance(self.sensor, int) or (isinstance(self.sensor, str) and self.sensor.isdigit()):
+            k = int(self.sensor)         # an index among the scene's sensors, as --sensor takes it
+            chosen = [sensors[k]] if 0 <= k < len(sensors) and sensors[k].get("type") == "sonar" else []
+        else:
+            chosen = [s for s in sonars if self.sensor is None or s.get("id") == self.sensor][:1]
+        if not chosen:
+            raise ValueError(f"{self.path}: no sonar sensor"
+                             + (f" with id {self.sensor!r}" if self.sensor is not None else ""))
+        el = chosen[0]
+        if el.get("id") is None:
+            el.set("id", _ID)
+        self._id = el.get("id")
+        return el
+
+    def water(self) -> dict:
+        """The rendered sensor's water (`mitsonar.devices.oculus.virtual.scene_water`: its
+        ``temperature`` and ``surface_z``), from the scene as it loads."""
+        from mitsonar.devices.live import live_scene
+        from mitsonar.devices.oculus.virtual import scene_water
+
+        scene = live_scene(self.path, self._choose)
+        return scene_water(next(s for s in scene.sensors() if s.id() == self._id))
+
+    def _values(self, mode, n_beams: int, range_m: float) -> dict:
+        """The sensor's XML properties for a mode, a beam count and a range: {name: (tag, value)}."""
+        from mitsonar.devices.oculus.presets import bearing_table
+
+        n_bins = max(1, min(4096, int(round(range_m / self.bin_width))))
+        table = bearing_table(mode.aperture, n_beams) / 100.0
+        return {"bearings": ("string", " ".join(f"{b:.2f}" for b in table)),
+                "range_min": ("float", 0.0), "range_max": ("float", range_m),
+                "n_bins": ("integer", n_bins), "beamwidth_h": ("float", mode.beamwidth_h),
+                "beamwidth_v": ("float", mode.beamwidth_v), "tx_beamwidth_h": ("float", mode.aperture),
+                "tx_beamwidth_v": ("float", mode.beamwidth_v), "frequency": ("float", mode.frequency)}
+
+    def _edit(self, root, values):
+        """Set ``values`` on the chosen sonar's element of ``root``; returns the element."""
+        el = self._choose(root)
+        for child in [c for c in el if c.get("name") in ("n_pings", "bearing_start", "bearing_step")]:
+            el.remove(child)             # the table says them
+        for name, (tag, value) in values.items():
+            child = next((c for c in el if c.get("name") == name), None)
+            if child is None:
+                child = ET.SubElement(el, tag, name=name)
+            child.tag = tag
+            child.set("value", str(value))
+        return el
+
+    def sensor_at(self, mode, n_beams: int, range_m: float):
+        """The scene's sonar sensor alone at that geometry (a new sensor object, cached per
+        setting), for rendering the scene as loaded (`mitsonar.devices.live.LiveOculus`: the shapes
+        it moves stay moved)."""
+        key = ("sensor", mode, int(n_beams), round(float(range_m), 9))
+        with self._lock:
+            if key not in self._cache:
+                if len(self._cache) >= self.max_cached:
+                    self._cache.pop(next(iter(self._cache)))
+                self._cache[key] = self._load_sensor(mode, int(n_beams), float(range_m))
+            return self._cache[key]
+
+    def _load_sensor(self, mode, n_beams: int, range_m: float):
+        import mitsuba as mi
+
+        from mitsonar.devices.live import scene_folder
+        from mitsonar.sim.variant import ensure_variant
+
+        try:
+            root = ET.parse(self.path).getroot()
+        except (OSError, ET.ParseError) as e:
+            raise ValueError(f"{self.path}: cannot read the scene XML ({e})") from None
+        el = self._edit(root, self._values(mode, n_beams, range_m))
+        el.set("version", root.get("version", "3.0.0"))
+        ensure_variant()
+        scene_folder(self.path)
+        text = ET.tostring(el, encoding="unicode")
+        # the scene's <default> $parameters the sensor uses (Mitsuba refuses unused ones)
+        defaults = {d.get("name"): d.get("value") for d in root.iter("default") if f"${d.get('name')}" in text}
+        return mi.load_string(text, **defaults)
+
     def _render(self, mode, n_beams: int, range_m: float):
         from mitsonar.devices.live import live_scene
         from mitsonar.sim.render import render_scan
 
-        n_bins = max(1, min(4096, int(round(range_m / self.bin_width))))
-        step = mode.aperture / n_beams
-        values = {"n_pings": ("integer", n_beams), "bearing_start": ("float", -mode.aperture / 2 + step / 2),
-                  "bearing_step": ("float", step), "range_min": ("float", 0.0), "range_max": ("float", range_m),
-                  "n_bins": ("integer", n_bins), "beamwidth_h": ("float", mode.beamwidth_h),
-                  "beamwidth_v": ("float", mode.beamwidth_v), "tx_beamwidth_h": ("float", mode.aperture),
-                  "tx_beamwidth_v": ("float", mode.beamwidth_v), "frequency": ("float", mode.frequency)}
-
-        def edit(root):
-            sensors = list(root.iter("sensor"))
-            sonars = [s for s in sensors if s.get("type") == "sonar"]
-            if isinstance(self.sensor, int) or (isinstance(self.sensor, str) and self.sensor.isdigit()):
-                k = int(self.sensor)         # an index among the scene's sensors, as --sensor takes it
-                chosen = [sensors[k]] if 0 <= k < len(sensors) and sensors[k].get("type") == "sonar" else []
-            else:
-                chosen = [s for s in sonars if self.sensor is None or s.get("id") == self.sensor][:1]
-            if not chosen:
-                raise ValueError(f"{self.path}: no sonar sensor"
-                                 + (f" with id {self.sensor!r}" if self.sensor is not None else ""))
-            el = chosen[0]
-            if el.get("id") is None:
-                el.set("id", _ID)
-            for name, (tag, value) in values.items():
-                child = next((c for c in el if c.get("name") == name), None)
-                if child is None:
-                    child = ET.SubElement(el, tag, name=name)
-                child.tag = tag
-                child.set("value", str(value))
-            self._id = el.get("id")
-
-        scene = live_scene(self.path, edit)
+        values = self._values(mode, n_beams, range_m)
+        scene = live_scene(self.path, lambda root: self._edit(root, values))
         scan = render_scan(scene, spp=self.spp, seed=self.seed, sensor=self._id)
         self.renders += 1
         return scan

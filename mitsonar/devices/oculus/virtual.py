@@ -37,21 +37,24 @@ scan's bins at the scan's sound speed), ``n_ranges = round(range / range_resolut
 takes the scan bin holding the range ``(i + 1/2) x range_resolution x c_scan / c_used`` (a
 different speed of sound stretches the image as it would a real head's), zeros past the scan.
 ``speedOfSound`` 0 means the head's own: `mitsonar.acoustics.seawater.sound_speed` of the
-water's temperature, the fire message's salinity and the head's depth.
+water's temperature, the fire message's salinity and the head's depth below ``surface_z``.
 
 Levels: ``gainPercent`` g is the receiver gain: 100 % the scan's own, g % ``20 log10(g/100)`` dB
 on it (`VirtualOculus.received`: a rendered scan through its receiver chain again, a scan of
-bytes moved on its A/D scale); ``gammaCorrection`` G applies ``255 (x/255)^(G/255)`` (G 0 or
-255: none), and the level is
-quantised to the sample width: 8-bit ``round(y)``, 16-bit ``round(y x 257)``, 32-bit
-``round(y x 16843009)`` (the same level through a wider A/D). The per-row gain sent (flag bit 2)
+bytes moved on its A/D scale); ``gammaCorrection`` G applies ``T (x/T)^(G/255)`` (G 0 or
+255: none) to the codes x of full scale T. 8-bit samples are the scan's bytes; 16- and 32-bit
+ones the same levels through a wider A/D: a rendered scan's receiver chain again at ``bit_depth``
+16 or 32 (`mitsonar.receiver.electronics.Electronics`: ``round((2^bits - 1) x)`` of the A/D
+window's fraction x, so the 8-bit byte is the 16-bit code / 257 up to rounding); a log's bytes
+times 257 and 16843009 (it has no finer levels). The per-row gain sent (flag bit 2)
 is g/100 (the amplitude gain) as a float32. So at gain 100 and gamma 255 the 8-bit image is the
 scan's bytes.
 
 ``heading``, ``pitch``, ``roll`` (version 2 results) come from the head's pose in the scan (world x
 east, y north, z up: heading clockwise from north of the boresight, pitch its elevation, roll the
 tilt of the fan's axis towards starboard), ``temperature`` from ``water`` (deg C),
-``pressure`` (bar, gauge) from the head's depth ``-z``.
+``pressure`` (bar, gauge) from the head's depth ``surface_z - z`` (``water``: a scene's own,
+`scene_water`, with ``virtual-sonar SCENE`` and ``live``).
 
 Timing (``realtime=True``): a stream's pings are ``max(1 / rate, 2 range / c)`` apart;
 ``realtime=False`` sends each ping as soon as the last one is written.
@@ -79,7 +82,6 @@ __all__ = ["VirtualOculus", "attitude", "check_fire", "serve", "parse_tcp_url"]
 MAX_INCOMING_PAYLOAD = 1024
 #: how much a slow client may have waiting before pings for it are skipped
 MAX_BACKLOG = 8 << 20
-_SCALE = {1: 1, 2: 257, 4: 16843009}
 
 
 def parse_tcp_url(url: str | None, default_host: str = "127.0.0.1", default_port: int = 52100) -> tuple[str, int]:
@@ -160,7 +162,9 @@ class VirtualOculus:
     udp_port         52102: where the status goes (None: no status broadcast)
     status_period    s between status messages (default 1)
     realtime         True: pings at the fire message's rate; False: as fast as written
-    water            ``{"temperature": deg C}`` (default 10)
+    water            ``{"temperature": deg C, "surface_z": m}`` (default 10 and 0, the
+                     sensor's defaults; `scene_water` reads a scene sensor's): the head's
+                     temperature, and its depth ``surface_z - z``
     device_id        the head's ``srcDeviceId`` and ``deviceId`` (default 1)
     frames           ``frames(mode, n_beams, range) -> Scan``: the scan of each fire
                      message's geometry (`mitsonar.devices.oculus.scenes.SceneFrames`);
@@ -194,12 +198,15 @@ class VirtualOculus:
         self.udp_port = udp_port
         self.status_period = float(status_period)
         self.realtime = bool(realtime)
-        self.water = {"temperature": 10.0, **(water or {})}
+        self.water = {"temperature": 10.0, "surface_z": 0.0, **(water or {})}
         from mitsonar.acoustics.seawater import MACKENZIE_RANGE
         lo, hi = MACKENZIE_RANGE["temperature"]
         t = self.water["temperature"]
         if not (isinstance(t, (int, float)) and lo <= t <= hi):
             raise ValueError(f"VirtualOculus: water temperature {t!r} is not allowed ({lo:g}..{hi:g} deg C)")
+        z = self.water["surface_z"]
+        if not (isinstance(z, (int, float)) and math.isfinite(z)):
+            raise ValueError(f"VirtualOculus: water surface_z {z!r} is not allowed (a finite world z, m)")
         self.device_id = int(device_id)
         self.stats: Counter = Counter()
         self.last_problem: str | None = None
@@ -232,9 +239,13 @@ class VirtualOculus:
         (a scene rendered at the fire message's geometry) if given, else scan ``ping_id mod
         len(scans)``."""
         if self.frames is not None:
-            mode = self.model.mode(fire.master_mode)
-            return self.frames(mode, fire.n_beams, _range(fire, mode))
+            return self.frames(*self.geometry_of(fire))
         return self.scans[ping_id % len(self.scans)]
+
+    def geometry_of(self, fire: FireMessage) -> tuple:
+        """``(mode, n_beams, range m)`` a fire message asks for (`mitsonar.devices.oculus.presets.Mode`)."""
+        mode = self.model.mode(fire.master_mode)
+        return mode, fire.n_beams, _range(fire, mode)
 
     # ---- pings ----
     def sound_speed(self, fire: FireMessage) -> float:
@@ -246,7 +257,7 @@ class VirtualOculus:
         if fire.speed_of_sound:
             return float(fire.speed_of_sound)
         from mitsonar.acoustics.seawater import MACKENZIE_RANGE, sound_speed
-        depth = max(0.0, -float(self.head_pose(self.scans[0])[2, 3]))
+        depth = self.depth(self.head_pose(self.scans[0]))
         t = float(self.water["temperature"])
         lo, hi = MACKENZIE_RANGE["salinity"]
         s = float(fire.salinity)
@@ -256,6 +267,10 @@ class VirtualOculus:
         inside = end + (1.0 if s < lo else -1.0)
         c_end, c_in = float(sound_speed(t, end, depth)), float(sound_speed(t, inside, depth))
         return c_end + (s - end) * (c_end - c_in) / (end - inside)
+
+    def depth(self, pose) -> float:
+        """m below the water's surface (``surface_z``) of a head at ``pose``; 0 above it."""
+        return max(0.0, float(self.water["surface_z"]) - float(pose[2, 3]))
 
     @staticmethod
     def head_pose(scan: Scan) -> np.ndarray:
@@ -278,7 +293,7 @@ class VirtualOculus:
         image, bearings, res = self._image(fire, mode, c, scan)
         pose = self.head_pose(scan)
         heading, pitch, roll = attitude(pose)
-        depth = max(0.0, -float(pose[2, 3]))
+        depth = self.depth(pose)
         gains = np.full(image.shape[0], fire.gain / 100.0, np.float32) if fire.send_gain else None
         return PingResult(fire, image, bearings, res, gains=gains, ping_id=ping_id, status=0,
                           frequency=mode.frequency, temperature=float(self.water["temperature"]),
@@ -297,6 +312,9 @@ class VirtualOculus:
         n_r = max(1, min(65535, int(round(key[1] / res))))
         if n_r > 4096:                       # keep the image a real head's size: coarser lines
             n_r, res = 4096, key[1] / 4096
+        from mitsonar.receiver.devicechain import AD_CODES
+        bits = 8 * fire.data_bytes
+        top, _, dtype = AD_CODES[bits]
         level = np.zeros((n_r, fire.n_beams), np.float64)
         if scan.n_pings:
             want = np.radians(bearings / 100.0)
@@ -308,40 +326,44 @@ class VirtualOculus:
             r_scan = (np.arange(n_r) + 0.5) * res / stretch
             idx = np.floor((r_scan - scan.range_min) / scan.bin_width + 1e-9).astype(np.int64)
             ok = (idx >= 0) & (idx < scan.n_bins)
-            rows = self.received(scan, fire.gain)[rows_of[k]].astype(np.float64)      # (n_beams, n_bins)
+            rows = self.received(scan, fire.gain, bits)[rows_of[k]].astype(np.float64)      # (n_beams, n_bins)
             level[np.ix_(ok, inside)] = rows[inside][:, idx[ok]].T
         if fire.gamma not in (0, 255):
-            level = 255.0 * (level / 255.0) ** (fire.gamma / 255.0)
-        nb = fire.data_bytes
-        dtype = {1: np.uint8, 2: np.uint16, 4: np.uint32}[nb]
-        image = np.round(level * _SCALE[nb]).astype(dtype)
+            level = top * (level / top) ** (fire.gamma / 255.0)
+        image = np.round(level).astype(dtype)
         out = (image, bearings, float(res))
         if len(self._cache) > 32:
             self._cache.clear()
         self._cache[key] = (scan, out)
         return out
 
-    def received(self, scan: Scan, gain_percent: float) -> np.ndarray:
-        """``scan``'s bytes at the receiver gain ``gain_percent`` asks for: 100 % is the scan's
-        own gain (its bytes); g % is ``20 log10(g / 100)`` dB on it (50 %: -6 dB), within the
-        head's 0..80 dB (`mitsonar.receiver.electronics.HEAD_LIMITS`; 0 %: the least). A rendered
-        scan (with intensity) goes through its receiver chain again at that gain
-        (`mitsonar.receiver.electronics.apply_to_scan`, the same noise seed); a scan of bytes
-        only (a log) has its bytes moved by that many dB on its A/D scale (``ad_span``)."""
-        if gain_percent == 100.0:
+    def received(self, scan: Scan, gain_percent: float, bits: int = 8) -> np.ndarray:
+        """``scan``'s codes from a ``bits``-bit A/D (8: bytes, uint8; 16, 32: uint16, uint32) at
+        the receiver gain ``gain_percent`` asks for: 100 % is the scan's own gain; g % is
+        ``20 log10(g / 100)`` dB on it (50 %: -6 dB), within the head's 0..80 dB
+        (`mitsonar.receiver.electronics.HEAD_LIMITS`; 0 %: the least). A rendered scan (with
+        intensity) goes through its receiver chain again at that gain and A/D width
+        (`mitsonar.receiver.electronics.apply_to_scan`, the same noise seed: its 8-bit codes are
+        its bytes at 100 %); a scan of codes only (a log) has them moved by that many dB on its
+        A/D scale (``ad_span``) and scaled to the width asked (a byte b is ``257 b`` at 16 bits)."""
+        from mitsonar.receiver.devicechain import AD_CODES
+        from mitsonar.receiver.electronics import HEAD_LIMITS, Electronics, apply_to_scan
+        top, _, dtype = AD_CODES[bits]
+        if gain_percent == 100.0 and scan.data.dtype == dtype:
             return scan.data
-        key = ("received", id(scan), float(gain_percent))
+        key = ("received", id(scan), float(gain_percent), bits)
         if key in self._cache and self._cache[key][0] is scan:
             return self._cache[key][1]
-        from mitsonar.receiver.electronics import HEAD_LIMITS, Electronics, apply_to_scan
         e = Electronics.from_dict(scan.electronics)
         lo, hi = HEAD_LIMITS["gain"]
         db = 20.0 * math.log10(gain_percent / 100.0) if gain_percent > 0 else -math.inf
         if np.any(scan.intensity):
-            out = apply_to_scan(scan, {**scan.electronics, "gain": float(np.clip(e.gain + db, lo, hi))}).data
+            gain = e.gain if gain_percent == 100.0 else float(np.clip(e.gain + db, lo, hi))
+            out = apply_to_scan(scan, {**scan.electronics, "gain": gain, "bit_depth": bits}).data
         else:
-            shift = max(db, lo - e.gain) * 255.0 / e.ad_span
-            out = np.clip(np.floor(scan.data.astype(np.float64) + shift + 0.5), 0, 255).astype(np.uint8)
+            shift = 0.0 if gain_percent == 100.0 else max(db, lo - e.gain) * top / e.ad_span
+            codes = scan.data.astype(np.float64) * (top / np.iinfo(scan.data.dtype).max)
+            out = np.clip(np.floor(codes + shift + 0.5), 0, top).astype(dtype)
         self._cache[key] = (scan, out)
         return out
 
@@ -566,3 +588,12 @@ class VirtualOculus:
 def serve(scan: Scan, seconds: float | None = None, *, out=None, **kwargs) -> int:
     """Run a `VirtualOculus` in the foreground (keyword arguments go to it)."""
     return VirtualOculus(scan, **kwargs).serve(seconds, out)
+
+
+def scene_water(sensor) -> dict:
+    """``{"temperature", "surface_z"}`` of a scene's ``sonar`` sensor (its ``water``, the XML's
+    ``temperature`` and ``surface_z`` with ``auto`` water; the sensor's defaults otherwise), for
+    `VirtualOculus`'s ``water``."""
+    from mitsonar.plugins.water import WATER_DEFAULTS
+    water = getattr(sensor, "water", None) or WATER_DEFAULTS
+    return {"temperature": float(water["temperature"]), "surface_z": float(water["surface_z"])}
