@@ -95,10 +95,10 @@ def _live(args) -> int:
                 head = _head(args)
                 head.check_serve(args)
         if not frames and head.frames:
-            if not sonar.sonar_kind.transmit_fan:
+            if not sonar.sonar_kind.fan_frame:
                 from mitsonar.geometry import kinds
                 raise ValueError(f"live {scene_path.name}: --head {head.name} is a multibeam head; a "
-                                 f"{sonar.sonar_kind.name!r} sonar (kind must be {kinds.which('transmit_fan')}) "
+                                 f"{sonar.sonar_kind.name!r} sonar (kind must be {kinds.which('fan_frame')}) "
                                  f"has no {head.serves} to serve")
         elif not frames:
             require_mechanical(sonar, f"live {scene_path.name}", f"no {head.serves} to serve")

@@ -118,10 +118,10 @@ def _virtual_sonar(args) -> int:
     # Refuse before the render, not after it: a multibeam scene can take a while to render.
     if head.frames:
         from mitsonar.geometry import kinds
-        if not getattr(kinds.lookup(getattr(sensor, "kind", kinds.DEFAULT)), "transmit_fan", False):
+        if not getattr(kinds.lookup(getattr(sensor, "kind", kinds.DEFAULT)), "fan_frame", False):
             raise ValueError(f"virtual-sonar {scene_path.name}: --head {head.name} is a multibeam head; a "
                              f"{getattr(sensor, 'kind', kinds.DEFAULT)!r} sonar (kind must be "
-                             f"{kinds.which('transmit_fan')}) has no {head.serves} to serve")
+                             f"{kinds.which('fan_frame')}) has no {head.serves} to serve")
     else:
         require_mechanical(sensor, f"virtual-sonar {scene_path.name}", f"no {head.serves} to serve")
     kw = {"seed": args.seed, "sensor": sensor}

@@ -65,6 +65,8 @@ class SonarKind:
                        dataset jobs mount it with the identity
     share_beams        the receive beams lie in one fan about +y, so ``sonar_tof`` may score a
                        frame's shared transmit paths into them (`plugins/shared_beams.py`)
+    fan_frame          rows are one fan of receive beams fired at once: the frame a multibeam head
+                       (the Oculus) serves and logs
     grid               rows are beams over an elevation x azimuth grid (the sensor reads
                        ``n_azimuth``, ``n_elevation``, ``elevation_start``, ``elevation_step``;
                        ``Scan.volume`` reshapes the rows)
@@ -88,6 +90,7 @@ class SonarKind:
     mosaic = False
     head_frame_mount = False
     share_beams = False
+    fan_frame = False
     grid = False
 
     # ------------------------------------------------------------------ rows
@@ -157,6 +160,7 @@ class Multibeam(SonarKind):
     bathymetry_method = "centroid"
     max_sounding_fan = 180.0
     share_beams = True
+    fan_frame = True
 
     def ping_times(self, ping_period, pings, n_rows):
         """Zeros: the rows of a frame fire together."""
@@ -223,6 +227,7 @@ class Volumetric(Multibeam):
     name = "volumetric"
     grid = True
     share_beams = False
+    fan_frame = False
     has_fan = False
     plot_kinds = ("ascan",)
     max_sounding_fan = None

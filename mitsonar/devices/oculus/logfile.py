@@ -72,7 +72,7 @@ def scan_to_ping(scan, *, ping_id: int = 0, version: int = 2, gains: bool = True
     window starting above 0 m gets zero lines below it, so line i still covers
     ``[i, i + 1) x rangeResolution``), the image its bytes, at gain 100 % and gamma 1.
     ValueError if the scan is no multibeam or ``range_min`` is no whole number of bins."""
-    if not scan.sonar_kind.transmit_fan:
+    if not scan.sonar_kind.fan_frame:
         raise ValueError(f"scan_to_ping: a {scan.kind} scan is no Oculus ping (a multibeam frame)")
     w = scan.bin_width
     lead = scan.range_min / w

@@ -183,7 +183,7 @@ class VirtualOculus:
         for s in scans:
             if not isinstance(s, Scan):
                 raise TypeError(f"scan must be a Scan or a list of them, got {type(s).__name__}")
-            if not s.sonar_kind.transmit_fan:
+            if not s.sonar_kind.fan_frame:
                 raise ValueError(f"VirtualOculus: a {s.kind} scan has no Oculus pings to serve "
                                  f"(an Oculus is a multibeam head)")
         for name, port in (("tcp_port", tcp_port), ("udp_port", udp_port)):
