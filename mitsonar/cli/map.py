@@ -207,6 +207,7 @@ class _FitProgress:
     --incremental); nothing with --quiet. A bar shows once its stage has taken half a second (a
     quick stage, or a refusal in one, needs none) and is cleared when the stage ends."""
 
+    DELAY = 0.5     # s a stage runs before its bar shows
     WORDS = {"embedding": ("embedding scans", "scan"), "features": ("inducing points and kernel features", "step"),
              "sgd": ("SGD", "batch"), "sgd multi-echo": ("SGD, multi-echo refit", "batch"),
              "scans": ("mapping scans", "scan")}
@@ -224,7 +225,8 @@ class _FitProgress:
 
             desc, unit = self.WORDS.get(stage, (stage, "step"))
             self.stage = stage
-            self.bar = tqdm(total=total, desc=f"map: {desc}", unit=unit, leave=False, file=sys.stderr, delay=0.5)
+            self.bar = tqdm(total=total, desc=f"map: {desc}", unit=unit, leave=False, file=sys.stderr,
+                            delay=self.DELAY)
         self.bar.update(done - self.bar.n)
 
     def close(self) -> None:
