@@ -371,12 +371,12 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
         meta["start_time"] = start_time
     meta.update(sonar.sonar_kind.render_meta(sonar))   # a side-scan's channels and their tilt
     if getattr(sonar, "transmit", None) is not None:  # multibeam: the transmit fan beside the receive beams
-        meta.update(tx_pattern=sonar.transmit.kind, tx_beamwidth_h=sonar.transmit.beamwidth_h,
+        meta.update(tx_pattern=sonar.transmit.pattern, tx_beamwidth_h=sonar.transmit.beamwidth_h,
                     tx_beamwidth_v=sonar.transmit.beamwidth_v)
     return Scan(intensity=intensity, data=data, ranges=ranges,
                 bearings=np.radians(sonar.bearings_deg()), poses=poses, times=sonar.ping_times(),
                 range_min=sonar.range_min, range_max=sonar.range_max,
-                beam_pattern=sonar.beam.kind, beamwidth_h=sonar.beam.beamwidth_h,
+                beam_pattern=sonar.beam.pattern, beamwidth_h=sonar.beam.beamwidth_h,
                 beamwidth_v=sonar.beam.beamwidth_v, kind=sonar.kind, sound_speed=sonar.sound_speed,
                 absorption=sonar.absorption, electronics={**model.to_dict(), "seed": int(eseed)},
                 meta=meta)
