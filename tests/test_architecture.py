@@ -251,8 +251,7 @@ def test_heads_are_chosen_only_through_the_registry():
 # ----------------------------------------------------------------------------- sonar kinds
 KIND_NAMES = ("mechanical", "multibeam", "sidescan")
 KINDS_MODULE = os.path.join(ROOT, "mitsonar", "geometry", "kinds.py")
-# mitsonar.sidescan is the old flat path of the products.sidescan module: a module name, no kind.
-NOT_KINDS = {os.path.join(ROOT, "mitsonar", "_aliases.py")}
+NOT_KINDS = set()
 
 
 def _docstrings(tree):

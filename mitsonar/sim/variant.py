@@ -1,9 +1,13 @@
 """Choosing and activating the Mitsuba variant, and making sure Dr.Jit finds a libLLVM that works.
 
 Dr.Jit's ``llvm`` variants JIT-compile through a shared libLLVM found at run time. Debian 12's
-default LLVM 15 crashes (``Cannot select ... fminimum``); version 16 or newer works. Before
-Dr.Jit is imported we point ``DRJIT_LIBLLVM_PATH`` at the newest libLLVM on the system (unless
-the user set it), and we refuse to start on a version that is known to fail.
+default LLVM 15 crashes (``Cannot select ... fminimum``); version 16 or newer works. When mitsonar
+first chooses a variant (`set_variant`, or `ensure_variant` on first use; never at ``import
+mitsonar``) and Dr.Jit is not imported yet, it points ``DRJIT_LIBLLVM_PATH`` at the newest libLLVM
+on the system (unless the user set it), and it refuses to start on a version that is known to
+fail. A program that imported ``drjit`` (or ``mitsuba``) before that keeps the libLLVM Dr.Jit
+found by itself: set ``DRJIT_LIBLLVM_PATH`` before importing them, or let mitsonar choose the
+variant first.
 """
 from __future__ import annotations
 
@@ -43,8 +47,11 @@ def find_libllvm():
 
 
 def prepare_llvm_environment() -> None:
-    """Point Dr.Jit at a working libLLVM; must run before drjit is imported."""
-    if os.environ.get("DRJIT_LIBLLVM_PATH"):
+    """Point Dr.Jit at a working libLLVM (``DRJIT_LIBLLVM_PATH``, unless set); does nothing once
+    drjit is imported (it has found its libLLVM then)."""
+    import sys
+
+    if os.environ.get("DRJIT_LIBLLVM_PATH") or "drjit" in sys.modules:
         return
     path, version = find_libllvm()
     if path is not None and version >= MIN_LLVM:
@@ -86,9 +93,25 @@ def _on_variant_change(old, new):
         register()
 
 
+_following = []
+
+
+def _follow_variant_changes() -> None:
+    """Register the plugins again whenever the variant changes (``mi.set_variant`` too); once."""
+    if not _following:
+        import mitsuba as mi
+
+        mi.detail.add_variant_callback(_on_variant_change)
+        _following.append(True)
+
+
 def set_variant(name=None) -> str:
     """Activate a Mitsuba variant (default ``llvm_ad_mono`` or ``$MITSONAR_VARIANT``) and register
-    the plugins for it. Returns the variant's name."""
+    the plugins for it, and again whenever the variant changes. Returns the variant's name.
+
+    The first call (or `ensure_variant`'s) points Dr.Jit at a working libLLVM if drjit is not
+    imported yet (`prepare_llvm_environment`)."""
+    prepare_llvm_environment()
     import mitsuba as mi
 
     name = requested_variant(name)
@@ -98,6 +121,7 @@ def set_variant(name=None) -> str:
     from mitsonar.plugins import register
 
     register()
+    _follow_variant_changes()
     return name
 
 
@@ -110,7 +134,9 @@ def variant():
 
 def ensure_variant() -> None:
     """Make a supported variant active (the requested one when ``MITSONAR_VARIANT`` is set) and
-    the plugins registered for it."""
+    the plugins registered for it: what `load_scene`, `render_scan` and the other entry points
+    call first, so that ``import mitsonar`` need not."""
+    prepare_llvm_environment()
     import mitsuba as mi
 
     if mi.variant() not in SUPPORTED or os.environ.get("MITSONAR_VARIANT"):
@@ -119,10 +145,12 @@ def ensure_variant() -> None:
     from mitsonar.plugins import register
 
     register()
+    _follow_variant_changes()
 
 
 def init_on_import() -> None:
-    """Activate the default variant if none is set, register the plugins, follow variant changes.
+    """Activate the default variant if none is set, register the plugins, follow variant changes
+    (what ``import mitsonar`` did before version 0.3; `ensure_variant` does it now on first use).
 
     A missing or too old libLLVM does not make ``import mitsonar`` fail (the command line must
     still start and explain); it is reported as a `VariantError` by the first `load_scene` or
@@ -130,6 +158,7 @@ def init_on_import() -> None:
     """
     import warnings
 
+    prepare_llvm_environment()
     import mitsuba as mi
 
     try:
@@ -147,4 +176,4 @@ def init_on_import() -> None:
         # still "-m" while the package imports.)
         if os.path.basename(sys.argv[0] if sys.argv else "") not in ("mitsonar", "-m"):
             warnings.warn(f"mitsonar: {exc}", RuntimeWarning, stacklevel=3)
-    mi.detail.add_variant_callback(_on_variant_change)
+    _follow_variant_changes()
