@@ -11,11 +11,12 @@ import numpy as np
 from mitsonar._checks import is_whole
 from mitsonar._limits import LIMITS
 from mitsonar.geometry.frames import check_rigid
-from mitsonar.plugins import PLUGINS, module
+from mitsonar.plugins import PLUGINS
 from mitsonar.scan import Scan
 from mitsonar.sim.scene import SceneError, mitsuba_error, scene_name, sonar_of
 from mitsonar.geometry.trajectory import Trajectory
 from mitsonar.sim.variant import ensure_variant
+from mitsonar.sim.variant import plugin_module as module
 
 DEFAULT_SPP = 4096
 
@@ -120,8 +121,6 @@ def pick_sensor(scene, sensor=None, option="--sensor"):
     warning naming it when the scene has several. Refused with one `SceneError` naming the
     scene, ``option`` and its sensors (index, id, kind). Returns the sensor object, which
     `render_scan` and `render_survey` take without warning again."""
-    from mitsonar.plugins import module
-
     common = module("common")
     name = scene_name(scene) or "the scene"
     sensors = list(scene.sensors())
@@ -418,8 +417,6 @@ def scan_parameters(scene, keys=None):
 
     import drjit as dr
     import mitsuba as mi
-
-    from mitsonar.plugins import module
 
     ensure_variant()
     if not dr.is_diff_v(mi.Float):
