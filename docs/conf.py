@@ -15,7 +15,9 @@ sys.path.insert(0, str(HERE.parent))
 
 # The CPU variant, so the plugins import (and autodoc reads them) on a machine without a GPU.
 os.environ["MITSONAR_VARIANT"] = "llvm_ad_mono"
-import mitsonar  # noqa: E402  (registers the plugins for the variant)
+import mitsonar  # noqa: E402
+
+mitsonar.set_variant()   # registers the plugins for the variant (import mitsonar does not)
 
 project = "mitsonar"
 author = "mitsonar contributors"

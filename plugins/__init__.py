@@ -2,7 +2,8 @@
 
 The plugin classes derive from the classes of the active Mitsuba variant, so their modules are
 (re)loaded for each variant and the plugins registered again; `register()` does that and is
-called by ``import mitsonar`` and on every variant change.
+called by ``mitsonar.set_variant`` and ``mitsonar.ensure_variant`` (the first ``load_scene``,
+``render_scan``, ...), and on every variant change after that (never by ``import mitsonar``).
 """
 from __future__ import annotations
 

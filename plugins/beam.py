@@ -37,8 +37,6 @@ from mitsonar._compat import trapezoid
 
 from .jit_arrays import upload
 
-PATTERNS = ("gaussian", "sinc", "uniform", "table")
-
 # Solves sinc(t)^2 = 1/2: the -3 dB point of a piston's one-way pattern.
 _SINC_HALF_POWER = 1.3915573
 
@@ -196,13 +194,284 @@ def _table_row(path, lineno, row, rows):
     rows[axis].append((a, g))
 
 
+class Pattern:
+    """One beam pattern's law: what differs between ``gaussian``, ``sinc``, ``uniform`` and
+    ``table`` (the ``beam_pattern`` and ``tx_pattern`` strings of the XML).
+
+    A `BeamPattern` holds the widths, frequency and sound speed every pattern shares, and asks its
+    ``shape`` (the registered `Pattern` named by its ``pattern``) for the rest; this class and its
+    subclasses are the one place a pattern's name is read (`register`, `lookup`, `get`). A new
+    pattern is a subclass with its ``name``, the attributes and the methods that differ, made known
+    with `register`: the sensor's ``beam_pattern`` (and, if it ``transmits``, ``tx_pattern``) then
+    accept it.
+
+    Attributes (class-level):
+
+    ================== ==============================================================================
+    name               the XML string
+    transmits          may be a multibeam's transmit fan (``tx_pattern``)
+    apertures          reads ``aperture_h``/``aperture_v`` (refused for the others)
+    measured           reads a ``beam_table`` CSV (a scan records no more than its name, so its
+                       directivity index cannot be recomputed from the scan)
+    separable          ``B(az, el) = B_h(az) B_v(el)``: the solid angle is two 1D integrals
+    traversed_widths   the sensor traverses ``beamwidth_h``/``_v`` as differentiable parameters
+    bounded            lies within a window either side of the bearing (`share_window`): receive
+                       beams may share transmit paths
+    ================== ==============================================================================
+    """
+
+    name: str = ""
+    transmits = True
+    apertures = False
+    measured = False
+    separable = True
+    traversed_widths = False
+    bounded = True
+
+    def setup(self, beam, aperture_h, aperture_v, table, source) -> None:
+        """Set the pattern's own parameters on ``beam`` (apertures, table), or refuse them."""
+        beam.aperture_h = beam.aperture_v = None
+        beam.table = None
+
+    def support(self, beam):
+        """Angular rectangle (radians) holding all of the pattern: az_lo, az_hi, el_lo, el_hi."""
+        raise NotImplementedError
+
+    def eval_np(self, beam, az, el):
+        """B(az, el) in float64 numpy (radians)."""
+        raise NotImplementedError
+
+    def axis_gains(self, beam, az, el):
+        """(B(az, 0), B(0, el)) in numpy: the two factors of a separable pattern."""
+        return beam.eval_np(az, np.zeros_like(az)), beam.eval_np(np.zeros_like(el), el)
+
+    def build(self, beam) -> None:
+        """Upload what the kernel of `eval` needs beyond the widths."""
+
+    def eval(self, beam, az, el):
+        """B(az, el) inside a kernel (radians)."""
+        raise NotImplementedError
+
+    def share_window(self, beam) -> float:
+        """Radians either side of a receive beam's bearing that hold its pattern, for the receive
+        beams sharing transmit paths (``plugins/shared_beams.py``); a ValueError where the pattern
+        has no such window."""
+        lo, hi, _, _ = beam.support()
+        return max(-lo, hi)
+
+    def __repr__(self) -> str:
+        return f"<beam pattern {self.name!r}>"
+
+
+class Gaussian(Pattern):
+    """``2^-((2 az / bw_h)^2 + (2 el / bw_v)^2)``."""
+
+    name = "gaussian"
+    traversed_widths = True
+    #: A receive beam sharing transmit paths is scored within this many beam widths of its axis
+    #: (beyond, B < 2^-16: ``plugins/shared_beams.py``).
+    SHARE_WINDOW = 2.0
+
+    def support(self, beam):
+        bh, bv = math.radians(beam.beamwidth_h), math.radians(beam.beamwidth_v)
+        ah = min(math.pi, _GAUSS_SUPPORT * bh)
+        av = min(math.pi / 2, _GAUSS_SUPPORT * bv)
+        return -ah, ah, -av, av
+
+    def eval_np(self, beam, az, el):
+        bh, bv = math.radians(beam.beamwidth_h), math.radians(beam.beamwidth_v)
+        return np.exp2(-((2 * az / bh) ** 2 + (2 * el / bv) ** 2))
+
+    def eval(self, beam, az, el):
+        return dr.exp2(-(dr.square(2 * az / beam._p_bh) + dr.square(2 * el / beam._p_bv)))
+
+    def share_window(self, beam) -> float:
+        return self.SHARE_WINDOW * math.radians(beam.beamwidth_h)
+
+
+class Sinc(Pattern):
+    """Baffled rectangular piston of apertures ``a_h x a_v``."""
+
+    name = "sinc"
+    apertures = True
+    separable = False
+    bounded = False
+
+    def setup(self, beam, aperture_h, aperture_v, table, source) -> None:
+        if aperture_h is None:
+            aperture_h = line_aperture(beam.beamwidth_h, beam.frequency, beam.sound_speed)
+        if aperture_v is None:
+            aperture_v = line_aperture(beam.beamwidth_v, beam.frequency, beam.sound_speed)
+        for name, a in (("aperture_h", aperture_h), ("aperture_v", aperture_v)):
+            if not a > 0:
+                raise BeamPatternError(f"{source} '{name}': {a} m must be > 0")
+        beam.aperture_h, beam.aperture_v = float(aperture_h), float(aperture_v)
+        beam.table = None
+
+    def support(self, beam):
+        return -math.pi / 2, math.pi / 2, -math.pi / 2, math.pi / 2
+
+    def eval_np(self, beam, az, el):
+        lam = beam.sound_speed / beam.frequency
+        x = np.cos(el) * np.sin(az)
+        y = np.sin(el)
+        b = (_sinc(math.pi * beam.aperture_h * x / lam) * _sinc(math.pi * beam.aperture_v * y / lam)) ** 2
+        return np.where(np.abs(az) <= math.pi / 2, b, 0.0)
+
+    def build(self, beam) -> None:
+        lam = beam.sound_speed / beam.frequency
+        beam._p_kh = dr.opaque(mi.Float, math.pi * beam.aperture_h / lam)
+        beam._p_kv = dr.opaque(mi.Float, math.pi * beam.aperture_v / lam)
+
+    def eval(self, beam, az, el):
+        x = beam._p_kh * dr.cos(el) * dr.sin(az)
+        y = beam._p_kv * dr.sin(el)
+        if _approximate_sin():
+            sx, sy = sin_over_x(x), sin_over_x(y)
+        else:
+            sx = dr.select(dr.abs(x) > 1e-6, dr.sin(x) / x, 1.0)
+            sy = dr.select(dr.abs(y) > 1e-6, dr.sin(y) / y, 1.0)
+        return dr.select(dr.abs(az) <= dr.pi / 2, dr.square(sx * sy), 0.0)
+
+    def share_window(self, beam) -> float:
+        raise ValueError(f"sonar_tof 'share_beams': a {self.name!r} receive beam has side lobes over the whole "
+                         f"half-space; use beam_pattern {_quoted('bounded')}, or share_beams false")
+
+
+class Uniform(Pattern):
+    """1 inside ``|az| <= bw_h / 2, |el| <= bw_v / 2``, 0 outside."""
+
+    name = "uniform"
+
+    def support(self, beam):
+        bh, bv = math.radians(beam.beamwidth_h), math.radians(beam.beamwidth_v)
+        return -bh / 2, bh / 2, -min(bv / 2, math.pi / 2), min(bv / 2, math.pi / 2)
+
+    def eval_np(self, beam, az, el):
+        bh, bv = math.radians(beam.beamwidth_h), math.radians(beam.beamwidth_v)
+        return ((np.abs(az) <= bh / 2) & (np.abs(el) <= bv / 2)).astype(np.float64)
+
+    def eval(self, beam, az, el):
+        inside = (dr.abs(az) <= 0.5 * beam._p_bh) & (dr.abs(el) <= 0.5 * beam._p_bv)
+        return dr.select(inside, 1.0, 0.0)
+
+
+class Table(Pattern):
+    """Measured: a CSV of one-way gains per axis (`read_beam_table`)."""
+
+    name = "table"
+    transmits = False
+    measured = True
+
+    def setup(self, beam, aperture_h, aperture_v, table, source) -> None:
+        if table is None:
+            raise BeamPatternError(f"{source} 'beam_table': a CSV file is required for beam_pattern {self.name!r}")
+        beam.aperture_h = beam.aperture_v = None
+        beam.table = table
+
+    def support(self, beam):
+        h, v = beam.table["h"][0], beam.table["v"][0]
+        return (math.radians(h[0]), math.radians(h[-1]), math.radians(v[0]), math.radians(v[-1]))
+
+    def eval_np(self, beam, az, el):
+        (ha, hg), (va, vg) = beam.table["h"], beam.table["v"]
+        deg_az, deg_el = np.degrees(az), np.degrees(el)
+        g = np.interp(deg_az, ha, hg) + np.interp(deg_el, va, vg)
+        inside = (deg_az >= ha[0]) & (deg_az <= ha[-1]) & (deg_el >= va[0]) & (deg_el <= va[-1])
+        return np.where(inside, 10.0 ** (g / 10.0), 0.0)
+
+    def axis_gains(self, beam, az, el):
+        (ha, hg), (va, vg) = beam.table["h"], beam.table["v"]
+        return 10.0 ** (np.interp(np.degrees(az), ha, hg) / 10.0), 10.0 ** (np.interp(np.degrees(el), va, vg) / 10.0)
+
+    def build(self, beam) -> None:
+        # Resample each axis onto a uniform grid (dB) so the kernel interpolates with one gather.
+        beam._tab = {}
+        for axis in ("h", "v"):
+            ang, g = beam.table[axis]
+            u = np.linspace(ang[0], ang[-1], 2049)
+            beam._tab[axis] = (dr.opaque(mi.Float, math.radians(ang[0])),
+                               dr.opaque(mi.Float, (len(u) - 1) / math.radians(ang[-1] - ang[0])),
+                               upload(mi.Float, np.interp(u, ang, g), np.float32), len(u))
+
+    def eval(self, beam, az, el):
+        g, inside = mi.Float(0.0), mi.Bool(True)
+        for axis, ang in (("h", az), ("v", el)):
+            lo, scale, vals, n = beam._tab[axis]
+            t = (ang - lo) * scale
+            inside &= (t >= 0) & (t <= n - 1)
+            i = mi.UInt32(dr.clip(dr.floor(t), 0, n - 2))
+            w = dr.clip(t - mi.Float(i), 0.0, 1.0)
+            g += dr.lerp(dr.gather(mi.Float, vals, i), dr.gather(mi.Float, vals, i + 1), w)
+        return dr.select(inside, dr.exp2(g * (math.log2(10.0) / 10.0)), 0.0)
+
+
+_REGISTRY: dict = {}
+
+
+def register(pattern):
+    """Make a `Pattern` (a subclass or an instance) known by its ``name``; returns it (usable as a
+    class decorator). A name already taken is refused."""
+    inst = pattern() if isinstance(pattern, type) else pattern
+    if not isinstance(inst, Pattern) or not isinstance(inst.name, str) or not inst.name:
+        raise TypeError(f"register: {pattern!r} is not a beam Pattern with a name")
+    if inst.name in _REGISTRY:
+        raise ValueError(f"register: beam pattern {inst.name!r} is already registered")
+    _REGISTRY[inst.name] = inst
+    return pattern
+
+
+def unregister(name: str) -> None:
+    """Forget the pattern called ``name`` (for tests that register a toy pattern)."""
+    _REGISTRY.pop(name, None)
+
+
+GAUSSIAN, SINC, UNIFORM, TABLE = Gaussian(), Sinc(), Uniform(), Table()
+for _p in (GAUSSIAN, SINC, UNIFORM, TABLE):
+    register(_p)
+#: The receive pattern (and transmit fan) of a head whose XML names none.
+DEFAULT = GAUSSIAN.name
+
+
+def names(**having) -> tuple:
+    """The registered patterns' names in registration order; ``names(transmits=True)``: those whose
+    attributes have the values given."""
+    return tuple(n for n, p in _REGISTRY.items() if all(getattr(p, a) == v for a, v in having.items()))
+
+
+def lookup(name):
+    """The `Pattern` called ``name``, or None when no pattern has that name (or it is no string)."""
+    return _REGISTRY.get(name) if isinstance(name, str) else None
+
+
+def get(name, source: str = "sonar", field: str = "beam_pattern", **having) -> Pattern:
+    """The `Pattern` called ``name`` among those `names` (``**having``) lists; otherwise a
+    `BeamPatternError` naming ``source``, ``field`` and the allowed names."""
+    allowed = names(**having)
+    if not isinstance(name, str) or name not in allowed:
+        raise BeamPatternError(f"{source} '{field}': {name!r} is not one of {', '.join(allowed)}")
+    return _REGISTRY[name]
+
+
+def which(attr: str) -> str:
+    """The quoted names of the patterns whose ``attr`` is true, for messages: ``'sinc'``."""
+    return " or ".join(repr(p.name) for p in _REGISTRY.values() if getattr(p, attr))
+
+
+def _quoted(attr) -> str:
+    """``'gaussian', 'uniform' or 'table'``: the patterns whose ``attr`` is true, for messages."""
+    q = [repr(p.name) for p in _REGISTRY.values() if getattr(p, attr)]
+    return q[0] if len(q) == 1 else ", ".join(q[:-1]) + " or " + q[-1]
+
+
 class BeamPattern:
     """One-way directivity of a transducer and its importance sampler.
 
     Parameters (angles in degrees, as in the XML)
 
     ============== =====================================================================
-    kind           ``gaussian``, ``sinc``, ``uniform`` or ``table``
+    pattern        the name of a registered `Pattern`: ``gaussian``, ``sinc``, ``uniform``
+                   or ``table``
     beamwidth_h    full -3 dB width across the scan plane (about the beam frame's x)
     beamwidth_v    full -3 dB width along the scan axis (y)
     frequency      Hz (``sinc``)
@@ -210,12 +479,13 @@ class BeamPattern:
     sound_speed    m/s (``sinc``: wavelength)
     table          parsed beam table (``table``)
     ============== =====================================================================
+
+    ``pattern`` stays the name; ``shape`` is its `Pattern`, asked for everything that differs.
     """
 
-    def __init__(self, kind="gaussian", beamwidth_h=3.0, beamwidth_v=35.0, frequency=700e3,
+    def __init__(self, pattern="gaussian", beamwidth_h=3.0, beamwidth_v=35.0, frequency=700e3,
                  aperture_h=None, aperture_v=None, sound_speed=1500.0, table=None, source="sonar"):
-        if kind not in PATTERNS:
-            raise BeamPatternError(f"{source} 'beam_pattern': {kind!r} is not one of {', '.join(PATTERNS)}")
+        shape = get(pattern, source)
         for name, v, hi in (("beamwidth_h", beamwidth_h, 360.0), ("beamwidth_v", beamwidth_v, 180.0)):
             if not (0.0 < v <= hi):
                 raise BeamPatternError(f"{source} '{name}': {v} deg is outside (0, {hi:g}]")
@@ -225,31 +495,26 @@ class BeamPattern:
         for name, a in (("aperture_h", aperture_h), ("aperture_v", aperture_v)):
             if a is not None and not (math.isfinite(a) and a > 0):
                 raise BeamPatternError(f"{source} '{name}': {a} m must be > 0")
-            if a is not None and kind != "sinc":
-                raise BeamPatternError(f"{source} '{name}' is only used with beam_pattern 'sinc' (got {kind!r})")
-        self.kind = kind
+            if a is not None and not shape.apertures:
+                raise BeamPatternError(f"{source} '{name}' is only used with beam_pattern {which('apertures')} "
+                                       f"(got {pattern!r})")
+        self.pattern = pattern
+        self.shape = shape
         self.beamwidth_h = float(beamwidth_h)
         self.beamwidth_v = float(beamwidth_v)
         self.frequency = float(frequency)
         self.sound_speed = float(sound_speed)
-        if kind == "sinc":
-            if aperture_h is None:
-                aperture_h = line_aperture(beamwidth_h, self.frequency, self.sound_speed)
-            if aperture_v is None:
-                aperture_v = line_aperture(beamwidth_v, self.frequency, self.sound_speed)
-            for name, a in (("aperture_h", aperture_h), ("aperture_v", aperture_v)):
-                if not a > 0:
-                    raise BeamPatternError(f"{source} '{name}': {a} m must be > 0")
-            self.aperture_h, self.aperture_v = float(aperture_h), float(aperture_v)
-        else:
-            self.aperture_h = self.aperture_v = None
-        if kind == "table":
-            if table is None:
-                raise BeamPatternError(f"{source} 'beam_table': a CSV file is required for beam_pattern 'table'")
-            self.table = table
-        else:
-            self.table = None
+        shape.setup(self, aperture_h, aperture_v, table, source)
         self._build()
+
+    @property
+    def kind(self) -> str:
+        """The pattern's name: `pattern` (deprecated name, goes in the next release)."""
+        import warnings
+
+        warnings.warn("BeamPattern.kind is now BeamPattern.pattern; the old name goes in the next release",
+                      DeprecationWarning, stacklevel=2)
+        return self.pattern
 
     # ---------------------------------------------------------------- support and numpy eval
     def across_aperture(self) -> float:
@@ -262,38 +527,12 @@ class BeamPattern:
 
     def support(self):
         """Angular rectangle (radians) holding all of the pattern: az_lo, az_hi, el_lo, el_hi."""
-        bh, bv = math.radians(self.beamwidth_h), math.radians(self.beamwidth_v)
-        if self.kind == "gaussian":
-            ah = min(math.pi, _GAUSS_SUPPORT * bh)
-            av = min(math.pi / 2, _GAUSS_SUPPORT * bv)
-            return -ah, ah, -av, av
-        if self.kind == "uniform":
-            return -bh / 2, bh / 2, -min(bv / 2, math.pi / 2), min(bv / 2, math.pi / 2)
-        if self.kind == "sinc":
-            return -math.pi / 2, math.pi / 2, -math.pi / 2, math.pi / 2
-        h, v = self.table["h"][0], self.table["v"][0]
-        return (math.radians(h[0]), math.radians(h[-1]), math.radians(v[0]), math.radians(v[-1]))
+        return self.shape.support(self)
 
     def eval_np(self, az, el):
         """B(az, el) in float64 numpy (radians)."""
         az, el = np.asarray(az, np.float64), np.asarray(el, np.float64)
-        if self.kind == "gaussian":
-            bh, bv = math.radians(self.beamwidth_h), math.radians(self.beamwidth_v)
-            return np.exp2(-((2 * az / bh) ** 2 + (2 * el / bv) ** 2))
-        if self.kind == "uniform":
-            bh, bv = math.radians(self.beamwidth_h), math.radians(self.beamwidth_v)
-            return ((np.abs(az) <= bh / 2) & (np.abs(el) <= bv / 2)).astype(np.float64)
-        if self.kind == "sinc":
-            lam = self.sound_speed / self.frequency
-            x = np.cos(el) * np.sin(az)
-            y = np.sin(el)
-            b = (_sinc(math.pi * self.aperture_h * x / lam) * _sinc(math.pi * self.aperture_v * y / lam)) ** 2
-            return np.where(np.abs(az) <= math.pi / 2, b, 0.0)
-        (ha, hg), (va, vg) = self.table["h"], self.table["v"]
-        deg_az, deg_el = np.degrees(az), np.degrees(el)
-        g = np.interp(deg_az, ha, hg) + np.interp(deg_el, va, vg)
-        inside = (deg_az >= ha[0]) & (deg_az <= ha[-1]) & (deg_el >= va[0]) & (deg_el <= va[-1])
-        return np.where(inside, 10.0 ** (g / 10.0), 0.0)
+        return self.shape.eval_np(self, az, el)
 
     def solid_angle(self, n=2048):
         """Integral of B over the sphere (sr), by quadrature on the sampling grid."""
@@ -311,10 +550,10 @@ class BeamPattern:
         ``sinc`` (not separable in these angles) on a 2D grid of at least 30 samples per main
         lobe width on each axis, side lobes included (checked against ``10 log10(4 pi a_h a_v /
         lambda^2)`` for a large piston)."""
-        if self.kind == "table":
+        if self.shape.measured:
             return 10.0 * math.log10(4.0 * math.pi / self.beam_solid_angle())
         # Renders record it every scan (surveys: every ping): computed once per pattern.
-        key = (self.kind, self.beamwidth_h, self.beamwidth_v, self.frequency, self.aperture_h, self.aperture_v,
+        key = (self.pattern, self.beamwidth_h, self.beamwidth_v, self.frequency, self.aperture_h, self.aperture_v,
                self.sound_speed)
         if key not in _DI_CACHE:
             if len(_DI_CACHE) > 256:
@@ -326,16 +565,10 @@ class BeamPattern:
         """sr, the integral of B over the sphere (see `directivity_index`)."""
         az_lo, az_hi, el_lo, el_hi = self.support()
         bh, bv = math.radians(self.beamwidth_h), math.radians(self.beamwidth_v)
-        if self.kind != "sinc":
+        if self.shape.separable:
             az = np.linspace(az_lo, az_hi, max(4097, int(200 * (az_hi - az_lo) / bh)) | 1)
             el = np.linspace(el_lo, el_hi, max(4097, int(200 * (el_hi - el_lo) / bv)) | 1)
-            if self.kind == "table":
-                (ha, hg), (va, vg) = self.table["h"], self.table["v"]
-                bh_ = 10.0 ** (np.interp(np.degrees(az), ha, hg) / 10.0)
-                bv_ = 10.0 ** (np.interp(np.degrees(el), va, vg) / 10.0)
-            else:
-                bh_ = self.eval_np(az, np.zeros_like(az))
-                bv_ = self.eval_np(np.zeros_like(el), el)
+            bh_, bv_ = self.shape.axis_gains(self, az, el)
             return float(trapezoid(bh_, az) * trapezoid(bv_ * np.cos(el), el))
         n_az = min(max(1025, int(30 * math.pi / bh)), 20001) | 1
         n_el = min(max(513, int(30 * math.pi / bv)), 20001) | 1
@@ -375,45 +608,12 @@ class BeamPattern:
         bh, bv = math.radians(self.beamwidth_h), math.radians(self.beamwidth_v)
         self._p_bh = dr.opaque(mi.Float, bh)
         self._p_bv = dr.opaque(mi.Float, bv)
-        if self.kind == "sinc":
-            lam = self.sound_speed / self.frequency
-            self._p_kh = dr.opaque(mi.Float, math.pi * self.aperture_h / lam)
-            self._p_kv = dr.opaque(mi.Float, math.pi * self.aperture_v / lam)
-        if self.kind == "table":
-            # Resample each axis onto a uniform grid (dB) so the kernel interpolates with one gather.
-            self._tab = {}
-            for axis in ("h", "v"):
-                ang, g = self.table[axis]
-                u = np.linspace(ang[0], ang[-1], 2049)
-                self._tab[axis] = (dr.opaque(mi.Float, math.radians(ang[0])),
-                                   dr.opaque(mi.Float, (len(u) - 1) / math.radians(ang[-1] - ang[0])),
-                                   upload(mi.Float, np.interp(u, ang, g), np.float32), len(u))
+        self.shape.build(self)
 
     def eval(self, az: mi.Float, el: mi.Float) -> mi.Float:
         """B(az, el) inside a kernel (radians)."""
-        if self.kind == "gaussian":
-            return dr.exp2(-(dr.square(2 * az / self._p_bh) + dr.square(2 * el / self._p_bv)))
-        if self.kind == "uniform":
-            inside = (dr.abs(az) <= 0.5 * self._p_bh) & (dr.abs(el) <= 0.5 * self._p_bv)
-            return dr.select(inside, 1.0, 0.0)
-        if self.kind == "sinc":
-            x = self._p_kh * dr.cos(el) * dr.sin(az)
-            y = self._p_kv * dr.sin(el)
-            if _approximate_sin():
-                sx, sy = sin_over_x(x), sin_over_x(y)
-            else:
-                sx = dr.select(dr.abs(x) > 1e-6, dr.sin(x) / x, 1.0)
-                sy = dr.select(dr.abs(y) > 1e-6, dr.sin(y) / y, 1.0)
-            return dr.select(dr.abs(az) <= dr.pi / 2, dr.square(sx * sy), 0.0)
-        g, inside = mi.Float(0.0), mi.Bool(True)
-        for axis, ang in (("h", az), ("v", el)):
-            lo, scale, vals, n = self._tab[axis]
-            t = (ang - lo) * scale
-            inside &= (t >= 0) & (t <= n - 1)
-            i = mi.UInt32(dr.clip(dr.floor(t), 0, n - 2))
-            w = dr.clip(t - mi.Float(i), 0.0, 1.0)
-            g += dr.lerp(dr.gather(mi.Float, vals, i), dr.gather(mi.Float, vals, i + 1), w)
-        return dr.select(inside, dr.exp2(g * (math.log2(10.0) / 10.0)), 0.0)
+        return self.shape.eval(self, az, el)
+
 
     def eval_dir(self, d: mi.Vector3f) -> mi.Float:
         """B of a unit direction in the beam frame."""

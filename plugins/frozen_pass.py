@@ -15,7 +15,7 @@ What makes a replay give the same numbers as tracing again:
   scene), all opaque, so a new pose, window, seed or pass start is new data for the same kernel;
 * everything else that shapes the kernel is in the recording's key (`Context`): the pass's body,
   the integrator's class and settings, the scene, sensor and beam objects, and every Python
-  number and string of the context (sizes, the beam's kind, the window's width in beams);
+  number and string of the context (sizes, the beam's pattern, the window's width in beams);
 * a scene that holds textures anywhere (`has_textures`) is traced every pass (`Context.freezable`): a replay after
   texels changed through ``mi.traverse`` read the old texels (tests/test_gradients.py's
   per-texel finite difference found it);

@@ -41,8 +41,6 @@ BETA = 0.25
 CELLS_PER_BEAM = 4
 #: Azimuth cells at most.
 MAX_AZ_CELLS = 8192
-#: Fan patterns that are a product of an azimuth and an elevation factor (drawn as two 1-D inversions).
-SEPARABLE = ("gaussian", "uniform", "table")
 
 _cache: dict = {}
 
@@ -61,7 +59,7 @@ class ReceiveWeighted:
                            MAX_AZ_CELLS))
         n_el = int(np.clip(math.ceil((el_hi - el_lo) / math.radians(tx.beamwidth_v) * 40), 64, 2048))
         self.tx, self.rx = tx, rx   # held: the cache's key holds their ids
-        self.separable = tx.kind in SEPARABLE
+        self.separable = tx.shape.separable
         if self.separable:
             az = np.linspace(az_lo, az_hi, n_az)
             el = np.linspace(el_lo, el_hi, n_el)

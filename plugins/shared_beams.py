@@ -23,7 +23,8 @@ Row k's frame is the head frame turned by ``b_k`` about +y, so a head-frame dire
 ``az = atan2(x, z)`` and elevation ``el = asin(y)`` has azimuth ``az - b_k`` (wrapped to
 ``(-pi, pi]``) and the same elevation in row k's frame. The beams scored are those with
 ``|az - b_k| <= W``, found from the nearest one: ``W`` is the receive pattern's azimuth support
-(``BeamPattern.support``) except for a gaussian, where it is 2 beam widths (beyond, ``B < 2^-16``
+(``BeamPattern.support``) except for a gaussian, where it is 2 beam widths (``Gaussian.SHARE_WINDOW``
+in ``plugins/beam.py``) (beyond, ``B < 2^-16``
 and the pattern's mass is below 1e-5 of the beam's: the truncation is far below any Monte-Carlo
 error at reachable spp). A ``sinc`` receive pattern (side lobes over the whole half-space)
 would be scored into every row: it is refused with ``share_beams="true"``, as are echoes reaching
@@ -47,8 +48,6 @@ from .sonar_sensor import PingFrames
 # Beams scored per echo at most: the window either side of the nearest (2 m + 1 beams), or every
 # row of a frame narrower than that.
 MAX_BEAMS = 65
-# A gaussian receive beam is scored within this many beam widths of its axis.
-GAUSSIAN_WINDOW = 2.0
 # Float64 atomics straight to memory: the echoes of one SIMD packet rarely share a bin, so the
 # packet-local pre-reduction of the default mode only costs (one A/B on a loaded machine: a
 # quay-wall frame at spp 256 took 0.10 s against 0.14-0.16 s with ReduceMode.Auto).
@@ -66,14 +65,7 @@ def window(sensor):
     if not sensor.sonar_kind.share_beams:   # receive beams in one fan (a volumetric grid's are not)
         raise ValueError(f"sonar_tof 'share_beams': only for a sensor of kind {kinds.which('share_beams')} "
                          f"(kind is {sensor.kind!r})")
-    if beam.kind == "sinc":
-        raise ValueError("sonar_tof 'share_beams': a 'sinc' receive beam has side lobes over the whole half-space; "
-                         "use beam_pattern 'gaussian', 'uniform' or 'table', or share_beams false")
-    if beam.kind == "gaussian":
-        w = GAUSSIAN_WINDOW * math.radians(beam.beamwidth_h)
-    else:
-        lo, hi, _, _ = beam.support()
-        w = max(-lo, hi)
+    w = beam.shape.share_window(beam)
     bearings = np.radians(sensor.bearings_deg())
     # the narrowest spacing of the rows (a head's own table may be uneven: more beams per degree
     # near its boresight), so that the window either side of the nearest covers W everywhere

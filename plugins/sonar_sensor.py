@@ -15,13 +15,13 @@ from mitsonar._limits import LIMITS, check
 import mitsonar.geometry.kinds as kinds
 from mitsonar.geometry.frames import SIDES, check_rigid, check_rigid_stack
 
+from . import beam as patterns
 from .beam import BeamPattern, read_beam_table, resolve_path
 from .jit_arrays import upload
 from .props import count, number, text
 from .sidescan_heads import PRESETS
 from .water import check_pose, number_or_auto, read_water, resolve
 
-TX_PATTERNS = ("gaussian", "sinc", "uniform")
 # The size bounds are `mitsonar._limits.LIMITS`, with the physics behind them.
 MAX_BINS, MAX_PINGS = int(LIMITS["n_bins"].hi), int(LIMITS["n_pings"].hi)
 DEFAULT_FREQUENCY = 700e3
@@ -212,7 +212,7 @@ class SonarSensor(mi.Sensor):
         self.water = read_water(props, self.absorption, self.sound_speed)
         self.water_auto = [n for n in ("absorption", "sound_speed") if getattr(self, n) == "auto"]
         self.ping_period = num("ping_period", None)
-        pattern = text(props, "beam_pattern", preset.get("beam_pattern", "gaussian"), "sonar")
+        pattern = text(props, "beam_pattern", preset.get("beam_pattern", patterns.DEFAULT), "sonar")
         beam = self.sonar_kind.default_beamwidths
         bw_h = num("beamwidth_h", preset.get("beamwidth_h", beam[0]))
         bw_v = num("beamwidth_v", preset.get("beamwidth_v", beam[1]))
@@ -244,9 +244,12 @@ class SonarSensor(mi.Sensor):
         check_head_settings(elec, "sonar")             # the head's ranges, then the model's checks
         self.electronics_model = Electronics(**elec)
 
-        table = read_beam_table(table_path) if pattern == "table" and table_path else None
-        if table_path and pattern != "table":
-            raise ValueError(f"sonar 'beam_table' is only used with beam_pattern 'table' (got {pattern!r})")
+        shape = patterns.lookup(pattern)
+        measured = shape is not None and shape.measured
+        table = read_beam_table(table_path) if measured and table_path else None
+        if table_path and not measured:
+            raise ValueError(f"sonar 'beam_table' is only used with beam_pattern {patterns.which('measured')} "
+                             f"(got {pattern!r})")
         self.beam = BeamPattern(pattern, bw_h, bw_v, DEFAULT_FREQUENCY if frequency is None else frequency,
                                 ap_h, ap_v, self.sound_speed, table)
         self._tx_props = dict(tx)   # kept: a fan derived from the beam's widths follows them (parameters_changed)
@@ -373,16 +376,16 @@ class SonarSensor(mi.Sensor):
                 raise ValueError(f"sonar '{sorted(tx)[0]}': only used with kind {kinds.which('transmit_fan')} "
                                  f"(kind is {self.kind!r})")
             return None
-        kind = tx.get("tx_pattern", "gaussian")
-        if kind not in TX_PATTERNS:
-            raise not_allowed("sonar", "tx_pattern", kind, f"one of {', '.join(TX_PATTERNS)}")
+        pattern = tx.get("tx_pattern", patterns.DEFAULT)
+        if pattern not in patterns.names(transmits=True):
+            raise not_allowed("sonar", "tx_pattern", pattern, f"one of {', '.join(patterns.names(transmits=True))}")
         swath = self.swath_deg() + bw_h
         h = float(tx.get("tx_beamwidth_h", min(swath, 360.0)))
         v = float(tx.get("tx_beamwidth_v", min(abs(self.elevation_step) * (self.n_elevation - 1) + bw_v, 180.0)))
         for name, value, hi in (("tx_beamwidth_h", h, 360.0), ("tx_beamwidth_v", v, 180.0)):
             if not (math.isfinite(value) and 0.0 < value <= hi):
                 raise not_allowed("sonar", name, value, f"a width in (0, {hi:g}] deg")
-        return BeamPattern(kind, h, v, frequency, None, None, self.sound_speed, source="sonar tx")
+        return BeamPattern(pattern, h, v, frequency, None, None, self.sound_speed, source="sonar tx")
 
     # ------------------------------------------------------------------ geometry
     @property
@@ -492,7 +495,7 @@ class SonarSensor(mi.Sensor):
         if getattr(self, "_diff", None) is None:
             self._diff = {"to_world": mi.Transform4f(mi.Matrix4f(self.to_world_np)),
                           "absorption": mi.Float(self.absorption)}
-            if self.beam.kind == "gaussian":
+            if self.beam.shape.traversed_widths:
                 self._diff["beamwidth_h"] = mi.Float(self.beam.beamwidth_h)
                 self._diff["beamwidth_v"] = mi.Float(self.beam.beamwidth_v)
         return self._diff
@@ -515,7 +518,7 @@ class SonarSensor(mi.Sensor):
             self.absorption = value
         if "beamwidth_h" in keys or "beamwidth_v" in keys:
             h, v = float(d["beamwidth_h"][0]), float(d["beamwidth_v"][0])
-            self.beam = BeamPattern(self.beam.kind, h, v, self.beam.frequency, None, None, self.sound_speed)
+            self.beam = BeamPattern(self.beam.pattern, h, v, self.beam.frequency, None, None, self.sound_speed)
             if self.transmit is not None:
                 # a multibeam's fan whose widths the XML left to the beam's (the swath plus one beam
                 # width across, the beam's height) follows them, as loading those widths would do
@@ -523,12 +526,12 @@ class SonarSensor(mi.Sensor):
         super().parameters_changed(keys)
 
     def to_string(self):
-        tx = "" if self.transmit is None else (f", tx={self.transmit.kind} "
+        tx = "" if self.transmit is None else (f", tx={self.transmit.pattern} "
                                                f"{self.transmit.beamwidth_h:g}x{self.transmit.beamwidth_v:g} deg")
         if self.sonar_kind.sided:
             tx = f", side={self.side}, depression={self.depression:g} deg"
         return (f"SonarSensor[kind={self.kind}, n_pings={self.n_pings}, n_bins={self.n_bins}, "
-                f"range=[{self.range_min:g}, {self.range_max:g}) m, beam={self.beam.kind} "
+                f"range=[{self.range_min:g}, {self.range_max:g}) m, beam={self.beam.pattern} "
                 f"{self.beam.beamwidth_h:g}x{self.beam.beamwidth_v:g} deg{tx}]")
 
 

@@ -181,4 +181,14 @@ def mitsonar_mod():
     return mitsonar
 
 
+def pytest_configure(config):
+    """The suite's variant: ``import mitsonar`` chooses none (tests/test_import.py checks that in
+    fresh interpreters), so the tests' plugins, Dr.Jit arrays and ``mi.load_dict`` calls get the one
+    a user's `mitsonar.set_variant` (or first `load_scene`) would give (``MITSONAR_VARIANT``, else
+    ``llvm_ad_mono``), before any test module is imported."""
+    import mitsonar
+
+    mitsonar.ensure_variant()
+
+
 sys.path.insert(0, os.path.dirname(__file__))

@@ -173,7 +173,7 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     # and those import nothing of mitsonar's above them (the electronics' scene speckle, its NumPy
     # and Dr.Jit chains and the sonar equation's levels are leaves beside them)
     leaves = {"mitsonar._checks", "mitsonar._limits", "mitsonar._compat", "mitsonar.receiver.speckle",
-              "mitsonar.receiver.devicechain",
+              "mitsonar.receiver.devicechain", "mitsonar.sim.backend",
               "mitsonar.sonar_equation.levels",
               "mitsonar.acoustics._checks", "mitsonar.acoustics.seawater", "mitsonar.acoustics.interface",
               "mitsonar.acoustics.seabed", "mitsonar.acoustics.materials", "mitsonar.geometry.elements",
@@ -185,7 +185,9 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     # the kinds (numpy only) rotate rows with the frames' rotations
     assert {t for t in edges["mitsonar.geometry.kinds"] if t.startswith("mitsonar")} == {"mitsonar.geometry.frames"}
     assert {t for t in edges["mitsonar.receiver.speckle"] if t.startswith("mitsonar")} <= {"mitsonar.receiver.devicechain"}
-    assert not {t for t in edges["mitsonar.receiver.devicechain"] if t.startswith("mitsonar")}
+    # the chain asks for the variant mitsonar would choose (`mitsonar.sim.backend`: nothing of mitsonar)
+    assert {t for t in edges["mitsonar.receiver.devicechain"] if t.startswith("mitsonar")} <= {"mitsonar.sim.backend"}
+    assert not {t for t in edges["mitsonar.sim.backend"] if t.startswith("mitsonar")}
 
 
 def test_mitsonar_itself_holds_at_most_12_modules():
@@ -251,9 +253,8 @@ def test_heads_are_chosen_only_through_the_registry():
 # ----------------------------------------------------------------------------- sonar kinds
 KIND_NAMES = ("mechanical", "multibeam", "sidescan", "volumetric")
 KINDS_MODULE = os.path.join(ROOT, "mitsonar", "geometry", "kinds.py")
-# mitsonar.sidescan is the old flat path of the products.sidescan module, and mitsonar.signals'
-# lazy names point into its volumetric module: module names, no kind.
-NOT_KINDS = {os.path.join(ROOT, "mitsonar", "_aliases.py"), os.path.join(ROOT, "mitsonar", "signals", "__init__.py")}
+# mitsonar.signals' lazy names point into its volumetric module: a module name, no kind.
+NOT_KINDS = {os.path.join(ROOT, "mitsonar", "signals", "__init__.py")}
 
 
 def _docstrings(tree):
@@ -358,3 +359,59 @@ def test_a_new_kind_is_accepted_without_editing_other_modules(tmp_path):
         kinds.unregister("toy")
     with pytest.raises(ValueError, match="'toy' is not allowed"):
         scan("toy")
+
+
+# ----------------------------------------------------------------------------- beam patterns
+PATTERN_NAMES = ("gaussian", "sinc", "uniform", "table")
+PATTERNS_MODULE = os.path.join(ROOT, "plugins", "beam.py")
+# The dataset config's ``uniform`` is a way of drawing a parameter ("uniform", "randint",
+# "choice"), not a beam pattern.
+NOT_PATTERNS = {os.path.join(ROOT, "mitsonar", "jobs", "dataset", "config.py")}
+
+
+def pattern_strings(path):
+    """(line, code) of each comparison with a beam pattern's name (``beam.kind == "sinc"``,
+    ``p in ("gaussian", "uniform")``, ``case "table":``) and each display of two or more pattern
+    names (a table keyed by them, ``SEPARABLE = ("gaussian", "uniform", "table")``) in the code at
+    ``path``."""
+    with open(path, encoding="utf-8") as fh:
+        tree = ast.parse(fh.read(), path)
+
+    def names_in(node):
+        return [n.value for n in ast.walk(node) if isinstance(n, ast.Constant) and n.value in PATTERN_NAMES]
+
+    bad = []
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Compare, ast.MatchValue)) and names_in(node):
+            bad.append((node.lineno, ast.unparse(node)))
+        elif isinstance(node, (ast.Tuple, ast.List, ast.Set)) and len(names_in(node)) >= 2:
+            bad.append((node.lineno, ast.unparse(node)))
+        elif isinstance(node, ast.Dict) and len([k for k in node.keys if k is not None and names_in(k)]) >= 2:
+            bad.append((node.lineno, ast.unparse(node)))
+    return sorted(dict(sorted(bad, reverse=True)).items())   # one finding per line
+
+
+def test_the_checker_finds_pattern_comparisons(tmp_path):
+    src = tmp_path / "m.py"
+    src.write_text('"""A gaussian beam (docstring: fine)."""\n'
+                   'def f(beam, p):\n'
+                   '    a = beam.kind == "sinc"\n'
+                   '    b = p in ("gaussian", "uniform")\n'
+                   '    c = p.get("beam_pattern", "gaussian")\n'
+                   '    match p:\n'
+                   '        case "table":\n'
+                   '            pass\n'
+                   '    d = {"gaussian": 1, "sinc": 2}\n'
+                   '    return "use beam_pattern \'gaussian\'"\n')
+    assert [line for line, _ in pattern_strings(str(src))] == [3, 4, 7, 9]
+
+
+@pytest.mark.parametrize("name, path", sorted((n, p) for n, p in modules().items()
+                                              if not n.startswith("hilbertmap")))
+def test_only_the_pattern_classes_compare_pattern_names(name, path):
+    """Behaviour that differs between beam patterns lives on the pattern classes of
+    ``plugins/beam.py`` (`Pattern` and its registered subclasses): no other module compares a
+    pattern's name or keeps a table of pattern names; they ask the beam's ``shape``."""
+    if path == PATTERNS_MODULE or path in NOT_PATTERNS:
+        return
+    assert pattern_strings(path) == [], name

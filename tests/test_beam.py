@@ -135,7 +135,7 @@ def test_table_pattern_from_xml(mitsonar_mod, tmp_path):
     path = tmp_path / "beam.csv"
     path.write_text("axis,angle_deg,gain_db\nh,-5,-20\nh,0,0\nh,5,-20\nv,-30,-20\nv,0,0\nv,30,-20\n")
     scene = mitsonar_mod.load_scene(scene_xml(sonar_xml(beam_pattern="table", beam_table=str(path))))
-    assert scene.sensors()[0].beam.kind == "table"
+    assert scene.sensors()[0].beam.pattern == "table"
 
 
 @pytest.mark.parametrize("content, message", [
@@ -185,9 +185,9 @@ def test_relative_beam_table_is_found_next_to_the_scene(mitsonar_mod, tmp_path, 
         (tmp_path / "scene" / name).write_text(scene_xml(sonar_xml(beam_pattern="table", beam_table=table)))
     monkeypatch.chdir(tmp_path / "elsewhere")
     scene = mitsonar_mod.load_scene(str(tmp_path / "scene" / "good.xml"))
-    assert scene.sensors()[0].beam.kind == "table"
+    assert scene.sensors()[0].beam.pattern == "table"
     scene = mitsonar_mod.load_scene(os.path.join("..", "scene", "good.xml"))  # a relative scene path too
-    assert scene.sensors()[0].beam.kind == "table"
+    assert scene.sensors()[0].beam.pattern == "table"
     # Not found: the absolute paths tried, the scene's folder first.
     with pytest.raises(mitsonar_mod.SceneError, match="file 'nope.csv' does not exist") as info:
         mitsonar_mod.load_scene(str(tmp_path / "scene" / "missing.xml"))
@@ -219,3 +219,66 @@ def test_binary_beam_table_from_xml_is_one_sentence(mitsonar_mod, tmp_path):
 def test_impossible_or_unused_beam_parameters(beam_mod, params, message):
     with pytest.raises(beam_mod.BeamPatternError, match=message):
         beam_mod.BeamPattern("gaussian", 3.0, 35.0, **params)
+
+
+def test_a_new_pattern_is_accepted_without_editing_other_modules(mitsonar_mod, beam_mod):
+    """A toy pattern registered with the patterns' registry is a receive beam and a transmit fan of
+    the ``sonar`` sensor, samples and renders, and shares transmit paths through its window:
+    nothing outside its class names it."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from conftest import acoustic_xml, frame_matrix, rectangle_xml, scene_xml, sonar_xml
+
+    class Tent(beam_mod.Pattern):
+        name = "tent"
+
+        def support(self, beam):
+            bh, bv = math.radians(beam.beamwidth_h), math.radians(beam.beamwidth_v)
+            return -bh, bh, -min(bv, math.pi / 2), min(bv, math.pi / 2)
+
+        def eval_np(self, beam, az, el):
+            bh, bv = math.radians(beam.beamwidth_h), math.radians(beam.beamwidth_v)
+            return np.maximum(0.0, 1 - np.abs(az) / bh) * np.maximum(0.0, 1 - np.abs(el) / bv)
+
+        def eval(self, beam, az, el):
+            return dr.maximum(0.0, 1 - dr.abs(az) / beam._p_bh) * dr.maximum(0.0, 1 - dr.abs(el) / beam._p_bv)
+
+    with pytest.raises(beam_mod.BeamPatternError, match="'beam_pattern': 'tent' is not one of gaussian, sinc"):
+        beam_mod.BeamPattern("tent", 10.0, 20.0)
+    beam_mod.register(Tent)
+    try:
+        beam = beam_mod.BeamPattern("tent", 10.0, 20.0)
+        assert isinstance(beam.shape, Tent) and beam.pattern == "tent"
+        # B at half the width is 1/2 on each axis; the emission weight averages to the solid angle
+        assert beam.eval_np(math.radians(5.0), 0.0) == pytest.approx(0.5)
+        _, w = sample_weights(beam)
+        assert w.mean() == pytest.approx(beam.solid_angle(), rel=0.01)
+        floor = np.diag([40.0, 40.0, 1.0, 1.0])
+        floor[2, 3] = -2.0                              # 2 m below a head looking 40 deg down
+        shapes = rectangle_xml(floor, acoustic_xml(diffuse=0.5))
+        head = frame_matrix((math.sin(math.radians(40)), 0, -math.cos(math.radians(40))), (0, 1, 0))
+        scan = mitsonar_mod.render_scan(mitsonar_mod.load_scene(scene_xml(
+            sonar_xml(head, beam_pattern="tent", n_pings=3, bearing_start=-5.0, bearing_step=5.0, n_bins=50,
+                      range_max=10.0), shapes)), spp=256, seed=1)
+        assert scan.beam_pattern == "tent" and scan.intensity.max() > 0
+        fan = mitsonar_mod.load_scene(scene_xml(
+            sonar_xml(head, kind="multibeam", beam_pattern="tent", tx_pattern="tent", n_pings=5, bearing_start=-10.0,
+                      bearing_step=5.0, n_bins=50, range_max=10.0),
+            shapes, integrator='<integrator type="sonar_tof"><boolean name="share_beams" value="true"/></integrator>'))
+        assert fan.sensors()[0].transmit.pattern == "tent"
+        assert mitsonar_mod.render_scan(fan, spp=64, seed=1).meta["tx_pattern"] == "tent"
+        assert isinstance(mi.load_dict({"type": "sonar", "beam_pattern": "tent"}).beam.shape, Tent)
+    finally:
+        beam_mod.unregister("tent")
+    with pytest.raises(beam_mod.BeamPatternError, match="is not one of"):
+        beam_mod.BeamPattern("tent", 10.0, 20.0)
+
+
+def test_beam_kind_is_now_pattern(beam_mod):
+    """``BeamPattern.kind`` (the pattern's name) is now ``pattern``; the old name reads it with a
+    DeprecationWarning for one release."""
+    beam = beam_mod.BeamPattern("uniform", 10.0, 20.0)
+    assert beam.pattern == "uniform" and beam.shape is beam_mod.UNIFORM
+    with pytest.warns(DeprecationWarning, match="BeamPattern.kind is now BeamPattern.pattern"):
+        assert beam.kind == "uniform"

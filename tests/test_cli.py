@@ -178,7 +178,7 @@ def sidescan_npz(tmp_path_factory):
 
 
 def test_plot_of_a_sidescan_scan_is_a_waterfall_and_refuses_fans(tmp_path, sidescan_npz, capsys):
-    from mitsonar.cli import PLOT_KINDS, main, plot_kind
+    from mitsonar.cli.main import PLOT_KINDS, main, plot_kind
 
     assert plot_kind("sidescan") == "waterfall" and plot_kind("mechanical") == "polar"
     assert main(["plot", sidescan_npz, "-o", str(tmp_path / "w.png")]) == 0

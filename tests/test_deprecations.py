@@ -67,65 +67,33 @@ def importlib_module(name):
         return importlib.import_module(name)
 
 
-# The flat modules of mitsonar moved into packages by role: every old path imports, for one
-# release, the same module object with a warning naming its new home; the public names stay
-# without a warning.
-from mitsonar._aliases import MOVED, PUBLIC  # noqa: E402
+# The flat module paths of 0.2 (``mitsonar.electronics``, ``mitsonar.seanet``, ...) are gone in
+# 0.3 (no import hook answers for them); the four public names are small real modules.
+PUBLIC = {"plots": "mitsonar.products.plots", "bathymetry": "mitsonar.products.bathymetry",
+          "sidescan": "mitsonar.products.sidescan", "echosounders": "mitsonar.scenes.echosounders"}
 
 
-def _fresh(old):
-    """Forget an old path's alias so that importing it runs the finder again."""
-    import sys
-
-    sys.modules.pop(old, None)
-    parent, _, child = old.rpartition(".")
-    if parent in sys.modules and child in vars(sys.modules[parent]):
-        delattr(sys.modules[parent], child)  # an import set it on the package
-
-
-@pytest.mark.parametrize("old", sorted(set(MOVED) - PUBLIC))
-def test_old_module_paths_warn_and_give_the_same_module(old):
+@pytest.mark.parametrize("old", ["mitsonar.electronics", "mitsonar.seanet.messages", "mitsonar.frames",
+                                 "mitsonar.dataset.cli"])
+def test_the_old_flat_module_paths_are_gone(old):
     import importlib
 
-    new = f"mitsonar.{MOVED[old]}"
-    _fresh(f"mitsonar.{old}")
-    with pytest.warns(DeprecationWarning, match=rf"mitsonar\.{old} moved to {new}"):
-        module = importlib.import_module(f"mitsonar.{old}")
-    assert module is importlib.import_module(new)
-    # the module keeps its own name and spec (pickling, reload and autodoc read them)
-    assert module.__name__ == new and module.__spec__.name == new
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module(old)
 
 
-def test_submodules_of_a_moved_package_follow_it():
+@pytest.mark.parametrize("name", sorted(PUBLIC))
+def test_public_modules_import_under_their_names_without_a_warning(name):
     import importlib
 
-    _fresh("mitsonar.seanet.messages")
-    with pytest.warns(DeprecationWarning, match="mitsonar.devices.micron.seanet"):
-        old = importlib.import_module("mitsonar.seanet.messages")
-    assert old is importlib.import_module("mitsonar.devices.micron.seanet.messages")
-
-
-def test_an_old_module_as_an_attribute_warns():
-    import sys
-
-    import mitsonar
-
-    _fresh("mitsonar.trajectory")
-    with pytest.warns(DeprecationWarning, match="mitsonar.geometry.trajectory"):
-        module = mitsonar.trajectory
-    assert module is sys.modules["mitsonar.geometry.trajectory"]
-
-
-@pytest.mark.parametrize("old", sorted(PUBLIC))
-def test_public_modules_import_under_their_names_without_a_warning(old):
-    import importlib
-
-    _fresh(f"mitsonar.{old}")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        module = importlib.import_module(f"mitsonar.{old}")
-        exec(f"from mitsonar import {old} as again", {})
-    assert module is importlib.import_module(f"mitsonar.{MOVED[old]}")
+        module = importlib.import_module(f"mitsonar.{name}")
+        exec(f"from mitsonar import {name} as again", {})
+    room = importlib.import_module(PUBLIC[name])
+    assert module.__doc__ == room.__doc__ and module.__all__
+    for n in module.__all__:
+        assert getattr(module, n) is getattr(room, n), n
 
 
 def test_the_public_names_need_no_warning():

@@ -293,8 +293,8 @@ def test_receive_weighted_emission_weights_integrate_the_fan(mitsonar_mod, tx_ki
 
     BeamPattern = module("beam").BeamPattern
     remit = module("receive_emission")
-    tx = BeamPattern(kind=tx_kind, beamwidth_h=60.0, beamwidth_v=20.0, frequency=400e3)
-    rx = BeamPattern(kind="gaussian", beamwidth_h=3.0, beamwidth_v=20.0, frequency=400e3)
+    tx = BeamPattern(pattern=tx_kind, beamwidth_h=60.0, beamwidth_v=20.0, frequency=400e3)
+    rx = BeamPattern(pattern="gaussian", beamwidth_h=3.0, beamwidth_v=20.0, frequency=400e3)
     bearings = np.radians(np.arange(-20.0, 21.0, 2.0))          # a 40 deg swath inside the fan
     em = remit.ReceiveWeighted(tx, rx, bearings, math.radians(6.0))
     assert em.separable == (tx_kind != "sinc")

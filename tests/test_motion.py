@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 from conftest import SCENES, jit_kernels, matrix_attr, scene_xml, sonar_xml
 
+from mitsonar.geometry.trajectory import pose as trajectory_pose
+
 HALF = 8.0  # the walls: x = +-8, y = +-8 (vertical, 10 m tall)
 RANGE_MAX, N_BINS = 16.0, 400
 BIN = RANGE_MAX / N_BINS
@@ -72,7 +74,7 @@ def test_moving_mechanical_scan_pings_from_its_own_poses(mitsonar_mod, room):
 
     m = mitsonar_mod
     # 1 m/s forward while turning 6 deg/s: an arc of radius 9.5 m, 10 m and 60 deg over the scan
-    start = m.trajectory.pose([-3.0, -2.0, 0.0], 0.0)
+    start = trajectory_pose([-3.0, -2.0, 0.0], 0.0)
     traj = m.Trajectory.turn(12.0, 1.0, 6.0, start=start, dt=0.1)
     scan = m.render_scan(room, spp=64, seed=1, trajectory=traj, start_time=0.5, max_depth=1)
     np.testing.assert_array_equal(scan.times, np.arange(200) * 0.05)
@@ -114,7 +116,7 @@ def test_static_trajectory_gives_todays_static_scan(mitsonar_mod):
 def test_a_new_trajectory_compiles_no_new_kernel(mitsonar_mod, room):
     m = mitsonar_mod
     a = m.Trajectory.turn(12.0, 1.0, 6.0, dt=0.1)
-    b = m.Trajectory.straight(12.0, 2.0, start=m.trajectory.pose([1.0, 1.0, 0.0], 1.0), dt=0.2)
+    b = m.Trajectory.straight(12.0, 2.0, start=trajectory_pose([1.0, 1.0, 0.0], 1.0), dt=0.2)
     m.render_scan(room, spp=16, trajectory=a)
     _, fresh = jit_kernels(m.render_scan, room, spp=16, trajectory=b, start_time=1.0)
     assert fresh == []
@@ -134,7 +136,7 @@ def test_multibeam_frame_in_motion_shares_one_time_and_pose(mitsonar_mod):
 
 def test_survey_is_consecutive_scans_bit_for_bit_and_streams_to_disk(mitsonar_mod, room, tmp_path):
     m = mitsonar_mod
-    traj = m.Trajectory.turn(25.0, 0.5, 3.0, start=m.trajectory.pose([-2.0, -2.0, 0.0], 0.0), dt=0.2)
+    traj = m.Trajectory.turn(25.0, 0.5, 3.0, start=trajectory_pose([-2.0, -2.0, 0.0], 0.0), dt=0.2)
     period = 200 * 0.05
     scans = list(m.render_survey(room, traj, tmp_path / "a", spp=16, seed=5, progress=False))
     assert len(scans) == 2                                            # 25 s holds two 10 s sweeps

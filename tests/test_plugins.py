@@ -314,13 +314,14 @@ def test_scene_mesh_is_the_box_ground_truth(mitsonar_mod):
 
 
 def test_plugins_follow_a_variant_change():
-    """Registered per variant: after switching away and back the XML plugins still load."""
+    """Registered per variant (by `mitsonar.set_variant`: ``import mitsonar`` chooses none): after
+    switching away and back the XML plugins still load."""
     import subprocess
     import sys
 
     code = f"""
 import mitsonar, mitsuba as mi
-active = mi.variant()
+active = mitsonar.set_variant()
 mi.set_variant('scalar_rgb')
 mi.set_variant(active)
 scene = mi.load_file({BOX!r}, parallel=False)

@@ -213,7 +213,7 @@ def test_presets_and_the_wreck_survey_scene(mitsonar_mod):
                                               seabed(-5.0, 0.5)))
     s = scene.sensors()[0]
     p = presets["klein3000_500k"]
-    assert (s.beam.kind, s.beam.frequency, s.beam.beamwidth_h, s.beam.beamwidth_v, s.range_max, s.depression) == (
+    assert (s.beam.pattern, s.beam.frequency, s.beam.beamwidth_h, s.beam.beamwidth_v, s.range_max, s.depression) == (
         "sinc", p["frequency"], p["beamwidth_h"], p["beamwidth_v"], p["range_max"], p["depression"])
     s = mitsonar_mod.load_scene(scene_xml(sonar_xml(kind="sidescan", preset="starfish450", range_max=50.0,
                                                     depression=15.0), seabed(-5.0, 0.5))).sensors()[0]

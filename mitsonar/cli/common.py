@@ -78,7 +78,7 @@ def check_outputs(args, error=ValueError) -> None:
 
 
 def _max_depth():
-    from mitsonar.plugins import module
+    from mitsonar.sim.variant import plugin_module as module
 
     return module("common").MAX_DEPTH
 

@@ -288,17 +288,19 @@ class Scan:
         ``meta['frequency']``, ``meta['aperture_h']`` for ``sinc``)."""
         if self.meta.directivity_index is not None:
             return float(self.meta.directivity_index)
-        if self.beam_pattern == "table":
-            raise ScanFieldError("meta", "a 'table' beam pattern's directivity_index is not recorded")
-        from mitsonar.plugins.beam import BeamPattern
         from mitsonar.sim.variant import ensure_variant
 
         ensure_variant()
-        sinc = self.beam_pattern == "sinc"
-        beam = BeamPattern(self.beam_pattern, self.beamwidth_h, self.beamwidth_v,
-                           float(700e3 if self.meta.frequency is None else self.meta.frequency),
-                           float(self.meta.aperture_h) if sinc and self.meta.aperture_h is not None else None,
-                           None, self.sound_speed)
+        from mitsonar.plugins import beam as patterns
+
+        shape = patterns.lookup(self.beam_pattern)
+        if shape is not None and shape.measured:
+            raise ScanFieldError("meta", f"a {shape.name!r} beam pattern's directivity_index is not recorded")
+        own = shape is not None and shape.apertures     # the pattern reads the recorded aperture
+        beam = patterns.BeamPattern(self.beam_pattern, self.beamwidth_h, self.beamwidth_v,
+                                    float(700e3 if self.meta.frequency is None else self.meta.frequency),
+                                    float(self.meta.aperture_h) if own and self.meta.aperture_h is not None else None,
+                                    None, self.sound_speed)
         return beam.directivity_index()
 
     @property

@@ -311,7 +311,7 @@ def _shape_tables(scene):
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.plugins import module
+    from mitsonar.sim.variant import plugin_module as module
 
     guide = module("image_guide")
     acoustic = module("acoustic_bsdf").AcousticBSDF
@@ -365,7 +365,7 @@ def _trace(scene, sonar, row_poses, spp, seed, max_depth, spacing, resolution, s
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.plugins import module
+    from mitsonar.sim.variant import plugin_module as module
 
     samples_mod = module("samples")
     integ = scene.integrator()

@@ -11,11 +11,12 @@ import numpy as np
 from mitsonar._checks import is_whole
 from mitsonar._limits import LIMITS
 from mitsonar.geometry.frames import check_rigid
-from mitsonar.plugins import PLUGINS, module
+from mitsonar.plugins import PLUGINS
 from mitsonar.scan import Scan
 from mitsonar.sim.scene import SceneError, mitsuba_error, scene_name, sonar_of
 from mitsonar.geometry.trajectory import Trajectory
 from mitsonar.sim.variant import ensure_variant
+from mitsonar.sim.variant import plugin_module as module
 
 DEFAULT_SPP = 4096
 
@@ -121,8 +122,6 @@ def pick_sensor(scene, sensor=None, option="--sensor"):
     warning naming it when the scene has several. Refused with one `SceneError` naming the
     scene, ``option`` and its sensors (index, id, kind). Returns the sensor object, which
     `render_scan` and `render_survey` take without warning again."""
-    from mitsonar.plugins import module
-
     common = module("common")
     name = scene_name(scene) or "the scene"
     sensors = list(scene.sensors())
@@ -373,12 +372,12 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
         meta["start_time"] = start_time
     meta.update(sonar.sonar_kind.render_meta(sonar))   # a side-scan's channels and their tilt
     if getattr(sonar, "transmit", None) is not None:  # multibeam: the transmit fan beside the receive beams
-        meta.update(tx_pattern=sonar.transmit.kind, tx_beamwidth_h=sonar.transmit.beamwidth_h,
+        meta.update(tx_pattern=sonar.transmit.pattern, tx_beamwidth_h=sonar.transmit.beamwidth_h,
                     tx_beamwidth_v=sonar.transmit.beamwidth_v)
     return Scan(intensity=intensity, data=data, ranges=ranges,
                 bearings=np.radians(sonar.bearings_deg()), poses=poses, times=sonar.ping_times(),
                 range_min=sonar.range_min, range_max=sonar.range_max,
-                beam_pattern=sonar.beam.kind, beamwidth_h=sonar.beam.beamwidth_h,
+                beam_pattern=sonar.beam.pattern, beamwidth_h=sonar.beam.beamwidth_h,
                 beamwidth_v=sonar.beam.beamwidth_v, kind=sonar.kind, sound_speed=sonar.sound_speed,
                 absorption=sonar.absorption, electronics={**model.to_dict(), "seed": int(eseed)},
                 meta=meta)
@@ -420,8 +419,6 @@ def scan_parameters(scene, keys=None):
 
     import drjit as dr
     import mitsuba as mi
-
-    from mitsonar.plugins import module
 
     ensure_variant()
     if not dr.is_diff_v(mi.Float):

@@ -158,7 +158,7 @@ def scene_name(scene) -> str:
 def sonar_of(scene, sensor=0):
     """The sonar sensor ``sensor`` (an index or a sensor) of ``scene``, or a `SceneError` saying
     what the scene has instead; warns when an index picks one of several sonars."""
-    from mitsonar.plugins import module
+    from mitsonar.sim.variant import plugin_module as module
 
     common = module("common")
     name = scene_name(scene) or "the scene"

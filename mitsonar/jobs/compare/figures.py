@@ -90,7 +90,7 @@ def scan_from_histogram(sensor, hist, meta=None):
     return Scan(intensity=hist.astype(np.float32), data=np.zeros(hist.shape, np.uint8),
                 ranges=sensor.bin_centres(), bearings=np.radians(sensor.bearings_deg()),
                 poses=sensor.ping_poses(None), range_min=sensor.range_min, range_max=sensor.range_max,
-                beam_pattern=sensor.beam.kind, beamwidth_h=sensor.beam.beamwidth_h,
+                beam_pattern=sensor.beam.pattern, beamwidth_h=sensor.beam.beamwidth_h,
                 beamwidth_v=sensor.beam.beamwidth_v, kind=sensor.kind, sound_speed=sensor.sound_speed,
                 absorption=sensor.absorption, meta=dict(meta or {}))
 

@@ -12,7 +12,7 @@ def load_integrator(name, params=None):
     """
     import mitsuba as mi
 
-    from mitsonar.plugins import module
+    from mitsonar.sim.variant import plugin_module as module
     from mitsonar.sim.render import SONAR_INTEGRATORS
     from mitsonar.sim.scene import mitsuba_error
 

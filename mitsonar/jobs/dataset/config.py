@@ -358,7 +358,7 @@ def _check_terrain(where, spec):
 
 
 def _sonar_parameters():
-    from mitsonar.plugins import module
+    from mitsonar.sim.variant import plugin_module as module
 
     return module("sonar_sensor").SonarSensor.parameters()
 

@@ -33,7 +33,7 @@ def labelling_integrator(max_depth=5, sampling="sobol"):
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.plugins import module
+    from mitsonar.sim.variant import plugin_module as module
 
     base = module("sonar_tof").SonarTOFIntegrator
 

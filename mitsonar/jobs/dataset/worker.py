@@ -112,7 +112,7 @@ class SampleRenderer:
                 resolver.append(p)
             if "terrain" in draw:
                 os.remove(ply)
-        from mitsonar.plugins import module
+        from mitsonar.sim.variant import plugin_module as module
 
         sonars = [s for s in scene.sensors() if isinstance(s, module("common").SonarSensor)]
         if not sonars:
