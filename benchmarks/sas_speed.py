@@ -44,7 +44,7 @@ def main(argv=None):
     duration = (along + 2 * half_sa) / cfg.speed
     n_pings = int(duration / cfg.ping_period)
     scene = mitsonar.load_scene('<scene version="3.0.0"><integrator type="sonar_tof"/>'
-                                + cfg.sensor_xml(n_pings=n_pings, beam_pattern="uniform", depression=10.0,
+                                + cfg.sensor_xml(n_pings=n_pings, flat=True, depression=10.0,
                                                  beamwidth_v=80.0) + "</scene>")
     targets = [PointTarget((half_sa + along * f, near + args.across * g, 0.0), 0.0)
                for f, g in ((0.25, 0.2), (0.5, 0.5), (0.75, 0.8))]

@@ -122,7 +122,7 @@ def _sas_psf(path):
     cfg = sas.StripMap(n_elements=8, element_length=0.06, frequency=100e3, bandwidth=30e3, speed=3.6,
                        ping_period=0.05, range_max=20.0)
     scene = mitsonar.load_scene('<scene version="3.0.0"><integrator type="sonar_tof"/>'
-                                + cfg.sensor_xml(beam_pattern="uniform", n_pings=36, depression=30.0,
+                                + cfg.sensor_xml(flat=True, n_pings=36, depression=30.0,
                                                  beamwidth_v=80.0) + "</scene>")
     target = PointTarget((3.6, math.sqrt(64.0 - 9.0), 0.0), 0.0)
     echoes = mitsonar.render_echoes(scene, cfg.pulse(), elements=cfg.elements(), spp=1,

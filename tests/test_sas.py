@@ -33,7 +33,7 @@ def sas_run(mitsonar_mod):
     past three unit targets at slant ranges 4, 8 and 16 m (4x); a flat transmit beam over twice
     lambda / D so the processed beam sees a flat aperture."""
     cfg = strip_map()
-    scene = mitsonar_mod.load_scene(scene_xml(cfg.sensor_xml(beam_pattern="uniform", n_pings=36, depression=30.0,
+    scene = mitsonar_mod.load_scene(scene_xml(cfg.sensor_xml(flat=True, n_pings=36, depression=30.0,
                                                              beamwidth_v=80.0)))
     targets = [target_at(r) for r in (4.0, 8.0, 16.0)]
     track = cfg.track(1.9, start=(0.0, 0.0, H))
@@ -208,7 +208,7 @@ def test_dpca_micronavigation_recovers_the_sway_and_refocuses(mitsonar_mod, side
     cfg = strip_map(speed=3.6)
     assert cfg.overlap == 2
     sign = 1.0 if side == "port" else -1.0
-    scene = mitsonar_mod.load_scene(scene_xml(cfg.sensor_xml(side=side, beam_pattern="uniform", n_pings=36,
+    scene = mitsonar_mod.load_scene(scene_xml(cfg.sensor_xml(side=side, flat=True, n_pings=36,
                                                              depression=30.0, beamwidth_v=80.0)))
     rng = np.random.default_rng(1)
     field = [PointTarget((x, sign * y, 0.0), -20.0)
@@ -308,7 +308,7 @@ def test_omega_k_matches_backprojection_and_the_closed_forms(mitsonar_mod):
     from mitsonar import sas
 
     cfg = strip_map(speed=3.6)
-    scene = mitsonar_mod.load_scene(scene_xml(cfg.sensor_xml(beam_pattern="uniform", n_pings=36, depression=30.0,
+    scene = mitsonar_mod.load_scene(scene_xml(cfg.sensor_xml(flat=True, n_pings=36, depression=30.0,
                                                              beamwidth_v=80.0)))
     targets = [target_at(r) for r in (4.0, 8.0, 16.0)]
     track = cfg.track(1.9, start=(0.0, 0.0, H))

@@ -160,24 +160,21 @@ class StripMap:
         T = min(2e-3, 0.1 * self.ping_period) if duration is None else duration
         return lfm(self.frequency - 0.5 * self.bandwidth, self.frequency + 0.5 * self.bandwidth, T, window)
 
-    def sensor_xml(self, *, side="port", depression=20.0, beamwidth_v=60.0, beam_pattern="sinc", n_pings=64,
+    def sensor_xml(self, *, side="port", depression=20.0, beamwidth_v=60.0, flat=False, n_pings=64,
                    source_level=200.0) -> str:
         """A ``<sensor type="sonar">`` of kind ``sidescan`` for this configuration: its transmit
-        beam ``sinc`` of aperture ``D`` along track (or ``uniform`` over twice ``lambda / D``, flat
-        across the processed beam: for closed-form checks), ``beamwidth_v`` deg across track, its
-        band, ping period and range."""
-        if beam_pattern not in ("sinc", "uniform"):
-            raise ValueError(f"StripMap.sensor_xml 'beam_pattern': {beam_pattern!r} is not allowed (sinc or uniform)")
-        bw_h = math.degrees(self.beamwidth) if beam_pattern == "sinc" else 2.0 * math.degrees(self.beamwidth)
+        beam the element's own ``sinc`` of aperture ``D`` along track, or with ``flat`` a
+        ``uniform`` beam over twice ``lambda / D`` (flat across the processed beam: for
+        closed-form checks); ``beamwidth_v`` deg across track, its band, ping period and range."""
         from mitsonar.geometry.kinds import SIDESCAN
 
+        beam = {"beam_pattern": "uniform", "beamwidth_h": 2.0 * math.degrees(self.beamwidth)} if flat else \
+            {"beam_pattern": "sinc", "beamwidth_h": math.degrees(self.beamwidth), "aperture_h": self.element_length}
         items = {"kind": SIDESCAN.name, "side": side, "depression": float(depression), "range_max": self.range_max,
-                 "n_bins": 200, "n_pings": int(n_pings), "beam_pattern": beam_pattern, "beamwidth_h": bw_h,
+                 "n_bins": 200, "n_pings": int(n_pings), **beam,
                  "beamwidth_v": float(beamwidth_v), "frequency": self.frequency, "bandwidth": self.bandwidth,
                  "ping_period": self.ping_period, "sound_speed": self.sound_speed, "absorption": 0.0,
                  "source_level": float(source_level)}
-        if beam_pattern == "sinc":
-            items.update(aperture_h=self.element_length)
         from mitsonar.sim.sensor_xml import sensor_xml
 
         return sensor_xml(items)
