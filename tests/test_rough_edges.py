@@ -46,9 +46,9 @@ def test_python_dash_m_mitsonar_runs_the_command_line():
 
 
 def test_progress_rate_is_spp_over_the_time_since_the_render_started():
-    from mitsonar import cli
+    from mitsonar.cli.main import _Progress
 
-    progress = cli._Progress()
+    progress = _Progress()
     time.sleep(0.6)               # compiling and the first pass: the bar is not shown yet
     progress(4096, 65536)
     try:
