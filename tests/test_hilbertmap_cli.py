@@ -280,12 +280,13 @@ def test_a_sigint_mid_fit_ends_map_with_130_and_writes_nothing(scan_files, tmp_p
     try:
         assert in_sgd.wait(300), bytes(err)        # a bound against hanging only
         proc.send_signal(signal.SIGINT)
-        stdout, _ = proc.communicate(timeout=300)
+        proc.wait(timeout=300)                     # stderr is the reader's alone (communicate would race it)
     finally:
         if proc.poll() is None:
             proc.kill()
-            proc.communicate()
+            proc.wait()
     reader.join(10)
+    stdout = proc.stdout.read()
     text = err.decode(errors="replace")
     assert proc.returncode == 130, text
     assert text.rstrip().endswith("mitsonar: interrupted") and "Traceback" not in text
