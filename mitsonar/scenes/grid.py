@@ -172,16 +172,9 @@ def read_grid(path, *, bounds=None, resolution=None, resampling="bilinear", crs=
         raise GridError(f"--vertical-offset {vertical_offset}: not allowed (a finite number of metres)")
     if resolution is not None and not (math.isfinite(resolution) and resolution > 0):
         raise GridError(f"--resolution {resolution:g}: not allowed (a cell size > 0 in metres)")
-    if not os.path.isfile(path):
-        raise GridError(f"{path}: no such file (a raster GDAL reads: GeoTIFF, BAG, NetCDF, ASCII grid)")
-    try:
-        src = rasterio.open(path)
-    except rasterio.errors.RasterioError as exc:
-        raise GridError(f"{path}: not a raster GDAL reads ({first_line(exc)})") from None
+    src = _open_raster(rasterio, path, str(path), "a raster GDAL reads: GeoTIFF, BAG, NetCDF, ASCII grid",
+                       f"give the file its projected CRS first (gdal_edit.py -a_srs EPSG:NNNN {os.path.basename(path)})")
     with src:
-        if src.crs is None:
-            raise GridError(f"{path}: has no CRS; give the file its projected CRS first "
-                            f"(gdal_edit.py -a_srs EPSG:NNNN {os.path.basename(path)})")
         if src.transform.b != 0 or src.transform.d != 0:
             raise GridError(f"{path}: a rotated grid; warp it north-up first (gdalwarp)")
         src_crs = _horizontal(pyproj.CRS.from_user_input(src.crs.to_wkt()))
@@ -354,6 +347,21 @@ def read_sediment_map(path) -> dict:
     return out
 
 
+def _open_raster(rasterio, path, where: str, what: str, crs_hint: str):
+    """``rasterio.open(path)``, or one line naming ``where``: no such file (``what`` it should be),
+    not a raster GDAL reads, or a raster without a CRS (``crs_hint`` says how to give it one)."""
+    if not os.path.isfile(path):
+        raise GridError(f"{where}: no such file ({what})")
+    try:
+        src = rasterio.open(path)
+    except rasterio.errors.RasterioError as exc:
+        raise GridError(f"{where}: not a raster GDAL reads ({first_line(exc)})") from None
+    if src.crs is None:
+        src.close()
+        raise GridError(f"{where}: has no CRS; {crs_hint}")
+    return src
+
+
 def sediment_classes(path, grid: Grid, mapping: dict) -> np.ndarray:
     """The class (int) at the centre of each cell of ``grid`` ((ny-1, nx-1)), read from the
     sediment raster ``path`` (nearest cell, reprojected into the grid's CRS); refused: a cell
@@ -362,15 +370,9 @@ def sediment_classes(path, grid: Grid, mapping: dict) -> np.ndarray:
     from rasterio.transform import Affine
     from rasterio.warp import Resampling, reproject
 
-    if not os.path.isfile(path):
-        raise GridError(f"--sediment {path}: no such file (a raster of integer classes)")
-    try:
-        src = rasterio.open(path)
-    except rasterio.errors.RasterioError as exc:
-        raise GridError(f"--sediment {path}: not a raster GDAL reads ({first_line(exc)})") from None
+    src = _open_raster(rasterio, path, f"--sediment {path}", "a raster of integer classes",
+                       "give the file one first (gdal_edit.py -a_srs EPSG:NNNN)")
     with src:
-        if src.crs is None:
-            raise GridError(f"--sediment {path}: has no CRS; give the file one first (gdal_edit.py -a_srs EPSG:NNNN)")
         cx, cy = grid.x[0] + grid.cell / 2, grid.y[0] + grid.cell / 2
         ny, nx = len(grid.y) - 1, len(grid.x) - 1
         # the cells' centres as the centres of a grid of the same cell, rows down
