@@ -28,9 +28,18 @@ FOLDER_SAMPLES = {("demo", "output"): "box.exr", ("survey", "output"): "scan_000
 
 
 def _subparsers():
-    parser = build_parser()
-    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    return sub.choices
+    """Every command's parser by its words (``"render"``, ``"scene from-grid"``): nested ones too."""
+    found = {}
+
+    def walk(parser, words):
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    found[" ".join((*words, name))] = sub
+                    walk(sub, (*words, name))
+
+    walk(build_parser(), ())
+    return found
 
 
 def _takes_a_path(action) -> bool:
@@ -73,7 +82,7 @@ def test_every_writing_option_is_under_the_force_policy():
 def _argv(command, parser, target, path, tmp_path):
     """A command line of ``command`` with ``target`` set to ``path``: inputs that do not exist,
     other required outputs on fresh paths."""
-    argv = [command]
+    argv = command.split()
     for action in parser._actions:
         if action.dest == target.dest:
             argv += [action.option_strings[0], str(path)] if action.option_strings else [str(path)]

@@ -45,7 +45,7 @@ def cmd_from_sdf(args):
 
 
 def add_subcommands(sub):
-    from mitsonar.cli.common import add_force
+    from mitsonar.cli.common import add_force, add_output
     from mitsonar.scenes.grid import POSITIVE, RESAMPLING
     from mitsonar.scenes.echosounders import PRESETS
 
@@ -62,7 +62,7 @@ def add_subcommands(sub):
                                   "GDAL reads; the scene records its origin and CRS, so survey and bathymetry over "
                                   "it write products at the grid's coordinates without --origin.")
     g.add_argument("grid", help="the grid: GeoTIFF, BAG, NetCDF (GEBCO), ASCII grid, ...")
-    g.add_argument("-o", "--output", required=True, help="scene file to write (.xml; the PLY files go beside it)")
+    add_output(g, "-o", "--output", required=True, help="scene file to write (.xml; the PLY files go beside it)")
     g.add_argument("--material", help="the seabed's material (default seabed_sand)")
     g.add_argument("--sediment", metavar="MAP.tif", help="a raster of integer sediment classes (with --sediment-map)")
     g.add_argument("--sediment-map", metavar="CSV", help="class,material per line, for --sediment")
@@ -88,7 +88,8 @@ def add_subcommands(sub):
                                   "first heightmap geometries, with their poses) in a scene; what cannot be converted "
                                   "is listed one line each.")
     w.add_argument("world", help="the .sdf or .world file")
-    w.add_argument("-o", "--output", required=True, help="scene file to write (.xml; its meshes go beside it as <stem>_mesh_<k>.ply)")
+    add_output(w, "-o", "--output", required=True,
+               help="scene file to write (.xml; its meshes go beside it as <stem>_mesh_<k>.ply)")
     w.add_argument("--model-path", action="append", default=[], metavar="DIR",
                    help="a folder of models for model:// URIs (repeatable; GAZEBO_MODEL_PATH and "
                         "GZ_SIM_RESOURCE_PATH are searched after)")
