@@ -34,6 +34,7 @@ import mitsuba as mi
 import numpy as np
 
 from mitsonar._compat import trapezoid
+from mitsonar._registry import Registry
 
 from .jit_arrays import upload
 
@@ -406,24 +407,19 @@ class Table(Pattern):
         return dr.select(inside, dr.exp2(g * (math.log2(10.0) / 10.0)), 0.0)
 
 
-_REGISTRY: dict = {}
+_PATTERNS = Registry(Pattern, "a beam Pattern", "beam pattern")
+_REGISTRY = _PATTERNS.items
 
 
 def register(pattern):
     """Make a `Pattern` (a subclass or an instance) known by its ``name``; returns it (usable as a
     class decorator). A name already taken is refused."""
-    inst = pattern() if isinstance(pattern, type) else pattern
-    if not isinstance(inst, Pattern) or not isinstance(inst.name, str) or not inst.name:
-        raise TypeError(f"register: {pattern!r} is not a beam Pattern with a name")
-    if inst.name in _REGISTRY:
-        raise ValueError(f"register: beam pattern {inst.name!r} is already registered")
-    _REGISTRY[inst.name] = inst
-    return pattern
+    return _PATTERNS.register(pattern)
 
 
 def unregister(name: str) -> None:
     """Forget the pattern called ``name`` (for tests that register a toy pattern)."""
-    _REGISTRY.pop(name, None)
+    _PATTERNS.unregister(name)
 
 
 GAUSSIAN, SINC, UNIFORM, TABLE = Gaussian(), Sinc(), Uniform(), Table()

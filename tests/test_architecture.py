@@ -157,6 +157,8 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
                "mitsonar._limits",
                # what differs between the NumPy releases pyproject.toml allows (NumPy only)
                "mitsonar._compat",
+               # the kinds' and beam patterns' registry (imports nothing)
+               "mitsonar._registry",
                # the water and seabed acoustics (NumPy, and scipy.special for the APL-UW model's
                # erfc; nothing of mitsonar beyond each other): the sensor's absorption and sound
                # speed 'auto', the acoustic_material BSDF's reflection and backscatter tables
@@ -172,7 +174,7 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
             assert above <= allowed, (name, above - allowed)
     # and those import nothing of mitsonar's above them (the electronics' scene speckle, its NumPy
     # and Dr.Jit chains and the sonar equation's levels are leaves beside them)
-    leaves = {"mitsonar._checks", "mitsonar._limits", "mitsonar._compat", "mitsonar.receiver.speckle",
+    leaves = {"mitsonar._checks", "mitsonar._limits", "mitsonar._compat", "mitsonar._registry", "mitsonar.receiver.speckle",
               "mitsonar.receiver.devicechain", "mitsonar.sim.backend",
               "mitsonar.sonar_equation.levels",
               "mitsonar.acoustics._checks", "mitsonar.acoustics.seawater", "mitsonar.acoustics.interface",
@@ -182,8 +184,10 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
               "mitsonar.acoustics.propagation"}
     for low in (allowed | leaves) - {"mitsonar._checks", "mitsonar.geometry.kinds"}:
         assert not {t for t in edges[low] if t.startswith("mitsonar")} - leaves, low
-    # the kinds (numpy only) rotate rows with the frames' rotations
-    assert {t for t in edges["mitsonar.geometry.kinds"] if t.startswith("mitsonar")} == {"mitsonar.geometry.frames"}
+    # the kinds (numpy only) rotate rows with the frames' rotations, and keep their registry in the
+    # one shared with the beam patterns
+    assert {t for t in edges["mitsonar.geometry.kinds"] if t.startswith("mitsonar")} == \
+        {"mitsonar.geometry.frames", "mitsonar._registry"}
     assert {t for t in edges["mitsonar.receiver.speckle"] if t.startswith("mitsonar")} <= {"mitsonar.receiver.devicechain"}
     # the chain asks for the variant mitsonar would choose (`mitsonar.sim.backend`: nothing of mitsonar)
     assert {t for t in edges["mitsonar.receiver.devicechain"] if t.startswith("mitsonar")} <= {"mitsonar.sim.backend"}

@@ -30,6 +30,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from mitsonar._registry import Registry
 from mitsonar.geometry.frames import STARBOARD, bearing_rotation, elevation_rotation, sidescan_rotation
 
 __all__ = ["SonarKind", "Mechanical", "Multibeam", "Sidescan", "Volumetric", "MECHANICAL", "MULTIBEAM", "SIDESCAN",
@@ -247,24 +248,19 @@ class Volumetric(Multibeam):
                     elevation_start=float(sonar.elevation_start), elevation_step=float(sonar.elevation_step))
 
 
-_REGISTRY: dict = {}
+_KINDS = Registry(SonarKind, "a SonarKind", "sonar kind")
+_REGISTRY = _KINDS.items
 
 
 def register(kind):
     """Make a `SonarKind` (a subclass or an instance) known by its ``name``; returns it (usable as
     a class decorator). A name already taken is refused."""
-    inst = kind() if isinstance(kind, type) else kind
-    if not isinstance(inst, SonarKind) or not isinstance(inst.name, str) or not inst.name:
-        raise TypeError(f"register: {kind!r} is not a SonarKind with a name")
-    if inst.name in _REGISTRY:
-        raise ValueError(f"register: sonar kind {inst.name!r} is already registered")
-    _REGISTRY[inst.name] = inst
-    return kind
+    return _KINDS.register(kind)
 
 
 def unregister(name: str) -> None:
     """Forget the kind called ``name`` (for tests that register a toy kind)."""
-    _REGISTRY.pop(name, None)
+    _KINDS.unregister(name)
 
 
 MECHANICAL, MULTIBEAM, SIDESCAN, VOLUMETRIC = Mechanical(), Multibeam(), Sidescan(), Volumetric()
