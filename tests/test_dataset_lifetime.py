@@ -59,26 +59,34 @@ def still_running(procs):
 pytestmark = pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads the process table in /proc (Linux)")
 
 
+# Samples of the killed run, in shards of 2. A sample renders in about 0.03 s, so two workers have
+# about two seconds of work left when the first shard appears, against the milliseconds the test
+# takes to kill the coordinator: with 12 samples a loaded machine once let the run write all six
+# shards before the kill landed (CI, 2026-11-29).
+SAMPLES = 120
+SHARDS = SAMPLES // 2
+
+
 @pytest.fixture(scope="module")
-def twelve(tmp_path_factory):
-    """12 samples in shards of 2, rendered in this process: what any run must end with."""
-    out = tmp_path_factory.mktemp("ds") / "twelve"
-    generate_dataset(small_config(samples=12), str(out), workers=0, progress=False)
+def full(tmp_path_factory):
+    """`SAMPLES` samples in shards of 2, rendered in this process: what any run must end with."""
+    out = tmp_path_factory.mktemp("ds") / "full"
+    generate_dataset(small_config(samples=SAMPLES), str(out), workers=0, progress=False)
     return out
 
 
-def test_a_finished_run_leaves_no_lock(twelve):
-    assert sorted(os.listdir(twelve)) == ["manifest.json", "meshes"] + [f"shard-{k:06d}.tar" for k in range(6)]
-    assert not (twelve / LOCK).exists()
+def test_a_finished_run_leaves_no_lock(full):
+    assert sorted(os.listdir(full)) == ["manifest.json", "meshes"] + [f"shard-{k:06d}.tar" for k in range(SHARDS)]
+    assert not (full / LOCK).exists()
 
 
-def test_a_killed_coordinator_takes_its_workers_along(twelve, tmp_path):
+def test_a_killed_coordinator_takes_its_workers_along(full, tmp_path):
     """SIGKILL the coordinator alone (not its process group) of ``mitsonar dataset --workers 2``
     once it has written a shard: its two worker processes and the resource tracker end too; the
     shards written are kept, and the same command resumes to the dataset an uninterrupted run
     writes, leaving no lock file."""
-    cfg_path = tmp_path / "twelve.yaml"
-    cfg_path.write_text(yaml.safe_dump(small_config(samples=12)))
+    cfg_path = tmp_path / "run.yaml"
+    cfg_path.write_text(yaml.safe_dump(small_config(samples=SAMPLES)))
     out = tmp_path / "killed"
     cmd = [sys.executable, "-m", "mitsonar", "dataset", str(cfg_path), "-o", str(out), "--workers", "2",
            "--threads", "1", "--engine", "local", "-q"]
@@ -86,7 +94,7 @@ def test_a_killed_coordinator_takes_its_workers_along(twelve, tmp_path):
     try:
         deadline = time.monotonic() + 300
         while time.monotonic() < deadline and proc.poll() is None and not (out / "shard-000000.tar").exists():
-            time.sleep(0.02)
+            time.sleep(0.005)
         kids = children(proc.pid)
         assert proc.poll() is None, f"the command ended before it was killed: {proc.stderr.read().decode()[-500:]}"
         assert (out / "shard-000000.tar").exists(), "no shard written within 300 s"
@@ -107,10 +115,10 @@ def test_a_killed_coordinator_takes_its_workers_along(twelve, tmp_path):
     shards = len(yaml.safe_load((out / "manifest.json").read_text())["shards"])
     # killed mid-run: the shards the manifest lists (shard 0 too, unless the kill fell between its
     # rename and the manifest's), and a stale lock file
-    assert shards < 6 and (out / LOCK).exists()
+    assert shards < SHARDS and (out / LOCK).exists()
     result = generate_dataset(str(cfg_path), str(out), workers=0, progress=False)
-    assert result["rendered"] == 12 - 2 * shards            # nothing written was lost or redone
-    assert folder_bytes(out) == folder_bytes(twelve) and not (out / LOCK).exists()
+    assert result["rendered"] == SAMPLES - 2 * shards            # nothing written was lost or redone
+    assert folder_bytes(out) == folder_bytes(full) and not (out / LOCK).exists()
 
 
 def test_a_run_that_locked_a_removed_lock_file_takes_the_new_one(tmp_path, monkeypatch):
