@@ -339,6 +339,23 @@ def test_slots_of_a_client_behind_are_skipped_on_the_heads_schedule(monkeypatch)
     assert c.due == pytest.approx(2.0)
 
 
+def test_a_ping_is_delivered_when_its_last_byte_is_written():
+    # the live head's latency runs to the ping result's last byte (LiveOculus.delivered): a client
+    # taking 1000 bytes a write has the ping only after several writes, not when it was made
+    h, clock, c = _scheduled_head(0.0, chunk=1000)
+    got = []
+    h.delivered = lambda pid, t: got.append((pid, t, c.sock.sent))
+    h._tick()                               # the first ping made at t = 0, its first 1000 bytes out
+    size = len(c.out) + c.sock.sent
+    assert got == [] and size > 3000
+    start, writes = clock.t, 0
+    while not got and writes < 100:
+        clock.t += 0.001
+        h._flush(c)
+        writes += 1
+    assert got == [(0, pytest.approx(start + writes * 0.001), size)] and writes == -(-size // 1000) - 1
+
+
 def test_gain_percent_is_the_receiver_gain_of_a_rendered_scan(wall):
     from mitsonar.devices.oculus.virtual import VirtualOculus
     from mitsonar.receiver.electronics import apply_to_scan

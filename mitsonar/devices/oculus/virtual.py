@@ -70,7 +70,7 @@ import socket
 import sys
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 
 import numpy as np
 
@@ -149,6 +149,8 @@ class _Client:
         self.sock, self.addr = sock, addr
         self.parser = StreamParser(MAX_INCOMING_PAYLOAD)
         self.out = bytearray()
+        self.written = 0                # bytes sent to the client so far
+        self.ends: deque = deque()      # (self.written at a ping's last byte, its ping id), in order
         self.fire: FireMessage | None = None
         self.due = 0.0
 
@@ -506,6 +508,13 @@ class VirtualOculus:
             pass
         c.sock.close()
         self.stats["clients gone"] += 1
+        while c.ends:
+            self.delivered(c.ends.popleft()[1], None)
+
+    def delivered(self, ping_id: int, t: float | None) -> None:
+        """Ping ``ping_id``'s last byte was written to its client at ``t`` (the head's clock), or
+        never (``t`` None: the client went first). Nothing here; `mitsonar.devices.live.LiveOculus`
+        logs the ping's latency."""
 
     def _read(self, c: _Client) -> None:
         try:
@@ -571,6 +580,7 @@ class VirtualOculus:
             return
         self.stats["pings"] += 1
         c.out += data
+        c.ends.append((c.written + len(c.out), pid))
         self._flush(c)
 
     def _flush(self, c: _Client) -> None:
@@ -578,6 +588,11 @@ class VirtualOculus:
             try:
                 n = c.sock.send(c.out)
                 del c.out[:n]
+                c.written += n
+                if c.ends and c.ends[0][0] <= c.written:
+                    t = self._clock()
+                    while c.ends and c.ends[0][0] <= c.written:
+                        self.delivered(c.ends.popleft()[1], t)
             except BlockingIOError:
                 pass
             except OSError:
