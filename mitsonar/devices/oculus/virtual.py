@@ -471,6 +471,7 @@ class VirtualOculus:
                 self.stats["status not sent"] += 1
             self._next_status = now + self.status_period
         for c in list(self._clients.values()):
+            now = self._clock()             # another client's ping may have taken time
             if c.fire is not None and now >= c.due:
                 self._slot(c, now)
         now = self._clock()                 # the pings took time: wait from now, not from the tick's start
