@@ -236,6 +236,126 @@ def test_period_follows_the_rate_and_the_listening_time(head):
     assert head.period(FireMessage(ping_rate=5)) == math.inf
 
 
+class _FakeClock:
+    """The head's clock in a test: time passes only when the test (or the fake selector) says."""
+
+    def __init__(self):
+        self.t = 0.0
+
+    def __call__(self):
+        return self.t
+
+
+class _FakeSelector:
+    """The head's selector on the fake clock: a wait of ``timeout`` s passes at once, no events."""
+
+    def __init__(self, clock):
+        self.clock = clock
+
+    def select(self, timeout):
+        self.clock.t += max(timeout, 1e-6)
+        return []
+
+    def register(self, *a):
+        pass
+
+    modify = unregister = register
+
+
+class _FakeSock:
+    """A client socket that takes every byte (``full``: none)."""
+
+    def __init__(self, full=False, chunk=None):
+        self.full, self.chunk, self.sent = full, chunk, 0
+
+    def send(self, data):
+        if self.full:
+            raise BlockingIOError
+        n = len(data) if self.chunk is None else min(len(data), self.chunk)
+        self.sent += n
+        return n
+
+    def fileno(self):
+        return 99
+
+    def close(self):
+        pass
+
+
+def _scheduled_head(render_s, full=False, chunk=None):
+    """A virtual head on a fake clock with one client fired at 10 Hz (a 2 m range: 20 lines),
+    each ping taking ``render_s`` s of that clock to make."""
+    from mitsonar.devices.oculus.driver import fire_message
+    from mitsonar.devices.oculus.virtual import VirtualOculus, _Client
+    clock = _FakeClock()
+    h = VirtualOculus(fan_scan(n_r=20), tcp_port=0, udp_port=None, clock=clock)
+    h._sel, h._udp = _FakeSelector(clock), None        # what start() would open, without sockets
+    made = h.ping
+
+    def slow_ping(*a, **kw):
+        clock.t += render_s
+        return made(*a, **kw)
+
+    h.ping = slow_ping
+    c = _Client(_FakeSock(full, chunk), ("127.0.0.1", 1))
+    h._clients[99] = c
+    h._on_message(c, fire_message(rate=10, range=2.0, gain=100, beams=256))
+    return h, clock, c
+
+
+def test_the_head_keeps_its_rate_when_each_ping_takes_most_of_the_period():
+    # 60 ms to make each ping at 10 Hz: slots 0, 0.1, ..., 9.9 s of the head's clock all ping.
+    # Scheduling the next ping a period after the tick that sent it (and waiting a period from the
+    # tick's start) added each ping's making time to the period: 9 pings a second, not 10.
+    h, clock, _ = _scheduled_head(0.06)
+    while clock.t < 9.95:                 # half a period after the last slot (9.9 s)
+        h._tick()
+    assert h.stats["pings"] == 100
+    assert h.stats["pings skipped (late)"] == 0 and h.last_error is None
+
+
+def test_slots_missed_by_a_whole_period_are_skipped_and_counted_not_burst():
+    # 250 ms a ping at 10 Hz: the head pings at the next slot it can and counts the ones it missed;
+    # every slot is either pinged or skipped, and no two pings are closer than a ping's making.
+    h, clock, _ = _scheduled_head(0.25)
+    sent = []
+    send = h._send_ping
+    h._send_ping = lambda c, now: (sent.append(now), send(c, now))
+    while clock.t < 9.95:
+        h._tick()
+    slots = round(h._clients[99].due / 0.1)
+    assert h.stats["pings"] == len(sent) == 40
+    assert h.stats["pings"] + h.stats["pings skipped (late)"] == slots
+    assert min(np.diff(sent)) >= 0.25 - 1e-9
+
+
+def test_slots_of_a_client_behind_are_skipped_on_the_heads_schedule(monkeypatch):
+    import mitsonar.devices.oculus.virtual as virtual
+    monkeypatch.setattr(virtual, "MAX_BACKLOG", 1)          # the first ping fills what the client may have waiting
+    h, clock, c = _scheduled_head(0.0, full=True)
+    while clock.t < 1.95:
+        h._tick()
+    assert h.stats["pings"] == 1 and h.stats["pings skipped (client behind)"] == 19
+    assert c.due == pytest.approx(2.0)
+
+
+def test_a_ping_is_delivered_when_its_last_byte_is_written():
+    # the live head's latency runs to the ping result's last byte (LiveOculus.delivered): a client
+    # taking 1000 bytes a write has the ping only after several writes, not when it was made
+    h, clock, c = _scheduled_head(0.0, chunk=1000)
+    got = []
+    h.delivered = lambda pid, t: got.append((pid, t, c.sock.sent))
+    h._tick()                               # the first ping made at t = 0, its first 1000 bytes out
+    size = len(c.out) + c.sock.sent
+    assert got == [] and size > 3000
+    start, writes = clock.t, 0
+    while not got and writes < 100:
+        clock.t += 0.001
+        h._flush(c)
+        writes += 1
+    assert got == [(0, pytest.approx(start + writes * 0.001), size)] and writes == -(-size // 1000) - 1
+
+
 def test_gain_percent_is_the_receiver_gain_of_a_rendered_scan(wall):
     from mitsonar.devices.oculus.virtual import VirtualOculus
     from mitsonar.receiver.electronics import apply_to_scan

@@ -478,7 +478,8 @@ def _oculus():
         n_beams, range)`` gives the sensor of that geometry (`mitsonar.devices.oculus.scenes.
         SceneFrames.sensor_at`, what ``mitsonar live --head oculus`` passes), which renders the
         scene as loaded (so moved shapes stay moved); without ``geometry``, the scene sensor's own
-        fan and range."""
+        fan and range. A ping's record (``--records``) is logged when its last byte is written
+        (`delivered`): its latency runs from the ping's time to then."""
 
         def __init__(self, renderer: PingRenderer, port_url=None, *, baudrate=None, realtime: bool = True,
                      status_port: int | None = None, model: str | None = None, geometry=None):
@@ -487,6 +488,7 @@ def _oculus():
             host, port = parse_tcp_url(port_url)
             from mitsonar.devices.oculus.virtual import scene_water
             self.geometry = geometry
+            self._records = {}              # ping id -> its record, until its last byte is written
             super().__init__(renderer.warm(), model=model or "M1200d", host=host, tcp_port=port,
                              udp_port=UDP_PORT if status_port is None else status_port, realtime=realtime,
                              water=scene_water(renderer.sonar))
@@ -502,8 +504,13 @@ def _oculus():
             self._cache.clear()
             record = self.renderer.last_record
             result = super().ping(fire, ping_id, now)
-            self.renderer.finish(record)
+            self._records[ping_id] = record          # logged when its last byte is written (delivered)
             return result
+
+        def delivered(self, ping_id: int, t) -> None:
+            record = self._records.pop(ping_id, None)
+            if record is not None and t is not None:
+                self.renderer.finish(record, t)
 
     return LiveOculus
 

@@ -6,12 +6,13 @@ the file side-scan software (SonarWiz, SeaView, PINGMapper, OpenSidescan) opens.
     write_xtf("survey.xtf", scans, frame, start=1.7e9)     # frame: a mitsonar.geometry.geodesy.GeoFrame
 
 The file: one 1024-byte ``XTFFILEHEADER`` (two sonar channels: ``CHANINFO`` 0 ``TypeOfChannel`` 1
-port, 1 ``TypeOfChannel`` 2 starboard, 1 byte a sample, ``SampleFormat`` 8, slant range; ``NavUnits``
+port, 1 ``TypeOfChannel`` 2 starboard, 1 byte a sample, ``SampleFormat`` 8 (a 16- or 32-bit A/D's
+uint16, uint32 ``data``: 2 or 4 bytes, ``SampleFormat`` 3 or 2; one type in a file), slant range; ``NavUnits``
 3: navigation in lat/lon), then one sonar packet (``HeaderType`` 0) per ping: its 256-byte
-``XTFPINGHEADER`` and, per channel, a 64-byte ``XTFPINGCHANHEADER`` followed by the 8-bit samples,
+``XTFPINGHEADER`` and, per channel, a 64-byte ``XTFPINGCHANHEADER`` followed by the samples,
 the record padded with zeros to a multiple of 64 bytes (``NumBytesThisRecord`` holds the padded
 length). Ping k of a scan pairs the port row k with the starboard row k; the samples are the
-scan's ``data`` rows, byte for byte.
+scan's ``data`` rows, sample for sample (little-endian).
 
 Navigation: ``SensorXcoordinate`` longitude and ``SensorYcoordinate`` latitude (WGS 84 degrees) of
 the transducer of that ping (``poses[k][:3, 3]`` of its port row, converted through the frame's CRS),
@@ -205,6 +206,10 @@ def write_xtf(path, scans, frame, *, names=None, start=0.0, trajectory=None, son
     names = names or [f"scans[{i}]" for i in range(len(scans))]
     if not scans:
         raise XTFError("XTF export: no scans given (at least one side-scan scan)")
+    types = sorted({str(np.asarray(s.data).dtype) for s in scans})
+    if len(types) > 1:
+        raise XTFError(f"XTF export: the scans' data are {' and '.join(types)}; allowed: one type in a file (its "
+                       f"channels' BytesPerSample: bytes, or one A/D's uint16 or uint32 codes)")
     pings = _Pings(scans, names, start, trajectory)
     first = scans[0]
     slon, slat = frame.to_lonlat(pings.pos[:, 0], pings.pos[:, 1])
@@ -257,9 +262,10 @@ def _file_header(scan, filename, sonar_name, frame) -> bytes:
     chans = b""
     for i, (kind, name) in enumerate(((PORT_TYPE, b"port"), (STARBOARD_TYPE, b"starboard"))):
         chans += _pack(CHANINFO, TypeOfChannel=kind, SubChannelNumber=i, CorrectionFlags=1, UniPolar=1,
-                       BytesPerSample=1, Reserved=scan.n_bins, ChannelName=name, Frequency=_frequency_khz(scan),
-                       HorizBeamAngle=float(scan.beamwidth_v), TiltAngle=float(scan.meta.depression or 0.0),
-                       BeamWidth=float(scan.beamwidth_h), SampleFormat=8)
+                       BytesPerSample=scan.data.dtype.itemsize, Reserved=scan.n_bins, ChannelName=name,
+                       Frequency=_frequency_khz(scan), HorizBeamAngle=float(scan.beamwidth_v),
+                       TiltAngle=float(scan.meta.depression or 0.0), BeamWidth=float(scan.beamwidth_h),
+                       SampleFormat=SAMPLE_FORMATS[scan.data.dtype.itemsize])
     chans += b"".join(_pack(CHANINFO, Reserved=1024) for _ in range(4))
     head = _pack(FILEHEADER, FileFormat=0x7B, SystemType=1, RecordingProgramName=b"mitsonar",
                  RecordingProgramVersion=_version(), SonarName=sonar_name.encode()[:16], SonarType=0,
@@ -274,8 +280,12 @@ def _version() -> bytes:
     return __version__.encode()[:8]
 
 
+#: CHANINFO ``SampleFormat`` by bytes a sample: 1-byte, 2-byte and 4-byte integers (XTF rev 41)
+SAMPLE_FORMATS = {1: 8, 2: 3, 4: 2}
+
+
 def _channel(scan, row, number) -> bytes:
-    data = np.ascontiguousarray(scan.data[row], dtype=np.uint8)
+    data = np.ascontiguousarray(scan.data[row], dtype=scan.data.dtype.newbyteorder("<"))
     c = float(scan.sound_speed)
     period = scan.meta.ping_period
     head = _pack(PINGCHANHEADER, ChannelNumber=number, SlantRange=float(scan.range_max),

@@ -31,7 +31,8 @@ from mitsonar.scan.model import as_scans
 class Mosaic:
     """A mosaic: ``image`` (H, W) float64 mean value per cell (NaN: no data), ``count`` (H, W)
     samples per cell, ``transform`` the 6-tuple ``(a, b, c, d, e, f)`` above, ``use`` what the values
-    are (``data`` bytes or ``intensity``)."""
+    are (``data`` levels 0..255, a wider A/D's codes on that scale: `mitsonar.products.sidescan`,
+    or ``intensity``)."""
 
     image: np.ndarray
     count: np.ndarray

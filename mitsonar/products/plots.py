@@ -10,8 +10,9 @@ Values shown (``use`` and ``db``):
 ============= ======= =============================================================================
 use           db      colour
 ============= ======= =============================================================================
-``data``      False   device bytes 0..255 (what the head outputs)
-``data``      True    the bytes' level on the A/D scale, ``ad_low + byte / 255 * ad_span`` dB
+``data``      False   device codes 0..255 (what the head outputs; 0..65535, 0..4294967295 for the
+                      uint16, uint32 data of a 16-, 32-bit A/D)
+``data``      True    the codes' level on the A/D scale, ``ad_low + code / full scale * ad_span`` dB
 ``intensity`` False   noise-free echo energy per bin (linear)
 ``intensity`` True    ``10 log10`` of it, the top ``dynamic_range`` dB shown (zeros at the bottom)
 ============= ======= =============================================================================
@@ -42,11 +43,12 @@ def _values(scan, use: str, db: bool, dynamic_range: float, vmin=None, vmax=None
         raise ValueError(f"plot: use={use!r} is not one of data, intensity")
     if use == "data":
         v = scan.data.astype(np.float64)
+        top = scan.data_full_scale        # 255, or a 16- or 32-bit A/D's 65535, 4294967295
         if not db:
-            lo, hi, label = 0.0, 255.0, "device output (0..255)"
+            lo, hi, label = 0.0, float(top), f"device output (0..{top})"
         else:
             elec = _electronics(scan)
-            v = elec["ad_low"] + v / 255.0 * elec["ad_span"]
+            v = elec["ad_low"] + v / top * elec["ad_span"]
             lo, hi = elec["ad_low"], elec["ad_low"] + elec["ad_span"]
             label = "level on the A/D scale (dB)"
     else:
@@ -229,7 +231,8 @@ def plot_polar(scan, path=None, ax=None, db: bool = False, cmap: str = DEFAULT_C
         Wedge width in degrees; default: consecutive pings tile the fan, a ping without neighbours
         is the scan's ``beamwidth_h`` wide.
     vmin, vmax : float, optional
-        Colour limits (defaults: 0..255, the A/D window, or the data range).
+        Colour limits (defaults: 0..255 (0..65535, 0..4294967295 for wider data), the A/D window,
+        or the data range).
     dynamic_range : float
         dB shown below the maximum for ``use='intensity', db=True``.
     resolution : int
@@ -606,8 +609,9 @@ def plot_ascan(scan, ping: int, path=None, ax=None, db: bool = False, *,
     ax.set_xlim(scan.range_min, scan.range_max)
     ax2 = ax.twinx()
     ax2.step(scan.ranges, scan.data[ping], where="mid", color="tab:orange", lw=0.7, alpha=0.8, label="data")
-    ax2.set_ylim(0, 260)
-    ax2.set_ylabel("device output (0..255)", color="tab:orange")
+    top = scan.data_full_scale
+    ax2.set_ylim(0, top * 260 / 255)
+    ax2.set_ylabel(f"device output (0..{top})", color="tab:orange")
     row = ping % scan.n_pings
     if scan.channel is not None:      # a side-scan row: a ping of one channel, not a bearing
         side = scan.channel[row]

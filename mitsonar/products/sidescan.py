@@ -13,6 +13,10 @@ the ground-range image samples each row at ``r(g) = sqrt(g^2 + a^2)``. Over a kn
 ``z = f(x, y)`` the ground point ``q = p + g u`` (``p`` the transducer, ``u`` the horizontal unit
 vector across the track to the row's side) is at slant range ``sqrt(g^2 + (p_z - f(q))^2)``.
 Ranges before the first bottom return (the nadir gap, ``r < a``) have no ground position.
+
+``use="data"`` values are device levels 0..255: the bytes, or the uint16/uint32 codes of a 16- or
+32-bit A/D times ``255 / full scale`` (not rounded: the finer levels kept), so that products
+(waterfalls, ground range, mosaics) of scans of any A/D width share one scale.
 """
 from __future__ import annotations
 
@@ -36,7 +40,10 @@ def _check_sidescan(scan, where):
 def _values(scan, use, where):
     if use not in USES:
         raise ValueError(f"{where} 'use': {use!r} is not allowed (one of {', '.join(USES)})")
-    return np.asarray(getattr(scan, use), dtype=np.float64)
+    v = np.asarray(getattr(scan, use), dtype=np.float64)
+    if use == "data" and scan.data.dtype != np.uint8:      # a 16- or 32-bit A/D's codes: on the bytes' scale
+        v *= 255.0 / scan.data_full_scale
+    return v
 
 
 def channel_rows(scan, side) -> np.ndarray:

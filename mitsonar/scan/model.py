@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from mitsonar._checks import not_allowed
 from mitsonar.scan import fileformat as scanfile
 from mitsonar.scan.meta import ScanFieldError, ScanMeta
 
@@ -82,6 +83,38 @@ def _device_bytes(value) -> np.ndarray:
                                          "(device bytes: integers 0 to 255)")
         a = a.astype(np.uint8)
     return a
+
+
+def data_full_scale(data) -> int:
+    """The largest code of device data ``data`` (uint8, uint16 or uint32: 255, 65535, 4294967295)."""
+    return int(np.iinfo(np.asarray(data).dtype).max)
+
+
+def data_as(data, dtype) -> np.ndarray:
+    """Device data ``data`` (uint8, uint16 or uint32) on the codes of ``dtype`` (one of those):
+    ``round(code x top' / top)`` (halves up), the same levels on the other A/D's scale; ``data``
+    itself when the types agree."""
+    a = np.asarray(data)
+    dtype = np.dtype(dtype)
+    if a.dtype == dtype:
+        return a
+    top, to = data_full_scale(a), int(np.iinfo(dtype).max)
+    return ((a.astype(np.uint64) * to + top // 2) // top).astype(dtype)
+
+
+def data_bytes(data) -> np.ndarray:
+    """Device data ``data`` (uint8, uint16 or uint32) as bytes 0..255: ``round(255 code / full
+    scale)`` (halves up; the bytes themselves for uint8). `Scan.data_bytes`."""
+    return data_as(data, np.uint8)
+
+
+def require_bytes(scan, who: str, sends: str) -> None:
+    """Refuse, in one line, a scan whose ``data`` is not bytes (uint8) for ``who``, a head that
+    ``sends`` only 8-bit (or 4-bit) samples: a wider A/D's codes are not what it sends."""
+    dtype = np.asarray(scan.data).dtype
+    if dtype != np.uint8:
+        raise not_allowed(who, "data", str(dtype), f"{sends}: uint8 data, a scan rendered with electronics "
+                                                   f"bit_depth 8 (or 4), not {8 * dtype.itemsize}")
 
 
 def _number(name: str, value, ok, allowed: str) -> None:
@@ -250,6 +283,17 @@ class Scan:
             raise ScanFieldError("meta", f"n_elevation x n_azimuth = {n_el} x {n_az} is not allowed (the scan's "
                                          f"{self.n_pings} rows)")
         return self.intensity.reshape(n_el, n_az, self.n_bins)
+
+    @property
+    def data_full_scale(self) -> int:
+        """The largest code of `data`: 255 (uint8), 65535 (uint16) or 4294967295 (uint32)."""
+        return data_full_scale(self.data)
+
+    def data_bytes(self) -> np.ndarray:
+        """`data` as bytes 0..255, uint8: itself for uint8; the codes of a wider A/D
+        ``round(255 code / full scale)``, the same levels at 8 bits (a 16-bit code / 257, a 32-bit
+        one / 16843009, to the nearest), for consumers that show or send bytes only."""
+        return data_bytes(self.data)
 
     @property
     def n_bins(self) -> int:

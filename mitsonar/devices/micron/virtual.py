@@ -38,6 +38,7 @@ import numpy as np
 
 from mitsonar._checks import in_range
 from mitsonar.scan import Scan
+from mitsonar.scan.model import require_bytes
 from mitsonar.devices.transports import ServedHead, check_port
 from mitsonar.devices.micron.seanet import (DEFAULT_NIBBLE_ORDER, FULL_TURN, Alive, BBUserData, FpgaCalibrationData,
                      FpgaVersionData, GainCommand, HeadCommand, HeadData, HeadInf, HeadSettings,
@@ -45,6 +46,9 @@ from mitsonar.devices.micron.seanet import (DEFAULT_NIBBLE_ORDER, FULL_TURN, Ali
                      StopAlives, StreamParser, VersionData, bearing_to_radians, encode, require_mechanical)
 
 __all__ = ["Faults", "VirtualMicron", "serve", "check_port"]
+
+#: what a Micron sends, in the refusal of a scan of wider codes (`mitsonar.scan.model.require_bytes`)
+MICRON_SENDS = "a Micron sends 8- or 4-bit samples"
 
 
 @dataclass
@@ -126,6 +130,7 @@ class VirtualMicron(ServedHead):
             raise TypeError("scan_source must be a Scan or a callable settings -> Scan")
         if isinstance(scan_source, Scan):
             require_mechanical(scan_source, "VirtualMicron", "no SeaNet scanlines to serve")
+            require_bytes(scan_source, "VirtualMicron", MICRON_SENDS)
         self._source = scan_source
         self.port_url = port_url
         self.baudrate = int(baudrate)
@@ -350,6 +355,7 @@ class VirtualMicron(ServedHead):
                 scan = self._source(settings)
                 if not isinstance(scan, Scan):
                     raise TypeError(f"scan_source returned {type(scan).__name__}, not a Scan")
+                require_bytes(scan, "VirtualMicron", MICRON_SENDS)
             except Exception as e:
                 self.last_error = e
                 self.stats["scan source errors"] += 1

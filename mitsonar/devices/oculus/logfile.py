@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mitsonar.devices.oculus.protocol import FLAG, FireMessage, OculusError, PingResult, decode
+from mitsonar.devices.oculus.protocol import EXT_32BIT, FLAG, FireMessage, OculusError, PingResult, decode
 
 __all__ = ["FILE_MAGIC", "ITEM_MAGIC", "RT_OCULUS_SONAR", "OculusLogWriter", "write_log", "read_log",
            "read_scans", "is_oculus_log", "scan_to_ping"]
@@ -70,7 +70,9 @@ def scan_to_ping(scan, *, ping_id: int = 0, version: int = 2, gains: bool = True
     """A multibeam `mitsonar.scan.Scan` as the simple ping result a head would send: beams its rows
     (bearings rounded to 0.01 degree), range lines its bins (``rangeResolution`` the bin width; a
     window starting above 0 m gets zero lines below it, so line i still covers
-    ``[i, i + 1) x rangeResolution``), the image its bytes, at gain 100 % and gamma 1.
+    ``[i, i + 1) x rangeResolution``), the image its data (8-bit samples of bytes; 16- and 32-bit
+    ones, as the fire message asks them, of a wider A/D's uint16, uint32 codes; 32-bit ones in a
+    version 2 result only), at gain 100 % and gamma 1.
     ValueError if the scan is no multibeam or ``range_min`` is no whole number of bins."""
     if not scan.sonar_kind.fan_frame:
         raise ValueError(f"scan_to_ping: a {scan.kind} scan is no Oculus ping (a multibeam frame)")
@@ -80,15 +82,21 @@ def scan_to_ping(scan, *, ping_id: int = 0, version: int = 2, gains: bool = True
         raise ValueError(f"scan_to_ping: range_min {scan.range_min:g} m is not a whole number of "
                          f"{w:g} m bins (an Oculus image starts at 0 m)")
     lead = int(round(lead))
-    image = np.zeros((lead + scan.n_bins, scan.n_pings), np.uint8)
-    image[lead:] = np.asarray(scan.data).T
+    data = np.asarray(scan.data)
+    if data.dtype == np.uint32 and version != 2:
+        raise ValueError("scan_to_ping: a scan of 32-bit data (uint32) needs a version 2 ping result "
+                         "(32-bit samples are its extFlags 0x200), not version 1")
+    image = np.zeros((lead + scan.n_bins, scan.n_pings), data.dtype)
+    image[lead:] = data.T
     bearings = np.round(np.degrees(scan.bearings) * 100)
     if np.any(np.abs(bearings) > 32767):
         raise ValueError("scan_to_ping: a bearing beyond +-327.67 degrees does not fit the ping result")
     flags = FLAG["range_as_meters"] | FLAG["simple_return"] | (FLAG["send_gain"] if gains else 0)
     flags |= FLAG["512_beams"] if scan.n_pings > 256 else 0
+    flags |= FLAG["data_16bit"] if data.dtype == np.uint16 else 0
     fire = FireMessage(master_mode=mode, ping_rate=0, gamma=255, flags=flags, range=float(scan.range_max),
-                       gain=100.0, speed_of_sound=float(scan.sound_speed), salinity=35.0, version=version)
+                       gain=100.0, speed_of_sound=float(scan.sound_speed), salinity=35.0, version=version,
+                       ext_flags=EXT_32BIT if data.dtype == np.uint32 else 0)
     freq = scan.meta.get("frequency") or 0.0
     return PingResult(fire, image, bearings.astype(np.int16), float(w),
                       gains=np.ones(image.shape[0], np.float32) if gains else None, ping_id=ping_id,

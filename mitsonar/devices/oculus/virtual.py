@@ -56,8 +56,11 @@ tilt of the fan's axis towards starboard), ``temperature`` from ``water`` (deg C
 ``pressure`` (bar, gauge) from the head's depth ``surface_z - z`` (``water``: a scene's own,
 `scene_water`, with ``virtual-sonar SCENE`` and ``live``).
 
-Timing (``realtime=True``): a stream's pings are ``max(1 / rate, 2 range / c)`` apart;
-``realtime=False`` sends each ping as soon as the last one is written.
+Timing (``realtime=True``): a stream's pings are ``max(1 / rate, 2 range / c)`` apart on the
+head's own clock, from the fire message on (slot k at ``k x period``, as a real head keeps its
+rate: a ping sent late does not delay the next slot); a slot missed by a whole period (a ping
+that took longer than that) is skipped and counted, not caught up in a burst
+(`VirtualOculus._slot`). ``realtime=False`` sends each ping as soon as the last one is written.
 """
 from __future__ import annotations
 
@@ -67,7 +70,7 @@ import socket
 import sys
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 
 import numpy as np
 
@@ -146,6 +149,8 @@ class _Client:
         self.sock, self.addr = sock, addr
         self.parser = StreamParser(MAX_INCOMING_PAYLOAD)
         self.out = bytearray()
+        self.written = 0                # bytes sent to the client so far
+        self.ends: deque = deque()      # (self.written at a ping's last byte, its ping id), in order
         self.fire: FireMessage | None = None
         self.due = 0.0
 
@@ -169,6 +174,7 @@ class VirtualOculus:
     frames           ``frames(mode, n_beams, range) -> Scan``: the scan of each fire
                      message's geometry (`mitsonar.devices.oculus.scenes.SceneFrames`);
                      None: the scans given
+    clock            seconds, the head's clock of its ping slots (default ``time.monotonic``)
     ===============  ========================================================================
 
     ``stats`` counts clients, messages, pings and refusals; ``last_problem`` is the last refusal.
@@ -176,7 +182,7 @@ class VirtualOculus:
 
     def __init__(self, scan: Scan, *, model="M1200d", host: str = "127.0.0.1", tcp_port: int = TCP_PORT,
                  udp_port: int | None = UDP_PORT, status_period: float = 1.0, realtime: bool = True,
-                 water: dict | None = None, device_id: int = 1, frames=None):
+                 water: dict | None = None, device_id: int = 1, frames=None, clock=time.monotonic):
         scans = list(scan) if isinstance(scan, (list, tuple)) else [scan]
         if not scans:
             raise ValueError("VirtualOculus: no scan to serve")
@@ -215,7 +221,8 @@ class VirtualOculus:
         self._cache: dict = {}
         self._thread = None
         self._stop = threading.Event()
-        self._t0 = time.monotonic()
+        self._clock = clock
+        self._t0 = clock()
         self._fans: dict = {}
         self._drop_all = threading.Event()
 
@@ -406,7 +413,7 @@ class VirtualOculus:
         self._sel = selectors.DefaultSelector()
         self._sel.register(srv, selectors.EVENT_READ, None)
         self._stop.clear()
-        self._next_status = time.monotonic()
+        self._next_status = self._clock()
         self._thread = threading.Thread(target=self._run, name="VirtualOculus", daemon=True)
         self._thread.start()
         return self.host, self.tcp_port
@@ -451,7 +458,7 @@ class VirtualOculus:
         self._drop_all.set()
 
     def _tick(self) -> None:
-        now = time.monotonic()
+        now = self._clock()
         if self._drop_all.is_set():
             self._drop_all.clear()
             for c in list(self._clients.values()):
@@ -464,11 +471,10 @@ class VirtualOculus:
                 self.stats["status not sent"] += 1
             self._next_status = now + self.status_period
         for c in list(self._clients.values()):
-            if c.fire is not None and now >= c.due and len(c.out) < MAX_BACKLOG:
-                self._send_ping(c, now)
-            elif c.fire is not None and now >= c.due:
-                self.stats["pings skipped (client behind)"] += 1
-                c.due = now + self.period(c.fire)
+            now = self._clock()             # another client's ping may have taken time
+            if c.fire is not None and now >= c.due:
+                self._slot(c, now)
+        now = self._clock()                 # the pings took time: wait from now, not from the tick's start
         wait = self._next_status - now if self._udp is not None else 0.05
         for c in self._clients.values():
             if c.fire is not None:
@@ -503,6 +509,13 @@ class VirtualOculus:
             pass
         c.sock.close()
         self.stats["clients gone"] += 1
+        while c.ends:
+            self.delivered(c.ends.popleft()[1], None)
+
+    def delivered(self, ping_id: int, t: float | None) -> None:
+        """Ping ``ping_id``'s last byte was written to its client at ``t`` (the head's clock), or
+        never (``t`` None: the client went first). Nothing here; `mitsonar.devices.live.LiveOculus`
+        logs the ping's latency."""
 
     def _read(self, c: _Client) -> None:
         try:
@@ -536,7 +549,26 @@ class VirtualOculus:
             self.last_problem = problem
             return
         c.fire = m
-        c.due = time.monotonic()          # the first ping at once, then at the rate
+        c.due = self._clock()             # the first ping at once, then at the rate
+
+    def _slot(self, c: _Client, now: float) -> None:
+        """Client ``c``'s ping slot ``c.due`` has come (at ``now``): ping, and the next slot one
+        period on, on the head's own clock (``due += period``: a ping sent late does not delay
+        the ones after it). A slot missed by a whole period or more (a ping that took longer than
+        the period, a stalled process) is skipped and counted (``stats["pings skipped (late)"]``),
+        not caught up in a burst; a slot while the client has ``MAX_BACKLOG`` bytes waiting is
+        skipped and counted (``stats["pings skipped (client behind)"]``)."""
+        period = self.period(c.fire)
+        late = now - c.due
+        if 0.0 < period < math.inf and late >= period:
+            missed = int(late // period)
+            self.stats["pings skipped (late)"] += missed
+            c.due += missed * period
+        if len(c.out) < MAX_BACKLOG:
+            self._send_ping(c, now)
+        else:
+            self.stats["pings skipped (client behind)"] += 1
+        c.due += period
 
     def _send_ping(self, c: _Client, now: float) -> None:
         pid = self.stats["pings"]
@@ -549,7 +581,7 @@ class VirtualOculus:
             return
         self.stats["pings"] += 1
         c.out += data
-        c.due = now + self.period(c.fire)
+        c.ends.append((c.written + len(c.out), pid))
         self._flush(c)
 
     def _flush(self, c: _Client) -> None:
@@ -557,6 +589,11 @@ class VirtualOculus:
             try:
                 n = c.sock.send(c.out)
                 del c.out[:n]
+                c.written += n
+                if c.ends and c.ends[0][0] <= c.written:
+                    t = self._clock()
+                    while c.ends and c.ends[0][0] <= c.written:
+                        self.delivered(c.ends.popleft()[1], t)
             except BlockingIOError:
                 pass
             except OSError:

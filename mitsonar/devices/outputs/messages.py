@@ -12,6 +12,7 @@ import numpy as np
 
 from mitsonar.export.ros.messages import SONAR_AXES, SONAR_FRAME, VEHICLE_FRAME, WORLD_FRAME
 from mitsonar.geometry.trajectory import matrix_to_quat
+from mitsonar.scan.model import data_bytes
 
 __all__ = ["TOPICS", "PING_SCHEMA", "WORLD_FRAME", "VEHICLE_FRAME", "SONAR_FRAME", "POINTS_THRESHOLD_DB",
            "sonar_in_vehicle", "translation_rotation", "ping_message", "frame_points", "pointcloud2_cdr"]
@@ -43,7 +44,8 @@ PING_SCHEMA = {
         "beam_count": {"type": "integer"},
         "bin_count": {"type": "integer"},
         "intensities": {"type": "string", "contentEncoding": "base64",
-                        "description": "uint8 device levels, beam_count x bin_count, row-major"},
+                        "description": "uint8 device levels, beam_count x bin_count, row-major (a "
+                                       "16- or 32-bit head's codes as bytes: round(255 code / full scale))"},
     },
 }
 
@@ -62,7 +64,7 @@ def translation_rotation(pose) -> tuple:
 
 def ping_message(t_ns: int, scan) -> dict:
     """The ``/sonar/ping`` object of a ping (`PING_SCHEMA`)."""
-    data = np.ascontiguousarray(scan.data, np.uint8)
+    data = np.ascontiguousarray(data_bytes(scan.data))      # a wider A/D's codes: the same levels as bytes
     return {"timestamp": {"sec": int(t_ns // 1_000_000_000), "nsec": int(t_ns % 1_000_000_000)},
             "frame_id": SONAR_FRAME,
             "bearings": [float(b) for b in np.asarray(scan.bearings, np.float64)],

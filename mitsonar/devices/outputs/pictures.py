@@ -9,12 +9,17 @@ grid of ``slots`` bearings around the circle, each ping overwriting the slots it
 (its ``beamwidth_h``, at least the one nearest its bearing), drawn through a table of each
 pixel's slot and bin made once per range window. A multibeam frame (all its beams) is drawn
 alone, with ``fan_pixels``; a side-scan ping as its waterfall rows.
+
+Pictures are bytes (mono8): a 16- or 32-bit A/D's uint16, uint32 codes are drawn as the same
+levels on 8 bits (`mitsonar.scan.model.data_bytes`: ``round(255 code / full scale)``).
 """
 from __future__ import annotations
 
 import math
 
 import numpy as np
+
+from mitsonar.scan.model import data_bytes
 
 __all__ = ["Pictures", "SweepPicture"]
 
@@ -53,7 +58,7 @@ class SweepPicture:
 
     def add(self, scan) -> np.ndarray:
         """Put each row of ``scan`` in its slots; returns ``pixels`` (redrawn)."""
-        data = np.asarray(scan.data, np.uint8)
+        data = data_bytes(scan.data)
         window = (float(scan.range_min), float(scan.range_max), data.shape[1])
         if window != self._window:
             self._table(*window)
@@ -88,8 +93,8 @@ class Pictures:
             pixels = self.sweep.add(scan).copy()
         elif kind.has_fan:
             from mitsonar.export.ros.messages import fan_pixels
-            pixels = fan_pixels(scan, self.size)
+            pixels = np.ascontiguousarray(data_bytes(fan_pixels(scan, self.size)))
         else:
-            pixels = np.ascontiguousarray(scan.data, np.uint8)
+            pixels = np.ascontiguousarray(data_bytes(scan.data))
         self._last = (scan, pixels)
         return pixels

@@ -43,6 +43,7 @@ import numpy as np
 from mitsonar.devices.ping360.head import GRADIANS, TICK, angle_to_radians, check_setting
 from mitsonar.devices.ping360.protocol import Message, StreamParser, encode, ids
 from mitsonar.scan import Scan
+from mitsonar.scan.model import require_bytes
 from mitsonar.devices.transports import ServedHead
 
 __all__ = ["VirtualPing360", "serve"]
@@ -80,6 +81,7 @@ class VirtualPing360(ServedHead):
         if not scan.sonar_kind.scanlines:
             raise ValueError(f"VirtualPing360: a {scan.kind} scan has no Ping360 pings to serve "
                              f"(a Ping360 is a mechanical head)")
+        require_bytes(scan, "VirtualPing360", "a Ping360 sends 8-bit samples")
         self.scan = scan
         self.port_url = port_url
         self.baudrate = int(baudrate)

@@ -24,6 +24,12 @@ Topics (see docs/howto/ros2_bags.rst):
 ``/fix``            sensor_msgs/NavSatFix                     one per ping, with a geodetic origin
 =================== ========================================= =====================================
 
+Device levels: bytes (uint8 ``data``) go as they are; a 16-bit A/D's uint16 codes as DTYPE_UINT16
+in ``/sonar/image`` and ``mono16`` images; a 32-bit A/D's uint32 codes as DTYPE_UINT32 in
+``/sonar/image`` and as ``mono16`` images of the same levels on 16 bits (sensor_msgs has no unsigned
+32-bit grey encoding); ``/sonar/detections`` and the ``threshold`` are on the 0..255 scale
+(`mitsonar.export.ros.messages.detections`).
+
 Stamps: ``start + base + scan.times[k]`` seconds, ``start`` given by the caller (default 0) and
 ``base`` the scan's own start on its clock (``meta.start_time``: a trajectory's for a rendered
 scan, the wall clock for a real head's; 0 when it has none).
@@ -89,8 +95,9 @@ def check_scan(scan, name="scan") -> None:
             raise ExportError(f"{name}: the scan has no '{field}', which the ROS messages need "
                               f"(needed: {', '.join(M.NEEDS)})")
     data = np.asarray(scan.data)
-    if data.dtype != np.uint8 or data.ndim != 2:
-        raise ExportError(f"{name}: 'data' is {data.dtype} {data.shape}; allowed: uint8 (rows, bins)")
+    if data.dtype not in M.SONAR_IMAGE_DTYPES or data.ndim != 2:
+        raise ExportError(f"{name}: 'data' is {data.dtype} {data.shape}; allowed: uint8, uint16 or uint32 "
+                          f"(rows, bins)")
     rows, bins = data.shape
     for field, shape in (("ranges", (bins,)), ("bearings", (rows,)), ("times", (rows,)), ("poses", (rows, 4, 4))):
         a = np.asarray(getattr(scan, field))

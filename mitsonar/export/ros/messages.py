@@ -146,16 +146,23 @@ def tx_beamwidth_v(scan) -> float:
     return float(v) if isinstance(v, (int, float)) and math.isfinite(v) and v > 0 else float(scan.beamwidth_v)
 
 
+#: SonarImageData ``dtype`` of a scan's data: DTYPE_UINT8, DTYPE_UINT16, DTYPE_UINT32
+SONAR_IMAGE_DTYPES = {np.dtype(np.uint8): 0, np.dtype(np.uint16): 2, np.dtype(np.uint32): 4}
+
+
 def projected_image(scan, rows, ns: int, frame: str = SONAR_FRAME) -> dict:
-    """One ping as a ProjectedSonarImage: the rows' device bytes, the bin-centre ranges and each
-    beam's unit direction in the sonar frame. The bytes are range-major, every beam of range 0,
-    then of range 1 (byte ``range * beam_count + beam``), as the message's reference reader
-    indexes them (APL's sonar_image_proc, ``SonarImageMsgInterface::index``), so a scan's
-    (beams, bins) bytes go in transposed."""
+    """One ping as a ProjectedSonarImage: the rows' device levels (bytes; a 16- or 32-bit A/D's
+    uint16, uint32 codes as they are, little-endian, with ``dtype`` DTYPE_UINT16, DTYPE_UINT32),
+    the bin-centre ranges and each beam's unit direction in the sonar frame. The levels are
+    range-major, every beam of range 0, then of range 1 (sample ``range * beam_count + beam``), as
+    the message's reference reader indexes them (APL's sonar_image_proc,
+    ``SonarImageMsgInterface::index``), so a scan's (beams, bins) levels go in transposed."""
     world = sonar_pose(scan, rows[0], frame)
     rot = world[:3, :3].T
     dirs = (rot @ scan.poses[rows][:, :3, 2].T).T
-    data = np.ascontiguousarray(scan.data[rows].T, dtype=np.uint8)
+    data = np.asarray(scan.data)[rows].T
+    kind = SONAR_IMAGE_DTYPES[data.dtype]
+    data = np.ascontiguousarray(data, dtype=data.dtype.newbyteorder("<"))
     n = len(rows)
     return {
         "header": header(ns, frame),
@@ -164,7 +171,7 @@ def projected_image(scan, rows, ns: int, frame: str = SONAR_FRAME) -> dict:
                       "rx_beamwidths": [math.radians(scan.beamwidth_h)] * n},
         "beam_directions": [{"x": float(d[0]), "y": float(d[1]), "z": float(d[2])} for d in dirs],
         "ranges": np.asarray(scan.ranges, dtype=np.float32).tolist(),
-        "image": {"is_bigendian": False, "dtype": 0, "beam_count": n, "data": data.tobytes()},
+        "image": {"is_bigendian": False, "dtype": kind, "beam_count": n, "data": data.tobytes()},
     }
 
 
@@ -175,18 +182,35 @@ def mono8(ns: int, frame: str, pixels: np.ndarray) -> dict:
             "step": w, "data": pixels.tobytes()}
 
 
+def mono(ns: int, frame: str, pixels: np.ndarray) -> dict:
+    """An Image of device levels: ``mono8`` of bytes, ``mono16`` (little-endian) of a 16-bit A/D's
+    uint16 codes; a 32-bit A/D's uint32 codes go as ``mono16`` of the same levels on 16 bits
+    (`mitsonar.scan.model.data_as`: ``round(65535 code / 4294967295)``), as sensor_msgs has no
+    unsigned 32-bit grey encoding (32SC1 is signed, 32FC1 float)."""
+    pixels = np.asarray(pixels)
+    if pixels.dtype == np.uint8:
+        return mono8(ns, frame, pixels)
+    from mitsonar.scan.model import data_as
+    pixels = np.ascontiguousarray(data_as(pixels, np.uint16), dtype="<u2")
+    h, w = pixels.shape
+    return {"header": header(ns, frame), "height": h, "width": w, "encoding": "mono16", "is_bigendian": 0,
+            "step": 2 * w, "data": pixels.tobytes()}
+
+
 def waterfall(scan, ns: int) -> dict:
     """The scan's rows (pings of a mechanical head, beams of a multibeam frame) top to bottom,
-    range bins left to right: ``scan.data`` itself as a mono8 image."""
-    return mono8(ns, SONAR_FRAME, scan.data)
+    range bins left to right: ``scan.data`` itself as an image (`mono`: mono8 of bytes, mono16 of
+    a 16- or 32-bit A/D's codes)."""
+    return mono(ns, SONAR_FRAME, scan.data)
 
 
 def fan_pixels(scan, size: int = 400) -> np.ndarray:
     """The scan drawn in its fan's plane seen from the beam frame's +y (the scan axis: from above
     for an upright head), as `mitsonar.products.plots.plot_fan` draws it: the boresight up the
     picture, positive bearings counter-clockwise (the beam frame's +x, port for an upright head,
-    to the left); each pixel the level of the nearest beam and bin (0 outside the fan); ``size``
-    pixels across the fan's widest extent."""
+    to the left); each pixel the level of the nearest beam and bin (0 outside the fan), in the
+    data's own type (uint8; uint16, uint32 of a wider A/D); ``size`` pixels across the fan's
+    widest extent."""
     r_max = float(scan.range_max)
     az = np.asarray(scan.bearings, dtype=np.float64)
     wrapped = np.mod(az + math.pi, 2 * math.pi) - math.pi
@@ -224,21 +248,24 @@ def fan_pixels(scan, size: int = 400) -> np.ndarray:
     width = (float(scan.range_max) - float(scan.range_min)) / n_bins
     b = np.floor((r - float(scan.range_min)) / width).astype(np.int64)
     ok &= (b >= 0) & (b < n_bins)
-    out = np.zeros((h, w), dtype=np.uint8)
+    out = np.zeros((h, w), dtype=scan.data.dtype)
     out[ok] = scan.data[order[beam[ok]], b[ok]]
     return out
 
 
 def fan_image(scan, ns: int, size: int = 400) -> dict:
-    return mono8(ns, SONAR_FRAME, fan_pixels(scan, size))
+    return mono(ns, SONAR_FRAME, fan_pixels(scan, size))
 
 
 def detections(scan, threshold: int) -> tuple:
     """Detected returns: each row's strongest bin when its level is ``threshold`` or more, as
-    world points ``(n, 3)`` and their levels ``(n,)``."""
+    world points ``(n, 3)`` and their levels ``(n,)``: levels 0..255, a 16- or 32-bit A/D's codes
+    on that scale (``255 code / full scale``, not rounded)."""
     data = np.asarray(scan.data)
     k = np.argmax(data, axis=1)
     level = data[np.arange(len(k)), k]
+    if data.dtype != np.uint8:
+        level = level * (255.0 / np.iinfo(data.dtype).max)
     keep = level >= threshold
     r = np.asarray(scan.ranges, dtype=np.float64)[k[keep]]
     poses = np.asarray(scan.poses)[keep]

@@ -145,7 +145,8 @@ def _load_npy(payload):
 class SonarDataset(Sequence):
     """The samples of a dataset folder in sample order: ``len(ds)``, ``ds[i]``, ``for s in ds``.
 
-    Each sample is a dict of NumPy arrays: ``data`` (uint8, rows x bins), ``intensity`` (float32),
+    Each sample is a dict of NumPy arrays: ``data`` (uint8, rows x bins; uint16, uint32 for a
+    16-, 32-bit A/D), ``intensity`` (float32),
     ``poses`` (rows x 4 x 4), ``times`` (rows), ``segmentation`` (int32 label per bin, names in
     ``ds.labels``), ``first_return`` (float32 m per row, NaN without echo), ``ranges``,
     ``bearings``, ``mesh`` (the ground-truth mesh file, relative to the folder, as a str array),
