@@ -22,6 +22,7 @@ import pytest
 from mitsonar.cli.main import main
 from mitsonar.devices.oculus import presets
 from mitsonar.geometry.frames import bearing_rotation
+from mitsonar import load_scan
 from mitsonar.scan import Scan
 
 WALL = """<scene version="3.0.0">
@@ -418,7 +419,7 @@ def test_a_log_mitsonar_did_not_write_replays(tmp_path):
     _foreign_log(log, pings)
     assert main(["replay", str(log), "-o", str(tmp_path / "f.npz"), "--all"]) == 0
     for k, (_v, image, bearings, res) in enumerate(pings):
-        s = Scan.load(tmp_path / f"f_{k:03d}.npz")
+        s = load_scan(tmp_path / f"f_{k:03d}.npz")
         assert s.kind == "multibeam"
         np.testing.assert_array_equal(s.data, image.T)
         np.testing.assert_allclose(np.degrees(s.bearings), bearings / 100.0)
