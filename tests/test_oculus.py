@@ -243,7 +243,7 @@ def test_gain_percent_is_the_receiver_gain_of_a_rendered_scan(wall):
     _, rendered = wall
     head = VirtualOculus(rendered, tcp_port=0)
     assert head.received(rendered, 100.0) is rendered.data
-    g = rendered.electronics["gain"]
+    g = rendered.electronics.gain
     for percent, db in ((50.0, 20 * math.log10(0.5)), (10.0, -20.0), (0.0, -g)):
         expected = apply_to_scan(rendered, {**rendered.electronics, "gain": g + db}).data
         np.testing.assert_array_equal(head.received(rendered, percent), expected)
@@ -319,7 +319,7 @@ def test_driver_discovers_records_a_raw_log_that_replays(tmp_path):
     scans = replay(tmp_path / "o.bin")
     assert len(scans) >= 3
     for s in scans:
-        assert s.kind == "multibeam" and s.meta["source"] == "oculus"
+        assert s.kind == "multibeam" and s.meta.source == "oculus"
         np.testing.assert_array_equal(s.data, scan.data)
         np.testing.assert_allclose(s.bearings, scan.bearings, atol=1e-9)
         np.testing.assert_allclose(s.ranges, scan.ranges)

@@ -15,7 +15,9 @@ are the typed way and the one mitsonar uses. A value of the wrong type for a fie
 it is set, in one line: ``Scan 'meta': 'start_time': 'noon' is not allowed (a finite number, seconds)``.
 
 `ScanFieldError`, the one error of a bad `Scan` field, lives here (the leaf of `mitsonar.scan`);
-`mitsonar.scan.model` and `mitsonar.scan` export it. This module imports nothing from mitsonar.
+`mitsonar.scan.model` and `mitsonar.scan` export it. `TypedRecord` is the machinery of a record
+of optional typed fields, shared with the electronics settings (`mitsonar.scan.electronics`).
+This module imports nothing from mitsonar.
 """
 from __future__ import annotations
 

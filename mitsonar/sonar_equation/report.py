@@ -18,7 +18,7 @@ import os
 import numpy as np
 
 from mitsonar.acoustics.levels import two_way_transmission_loss
-from mitsonar.sonar_equation.scan_levels import scan_levels
+from mitsonar.sonar_equation.scan_levels import receiver_of, scan_levels
 
 #: Echoes nearer than this are left out of "the strongest echo" (TL -> -inf at r -> 0).
 MIN_RANGE = 0.05
@@ -77,9 +77,7 @@ def sonar_equation_report(scene_or_scan, *, spp: int = 256, seed: int = 0, senso
     ``sensor`` and other keywords) or for a `Scan` (or a scan file's path: ``.exr``/``.npz``; a
     scene XML path is loaded)."""
     scan = _scan_of(scene_or_scan, spp, seed, sensor, render_kw)
-    from mitsonar.receiver.electronics import Electronics
-
-    e = Electronics.from_dict(scan.electronics.to_dict(), "Scan 'electronics'")
+    e = receiver_of(scan)
     levels = scan_levels(scan)
     el, noise = levels.echo_level, levels.noise_band_level
     ranges = np.asarray(scan.ranges, dtype=np.float64)

@@ -17,14 +17,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from mitsonar.acoustics.levels import noise_band_level as _noise_band_level
+from mitsonar.scan.electronics import ElectronicsSettings
+from mitsonar.scan.meta import ScanFieldError, ScanMeta
 
 _WHERE = "Scan 'electronics'"
 
 
-def _electronics(scan):
+def receiver_of(scan):
+    """The receiver of the scan's recorded settings (a dict's too), defaults where absent."""
     from mitsonar.receiver.electronics import Electronics
 
-    return Electronics.from_dict(scan.electronics.to_dict(), _WHERE)
+    return Electronics.from_dict(ElectronicsSettings.from_dict(scan.electronics).to_dict(), _WHERE)
 
 
 def scan_echo_level(scan) -> np.ndarray:
@@ -33,7 +36,7 @@ def scan_echo_level(scan) -> np.ndarray:
     transmit pulse as a boxcar of ones over ``c pulse_length / 2``, the source level and pulse
     from ``scan.electronics`` (defaults where absent; `Electronics.echo_level`). It always agrees
     with the saved intensity and settings."""
-    return _electronics(scan).echo_level(scan.intensity, scan.ranges, scan.sound_speed)
+    return receiver_of(scan).echo_level(scan.intensity, scan.ranges, scan.sound_speed)
 
 
 def directivity_index(scan) -> float:
@@ -41,10 +44,9 @@ def directivity_index(scan) -> float:
     ``scan.meta.directivity_index``, else computed from ``scan.beam_pattern`` and its widths (and
     ``meta.frequency``, ``meta.aperture_h`` for ``sinc``), which starts Mitsuba. A measured
     (``table``) pattern's is only the recorded one: a `ScanFieldError` without it."""
-    meta = scan.meta
+    meta = ScanMeta.from_dict(scan.meta)
     if meta.directivity_index is not None:
         return float(meta.directivity_index)
-    from mitsonar.scan.meta import ScanFieldError
     from mitsonar.sim.variant import ensure_variant
 
     ensure_variant()
@@ -76,7 +78,7 @@ class ScanLevels:
 
 def scan_levels(scan) -> ScanLevels:
     """Echo level, directivity index, noise in band and SNR of ``scan`` (see `ScanLevels`)."""
-    e = _electronics(scan)
+    e = receiver_of(scan)
     di = directivity_index(scan)
     noise = _noise_band_level(e.noise_level, e.noise_bandwidth(scan.bin_width, scan.sound_speed), di)
     el = e.echo_level(scan.intensity, scan.ranges, scan.sound_speed)
