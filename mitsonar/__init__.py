@@ -19,11 +19,7 @@ from mitsonar.sim.scene import SceneError, load_scene
 from mitsonar.sim.survey import render_survey
 from mitsonar.sim.variant import VariantError, ensure_variant, set_variant, variant
 from mitsonar.sonar_equation import sonar_equation_report
-
-
-def load_scan(path) -> Scan:
-    """Read a scan written by `Scan.save` (``.exr`` or ``.npz``)."""
-    return Scan.load(path)
+from mitsonar.scan.io import load_scan   # the one way to read a scan file
 
 
 _LAZY = {"MicronSonar": "devices.micron.driver", "VirtualMicron": "devices.micron.virtual",

@@ -176,7 +176,10 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     # and Dr.Jit chains and the sonar equation's levels are leaves beside them)
     leaves = {"mitsonar._checks", "mitsonar._limits", "mitsonar._compat", "mitsonar._registry", "mitsonar.receiver.speckle",
               "mitsonar.receiver.devicechain", "mitsonar.sim.backend",
-              "mitsonar.sonar_equation.levels",
+              # the sonar equation's formulas, and the Scan's typed settings and their migrations
+              # (the electronics record what they applied: `ElectronicsSettings`)
+              "mitsonar.acoustics.levels", "mitsonar.scan.electronics", "mitsonar.scan.meta",
+              "mitsonar.scan.migrations",
               "mitsonar.acoustics._checks", "mitsonar.acoustics.seawater", "mitsonar.acoustics.interface",
               "mitsonar.acoustics.seabed", "mitsonar.acoustics.materials", "mitsonar.geometry.elements",
               # eigenrays and TL (SoundSpeedProfile.eigenrays calls it; it imports only the checks

@@ -94,4 +94,4 @@ def test_survey_cli_surface_option(tmp_path, mitsonar_mod):
     assert main(["survey", os.path.join(SCENES, "wreck.xml"), "--trajectory", os.path.join(SCENES, "wreck_survey.tum"),
                  "--surface", "--max-scans", "1", "--spp", "8", "-q", "-o", str(out)]) == 0
     scan = mitsonar_mod.load_scan(str(out / "scan_00000.npz"))
-    assert scan.meta["scene"] == "wreck.xml +surface"
+    assert scan.meta.scene == "wreck.xml +surface"

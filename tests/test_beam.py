@@ -267,7 +267,7 @@ def test_a_new_pattern_is_accepted_without_editing_other_modules(mitsonar_mod, b
                       bearing_step=5.0, n_bins=50, range_max=10.0),
             shapes, integrator='<integrator type="sonar_tof"><boolean name="share_beams" value="true"/></integrator>'))
         assert fan.sensors()[0].transmit.pattern == "tent"
-        assert mitsonar_mod.render_scan(fan, spp=64, seed=1).meta["tx_pattern"] == "tent"
+        assert mitsonar_mod.render_scan(fan, spp=64, seed=1).meta.tx_pattern == "tent"
         assert isinstance(mi.load_dict({"type": "sonar", "beam_pattern": "tent"}).beam.shape, Tent)
     finally:
         beam_mod.unregister("tent")

@@ -49,8 +49,8 @@ def test_render_plot_info_round_trip(tmp_path, mitsonar_mod):
                "--set", "gain=30")
     assert proc.returncode == 0, proc.stderr
     scan = mitsonar_mod.load_scan(str(exr))
-    assert scan.intensity.shape == (200, 500) and scan.meta["spp"] == 128 and scan.meta["seed"] == 5
-    assert scan.electronics["gain"] == 30
+    assert scan.intensity.shape == (200, 500) and scan.meta.spp == 128 and scan.meta.seed == 5
+    assert scan.electronics.gain == 30
     # The file holds exactly what the library renders with the same arguments.
     same = mitsonar_mod.render_scan(mitsonar_mod.load_scene(BOX), spp=128, seed=5, electronics={"gain": 30})
     np.testing.assert_array_equal(scan.intensity, same.intensity)

@@ -305,10 +305,10 @@ def test_apply_to_scan_returns_a_recorded_copy():
     assert out is not scan and np.all(scan.data == 0)
     np.testing.assert_array_equal(scan.intensity, before)
     np.testing.assert_array_equal(out.intensity, before)
-    assert out.electronics["gain"] == 20.0 and out.electronics["seed"] == 3
+    assert out.electronics.gain == 20.0 and out.electronics.seed == 3
     np.testing.assert_array_equal(out.data, Electronics(gain=20.0).apply(before, RANGES, seed=3))
     # Re-applying the recorded settings and seed reproduces the bytes.
     again = apply_to_scan(out)
     assert again.data.tobytes() == out.data.tobytes()
     # No seed anywhere but the meta's: it is used.
-    assert apply_to_scan(scan).electronics["seed"] == 5
+    assert apply_to_scan(scan).electronics.seed == 5

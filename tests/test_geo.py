@@ -79,6 +79,7 @@ def test_polar_origins_default_to_ups():
 
 
 def test_scan_meta_carries_origin_and_crs_through_files(tmp_path):
+    from mitsonar import load_scan
     from mitsonar.scan.model import Scan
 
     frame = GeoFrame.make((52.0, 4.5, -1.25), "EPSG:25831")
@@ -87,7 +88,7 @@ def test_scan_meta_carries_origin_and_crs_through_files(tmp_path):
                 meta=frame.meta())
     for ext in (".npz", ".exr"):
         scan.save(tmp_path / f"s{ext}")
-        back = Scan.load(tmp_path / f"s{ext}")
+        back = load_scan(tmp_path / f"s{ext}")
         assert back.meta.origin == [52.0, 4.5, -1.25] and back.meta.crs == "EPSG:25831"
         assert GeoFrame.from_meta(back.meta) == frame
 

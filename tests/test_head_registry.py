@@ -293,7 +293,7 @@ def test_a_toy_head_is_served_recorded_and_replayed_through_the_cli(toy, tmp_pat
     assert np.array_equal(got.bearings, scan.bearings)
     assert (got.range_min, got.range_max) == (scan.range_min, scan.range_max)
     # the API sees the same head: replay() of the log is the toy's assembly
-    assert mitsonar.replay(log)[0].meta["source"] == "toy"
+    assert mitsonar.replay(log)[0].meta.source == "toy"
 
 
 def test_a_registered_head_is_a_head_choice_and_refuses_other_heads_options(toy, tmp_path, capsys):

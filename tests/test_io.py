@@ -70,7 +70,7 @@ def test_round_trip_is_exact(tmp_path, ext, bit_depth):
     scan.save(path)
     back = load_scan(path)
     assert_same_scan(scan, back)
-    assert back.electronics["noise_floor"] == -math.inf
+    assert back.electronics.noise_floor == -math.inf
     assert back.data.dtype == np.uint8 and back.intensity.dtype == np.float32
     assert sorted(os.listdir(tmp_path)) == [f"scan{ext}"]  # no temporary file left behind
 

@@ -9,6 +9,8 @@ import pytest
 from conftest import frame_matrix, rectangle_xml, scene_xml, sonar_xml
 from test_levels import SINGLE, C, lambert_footprint_level
 
+from mitsonar.sonar_equation import scan_echo_level
+
 N_MC = 1 << 17
 
 
@@ -222,7 +224,7 @@ def test_rendered_lambert_seabed_echo_level_is_the_footprint_integral(mitsonar_m
     scene = mitsonar_mod.load_scene(scene_xml(sensor, rectangle_xml(plane, material), integrator=SINGLE))
     scan = mitsonar_mod.render_scan(scene, spp=1 << 16, seed=2)
     ref = lambert_footprint_level(rho, h, tilt, math.radians(bw), alpha, rmin, bin_width, n_bins, pulse_bins)
-    el = scan.echo_level[0].astype(np.float64)
+    el = scan_echo_level(scan)[0].astype(np.float64)
     lit = ref > ref.max() - 6.0
     assert lit.sum() >= 8
     np.testing.assert_allclose(el[lit], ref[lit], atol=0.1)

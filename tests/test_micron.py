@@ -54,7 +54,7 @@ def assert_same_scan(got: Scan, want: Scan):
     assert got.range_min == want.range_min and got.range_max == pytest.approx(want.range_max, rel=1e-12)
     assert got.kind == "mechanical" and (got.beamwidth_h, got.beamwidth_v) == (3.0, 35.0)
     assert got.intensity.dtype == np.float32 and not got.intensity.any()
-    assert got.meta["missing"] == []
+    assert got.meta.missing == []
 
 
 def run_scan(scan, faults=None, n=1, vm_kw=None, **kw):
@@ -68,8 +68,8 @@ def run_scan(scan, faults=None, n=1, vm_kw=None, **kw):
 def test_full_turn_through_a_pty_is_byte_exact():
     (got,), sonar, vm = run_scan(SCAN)
     assert_same_scan(got, SCAN)
-    assert got.meta["wire_bearings"][:3] == [3200, 3168, 3136]        # stepping left from ahead
-    assert got.meta["ad_interval"] == 50 and got.meta["step_size"] == 32
+    assert got.meta.wire_bearings[:3] == [3200, 3168, 3136]        # stepping left from ahead
+    assert got.meta.ad_interval == 50 and got.meta.step_size == 32
     assert sonar.dst and sonar.version.serial == vm.serial_number
     assert sonar.stats["pings"] == 200 and sonar.parser.dropped == 0
     assert vm.stats["scanlines"] == 200 and vm.stats["boots"] == 2   # power-on, mtReBoot
@@ -81,14 +81,14 @@ def test_gain_and_ad_window_round_trip_through_the_wire():
     sent = HeadSettings.from_scan(SCAN, gain=20.0, ad_low=10.0, ad_span=30.0)
     assert (sent.igain, sent.ad_low_byte, sent.ad_span_byte) == (53, 32, 96)
     (got,), _, _ = run_scan(SCAN, settings=sent)
-    assert got.electronics["gain"] == pytest.approx(53 * 80 / 210)
+    assert got.electronics.gain == pytest.approx(53 * 80 / 210)
     again = HeadSettings.from_scan(got)
     assert (again.igain, again.ad_low_byte, again.ad_span_byte, again.bit_depth) == (53, 32, 96, 8)
     # a rendered scan's Electronics gain is what the head is asked for; out of the head's range is an error
     rendered = synthetic_scan()
     rendered.electronics.update(gain=28.0, ad_low=12.5, ad_span=24.0)
     assert (HeadSettings.from_scan(rendered).igain, HeadSettings.from_scan(rendered).ad_span_byte) == (74, 77)
-    rendered.electronics["gain"] = 95.0
+    rendered.electronics.gain = 95.0
     with pytest.raises(ValueError, match="gain"):
         HeadSettings.from_scan(rendered)
 
@@ -133,7 +133,7 @@ def test_driver_survives_faults_and_still_gets_the_exact_scan(faults, check):
 
 def test_without_revisit_lost_pings_are_zero_and_listed():
     (got,), sonar, _ = run_scan(SCAN, Faults(drop_pings=(5,)), revisit=False)
-    assert got.meta["missing"] == [5]
+    assert got.meta.missing == [5]
     assert not got.data[5].any()
     keep = np.arange(200) != 5
     assert np.array_equal(got.data[keep], SCAN.data[keep])
@@ -143,7 +143,7 @@ def test_without_revisit_lost_pings_are_zero_and_listed():
 def test_four_bit_data(order):
     scan4 = synthetic_scan(bit_depth=4, seed=4)
     (got,), _, _ = run_scan(scan4, vm_kw={"nibble_order": order}, nibble_order=order)
-    assert got.electronics["bit_depth"] == 4
+    assert got.electronics.bit_depth == 4
     assert np.array_equal(got.data, scan4.data)
 
 
@@ -161,7 +161,7 @@ def test_sector_sweeps_alternate_and_share_the_turning_ping():
     scans, _, _ = run_scan(sector, n=3, settings=settings)
     for k, s in enumerate(scans):
         order = slice(None) if k % 2 == 0 else slice(None, None, -1)   # every other sweep goes back
-        assert s.meta["sweep"] == "sector"
+        assert s.meta.sweep == "sector"
         assert np.array_equal(s.data[order], sector.data)
         np.testing.assert_allclose(s.bearings[order], sector.bearings, atol=1e-12)
         np.testing.assert_allclose(s.poses[order], sector.poses, atol=1e-12)
@@ -176,7 +176,7 @@ def test_scan_right_and_inverted_head():
     assert settings.invert and not settings.scan_right
     (got,), _, vm = run_scan(want, settings=settings)
     assert_same_scan(got, want.__class__(**{**want.__dict__, "poses": MOUNT @ beam_rotation(want.bearings)}))
-    assert got.meta["hd_ctrl"] & HdCtrl.INVERT
+    assert got.meta.hd_ctrl & HdCtrl.INVERT
 
 
 def test_callable_scan_source_gets_the_settings():
@@ -230,7 +230,7 @@ def test_record_then_replay_gives_the_same_scan(tmp_path):
     scans = replay(log)
     assert len(scans) == 1
     assert_same_scan(scans[0], SCAN)
-    assert replay(log, partial=True)[-1].meta.get("partial") in (True, None)
+    assert replay(log, partial=True)[-1].meta.partial in (True, None)
 
 
 # The head's faults (a reboot, dropped or garbled bytes, a recording stopped mid-packet) leave
@@ -247,7 +247,7 @@ def test_replay_reproduces_the_driver_scans_under_faults(tmp_path):
     assert len(replayed) == 2
     for a, b in zip(live, replayed):
         assert np.array_equal(a.data, b.data) and np.array_equal(a.bearings, b.bearings)
-        assert np.array_equal(a.poses, b.poses) and a.meta["wire_bearings"] == b.meta["wire_bearings"]
+        assert np.array_equal(a.poses, b.poses) and a.meta.wire_bearings == b.meta.wire_bearings
 
 
 def test_replay_uses_logged_pose_changes(tmp_path):
@@ -584,7 +584,7 @@ def test_assembled_scan_has_its_ping_times():
             continue                           # lost on the wire
         out = asm.add(_ping(100 + 32 * k), t=1000.0 + 0.05 * k) or out
     out = out or asm.finish()
-    assert out.n_pings == 200 and 57 in out.meta["missing"]
+    assert out.n_pings == 200 and 57 in out.meta.missing
     np.testing.assert_allclose(out.times, 0.05 * np.arange(200), atol=1e-9)
     assert out.meta.start_time == pytest.approx(1000.0)
     asm = ScanAssembler()

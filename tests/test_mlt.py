@@ -112,7 +112,7 @@ def test_mlt_from_xml_through_render_scan_is_deterministic(mitsonar_mod):
     scene = mitsonar_mod.load_scene(text)
     a = mitsonar_mod.render_scan(scene, spp=256, seed=4)
     b = mitsonar_mod.render_scan(scene, spp=256, seed=4)
-    assert a.meta["integrator"] == "SonarMLTIntegrator"
+    assert a.meta.integrator == "SonarMLTIntegrator"
     np.testing.assert_array_equal(a.intensity, b.intensity)
     assert a.intensity.sum() > 0
 

@@ -109,7 +109,7 @@ def test_static_trajectory_gives_todays_static_scan(mitsonar_mod):
         np.testing.assert_array_equal(getattr(moved, name), getattr(static, name), err_msg=name)
     sensor = scene.sensors()[0]
     period = 2 * sensor.range_max / sensor.sound_speed + 0.03
-    assert static.meta["ping_period"] == pytest.approx(period)
+    assert static.meta.ping_period == pytest.approx(period)
     np.testing.assert_allclose(static.times, np.arange(static.n_pings) * period)
 
 
@@ -140,7 +140,7 @@ def test_survey_is_consecutive_scans_bit_for_bit_and_streams_to_disk(mitsonar_mo
     period = 200 * 0.05
     scans = list(m.render_survey(room, traj, tmp_path / "a", spp=16, seed=5, progress=False))
     assert len(scans) == 2                                            # 25 s holds two 10 s sweeps
-    assert [s.meta["start_time"] for s in scans] == [0.0, period]
+    assert [s.meta.start_time for s in scans] == [0.0, period]
     again = list(m.render_survey(room, traj, tmp_path / "b", spp=16, seed=5, progress=False))
     for x, y in zip(scans, again):
         np.testing.assert_array_equal(x.intensity, y.intensity)
@@ -171,7 +171,7 @@ def test_interrupted_survey_keeps_the_scans_written(mitsonar_mod, room, tmp_path
             pass
     names = sorted(os.listdir(tmp_path))
     assert names == ["scan_00000.npz", "scan_00001.npz", "trajectory.tum"]   # no temporary file
-    assert m.load_scan(tmp_path / "scan_00001.npz").meta["survey_index"] == 1
+    assert m.load_scan(tmp_path / "scan_00001.npz").meta.survey_index == 1
 
 
 def test_bad_motion_arguments_are_one_sentence_before_any_render(mitsonar_mod, room):

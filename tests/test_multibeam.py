@@ -41,7 +41,7 @@ def test_every_row_sees_the_wall_where_the_geometry_puts_it(mitsonar_mod, tmp_pa
     path = tmp_path / "fls.exr"
     scan.save(str(path))
     back = mitsonar_mod.load_scan(str(path))
-    assert back.kind == "multibeam" and back.meta["tx_beamwidth_h"] == pytest.approx(131.0)
+    assert back.kind == "multibeam" and back.meta.tx_beamwidth_h == pytest.approx(131.0)
     np.testing.assert_array_equal(back.data, scan.data)
 
 

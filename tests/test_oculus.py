@@ -22,6 +22,7 @@ import pytest
 from mitsonar.cli.main import main
 from mitsonar.devices.oculus import presets
 from mitsonar.geometry.frames import bearing_rotation
+from mitsonar import load_scan
 from mitsonar.scan import Scan
 
 WALL = """<scene version="3.0.0">
@@ -362,7 +363,7 @@ def test_gain_percent_is_the_receiver_gain_of_a_rendered_scan(wall):
     _, rendered = wall
     head = VirtualOculus(rendered, tcp_port=0)
     assert head.received(rendered, 100.0) is rendered.data
-    g = rendered.electronics["gain"]
+    g = rendered.electronics.gain
     for percent, db in ((50.0, 20 * math.log10(0.5)), (10.0, -20.0), (0.0, -g)):
         expected = apply_to_scan(rendered, {**rendered.electronics, "gain": g + db}).data
         np.testing.assert_array_equal(head.received(rendered, percent), expected)
@@ -438,7 +439,7 @@ def test_driver_discovers_records_a_raw_log_that_replays(tmp_path):
     scans = replay(tmp_path / "o.bin")
     assert len(scans) >= 3
     for s in scans:
-        assert s.kind == "multibeam" and s.meta["source"] == "oculus"
+        assert s.kind == "multibeam" and s.meta.source == "oculus"
         np.testing.assert_array_equal(s.data, scan.data)
         np.testing.assert_allclose(s.bearings, scan.bearings, atol=1e-9)
         np.testing.assert_allclose(s.ranges, scan.ranges)
@@ -538,7 +539,7 @@ def test_a_log_mitsonar_did_not_write_replays(tmp_path):
     _foreign_log(log, pings)
     assert main(["replay", str(log), "-o", str(tmp_path / "f.npz"), "--all"]) == 0
     for k, (_v, image, bearings, res) in enumerate(pings):
-        s = Scan.load(tmp_path / f"f_{k:03d}.npz")
+        s = load_scan(tmp_path / f"f_{k:03d}.npz")
         assert s.kind == "multibeam"
         np.testing.assert_array_equal(s.data, image.T)
         np.testing.assert_allclose(np.degrees(s.bearings), bearings / 100.0)

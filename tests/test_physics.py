@@ -216,7 +216,7 @@ def test_multibeam_rows_follow_receive_beam_times_transmit_fan(mitsonar_mod):
     mech = sphere_echo_reference(rx, R, a, rho, -bearings)
     assert np.max(np.abs(meas - mech / mech[24])) > 0.2
     scan = mitsonar_mod.render_scan(scene, spp=64)
-    assert scan.kind == "multibeam" and scan.meta["tx_beamwidth_h"] == tx_h
+    assert scan.kind == "multibeam" and scan.meta.tx_beamwidth_h == tx_h
     np.testing.assert_allclose(scan.poses[:, :3, 3], np.zeros((49, 3)), atol=1e-12)  # one head, one pose
 
 

@@ -50,7 +50,7 @@ def assert_same_scan(got: Scan, want: Scan):
     np.testing.assert_allclose(got.ranges, want.ranges, rtol=1e-12)
     assert got.range_max == pytest.approx(want.range_max, rel=1e-12) and got.range_min == 0.0
     assert got.kind == "mechanical" and (got.beamwidth_h, got.beamwidth_v) == (2.0, 25.0)
-    assert not got.intensity.any() and got.meta["missing"] == [] and got.meta["source"] == "ping360"
+    assert not got.intensity.any() and got.meta.missing == [] and got.meta.source == "ping360"
 
 
 def run_scan(scan, url=None, n=1, vm_kw=None, **kw):
@@ -118,7 +118,7 @@ def test_settings_from_scan():
 def test_full_turn_through_a_pty_is_byte_exact():
     (got,), sonar, vm = run_scan(SCAN)
     assert_same_scan(got, SCAN)
-    assert got.meta["angles"] == list(range(400)) and got.meta["sample_period"] == 640
+    assert got.meta.angles == list(range(400)) and got.meta.sample_period == 640
     assert sonar.stats["pings"] == 400 and sonar.parser.dropped == 0
     # the autobaud 'U' the driver sends first, as brping does, is the only byte the head skips
     assert vm.parser.dropped == 1 and vm.parser.packets == 402
@@ -127,7 +127,7 @@ def test_full_turn_through_a_pty_is_byte_exact():
 
 def test_udp_on_the_loopback_is_byte_exact():
     (got,), sonar, vm = run_scan(SCAN, "udp://127.0.0.1:0")
-    assert got.meta["port"].startswith("udp://127.0.0.1:")
+    assert got.meta.port.startswith("udp://127.0.0.1:")
     assert_same_scan(got, SCAN)
 
 
@@ -141,7 +141,7 @@ def test_sector_counter_clockwise_and_coarser_steps():
     scans, sonar, _ = run_scan(sector, n=2)
     for s in scans:
         assert_same_scan(s, sector)
-        assert s.meta["sweep"] == "sector" and s.meta["angles"][0] == 50
+        assert s.meta.sweep == "sector" and s.meta.angles[0] == 50
 
 
 def test_a_coarser_request_serves_the_nearest_rendered_bearing():
@@ -246,9 +246,9 @@ def test_assembler_zero_fills_a_pass_cut_short():
                        data=bytes([a % 256]) * 200)
     assert asm.add(reply(0)) is None and asm.add(reply(100)) is None
     cut = asm.add(reply(0))                      # a new pass before the last angle
-    assert cut.meta["missing"] == [2, 3] and not cut.data[2:].any() and cut.data[1, 0] == 100
+    assert cut.meta.missing == [2, 3] and not cut.data[2:].any() and cut.data[1, 0] == 100
     assert asm.add(reply(0)) is None             # a repeat of the last ping counts once
-    assert asm.finish().meta["missing"] == [1, 2, 3]
+    assert asm.finish().meta.missing == [1, 2, 3]
 
 
 # ---- record and replay ------------------------------------------------------------------------

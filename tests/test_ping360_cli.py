@@ -140,5 +140,5 @@ def test_record_keeps_what_arrived_on_ctrl_c(tmp_path, capsys, monkeypatch):
     assert "(5 pings) to" in capsys.readouterr().out and log.is_file()
     assert cli("replay", log, "-o", tmp_path / "s.npz", "--partial") == 0
     got = mitsonar.load_scan(str(tmp_path / "s.npz"))
-    assert np.array_equal(got.data[:5], scan.data[:5]) and got.meta["missing"] == list(range(5, 40))
-    assert Ping360Settings(range=2.4, number_of_samples=200, step=10).angles == got.meta["angles"]
+    assert np.array_equal(got.data[:5], scan.data[:5]) and got.meta.missing == list(range(5, 40))
+    assert Ping360Settings(range=2.4, number_of_samples=200, step=10).angles == got.meta.angles

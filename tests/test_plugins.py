@@ -62,7 +62,7 @@ def test_scan_shapes_and_conventions(mitsonar_mod):
     np.testing.assert_allclose(scan.poses[50][:3, 2], [0, 1, 0], atol=1e-12)  # 90 deg: +y
     assert (scan.range_min, scan.range_max, scan.beam_pattern) == (0.0, 12.0, "gaussian")
     assert (scan.beamwidth_h, scan.beamwidth_v, scan.kind) == (3.0, 35.0, "mechanical")
-    assert scan.meta["seed"] == 0 and scan.meta["spp"] == 16 and scan.meta["scene"] == "box.xml"
+    assert scan.meta.seed == 0 and scan.meta.spp == 16 and scan.meta.scene == "box.xml"
 
 
 def test_misspelled_parameter_names_the_nearest_parameter(mitsonar_mod):

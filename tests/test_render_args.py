@@ -56,7 +56,7 @@ def test_whole_floats_count_as_counts(mitsonar_mod, box):
     a = mitsonar_mod.render_scan(box, spp=32.0, seed=np.uint32(3), max_depth=np.int64(2))
     b = mitsonar_mod.render_scan(box, spp=32, seed=3, max_depth=2)
     np.testing.assert_array_equal(a.intensity, b.intensity)
-    assert a.meta["spp"] == 32 and isinstance(a.meta["spp"], int)
+    assert a.meta.spp == 32 and isinstance(a.meta.spp, int)
 
 
 def test_largest_seed_is_allowed_and_differs_from_zero(mitsonar_mod, box):
@@ -77,7 +77,7 @@ def test_a_chosen_non_sonar_integrator_is_replaced_with_a_warning(mitsonar_mod, 
     scene = mitsonar_mod.load_scene(path_xml)
     with pytest.warns(UserWarning, match="its integrator PathIntegrator is not a sonar integrator; rendering with sonar_tof"):
         scan = mitsonar_mod.render_scan(scene, spp=4)
-    assert scan.meta["integrator"] == "SonarTOFIntegrator"
+    assert scan.meta.integrator == "SonarTOFIntegrator"
     # No <integrator> at all: sonar_tof is the documented default, nothing to warn about.
     scene = mitsonar_mod.load_scene(text[:start] + text[end:])
     with warnings.catch_warnings():

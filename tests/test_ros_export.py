@@ -200,7 +200,7 @@ def test_survey_mcap_has_the_vehicle_frames(tmp_path, capsys):
     images = [d for t, _, _, d in msgs if t == "/sonar/image"]
     assert len(images) == sum(len(np.unique(s.times)) for s in scans)
     assert b"".join(bytes(m.image.data) for m in images) == b"".join(s.data.tobytes() for s in scans)
-    want = [round((s.meta["start_time"] + t) * 1e9) for s in scans for t in np.unique(s.times)]
+    want = [round((s.meta.start_time + t) * 1e9) for s in scans for t in np.unique(s.times)]
     assert [_ns(m.header.stamp) for m in images] == want
     tfs = [d for t, _, _, d in msgs if t == "/tf"]
 

@@ -29,7 +29,7 @@ def test_xml_and_render_scan_electronics_get_the_heads_range(mitsonar_mod):
         mitsonar_mod.render_scan(scene, spp=1, electronics={"ad_low": -3})
     # The edges are the head's own: 0 and 80 dB are settings a Micron takes.
     scan = mitsonar_mod.render_scan(scene, spp=1, electronics={"gain": 80, "ad_low": 0})
-    assert scan.electronics["gain"] == 80 and scan.electronics["ad_low"] == 0
+    assert scan.electronics.gain == 80 and scan.electronics.ad_low == 0
 
 
 def test_the_electronics_class_keeps_the_simulator_ranges():
@@ -63,7 +63,7 @@ def test_progress_rate_is_spp_over_the_time_since_the_render_started():
 
 def test_info_summarises_long_lists(tmp_path, mitsonar_mod):
     scan = mitsonar_mod.render_scan(mitsonar_mod.load_scene(BOX), spp=1)
-    scan.meta["wire_bearings"] = list(range(0, 6400, 32))
+    scan.meta.wire_bearings = list(range(0, 6400, 32))
     path = tmp_path / "s.npz"
     scan.save(path)
     proc = run("info", str(path))

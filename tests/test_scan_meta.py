@@ -12,6 +12,7 @@ import pytest
 
 from mitsonar.devices.recording import replay
 from mitsonar.products.bathymetry import soundings
+from mitsonar import load_scan
 from mitsonar.scan import Scan, ScanFieldError
 from mitsonar.scan.meta import ScanMeta
 
@@ -115,7 +116,7 @@ def test_ros_export_of_a_real_head_scan_is_stamped_on_its_clock(real_scan, tmp_p
 def test_real_head_metadata_round_trips_through_files(real_scan, tmp_path, ext):
     real_scan.meta["operator"] = "ünïcode"                      # unknown: kept apart, kept
     real_scan.save(tmp_path / f"s{ext}")
-    back = Scan.load(tmp_path / f"s{ext}")
+    back = load_scan(tmp_path / f"s{ext}")
     assert isinstance(back.meta, ScanMeta) and back.meta == real_scan.meta
     assert back.meta.start_time == real_scan.meta.start_time and back.meta.extra == {"operator": "ünïcode"}
     assert back.meta.source == real_scan.meta.source and back.meta.missing == []
@@ -124,7 +125,7 @@ def test_real_head_metadata_round_trips_through_files(real_scan, tmp_path, ext):
 def test_a_file_written_before_scan_meta_loads_with_start_time():
     """tests/data/real_head_v1.npz: a Micron replay saved by mitsonar before `ScanMeta`
     (meta ``time_start``/``time_end``, the name the heads wrote)."""
-    old = Scan.load(os.path.join(DATA, "real_head_v1.npz"))
+    old = load_scan(os.path.join(DATA, "real_head_v1.npz"))
     assert old.meta.start_time == pytest.approx(5000.006) and old.meta.end_time > old.meta.start_time
     assert "time_start" not in old.meta and old.meta.extra == {}
     assert old.meta.source == "seanet" and old.meta.log.endswith("head.bin")

@@ -138,7 +138,7 @@ def test_a_target_appears_at_its_pixel_of_the_waterfall_and_of_the_mosaic(mitson
     track = mitsonar_mod.Trajectory.straight(10.0, 2.0, start=pose((-2.0, 0.0, 0.0)))
     scans = [mitsonar_mod.render_scan(target_scene(mitsonar_mod, t), spp=256, seed=1, trajectory=track)
              for t in (True, False)]
-    assert scans[0].meta["ping_period"] == pytest.approx(2 * 15.0 / 1500.0)
+    assert scans[0].meta.ping_period == pytest.approx(2 * 15.0 / 1500.0)
     # waterfall: the echo's rows are the pings abeam of the patch, its columns the starboard half
     diff = np.nan_to_num(waterfall(scans[0], use="intensity") - waterfall(scans[1], use="intensity"))
     r, c = np.unravel_index(np.argmax(diff), diff.shape)
@@ -148,7 +148,7 @@ def test_a_target_appears_at_its_pixel_of_the_waterfall_and_of_the_mosaic(mitson
     assert c >= scans[0].n_bins and math.hypot(5.75, 5.0) - 0.1 <= slant <= math.hypot(6.25, 5.0) + 0.1
     # the starboard rows alone give the same picture's right half
     star = select_side(scans[0], "starboard")
-    assert star.meta["side"] == "starboard" and np.all(star.channel == 1) and star.n_pings == 150
+    assert star.meta.side == "starboard" and np.all(star.channel == 1) and star.n_pings == 150
     np.testing.assert_array_equal(waterfall(star, use="intensity")[:, 300:], waterfall(scans[0], use="intensity")[:, 300:])
     # mosaic: the brightest difference lies on the patch (x in [0.75, 1.25], y in [-6.25, -5.75])
     ms = [mosaic(s, resolution=0.1, bounds=(-3, 5, -8, 8), use="intensity", altitude=5.0) for s in scans]
@@ -184,7 +184,7 @@ def test_rows_poses_times_and_the_file_round_trip(mitsonar_mod, tmp_path):
     for ext in (".npz", ".exr"):
         scan.save(str(tmp_path / f"s{ext}"))
         back = mitsonar_mod.load_scan(str(tmp_path / f"s{ext}"))
-        assert back.kind == "sidescan" and back.meta["depression"] == 12.0
+        assert back.kind == "sidescan" and back.meta.depression == 12.0
         np.testing.assert_array_equal(back.channel, scan.channel)
         np.testing.assert_array_equal(back.times, scan.times)
 
@@ -196,7 +196,7 @@ def test_render_survey_splits_a_long_track_into_consecutive_scans(mitsonar_mod, 
     scans = list(mitsonar_mod.render_survey(scene, track, tmp_path / "survey", spp=16, progress=False))
     period = 0.02
     assert len(scans) == int((1.0 - 9 * period) / (10 * period) + 1e-9) + 1 == 5
-    starts = [s.meta["start_time"] for s in scans]
+    starts = [s.meta.start_time for s in scans]
     np.testing.assert_allclose(np.diff(starts), 10 * period)
     # one starboard ping every period, scan after scan, no gap and no overlap
     x = np.concatenate([s.positions[:, 0] for s in scans])

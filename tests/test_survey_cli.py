@@ -25,7 +25,7 @@ def test_survey_writes_scans_trajectory_and_pictures(tmp_path, capsys):
     mount = mitsonar.load_scene(BOX).sensors()[0].to_world_np
     from mitsonar.scan import bearing_rotation
 
-    t = scan.meta["start_time"] + scan.times
+    t = scan.meta.start_time + scan.times
     np.testing.assert_allclose(scan.poses, traj.at(t) @ mount @ bearing_rotation(scan.bearings), atol=1e-12)
     assert "wrote 2 scans" in capsys.readouterr().out
     # a second survey into the same folder would mix two surveys: refused

@@ -89,7 +89,7 @@ def test_map_elevation_geotiff_has_the_scans_crs(tmp_path, capsys):
     map's elevation grid. Scans with different origins are refused in one line, nothing written."""
     rasterio = pytest.importorskip("rasterio", reason="GeoTIFF needs rasterio (the geo extra)")
     pytest.importorskip("pyproj", reason="georeferencing needs pyproj (the geo extra)")
-    from mitsonar import Scan
+    from mitsonar import Scan, load_scan
     from mitsonar.cli import main
     from mitsonar.geometry.geodesy import GeoFrame
 
@@ -113,7 +113,7 @@ def test_map_elevation_geotiff_has_the_scans_crs(tmp_path, capsys):
         assert tuple(src.transform)[:6] == pytest.approx((a, b, c + geo.e0, d, e, f + geo.n0), abs=1e-6)
         np.testing.assert_array_equal(src.read(1), grid.elevation.astype(np.float32))
     other = GeoFrame.make((10.0, 4.5))
-    s = Scan.load(str(survey / "scan_00001.npz"))
+    s = load_scan(str(survey / "scan_00001.npz"))
     s.meta = {**s.meta, **other.meta()}
     s.save(str(survey / "scan_00001.npz"))
     capsys.readouterr()

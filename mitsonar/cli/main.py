@@ -239,8 +239,8 @@ def cmd_info(args):
         ("intensity", f"sum {float(scan.intensity.sum()):.6g}, max {float(scan.intensity.max()):.6g}"),
         ("data", f"mean {float(scan.data.mean()):.4g}, max {int(scan.data.max())}"),
     ]
-    rows += [(f"electronics.{k}", v) for k, v in scan.electronics.items()]
-    rows += [(f"meta.{k}", v) for k, v in scan.meta.items()]
+    rows += [(f"electronics.{k}", v) for k, v in scan.electronics.to_dict().items()]
+    rows += [(f"meta.{k}", v) for k, v in scan.meta.to_dict().items()]
     width = max(len(k) for k, _ in rows)
     for k, v in rows:
         print(f"{k:<{width}}  {_format_value(v)}")

@@ -161,7 +161,7 @@ def assemble_log(path, meta: dict, records: list, asm, rx, tx, is_command, usabl
                     command = None
                 s = asm.add(m, T, t0 + t)
                 if s is not None:
-                    s.meta["log"] = str(path)
+                    s.meta.log = str(path)
                     scans.append(s)
 
     for t, kind, data in records:
@@ -184,7 +184,7 @@ def assemble_log(path, meta: dict, records: list, asm, rx, tx, is_command, usabl
     if partial:
         s = asm.finish()
         if s is not None:
-            s.meta["log"] = str(path)
-            s.meta["partial"] = True
+            s.meta.log = str(path)
+            s.meta.partial = True
             scans.append(s)
     return scans

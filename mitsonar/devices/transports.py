@@ -215,9 +215,8 @@ class LineDriver:
             ping = self.read_ping()
             scan = asm.add(ping, self._pose, self.last_ping_time)
             if scan is not None:
-                scan.meta["port"] = str(self.port)
-                scan.meta["settings"] = self._settings.as_dict()
-                scan.meta.update(self._head_meta())
+                scan.meta = scan.meta.replace(port=str(self.port), settings=self._settings.as_dict(),
+                                              **self._head_meta())
                 return scan
 
     def pings(self, count: int | None = None):

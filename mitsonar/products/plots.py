@@ -28,6 +28,9 @@ import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
+from mitsonar.scan.electronics import ElectronicsSettings
+from mitsonar.scan.meta import ScanMeta
+
 #: Colour map of the sonar pictures: dark open water, bright echoes (a classic sonar palette).
 DEFAULT_CMAP = "copper"
 DEFAULT_DYNAMIC_RANGE = 60.0  # dB shown below the brightest intensity when db=True
@@ -77,7 +80,8 @@ def _electronics(scan) -> dict[str, Any]:
     from mitsonar.receiver.electronics import Electronics
 
     defaults = Electronics().to_dict()
-    return {**defaults, **{k: v for k, v in (scan.electronics or {}).items() if k in defaults}}
+    given = ElectronicsSettings.from_dict(getattr(scan, "electronics", None) or {})
+    return {**defaults, **{k: v for k, v in given.to_dict().items() if k in defaults}}
 
 
 def fmt(value, decimals: int = 2) -> str:
@@ -105,24 +109,24 @@ def _settings_line(scan) -> str:
     parts = [f"{scan.kind}, {rows_text(scan)} x {scan.n_bins} bins, {fmt(scan.range_min)}-{fmt(scan.range_max)} m",
              f"{scan.beam_pattern} {fmt(scan.beamwidth_h)}x{fmt(scan.beamwidth_v)} deg"]
     line2 = []
-    e = scan.electronics or {}
+    e = ElectronicsSettings.from_dict(getattr(scan, "electronics", None) or {})
     elec = []
-    if "tvg" in e:
-        elec.append(f"TVG {e['tvg']}")
-    if "gain" in e:
-        elec.append(f"gain {fmt(e['gain'], 1)} dB")
-    if "ad_low" in e:
-        elec.append(f"AD {fmt(e['ad_low'], 1)}" + (f"+{fmt(e['ad_span'], 1)} dB" if "ad_span" in e else " dB"))
-    if "bit_depth" in e:
-        elec.append(f"{e['bit_depth']}-bit")
-    if "speckle" in e:
-        elec.append(f"speckle {e['speckle']}")
+    if e.tvg is not None:
+        elec.append(f"TVG {e.tvg}")
+    if e.gain is not None:
+        elec.append(f"gain {fmt(e.gain, 1)} dB")
+    if e.ad_low is not None:
+        elec.append(f"AD {fmt(e.ad_low, 1)}" + (f"+{fmt(e.ad_span, 1)} dB" if e.ad_span is not None else " dB"))
+    if e.bit_depth is not None:
+        elec.append(f"{e.bit_depth}-bit")
+    if e.speckle is not None:
+        elec.append(f"speckle {e.speckle}")
     if elec:
         line2.append(", ".join(elec))
-    meta = scan.meta or {}
-    prov = [f"{k} {meta[k]}" for k in ("scene", "spp", "seed") if k in meta]
-    if meta.get("source") == "seanet":
-        prov.insert(0, "SeaNet head" + (f" log {os.path.basename(str(meta['log']))}" if "log" in meta else ""))
+    meta = ScanMeta.from_dict(getattr(scan, "meta", None) or {})
+    prov = [f"{k} {getattr(meta, k)}" for k in ("scene", "spp", "seed") if getattr(meta, k) is not None]
+    if meta.source == "seanet":
+        prov.insert(0, "SeaNet head" + (f" log {os.path.basename(str(meta.log))}" if meta.log is not None else ""))
     if prov:
         line2.append(", ".join(prov))
     # a line that would run off a 7-inch title wraps at the parts' boundary

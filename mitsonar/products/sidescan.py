@@ -66,7 +66,7 @@ def select_side(scan, side):
     if not len(rows):
         raise ValueError(f"select_side: the scan has no {name} rows (its side is {scan.meta.side or 'both'!r})")
     return dataclasses.replace(scan, intensity=scan.intensity[rows], data=scan.data[rows], bearings=scan.bearings[rows],
-                               poses=scan.poses[rows], times=scan.times[rows], meta={**scan.meta, "side": name})
+                               poses=scan.poses[rows], times=scan.times[rows], meta=scan.meta.replace(side=name))
 
 
 def first_return(scan, threshold=1e-3, use="intensity") -> np.ndarray:

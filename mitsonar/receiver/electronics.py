@@ -74,8 +74,10 @@ import numpy as np
 
 from mitsonar._checks import is_number, not_a, not_allowed
 import mitsonar.receiver.devicechain as devicechain
-from mitsonar.sonar_equation.levels import (DEFAULT_NOISE_LEVEL, DEFAULT_RECEIVER_SENSITIVITY, DEFAULT_SOURCE_LEVEL,
-                                    SOURCE_LEVELS, echo_level, rename_settings, source_level_error)
+from mitsonar.acoustics.levels import (DEFAULT_NOISE_LEVEL, DEFAULT_RECEIVER_SENSITIVITY, DEFAULT_SOURCE_LEVEL,
+                                       SOURCE_LEVELS, echo_level, source_level_error)
+from mitsonar.scan.electronics import ElectronicsSettings
+from mitsonar.scan.migrations import rename_settings
 
 TVG_LAWS = {"off": 0, "20log": 20, "30log": 30, "40log": 40}
 SPECKLE_MODELS = ("off", "rayleigh", "weibull")
@@ -621,14 +623,13 @@ def apply_to_scan(scan, electronics: "Electronics | dict | None" = None, seed: i
     ----------
     scan : mitsonar.scan.Scan
         Not modified.
-    electronics : Electronics, dict or None
-        Settings; a dict is read with `Electronics.from_dict`; ``None`` re-uses the settings
-        recorded in ``scan.electronics`` (defaults for missing ones).
+    electronics : Electronics, dict, ElectronicsSettings or None
+        Settings, read with `Electronics.from_dict`; ``None``: those of ``scan.electronics``.
     seed : int or None
         The receiver's noise seed. The speckle of a rendered scan (``meta['speckle'] ==
         'scene'``) follows its poses and the settings' ``speckle_seed``; a scan from elsewhere
-        (a real head's) has its speckle drawn from this seed too. ``None`` takes ``scan.electronics['seed']``, else ``scan.meta['electronics_seed']``
-        (what `render_scan` records), else ``scan.meta['seed']``, else 0.
+        (a real head's) has its speckle drawn from this seed too. ``None`` takes ``scan.electronics.seed``, else
+        ``scan.meta.electronics_seed`` (what `render_scan` records), else ``scan.meta.seed``, else 0.
 
     Returns
     -------
@@ -638,12 +639,11 @@ def apply_to_scan(scan, electronics: "Electronics | dict | None" = None, seed: i
     import copy
 
     if electronics is None:
-        electronics = Electronics.from_dict(scan.electronics)
-    elif isinstance(electronics, dict):
-        electronics = Electronics.from_dict(electronics)
+        electronics = Electronics.from_dict(scan.electronics.to_dict())
+    elif isinstance(electronics, (dict, ElectronicsSettings)):
+        electronics = Electronics.from_dict(dict(electronics))
     if seed is None:
-        seed = scan.electronics.get("seed", next((s for s in (scan.meta.electronics_seed, scan.meta.seed)
-                                                  if s is not None), 0))
+        seed = next((s for s in (scan.electronics.seed, scan.meta.electronics_seed, scan.meta.seed) if s is not None), 0)
     speckle = None
     if electronics.speckle != "off" and has_scene_speckle(scan):
         speckle = electronics.scene_speckle(scan.poses, scan.ranges, sound_speed=scan.sound_speed,
@@ -652,7 +652,7 @@ def apply_to_scan(scan, electronics: "Electronics | dict | None" = None, seed: i
                              sound_speed=scan.sound_speed, seed=seed, speckle=speckle)
     out = copy.deepcopy(scan)
     out.data = data
-    out.electronics = {**electronics.to_dict(), "seed": seed}
+    out.electronics = ElectronicsSettings.from_dict({**electronics.to_dict(), "seed": seed})
     return out
 
 

@@ -1,8 +1,8 @@
 """The scan file format: OpenEXR (``.exr``) and numpy (``.npz``), both lossless, metadata included.
 
 This module knows the format, not the `Scan` class: `write` takes any object with the Scan's
-fields, `read` returns the fields a Scan is built from (``Scan.save``/``Scan.load``, and
-``mitsonar.scan.io``, use it).
+fields, `read` returns the fields a Scan is built from (``Scan.save`` and `mitsonar.load_scan`
+use it).
 
 EXR layout (one scanline part, ZIP compression, lossless)
 ---------------------------------------------------------
@@ -36,7 +36,8 @@ poses               ``n_pings`` x 4 x 4 nested lists (world transform of each pi
 times               list of floats: seconds of each ping from the scan start (absent in files
                     written before scans had times: they load with times None, i.e. zeros)
 range_min/max, beam_pattern, beamwidth_h, beamwidth_v, kind, sound_speed, absorption
-electronics, meta   the Scan's dicts (numpy arrays, numpy scalars and tuples are tagged and restored);
+electronics, meta   the Scan's settings and metadata as dicts (`ElectronicsSettings.to_dict`,
+                    `ScanMeta.to_dict`; numpy arrays, numpy scalars and tuples are tagged and restored);
                     an ``electronics`` written by mitsonar 0.2.0 (a ``source_level`` below 150 dB
                     and no ``receiver_sensitivity``: the old calibration constant) is read as
                     source level 200 dB and the sensitivity that keeps their sum
@@ -69,7 +70,7 @@ import numpy as np
 
 from mitsonar._checks import first_line
 from mitsonar._files import check_output_file, replacing
-from mitsonar.sonar_equation.levels import migrate_settings
+from mitsonar.scan.migrations import migrate_settings
 
 FORMAT = "mitsonar-scan"
 FORMAT_VERSION = 1
@@ -169,8 +170,8 @@ def _header(scan, with_arrays: bool, path: str) -> dict[str, Any]:
         head["bearings"] = scan.bearings.tolist()
         head["poses"] = scan.poses.tolist()
         head["times"] = scan.times.tolist()
-    head["electronics"] = _encode(dict(scan.electronics), f"{path}: electronics")
-    head["meta"] = _encode(dict(scan.meta), f"{path}: meta")
+    head["electronics"] = _encode(scan.electronics.to_dict(), f"{path}: electronics")
+    head["meta"] = _encode(scan.meta.to_dict(), f"{path}: meta")
     if scan.data.dtype != np.uint8:
         head["data_type"] = str(scan.data.dtype)
     head["checksums"] = _checksums(scan.intensity, scan.data)

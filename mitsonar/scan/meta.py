@@ -15,7 +15,9 @@ are the typed way and the one mitsonar uses. A value of the wrong type for a fie
 it is set, in one line: ``Scan 'meta': 'start_time': 'noon' is not allowed (a finite number, seconds)``.
 
 `ScanFieldError`, the one error of a bad `Scan` field, lives here (the leaf of `mitsonar.scan`);
-`mitsonar.scan.model` and `mitsonar.scan` export it. This module imports nothing from mitsonar.
+`mitsonar.scan.model` and `mitsonar.scan` export it. `TypedRecord` is the machinery of a record
+of optional typed fields, shared with the electronics settings (`mitsonar.scan.electronics`).
+This module imports nothing from mitsonar.
 """
 from __future__ import annotations
 
@@ -34,7 +36,9 @@ RENAMED = {"time_start": "start_time", "time_end": "end_time"}
 # What each kind of field allows, as said in the refusal.
 _KINDS = {
     "number": "a finite number",
+    "real": "a number, not NaN",
     "int": "a whole number",
+    "whole": "a whole number (an int, or a float without fraction)",
     "str": "a string",
     "bool": "True or False",
     "list": "a list",
@@ -60,6 +64,10 @@ def _f(kind: str, doc: str, *, positive: bool = False):
 
 
 def _ok(kind: str, value, positive: bool) -> bool:
+    if kind in ("real", "whole"):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.integer, np.floating)):
+            return False
+        return not math.isnan(value) and (kind == "real" or (math.isfinite(value) and float(value).is_integer()))
     if kind in ("number", "int"):
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.integer, np.floating)):
             return False
@@ -75,8 +83,125 @@ def _ok(kind: str, value, positive: bool) -> bool:
     return isinstance(value, dict)
 
 
-@dataclass(eq=False)
-class ScanMeta(MutableMapping):
+class TypedRecord(MutableMapping):
+    """The machinery of a typed record of optional fields (`ScanMeta`, `ElectronicsSettings`): each
+    dataclass field made with `_f` is checked when set (a `ScanFieldError` on ``WHERE``), None is
+    absent, unknown keys go to ``extra``; `from_dict`/`to_dict` for files, and the mapping API of
+    the dict era (``r["key"]``, ``r.get``, ``in``, ``items()``, ``update``, ``==`` a dict)."""
+
+    #: the Scan field the record is (named in a refusal)
+    WHERE = "meta"
+    #: old key -> new key, read with a DeprecationWarning and renamed on `from_dict`
+    RENAMED: dict = {}
+
+    @classmethod
+    def _spec(cls) -> dict:
+        spec = cls.__dict__.get("_SPEC_CACHE")
+        if spec is None:
+            spec = {f.name: (f.metadata["kind"], f.metadata["doc"], f.metadata["positive"])
+                    for f in fields(cls) if f.name != "extra"}
+            cls._SPEC_CACHE = spec
+        return spec
+
+    def __post_init__(self) -> None:  # the fields were checked as __init__ set them (__setattr__)
+        if not isinstance(self.extra, dict):
+            raise ScanFieldError(self.WHERE, f"extra: a {type(self.extra).__name__} is not a dict")
+
+    def _check(self, name: str, value) -> None:
+        if value is None:
+            return
+        kind, doc, positive = self._spec()[name]
+        if not _ok(kind, value, positive):
+            shown = value.item() if isinstance(value, np.generic) else value
+            raise ScanFieldError(self.WHERE, f"'{name}': {shown!r} is not allowed ({_KINDS[kind]}"
+                                 + (" > 0" if positive else "") + f", {doc})")
+
+    def __setattr__(self, name, value):
+        if name in self._spec():
+            self._check(name, value)
+        object.__setattr__(self, name, value)
+
+    @classmethod
+    def from_dict(cls, d: Mapping):
+        """The record of a dict (a file's, a caller's): known keys to their fields, old names
+        (`RENAMED`) to the new ones, every other key to `extra`."""
+        if isinstance(d, cls):
+            return d
+        spec = cls._spec()
+        known, extra = {}, {}
+        for key, value in d.items():
+            new = cls.RENAMED.get(key) if isinstance(key, str) else None
+            if new is not None and new not in d:
+                key = new
+            (known if key in spec else extra)[key] = value
+        return cls(**known, extra=extra)
+
+    def to_dict(self) -> dict:
+        """A plain dict: the fields that are set, then `extra` (what files hold)."""
+        return dict(self.items())
+
+    def replace(self, **changes):
+        """A copy (its own `extra`) with the fields in ``changes`` set (None: absent)."""
+        return type(self).from_dict({**self.to_dict(), **changes})
+
+    # ---- the mapping API (one release; see the module docstring) --------------------------------
+
+    def __getitem__(self, key):
+        if isinstance(key, str) and key in self._spec():
+            value = getattr(self, key)
+            if value is None:
+                raise KeyError(key)
+            return value
+        if key in self.extra:
+            return self.extra[key]
+        if key in self.RENAMED:
+            value = self[self.RENAMED[key]]
+            warnings.warn(f"Scan {self.WHERE} '{key}' is now '{self.RENAMED[key]}'", DeprecationWarning, stacklevel=2)
+            return value
+        raise KeyError(key)
+
+    def __contains__(self, key) -> bool:
+        # not through __getitem__: ``"time_start" in meta`` is False (the name is gone), no warning
+        if isinstance(key, str) and key in self._spec():
+            return getattr(self, key) is not None
+        return key in self.extra
+
+    def __setitem__(self, key, value) -> None:
+        if isinstance(key, str) and key in self._spec():
+            setattr(self, key, value)
+        else:
+            self.extra[key] = value
+
+    def __delitem__(self, key) -> None:
+        if isinstance(key, str) and key in self._spec():
+            if getattr(self, key) is None:
+                raise KeyError(key)
+            setattr(self, key, None)
+        else:
+            del self.extra[key]
+
+    def __iter__(self):
+        for name in self._spec():
+            if getattr(self, name) is not None:
+                yield name
+        yield from self.extra
+
+    def __len__(self) -> int:
+        return sum(getattr(self, n) is not None for n in self._spec()) + len(self.extra)
+
+    def __eq__(self, other) -> bool:
+        if isinstance(other, Mapping):
+            return dict(self.items()) == dict(other.items())
+        return NotImplemented
+
+    __hash__ = None
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({dict(self.items())!r})"
+
+
+@dataclass(eq=False, repr=False)
+class ScanMeta(TypedRecord):
     """A `Scan`'s metadata. Fields (all optional; None: absent):
 
     Rendered scans (`render_scan`): ``scene``, ``seed``, ``spp``, ``integrator``, ``max_depth``,
@@ -174,103 +299,5 @@ class ScanMeta(MutableMapping):
     transmit_frequency: int | None = _f("int", "kHz")
     extra: dict[str, Any] = field(default_factory=dict)
 
-    def __post_init__(self) -> None:  # the fields were checked as __init__ set them (__setattr__)
-        if not isinstance(self.extra, dict):
-            raise _error(f"extra: a {type(self.extra).__name__} is not a dict")
+    RENAMED = RENAMED   # the old names of the fields (a class attribute, not a field)
 
-    @staticmethod
-    def _check(name: str, value) -> None:
-        if value is None:
-            return
-        kind, doc, positive = _SPEC[name]
-        if not _ok(kind, value, positive):
-            shown = value.item() if isinstance(value, np.generic) else value
-            raise _error(f"'{name}': {shown!r} is not allowed ({_KINDS[kind]}"
-                         + (" > 0" if positive else "") + f", {doc})")
-
-    def __setattr__(self, name, value):
-        if name in _SPEC:
-            self._check(name, value)
-        object.__setattr__(self, name, value)
-
-    @classmethod
-    def from_dict(cls, d: Mapping) -> "ScanMeta":
-        """The metadata of a dict (a file's, a caller's): known keys to their fields, old names
-        (``time_start``, ``time_end``) to the new ones, every other key to `extra`."""
-        if isinstance(d, ScanMeta):
-            return d
-        known, extra = {}, {}
-        for key, value in d.items():
-            new = RENAMED.get(key) if isinstance(key, str) else None
-            if new is not None and new not in d:
-                key = new
-            (known if key in _SPEC else extra)[key] = value
-        return cls(**known, extra=extra)
-
-    def to_dict(self) -> dict:
-        """A plain dict: the fields that are set, then `extra` (what files hold)."""
-        return dict(self.items())
-
-    # ---- the mapping API (one release; see the module docstring) --------------------------------
-
-    def __getitem__(self, key):
-        if isinstance(key, str) and key in _SPEC:
-            value = getattr(self, key)
-            if value is None:
-                raise KeyError(key)
-            return value
-        if key in self.extra:
-            return self.extra[key]
-        if key in RENAMED:
-            value = self[RENAMED[key]]
-            warnings.warn(f"Scan meta '{key}' is now '{RENAMED[key]}'", DeprecationWarning, stacklevel=2)
-            return value
-        raise KeyError(key)
-
-    def __contains__(self, key) -> bool:
-        # not through __getitem__: ``"time_start" in meta`` is False (the name is gone), no warning
-        if isinstance(key, str) and key in _SPEC:
-            return getattr(self, key) is not None
-        return key in self.extra
-
-    def __setitem__(self, key, value) -> None:
-        if isinstance(key, str) and key in _SPEC:
-            setattr(self, key, value)
-        else:
-            self.extra[key] = value
-
-    def __delitem__(self, key) -> None:
-        if isinstance(key, str) and key in _SPEC:
-            if getattr(self, key) is None:
-                raise KeyError(key)
-            setattr(self, key, None)
-        else:
-            del self.extra[key]
-
-    def __iter__(self):
-        for name in _NAMES:
-            if getattr(self, name) is not None:
-                yield name
-        yield from self.extra
-
-    def __len__(self) -> int:
-        return sum(getattr(self, n) is not None for n in _NAMES) + len(self.extra)
-
-    def __eq__(self, other) -> bool:
-        if isinstance(other, Mapping):
-            return dict(self.items()) == dict(other.items())
-        return NotImplemented
-
-    __hash__ = None
-
-    def __repr__(self) -> str:
-        return f"ScanMeta({dict(self.items())!r})"
-
-
-def _error(reason: str) -> ScanFieldError:
-    return ScanFieldError("meta", reason)
-
-
-_SPEC = {f.name: (f.metadata["kind"], f.metadata["doc"], f.metadata["positive"])
-         for f in fields(ScanMeta) if f.name != "extra"}
-_NAMES = tuple(_SPEC)

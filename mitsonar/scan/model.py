@@ -9,12 +9,12 @@ import dataclasses
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
 from mitsonar._checks import not_allowed
 from mitsonar.scan import fileformat as scanfile
+from mitsonar.scan.electronics import ElectronicsSettings
 from mitsonar.scan.meta import ScanFieldError, ScanMeta
 
 # The frames' helpers and the kinds live below the Scan (the sensor plugin uses them too); they
@@ -155,14 +155,20 @@ class Scan:
         (`mitsonar.geometry.kinds`), which says what differs between kinds.
     sound_speed : float  (m/s)
     absorption : float  (dB/m)
-    electronics : dict
-        The device-electronics settings that turned `intensity` into `data`.
+    electronics : ElectronicsSettings
+        The device-electronics settings that turned `intensity` into `data`, typed
+        (`mitsonar.scan.electronics`; None fields take the receiver's defaults). A dict given here
+        (or assigned later) becomes an `ElectronicsSettings`.
     meta : ScanMeta
         Provenance and schedule, typed (`mitsonar.scan.meta`): scene, seed, spp, integrator,
         max_depth, mitsonar_version, ..., ``start_time`` (s, the scan's start on its clock: a
         trajectory's, or a real head's wall clock), a real head's source, log, settings, ...; other
         keys in ``meta.extra``. A dict given here (or assigned later) becomes a `ScanMeta`; the
         dict reading (``meta["seed"]``, ``meta.get(...)``) still works for this release.
+
+    A Scan is data: its levels (echo level, directivity index, SNR) are functions of it in
+    `mitsonar.sonar_equation` (`scan_levels`, `snr`, `directivity_index`); `mitsonar.load_scan`
+    reads one from a file.
     times : float64 (n_pings,)
         Seconds of each row's ping from the scan start, finite and non-decreasing: a mechanical
         head's ``k * ping_period``, zeros for the rows of one multibeam frame; a side-scan head's
@@ -185,13 +191,16 @@ class Scan:
     kind: str = kinds.DEFAULT
     sound_speed: float = 1500.0
     absorption: float = 0.0
-    electronics: dict[str, Any] = field(default_factory=dict)
+    electronics: ElectronicsSettings = field(default_factory=ElectronicsSettings)
     meta: ScanMeta = field(default_factory=ScanMeta)
     times: np.ndarray | None = None
 
     def __setattr__(self, name, value):
-        if name == "meta" and isinstance(value, dict):   # a caller's or a file's dict: typed here
+        # a caller's or a file's dict: typed here
+        if name == "meta" and isinstance(value, dict):
             value = ScanMeta.from_dict(value)
+        elif name == "electronics" and isinstance(value, dict):
+            value = ElectronicsSettings.from_dict(value)
         object.__setattr__(self, name, value)
 
     def __post_init__(self) -> None:
@@ -208,8 +217,8 @@ class Scan:
             raise ScanFieldError("kind", f"{self.kind!r} is not allowed (one of {', '.join(kinds.names())})")
         if not isinstance(self.beam_pattern, str) or not self.beam_pattern:
             raise ScanFieldError("beam_pattern", f"{self.beam_pattern!r} is not a pattern name")
-        for name in ("electronics", "meta"):
-            if not isinstance(getattr(self, name), dict if name == "electronics" else ScanMeta):
+        for name, typed in (("electronics", ElectronicsSettings), ("meta", ScanMeta)):
+            if not isinstance(getattr(self, name), typed):
                 raise ScanFieldError(name, f"a {type(getattr(self, name)).__name__} is not a dict")
         self.intensity = _array("intensity", self.intensity, np.float32)
         if self.intensity.ndim != 2:
@@ -313,57 +322,6 @@ class Scan:
         """(n_pings, 3) world transducer position of each ping."""
         return self.poses[:, :3, 3]
 
-    @property
-    def echo_level(self) -> np.ndarray:
-        """float32 (n_pings, n_bins): the noise-free echo level at the receiver, dB re 1 uPa, per
-        bin (``-inf`` where no echo): ``source_level + 10 log10`` of `intensity` convolved with
-        the transmit pulse as a boxcar of ones over ``c pulse_length / 2``, the source level and
-        pulse from `electronics` (defaults where absent). Derived, not stored: it always agrees
-        with the saved intensity and settings (`Electronics.echo_level`)."""
-        from mitsonar.receiver.electronics import Electronics
-
-        return Electronics.from_dict(self.electronics, "Scan 'electronics'").echo_level(
-            self.intensity, self.ranges, self.sound_speed)
-
-    @property
-    def directivity_index(self) -> float:
-        """dB, the receive beam's ``10 log10(4 pi / Int B)``: recorded by `render_scan` in
-        ``meta['directivity_index']``, else computed from `beam_pattern` and its widths (and
-        ``meta['frequency']``, ``meta['aperture_h']`` for ``sinc``)."""
-        if self.meta.directivity_index is not None:
-            return float(self.meta.directivity_index)
-        from mitsonar.sim.variant import ensure_variant
-
-        ensure_variant()
-        from mitsonar.plugins import beam as patterns
-
-        shape = patterns.lookup(self.beam_pattern)
-        if shape is not None and shape.measured:
-            raise ScanFieldError("meta", f"a {shape.name!r} beam pattern's directivity_index is not recorded")
-        own = shape is not None and shape.apertures     # the pattern reads the recorded aperture
-        beam = patterns.BeamPattern(self.beam_pattern, self.beamwidth_h, self.beamwidth_v,
-                                    float(700e3 if self.meta.frequency is None else self.meta.frequency),
-                                    float(self.meta.aperture_h) if own and self.meta.aperture_h is not None else None,
-                                    None, self.sound_speed)
-        return beam.directivity_index()
-
-    @property
-    def noise_band_level(self) -> float:
-        """dB re 1 uPa: ``NL + 10 log10 B - DI``, the receiver's noise in its band after the
-        beam's directivity (``noise_level`` and ``receiver_bandwidth`` from `electronics`)."""
-        from mitsonar.receiver.electronics import Electronics
-        from mitsonar.sonar_equation.levels import noise_band_level
-
-        e = Electronics.from_dict(self.electronics, "Scan 'electronics'")
-        return noise_band_level(e.noise_level, e.noise_bandwidth(self.bin_width, self.sound_speed),
-                                self.directivity_index)
-
-    @property
-    def snr(self) -> np.ndarray:
-        """float32 (n_pings, n_bins), dB: ``echo_level - (NL + 10 log10 B - DI)`` per bin (the
-        active sonar equation's signal-to-noise ratio, Urick 1983, eq. 2.2); ``-inf`` where no echo."""
-        return (self.echo_level - np.float32(self.noise_band_level)).astype(np.float32)
-
     def save(self, path) -> None:
         """Write the scan losslessly to ``.exr`` (range-intensity image, lossless header) or ``.npz``
         (chosen by the extension), atomically; the format is described in `mitsonar.scan.fileformat`.
@@ -376,7 +334,7 @@ class Scan:
         scanfile.extension(path)
         try:
             # Fields may have been assigned since construction: check them again, so that nothing
-            # is written that `load` would refuse.
+            # is written that `mitsonar.load_scan` would refuse.
             checked = dataclasses.replace(self)
         except ScanFieldError as exc:
             raise scanfile.ScanFileError(f"{path}: not saved: {exc}") from None
@@ -384,22 +342,28 @@ class Scan:
 
     @classmethod
     def load(cls, path) -> "Scan":
-        """Read a scan written by `save` (``.exr`` or ``.npz``): bit-identical arrays, equal scalars
-        and dicts. A missing, truncated, corrupt or foreign file, or content that `Scan` does not
-        allow, raises `ScanFileError` naming the file and the header field, channel or array."""
-        path = os.fspath(path)
-        fields, stored_as = scanfile.read(path)
-        try:
-            return cls(**fields)
-        except ScanFieldError as exc:
-            arrays = ("ranges", "bearings", "poses", "times") if stored_as == "array" else ()
-            where = stored_as if exc.field in ("intensity", "data", *arrays) else "header"
-            raise scanfile.ScanFileError(f"{path}: {where} '{exc.field}': {exc.reason}") from None
+        """Deprecated: `mitsonar.load_scan` (the one way to read a scan file; the same result)."""
+        import warnings
+
+        warnings.warn("Scan.load is deprecated: use mitsonar.load_scan(path)", DeprecationWarning, stacklevel=2)
+        return read(path)
 
     def __repr__(self) -> str:
         return (f"Scan(kind={self.kind!r}, n_pings={self.n_pings}, n_bins={self.n_bins}, "
                 f"range=[{self.range_min:g}, {self.range_max:g}) m, beam={self.beam_pattern} "
                 f"{self.beamwidth_h:g}x{self.beamwidth_v:g} deg)")
+
+
+def read(path) -> Scan:
+    """The scan in ``path`` (``.exr`` or ``.npz``), what `mitsonar.load_scan` returns."""
+    path = os.fspath(path)
+    fields, stored_as = scanfile.read(path)
+    try:
+        return Scan(**fields)
+    except ScanFieldError as exc:
+        arrays = ("ranges", "bearings", "poses", "times") if stored_as == "array" else ()
+        where = stored_as if exc.field in ("intensity", "data", *arrays) else "header"
+        raise scanfile.ScanFileError(f"{path}: {where} '{exc.field}': {exc.reason}") from None
 
 
 def as_scans(scans) -> list:

@@ -25,7 +25,7 @@ def beamform(echoes, bearings=None, *, row=0, n_bins=None, weights=None):
     (`mitsonar.receiver.electronics.Electronics.apply`, noise seeded by the render's ``seed``) without
     their statistical speckle: the beams already hold the physical one."""
     from mitsonar.geometry.frames import bearing_rotation
-    from mitsonar.scan import Scan
+    from mitsonar.scan import ElectronicsSettings, Scan, ScanMeta
 
     b = np.asarray(echoes.bearings if bearings is None else bearings, dtype=np.float64).reshape(-1)
     n_bins = int(echoes.n_bins if n_bins is None else n_bins)
@@ -54,8 +54,8 @@ def beamform(echoes, bearings=None, *, row=0, n_bins=None, weights=None):
                 bearings=b, poses=poses, range_min=echoes.range_min, range_max=echoes.range_max,
                 beam_pattern="delay_and_sum", beamwidth_h=_beamwidth_deg(echoes), beamwidth_v=180.0,
                 kind=kinds.MULTIBEAM.name, sound_speed=c, absorption=float(echoes.meta.get("absorption", 0.0)),
-                electronics=dict(settings or {}), meta={"source": "beamformed echoes", **{
-                    k: v for k, v in echoes.meta.items() if k in ("spp", "seed", "speckle_seed")}})
+                electronics=ElectronicsSettings.from_dict(settings), meta=ScanMeta.from_dict({"source": "beamformed echoes", **{
+                    k: v for k, v in echoes.meta.items() if k in ("spp", "seed", "speckle_seed")}}))
 
 
 def _beamwidth_deg(echoes) -> float:

@@ -12,7 +12,7 @@ from mitsonar._checks import is_whole
 from mitsonar._limits import LIMITS
 from mitsonar.geometry.frames import check_rigid
 from mitsonar.plugins import PLUGINS
-from mitsonar.scan import Scan
+from mitsonar.scan import ElectronicsSettings, Scan, ScanMeta
 from mitsonar.sim.scene import SceneError, mitsuba_error, scene_name, sonar_of
 from mitsonar.geometry.trajectory import Trajectory
 from mitsonar.sim.variant import ensure_variant
@@ -351,36 +351,27 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     data = devicechain.host_codes(frame.data, frame.shape, model.bit_depth)
     from mitsonar._version import __version__
 
-    meta = {
-        "scene": scene_name(scene),
-        "seed": int(seed),
-        "spp": int(spp),
-        "integrator": type(integrator).__name__,
-        "max_depth": int(max_depth if max_depth is not None else getattr(integrator, "max_depth", 0)),
-        "mitsonar_version": __version__,
-        "variant": mi.variant(),
-        "bearing_start": sonar.bearing_start,
-        "bearing_step": sonar.bearing_step,
-        "electronics_seed": int(eseed),
-        "ping_period": float(sonar.ping_period),
-        "frequency": float(sonar.beam.frequency),
-        "speckle": "scene",
-        "aperture_h": float(sonar.beam.across_aperture()),
-        "directivity_index": float(sonar.beam.directivity_index()),   # the receive beam's, for Scan.snr
-    }
-    if trajectory is not None:
-        meta["start_time"] = start_time
-    meta.update(sonar.sonar_kind.render_meta(sonar))   # a side-scan's channels and their tilt
-    if getattr(sonar, "transmit", None) is not None:  # multibeam: the transmit fan beside the receive beams
-        meta.update(tx_pattern=sonar.transmit.pattern, tx_beamwidth_h=sonar.transmit.beamwidth_h,
-                    tx_beamwidth_v=sonar.transmit.beamwidth_v)
+    transmit = getattr(sonar, "transmit", None)   # multibeam: the transmit fan beside the receive beams
+    meta = ScanMeta(
+        scene=scene_name(scene), seed=int(seed), spp=int(spp), integrator=type(integrator).__name__,
+        max_depth=int(max_depth if max_depth is not None else getattr(integrator, "max_depth", 0)),
+        mitsonar_version=__version__, variant=mi.variant(),
+        bearing_start=sonar.bearing_start, bearing_step=sonar.bearing_step, electronics_seed=int(eseed),
+        ping_period=float(sonar.ping_period), frequency=float(sonar.beam.frequency), speckle="scene",
+        aperture_h=float(sonar.beam.across_aperture()),
+        directivity_index=float(sonar.beam.directivity_index()),   # the receive beam's, for the SNR
+        start_time=start_time if trajectory is not None else None,
+        tx_pattern=None if transmit is None else transmit.pattern,
+        tx_beamwidth_h=None if transmit is None else transmit.beamwidth_h,
+        tx_beamwidth_v=None if transmit is None else transmit.beamwidth_v,
+    ).replace(**sonar.sonar_kind.render_meta(sonar))   # a side-scan's channels and their tilt, ...
     return Scan(intensity=intensity, data=data, ranges=ranges,
                 bearings=np.radians(sonar.bearings_deg()), poses=poses, times=sonar.ping_times(),
                 range_min=sonar.range_min, range_max=sonar.range_max,
                 beam_pattern=sonar.beam.pattern, beamwidth_h=sonar.beam.beamwidth_h,
                 beamwidth_v=sonar.beam.beamwidth_v, kind=sonar.kind, sound_speed=sonar.sound_speed,
-                absorption=sonar.absorption, electronics={**model.to_dict(), "seed": int(eseed)},
-                meta=meta)
+                absorption=sonar.absorption,
+                electronics=ElectronicsSettings.from_dict({**model.to_dict(), "seed": int(eseed)}), meta=meta)
 
 
 @contextlib.contextmanager

@@ -119,7 +119,7 @@ def _scans(scene, trajectory, output, starts, sonar, kwargs, seed, ext, progress
             trajectory.to_tum(os.path.join(output, TRAJECTORY_NAME))
         for i, t in enumerate(starts):
             scan = render_scan(scene, seed=scan_seed(seed, i), trajectory=trajectory, start_time=float(t), **kwargs)
-            scan.meta.update(survey_index=i, survey_seed=seed, **(meta or {}))
+            scan.meta = scan.meta.replace(survey_index=i, survey_seed=seed, **(meta or {}))
             if output is not None:
                 scan.save(os.path.join(output, SCAN_NAME.format(i, ext)))
             if progress:

@@ -3,7 +3,7 @@
 `sonar_equation_report` renders a scene (or takes a scan) and lists the terms of the active sonar
 equation (Urick 1983, eqs. 2.1, 2.2) in dB: the head's source level SL, noise spectrum level NL,
 receiver bandwidth B and directivity index DI, the noise in band ``NL + 10 log10 B - DI``; per ping the
-strongest echo's range r, its echo level EL (`Scan.echo_level`), the two-way transmission loss
+strongest echo's range r, its echo level EL (`scan_echo_level`), the two-way transmission loss
 ``TL = 40 log10 r + 2 alpha r``, the target term it implies (``TS`` of a point target, or
 ``S_b + 10 log10 A`` of a seabed patch: ``EL - SL + TL``) and the SNR. `plot_levels` draws echo
 level and noise against range. Command line:
@@ -17,7 +17,8 @@ import os
 
 import numpy as np
 
-from mitsonar.sonar_equation.levels import two_way_transmission_loss
+from mitsonar.acoustics.levels import two_way_transmission_loss
+from mitsonar.sonar_equation.scan_levels import receiver_of, scan_levels
 
 #: Echoes nearer than this are left out of "the strongest echo" (TL -> -inf at r -> 0).
 MIN_RANGE = 0.05
@@ -76,11 +77,9 @@ def sonar_equation_report(scene_or_scan, *, spp: int = 256, seed: int = 0, senso
     ``sensor`` and other keywords) or for a `Scan` (or a scan file's path: ``.exr``/``.npz``; a
     scene XML path is loaded)."""
     scan = _scan_of(scene_or_scan, spp, seed, sensor, render_kw)
-    from mitsonar.receiver.electronics import Electronics
-
-    e = Electronics.from_dict(scan.electronics, "Scan 'electronics'")
-    el = scan.echo_level
-    noise = scan.noise_band_level
+    e = receiver_of(scan)
+    levels = scan_levels(scan)
+    el, noise = levels.echo_level, levels.noise_band_level
     ranges = np.asarray(scan.ranges, dtype=np.float64)
     usable = ranges >= MIN_RANGE
     pings = []
@@ -98,19 +97,20 @@ def sonar_equation_report(scene_or_scan, *, spp: int = 256, seed: int = 0, senso
                           snr=float(row[j] - noise)))
     return SonarEquationReport(source_level=e.source_level, noise_level=e.noise_level,
                                receiver_bandwidth=e.noise_bandwidth(scan.bin_width, scan.sound_speed),
-                               directivity_index=scan.directivity_index, noise_band_level=noise,
+                               directivity_index=levels.directivity_index, noise_band_level=noise,
                                absorption=scan.absorption, ranges=ranges, echo_level=el, pings=pings)
 
 
 def _scan_of(obj, spp, seed, sensor, render_kw):
     from mitsonar.scan import Scan
+    from mitsonar.scan.io import load_scan
 
     if isinstance(obj, Scan):
         return obj
     if isinstance(obj, (str, os.PathLike)):
         path = os.fspath(obj)
         if os.path.splitext(path)[1].lower() in (".exr", ".npz"):
-            return Scan.load(path)
+            return load_scan(path)
         from mitsonar.sim.scene import load_scene
 
         obj = load_scene(path)

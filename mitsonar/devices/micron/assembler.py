@@ -15,7 +15,7 @@ import numpy as np
 
 from mitsonar.geometry import kinds
 from mitsonar.geometry.frames import bearing_rotation, check_rigid
-from mitsonar.scan import Scan, reception_times
+from mitsonar.scan import ElectronicsSettings, Scan, ScanMeta, reception_times
 from mitsonar.devices.micron.seanet.constants import FULL_TURN, HdCtrl, bearing_to_radians
 from mitsonar.devices.micron.seanet.messages import HeadData
 from mitsonar.devices.micron.seanet.settings import HeadSettings, ad_db, gain_db
@@ -258,22 +258,22 @@ class ScanAssembler:
                 break
             poses[k] = first
         poses = poses @ beam_rotation(bearings)
-        meta = {
-            "source": "seanet", "sweep": sweep, "wire_bearings": wire, "missing": missing,
-            "ad_interval": int(ref.ad_interval), "step_size": int(ref.step_size),
-            "hd_ctrl": int(ref.hd_ctrl), "device_type": int(ref.device_type),
-            "gain_byte": int(ref.gain), "ad_low_byte": int(ref.ad_low),
-            "ad_span_byte": int(ref.ad_span), "nibble_order": ref.nibble_order,
-        }
+        meta = ScanMeta(
+            source="seanet", sweep=sweep, wire_bearings=wire, missing=missing,
+            ad_interval=int(ref.ad_interval), step_size=int(ref.step_size),
+            hd_ctrl=int(ref.hd_ctrl), device_type=int(ref.device_type),
+            gain_byte=int(ref.gain), ad_low_byte=int(ref.ad_low),
+            ad_span_byte=int(ref.ad_span), nibble_order=ref.nibble_order,
+        )
         if sweep == "sector":
-            meta["left_lim"], meta["right_lim"] = int(ref.left_lim), int(ref.right_lim)
+            meta.left_lim, meta.right_lim = int(ref.left_lim), int(ref.right_lim)
         if times:
-            meta["start_time"], meta["end_time"] = float(min(times)), float(max(times))
+            meta.start_time, meta.end_time = float(min(times)), float(max(times))
         return Scan(intensity=np.zeros((n, nb), np.float32), data=data,
                     ranges=(np.arange(nb) + 0.5) * width, bearings=bearings, poses=poses,
                     range_min=0.0, range_max=float(range_max), beamwidth_h=3.0, beamwidth_v=35.0,
                     kind=kinds.MECHANICAL.name, sound_speed=c, times=reception_times(row_times),
-                    electronics=_wire_electronics(ref), meta=meta)
+                    electronics=ElectronicsSettings.from_dict(_wire_electronics(ref)), meta=meta)
 
     def finish(self) -> Scan | None:
         """The scan in progress, zero-filled, or None if there is none (end of a replay)."""

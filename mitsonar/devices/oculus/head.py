@@ -41,7 +41,7 @@ def ping_to_scan(ping: PingResult, pose=None, t: float = 0.0, meta: dict | None 
     at time ``t`` (s, ``meta['start_time']``)."""
     from mitsonar.geometry import kinds
     from mitsonar.geometry.frames import bearing_rotation
-    from mitsonar.scan import Scan
+    from mitsonar.scan import ElectronicsSettings, Scan, ScanMeta
 
     pose = np.eye(4) if pose is None else np.asarray(pose, np.float64)
     image = np.asarray(ping.image)
@@ -65,7 +65,8 @@ def ping_to_scan(ping: PingResult, pose=None, t: float = 0.0, meta: dict | None 
                 bearings=bearings, poses=pose @ bearing_rotation(bearings), range_min=0.0, range_max=n_r * res,
                 beamwidth_h=mode.beamwidth_h if mode else 1.0, beamwidth_v=mode.beamwidth_v if mode else 20.0,
                 kind=kinds.MULTIBEAM.name, sound_speed=c, times=np.zeros(n_b),
-                electronics={"bit_depth": 8 * nbytes}, meta={k: v for k, v in info.items() if v is not None})
+                electronics=ElectronicsSettings(bit_depth=8 * nbytes),
+                meta=ScanMeta.from_dict({k: v for k, v in info.items() if v is not None}))
 
 
 class OculusAssembler:

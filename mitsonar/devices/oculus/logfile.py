@@ -97,7 +97,7 @@ def scan_to_ping(scan, *, ping_id: int = 0, version: int = 2, gains: bool = True
     fire = FireMessage(master_mode=mode, ping_rate=0, gamma=255, flags=flags, range=float(scan.range_max),
                        gain=100.0, speed_of_sound=float(scan.sound_speed), salinity=35.0, version=version,
                        ext_flags=EXT_32BIT if data.dtype == np.uint32 else 0)
-    freq = scan.meta.get("frequency") or 0.0
+    freq = scan.meta.frequency or 0.0
     return PingResult(fire, image, bearings.astype(np.int16), float(w),
                       gains=np.ones(image.shape[0], np.float32) if gains else None, ping_id=ping_id,
                       frequency=float(freq), speed_of_sound_used=float(scan.sound_speed),

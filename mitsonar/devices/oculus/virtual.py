@@ -361,12 +361,12 @@ class VirtualOculus:
         key = ("received", id(scan), float(gain_percent), bits)
         if key in self._cache and self._cache[key][0] is scan:
             return self._cache[key][1]
-        e = Electronics.from_dict(scan.electronics)
+        e = Electronics.from_dict(scan.electronics.to_dict())
         lo, hi = HEAD_LIMITS["gain"]
         db = 20.0 * math.log10(gain_percent / 100.0) if gain_percent > 0 else -math.inf
         if np.any(scan.intensity):
             gain = e.gain if gain_percent == 100.0 else float(np.clip(e.gain + db, lo, hi))
-            out = apply_to_scan(scan, {**scan.electronics, "gain": gain, "bit_depth": bits}).data
+            out = apply_to_scan(scan, scan.electronics.replace(gain=gain, bit_depth=bits)).data
         else:
             shift = 0.0 if gain_percent == 100.0 else max(db, lo - e.gain) * top / e.ad_span
             codes = scan.data.astype(np.float64) * (top / np.iinfo(scan.data.dtype).max)

@@ -31,7 +31,7 @@ import numpy as np
 from mitsonar._checks import in_range, is_whole, require
 from mitsonar.geometry import kinds
 from mitsonar.geometry.frames import bearing_rotation, check_rigid
-from mitsonar.scan import Scan, reception_times
+from mitsonar.scan import ElectronicsSettings, Scan, ScanMeta, reception_times
 
 __all__ = ["Ping360Settings", "Ping360Assembler", "GRADIANS", "TICK", "LIMITS", "GAIN_PRESETS",
            "BEAMWIDTH_H", "BEAMWIDTH_V", "angle_to_radians", "ping_problem", "check_pose"]
@@ -269,15 +269,15 @@ class Ping360Assembler:
                     times.append(t)
                     row_times[k] = t
             poses[k] = last_T
-        meta = {"source": "ping360", "sweep": "continuous" if s.stop_angle is None else "sector",
-                "angles": list(self.angles), "missing": [k for k in range(n) if k not in self._slots],
-                "gain_setting": int(ref.gain_setting), "transmit_duration": int(ref.transmit_duration),
-                "sample_period": int(ref.sample_period), "transmit_frequency": int(ref.transmit_frequency)}
+        meta = ScanMeta(source="ping360", sweep="continuous" if s.stop_angle is None else "sector",
+                        angles=list(self.angles), missing=[k for k in range(n) if k not in self._slots],
+                        gain_setting=int(ref.gain_setting), transmit_duration=int(ref.transmit_duration),
+                        sample_period=int(ref.sample_period), transmit_frequency=int(ref.transmit_frequency))
         if times:
-            meta["start_time"], meta["end_time"] = float(min(times)), float(max(times))
+            meta.start_time, meta.end_time = float(min(times)), float(max(times))
         self.reset()
         return Scan(intensity=np.zeros((n, nb), np.float32), data=data, ranges=(np.arange(nb) + 0.5) * w,
                     bearings=bearings, poses=poses @ bearing_rotation(bearings), range_min=0.0,
                     range_max=float(range_max), beamwidth_h=BEAMWIDTH_H, beamwidth_v=BEAMWIDTH_V,
                     kind=kinds.MECHANICAL.name, sound_speed=c, times=reception_times(row_times),
-                    electronics={"bit_depth": 8}, meta=meta)
+                    electronics=ElectronicsSettings(bit_depth=8), meta=meta)

@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Mapping
 
 import numpy as np
 
@@ -83,7 +82,7 @@ def _require_mcap():
 
 def scan_base(scan) -> float:
     """The scan's own start time in seconds (its ``meta.start_time``, else 0)."""
-    v = ScanMeta.from_dict(scan.meta).start_time if isinstance(getattr(scan, "meta", None), Mapping) else None
+    v = ScanMeta.from_dict(getattr(scan, "meta", None) or {}).start_time
     return 0.0 if v is None else float(v)
 
 
@@ -273,13 +272,13 @@ class McapBag:
 
 def _geo_of(scan, name):
     """The `GeoFrame` a scan's metadata holds (``origin``, ``crs``), or None."""
-    meta = getattr(scan, "meta", None)
-    if not isinstance(meta, Mapping) or meta.get("origin") is None:
+    meta = ScanMeta.from_dict(getattr(scan, "meta", None) or {})
+    if meta.origin is None:
         return None
     from mitsonar.geometry.geodesy import GeoError, GeoFrame
 
     try:
-        return GeoFrame.from_meta(dict(meta), f"{name}: meta")
+        return GeoFrame.from_meta(meta, f"{name}: meta")
     except GeoError as exc:
         raise ExportError(str(exc)) from None
 

@@ -16,12 +16,13 @@ is then the head itself (REP-103: x forward, y port, z up), which the waterfall 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 
 import numpy as np
 
 from mitsonar.geometry.frames import bearing_rotation, sidescan_rotation
 from mitsonar.geometry.trajectory import matrix_to_quat
+from mitsonar.scan.electronics import ElectronicsSettings
+from mitsonar.scan.meta import ScanMeta
 
 WORLD_FRAME = "map"
 SONAR_FRAME = "sonar"
@@ -93,8 +94,8 @@ def depression(scan) -> float:
     """A side-scan scan's depression in radians: ``meta.depression`` (deg) when it holds one, else
     half the angle by which its first ping's two boresights miss being opposite (both channels
     turned down by ``d`` meet at 180 - 2d deg), else 0."""
-    v = scan.meta.get("depression") if isinstance(scan.meta, Mapping) else None
-    if isinstance(v, (int, float)) and math.isfinite(v):
+    v = _meta(scan).depression
+    if v is not None:
         return math.radians(float(v))
     channel = np.asarray(scan.channel)
     times = np.asarray(scan.times, np.float64)
@@ -132,18 +133,24 @@ def channel_mounts(scan) -> dict:
 
 
 def frequency(scan) -> float:
-    for src in (scan.meta, scan.electronics):
-        v = src.get("frequency") if isinstance(src, Mapping) else None
-        if isinstance(v, (int, float)) and math.isfinite(v):
-            return float(v)
+    v = _meta(scan).frequency
+    if v is None:     # a settings key of the dict era
+        v = ElectronicsSettings.from_dict(getattr(scan, "electronics", None) or {}).extra.get("frequency")
+    if isinstance(v, (int, float)) and math.isfinite(v):
+        return float(v)
     return 0.0          # PingInfo: "Set to 0 if unavailable"
 
 
 def tx_beamwidth_v(scan) -> float:
     """The transmit beam's vertical width (deg): ``meta['tx_beamwidth_v']`` when the head has its
     own transmit pattern, else the scan's ``beamwidth_v`` (one pattern both ways)."""
-    v = scan.meta.get("tx_beamwidth_v") if isinstance(scan.meta, Mapping) else None
-    return float(v) if isinstance(v, (int, float)) and math.isfinite(v) and v > 0 else float(scan.beamwidth_v)
+    v = _meta(scan).tx_beamwidth_v
+    return float(scan.beamwidth_v) if v is None else float(v)
+
+
+def _meta(scan) -> ScanMeta:
+    """A scan's (or a scan-like object's) metadata, typed."""
+    return ScanMeta.from_dict(getattr(scan, "meta", None) or {})
 
 
 #: SonarImageData ``dtype`` of a scan's data: DTYPE_UINT8, DTYPE_UINT16, DTYPE_UINT32

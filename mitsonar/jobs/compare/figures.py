@@ -84,7 +84,7 @@ def plot_convergence(result, path):
 
 def scan_from_histogram(sensor, hist, meta=None):
     """A `Scan` of a rendered histogram for pictures: intensity only (device bytes zero)."""
-    from mitsonar.scan import Scan
+    from mitsonar.scan import Scan, ScanMeta
 
     hist = np.asarray(hist)
     return Scan(intensity=hist.astype(np.float32), data=np.zeros(hist.shape, np.uint8),
@@ -92,7 +92,7 @@ def scan_from_histogram(sensor, hist, meta=None):
                 poses=sensor.ping_poses(None), range_min=sensor.range_min, range_max=sensor.range_max,
                 beam_pattern=sensor.beam.pattern, beamwidth_h=sensor.beam.beamwidth_h,
                 beamwidth_v=sensor.beam.beamwidth_v, kind=sensor.kind, sound_speed=sensor.sound_speed,
-                absorption=sensor.absorption, meta=dict(meta or {}))
+                absorption=sensor.absorption, meta=ScanMeta.from_dict(meta or {}))
 
 
 def _sector_box(scan):

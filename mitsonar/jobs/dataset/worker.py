@@ -182,7 +182,7 @@ class SampleRenderer:
                           "first_return": first_return(scan.intensity, scan.ranges, self.cfg["first_return_db"]),
                           "ranges": scan.ranges, "bearings": scan.bearings},
                "meta": {"kind": scan.kind, "seed": s["seed"], "speckle_seed": s["speckle_seed"],
-                        "electronics": scan.electronics,
+                        "electronics": scan.electronics.to_dict(),
                         "pose": s["pose"], "trajectory": s["trajectory"], "materials": s["materials"],
                         "range_min": scan.range_min, "range_max": scan.range_max}}
         if want_mesh:

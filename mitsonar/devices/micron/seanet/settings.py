@@ -16,6 +16,7 @@ import numpy as np
 from mitsonar._checks import in_range, is_number
 from mitsonar.geometry import kinds
 from mitsonar.receiver.electronics import HEAD_AD_BYTES, HEAD_DB_SCALE, HEAD_LIMITS
+from mitsonar.scan.electronics import ElectronicsSettings
 from mitsonar.devices.micron.seanet.constants import FULL_TURN, STEP_SIZES, HdCtrl, radians_to_bearing
 from mitsonar.devices.micron.seanet.messages import V3B_BLOCK, V3B_NONE, HeadCommand, HeadData
 
@@ -309,12 +310,13 @@ class HeadSettings:
         # Simulator bearing increasing = wire bearing decreasing (for an upright head).
         scan_right = (step_rad < 0) != invert
         full = bear.size * step >= FULL_TURN
+        e = ElectronicsSettings.from_dict(getattr(scan, "electronics", None) or {})
         kw: dict[str, Any] = dict(range=n_bins * bw, n_bins=n_bins, sound_speed=float(scan.sound_speed),
                                   step_size=step, scan_right=scan_right, continuous=full,
-                                  bit_depth=int(scan.electronics.get("bit_depth", 8)) if scan.electronics else 8)
+                                  bit_depth=int(8 if e.bit_depth is None else e.bit_depth))
         for name in ("gain", "ad_low", "ad_span"):
-            if scan.electronics and scan.electronics.get(name) is not None:
-                kw[name] = float(scan.electronics[name])
+            if getattr(e, name) is not None:
+                kw[name] = float(getattr(e, name))
         if not full:
             first, last = radians_to_bearing(bear[0], invert), radians_to_bearing(bear[-1], invert)
             kw["left_limit"], kw["right_limit"] = (first, last) if scan_right else (last, first)
