@@ -1,4 +1,4 @@
-"""The ``volumetric`` sensor kind (`mitsonar.geometry.kinds.Volumetric`): rows are beams over an
+"""The ``volumetric`` sensor kind (`mitsonar.kinds.Volumetric`): rows are beams over an
 elevation x azimuth grid, each turned in both angles; a sonar_tof render lights the row of a
 target's (azimuth, elevation); ``Scan.volume`` reshapes a frame to (n_elevation, n_azimuth, n_bins)
 and the scan files keep the kind and the grid."""

@@ -96,7 +96,7 @@ def _live(args) -> int:
                 head.check_serve(args)
         if not frames and head.frames:
             if not sonar.sonar_kind.fan_frame:
-                from mitsonar.geometry import kinds
+                import mitsonar.kinds as kinds
                 raise ValueError(f"live {scene_path.name}: --head {head.name} is a multibeam head; a "
                                  f"{sonar.sonar_kind.name!r} sonar (kind must be {kinds.which('fan_frame')}) "
                                  f"has no {head.serves} to serve")

@@ -93,16 +93,16 @@ def scene_folder(path: str) -> None:
 
 
 def _xml_kind(sensor):
-    """The `mitsonar.geometry.kinds.SonarKind` a ``sonar`` sensor element names (the default kind
+    """The `mitsonar.kinds.SonarKind` a ``sonar`` sensor element names (the default kind
     without a ``kind``; an unknown name: the default's, and the scene's load says what is wrong)."""
-    from mitsonar.geometry import kinds
+    import mitsonar.kinds as kinds
 
     el = next((c for c in sensor if c.get("name") == "kind"), None)
     return kinds.lookup(kinds.DEFAULT if el is None else el.get("value")) or kinds.get(kinds.DEFAULT)
 
 
 def scene_kinds(path: str) -> list:
-    """The `mitsonar.geometry.kinds.SonarKind` of each ``sonar`` sensor of the scene file, in order
+    """The `mitsonar.kinds.SonarKind` of each ``sonar`` sensor of the scene file, in order
     (SceneError naming the file if it cannot be read)."""
     from mitsonar.sim.scene import SceneError
 

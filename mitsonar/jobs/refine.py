@@ -66,7 +66,7 @@ def sidescan_xml(ply, *, n_bins=200, range_max=10.0, depression=30.0, beamwidth_
                  bsdf='<string name="preset" value="seabed_rock"/>'):
     """A scene of a two-channel side-scan head (``id="head"``, one ping) over the mesh ``ply``
     (``id="seabed"``, face normals), single-bounce echoes."""
-    from mitsonar.geometry.kinds import SIDESCAN
+    from mitsonar.kinds import SIDESCAN
 
     return ('<scene version="3.0.0"><integrator type="sonar_tof"><integer name="max_depth" value="1"/></integrator>'
             f'<sensor type="sonar" id="head"><string name="kind" value="{SIDESCAN.name}"/><string name="side" value="both"/>'

@@ -116,7 +116,7 @@ def _head_settings(scans, what):
     """(the head's ``to_world`` of each scan, the settings `piles_xml` needs), checked: every scan
     a frame of the same steered head (evenly stepped bearings, one position a frame)."""
     from mitsonar.geometry.frames import bearing_rotation
-    from mitsonar.geometry.kinds import kind_of
+    from mitsonar.kinds import kind_of
 
     frames, head = [], None
     for k, s in enumerate(scans):

@@ -98,7 +98,7 @@ def room_xml(ply, *, range_max=12.0, n_bins=500, n_pings=200, bearing_step=1.8, 
              beamwidth_v=35.0, beam_pattern="gaussian", bsdf='<string name="preset" value="concrete_good"/>'):
     """A scene of a mechanical head (``id="head"``) inside the room mesh ``ply`` (``id="room"``,
     face normals), single-bounce echoes; the head's defaults are those of ``scenes_xml/box.xml``."""
-    from mitsonar.geometry.kinds import MECHANICAL
+    from mitsonar.kinds import MECHANICAL
 
     return ('<scene version="3.0.0"><integrator type="sonar_tof"><integer name="max_depth" value="1"/></integrator>'
             f'<sensor type="sonar" id="head"><string name="kind" value="{MECHANICAL.name}"/>'

@@ -166,7 +166,7 @@ class StripMap:
         beam the element's own ``sinc`` of aperture ``D`` along track, or with ``flat`` a
         ``uniform`` beam over twice ``lambda / D`` (flat across the processed beam: for
         closed-form checks); ``beamwidth_v`` deg across track, its band, ping period and range."""
-        from mitsonar.geometry.kinds import SIDESCAN
+        from mitsonar.kinds import SIDESCAN
 
         beam = {"beam_pattern": "uniform", "beamwidth_h": 2.0 * math.degrees(self.beamwidth)} if flat else \
             {"beam_pattern": "sinc", "beamwidth_h": math.degrees(self.beamwidth), "aperture_h": self.element_length}

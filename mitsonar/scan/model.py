@@ -18,7 +18,7 @@ from mitsonar.scan.meta import ScanFieldError, ScanMeta
 
 # The frames' helpers and the kinds live below the Scan (the sensor plugin uses them too); they
 # stay importable from here.
-from mitsonar.geometry import kinds
+import mitsonar.kinds as kinds
 from mitsonar.geometry.frames import SIDES, _not_rigid, bearing_rotation, check_rigid, check_rigid_stack  # noqa: F401
 
 _RIGID = "only rigid transforms: rotation + translation, no scale, shear or mirror"

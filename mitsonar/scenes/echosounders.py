@@ -57,7 +57,7 @@ import numpy as np
 
 from mitsonar._checks import is_number, not_allowed
 from mitsonar._limits import LIMITS, check
-from mitsonar.geometry.kinds import MECHANICAL, MULTIBEAM, SonarKind
+from mitsonar.kinds import MECHANICAL, MULTIBEAM, SonarKind
 from mitsonar.sonar_equation.levels import CALIBRATION_DB
 
 WHERE = "echosounder"

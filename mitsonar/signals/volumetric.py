@@ -6,7 +6,7 @@ the columns) and y (elevation, across the rows), facing +z. One transmission giv
 range x azimuth x elevation, not a fan image that collapses elevation:
 
 * `render_echoes` renders the element data: the head is a ``volumetric`` sensor (its rows the
-  beam grid, `mitsonar.geometry.kinds.Volumetric`) whose transmit fan covers the field of view
+  beam grid, `mitsonar.kinds.Volumetric`) whose transmit fan covers the field of view
   (`Volumetric.sensor_xml`) and whose elements are the planar array (`Volumetric.elements`); one
   row, the frame's transmission; `mitsonar.render_scan` of that sensor renders each beam's echo
   energy straight from its receive beam (`mitsonar.scan.Scan.volume` gives the volume);
@@ -131,12 +131,12 @@ class Volumetric:
         return lfm(self.frequency - 0.5 * self.bandwidth, self.frequency + 0.5 * self.bandwidth, T)
 
     def sensor_xml(self, to_world=None, source_level=210.0) -> str:
-        """A ``<sensor type="sonar">`` of kind ``volumetric`` (`mitsonar.geometry.kinds.Volumetric`)
+        """A ``<sensor type="sonar">`` of kind ``volumetric`` (`mitsonar.kinds.Volumetric`)
         for `mitsonar.render_echoes`, `render_volume` and `mitsonar.render_scan`: its rows the
         ``n_elevation x n_azimuth`` beams at `elevations` x `azimuths`, each a gaussian receive beam
         of the array's broadside widths (`beamwidths`), a uniform transmit fan over the field of
         view (plus a tenth), the band, the range; ``to_world`` a 4x4 beam frame (default identity)."""
-        from mitsonar.geometry.kinds import VOLUMETRIC
+        from mitsonar.kinds import VOLUMETRIC
 
         az, el = np.degrees(self.azimuths()), np.degrees(self.elevations())
         w_az, w_el = (min(179.0, math.degrees(w)) for w in self.beamwidths())
@@ -428,7 +428,7 @@ def render_volume(scene, head, *, spp=4096, seed=0, pose=None, sensor=0, max_dep
     summed over range agrees with the coherent path's speckle-averaged one, which spreads it over
     the bins by the pulse's autocorrelation. Cost: scatterers x beams (numpy, ``chunk`` scatterers
     at a time); no pulse, no elements."""
-    from mitsonar.geometry import kinds
+    import mitsonar.kinds as kinds
     from mitsonar.signals.echoes import _trace
     from mitsonar.sim.render import SEED_ALLOWED, SEED_MAX, SPP_ALLOWED, SPP_MAX, _check_pose, _whole
     from mitsonar.sim.scene import SceneError, sonar_of

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from mitsonar.geometry import kinds
+import mitsonar.kinds as kinds
 from mitsonar.geometry.frames import bearing_rotation, check_rigid
 from mitsonar.scan import Scan, reception_times
 from mitsonar.devices.micron.seanet.constants import FULL_TURN, HdCtrl, bearing_to_radians

@@ -39,7 +39,7 @@ def mode_of(frequency: float, master_mode: int | None = None):
 def ping_to_scan(ping: PingResult, pose=None, t: float = 0.0, meta: dict | None = None):
     """The `Scan` of one simple ping result, with the head at ``pose`` (4x4, default identity)
     at time ``t`` (s, ``meta['start_time']``)."""
-    from mitsonar.geometry import kinds
+    import mitsonar.kinds as kinds
     from mitsonar.geometry.frames import bearing_rotation
     from mitsonar.scan import Scan
 

@@ -29,7 +29,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from mitsonar._checks import in_range, is_whole, require
-from mitsonar.geometry import kinds
+import mitsonar.kinds as kinds
 from mitsonar.geometry.frames import bearing_rotation, check_rigid
 from mitsonar.scan import Scan, reception_times
 

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from mitsonar._checks import in_range, is_number
-from mitsonar.geometry import kinds
+import mitsonar.kinds as kinds
 from mitsonar.receiver.electronics import HEAD_AD_BYTES, HEAD_DB_SCALE, HEAD_LIMITS
 from mitsonar.devices.micron.seanet.constants import FULL_TURN, STEP_SIZES, HdCtrl, radians_to_bearing
 from mitsonar.devices.micron.seanet.messages import V3B_BLOCK, V3B_NONE, HeadCommand, HeadData
