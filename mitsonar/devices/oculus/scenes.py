@@ -74,7 +74,7 @@ class SceneFrames:
     def water(self) -> dict:
         """The rendered sensor's water (`mitsonar.devices.oculus.virtual.scene_water`: its
         ``temperature`` and ``surface_z``), from the scene as it loads."""
-        from mitsonar.devices.live import live_scene
+        from mitsonar.live.heads import live_scene
         from mitsonar.devices.oculus.virtual import scene_water
 
         scene = live_scene(self.path, self._choose)
@@ -107,7 +107,7 @@ class SceneFrames:
 
     def sensor_at(self, mode, n_beams: int, range_m: float):
         """The scene's sonar sensor alone at that geometry (a new sensor object, cached per
-        setting), for rendering the scene as loaded (`mitsonar.devices.live.LiveOculus`: the shapes
+        setting), for rendering the scene as loaded (`mitsonar.live.heads.LiveOculus`: the shapes
         it moves stay moved)."""
         key = ("sensor", mode, int(n_beams), round(float(range_m), 9))
         with self._lock:
@@ -120,7 +120,7 @@ class SceneFrames:
     def _load_sensor(self, mode, n_beams: int, range_m: float):
         import mitsuba as mi
 
-        from mitsonar.devices.live import scene_folder
+        from mitsonar.live.heads import scene_folder
         from mitsonar.sim.variant import ensure_variant
 
         try:
@@ -137,7 +137,7 @@ class SceneFrames:
         return mi.load_string(text, **defaults)
 
     def _render(self, mode, n_beams: int, range_m: float):
-        from mitsonar.devices.live import live_scene
+        from mitsonar.live.heads import live_scene
         from mitsonar.sim.render import render_scan
 
         values = self._values(mode, n_beams, range_m)
