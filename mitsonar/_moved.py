@@ -19,6 +19,9 @@ __all__ = ["MOVED", "warn"]
 #: old module -> (new module, the release that removes the old path)
 MOVED = {
     "mitsonar.devices.outputs": ("mitsonar.live.outputs", "0.4.0"),
+    "mitsonar.jobs.refine": ("mitsonar.inverse.height_field", "0.4.0"),
+    "mitsonar.jobs.refine_room": ("mitsonar.inverse.room", "0.4.0"),
+    "mitsonar.jobs.refine_piles": ("mitsonar.inverse.piles", "0.4.0"),
 }
 
 
