@@ -22,6 +22,7 @@ MOVED = {
     "mitsonar.jobs.refine": ("mitsonar.inverse.height_field", "0.4.0"),
     "mitsonar.jobs.refine_room": ("mitsonar.inverse.room", "0.4.0"),
     "mitsonar.jobs.refine_piles": ("mitsonar.inverse.piles", "0.4.0"),
+    "mitsonar.devices.oculus.presets": ("mitsonar.presets.oculus", "0.4.0"),
 }
 
 

@@ -167,7 +167,9 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
                # the sound-speed profile: the integrators read their XML sound_speed_profile with it
                "mitsonar.acoustics.profile",
                # the receive elements' layout: the sensor reads its XML elements CSV with it (numpy)
-               "mitsonar.geometry.elements"}
+               "mitsonar.geometry.elements",
+               # the side-scan heads' published figures (the sensor's ``preset``; imports nothing)
+               "mitsonar.presets.sidescan"}
     for name, out in edges.items():
         if name.startswith("mitsonar.plugins"):
             above = {t for t in out if t.startswith("mitsonar") and not t.startswith("mitsonar.plugins")}
@@ -192,6 +194,18 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     # the chain asks for the variant mitsonar would choose (`mitsonar.sim.backend`: nothing of mitsonar)
     assert {t for t in edges["mitsonar.receiver.devicechain"] if t.startswith("mitsonar")} <= {"mitsonar.sim.backend"}
     assert not {t for t in edges["mitsonar.sim.backend"] if t.startswith("mitsonar")}
+
+
+def test_the_presets_are_a_leaf():
+    """Every sonar model's published figures (`mitsonar.presets`) import nothing of mitsonar but the
+    value checks and the sonar kinds (NumPy-only leaves): the drivers, the scene builders and the
+    plugins take figures from there without pulling in the renderer or one another."""
+    _, edges = import_graph()
+    presets = [m for m in edges if m == "mitsonar.presets" or m.startswith("mitsonar.presets.")]
+    assert {"mitsonar.presets.echosounders", "mitsonar.presets.sidescan", "mitsonar.presets.oculus",
+            "mitsonar.presets.micron", "mitsonar.presets.ping360", "mitsonar.presets.volumetric"} <= set(presets)
+    for m in presets:
+        assert {t for t in edges[m] if t.startswith("mitsonar")} <= {"mitsonar._checks", "mitsonar.kinds"}, m
 
 
 def test_mitsonar_itself_holds_at_most_14_modules():

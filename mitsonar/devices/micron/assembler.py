@@ -15,6 +15,7 @@ import numpy as np
 
 import mitsonar.kinds as kinds
 from mitsonar.geometry.frames import bearing_rotation, check_rigid
+import mitsonar.presets.micron as micron
 from mitsonar.scan import Scan, reception_times
 from mitsonar.devices.micron.seanet.constants import FULL_TURN, HdCtrl, bearing_to_radians
 from mitsonar.devices.micron.seanet.messages import HeadData
@@ -271,7 +272,8 @@ class ScanAssembler:
             meta["start_time"], meta["end_time"] = float(min(times)), float(max(times))
         return Scan(intensity=np.zeros((n, nb), np.float32), data=data,
                     ranges=(np.arange(nb) + 0.5) * width, bearings=bearings, poses=poses,
-                    range_min=0.0, range_max=float(range_max), beamwidth_h=3.0, beamwidth_v=35.0,
+                    range_min=0.0, range_max=float(range_max), beamwidth_h=micron.BEAMWIDTH_H,
+                    beamwidth_v=micron.BEAMWIDTH_V,
                     kind=kinds.MECHANICAL.name, sound_speed=c, times=reception_times(row_times),
                     electronics=_wire_electronics(ref), meta=meta)
 

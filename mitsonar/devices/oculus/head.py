@@ -9,13 +9,13 @@ bins are its range lines: bin i is centred at ``(i + 1/2) x rangeResolution`` (w
 bits: `mitsonar.devices.oculus.virtual` widens a level by 257 and 16843009, so a level
 round-trips). Row k's pose is the head's pose turned by bearing k about the fan's axis
 (`mitsonar.geometry.frames.bearing_rotation`); the beam widths are the model's in the
-result's frequency mode (`mitsonar.devices.oculus.presets`), else 1 x 20 degrees.
+result's frequency mode (`mitsonar.presets.oculus`), else 1 x 20 degrees.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from mitsonar.devices.oculus import presets
+import mitsonar.presets.oculus as presets
 from mitsonar.devices.oculus.protocol import PingResult
 
 __all__ = ["ping_to_scan", "OculusAssembler", "mode_of"]

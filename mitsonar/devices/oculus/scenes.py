@@ -3,9 +3,9 @@
 The virtual head (`mitsonar.devices.oculus.virtual.VirtualOculus`, ``frames=``) asks for the frame
 of each fire message's settings: ``frames(mode, n_beams, range)``. `SceneFrames` renders the
 scene file's multibeam ``sonar`` sensor with its XML properties set to the model's mode
-(`mitsonar.devices.oculus.presets.Mode`): ``n_beams`` receive beams evenly spaced across the
+(`mitsonar.presets.oculus.Mode`): ``n_beams`` receive beams evenly spaced across the
 mode's aperture at the head's own bearing table (the sensor's ``bearings``:
-`mitsonar.devices.oculus.presets.bearing_table`, even in sine, in place of the XML's ``n_pings``,
+`mitsonar.presets.oculus.bearing_table`, even in sine, in place of the XML's ``n_pings``,
 ``bearing_start`` and ``bearing_step``), the mode's beam widths (``beamwidth_h``,
 ``beamwidth_v``), a transmit fan as wide as the aperture (``tx_beamwidth_h``, ``tx_beamwidth_v``),
 its ``frequency``, and the range window ``0 .. range`` in bins of the given width: row k of the
@@ -82,7 +82,7 @@ class SceneFrames:
 
     def _values(self, mode, n_beams: int, range_m: float) -> dict:
         """The sensor's XML properties for a mode, a beam count and a range: {name: (tag, value)}."""
-        from mitsonar.devices.oculus.presets import bearing_table
+        from mitsonar.presets.oculus import bearing_table
 
         n_bins = max(1, min(4096, int(round(range_m / self.bin_width))))
         table = bearing_table(mode.aperture, n_beams) / 100.0

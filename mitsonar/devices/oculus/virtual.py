@@ -71,7 +71,7 @@ from collections import Counter
 
 import numpy as np
 
-from mitsonar.devices.oculus import presets
+import mitsonar.presets.oculus as presets
 from mitsonar.devices.oculus.protocol import (FLAG, PING_RATE_HZ, TCP_PORT, UDP_PORT, FireMessage, OculusError,
                                               PingResult, StatusMessage, StreamParser)
 from mitsonar.scan import Scan
