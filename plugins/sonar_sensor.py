@@ -12,6 +12,7 @@ import numpy as np
 
 from mitsonar._checks import not_allowed
 from mitsonar._limits import LIMITS, check
+from mitsonar.acoustics.water import SOUND_SPEED
 import mitsonar.kinds as kinds
 from mitsonar.geometry.frames import SIDES, check_rigid, check_rigid_stack
 
@@ -207,7 +208,7 @@ class SonarSensor(mi.Sensor):
             self.bearing_start = float(t[0])
             self.bearing_step = float((t[-1] - t[0]) / (len(t) - 1)) if len(t) > 1 else 0.0
         # A number, or 'auto': the water's equations at the head's depth (plugins/water.py).
-        self.sound_speed = number_or_auto(props, "sound_speed", 1500.0)
+        self.sound_speed = number_or_auto(props, "sound_speed", SOUND_SPEED)
         self.absorption = number_or_auto(props, "absorption", 0.0)
         self.water = read_water(props, self.absorption, self.sound_speed)
         self.water_auto = [n for n in ("absorption", "sound_speed") if getattr(self, n) == "auto"]

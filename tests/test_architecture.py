@@ -169,7 +169,9 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
                # the receive elements' layout: the sensor reads its XML elements CSV with it (numpy)
                "mitsonar.geometry.elements",
                # the side-scan heads' published figures (the sensor's ``preset``; imports nothing)
-               "mitsonar.presets.sidescan"}
+               "mitsonar.presets.sidescan",
+               # the water as one value and the nominal sound speed (the sensor's defaults)
+               "mitsonar.acoustics.water"}
     for name, out in edges.items():
         if name.startswith("mitsonar.plugins"):
             above = {t for t in out if t.startswith("mitsonar") and not t.startswith("mitsonar.plugins")}
@@ -181,6 +183,7 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
               "mitsonar.sonar_equation.levels",
               "mitsonar.acoustics._checks", "mitsonar.acoustics.seawater", "mitsonar.acoustics.interface",
               "mitsonar.acoustics.seabed", "mitsonar.acoustics.materials", "mitsonar.geometry.elements",
+              "mitsonar.acoustics.water",
               # eigenrays and TL (SoundSpeedProfile.eigenrays calls it; it imports only the checks
               # and the interface)
               "mitsonar.acoustics.propagation"}

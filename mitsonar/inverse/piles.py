@@ -38,6 +38,7 @@ import time
 import numpy as np
 
 from mitsonar.inverse.driver import staged_refine
+from mitsonar.acoustics.water import SOUND_SPEED
 
 __all__ = ["attribute_groups", "model_hits", "piles_feedback", "piles_from_points", "piles_mesh", "piles_xml",
            "refine_piles", "seabed_search"]
@@ -133,7 +134,7 @@ def _head_settings(scans, what):
         h = dict(kind=kind.name, range_min=float(s.range_min), range_max=float(s.range_max), n_bins=int(s.n_bins),
                  bearing_start=math.degrees(b[0]), bearing_step=math.degrees(b[1] - b[0]), n_rows=len(b),
                  beam_pattern=str(s.beam_pattern), beamwidth_h=float(s.beamwidth_h),
-                 beamwidth_v=float(s.beamwidth_v), sound_speed=float(getattr(s, "sound_speed", 1500.0)))
+                 beamwidth_v=float(s.beamwidth_v), sound_speed=float(getattr(s, "sound_speed", SOUND_SPEED)))
         if head is not None and any(abs(h[q] - head[q]) > 1e-6 if isinstance(h[q], float) else h[q] != head[q]
                                     for q in h):
             raise ValueError(f"{what}: scans[{k}] has other head settings than scans[0]")

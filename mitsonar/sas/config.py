@@ -37,6 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mitsonar.acoustics.water import SOUND_SPEED
+
 #: -3 dB width factors of the processing windows, in units of the inverse of their support
 #: (the uniform window's sinc: 0.886; the Hann window's: 1.44; Harris, "On the use of windows for
 #: harmonic analysis with the discrete Fourier transform", Proc. IEEE 66(1), 1978, table 1).
@@ -70,7 +72,7 @@ class StripMap:
     speed: float
     ping_period: float
     range_max: float
-    sound_speed: float = 1500.0
+    sound_speed: float = SOUND_SPEED
 
     def __post_init__(self):
         n = self.n_elements

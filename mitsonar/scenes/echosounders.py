@@ -38,6 +38,7 @@ from mitsonar._checks import is_number, not_allowed
 from mitsonar._limits import LIMITS, check
 from mitsonar.presets.echosounders import PRESETS, WHERE, EchoSounder, preset  # noqa: F401 (this room's names)
 from mitsonar.sonar_equation.levels import CALIBRATION_DB
+from mitsonar.acoustics.water import SOUND_SPEED
 
 #: The widest fan a bathymetric head may have: beyond 180 deg its outer beams look up.
 MAX_SWATH = 180.0
@@ -73,7 +74,7 @@ class HeadSetup:
 
 
 def configure(name, *, swath=None, n_beams=None, range_min=None, range_max=None, bin_width=None,
-              n_bins=None, mount=None, sound_speed=1500.0) -> HeadSetup:
+              n_bins=None, mount=None, sound_speed=SOUND_SPEED) -> HeadSetup:
     """The ``sonar`` sensor parameters of preset ``name`` with the given overrides.
 
     ============ ===================================================================================

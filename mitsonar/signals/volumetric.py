@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 import mitsonar.presets.volumetric as volumetric_presets
+from mitsonar.acoustics.water import SOUND_SPEED
 
 #: Voxels of one kernel launch: bounds the memory whatever the volume.
 CHUNK = 1 << 18
@@ -60,7 +61,7 @@ class Volumetric:
     range_max: float
     n_bins: int = 200
     pitch: float | None = None
-    sound_speed: float = 1500.0
+    sound_speed: float = SOUND_SPEED
     range_min: float = 0.0
 
     def __post_init__(self):

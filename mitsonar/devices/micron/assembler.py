@@ -20,6 +20,7 @@ from mitsonar.scan import Scan, reception_times
 from mitsonar.devices.micron.seanet.constants import FULL_TURN, HdCtrl, bearing_to_radians
 from mitsonar.devices.micron.seanet.messages import HeadData
 from mitsonar.devices.micron.seanet.settings import HeadSettings, ad_db, gain_db
+from mitsonar.acoustics.water import SOUND_SPEED
 
 __all__ = ["ScanAssembler", "beam_rotation", "check_pose"]
 
@@ -60,7 +61,7 @@ class ScanAssembler:
     ``scan.meta["missing"]`` (row indices) and left zero.
     """
 
-    def __init__(self, sound_speed: float = 1500.0, *, revisit: bool = True, max_turns: int = 3,
+    def __init__(self, sound_speed: float = SOUND_SPEED, *, revisit: bool = True, max_turns: int = 3,
                  settings: HeadSettings | None = None):
         if not (isinstance(max_turns, int) and max_turns >= 1):
             raise ValueError(f"max_turns must be an integer >= 1, got {max_turns!r}")

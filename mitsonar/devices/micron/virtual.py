@@ -43,6 +43,7 @@ from mitsonar.devices.micron.seanet import (DEFAULT_NIBBLE_ORDER, FULL_TURN, Ali
                      FpgaVersionData, GainCommand, HeadCommand, HeadData, HeadInf, HeadSettings,
                      HeadStatus, HdCtrl, ReBoot, ScanReverse, SendBBUser, SendData, SendVersion,
                      StopAlives, StreamParser, VersionData, bearing_to_radians, encode, require_mechanical)
+from mitsonar.acoustics.water import SOUND_SPEED
 
 __all__ = ["Faults", "VirtualMicron", "serve", "check_port"]
 
@@ -132,7 +133,7 @@ class VirtualMicron(ServedHead):
         self.realtime = bool(realtime)
         self.dst = bool(dst)
         if sound_speed is None:
-            sound_speed = float(scan_source.sound_speed) if isinstance(scan_source, Scan) else 1500.0
+            sound_speed = float(scan_source.sound_speed) if isinstance(scan_source, Scan) else SOUND_SPEED
         self.sound_speed = float(sound_speed)
         self.boot_time = float(boot_time if boot_time is not None else (2.0 if realtime else 0.02))
         self.alive_interval = float(alive_interval if alive_interval is not None else (1.0 if realtime else 0.05))

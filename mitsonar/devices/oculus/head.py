@@ -17,6 +17,7 @@ import numpy as np
 
 import mitsonar.presets.oculus as presets
 from mitsonar.devices.oculus.protocol import PingResult
+from mitsonar.acoustics.water import SOUND_SPEED
 
 __all__ = ["ping_to_scan", "OculusAssembler", "mode_of"]
 
@@ -55,7 +56,7 @@ def ping_to_scan(ping: PingResult, pose=None, t: float = 0.0, meta: dict | None 
     bearings = np.radians(np.asarray(ping.bearings, np.float64) / 100.0)
     mode = mode_of(ping.frequency, ping.fire.master_mode)
     c = float(ping.speed_of_sound_used) if np.isfinite(ping.speed_of_sound_used) and \
-        ping.speed_of_sound_used > 0 else 1500.0
+        ping.speed_of_sound_used > 0 else SOUND_SPEED
     info = {"source": "oculus", "sweep": "sector", "start_time": float(t),
             "frequency": float(ping.frequency) if ping.frequency > 0 and np.isfinite(ping.frequency) else None,
             "oculus_ping_id": int(ping.ping_id), "oculus_gain_percent": float(ping.fire.gain),

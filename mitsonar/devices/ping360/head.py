@@ -33,6 +33,7 @@ import mitsonar.kinds as kinds
 from mitsonar.geometry.frames import bearing_rotation, check_rigid
 from mitsonar.presets.ping360 import BEAMWIDTH_H, BEAMWIDTH_V  # the head's beam (published figures)
 from mitsonar.scan import Scan, reception_times
+from mitsonar.acoustics.water import SOUND_SPEED
 
 __all__ = ["Ping360Settings", "Ping360Assembler", "GRADIANS", "TICK", "LIMITS", "GAIN_PRESETS",
            "BEAMWIDTH_H", "BEAMWIDTH_V", "angle_to_radians", "ping_problem", "check_pose"]
@@ -90,7 +91,7 @@ class Ping360Settings:
 
     range: float = 12.0
     number_of_samples: int = 1200
-    sound_speed: float = 1500.0
+    sound_speed: float = SOUND_SPEED
     gain_setting: int = 1
     transmit_frequency: int = 750
     transmit_duration: int | None = None

@@ -18,6 +18,7 @@ import mitsonar.kinds as kinds
 from mitsonar.receiver.electronics import HEAD_AD_BYTES, HEAD_DB_SCALE, HEAD_LIMITS
 from mitsonar.devices.micron.seanet.constants import FULL_TURN, STEP_SIZES, HdCtrl, radians_to_bearing
 from mitsonar.devices.micron.seanet.messages import V3B_BLOCK, V3B_NONE, HeadCommand, HeadData
+from mitsonar.acoustics.water import SOUND_SPEED
 
 __all__ = ["HeadSettings", "ping_problem", "sound_speed_ok", "gain_db", "ad_db", "require_mechanical",
            "SOUND_SPEED_RANGE", "SOUND_SPEED_ALLOWED", "DB_FULL_SCALE", "GAIN_FULL_SCALE", "AD_FULL_SCALE"]
@@ -102,7 +103,7 @@ class HeadSettings:
 
     range: float = 12.0
     n_bins: int = 500
-    sound_speed: float = 1500.0
+    sound_speed: float = SOUND_SPEED
     gain: float = 27.8
     ad_low: float = 12.5
     ad_span: float = 24.0
@@ -266,7 +267,7 @@ class HeadSettings:
             max_ad_buf=self.max_ad_buf, lockout=self.lockout, v3b_block=block)
 
     @classmethod
-    def from_command(cls, cmd: HeadCommand, sound_speed: float = 1500.0) -> "HeadSettings":
+    def from_command(cls, cmd: HeadCommand, sound_speed: float = SOUND_SPEED) -> "HeadSettings":
         """Settings a head would infer from ``cmd`` (the virtual sonar's view of the host).
 
         The range comes from ADInterval and ``sound_speed`` (RangeScale is informational).
