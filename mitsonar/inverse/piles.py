@@ -33,12 +33,11 @@ thread (``deterministic``); the attribution's and the evidence's rays and the ma
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 
-from mitsonar.inverse.driver import staged_refine
 from mitsonar.acoustics.water import SOUND_SPEED
+from mitsonar.inverse.driver import staged_refine
 
 __all__ = ["attribute_groups", "model_hits", "piles_feedback", "piles_from_points", "piles_mesh", "piles_xml",
            "refine_piles", "seabed_search"]

@@ -37,7 +37,6 @@ Dr.Jit thread (``deterministic``), so a fit is the same for the same seed.
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 

@@ -72,10 +72,10 @@ from typing import Any
 import numpy as np
 
 from mitsonar._checks import is_number, not_a, not_allowed
+from mitsonar.acoustics.water import SOUND_SPEED
 import mitsonar.receiver.devicechain as devicechain
 from mitsonar.sonar_equation.levels import (DEFAULT_NOISE_LEVEL, DEFAULT_RECEIVER_SENSITIVITY, DEFAULT_SOURCE_LEVEL,
                                     SOURCE_LEVELS, echo_level, rename_settings, source_level_error)
-from mitsonar.acoustics.water import SOUND_SPEED
 
 TVG_LAWS = {"off": 0, "20log": 20, "30log": 30, "40log": 40}
 SPECKLE_MODELS = ("off", "rayleigh", "weibull")

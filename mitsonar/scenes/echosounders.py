@@ -36,9 +36,9 @@ import numpy as np
 
 from mitsonar._checks import is_number, not_allowed
 from mitsonar._limits import LIMITS, check
+from mitsonar.acoustics.water import SOUND_SPEED
 from mitsonar.presets.echosounders import PRESETS, WHERE, EchoSounder, preset  # noqa: F401 (this room's names)
 from mitsonar.sonar_equation.levels import CALIBRATION_DB
-from mitsonar.acoustics.water import SOUND_SPEED
 
 #: The widest fan a bathymetric head may have: beyond 180 deg its outer beams look up.
 MAX_SWATH = 180.0

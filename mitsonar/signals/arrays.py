@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mitsonar.geometry.elements import MIN_SEPARATION, check_elements, read_elements
 from mitsonar.acoustics.water import SOUND_SPEED
+from mitsonar.geometry.elements import MIN_SEPARATION, check_elements, read_elements
 
 
 def line_array(n=64, spacing=None, frequency=700e3, sound_speed=SOUND_SPEED) -> np.ndarray:

@@ -36,8 +36,8 @@ from typing import Any
 
 import numpy as np
 
-import mitsonar.presets.volumetric as volumetric_presets
 from mitsonar.acoustics.water import SOUND_SPEED
+import mitsonar.presets.volumetric as volumetric_presets
 
 #: Voxels of one kernel launch: bounds the memory whatever the volume.
 CHUNK = 1 << 18

@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from mitsonar.acoustics.water import SOUND_SPEED
 import mitsonar.kinds as kinds
 from mitsonar.geometry.frames import bearing_rotation, check_rigid
 import mitsonar.presets.micron as micron
@@ -20,7 +21,6 @@ from mitsonar.scan import Scan, reception_times
 from mitsonar.devices.micron.seanet.constants import FULL_TURN, HdCtrl, bearing_to_radians
 from mitsonar.devices.micron.seanet.messages import HeadData
 from mitsonar.devices.micron.seanet.settings import HeadSettings, ad_db, gain_db
-from mitsonar.acoustics.water import SOUND_SPEED
 
 __all__ = ["ScanAssembler", "beam_rotation", "check_pose"]
 

@@ -5,8 +5,8 @@ Imports its codec, driver and virtual head only when asked for them.
 """
 from __future__ import annotations
 
-from mitsonar.devices.head import Head
 from mitsonar.acoustics.water import SOUND_SPEED
+from mitsonar.devices.head import Head
 
 __all__ = ["MicronHead", "HEAD"]
 

@@ -37,13 +37,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from mitsonar._checks import in_range
+from mitsonar.acoustics.water import SOUND_SPEED
 from mitsonar.scan import Scan
 from mitsonar.devices.transports import ServedHead, check_port
 from mitsonar.devices.micron.seanet import (DEFAULT_NIBBLE_ORDER, FULL_TURN, Alive, BBUserData, FpgaCalibrationData,
                      FpgaVersionData, GainCommand, HeadCommand, HeadData, HeadInf, HeadSettings,
                      HeadStatus, HdCtrl, ReBoot, ScanReverse, SendBBUser, SendData, SendVersion,
                      StopAlives, StreamParser, VersionData, bearing_to_radians, encode, require_mechanical)
-from mitsonar.acoustics.water import SOUND_SPEED
 
 __all__ = ["Faults", "VirtualMicron", "serve", "check_port"]
 

@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from mitsonar.acoustics.water import SOUND_SPEED
 import mitsonar.presets.oculus as presets
 from mitsonar.devices.oculus.protocol import PingResult
-from mitsonar.acoustics.water import SOUND_SPEED
 
 __all__ = ["ping_to_scan", "OculusAssembler", "mode_of"]
 

@@ -29,11 +29,11 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from mitsonar._checks import in_range, is_whole, require
+from mitsonar.acoustics.water import SOUND_SPEED
 import mitsonar.kinds as kinds
 from mitsonar.geometry.frames import bearing_rotation, check_rigid
 from mitsonar.presets.ping360 import BEAMWIDTH_H, BEAMWIDTH_V  # the head's beam (published figures)
 from mitsonar.scan import Scan, reception_times
-from mitsonar.acoustics.water import SOUND_SPEED
 
 __all__ = ["Ping360Settings", "Ping360Assembler", "GRADIANS", "TICK", "LIMITS", "GAIN_PRESETS",
            "BEAMWIDTH_H", "BEAMWIDTH_V", "angle_to_radians", "ping_problem", "check_pose"]

@@ -17,9 +17,9 @@ from typing import ClassVar
 
 import numpy as np
 
+from mitsonar.acoustics.water import SOUND_SPEED
 from mitsonar.devices.micron.seanet.constants import (DEFAULT_NIBBLE_ORDER, FULL_TURN, PC_NODE, SONAR_NODE, HdCtrl, HeadInf,
                         HeadStatus, MessageId, SeaNetError, pack_bins, unpack_bins)
-from mitsonar.acoustics.water import SOUND_SPEED
 
 __all__ = [
     "Message", "ReBoot", "SendVersion", "SendBBUser", "SendData", "StopAlives", "ResetToDefaults",

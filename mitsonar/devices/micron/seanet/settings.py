@@ -14,11 +14,11 @@ from typing import Any
 import numpy as np
 
 from mitsonar._checks import in_range, is_number
+from mitsonar.acoustics.water import SOUND_SPEED
 import mitsonar.kinds as kinds
 from mitsonar.receiver.electronics import HEAD_AD_BYTES, HEAD_DB_SCALE, HEAD_LIMITS
 from mitsonar.devices.micron.seanet.constants import FULL_TURN, STEP_SIZES, HdCtrl, radians_to_bearing
 from mitsonar.devices.micron.seanet.messages import V3B_BLOCK, V3B_NONE, HeadCommand, HeadData
-from mitsonar.acoustics.water import SOUND_SPEED
 
 __all__ = ["HeadSettings", "ping_problem", "sound_speed_ok", "gain_db", "ad_db", "require_mechanical",
            "SOUND_SPEED_RANGE", "SOUND_SPEED_ALLOWED", "DB_FULL_SCALE", "GAIN_FULL_SCALE", "AD_FULL_SCALE"]
