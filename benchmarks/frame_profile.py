@@ -142,7 +142,7 @@ def main(argv=None):
     still = itertools.repeat(None)
     out["quay_frame"] = profile("quay_frame", _scene("quay_wall.xml"), (1, args.spp), frames, still)
 
-    from mitsonar.devices.live import live_scene
+    from mitsonar.live.heads import live_scene
     from mitsonar.geometry.frames import bearing_rotation
 
     harbour = live_scene(os.path.join(SCENES, "harbour.xml"))

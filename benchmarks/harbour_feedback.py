@@ -3,7 +3,7 @@
 The survey of ``benchmarks/survey_mapping.py`` (``scenes_xml/harbour.xml``'s 128-beam multibeam
 along ``harbour_survey.tum``, ``--frames`` frames at ``--spp``, seed 1) is mapped by
 :class:`hilbertmap.IncrementalHilbertMap` with the multibeam's default budget (the first map); then
-:func:`mitsonar.jobs.refine_piles.piles_feedback` finds the piles on its ridge, refines them
+:func:`mitsonar.inverse.piles.piles_feedback` finds the piles on its ridge, refines them
 (and the seabed, without ``--altitude``) against the recorded intensities, and maps the survey
 again with each echo placed where the refined model puts it (those it cannot place left out) and
 the model's surface as evidence (the second map, on a ``--node-spacing`` lattice: 0.1 m, finer
@@ -66,7 +66,7 @@ def main(argv=None) -> int:
 
     import survey_mapping as sm
 
-    from mitsonar.jobs.refine_piles import piles_feedback
+    from mitsonar.inverse.piles import piles_feedback
     from mitsonar.sim.groundtruth import scene_mesh
 
     report = {"command": "python benchmarks/harbour_feedback.py " + " ".join(argv if argv is not None else sys.argv[1:])}

@@ -210,7 +210,7 @@ def oculus(seconds, tmp, beams=512, rate=10.0, range_m=10.0, pose_rate=20.0):
     own sine-spaced table of ``beams`` bearings, 0..``range_m``), fired at ``rate`` Hz by the
     project's driver while poses arrive over UDP at ``pose_rate`` Hz; each ping's budget is its
     period. Latency: from the ping's time (its render's start) to the ping result written."""
-    from mitsonar.devices.oculus import presets
+    import mitsonar.presets.oculus as presets
     from mitsonar.devices.oculus.driver import OculusSonar, fire_message
 
     mode = presets.model("M1200d").mode(1)

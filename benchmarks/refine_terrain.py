@@ -9,7 +9,7 @@ rocks), surveyed by a two-channel side-scan head (2 x 50 deg beams, depressed 30
 mesh (noise-free expected intensities, the seeds the fit uses: common random numbers). The model:
 a height field on a ``--cell`` grid over ``x in [-L/2, L/2]``, ``y in [-8, 8]``, started flat at
 the true mean depth of the vertices the pings see (``1.5 <= |y| <= 7.5`` m: outside the nadir gap,
-inside the swath), refined by :func:`mitsonar.jobs.refine.refine_height_field`.
+inside the swath), refined by :func:`mitsonar.inverse.height_field.refine_height_field`.
 
 Prints one JSON object: the RMS height error over the seen vertices before and after (and their
 ratio), the render-and-compare loss at the last stage's blur before and after (and their ratio),
@@ -63,7 +63,8 @@ def run(length=3.0, cell=0.5, spacing=0.5, altitude=3.0, spp=128, seed=0, stages
     import mitsuba as mi
 
     import mitsonar
-    from mitsonar.jobs.refine import grid_mesh, refine_height_field, sidescan_xml, write_ply
+    from mitsonar.inverse.driver import write_ply
+    from mitsonar.inverse.height_field import grid_mesh, refine_height_field, sidescan_xml
 
     from mitsonar.sim.variant import ensure_variant
 
@@ -118,7 +119,7 @@ def map_heights(hm, x, y, cell):
 
 def height_mesh(x, y, z):
     """Triangles of a height field over the cells whose four corners are finite (NaN: no surface)."""
-    from mitsonar.jobs.refine import grid_mesh
+    from mitsonar.inverse.height_field import grid_mesh
 
     V, F = grid_mesh(x, y, np.nan_to_num(z))
     ok = np.isfinite(z).ravel()
@@ -188,7 +189,7 @@ def feedback(x, y, z_true, z_refined, seen, cell, spp=256, seed=0, spacing=0.1, 
     from hilbertmap import metrics as M
     from hilbertmap.embedding import Samples
     from hilbertmap.evidence import surface_samples
-    from mitsonar.jobs.refine import sidescan_xml
+    from mitsonar.inverse.height_field import sidescan_xml
     from mitsonar.scenes.terrain import read_ply
 
     ply = os.path.join(ROOT, "scenes_xml", "rocky_slope.ply")

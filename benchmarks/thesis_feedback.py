@@ -4,7 +4,7 @@
 One sonar position, three orthogonal mechanical scans of a box (``scenes_xml/box.xml``, or a box of
 other dimensions with ``--box``), ``HilbertMap()`` defaults (Soares 2017, ch. 4 and 5.1). The first
 map's walls are cut through the sonar, fitted with a polygon, refined until their renders match the
-scans (:func:`mitsonar.jobs.refine_room.room_feedback`) and fed back into a second map as occupied
+scans (:func:`mitsonar.inverse.room.room_feedback`) and fed back into a second map as occupied
 evidence. Prints one JSON document: per setting the slice Hausdorff of the map's own ridge surface
 (``hilbertmap.metrics.evaluate(..., surfaces=("ridge",), surface_bounds=slab)``, as in
 ``tests/test_hilbertmap_thesis.py``), AUC and AUC against the water 0.1-0.3 m from the walls,
@@ -50,7 +50,7 @@ def run(box, seed, out_dir):
     from hilbertmap import HilbertMap
     from hilbertmap.metrics import evaluate
     from hilbertmap.testing import orthogonal_frames
-    from mitsonar.jobs.refine_room import room_feedback
+    from mitsonar.inverse.room import room_feedback
     from thesis_mapping import box_xml
 
     origin = (0.6, -0.4, 0.0) if box else (0.0, 0.0, 0.0)

@@ -39,9 +39,10 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _inverse import argument_parser, positive_int, pyplot, relative_l2, save_figure  # noqa: E402
 
 # The height map as a mesh and its binary PLY, the Gaussian smoothing of the heights and the
-# Laplacian penalty: the library's (`mitsonar.jobs.refine`, which refines such height fields
+# Laplacian penalty: the library's (`mitsonar.inverse.height_field`, which refines such height fields
 # coarse-to-fine).
-from mitsonar.jobs.refine import grid_mesh, laplacian_penalty, smoothed, smoothing_taps, write_ply  # noqa: E402,F401
+from mitsonar.inverse.driver import write_ply  # noqa: E402
+from mitsonar.inverse.height_field import grid_mesh, laplacian_penalty, smoothed, smoothing_taps  # noqa: E402,F401
 
 DEPTH = -2.0
 

@@ -35,6 +35,7 @@ import numpy as np
 
 from mitsonar._compat import trapezoid
 from mitsonar._registry import Registry
+from mitsonar.acoustics.water import SOUND_SPEED
 
 from .jit_arrays import upload
 
@@ -480,7 +481,7 @@ class BeamPattern:
     """
 
     def __init__(self, pattern="gaussian", beamwidth_h=3.0, beamwidth_v=35.0, frequency=700e3,
-                 aperture_h=None, aperture_v=None, sound_speed=1500.0, table=None, source="sonar"):
+                 aperture_h=None, aperture_v=None, sound_speed=SOUND_SPEED, table=None, source="sonar"):
         shape = get(pattern, source)
         for name, v, hi in (("beamwidth_h", beamwidth_h, 360.0), ("beamwidth_v", beamwidth_v, 180.0)):
             if not (0.0 < v <= hi):

@@ -39,7 +39,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-import mitsonar.geometry.kinds as kinds
+import mitsonar.kinds as kinds
 
 from .jit_arrays import upload
 from .range_bins import RangeBins

@@ -12,7 +12,8 @@ import numpy as np
 
 from mitsonar._checks import not_allowed
 from mitsonar._limits import LIMITS, check
-import mitsonar.geometry.kinds as kinds
+from mitsonar.acoustics.water import SOUND_SPEED
+import mitsonar.kinds as kinds
 from mitsonar.geometry.frames import SIDES, check_rigid, check_rigid_stack
 
 from . import beam as patterns
@@ -57,7 +58,7 @@ class SonarSensor(mi.Sensor):
     the ``n_pings`` starboard pings (2 n_pings rows, `channels` says which is which), with one side
     row k is ping k. ``preset`` sets the defaults of a commercial head (`sidescan_heads.PRESETS`).
     ``kind='volumetric'`` (3D imaging sonar): a multibeam head whose receive beams form an
-    ``n_elevation x n_azimuth`` grid (`mitsonar.geometry.kinds.Volumetric`): row ``k = i n_azimuth + j``
+    ``n_elevation x n_azimuth`` grid (`mitsonar.kinds.Volumetric`): row ``k = i n_azimuth + j``
     is turned by bearing ``bearing_start + j bearing_step`` about +y, then by elevation
     ``elevation_start + i elevation_step`` towards +y; ``Scan.volume`` reshapes a frame to
     ``(n_elevation, n_azimuth, n_bins)``. ``sonar_tof`` traces its rows per row (no shared beams).
@@ -66,7 +67,7 @@ class SonarSensor(mi.Sensor):
     start; a multibeam head fires all rows of a frame at once, and frames ``ping_period`` apart;
     a side-scan head fires both channels of ping ``k`` together at ``k * ping_period``.
     The default period is the two-way flight to ``range_max``, ``2 range_max / sound_speed``, plus
-    the head's overhead (its kind's ``head_overhead``, `mitsonar.geometry.kinds`: 30 ms mechanical,
+    the head's overhead (its kind's ``head_overhead``, `mitsonar.kinds`: 30 ms mechanical,
     50 ms multibeam, none side-scan).
 
     ``mi.render``'s paths per row are the ``<sampler>``'s ``sample_count``, 1 to 2^31 - 1.
@@ -207,7 +208,7 @@ class SonarSensor(mi.Sensor):
             self.bearing_start = float(t[0])
             self.bearing_step = float((t[-1] - t[0]) / (len(t) - 1)) if len(t) > 1 else 0.0
         # A number, or 'auto': the water's equations at the head's depth (plugins/water.py).
-        self.sound_speed = number_or_auto(props, "sound_speed", 1500.0)
+        self.sound_speed = number_or_auto(props, "sound_speed", SOUND_SPEED)
         self.absorption = number_or_auto(props, "absorption", 0.0)
         self.water = read_water(props, self.absorption, self.sound_speed)
         self.water_auto = [n for n in ("absorption", "sound_speed") if getattr(self, n) == "auto"]

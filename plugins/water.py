@@ -24,11 +24,13 @@ import math
 from mitsonar._checks import not_allowed
 from mitsonar.acoustics.seawater import (AINSLIE_MCCOLM_RANGE, MACKENZIE_RANGE, UNESCO_RANGE, absorption,
                                          depth_to_pressure, sound_speed)
+from mitsonar.acoustics.water import Water
 
 from .props import number, text
 
-#: Defaults of the water fields: a temperate sea, the standard ocean salinity, open-ocean pH.
-WATER_DEFAULTS = {"temperature": 10.0, "salinity": 35.0, "ph": 8.0, "surface_z": 0.0}
+#: Defaults of the water fields: `mitsonar.acoustics.water.Water`'s (a temperate sea, the standard
+#: ocean salinity, open-ocean pH, the surface at z 0), as the sensor's XML parameters.
+WATER_DEFAULTS = Water().sensor_parameters()
 WATER_FIELDS = tuple(WATER_DEFAULTS)
 AUTO = "auto"
 _UNITS = {"temperature": "deg C", "salinity": "ppt", "ph": "", "depth": "m", "frequency": "Hz"}

@@ -151,7 +151,7 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     the sonar kinds) and the electronics' settings (the sensor reads and checks its electronics
     fields), nothing else of mitsonar (not the Scan, files, render or devices)."""
     _, edges = import_graph()
-    allowed = {"mitsonar._checks", "mitsonar.geometry.frames", "mitsonar.geometry.kinds",
+    allowed = {"mitsonar._checks", "mitsonar.geometry.frames", "mitsonar.kinds",
                "mitsonar.receiver.electronics",
                # the size bounds of every setting (one table; it imports only the checks)
                "mitsonar._limits",
@@ -167,7 +167,11 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
                # the sound-speed profile: the integrators read their XML sound_speed_profile with it
                "mitsonar.acoustics.profile",
                # the receive elements' layout: the sensor reads its XML elements CSV with it (numpy)
-               "mitsonar.geometry.elements"}
+               "mitsonar.geometry.elements",
+               # the side-scan heads' published figures (the sensor's ``preset``; imports nothing)
+               "mitsonar.presets.sidescan",
+               # the water as one value and the nominal sound speed (the sensor's defaults)
+               "mitsonar.acoustics.water"}
     for name, out in edges.items():
         if name.startswith("mitsonar.plugins"):
             above = {t for t in out if t.startswith("mitsonar") and not t.startswith("mitsonar.plugins")}
@@ -182,14 +186,15 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
               "mitsonar.scan.migrations",
               "mitsonar.acoustics._checks", "mitsonar.acoustics.seawater", "mitsonar.acoustics.interface",
               "mitsonar.acoustics.seabed", "mitsonar.acoustics.materials", "mitsonar.geometry.elements",
+              "mitsonar.acoustics.water",
               # eigenrays and TL (SoundSpeedProfile.eigenrays calls it; it imports only the checks
               # and the interface)
               "mitsonar.acoustics.propagation"}
-    for low in (allowed | leaves) - {"mitsonar._checks", "mitsonar.geometry.kinds"}:
+    for low in (allowed | leaves) - {"mitsonar._checks", "mitsonar.kinds"}:
         assert not {t for t in edges[low] if t.startswith("mitsonar")} - leaves, low
     # the kinds (numpy only) rotate rows with the frames' rotations, and keep their registry in the
     # one shared with the beam patterns
-    assert {t for t in edges["mitsonar.geometry.kinds"] if t.startswith("mitsonar")} == \
+    assert {t for t in edges["mitsonar.kinds"] if t.startswith("mitsonar")} == \
         {"mitsonar.geometry.frames", "mitsonar._registry"}
     assert {t for t in edges["mitsonar.receiver.speckle"] if t.startswith("mitsonar")} <= {"mitsonar.receiver.devicechain"}
     # the chain asks for the variant mitsonar would choose (`mitsonar.sim.backend`: nothing of mitsonar)
@@ -197,12 +202,26 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     assert not {t for t in edges["mitsonar.sim.backend"] if t.startswith("mitsonar")}
 
 
-def test_mitsonar_itself_holds_at_most_12_modules():
+def test_the_presets_are_a_leaf():
+    """Every sonar model's published figures (`mitsonar.presets`) import nothing of mitsonar but the
+    value checks and the sonar kinds (NumPy-only leaves): the drivers, the scene builders and the
+    plugins take figures from there without pulling in the renderer or one another."""
+    _, edges = import_graph()
+    presets = [m for m in edges if m == "mitsonar.presets" or m.startswith("mitsonar.presets.")]
+    assert {"mitsonar.presets.echosounders", "mitsonar.presets.sidescan", "mitsonar.presets.oculus",
+            "mitsonar.presets.micron", "mitsonar.presets.ping360", "mitsonar.presets.volumetric"} <= set(presets)
+    for m in presets:
+        assert {t for t in edges[m] if t.startswith("mitsonar")} <= {"mitsonar._checks", "mitsonar.kinds"}, m
+
+
+def test_mitsonar_itself_holds_at_most_14_modules():
     """Code lives in packages by role (sim, scan, receiver, geometry, scenes, products, export,
-    devices, jobs, cli, ...): the package's own folder keeps only its entry points and shared
-    helpers, so a newcomer finds a kind, a head or a format by its room."""
+    devices, live, inverse, presets, jobs, cli, ...): the package's own folder keeps only its entry
+    points, shared helpers (with the table of moved modules, ``_moved.py``), the public short names
+    and the sonar kinds' registry (``kinds.py``), so a newcomer finds a kind, a head or a format by
+    its room."""
     top = sorted(f for f in os.listdir(os.path.join(ROOT, "mitsonar")) if f.endswith(".py"))
-    assert len(top) <= 12, top
+    assert len(top) <= 14, top
 
 
 def test_every_subpackage_says_what_it_holds():
@@ -259,7 +278,7 @@ def test_heads_are_chosen_only_through_the_registry():
 
 # ----------------------------------------------------------------------------- sonar kinds
 KIND_NAMES = ("mechanical", "multibeam", "sidescan", "volumetric")
-KINDS_MODULE = os.path.join(ROOT, "mitsonar", "geometry", "kinds.py")
+KINDS_MODULE = os.path.join(ROOT, "mitsonar", "kinds.py")
 # mitsonar.signals' lazy names point into its volumetric module: a module name, no kind.
 NOT_KINDS = {os.path.join(ROOT, "mitsonar", "signals", "__init__.py")}
 
@@ -312,7 +331,7 @@ def test_the_checker_finds_kind_strings(tmp_path):
                                               if not n.startswith("hilbertmap")))
 def test_only_the_kinds_module_names_the_kinds(name, path):
     """Behaviour that differs between sonar kinds lives on the kind classes of
-    `mitsonar.geometry.kinds`: no other module of mitsonar or its plugins compares a kind string
+    `mitsonar.kinds`: no other module of mitsonar or its plugins compares a kind string
     (``scan.kind == "multibeam"``) or keeps a table keyed by kind names; they ask the kind."""
     if path == KINDS_MODULE or path in NOT_KINDS:
         return
@@ -326,7 +345,7 @@ def test_a_new_kind_is_accepted_without_editing_other_modules(tmp_path):
 
     import mitsonar
     from mitsonar.cli.main import PLOT_KINDS, plot_kind
-    from mitsonar.geometry import kinds
+    import mitsonar.kinds as kinds
 
     class Toy(kinds.SonarKind):
         name = "toy"

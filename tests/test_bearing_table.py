@@ -7,7 +7,7 @@ import pytest
 
 from conftest import acoustic_xml, frame_matrix, scene_xml, sonar_xml, sphere_xml
 
-from mitsonar.devices.oculus.presets import bearing_table
+from mitsonar.presets.oculus import bearing_table
 
 HEAD = frame_matrix((1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
 TARGET = np.array([4.0, -2.3, 0.0])          # about 30 deg off the boresight, 4.6 m away

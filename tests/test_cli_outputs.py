@@ -157,8 +157,8 @@ def test_folders_resumed_or_cached_into_are_not_refused(tmp_path, argv):
 def test_live_mcap_takes_force_down_to_the_recording(tmp_path):
     """``live --mcap OLD --force``: the recording's own check lets the existing file be replaced."""
     pytest.importorskip("foxglove")
-    from mitsonar.devices.outputs import OutputError
-    from mitsonar.devices.outputs.mcapfile import check_mcap_path
+    from mitsonar.live.outputs import OutputError
+    from mitsonar.live.outputs.mcapfile import check_mcap_path
 
     old = tmp_path / "old.mcap"
     old.write_bytes(b"keep")

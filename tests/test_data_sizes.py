@@ -134,8 +134,8 @@ def test_ros_images_of_wide_data_are_mono16_and_the_sonar_image_keeps_its_codes(
 def test_live_pictures_of_wide_data_are_the_same_bytes(dtype, per_byte):
     import base64
 
-    from mitsonar.devices.outputs.messages import ping_message
-    from mitsonar.devices.outputs.pictures import Pictures
+    from mitsonar.live.outputs.messages import ping_message
+    from mitsonar.live.outputs.pictures import Pictures
     # codes between the bytes' levels (a byte times 257 would wrap to itself modulo 256)
     x = np.random.default_rng(2).random((36, 10))
     data = np.floor(x * 255 + 0.5).astype(np.uint8)

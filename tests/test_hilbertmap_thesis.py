@@ -7,7 +7,7 @@ through the sonar it lies within 0.12 m of the walls both ways (the thesis repor
 with the mean probability on the insonified walls above 0.5 (the thesis: about 0.35), AUC > 0.95
 and AUC > 0.85 against the water 0.1-0.3 m from the walls. The map alone does not reach 0.12 m (its
 ridge rounds the concave corners); the map with its walls refined by the renderer and fed back as
-evidence (``mitsonar.jobs.refine_room.room_feedback``) does, and is asserted.
+evidence (``mitsonar.inverse.room.room_feedback``) does, and is asserted.
 
 The defaults were chosen on the render seeds 0 and 3 of this box and checked on a 9 x 7 m box
 with the sonar off-centre (``benchmarks/thesis_mapping.py``); seed 11 is used nowhere else.
@@ -56,8 +56,8 @@ def thesis_report(thesis_map):
 @pytest.fixture(scope="module")
 def feedback_report(thesis_map):
     """The same scans mapped again with the first map's walls refined by the renderer and fed back
-    as occupied evidence (:func:`mitsonar.jobs.refine_room.room_feedback`)."""
-    from mitsonar.jobs.refine_room import room_feedback
+    as occupied evidence (:func:`mitsonar.inverse.room.room_feedback`)."""
+    from mitsonar.inverse.room import room_feedback
 
     hm, V, F, scans = thesis_map
     fb = room_feedback(scans, hm, seed=SEED)

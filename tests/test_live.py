@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from conftest import subcommand_runner
 
-from mitsonar.devices.poses import (MAX_DATAGRAM, DatagramError, PoseBuffer, parse_datagram, pose_matrix)
+from mitsonar.live.poses import (MAX_DATAGRAM, DatagramError, PoseBuffer, parse_datagram, pose_matrix)
 from mitsonar.geometry.trajectory import quat_to_matrix
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -110,7 +110,7 @@ def test_datagrams_without_time_are_stamped_on_arrival():
 
 @pytest.fixture(scope="module")
 def box():
-    from mitsonar.devices.live import PingRenderer, live_scene
+    from mitsonar.live.heads import PingRenderer, live_scene
     from mitsonar.sim.render import pick_sensor
 
     scene = live_scene(BOX)
@@ -152,7 +152,7 @@ def test_new_poses_launch_the_same_kernels(box):
 # ---------------------------------------------------------------- the heads, with their clients
 
 def test_the_live_micron_answers_the_seanet_driver_from_the_new_pose(box):
-    from mitsonar.devices.live import LiveMicron
+    from mitsonar.live.heads import LiveMicron
     from mitsonar.devices.micron.driver import MicronSonar
     from mitsonar.devices.micron.seanet import HeadSettings
 
@@ -298,7 +298,7 @@ def test_bad_pose_urls_are_one_line_before_the_scene_loads(capsys):
 
 
 def test_a_trajectory_replays_in_real_time_and_holds_its_last_pose():
-    from mitsonar.devices.poses import TrajectoryReplay
+    from mitsonar.live.poses import TrajectoryReplay
     from mitsonar.geometry.trajectory import Trajectory
 
     traj = Trajectory.straight(duration=4.0, speed=0.5, t0=100.0)
@@ -310,7 +310,7 @@ def test_a_trajectory_replays_in_real_time_and_holds_its_last_pose():
 
 
 def test_an_object_datagram_moves_a_shape_and_its_echo(box):
-    from mitsonar.devices.live import PoseReceiver, SceneObjects
+    from mitsonar.live.heads import PoseReceiver, SceneObjects
 
     objects = SceneObjects(box.scene, box.lock)
     assert "wall_xpos" in objects.names and "sonar" not in objects.names
@@ -345,7 +345,7 @@ def _encoded(mav, msg) -> bytes:
 def test_ned_frd_to_enu_flu():
     """A level vehicle facing north: forward is world +y, port is west (-x); facing east
     (yaw 90 deg in NED): forward is +x. Positions: (north, east, down) -> (east, north, up)."""
-    from mitsonar.devices.mavlink import ned_to_enu
+    from mitsonar.live.mavlink import ned_to_enu
 
     p, q = ned_to_enu([10.0, 3.0, 2.0], [1.0, 0.0, 0.0, 0.0])
     np.testing.assert_allclose(p, [3.0, 10.0, -2.0])
@@ -364,7 +364,7 @@ def test_ned_frd_to_enu_flu():
 
 def test_mavlink_messages_encoded_by_pymavlink_become_poses():
     common = _mav()
-    from mitsonar.devices.mavlink import MavlinkReceiver
+    from mitsonar.live.mavlink import MavlinkReceiver
 
     buf = PoseBuffer()
     rx = MavlinkReceiver("udpin:127.0.0.1:0", buf, out=io.StringIO())
@@ -406,7 +406,7 @@ def threading_event_wait(seconds):
 
 def test_stale_ping360_requests_are_coalesced_to_the_newest(box):
     """Requests that wait while a ping renders: only the newest is answered."""
-    from mitsonar.devices.live import LivePing360
+    from mitsonar.live.heads import LivePing360
     from mitsonar.devices.ping360.protocol import Message, StreamParser, encode
 
     box.poses = PoseBuffer()
@@ -435,7 +435,7 @@ def test_stale_ping360_requests_are_coalesced_to_the_newest(box):
 
 
 def test_drops_are_reported_at_most_every_two_seconds_and_a_silent_stream_is_said_once():
-    from mitsonar.devices.live import PoseReceiver
+    from mitsonar.live.heads import PoseReceiver
 
     out = io.StringIO()
     rx = PoseReceiver(socket.socket(socket.AF_INET, socket.SOCK_DGRAM), PoseBuffer(), out=out)
@@ -479,7 +479,7 @@ def test_a_wild_time_stamp_over_udp_is_dropped_and_the_good_poses_after_it_are_a
     import warnings
 
     from mitsonar.cli.live import _summary
-    from mitsonar.devices.live import PoseReceiver, pose_socket
+    from mitsonar.live.heads import PoseReceiver, pose_socket
 
     box.poses = PoseBuffer()
     rx = PoseReceiver(pose_socket("udp://127.0.0.1:0"), box.poses, out=io.StringIO()).start()
@@ -510,7 +510,7 @@ def test_a_position_beyond_the_scene_is_dropped_and_pings_stay_finite(box):
     Now positions outside the scene's box enlarged by BOUNDS_MARGIN are refused."""
     import warnings
 
-    from mitsonar.devices.live import PoseReceiver
+    from mitsonar.live.heads import PoseReceiver
 
     box.poses = PoseBuffer()            # without a scene's bounds: |x|, |y|, |z| <= MAX_COORDINATE
     rx = PoseReceiver(socket.socket(socket.AF_INET, socket.SOCK_DGRAM), box.poses, out=io.StringIO())
@@ -525,8 +525,8 @@ def test_a_position_beyond_the_scene_is_dropped_and_pings_stay_finite(box):
     finally:
         rx.sock.close()
     # with the scene's: its box enlarged by BOUNDS_MARGIN
-    from mitsonar.devices.live import pose_bounds
-    from mitsonar.devices.poses import BOUNDS_MARGIN
+    from mitsonar.live.heads import pose_bounds
+    from mitsonar.live.poses import BOUNDS_MARGIN
 
     lo, hi = pose_bounds(box.scene)
     np.testing.assert_allclose(hi - lo, np.array(box.scene.bbox().extents()) + 2 * BOUNDS_MARGIN, rtol=1e-6)
@@ -554,7 +554,7 @@ def test_a_sender_whose_clock_jumped_is_followed_after_clock_resync_poses_in_a_r
     """A wild first stamp (nothing to refuse it against yet), or a restarted sender (MAVLink's
     time_boot_ms starts again at 0): CLOCK_RESYNC poses in a row that agree with each other
     restart the clock; fewer, or ones that disagree, do not."""
-    from mitsonar.devices.poses import CLOCK_RESYNC
+    from mitsonar.live.poses import CLOCK_RESYNC
 
     buf = PoseBuffer()
     buf.add([9, 9, 0], yaw_q(0), t=1e300, arrival=5.0)         # the first stamp: taken
@@ -577,7 +577,7 @@ def test_a_sender_whose_clock_jumped_is_followed_after_clock_resync_poses_in_a_r
 def test_mavlink_poses_off_the_clock_or_the_bounds_are_dropped_with_their_reason():
     common = _mav()
     from mitsonar.cli.live import _summary
-    from mitsonar.devices.mavlink import MavlinkReceiver
+    from mitsonar.live.mavlink import MavlinkReceiver
 
     buf = PoseBuffer()
     rx = MavlinkReceiver("udpin:127.0.0.1:0", buf, out=io.StringIO())

@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from conftest import subcommand_runner
 
-from mitsonar.devices.poses import PoseBuffer
+from mitsonar.live.poses import PoseBuffer
 from mitsonar.geometry.trajectory import quat_to_matrix
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -56,7 +56,7 @@ class Collect:
 # ---------------------------------------------------------------- the fan-out
 
 def test_a_slow_output_drops_the_oldest_pings_and_counts_them():
-    from mitsonar.devices.outputs import LiveOutput, LiveOutputs
+    from mitsonar.live.outputs import LiveOutput, LiveOutputs
 
     slow = Collect()
     assert isinstance(slow, LiveOutput)
@@ -74,7 +74,7 @@ def test_a_slow_output_drops_the_oldest_pings_and_counts_them():
 
 
 def test_an_output_that_fails_is_said_once_and_the_others_go_on():
-    from mitsonar.devices.outputs import LiveOutputs
+    from mitsonar.live.outputs import LiveOutputs
 
     class Broken:
         def publish(self, *ping):
@@ -108,7 +108,7 @@ def test_a_sweep_puts_each_bin_where_its_bearing_and_range_are():
     """Bearing 0 up the picture, bearing +90 deg (port) to its left (seen from above, as the bags'
     fan and `plot_fan`); a pixel at
     distance r from the centre holds bin floor(r / width); later pings keep the earlier ones."""
-    from mitsonar.devices.outputs.pictures import Pictures
+    from mitsonar.live.outputs.pictures import Pictures
 
     size, r_max, n = 200, 10.0, 50
     pictures = Pictures(size=size)
@@ -159,7 +159,7 @@ def test_a_fan_is_drawn_from_above_port_on_the_left():
 
 @pytest.fixture(scope="module")
 def box():
-    from mitsonar.devices.live import PingRenderer, live_scene
+    from mitsonar.live.heads import PingRenderer, live_scene
     from mitsonar.sim.render import pick_sensor
 
     scene = live_scene(BOX)
@@ -178,7 +178,7 @@ def protobuf_class(name, descriptor_set: bytes):
 
 
 def replayed_pictures(scans):
-    from mitsonar.devices.outputs.pictures import Pictures
+    from mitsonar.live.outputs.pictures import Pictures
 
     pictures = Pictures()
     return [pictures.of(s).copy() for s in scans]
@@ -259,8 +259,8 @@ def read_mcap(path):
 def test_an_mcap_recording_holds_each_rendered_ping(box, tmp_path):
     pytest.importorskip("foxglove")
     pytest.importorskip("mcap")
-    from mitsonar.devices.outputs import LiveOutputs
-    from mitsonar.devices.outputs.mcapfile import McapRecording
+    from mitsonar.live.outputs import LiveOutputs
+    from mitsonar.live.outputs.mcapfile import McapRecording
 
     path = tmp_path / "live.mcap"
     seen = Collect()
@@ -283,7 +283,7 @@ def test_a_multibeam_frame_is_one_message_of_its_fan(tmp_path):
     """A multibeam head publishes whole frames (all its beams at once): one picture (the bags' fan
     of that frame alone) and one raw ping holding every beam."""
     pytest.importorskip("foxglove")
-    from mitsonar.devices.outputs import open_outputs
+    from mitsonar.live.outputs import open_outputs
     from mitsonar.export.ros.messages import fan_pixels
     from mitsonar.geometry.frames import bearing_rotation
     from mitsonar.scan.model import Scan
@@ -313,7 +313,7 @@ def test_a_multibeam_frame_is_one_message_of_its_fan(tmp_path):
 
 def test_a_discarded_recording_leaves_no_file(tmp_path):
     pytest.importorskip("foxglove")
-    from mitsonar.devices.outputs import open_outputs
+    from mitsonar.live.outputs import open_outputs
 
     outs = open_outputs(mcap=tmp_path / "x.mcap")
     outs.discard()
@@ -328,8 +328,8 @@ def test_foxglove_websocket_stream_read_by_a_minimal_protocol_client(box):
     ``foxglove.websocket.v1``): the client offers both, as the Foxglove app does."""
     pytest.importorskip("foxglove")
     sync = pytest.importorskip("websockets.sync.client")
-    from mitsonar.devices.outputs import LiveOutputs
-    from mitsonar.devices.outputs.foxglove import FoxgloveServer
+    from mitsonar.live.outputs import LiveOutputs
+    from mitsonar.live.outputs.foxglove import FoxgloveServer
 
     server = FoxgloveServer(0)
     seen = Collect()
@@ -396,8 +396,8 @@ def test_foxglove_websocket_stream_read_by_a_minimal_protocol_client(box):
 
 
 def test_outputs_import_no_optional_package_unless_asked():
-    code = ("import sys, mitsonar.cli.live, mitsonar.devices.live, mitsonar.devices.outputs;"
-            "import mitsonar.devices.outputs.base, mitsonar.devices.outputs.pictures;"
+    code = ("import sys, mitsonar.cli.live, mitsonar.live.heads, mitsonar.live.outputs;"
+            "import mitsonar.live.outputs.base, mitsonar.live.outputs.pictures;"
             "bad = [m for m in ('foxglove', 'cyclonedds', 'websockets', 'mcap') if m in sys.modules];"
             "assert not bad, bad")
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
@@ -497,8 +497,8 @@ def test_dds_topics_are_ros2_messages_a_subscriber_reads(box, monkeypatch):
     from cyclonedds.sub import DataReader
     from cyclonedds.topic import Topic
 
-    from mitsonar.devices.outputs import LiveOutputs
-    from mitsonar.devices.outputs.dds import TOPICS, DdsOutput, ros_qos, ros_types
+    from mitsonar.live.outputs import LiveOutputs
+    from mitsonar.live.outputs.dds import TOPICS, DdsOutput, ros_qos, ros_types
     from mitsonar.export.ros import messages as M
     from mitsonar.export.ros import msgdefs
 

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 from conftest import subcommand_runner
 
-from mitsonar.devices.poses import PoseBuffer
-from mitsonar.devices.realtime import SPP_LADDER, ErrorModel, PathBudget, PingLog, WireClock
+from mitsonar.live.poses import PoseBuffer
+from mitsonar.live.realtime import SPP_LADDER, ErrorModel, PathBudget, PingLog, WireClock
 from test_live import live_process
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -69,7 +69,7 @@ def test_paths_converge_to_fill_the_budget_with_a_fixed_cost():
 
 @pytest.fixture(scope="module")
 def box_scene():
-    from mitsonar.devices.live import live_scene
+    from mitsonar.live.heads import live_scene
     from mitsonar.sim.render import pick_sensor
 
     scene = live_scene(BOX)
@@ -80,7 +80,7 @@ def test_other_numbers_of_paths_launch_the_same_kernels(box_scene):
     """The budget may pick any ladder size: no size compiles new kernels; a size seen before
     replays its frozen pass (no new recording)."""
     from conftest import jit_kernels
-    from mitsonar.devices.live import PingRenderer
+    from mitsonar.live.heads import PingRenderer
 
     from mitsonar.plugins import module
 
@@ -108,7 +108,7 @@ def test_other_numbers_of_paths_launch_the_same_kernels(box_scene):
 
 
 def test_a_tight_budget_renders_fewer_paths_than_a_loose_one(box_scene):
-    from mitsonar.devices.live import PingRenderer
+    from mitsonar.live.heads import PingRenderer
 
     scene, sonar = box_scene
     paths = {}
@@ -127,7 +127,7 @@ def test_the_error_estimate_is_within_a_factor_two_of_the_measured_error(box_sce
     """The estimate (the table measured at 16, 64, ... 4096 paths at the mount, interpolated)
     against the error of renders at other sizes measured against a 2**18-path reference: within
     a factor 2 at 32 and 128 paths (interpolated), 3 at 16384 (extrapolated as 1/sqrt(n))."""
-    from mitsonar.devices.live import PingRenderer
+    from mitsonar.live.heads import PingRenderer
     from mitsonar.sim.render import render_scan
 
     scene, sonar = box_scene
@@ -205,7 +205,7 @@ def test_live_ping360_records_each_reply_with_its_latency_to_the_bytes(box_scene
     """Through Blue Robotics' client: one record per reply, the latency at least the render
     (the pose time is before the render, the bytes after it), the budget the head's ping time."""
     brping = pytest.importorskip("brping")
-    from mitsonar.devices.live import LivePing360, PingRenderer
+    from mitsonar.live.heads import LivePing360, PingRenderer
 
     scene, sonar = box_scene
     r = PingRenderer(scene, sonar, PoseBuffer(), spp=None, out=io.StringIO(), calibration=2)
@@ -237,7 +237,7 @@ def test_the_live_micron_renders_at_the_request_and_records_each_scanline(box_sc
     """The SeaNet driver's scanlines: each rendered when its mtSendData arrives, from the pose
     at that time (so its bytes, which the timing model sends a ping period after the request,
     come at least a period after the pose time), one record per scanline, budget = its period."""
-    from mitsonar.devices.live import LiveMicron, PingRenderer
+    from mitsonar.live.heads import LiveMicron, PingRenderer
     from mitsonar.devices.micron.driver import MicronSonar
     from mitsonar.devices.micron.seanet import HeadSettings
 
@@ -265,8 +265,8 @@ def test_the_live_micron_renders_at_the_request_and_records_each_scanline(box_sc
 # ---------------------------------------------------------------- multibeam frames
 
 def test_multibeam_frames_come_at_the_ping_period_and_late_ones_are_skipped_and_counted():
-    from mitsonar.devices.framing import FrameLoop
-    from mitsonar.devices.live import PingRenderer, live_scene
+    from mitsonar.live.framing import FrameLoop
+    from mitsonar.live.heads import PingRenderer, live_scene
     from mitsonar.sim.render import pick_sensor
 
     scene = live_scene(BOX_FLS)
@@ -364,7 +364,7 @@ def test_bad_real_time_options_are_one_line_before_the_scene_loads(capsys, tmp_p
 # ---------------------------------------------------------------- reliability
 
 def test_no_pose_yet_pings_from_the_origin_and_says_so_once(box_scene):
-    from mitsonar.devices.live import PingRenderer
+    from mitsonar.live.heads import PingRenderer
 
     scene, sonar = box_scene
     out = io.StringIO()
@@ -378,7 +378,7 @@ def test_no_pose_yet_pings_from_the_origin_and_says_so_once(box_scene):
 def test_ping360_clients_connect_drop_and_reconnect(box_scene):
     """Three clients one after the other (each its own UDP port), the second leaving in the
     middle of a request: each later client is answered."""
-    from mitsonar.devices.live import LivePing360, PingRenderer
+    from mitsonar.live.heads import LivePing360, PingRenderer
     from mitsonar.devices.ping360.protocol import Message, StreamParser, encode
 
     scene, sonar = box_scene
@@ -408,7 +408,7 @@ def test_ping360_clients_connect_drop_and_reconnect(box_scene):
 
 
 def test_the_micron_driver_reconnects_to_the_live_head(box_scene):
-    from mitsonar.devices.live import LiveMicron, PingRenderer
+    from mitsonar.live.heads import LiveMicron, PingRenderer
     from mitsonar.devices.micron.driver import MicronSonar
     from mitsonar.devices.micron.seanet import HeadSettings
 
@@ -478,7 +478,7 @@ def test_two_threads_sharing_a_renderer_render_distinct_pings_and_read_their_own
     the ping count (0) before taking it."""
     import threading
 
-    from mitsonar.devices.live import PingRenderer
+    from mitsonar.live.heads import PingRenderer
 
     scene, sonar = box_scene
     r = PingRenderer(scene, sonar, PoseBuffer(), spp=16, out=io.StringIO(), calibration=0)

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from mitsonar.cli.main import main
-from mitsonar.devices.oculus import presets
+import mitsonar.presets.oculus as presets
 from mitsonar.geometry.frames import bearing_rotation
 from mitsonar import load_scan
 from mitsonar.scan import Scan

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from mitsonar.devices.oculus import presets, protocol as op
+import mitsonar.presets.oculus as presets
+from mitsonar.devices.oculus import protocol as op
 from mitsonar.devices.oculus.protocol import (FLAG, FireMessage, OculusError, PingResult, StatusMessage,
                                               StreamParser, UserConfig, decode)
 

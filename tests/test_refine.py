@@ -1,4 +1,4 @@
-"""Analysis by synthesis (mitsonar.jobs.refine): a height field refined from a flat start until its
+"""Analysis by synthesis (mitsonar.inverse.height_field): a height field refined from a flat start until its
 side-scan renders match the recorded pings; a tiny terrain, small spp."""
 from __future__ import annotations
 
@@ -19,7 +19,8 @@ def truth():
 
 
 def setup(tmp, z):
-    from mitsonar.jobs.refine import grid_mesh, sidescan_xml, write_ply
+    from mitsonar.inverse.driver import write_ply
+    from mitsonar.inverse.height_field import grid_mesh, sidescan_xml
     from mitsonar.sim.scene import load_scene
 
     ply = os.path.join(tmp, "m.ply")
@@ -49,7 +50,7 @@ def fitted(tmp_path_factory):
         p.update()
         targets.append(np.asarray(mi.render(sc, spp=64, seed=7 + k))[..., 0])
     start = np.full_like(z_true, z_true[:, SEEN].mean())
-    from mitsonar.jobs.refine import refine_height_field
+    from mitsonar.inverse.height_field import refine_height_field
 
     def fit():
         return refine_height_field(setup(tmp, start), X, Y, start, poses, targets, spp=64, seed=7, lr=0.08,
@@ -80,7 +81,7 @@ def test_refinement_is_deterministic_per_seed(fitted):
 
 
 def test_bad_inputs_are_refused_in_one_line(fitted):
-    from mitsonar.jobs.refine import refine_height_field
+    from mitsonar.inverse.height_field import refine_height_field
 
     z_true, start, _, _, (tmp, poses, targets) = fitted
     sc = setup(tmp, start)
@@ -104,7 +105,7 @@ def test_every_ping_moves_the_heights_not_only_the_first(tmp_path):
     the first ping's backward pass freed the heights' graph, so later pings added nothing)."""
     import mitsuba as mi
 
-    from mitsonar.jobs.refine import refine_height_field
+    from mitsonar.inverse.height_field import refine_height_field
 
     z_true = truth()
     start = np.full_like(z_true, z_true[:, SEEN].mean())

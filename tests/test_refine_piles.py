@@ -1,4 +1,4 @@
-"""Analysis by synthesis for piles over a flat seabed seen by a wide fan (mitsonar.jobs.refine_piles)."""
+"""Analysis by synthesis for piles over a flat seabed seen by a wide fan (mitsonar.inverse.piles)."""
 from __future__ import annotations
 
 import math
@@ -36,8 +36,8 @@ POSES = [_head_pose(8.0 - 7.0 * math.cos(a), 0.5 - 7.0 * math.sin(a), yaw=a)
 
 def _scene(piles, seabed, max_depth=1, seabed_bsdf='<string name="preset" value="seabed_rock"/>'):
     import mitsonar
-    from mitsonar.jobs.refine import write_ply
-    from mitsonar.jobs.refine_piles import piles_mesh, piles_xml
+    from mitsonar.inverse.driver import write_ply
+    from mitsonar.inverse.piles import piles_mesh, piles_xml
 
     Vp, Fp, Vs, Fs = piles_mesh(piles, seabed, BOUNDS, TOP, sides=24)
     with tempfile.TemporaryDirectory() as tmp:
@@ -62,7 +62,7 @@ def _render(scene, poses, spp, seed):
 
 
 def test_piles_mesh_is_round_faces_out_and_stands_on_the_seabed():
-    from mitsonar.jobs.refine_piles import piles_mesh
+    from mitsonar.inverse.piles import piles_mesh
 
     Vp, Fp, Vs, Fs = piles_mesh([[1.0, 2.0, 0.3], [5.0, -1.0, 0.5]], -6.0, ((-9, -9), (9, 9)), 2.0, sides=16)
     assert Vp.shape == (2 * 2 * 16, 3) and Fp.shape == (2 * 2 * 16, 3)
@@ -86,7 +86,7 @@ def test_piles_from_points_puts_the_axis_behind_the_smeared_front():
     """A pile of radius 0.3 at (6, 2) seen from around (0, 0): its front arc smeared towards the
     sensors by up to 9 % of the range (a 20 deg fan's r (1 - cos 25 deg)), as a first map's ridge
     has it; and a 6 m wall, left out."""
-    from mitsonar.jobs.refine_piles import piles_from_points
+    from mitsonar.inverse.piles import piles_from_points
 
     rng = np.random.default_rng(0)
     c = np.array([6.0, 2.0])
@@ -114,7 +114,7 @@ def test_refine_piles_moves_a_misplaced_pile_onto_its_echoes(targets):
     """Started 0.25 m off (along and across the line of sight) with the wrong radius, the pile's
     axis comes within 6 cm of the truth from four views around it and the loss falls at least 5x; the same
     seed gives the same pile."""
-    from mitsonar.jobs.refine_piles import refine_piles
+    from mitsonar.inverse.piles import refine_piles
 
     start = np.array([[8.2, 0.35, 0.22]])
     runs = []
@@ -137,7 +137,7 @@ def test_seabed_search_finds_a_faint_mud_seabed_beside_a_bright_pile():
     fine, and its loss rises at least 3x 1 m either side. The relative loss over every bin, ruled
     by the pile's face, changes by under 10 % from 2 m to 7 m down: it cannot tell the seabed
     (on the harbour survey it chose -4.5 m for -6 m with one seed in two)."""
-    from mitsonar.jobs.refine_piles import seabed_search
+    from mitsonar.inverse.piles import seabed_search
 
     mud = '<string name="preset" value="seabed_mud"/>'
     targets = _render(_scene(PILE, SEABED, max_depth=3, seabed_bsdf=mud), POSES, spp=64, seed=100)
@@ -166,7 +166,7 @@ def test_attribute_groups_puts_each_echo_on_the_model_not_on_its_arc(targets):
     arcs' distances and the share are pooled over six seeds (0.83 with either generator, a binomial standard deviation of
     about 0.035) and must reach 0.75."""
     from hilbertmap import IncrementalHilbertMap
-    from mitsonar.jobs.refine_piles import attribute_groups
+    from mitsonar.inverse.piles import attribute_groups
     from mitsonar.scan.model import Scan
 
     import mitsonar
@@ -201,7 +201,7 @@ def test_attribute_groups_puts_each_echo_on_the_model_not_on_its_arc(targets):
 
 def test_piles_feedback_refuses_scans_that_are_not_frames_of_one_steered_head():
     from hilbertmap import IncrementalHilbertMap
-    from mitsonar.jobs.refine_piles import piles_feedback
+    from mitsonar.inverse.piles import piles_feedback
 
     import mitsonar
 
@@ -222,7 +222,7 @@ def test_renders_follow_the_vertices_a_fit_sets():
     bytes, and a seabed search by rendering picked another height on every run)."""
     import mitsuba as mi
 
-    from mitsonar.jobs.refine_piles import piles_mesh
+    from mitsonar.inverse.piles import piles_mesh
     from mitsonar.sim.render import scan_parameters
 
     piles = np.array([[8.0, 0.5, 0.3], [8.0, 4.5, 0.3], [12.0, 0.5, 0.3]])  # (with one pile it did not show)
@@ -261,7 +261,7 @@ def test_a_moving_scene_in_use_stays_traced_past_the_registry_limit():
 def test_parabola_vertex_lies_between_the_candidates():
     """The seabed between 5 cm candidates: the vertex of the least-squares parabola, exact for a
     parabola, within the candidates' span, and the best candidate where the losses open downwards."""
-    from mitsonar.jobs.refine_piles import _parabola_vertex
+    from mitsonar.inverse.piles import _parabola_vertex
 
     z = -6.05 + np.arange(-0.25, 0.2501, 0.05)
     assert _parabola_vertex(z, 3.0 + 40.0 * (z + 5.987) ** 2) == pytest.approx(-5.987, abs=1e-9)

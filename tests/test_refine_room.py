@@ -1,4 +1,4 @@
-"""Analysis by synthesis for closed walls seen from inside (mitsonar.jobs.refine_room)."""
+"""Analysis by synthesis for closed walls seen from inside (mitsonar.inverse.room)."""
 from __future__ import annotations
 
 import os
@@ -12,7 +12,7 @@ BOX = np.array([[5.0, -4.0], [5.0, 4.0], [-5.0, 4.0], [-5.0, -4.0]])  # scenes_x
 
 
 def test_room_mesh_faces_the_water():
-    from mitsonar.jobs.refine_room import room_mesh
+    from mitsonar.inverse.room import room_mesh
 
     V, F = room_mesh(BOX, -3.0, 14.0)
     assert V.shape == (4 * 4 + 4, 3) and F.shape == (4 * 2 + 2, 3)
@@ -31,7 +31,7 @@ def test_room_mesh_faces_the_water():
 def test_polygon_from_points_finds_the_corners_that_a_rounded_cut_misses():
     """A rectangle's cut with its corners rounded by 0.3 m (as a map's ridge rounds them) and 1 cm
     noise: the fitted walls meet at the true corners."""
-    from mitsonar.jobs.refine_room import polygon_from_points
+    from mitsonar.inverse.room import polygon_from_points
 
     rng = np.random.default_rng(0)
     r, X, Y = 0.3, 4.5, 3.5
@@ -56,7 +56,7 @@ def test_polygon_from_points_finds_the_corners_that_a_rounded_cut_misses():
 
 
 def test_wall_points_lie_on_the_walls():
-    from mitsonar.jobs.refine_room import wall_points
+    from mitsonar.inverse.room import wall_points
 
     P = wall_points(BOX, -0.5, 0.5, 0.1)
     assert P.shape == ((2 * 80 + 2 * 100) * 11, 3)
@@ -79,8 +79,8 @@ def box_targets():
 
 def _model(corners, floor, top=14.0):
     import mitsonar
-    from mitsonar.jobs.refine import write_ply
-    from mitsonar.jobs.refine_room import room_mesh, room_xml
+    from mitsonar.inverse.driver import write_ply
+    from mitsonar.inverse.room import room_mesh, room_xml
 
     with tempfile.TemporaryDirectory() as tmp:
         ply = os.path.join(tmp, "room.ply")
@@ -91,7 +91,7 @@ def _model(corners, floor, top=14.0):
 def test_refine_room_moves_walls_03_m_off_onto_the_box(box_targets):
     """From walls 0.3 m inside the box and a floor 0.2 m high, the renderer's gradients bring the
     corners within 2 cm and the floor within 3 cm of the truth; the loss falls 10-fold."""
-    from mitsonar.jobs.refine_room import refine_room
+    from mitsonar.inverse.room import refine_room
 
     frames, targets = box_targets
     start = BOX * [(5 - 0.3) / 5, (4 - 0.3) / 4]
@@ -103,7 +103,7 @@ def test_refine_room_moves_walls_03_m_off_onto_the_box(box_targets):
 
 
 def test_refine_room_is_deterministic_per_seed_and_refuses_bad_input(box_targets):
-    from mitsonar.jobs.refine_room import refine_room
+    from mitsonar.inverse.room import refine_room
 
     frames, targets = box_targets
     start = BOX * 0.95
@@ -128,7 +128,7 @@ def test_refine_room_is_deterministic_per_seed_and_refuses_bad_input(box_targets
 def test_room_feedback_refuses_scans_it_cannot_model_before_any_work():
     """A head carried along a line, or scans from two positions, in one line before any fit."""
     from hilbertmap.testing import box_scan, frame, moving_poses, orthogonal_frames
-    from mitsonar.jobs.refine_room import room_feedback
+    from mitsonar.inverse.room import room_feedback
 
     moving = box_scan(moving_poses((0, 0, 0), (1, 0, 0), n_pings=20), n_pings=20, rays=10, seed=0)
     with pytest.raises(ValueError, match=r"scans\[0\] must be a mechanical scan from one fixed position"):

@@ -1,4 +1,4 @@
-"""The ``volumetric`` sensor kind (`mitsonar.geometry.kinds.Volumetric`): rows are beams over an
+"""The ``volumetric`` sensor kind (`mitsonar.kinds.Volumetric`): rows are beams over an
 elevation x azimuth grid, each turned in both angles; a sonar_tof render lights the row of a
 target's (azimuth, elevation); ``Scan.volume`` reshapes a frame to (n_elevation, n_azimuth, n_bins)
 and the scan files keep the kind and the grid."""
@@ -146,8 +146,8 @@ def test_a_volumetric_frame_is_a_pointcloud2_in_the_live_mcap(mitsonar_mod, sphe
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
-    from mitsonar.devices.outputs import open_outputs
-    from mitsonar.devices.outputs.messages import POINTS_THRESHOLD_DB, frame_points, pointcloud2_cdr
+    from mitsonar.live.outputs import open_outputs
+    from mitsonar.live.outputs.messages import POINTS_THRESHOLD_DB, frame_points, pointcloud2_cdr
     from mitsonar.export.ros import msgdefs
     from mitsonar.signals.volumetric import POINT_DTYPE, point_cloud, scan_volume
 
@@ -184,8 +184,8 @@ def test_the_dds_pointcloud2_serialises_as_ros_2_does(sphere_frame):
     """`mitsonar live --dds`: the rt/sonar/points struct of a frame serialises to the same CDR as the
     MCAP's /sonar/points (what rclcpp reads)."""
     pytest.importorskip("cyclonedds")
-    from mitsonar.devices.outputs.dds import POINT_TOPICS, point_cloud2, ros_types
-    from mitsonar.devices.outputs.messages import frame_points, pointcloud2_cdr
+    from mitsonar.live.outputs.dds import POINT_TOPICS, point_cloud2, ros_types
+    from mitsonar.live.outputs.messages import frame_points, pointcloud2_cdr
 
     T = ros_types()
     cloud = frame_points(1_000_000_001, sphere_frame[0])

@@ -1,5 +1,8 @@
 """Acoustics of sea water and the seabed in physical units (NumPy, no Mitsuba).
 
+* :class:`Water`, the water as one value (temperature, salinity, pH, surface, latitude, the
+  equations' names; the sensor's water parameters), and :data:`SOUND_SPEED`, the nominal sound
+  speed every ``sound_speed`` default takes (`mitsonar.acoustics.water`);
 * :func:`sound_speed` (Mackenzie 1981, UNESCO/Chen-Millero, Del Grosso by ``model=``) and
   :func:`absorption` (Francois and Garrison 1982, Ainslie and McColm 1998, fresh water);
 * :func:`reflection_coefficient` and :func:`critical_angle` of a fluid-fluid interface;
@@ -25,9 +28,10 @@ from mitsonar.acoustics.seabed import (APL_UW_FREQUENCY_RANGE, SEDIMENTS, Sedime
                      lambert, sediment)
 from mitsonar.acoustics.seawater import (FRANCOIS_GARRISON_RANGE, MACKENZIE_RANGE, OutOfRangeWarning, absorption,
                                          ainslie_mccolm, depth_to_pressure, sound_speed)
+from mitsonar.acoustics.water import SOUND_SPEED, Water
 
 __all__ = ["ARRIVAL_DTYPE", "FluidBottom", "arrivals", "eigenrays", "transmission_loss", "transmission_loss_field",
            "APL_UW_FREQUENCY_RANGE", "FRANCOIS_GARRISON_RANGE", "MACKENZIE_RANGE", "MATERIALS", "Material",
            "OutOfRangeWarning", "ProfileError", "RayPath", "ainslie_mccolm", "depth_to_pressure", "SEDIMENTS", "Sediment", "SoundSpeedProfile", "absorption",
            "apl_uw_backscatter", "bistatic_mean_grazing", "critical_angle", "lambert", "loss_parameter", "material",
-           "reflection_coefficient", "sediment", "sound_speed"]
+           "reflection_coefficient", "sediment", "sound_speed", "SOUND_SPEED", "Water"]

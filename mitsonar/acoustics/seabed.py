@@ -26,6 +26,7 @@ import numpy as np
 
 from mitsonar.acoustics._checks import as_array, at_least, grazing_angle, in_range
 from mitsonar.acoustics.interface import DB_PER_WAVELENGTH_PER_DELTA
+from mitsonar.acoustics.water import SOUND_SPEED
 
 __all__ = ["lambert", "bistatic_mean_grazing", "Sediment", "SEDIMENTS", "sediment", "apl_uw_backscatter",
            "APL_UW_FREQUENCY_RANGE"]
@@ -260,7 +261,7 @@ def _interp(x):
     return 1.0 / (1.0 + np.exp(np.clip(x, -40.0, 40.0)))
 
 
-def apl_uw_backscatter(grazing, frequency, sediment, sound_speed=1500.0, extrapolate=False):
+def apl_uw_backscatter(grazing, frequency, sediment, sound_speed=SOUND_SPEED, extrapolate=False):
     """Seabed backscattering strength, dB: the APL-UW high-frequency bottom model (TR 9407 sec. IV.C).
 
     :math:`S_b = 10\\log_{10}(\\sigma_r + \\sigma_v)` (sec. IV.C, Eqs. 34-66), with

@@ -50,7 +50,7 @@ def plot_bathymetry(result, grid, path, trajectory=None):
     seabed at the survey's median altitude."""
     from matplotlib.figure import Figure
 
-    from mitsonar.geometry import kinds
+    import mitsonar.kinds as kinds
     from mitsonar.products.bathymetry import predicted_rms
     from mitsonar.products.plots import _save
 
@@ -161,7 +161,7 @@ def _geo_frame(args):
 def _uncertainty(run):
     """Each sounding's predicted depth sigma (m, `predicted_rms` at its range and angle) where the
     model holds (speckled centroid detection across a transmit fan), else None."""
-    from mitsonar.geometry import kinds
+    import mitsonar.kinds as kinds
     from mitsonar.products.bathymetry import predicted_rms
 
     info, s = run.sonar, run.soundings

@@ -1,14 +1,14 @@
-"""``mitsonar live SCENE.xml``: a head in a loop with a vehicle (`mitsonar.devices.live`).
+"""``mitsonar live SCENE.xml``: a head in a loop with a vehicle (`mitsonar.live.heads`).
 
 Each ping the client asks for is rendered when it fires, from the vehicle's pose at that time:
-poses arrive as UDP datagrams on ``--pose-url`` (`mitsonar.devices.poses`), or come from a
+poses arrive as UDP datagrams on ``--pose-url`` (`mitsonar.live.poses`), or come from a
 ``--trajectory`` replayed in real time. Without ``--head``, a scene with a multibeam publishes
-its whole frames at ``--ping-rate`` (`mitsonar.devices.framing`). Each ping takes the paths that
+its whole frames at ``--ping-rate`` (`mitsonar.live.framing`). Each ping takes the paths that
 fit its budget (the head's ping period, or ``--budget-ms``; ``--spp`` fixes them instead) and is
-recorded (`mitsonar.devices.realtime`; ``--records FILE.csv|.jsonl``). Runs until ``--seconds``
+recorded (`mitsonar.live.realtime`; ``--records FILE.csv|.jsonl``). Runs until ``--seconds``
 or SIGINT/SIGTERM (exit 0, ports and files closed), then prints what it did (and on SIGUSR1).
 ``--foxglove``, ``--mcap``, ``--dds``: each ping (or frame) also goes to Foxglove, an MCAP file, ROS 2
-over DDS (`mitsonar.devices.outputs`). Exit codes as `mitsonar.cli.serial`.
+over DDS (`mitsonar.live.outputs`). Exit codes as `mitsonar.cli.serial`.
 """
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ def _frame_mode(args, scene_path) -> bool:
     sensor (its kind decides once the scene is loaded); False with a ``--head``."""
     if args.head is not None:
         return False
-    from mitsonar.devices.live import scene_kinds
+    from mitsonar.live.heads import scene_kinds
 
     if args.sensor is not None:
         return None             # decided by the named sensor's kind once the scene is loaded
@@ -52,10 +52,10 @@ def _live(args) -> int:
         from mitsonar.devices import registry
         args.head = registry.DEFAULT
     head = _head(args) if args.head is not None else None
-    from mitsonar.devices.live import (LIVE_HEADS, PingRenderer, PoseReceiver, SceneObjects, live_scene, pose_bounds,
+    from mitsonar.live.heads import (LIVE_HEADS, PingRenderer, PoseReceiver, SceneObjects, live_scene, pose_bounds,
                                        pose_socket)
-    from mitsonar.devices.poses import PoseBuffer, TrajectoryReplay
-    from mitsonar.devices.realtime import PingLog, check_records_path
+    from mitsonar.live.poses import PoseBuffer, TrajectoryReplay
+    from mitsonar.live.realtime import PingLog, check_records_path
     if head is not None and head.name not in LIVE_HEADS:
         raise ValueError(f"--head {head.name}: no live version (live heads: {', '.join(LIVE_HEADS)})")
     sources = [f for f, v in (("--pose-url", args.pose_url), ("--trajectory", args.trajectory),
@@ -96,7 +96,7 @@ def _live(args) -> int:
                 head.check_serve(args)
         if not frames and head.frames:
             if not sonar.sonar_kind.fan_frame:
-                from mitsonar.geometry import kinds
+                import mitsonar.kinds as kinds
                 raise ValueError(f"live {scene_path.name}: --head {head.name} is a multibeam head; a "
                                  f"{sonar.sonar_kind.name!r} sonar (kind must be {kinds.which('fan_frame')}) "
                                  f"has no {head.serves} to serve")
@@ -108,7 +108,7 @@ def _live(args) -> int:
         renderer = PingRenderer(scene, sonar, buffer, spp=args.spp, seed=args.seed, budget=budget, log=log,
                                 outputs=outputs)
         if frames:
-            from mitsonar.devices.framing import FrameLoop
+            from mitsonar.live.framing import FrameLoop
             rate = args.ping_rate
             if rate is None:
                 period = float(getattr(sonar, "ping_period", 0.0) or 0.0)
@@ -141,7 +141,7 @@ def _live(args) -> int:
         renderer.poses = TrajectoryReplay(trajectory)
     mav = None
     if args.mavlink:
-        from mitsonar.devices.mavlink import MavlinkReceiver
+        from mitsonar.live.mavlink import MavlinkReceiver
         try:
             mav = MavlinkReceiver(args.mavlink, buffer).start()
         except BaseException:
@@ -198,7 +198,7 @@ def _outputs(args):
     """The `LiveOutputs` that --foxglove, --mcap and --dds ask for (None: none)."""
     if args.foxglove is None and args.mcap is None and args.dds is None:
         return None
-    from mitsonar.devices.outputs import open_outputs
+    from mitsonar.live.outputs import open_outputs
     return open_outputs(foxglove=args.foxglove, mcap=args.mcap, dds=args.dds, force=args.force)
 
 
@@ -244,7 +244,7 @@ def _refuse_head_flags(args, scene_path) -> None:
 
 
 class loop_running:  # noqa: N801 - a context manager, named for its use
-    """``with loop_running(loop):`` runs a `mitsonar.devices.framing.FrameLoop` for the block."""
+    """``with loop_running(loop):`` runs a `mitsonar.live.framing.FrameLoop` for the block."""
 
     def __init__(self, loop):
         self.loop = loop

@@ -12,7 +12,7 @@ import sys
 import time
 
 from mitsonar import _files
-from mitsonar.geometry import kinds
+import mitsonar.kinds as kinds
 from mitsonar._checks import first_line
 
 EXIT_USAGE = 2
@@ -95,7 +95,7 @@ def _render(scene_path, spp, seed, max_depth=None, electronics=None, quiet=False
 
 
 #: The pictures that make sense for each sonar kind; the first is the default (a live view of the
-#: kinds' ``plot_kinds``, `mitsonar.geometry.kinds`).
+#: kinds' ``plot_kinds``, `mitsonar.kinds`).
 PLOT_KINDS = kinds.by_name("plot_kinds")
 ALL_PLOT_KINDS = ("polar", "cartesian", "ascan", "waterfall")
 

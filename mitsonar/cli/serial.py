@@ -117,7 +117,7 @@ def _virtual_sonar(args) -> int:
     sensor = sensor_of(scene, args)      # --sensor, or the first sonar (one warning if several)
     # Refuse before the render, not after it: a multibeam scene can take a while to render.
     if head.frames:
-        from mitsonar.geometry import kinds
+        import mitsonar.kinds as kinds
         if not getattr(kinds.lookup(getattr(sensor, "kind", kinds.DEFAULT)), "fan_frame", False):
             raise ValueError(f"virtual-sonar {scene_path.name}: --head {head.name} is a multibeam head; a "
                              f"{getattr(sensor, 'kind', kinds.DEFAULT)!r} sonar (kind must be "

@@ -28,7 +28,7 @@ class Head:
     options      ``(dest, flag)`` of the command-line options only this head takes: any
                  other head refuses them in one line
     frames       True for a head whose pings are whole multibeam frames (a kind with a
-                 transmit fan, `mitsonar.geometry.kinds`); False (default): scanlines of a
+                 transmit fan, `mitsonar.kinds`); False (default): scanlines of a
                  mechanically scanned head
     ===========  ===================================================================
 

@@ -134,7 +134,7 @@ def _codes(fmt):
 def check_scan(scan, name="scan") -> tuple[np.ndarray, np.ndarray]:
     """The port and starboard row indices of a side-scan ``scan`` with both channels, paired
     ping by ping; an `XTFError` naming ``name`` otherwise."""
-    from mitsonar.geometry import kinds
+    import mitsonar.kinds as kinds
 
     kind = kinds.kind_of(scan)
     if kind is None or not kind.sided:

@@ -1,1 +1,1 @@
-"""Geometry: sonar frames and kinds, trajectories, north-up grids, PLY meshes."""
+"""Geometry: sonar frames, trajectories, north-up grids, PLY meshes (the sonar kinds are `mitsonar.kinds`)."""

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-# The kinds of sonar head (the old ``KINDS``) are classes in `mitsonar.geometry.kinds`.
+# The kinds of sonar head (the old ``KINDS``) are classes in `mitsonar.kinds`.
 
 #: A side-scan head's ``side`` values, and the channel number of each side (``scan.channel``).
 SIDES = ("port", "starboard", "both")

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mitsonar.geometry import kinds
+import mitsonar.kinds as kinds
 from mitsonar.geometry.frames import PORT, SIDES, STARBOARD
 
 USES = ("data", "intensity")

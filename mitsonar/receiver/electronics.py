@@ -57,11 +57,10 @@ echoes (1e-7..1e-6, 22..32 dB at 4 m) inside it (`mitsonar.sonar_equation.levels
 bytes' ``noise_floor`` below); a 100 us pulse (the Micron's short-range setting: 7.5 cm) and 2 cm jitter blur echoes over a few bins. The receiver's noise floor
 (15.5 dB, 3 dB above ``ad_low``) and the ring-down (40 dB at the transducer, fading to ``ad_low``
 at 0.55 m: an amplitude decay time ``tau = 2 x 0.55 m / c x 8.69 / 27.5 dB = 0.23 ms``) are fitted
-to the byte statistics of public recordings of a real Micron (200 bins, 10-20 m, harbour and tank
-scenes): beyond 1.6 m, 14-51 % zero bytes and a Weibull shape of 1.05-1.54 for the non-zero
-ones; from 0.1 to 1.0 m a mean byte of 60-96 (`mitsonar.receiver.realism`, ``benchmarks/realism.py``).
-The previous defaults (noise floor 1.5 dB below ``ad_low``, a 50 dB ring-down to 1.3 m) gave
-67 %, 0.88 and 184 on the default box scan.
+to the byte statistics of public recordings of a real Micron (200 bins, 10-20 m, harbour and tank scenes):
+beyond 1.6 m, 14-51 % zero bytes and a Weibull shape of 1.05-1.54 for the non-zero ones; from 0.1 to 1.0 m a
+mean byte of 60-96 (`mitsonar.receiver.realism`, ``benchmarks/realism.py``). The previous defaults (noise
+floor 1.5 dB below ``ad_low``, a 50 dB ring-down to 1.3 m) gave 67 %, 0.88 and 184 on the default box scan.
 """
 from __future__ import annotations
 
@@ -73,6 +72,7 @@ from typing import Any
 import numpy as np
 
 from mitsonar._checks import is_number, not_a, not_allowed
+from mitsonar.acoustics.water import SOUND_SPEED
 import mitsonar.receiver.devicechain as devicechain
 from mitsonar.acoustics.levels import (DEFAULT_NOISE_LEVEL, DEFAULT_RECEIVER_SENSITIVITY, DEFAULT_SOURCE_LEVEL,
                                        SOURCE_LEVELS, echo_level, source_level_error)
@@ -318,7 +318,7 @@ class Electronics:
         top, step, dtype = devicechain.AD_CODES[self.bit_depth]
         return (_round_half_up(float(top) * x) * float(step)).astype(dtype)
 
-    def range_kernel(self, bin_width: float, sound_speed: float = 1500.0) -> np.ndarray:
+    def range_kernel(self, bin_width: float, sound_speed: float = SOUND_SPEED) -> np.ndarray:
         """Weights that spread one bin's echo energy over bins 0, 1, ... (offsets ``-m .. +m``).
 
         The continuous spread is a boxcar ``[0, c pulse_length / 2)`` (the pulse trails the echo)
@@ -339,7 +339,7 @@ class Electronics:
         """
         return np.array(devicechain.spread_kernel(sound_speed * self.pulse_length / 2.0, self.range_jitter, bin_width))
 
-    def spread(self, intensity, ranges, sound_speed: float = 1500.0) -> np.ndarray:
+    def spread(self, intensity, ranges, sound_speed: float = SOUND_SPEED) -> np.ndarray:
         """Spread echo energy along range by the pulse and the range jitter (step 1 of the chain).
 
         Parameters
@@ -370,14 +370,14 @@ class Electronics:
         out = devicechain.spread(mi.Float64(rows.reshape(-1)), rows.shape[0], rows.shape[1], kernel)
         return out.numpy().reshape(inten.shape)
 
-    def echo_level(self, intensity, ranges, sound_speed: float = 1500.0) -> np.ndarray:
+    def echo_level(self, intensity, ranges, sound_speed: float = SOUND_SPEED) -> np.ndarray:
         """The noise-free echo level at the receiver, dB re 1 uPa, per bin (``Scan.echo_level``):
         `mitsonar.sonar_equation.echo_level` with this head's ``source_level`` and
         ``pulse_length`` (float32, ``-inf`` where no echo)."""
         _bin_width(ranges)   # evenly spaced, or a clear error
         return echo_level(intensity, ranges, self.source_level, self.pulse_length, sound_speed)
 
-    def noise_bandwidth(self, bin_width: float = 0.0, sound_speed: float = 1500.0) -> float:
+    def noise_bandwidth(self, bin_width: float = 0.0, sound_speed: float = SOUND_SPEED) -> float:
         """Hz: ``receiver_bandwidth``, else ``1 / pulse_length`` (a matched CW pulse), else (no pulse) the
         bandwidth ``c / (2 bin_width)`` of one range bin."""
         if self.receiver_bandwidth > 0:
@@ -481,7 +481,7 @@ class Electronics:
 
     # ------------------------------------------------------------------------------------------
 
-    def apply(self, intensity, ranges, absorption=0.0, sound_speed=1500.0, seed=0, speckle=None) -> np.ndarray:
+    def apply(self, intensity, ranges, absorption=0.0, sound_speed=SOUND_SPEED, seed=0, speckle=None) -> np.ndarray:
         """Turn noise-free echo intensity into device bytes.
 
         The received amplitude of a bin is the coherent sum of the echo (its amplitude times the
@@ -549,7 +549,7 @@ class Electronics:
         data = devicechain.host_codes(data, inten.shape, self.bit_depth)
         return data[0] if one_ping else data
 
-    def device_bytes(self, intensity, shape, ranges, absorption=0.0, sound_speed=1500.0, seed=0, speckle=None):
+    def device_bytes(self, intensity, shape, ranges, absorption=0.0, sound_speed=SOUND_SPEED, seed=0, speckle=None):
         """`apply` on the device: ``intensity`` a Dr.Jit array (``mi.Float32`` or ``mi.Float64``
         of ``shape = (n_rows, n_bins)`` values, row-major, >= 0 and finite: not checked here, a
         render's histogram), the bytes a ``mi.UInt8`` array of the same layout (16 or 32 bits:

@@ -37,6 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mitsonar.acoustics.water import SOUND_SPEED
+
 #: -3 dB width factors of the processing windows, in units of the inverse of their support
 #: (the uniform window's sinc: 0.886; the Hann window's: 1.44; Harris, "On the use of windows for
 #: harmonic analysis with the discrete Fourier transform", Proc. IEEE 66(1), 1978, table 1).
@@ -70,7 +72,7 @@ class StripMap:
     speed: float
     ping_period: float
     range_max: float
-    sound_speed: float = 1500.0
+    sound_speed: float = SOUND_SPEED
 
     def __post_init__(self):
         n = self.n_elements
@@ -166,7 +168,7 @@ class StripMap:
         beam the element's own ``sinc`` of aperture ``D`` along track, or with ``flat`` a
         ``uniform`` beam over twice ``lambda / D`` (flat across the processed beam: for
         closed-form checks); ``beamwidth_v`` deg across track, its band, ping period and range."""
-        from mitsonar.geometry.kinds import SIDESCAN
+        from mitsonar.kinds import SIDESCAN
 
         beam = {"beam_pattern": "uniform", "beamwidth_h": 2.0 * math.degrees(self.beamwidth)} if flat else \
             {"beam_pattern": "sinc", "beamwidth_h": math.degrees(self.beamwidth), "aperture_h": self.element_length}

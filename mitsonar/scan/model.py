@@ -19,7 +19,7 @@ from mitsonar.scan.meta import ScanFieldError, ScanMeta
 
 # The frames' helpers and the kinds live below the Scan (the sensor plugin uses them too); they
 # stay importable from here.
-from mitsonar.geometry import kinds
+import mitsonar.kinds as kinds
 from mitsonar.geometry.frames import SIDES, _not_rigid, bearing_rotation, check_rigid, check_rigid_stack  # noqa: F401
 
 _RIGID = "only rigid transforms: rotation + translation, no scale, shear or mirror"
@@ -152,7 +152,7 @@ class Scan:
     kind : str
         ``mechanical``, ``multibeam`` or ``sidescan`` (then ``meta['side']``: ``port``,
         ``starboard`` or ``both``, default ``both``; see `channel`). `sonar_kind` is its class
-        (`mitsonar.geometry.kinds`), which says what differs between kinds.
+        (`mitsonar.kinds`), which says what differs between kinds.
     sound_speed : float  (m/s)
     absorption : float  (dB/m)
     electronics : ElectronicsSettings
@@ -264,7 +264,7 @@ class Scan:
 
     @property
     def sonar_kind(self) -> kinds.SonarKind:
-        """The `mitsonar.geometry.kinds.SonarKind` of `kind` (the string): what differs between kinds."""
+        """The `mitsonar.kinds.SonarKind` of `kind` (the string): what differs between kinds."""
         return kinds.get(self.kind, "Scan 'kind'")
 
     @property
@@ -282,7 +282,7 @@ class Scan:
 
     def volume(self) -> np.ndarray:
         """(n_elevation, n_azimuth, n_bins) float32: a volumetric scan's rows (one frame) as its
-        volume, row ``i n_azimuth + j`` at ``[i, j]`` (`mitsonar.geometry.kinds.Volumetric`; the grid
+        volume, row ``i n_azimuth + j`` at ``[i, j]`` (`mitsonar.kinds.Volumetric`; the grid
         is ``meta.n_elevation`` x ``meta.n_azimuth``). A ValueError for the other kinds, or for a
         scan whose rows are not that grid."""
         if not self.sonar_kind.grid:

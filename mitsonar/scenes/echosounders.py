@@ -16,30 +16,9 @@ port (the beam frame's +x is the vehicle's +y). A Mills-cross head is modelled a
 The altimeter (single-beam echo sounder) is one ping of a ``mechanical`` head that does not
 rotate: one conical gaussian beam looking down.
 
-Published figures (frequency, beam count, beam widths, swath), and where they come from:
-
-``r2sonic_2024``  R2Sonic Sonic 2024: 200 to 400 kHz selectable, 256 beams over a selectable
-                  sector of 10 to 160 deg (R2Sonic, "Sonic 2024/2022 Broadband Multibeam
-                  Echosounders, Operation Manual" V5.0, 2014, section 1.1, checked); beam widths
-                  0.5 deg across x 1 deg along at 400 kHz (R2Sonic Sonic 2024 data sheet).
-``kongsberg_em2040``  Kongsberg EM 2040: 200 to 400 kHz, modular beam widths 0.5 x 1 deg or
-                  1 x 1 deg (transmit along x receive across; Kongsberg Maritime, "EM 2040
-                  multibeam echo sounder" product leaflet, checked); 400 soundings per ping
-                  (single swath) and a 140 deg swath for one receiver (Kongsberg EM 2040
-                  data sheet).
-``tritech_pa500`` Tritech PA500 altimeter: 500 kHz, 6 deg conical beam, 0.1 to 50 m, 1 mm
-                  resolution (Tritech PA500 data sheet).
-
-Source levels (``source_level``, dB re 1 uPa at 1 m) are typical values, not found in the sheets
-cited above: 215 dB for the two multibeams (high-frequency MBES: 200..230 dB, Lurton, *An
-Introduction to Underwater Acoustics*, 2nd ed. 2010, sec. 8.3), 205 dB for the altimeter. Each
-preset's ``receiver_sensitivity`` is ``52 - source_level`` (the shared A/D calibration, so the
-bytes are as before levels had units) and its ``noise_level`` the ambient noise at its frequency
-(`mitsonar.sonar_equation.ambient_noise_level`, wind 5 m/s, rounded).
-
-Figures marked "data sheet" are as the makers publish them but were not re-checked against the
-sheet for this module. The range bin (``bin_width``) is a simulation choice near the heads' range
-resolution ``c / (2 bandwidth)`` (1.25 cm for a 60 kHz bandwidth), not a published figure. The
+The published figures of each head (frequency, beam count, beam widths, swath, source level), with
+their sources, are `mitsonar.presets.echosounders`. The range bin (``bin_width``) is a simulation
+choice near the heads' range resolution ``c / (2 bandwidth)`` (1.25 cm for a 60 kHz bandwidth), not a published figure. The
 multibeams' ``pulse_length`` (an electronics field of the sensor) is the matched pulse of that
 resolution, ``2 bin / c`` = 16.7 us at the preset's bin: the scene's speckle grains
 (`mitsonar.receiver.speckle`, ``max(c pulse_length / 2, bin)`` long) are then one range resolution long,
@@ -57,10 +36,9 @@ import numpy as np
 
 from mitsonar._checks import is_number, not_allowed
 from mitsonar._limits import LIMITS, check
-from mitsonar.geometry.kinds import MECHANICAL, MULTIBEAM, SonarKind
+from mitsonar.acoustics.water import SOUND_SPEED
+from mitsonar.presets.echosounders import PRESETS, WHERE, EchoSounder, preset  # noqa: F401 (this room's names)
 from mitsonar.sonar_equation.levels import CALIBRATION_DB
-
-WHERE = "echosounder"
 
 #: The widest fan a bathymetric head may have: beyond 180 deg its outer beams look up.
 MAX_SWATH = 180.0
@@ -69,48 +47,6 @@ RX_ALONG_FACTOR = 4.0
 #: Transmit fan's across-track gaussian width over the swath.
 TX_ACROSS_FACTOR = 1.5
 MAX_BINS = int(LIMITS["n_bins"].hi)   # the sensor's bound (`mitsonar._limits`)
-
-
-@dataclasses.dataclass(frozen=True)
-class EchoSounder:
-    """One echo sounder's published figures (angles in degrees, lengths in metres)."""
-
-    name: str
-    model: str
-    kind: SonarKind        # MULTIBEAM (an MBES) or MECHANICAL, one fixed ping (an altimeter)
-    frequency: float       # Hz
-    n_beams: int
-    rx_across: float       # receive beam width across track (altimeter: the cone's width)
-    tx_along: float        # transmit width along track (altimeter: the cone's width)
-    swath: float           # default angle between the outermost beams' centres (altimeter: 0)
-    swath_range: tuple     # (smallest, widest) swath the head allows
-    range_max: float       # default end of the range window
-    bin_width: float       # range bin (a simulation choice, see the module docstring)
-    source: str
-    source_level: float = 215.0    # dB re 1 uPa at 1 m (typical: see the module docstring)
-    noise_level: float = 37.0      # dB re 1 uPa^2/Hz, ambient at the frequency
-
-
-PRESETS = {
-    "r2sonic_2024": EchoSounder(
-        "r2sonic_2024", "R2Sonic Sonic 2024", MULTIBEAM, 400e3, 256, 0.5, 1.0, 130.0, (10.0, 160.0),
-        40.0, 0.0125, "R2Sonic Sonic 2024/2022 Operation Manual V5.0 (2014) sec. 1.1; Sonic 2024 data sheet"),
-    "kongsberg_em2040": EchoSounder(
-        "kongsberg_em2040", "Kongsberg EM 2040", MULTIBEAM, 400e3, 400, 1.0, 0.5, 140.0, (10.0, 140.0),
-        40.0, 0.0125, "Kongsberg Maritime EM 2040 product leaflet; EM 2040 data sheet"),
-    "tritech_pa500": EchoSounder(
-        "tritech_pa500", "Tritech PA500 altimeter", MECHANICAL, 500e3, 1, 6.0, 6.0, 0.0, (0.0, 0.0),
-        50.0, 0.001, "Tritech PA500 data sheet", source_level=205.0, noise_level=39.0),
-}
-
-
-def preset(name) -> EchoSounder:
-    """The `EchoSounder` called ``name`` (a key of `PRESETS`), or one line naming the choices."""
-    if isinstance(name, EchoSounder):
-        return name
-    if name not in PRESETS:
-        raise not_allowed(WHERE, "preset", name, "one of " + ", ".join(sorted(PRESETS)))
-    return PRESETS[name]
 
 
 def looking_down(position=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -138,7 +74,7 @@ class HeadSetup:
 
 
 def configure(name, *, swath=None, n_beams=None, range_min=None, range_max=None, bin_width=None,
-              n_bins=None, mount=None, sound_speed=1500.0) -> HeadSetup:
+              n_bins=None, mount=None, sound_speed=SOUND_SPEED) -> HeadSetup:
     """The ``sonar`` sensor parameters of preset ``name`` with the given overrides.
 
     ============ ===================================================================================

@@ -13,17 +13,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from mitsonar.acoustics.water import SOUND_SPEED
 from mitsonar.geometry.elements import MIN_SEPARATION, check_elements, read_elements
 
 
-def line_array(n=64, spacing=None, frequency=700e3, sound_speed=1500.0) -> np.ndarray:
+def line_array(n=64, spacing=None, frequency=700e3, sound_speed=SOUND_SPEED) -> np.ndarray:
     """(n, 3): a uniform line array along +x centred on the origin (module docstring)."""
     d = 0.5 * sound_speed / frequency if spacing is None else float(spacing)
     x = (np.arange(int(n)) - 0.5 * (int(n) - 1)) * d
     return check_elements(np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1), "line_array")
 
 
-def interferometer(n=2, spacing=None, frequency=700e3, sound_speed=1500.0) -> np.ndarray:
+def interferometer(n=2, spacing=None, frequency=700e3, sound_speed=SOUND_SPEED) -> np.ndarray:
     """(n, 3): ``n`` elements along +y from the origin (module docstring); default spacing half a
     wavelength (unambiguous angles)."""
     d = 0.5 * sound_speed / frequency if spacing is None else float(spacing)
@@ -31,7 +32,7 @@ def interferometer(n=2, spacing=None, frequency=700e3, sound_speed=1500.0) -> np
     return check_elements(np.stack([np.zeros_like(y), y, np.zeros_like(y)], axis=1), "interferometer")
 
 
-def wavelength(frequency, sound_speed=1500.0) -> float:
+def wavelength(frequency, sound_speed=SOUND_SPEED) -> float:
     return float(sound_speed) / float(frequency)
 
 

@@ -50,7 +50,7 @@ from typing import Any
 
 import numpy as np
 
-import mitsonar.geometry.kinds as kinds
+import mitsonar.kinds as kinds
 
 from mitsonar.signals.arrays import check_elements, interferometer, line_array
 from mitsonar.signals.pulses import Pulse

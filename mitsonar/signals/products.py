@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-import mitsonar.geometry.kinds as kinds
+import mitsonar.kinds as kinds
 
 from mitsonar.signals.processing import (arrival_angle, delay_and_sum, equivalent_duration, look_directions,
                                          matched_filter)

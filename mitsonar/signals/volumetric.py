@@ -6,7 +6,7 @@ the columns) and y (elevation, across the rows), facing +z. One transmission giv
 range x azimuth x elevation, not a fan image that collapses elevation:
 
 * `render_echoes` renders the element data: the head is a ``volumetric`` sensor (its rows the
-  beam grid, `mitsonar.geometry.kinds.Volumetric`) whose transmit fan covers the field of view
+  beam grid, `mitsonar.kinds.Volumetric`) whose transmit fan covers the field of view
   (`Volumetric.sensor_xml`) and whose elements are the planar array (`Volumetric.elements`); one
   row, the frame's transmission; `mitsonar.render_scan` of that sensor renders each beam's echo
   energy straight from its receive beam (`mitsonar.scan.Scan.volume` gives the volume);
@@ -36,6 +36,9 @@ from typing import Any
 
 import numpy as np
 
+from mitsonar.acoustics.water import SOUND_SPEED
+import mitsonar.presets.volumetric as volumetric_presets
+
 #: Voxels of one kernel launch: bounds the memory whatever the volume.
 CHUNK = 1 << 18
 
@@ -58,7 +61,7 @@ class Volumetric:
     range_max: float
     n_bins: int = 200
     pitch: float | None = None
-    sound_speed: float = 1500.0
+    sound_speed: float = SOUND_SPEED
     range_min: float = 0.0
 
     def __post_init__(self):
@@ -131,12 +134,12 @@ class Volumetric:
         return lfm(self.frequency - 0.5 * self.bandwidth, self.frequency + 0.5 * self.bandwidth, T)
 
     def sensor_xml(self, to_world=None, source_level=210.0) -> str:
-        """A ``<sensor type="sonar">`` of kind ``volumetric`` (`mitsonar.geometry.kinds.Volumetric`)
+        """A ``<sensor type="sonar">`` of kind ``volumetric`` (`mitsonar.kinds.Volumetric`)
         for `mitsonar.render_echoes`, `render_volume` and `mitsonar.render_scan`: its rows the
         ``n_elevation x n_azimuth`` beams at `elevations` x `azimuths`, each a gaussian receive beam
         of the array's broadside widths (`beamwidths`), a uniform transmit fan over the field of
         view (plus a tenth), the band, the range; ``to_world`` a 4x4 beam frame (default identity)."""
-        from mitsonar.geometry.kinds import VOLUMETRIC
+        from mitsonar.kinds import VOLUMETRIC
 
         az, el = np.degrees(self.azimuths()), np.degrees(self.elevations())
         w_az, w_el = (min(179.0, math.degrees(w)) for w in self.beamwidths())
@@ -159,40 +162,8 @@ def _centres(fov_deg, n):
     return (np.arange(n) - 0.5 * (n - 1)) * w
 
 
-#: 3D sonars by name, with their published figures. ``echoscope``: the Coda Octopus Echoscope, a
-#: field of view of 50 x 50 deg in 128 x 128 beams (16384; up to 12 pings a second: QPS, Qinsy
-#: driver notes "CodaOctopus Echoscope", quoting the maker), to 120 m. Its carrier (375 kHz, the
-#: maker's standard model, not checked against a data sheet here), its array (48 x 48 elements at
-#: half a wavelength: 2.1 deg beams at broadside, which the 0.4 deg beam spacing oversamples) and
-#: its 10 % band are this preset's assumptions.
-#:
-#: ``sonar3d15_navigation`` and ``sonar3d15_inspection``: the Water Linked Sonar 3D-15's two modes, as
-#: the maker's documentation publishes them (docs.waterlinked.com, "Sonar 3D-15" specifications and
-#: "Integration API Sonar 3D-15"): navigation 1.2 MHz, 90 x 40 deg, 0.2 to 15 m, range resolution 4 mm,
-#: angular resolution 0.6 deg (H) x 2.4 deg (V), 5 Hz; inspection 2.4 MHz, 40 x 40 deg, 0.2 to 4 m,
-#: 1.5 mm, 0.4 x 1.1 deg, 20 Hz; both 256 x 64 beams (the range image's width x height; beam
-#: separation 0.35 / 0.16 deg by 0.6 deg) and 1491 m/s (the head's default sound speed). Derived here:
-#: the band ``c / (2 resolution)`` (the compressed pulse's cell, `mitsonar.signals.pulses.Pulse.range_resolution`)
-#: and the bins, one per range resolution cell. Assumed here (the maker publishes no array): a filled
-#: array at half a wavelength whose 0.886 lambda / (N d) widths (`Volumetric.beamwidths`) are the published
-#: angular resolutions, N = 0.886 / (0.5 resolution in rad), rounded.
-_WL_C = 1491.0
-
-
-def _sonar3d15(frequency, fov_azimuth, range_max, resolution, res_h, res_v):
-    n = lambda res: int(round(0.886 / (0.5 * math.radians(res))))  # noqa: E731
-    return Volumetric(rows=n(res_v), columns=n(res_h), frequency=frequency, bandwidth=_WL_C / (2.0 * resolution),
-                      n_azimuth=256, n_elevation=64, fov_azimuth=fov_azimuth, fov_elevation=40.0,
-                      range_max=range_max, n_bins=int(round((range_max - 0.2) / resolution)), sound_speed=_WL_C,
-                      range_min=0.2)
-
-
-PRESETS = {
-    "echoscope": Volumetric(rows=48, columns=48, frequency=375e3, bandwidth=37.5e3, n_azimuth=128,
-                            n_elevation=128, fov_azimuth=50.0, fov_elevation=50.0, range_max=120.0, n_bins=1000),
-    "sonar3d15_navigation": _sonar3d15(1.2e6, 90.0, 15.0, 0.004, 0.6, 2.4),
-    "sonar3d15_inspection": _sonar3d15(2.4e6, 40.0, 4.0, 0.0015, 0.4, 1.1),
-}
+#: 3D sonars by name: their published figures (`mitsonar.presets.volumetric`, with the sources).
+PRESETS = {name: Volumetric(**figures) for name, figures in volumetric_presets.FIGURES.items()}
 
 
 @dataclass
@@ -428,7 +399,7 @@ def render_volume(scene, head, *, spp=4096, seed=0, pose=None, sensor=0, max_dep
     summed over range agrees with the coherent path's speckle-averaged one, which spreads it over
     the bins by the pulse's autocorrelation. Cost: scatterers x beams (numpy, ``chunk`` scatterers
     at a time); no pulse, no elements."""
-    from mitsonar.geometry import kinds
+    import mitsonar.kinds as kinds
     from mitsonar.signals.echoes import _trace
     from mitsonar.sim.render import SEED_ALLOWED, SEED_MAX, SPP_ALLOWED, SPP_MAX, _check_pose, _whole
     from mitsonar.sim.scene import SceneError, sonar_of

@@ -13,8 +13,10 @@ import math
 
 import numpy as np
 
-from mitsonar.geometry import kinds
+from mitsonar.acoustics.water import SOUND_SPEED
+import mitsonar.kinds as kinds
 from mitsonar.geometry.frames import bearing_rotation, check_rigid
+import mitsonar.presets.micron as micron
 from mitsonar.scan import ElectronicsSettings, Scan, ScanMeta, reception_times
 from mitsonar.devices.micron.seanet.constants import FULL_TURN, HdCtrl, bearing_to_radians
 from mitsonar.devices.micron.seanet.messages import HeadData
@@ -59,7 +61,7 @@ class ScanAssembler:
     ``scan.meta["missing"]`` (row indices) and left zero.
     """
 
-    def __init__(self, sound_speed: float = 1500.0, *, revisit: bool = True, max_turns: int = 3,
+    def __init__(self, sound_speed: float = SOUND_SPEED, *, revisit: bool = True, max_turns: int = 3,
                  settings: HeadSettings | None = None):
         if not (isinstance(max_turns, int) and max_turns >= 1):
             raise ValueError(f"max_turns must be an integer >= 1, got {max_turns!r}")
@@ -271,7 +273,8 @@ class ScanAssembler:
             meta.start_time, meta.end_time = float(min(times)), float(max(times))
         return Scan(intensity=np.zeros((n, nb), np.float32), data=data,
                     ranges=(np.arange(nb) + 0.5) * width, bearings=bearings, poses=poses,
-                    range_min=0.0, range_max=float(range_max), beamwidth_h=3.0, beamwidth_v=35.0,
+                    range_min=0.0, range_max=float(range_max), beamwidth_h=micron.BEAMWIDTH_H,
+                    beamwidth_v=micron.BEAMWIDTH_V,
                     kind=kinds.MECHANICAL.name, sound_speed=c, times=reception_times(row_times),
                     electronics=ElectronicsSettings.from_dict(_wire_electronics(ref)), meta=meta)
 

@@ -5,6 +5,7 @@ Imports its codec, driver and virtual head only when asked for them.
 """
 from __future__ import annotations
 
+from mitsonar.acoustics.water import SOUND_SPEED
 from mitsonar.devices.head import Head
 
 __all__ = ["MicronHead", "HEAD"]
@@ -85,7 +86,7 @@ class MicronHead(Head):
         from mitsonar.devices.micron.assembler import ScanAssembler
         from mitsonar.devices.micron.seanet.settings import SOUND_SPEED_ALLOWED, HeadSettings, sound_speed_ok
         from mitsonar.devices.recording import assemble_log
-        c = sound_speed or meta.get("sound_speed") or 1500.0
+        c = sound_speed or meta.get("sound_speed") or SOUND_SPEED
         if not sound_speed_ok(c):
             raise ValueError(f"{path}: the log's sound_speed = {c!r} is out of range: allowed "
                              f"{SOUND_SPEED_ALLOWED} (pass sound_speed)")

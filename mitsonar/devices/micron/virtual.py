@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mitsonar._checks import in_range
+from mitsonar.acoustics.water import SOUND_SPEED
 from mitsonar.scan import Scan
 from mitsonar.scan.model import require_bytes
 from mitsonar.devices.transports import ServedHead, check_port
@@ -137,7 +138,7 @@ class VirtualMicron(ServedHead):
         self.realtime = bool(realtime)
         self.dst = bool(dst)
         if sound_speed is None:
-            sound_speed = float(scan_source.sound_speed) if isinstance(scan_source, Scan) else 1500.0
+            sound_speed = float(scan_source.sound_speed) if isinstance(scan_source, Scan) else SOUND_SPEED
         self.sound_speed = float(sound_speed)
         self.boot_time = float(boot_time if boot_time is not None else (2.0 if realtime else 0.02))
         self.alive_interval = float(alive_interval if alive_interval is not None else (1.0 if realtime else 0.05))

@@ -1,4 +1,4 @@
 """Blueprint Subsea Oculus M-series multibeam heads (M750d, M1200d, M3000d): the Ethernet codec
-(`protocol`), the models' presets (`presets`), the virtual head (`virtual`), the driver
+(`protocol`), the virtual head (`virtual`), the driver
 (`driver`), ``.oculus`` logs (`logfile`) and what the head is to `mitsonar.devices.registry`
-(`registration`)."""
+(`registration`). The models' published figures are `mitsonar.presets.oculus`."""

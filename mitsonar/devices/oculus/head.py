@@ -9,13 +9,14 @@ bins are its range lines: bin i is centred at ``(i + 1/2) x rangeResolution`` (w
 bits: `mitsonar.devices.oculus.virtual` widens a level by 257 and 16843009, so a level
 round-trips). Row k's pose is the head's pose turned by bearing k about the fan's axis
 (`mitsonar.geometry.frames.bearing_rotation`); the beam widths are the model's in the
-result's frequency mode (`mitsonar.devices.oculus.presets`), else 1 x 20 degrees.
+result's frequency mode (`mitsonar.presets.oculus`), else 1 x 20 degrees.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from mitsonar.devices.oculus import presets
+from mitsonar.acoustics.water import SOUND_SPEED
+import mitsonar.presets.oculus as presets
 from mitsonar.devices.oculus.protocol import PingResult
 
 __all__ = ["ping_to_scan", "OculusAssembler", "mode_of"]
@@ -39,7 +40,7 @@ def mode_of(frequency: float, master_mode: int | None = None):
 def ping_to_scan(ping: PingResult, pose=None, t: float = 0.0, meta: dict | None = None):
     """The `Scan` of one simple ping result, with the head at ``pose`` (4x4, default identity)
     at time ``t`` (s, ``meta['start_time']``)."""
-    from mitsonar.geometry import kinds
+    import mitsonar.kinds as kinds
     from mitsonar.geometry.frames import bearing_rotation
     from mitsonar.scan import ElectronicsSettings, Scan, ScanMeta
 
@@ -55,7 +56,7 @@ def ping_to_scan(ping: PingResult, pose=None, t: float = 0.0, meta: dict | None 
     bearings = np.radians(np.asarray(ping.bearings, np.float64) / 100.0)
     mode = mode_of(ping.frequency, ping.fire.master_mode)
     c = float(ping.speed_of_sound_used) if np.isfinite(ping.speed_of_sound_used) and \
-        ping.speed_of_sound_used > 0 else 1500.0
+        ping.speed_of_sound_used > 0 else SOUND_SPEED
     info = {"source": "oculus", "sweep": "sector", "start_time": float(t),
             "frequency": float(ping.frequency) if ping.frequency > 0 and np.isfinite(ping.frequency) else None,
             "oculus_ping_id": int(ping.ping_id), "oculus_gain_percent": float(ping.fire.gain),

@@ -39,7 +39,7 @@ message (header included).
 
 ``OculusStatusMsg`` (UDP, 142 bytes), `StatusMessage`
     16 ``deviceId`` (u32), 20 ``deviceType`` (u16, 1 imaging sonar), 22 ``partNumber`` (u16,
-    `mitsonar.devices.oculus.presets`), 24 ``status`` (u32; bits 0-2 the master state, 3 =
+    `mitsonar.presets.oculus`), 24 ``status`` (u32; bits 0-2 the master state, 3 =
     main run), 28 ``versionInfo`` (6 u32), 52 ``ipAddr``, 56 ``ipMask``, 60 ``connectedIpAddr``
     (u32 in network byte order: liboculus reads them with ``ntohl``), 64 ``macAddr0..5``,
     70 ``temperature0..7`` (double), 134 ``pressure``. liboculus's ``StatusRx`` takes a datagram

@@ -3,9 +3,9 @@
 The virtual head (`mitsonar.devices.oculus.virtual.VirtualOculus`, ``frames=``) asks for the frame
 of each fire message's settings: ``frames(mode, n_beams, range)``. `SceneFrames` renders the
 scene file's multibeam ``sonar`` sensor with its XML properties set to the model's mode
-(`mitsonar.devices.oculus.presets.Mode`): ``n_beams`` receive beams evenly spaced across the
+(`mitsonar.presets.oculus.Mode`): ``n_beams`` receive beams evenly spaced across the
 mode's aperture at the head's own bearing table (the sensor's ``bearings``:
-`mitsonar.devices.oculus.presets.bearing_table`, even in sine, in place of the XML's ``n_pings``,
+`mitsonar.presets.oculus.bearing_table`, even in sine, in place of the XML's ``n_pings``,
 ``bearing_start`` and ``bearing_step``), the mode's beam widths (``beamwidth_h``,
 ``beamwidth_v``), a transmit fan as wide as the aperture (``tx_beamwidth_h``, ``tx_beamwidth_v``),
 its ``frequency``, and the range window ``0 .. range`` in bins of the given width: row k of the
@@ -74,7 +74,7 @@ class SceneFrames:
     def water(self) -> dict:
         """The rendered sensor's water (`mitsonar.devices.oculus.virtual.scene_water`: its
         ``temperature`` and ``surface_z``), from the scene as it loads."""
-        from mitsonar.devices.live import live_scene
+        from mitsonar.live.heads import live_scene
         from mitsonar.devices.oculus.virtual import scene_water
 
         scene = live_scene(self.path, self._choose)
@@ -82,7 +82,7 @@ class SceneFrames:
 
     def _values(self, mode, n_beams: int, range_m: float) -> dict:
         """The sensor's XML properties for a mode, a beam count and a range: {name: (tag, value)}."""
-        from mitsonar.devices.oculus.presets import bearing_table
+        from mitsonar.presets.oculus import bearing_table
 
         n_bins = max(1, min(4096, int(round(range_m / self.bin_width))))
         table = bearing_table(mode.aperture, n_beams) / 100.0
@@ -107,7 +107,7 @@ class SceneFrames:
 
     def sensor_at(self, mode, n_beams: int, range_m: float):
         """The scene's sonar sensor alone at that geometry (a new sensor object, cached per
-        setting), for rendering the scene as loaded (`mitsonar.devices.live.LiveOculus`: the shapes
+        setting), for rendering the scene as loaded (`mitsonar.live.heads.LiveOculus`: the shapes
         it moves stay moved)."""
         key = ("sensor", mode, int(n_beams), round(float(range_m), 9))
         with self._lock:
@@ -120,7 +120,7 @@ class SceneFrames:
     def _load_sensor(self, mode, n_beams: int, range_m: float):
         import mitsuba as mi
 
-        from mitsonar.devices.live import scene_folder
+        from mitsonar.live.heads import scene_folder
         from mitsonar.sim.variant import ensure_variant
 
         try:
@@ -137,7 +137,7 @@ class SceneFrames:
         return mi.load_string(text, **defaults)
 
     def _render(self, mode, n_beams: int, range_m: float):
-        from mitsonar.devices.live import live_scene
+        from mitsonar.live.heads import live_scene
         from mitsonar.sim.render import render_scan
 
         values = self._values(mode, n_beams, range_m)

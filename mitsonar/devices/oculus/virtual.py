@@ -1,7 +1,7 @@
 """A virtual Oculus M-series head: a status broadcast on UDP and a TCP port answering fire
 messages with simple ping results rendered from a multibeam scan.
 
-``VirtualOculus(scan)`` is the head of one model (`mitsonar.devices.oculus.presets`, default the
+``VirtualOculus(scan)`` is the head of one model (`mitsonar.presets.oculus`, default the
 M1200d). It binds ``host`` (127.0.0.1 by default; loopback only unless asked) on TCP
 ``tcp_port`` (52100) and sends an ``OculusStatusMsg`` carrying ``host`` as its address every
 ``status_period`` s to ``host``:``udp_port`` (52102), as a real head broadcasts it on its
@@ -30,7 +30,7 @@ Each ping (`VirtualOculus.ping`) comes from a scan (`VirtualOculus.scan_for`): w
 uses), the scene rendered at the fire message's geometry (the mode's aperture, frequency and beam
 widths, the beam count, the range); else the scan given (ping k: scan k of a list, in turn).
 The beams are the head's own bearing table
-(`mitsonar.devices.oculus.presets.bearing_table` of the mode's aperture); beam k takes the row of
+(`mitsonar.presets.oculus.bearing_table` of the mode's aperture); beam k takes the row of
 the scan whose bearing is nearest (within half the scan's row spacing there; zeros outside the
 scan's fan). The range lines are ``range_resolution = bin width x c_used / c_scan`` apart (the
 scan's bins at the scan's sound speed), ``n_ranges = round(range / range_resolution)``; line i
@@ -74,7 +74,7 @@ from collections import Counter, deque
 
 import numpy as np
 
-from mitsonar.devices.oculus import presets
+import mitsonar.presets.oculus as presets
 from mitsonar.devices.oculus.protocol import (FLAG, PING_RATE_HZ, TCP_PORT, UDP_PORT, FireMessage, OculusError,
                                               PingResult, StatusMessage, StreamParser)
 from mitsonar.scan import Scan
@@ -250,7 +250,7 @@ class VirtualOculus:
         return self.scans[ping_id % len(self.scans)]
 
     def geometry_of(self, fire: FireMessage) -> tuple:
-        """``(mode, n_beams, range m)`` a fire message asks for (`mitsonar.devices.oculus.presets.Mode`)."""
+        """``(mode, n_beams, range m)`` a fire message asks for (`mitsonar.presets.oculus.Mode`)."""
         mode = self.model.mode(fire.master_mode)
         return mode, fire.n_beams, _range(fire, mode)
 
@@ -514,7 +514,7 @@ class VirtualOculus:
 
     def delivered(self, ping_id: int, t: float | None) -> None:
         """Ping ``ping_id``'s last byte was written to its client at ``t`` (the head's clock), or
-        never (``t`` None: the client went first). Nothing here; `mitsonar.devices.live.LiveOculus`
+        never (``t`` None: the client went first). Nothing here; `mitsonar.live.heads.LiveOculus`
         logs the ping's latency."""
 
     def _read(self, c: _Client) -> None:

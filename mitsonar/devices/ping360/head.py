@@ -29,8 +29,10 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from mitsonar._checks import in_range, is_whole, require
-from mitsonar.geometry import kinds
+from mitsonar.acoustics.water import SOUND_SPEED
+import mitsonar.kinds as kinds
 from mitsonar.geometry.frames import bearing_rotation, check_rigid
+from mitsonar.presets.ping360 import BEAMWIDTH_H, BEAMWIDTH_V  # the head's beam (published figures)
 from mitsonar.scan import ElectronicsSettings, Scan, ScanMeta, reception_times
 
 __all__ = ["Ping360Settings", "Ping360Assembler", "GRADIANS", "TICK", "LIMITS", "GAIN_PRESETS",
@@ -39,8 +41,6 @@ __all__ = ["Ping360Settings", "Ping360Assembler", "GRADIANS", "TICK", "LIMITS", 
 GRADIANS = 400
 TICK = 25e-9
 GAIN_PRESETS = {"low": 0, "normal": 1, "high": 2}
-#: the head's beam, full widths in degrees (Blue Robotics' Ping360 specifications)
-BEAMWIDTH_H, BEAMWIDTH_V = 2.0, 25.0
 LIMITS = {"gain_setting": (0, 2), "transmit_duration": (1, 1000), "sample_period": (80, 40000),
           "transmit_frequency": (500, 1000), "number_of_samples": (200, 1200), "angle": (0, 399),
           "step": (1, 200), "sound_speed": (1300.0, 1800.0)}
@@ -91,7 +91,7 @@ class Ping360Settings:
 
     range: float = 12.0
     number_of_samples: int = 1200
-    sound_speed: float = 1500.0
+    sound_speed: float = SOUND_SPEED
     gain_setting: int = 1
     transmit_frequency: int = 750
     transmit_duration: int | None = None

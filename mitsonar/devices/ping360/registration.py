@@ -5,6 +5,7 @@ Imports its codec, driver and virtual head only when asked for them.
 """
 from __future__ import annotations
 
+from mitsonar.acoustics.water import SOUND_SPEED
 from mitsonar.devices.head import Head
 
 __all__ = ["Ping360Head", "HEAD"]
@@ -66,7 +67,7 @@ class Ping360Head(Head):
         """The log's `Ping360Settings` at ``sound_speed`` (default the log's, else 1500 m/s)."""
         from mitsonar.devices.ping360.head import LIMITS, Ping360Settings
         lo, hi = LIMITS["sound_speed"]
-        c = sound_speed or meta.get("sound_speed") or 1500.0
+        c = sound_speed or meta.get("sound_speed") or SOUND_SPEED
         if not (isinstance(c, (int, float)) and lo <= c <= hi):
             raise ValueError(f"{path}: sound_speed = {c!r} is out of range: allowed {lo:g}..{hi:g} m/s")
         try:

@@ -15,7 +15,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from mitsonar.geometry import kinds
+import mitsonar.kinds as kinds
 
 # The standard mount of a mechanical or multibeam head on the vehicle (REP-103: x forward, y port,
 # z up): boresight at bearing 0 forward, scan axis up (beam x = vehicle y, beam y = vehicle z,

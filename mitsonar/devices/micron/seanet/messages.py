@@ -17,6 +17,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from mitsonar.acoustics.water import SOUND_SPEED
 from mitsonar.devices.micron.seanet.constants import (DEFAULT_NIBBLE_ORDER, FULL_TURN, PC_NODE, SONAR_NODE, HdCtrl, HeadInf,
                         HeadStatus, MessageId, SeaNetError, pack_bins, unpack_bins)
 
@@ -550,7 +551,7 @@ class HeadData(Message):
         """Seconds between bins (ADInterval x 640 ns)."""
         return self.ad_interval * 640e-9
 
-    def bin_width(self, sound_speed: float = 1500.0) -> float:
+    def bin_width(self, sound_speed: float = SOUND_SPEED) -> float:
         """Range covered by one bin in metres."""
         return sound_speed * self.sampling_interval / 2.0
 

@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 
 from mitsonar._checks import in_range, is_number
-from mitsonar.geometry import kinds
+from mitsonar.acoustics.water import SOUND_SPEED
+import mitsonar.kinds as kinds
 from mitsonar.receiver.electronics import HEAD_AD_BYTES, HEAD_DB_SCALE, HEAD_LIMITS
 from mitsonar.scan.electronics import ElectronicsSettings
 from mitsonar.devices.micron.seanet.constants import FULL_TURN, STEP_SIZES, HdCtrl, radians_to_bearing
@@ -103,7 +104,7 @@ class HeadSettings:
 
     range: float = 12.0
     n_bins: int = 500
-    sound_speed: float = 1500.0
+    sound_speed: float = SOUND_SPEED
     gain: float = 27.8
     ad_low: float = 12.5
     ad_span: float = 24.0
@@ -267,7 +268,7 @@ class HeadSettings:
             max_ad_buf=self.max_ad_buf, lockout=self.lockout, v3b_block=block)
 
     @classmethod
-    def from_command(cls, cmd: HeadCommand, sound_speed: float = 1500.0) -> "HeadSettings":
+    def from_command(cls, cmd: HeadCommand, sound_speed: float = SOUND_SPEED) -> "HeadSettings":
         """Settings a head would infer from ``cmd`` (the virtual sonar's view of the host).
 
         The range comes from ADInterval and ``sound_speed`` (RangeScale is informational).

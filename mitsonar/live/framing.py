@@ -1,6 +1,6 @@
 """Multibeam frames at their ping period (``mitsonar live SCENE`` without ``--head``).
 
-`FrameLoop` renders the scene's whole frame (every receive beam, `mitsonar.devices.live.PingRenderer`
+`FrameLoop` renders the scene's whole frame (every receive beam, `mitsonar.live.heads.PingRenderer`
 with no bearing) at the times ``t0 + k / rate``, each from the vehicle's pose at its own time,
 with ``1 / rate`` seconds as its budget, and hands it to each callable of ``on_frame`` as
 ``on_frame(t_ns, vehicle_pose, mount, scan)`` (``t_ns``: the frame's time, nanoseconds of the

@@ -4,13 +4,13 @@ node subscribes to without a bridge, under ROS 2's DDS names (topic ``rt/`` + th
 type ``package::msg::dds_::Type_``) and its default QoS (reliable, volatile, keep last 10).
 
 ====================== ===========================================================================
-``rt/sonar/fan``       sensor_msgs/msg/Image (mono8): the picture (`mitsonar.devices.outputs.pictures`)
+``rt/sonar/fan``       sensor_msgs/msg/Image (mono8): the picture (`mitsonar.live.outputs.pictures`)
 ``rt/sonar/image``     marine_acoustic_msgs/msg/ProjectedSonarImage: the raw ping, as the bags'
                        ``/sonar/image`` (`mitsonar.export.ros.messages.projected_image`)
 ``rt/tf``              tf2_msgs/msg/TFMessage: ``map -> base_link -> sonar``
 ``rt/vehicle/pose``    geometry_msgs/msg/PoseStamped: the vehicle in ``map``
 ``rt/sonar/points``    sensor_msgs/msg/PointCloud2: a volumetric frame's point cloud in ``map``
-                       (`mitsonar.devices.outputs.messages.frame_points`; its writer made at the
+                       (`mitsonar.live.outputs.messages.frame_points`; its writer made at the
                        first volumetric frame, `POINT_TOPICS`)
 ====================== ===========================================================================
 
@@ -21,10 +21,10 @@ variable, e.g. to keep it on the loopback).
 """
 from __future__ import annotations
 
-from mitsonar.devices.outputs.base import OutputError
-from mitsonar.devices.outputs.messages import (SONAR_FRAME, VEHICLE_FRAME, WORLD_FRAME, sonar_in_vehicle,
+from mitsonar.live.outputs.base import OutputError
+from mitsonar.live.outputs.messages import (SONAR_FRAME, VEHICLE_FRAME, WORLD_FRAME, sonar_in_vehicle,
                                                translation_rotation)
-from mitsonar.devices.outputs.pictures import Pictures
+from mitsonar.live.outputs.pictures import Pictures
 
 __all__ = ["DdsOutput", "TOPICS", "POINT_TOPICS", "check_domain", "ros_types"]
 
@@ -49,8 +49,8 @@ def check_domain(domain) -> int:
 
 def ros_types() -> dict:
     """The ROS 2 message types as cyclonedds IDL structs, by ROS name (``sensor_msgs/msg/Image``
-    ...): `mitsonar.devices.outputs.ros2types`."""
-    from mitsonar.devices.outputs.ros2types import TYPES
+    ...): `mitsonar.live.outputs.ros2types`."""
+    from mitsonar.live.outputs.ros2types import TYPES
     return TYPES
 
 
@@ -86,7 +86,7 @@ class DdsOutput:
         self.count = 0
 
     def publish(self, t_ns: int, vehicle, mount, scan) -> None:
-        from mitsonar.devices.outputs.messages import frame_points
+        from mitsonar.live.outputs.messages import frame_points
         from mitsonar.export.ros.messages import mono8, projected_image
 
         T = self.types

@@ -1,5 +1,5 @@
 """An MCAP recording of a live session (``mitsonar live --mcap FILE``): the channels of
-`mitsonar.devices.outputs.foxglove.FoxgloveChannels` written by foxglove-sdk's MCAP writer,
+`mitsonar.live.outputs.foxglove.FoxgloveChannels` written by foxglove-sdk's MCAP writer,
 under a temporary name beside ``FILE`` (`mitsonar._files.StagedFiles`) renamed onto it when
 the session closes (SIGINT, SIGTERM, ``--seconds``: the file is complete and readable); a
 session that fails to start removes it (`discard`). A process killed outright (SIGKILL) leaves the
@@ -8,9 +8,9 @@ temporary ``.NAME.*.partial.mcap``, without its summary.
 from __future__ import annotations
 
 from mitsonar._files import StagedFiles, check_output_file
-from mitsonar.devices.outputs.base import OutputError
-from mitsonar.devices.outputs.foxglove import FoxgloveChannels, require_foxglove
-from mitsonar.devices.outputs.pictures import Pictures
+from mitsonar.live.outputs.base import OutputError
+from mitsonar.live.outputs.foxglove import FoxgloveChannels, require_foxglove
+from mitsonar.live.outputs.pictures import Pictures
 
 __all__ = ["McapRecording", "check_mcap_path"]
 

@@ -5,24 +5,24 @@ Pieces:
 
 * `live_scene`: the scene file loaded with its scanning sonars reduced to one ping at bearing 0
   (``n_pings`` 1, ``bearing_start`` 0), so that a ping costs one row's paths (a multibeam keeps
-  its fan: `mitsonar.devices.framing` renders its whole frames); a sensor's ``to_world`` is the
+  its fan: `mitsonar.live.framing` renders its whole frames); a sensor's ``to_world`` is the
   mount on the vehicle (x forward, y port, z up).
 * `PingRenderer`: ``render(bearing)`` renders that one row with `mitsonar.render_scan` at the
   pose ``vehicle(t) @ mount @ bearing_rotation(bearing)`` (`mitsonar.geometry.frames`), the
-  vehicle's pose coming from a pose source's ``at(t)`` (`mitsonar.devices.poses.PoseBuffer` or
-  `mitsonar.devices.poses.TrajectoryReplay`); before any pose, the mount at the origin (said
+  vehicle's pose coming from a pose source's ``at(t)`` (`mitsonar.live.poses.PoseBuffer` or
+  `mitsonar.live.poses.TrajectoryReplay`); before any pose, the mount at the origin (said
   once). The pose enters the kernels as data, not as a literal: after the first ping, later
   pings launch the same compiled kernels (no recompilation; tests/test_live.py checks it).
   Ping ``k`` renders with seed ``seed + k``, so a session is reproducible given its poses (and,
   with a budget instead of a fixed ``spp``, the paths each ping took: its record says).
   A ping's paths fit its time budget and its record (paths, estimated error, latency from the
-  pose time to its last byte written) goes to a `mitsonar.devices.realtime.PingLog`.
+  pose time to its last byte written) goes to a `mitsonar.live.realtime.PingLog`.
 * `LiveMicron`, `LivePing360`: the virtual heads (`mitsonar.devices.micron.virtual`,
   `mitsonar.devices.ping360.virtual`) with their ``row`` rendering the requested bearing anew
   instead of looking it up in a pre-rendered scan; everything else (protocol, timing model,
   range resampling) is theirs. `LiveOculus`: the virtual Oculus
   (`mitsonar.devices.oculus.virtual`) rendering each ping's whole frame when it fires.
-* `PoseReceiver`: a thread reading pose datagrams (`mitsonar.devices.poses.parse_datagram`) on a
+* `PoseReceiver`: a thread reading pose datagrams (`mitsonar.live.poses.parse_datagram`) on a
   loopback UDP port into a `PoseBuffer`; a bad datagram is counted and dropped, never fatal.
 """
 from __future__ import annotations
@@ -39,7 +39,7 @@ from collections import Counter, deque
 
 import numpy as np
 
-from mitsonar.devices.poses import BOUNDS_MARGIN, DatagramError, PoseBuffer, PoseSource, parse_datagram
+from mitsonar.live.poses import BOUNDS_MARGIN, DatagramError, PoseBuffer, PoseSource, parse_datagram
 from mitsonar.geometry.frames import bearing_rotation
 
 __all__ = ["live_scene", "scene_kinds", "pose_bounds", "SceneObjects", "PingRenderer", "LiveMicron", "LivePing360",
@@ -93,16 +93,16 @@ def scene_folder(path: str) -> None:
 
 
 def _xml_kind(sensor):
-    """The `mitsonar.geometry.kinds.SonarKind` a ``sonar`` sensor element names (the default kind
+    """The `mitsonar.kinds.SonarKind` a ``sonar`` sensor element names (the default kind
     without a ``kind``; an unknown name: the default's, and the scene's load says what is wrong)."""
-    from mitsonar.geometry import kinds
+    import mitsonar.kinds as kinds
 
     el = next((c for c in sensor if c.get("name") == "kind"), None)
     return kinds.lookup(kinds.DEFAULT if el is None else el.get("value")) or kinds.get(kinds.DEFAULT)
 
 
 def scene_kinds(path: str) -> list:
-    """The `mitsonar.geometry.kinds.SonarKind` of each ``sonar`` sensor of the scene file, in order
+    """The `mitsonar.kinds.SonarKind` of each ``sonar`` sensor of the scene file, in order
     (SceneError naming the file if it cannot be read)."""
     from mitsonar.sim.scene import SceneError
 
@@ -114,7 +114,7 @@ def scene_kinds(path: str) -> list:
 
 
 def pose_bounds(scene, margin: float = BOUNDS_MARGIN):
-    """``(lo, hi)``: the box a vehicle's position must lie in (`mitsonar.devices.poses.PoseBuffer`),
+    """``(lo, hi)``: the box a vehicle's position must lie in (`mitsonar.live.poses.PoseBuffer`),
     the scene's bounding box enlarged by ``margin`` metres on every side; None for a scene
     without a finite bounding box (the buffer's default bound then holds)."""
     bbox = scene.bbox()
@@ -169,26 +169,26 @@ class SceneObjects:
 
 class PingRenderer:
     """Renders one ping at a bearing (or a whole frame) from the pose source's pose at the ping's
-    time (module doc), with as many paths as fit its time budget (`mitsonar.devices.realtime`).
+    time (module doc), with as many paths as fit its time budget (`mitsonar.live.realtime`).
 
     ``spp``: paths of every ping (fixed); None: each ping takes the paths that fit its budget
-    (`mitsonar.devices.realtime.PathBudget`), ``budget`` seconds (default: the one each `render`
-    is given, the head's ping period). ``log``: a `mitsonar.devices.realtime.PingLog` the
+    (`mitsonar.live.realtime.PathBudget`), ``budget`` seconds (default: the one each `render`
+    is given, the head's ping period). ``log``: a `mitsonar.live.realtime.PingLog` the
     records of finished pings go to (`finish`). ``stats``: pings rendered; ``latencies``:
     seconds of the last 1000 renders; ``last_pose``: the 4x4 pose (beam frame) of the last ping;
     ``last_vehicle``: the vehicle's pose then; ``last_record``: the record of the last ping (paths,
     estimated error, render time, ...); these three are the calling thread's own last ping's
     (a frame loop and a head may render with one renderer at once);
-    ``error``: the scene's `mitsonar.devices.realtime.ErrorModel` (measured by `warm`, with
+    ``error``: the scene's `mitsonar.live.realtime.ErrorModel` (measured by `warm`, with
     ``calibration`` renders at each of its numbers of paths).
     """
 
     def __init__(self, scene, sonar, poses=None, *, spp: int | None = 64, seed: int = 0, out=None,
                  budget: float | None = None, log=None, calibration: int = 8, outputs=None):
-        from mitsonar.devices.realtime import ErrorModel, PathBudget, PingLog
+        from mitsonar.live.realtime import ErrorModel, PathBudget, PingLog
 
         self.scene, self.sonar = scene, sonar
-        #: `mitsonar.devices.outputs.LiveOutputs` (or any ``publish(t_ns, vehicle, mount, scan)``)
+        #: `mitsonar.live.outputs.LiveOutputs` (or any ``publish(t_ns, vehicle, mount, scan)``)
         #: given each ping (or frame) after it is rendered: its time (ns, Unix epoch), the
         #: vehicle's pose, the mount and the scan; None: none.
         self.outputs = outputs
@@ -222,9 +222,9 @@ class PingRenderer:
     def warm(self):
         """Render one ping from the mount at the origin, uncounted: compiles the kernels before a
         client asks; then measures the scene's error at a few numbers of paths there
-        (`mitsonar.devices.realtime.ErrorModel.measure`, ``calibration`` renders each; 0: no
+        (`mitsonar.live.realtime.ErrorModel.measure`, ``calibration`` renders each; 0: no
         error estimate) and the time per path. Returns the first render's `Scan` (bearing 0)."""
-        from mitsonar.devices.realtime import ErrorModel
+        from mitsonar.live.realtime import ErrorModel
         from mitsonar.sim.render import render_scan
 
         paths = self.spp if self.spp is not None else self.paths.next()
@@ -335,7 +335,7 @@ def _clocked(head) -> None:
 def _micron():
     from mitsonar.devices.micron.seanet import bearing_to_radians
     from mitsonar.devices.micron.virtual import VirtualMicron
-    from mitsonar.devices.realtime import WireClock
+    from mitsonar.live.realtime import WireClock
 
     class LiveMicron(VirtualMicron):
         """A `VirtualMicron` whose scanline at wire bearing ``b`` is rendered when it fires: when
@@ -401,7 +401,7 @@ def _ping360():
     from mitsonar.devices.ping360.head import TICK, angle_to_radians
     from mitsonar.devices.ping360.protocol import ids
     from mitsonar.devices.ping360.virtual import VirtualPing360
-    from mitsonar.devices.realtime import WireClock
+    from mitsonar.live.realtime import WireClock
 
     class LivePing360(VirtualPing360):
         """A `VirtualPing360` whose samples at ``angle`` are rendered when it pings, with the
@@ -602,7 +602,7 @@ class PoseReceiver(PoseSource):
             if d["object"] is not None:
                 if self.objects is None:
                     raise DatagramError("unknown field", "'object' datagrams are not supported here")
-                from mitsonar.devices.poses import check_pose, pose_matrix
+                from mitsonar.live.poses import check_pose, pose_matrix
                 check_pose(d["position"], d["orientation"])     # an offset: held to MAX_COORDINATE
                 try:
                     self.objects(d["object"], pose_matrix(d["position"], d["orientation"]))

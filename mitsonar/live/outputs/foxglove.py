@@ -2,10 +2,10 @@
 ``foxglove-sdk`` package (imported here only, when the flag is used).
 
 `FoxgloveChannels` logs each ping on the channels of a ``foxglove.Context``
-(`mitsonar.devices.outputs.messages.TOPICS`):
+(`mitsonar.live.outputs.messages.TOPICS`):
 
 ===================== ======================================= =========================================
-``/sonar/fan``        foxglove.RawImage (protobuf), mono8     the picture (`mitsonar.devices.outputs.
+``/sonar/fan``        foxglove.RawImage (protobuf), mono8     the picture (`mitsonar.live.outputs.
                                                               pictures`), frame ``sonar``
 ``/sonar/ping``       mitsonar.SonarPing (JSON)               the raw ping: device bytes, ranges, bearings
 ``/sonar/points``     sensor_msgs/msg/PointCloud2 (ros2msg,   a volumetric frame's point cloud in ``map``
@@ -17,15 +17,15 @@
 
 Every message's timestamp and log time are the ping's time (ns since the Unix epoch).
 `FoxgloveServer` serves them over Foxglove's WebSocket protocol (``foxglove.websocket.v1``) on
-127.0.0.1; `mitsonar.devices.outputs.mcapfile.McapRecording` writes them into an MCAP file.
+127.0.0.1; `mitsonar.live.outputs.mcapfile.McapRecording` writes them into an MCAP file.
 """
 from __future__ import annotations
 
-from mitsonar.devices.outputs.base import OutputError
-from mitsonar.devices.outputs.messages import (PING_SCHEMA, SONAR_FRAME, VEHICLE_FRAME, WORLD_FRAME, frame_points,
+from mitsonar.live.outputs.base import OutputError
+from mitsonar.live.outputs.messages import (PING_SCHEMA, SONAR_FRAME, VEHICLE_FRAME, WORLD_FRAME, frame_points,
                                                ping_message, pointcloud2_cdr, sonar_in_vehicle,
                                                translation_rotation)
-from mitsonar.devices.outputs.pictures import Pictures
+from mitsonar.live.outputs.pictures import Pictures
 
 __all__ = ["DEFAULT_PORT", "FoxgloveChannels", "FoxgloveServer", "require_foxglove"]
 

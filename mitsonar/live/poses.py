@@ -1,4 +1,4 @@
-"""Vehicle poses for a live head (`mitsonar.devices.live`): datagrams in, the pose at a ping's time out.
+"""Vehicle poses for a live head (`mitsonar.live.heads`): datagrams in, the pose at a ping's time out.
 
 Datagrams (UDP, one JSON object each, at most `MAX_DATAGRAM` bytes, UTF-8)::
 

@@ -1,4 +1,4 @@
-"""ROS 2 message types as cyclonedds IDL structs (`mitsonar.devices.outputs.dds`), field for field
+"""ROS 2 message types as cyclonedds IDL structs (`mitsonar.live.outputs.dds`), field for field
 the ROS 2 ``.msg`` definitions (`mitsonar.export.ros.msgdefs`), under ROS 2's DDS type names
 (``package::msg::dds_::Type_``). Imports cyclonedds: imported only for ``--dds``. (No
 ``from __future__ import annotations`` here: cyclonedds reads the field types at run time.)"""

@@ -4,7 +4,7 @@ sends, read with ``pymavlink`` (the ``live`` extra; imported only when this modu
 Messages: ``LOCAL_POSITION_NED`` (``x, y, z``: north, east, down of the EKF origin, metres) and
 ``ATTITUDE_QUATERNION`` (``q1..q4`` = ``w, x, y, z``, the rotation from the body frame, x forward,
 y right, z down (FRD), to NED). Each one, once both have arrived, adds a pose to the
-`mitsonar.devices.poses.PoseBuffer` at ``time_boot_ms`` on the autopilot's clock (the buffer
+`mitsonar.live.poses.PoseBuffer` at ``time_boot_ms`` on the autopilot's clock (the buffer
 estimates the offset to ours), made of it and the latest of the other. A message whose numbers
 are not finite (or whose quaternion is not of norm 1) is dropped and its predecessor kept; a pose
 the buffer refuses (out of its bounds, a ``time_boot_ms`` off the clock: `PoseBuffer.add`) is
@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from mitsonar.devices.poses import DatagramError, PoseSource, check_pose
+from mitsonar.live.poses import DatagramError, PoseSource, check_pose
 from mitsonar.geometry.trajectory import matrix_to_quat, quat_to_matrix
 
 __all__ = ["NED_TO_ENU", "FLU_TO_FRD", "ned_to_enu", "MavlinkReceiver"]

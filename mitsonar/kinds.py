@@ -13,7 +13,7 @@ A new kind is a subclass of `SonarKind` with its ``name`` and the attributes and
 differ, made known with `register`: the sensor plugin, `Scan`, the files and the CLI then accept
 it. `names` lists the registered kinds in registration order (``mechanical``, ``multibeam``,
 ``sidescan``, ``volumetric``; the first three are the tuple the old ``mitsonar.geometry.frames.KINDS`` held, which moved here and is
-still importable as ``mitsonar.geometry.kinds.KINDS``, a tuple of today's names).
+still importable as ``mitsonar.kinds.KINDS``, a tuple of today's names).
 
 The echo sounders of `mitsonar.scenes.echosounders` are not kinds of their own: they differ from
 these only in their published figures and their downward mount, so they stay presets there. A
