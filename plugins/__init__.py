@@ -1,4 +1,4 @@
-"""mitsonar's Mitsuba plugins: sensor ``sonar``, BSDFs ``acoustic`` and ``acoustic_material``, integrators ``sonar_tof``, ``sonar_mlt``.
+"""mitsonar's Mitsuba plugins, by family: sensor ``sonar`` (`sensors`), BSDFs ``acoustic`` and ``acoustic_material`` (`bsdfs`), integrators ``sonar_tof``, ``sonar_mlt``, ``sonar_bdpt`` (`integrators`).
 
 The plugin classes derive from the classes of the active Mitsuba variant, so their modules are
 (re)loaded for each variant and the plugins registered again; `register()` does that and is
@@ -9,17 +9,18 @@ from __future__ import annotations
 
 import importlib
 
-_MODULES = ("materials", "beam", "acoustic_bsdf", "acoustic_material", "sonar_sensor", "range_bins", "samples", "common", "sonar_tof",
-            "sonar_mlt", "bdpt_paths", "sonar_bdpt")
+_MODULES = ("bsdfs.materials", "sensors.beam", "bsdfs.acoustic", "bsdfs.acoustic_material", "sensors.sonar",
+            "integrators.paths.range_bins", "integrators.paths.samples", "integrators.common", "integrators.sonar_tof",
+            "integrators.sonar_mlt", "integrators.paths.bdpt_paths", "integrators.sonar_bdpt")
 _current = None
 
 # (kind, XML plugin name, module, class) of every plugin registered with Mitsuba
-PLUGINS = (("BSDF", "acoustic", "acoustic_bsdf", "AcousticBSDF"),
-           ("BSDF", "acoustic_material", "acoustic_material", "AcousticMaterialBSDF"),
-           ("sensor", "sonar", "sonar_sensor", "SonarSensor"),
-           ("integrator", "sonar_tof", "sonar_tof", "SonarTOFIntegrator"),
-           ("integrator", "sonar_mlt", "sonar_mlt", "SonarMLTIntegrator"),
-           ("integrator", "sonar_bdpt", "sonar_bdpt", "SonarBDPTIntegrator"))
+PLUGINS = (("BSDF", "acoustic", "bsdfs.acoustic", "AcousticBSDF"),
+           ("BSDF", "acoustic_material", "bsdfs.acoustic_material", "AcousticMaterialBSDF"),
+           ("sensor", "sonar", "sensors.sonar", "SonarSensor"),
+           ("integrator", "sonar_tof", "integrators.sonar_tof", "SonarTOFIntegrator"),
+           ("integrator", "sonar_mlt", "integrators.sonar_mlt", "SonarMLTIntegrator"),
+           ("integrator", "sonar_bdpt", "integrators.sonar_bdpt", "SonarBDPTIntegrator"))
 
 # The last exception raised by one of our plugins' constructors. Mitsuba turns it into a
 # RuntimeError holding its traceback as text; `take_failure` hands the original back to whoever
@@ -79,6 +80,6 @@ def register(force: bool = False) -> None:
 
 
 def module(name: str):
-    """The plugin module for the active variant (e.g. ``module('sonar_sensor').SonarSensor``)."""
+    """The plugin module for the active variant (e.g. ``module('sensors.sonar').SonarSensor``)."""
     register()
     return importlib.import_module(f"{__name__}.{name}")

@@ -135,7 +135,7 @@ def test_lambert_seabed_echo_level_matches_the_footprint_integral(mitsonar_mod):
 # ----------------------------------------------------------------------------- receiver side
 
 def test_directivity_index_closed_forms(mitsonar_mod):
-    from mitsonar.plugins.beam import BeamPattern
+    from mitsonar.plugins.sensors.beam import BeamPattern
 
     bh, bv = math.radians(3.0), math.radians(35.0)
     uni = BeamPattern("uniform", 3.0, 35.0)

@@ -197,9 +197,9 @@ def test_invalid_max_depth_and_spp(mitsonar_mod):
 
 def test_presets_by_name(mitsonar_mod):
     import mitsuba as mi
-    from mitsonar.plugins import module
+    from mitsonar.plugins.bsdfs import materials
 
-    presets = module("materials").PRESETS
+    presets = materials.PRESETS
     for name in ("concrete_good", "water_calm", "sand", "rock"):
         scene = plane_scene(mitsonar_mod, f'<bsdf type="acoustic"><string name="preset" value="{name}"/></bsdf>')
         params = mi.traverse(scene)
@@ -265,11 +265,11 @@ def test_range_window_drops_echoes_outside_it(mitsonar_mod):
 @pytest.mark.parametrize("scene_file", ["box.xml", "box_fls.xml"])
 def test_second_render_with_new_pose_seed_spp_and_material_does_not_recompile(mitsonar_mod, scene_file):
     import mitsuba as mi
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators.paths import frozen_pass
 
     # start from no frozen-pass recording: past `MAX_RECORDINGS` (earlier tests' passes) all are
     # dropped, and a pass recorded anew between the two renders launches its traced kernels
-    module("frozen_pass").clear()
+    frozen_pass.clear()
     scene = mitsonar_mod.load_scene(os.path.join(SCENES, scene_file))
     mitsonar_mod.render_scan(scene, spp=64, seed=0)
     from mitsonar.receiver import speckle
@@ -331,3 +331,4 @@ print(mitsonar.render_scan(scene, spp=8).intensity.shape)
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "SonarSensor SonarTOFIntegrator" in proc.stdout and "(200, 500)" in proc.stdout
+

@@ -40,11 +40,11 @@ def box(mitsonar_mod):
     ({"electronics": {"gian": 3}}, "'gian' is not an electronics setting"),
 ])
 def test_bad_arguments_fail_before_rendering(mitsonar_mod, box, monkeypatch, kwargs, message):
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators import sonar_mlt, sonar_tof
 
     def no_render(*a, **k):
         raise AssertionError("rendered before the arguments were checked")
-    for cls in (module("sonar_tof").SonarTOFIntegrator, module("sonar_mlt").SonarMLTIntegrator):
+    for cls in (sonar_tof.SonarTOFIntegrator, sonar_mlt.SonarMLTIntegrator):
         monkeypatch.setattr(cls, "render_histogram", no_render)
     with pytest.raises(mitsonar_mod.SceneError) as err:
         mitsonar_mod.render_scan(box, **kwargs)

@@ -291,7 +291,7 @@ class Scan:
         from mitsonar.sim.variant import ensure_variant
 
         ensure_variant()
-        from mitsonar.plugins import beam as patterns
+        from mitsonar.plugins.sensors import beam as patterns
 
         shape = patterns.lookup(self.beam_pattern)
         if shape is not None and shape.measured:

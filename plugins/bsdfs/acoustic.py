@@ -7,7 +7,7 @@ import mitsuba as mi
 from mitsonar._checks import not_allowed
 
 from .materials import PRESETS
-from .props import number, text
+from mitsonar.plugins.props import number, text
 
 # What each parameter takes, for the message on a wrong XML type (an <rgb>, a <texture>).
 _EXPECTED = {"diffuse": "a <float> in [0, 1]", "specular": "a <float> in [0, 1]", "shininess": "a <float> >= 0"}
@@ -51,7 +51,7 @@ class AcousticBSDF(mi.BSDF):
     ============ ========= ==========================================================
     Parameter    Default   Meaning
     ============ ========= ==========================================================
-    preset       (none)    a material name from ``mitsonar.plugins.materials.PRESETS``
+    preset       (none)    a material name from ``mitsonar.plugins.bsdfs.materials.PRESETS``
                            (concrete qualities of thesis Table 2.2, ``water_calm``,
                            ``sand``, ``rock``, Lambert seabeds ``seabed_sand``, ``_mud``,
                            ``_gravel``, ``_rock``, ``_clay``); explicit values override it

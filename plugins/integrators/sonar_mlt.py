@@ -11,12 +11,12 @@ from mitsonar._checks import require
 from mitsonar._limits import check
 
 from .common import PathSetup, SonarIntegrator, tagging_hard
-from .denormals import flushed
-from .exact_sum import ExactBins
-from .jit_arrays import upload
+from .paths.denormals import flushed
+from .paths.exact_sum import ExactBins
+from mitsonar.plugins.jit_arrays import upload
 from .mlt_split import MAX_SHARE, render_split
-from .props import count, number, text
-from .samples import HashSamples, n_dims
+from mitsonar.plugins.props import count, number, text
+from .paths.samples import HashSamples, n_dims
 from .sonar_tof import SonarTOFIntegrator
 
 # Salts that keep the random streams of the stages apart for one user seed.

@@ -95,8 +95,8 @@ from mitsonar.acoustics.materials import MATERIALS, WATER_DENSITY, WATER_SOUND_S
 from mitsonar.acoustics.seabed import APL_UW_FREQUENCY_RANGE, SEDIMENTS, apl_uw_backscatter
 from mitsonar.acoustics.seabed import sediment as find_sediment
 
-from .acoustic_bsdf import lobe_direction, lobe_sample
-from .props import number, text
+from .acoustic import lobe_direction, lobe_sample
+from mitsonar.plugins.props import number, text
 
 NAME = "acoustic_material"
 BACKSCATTER = ("none", "lambert", "apl_uw")

@@ -7,9 +7,9 @@ import numpy as np
 
 from mitsonar._checks import not_allowed, require
 
-from .bdpt_paths import HEURISTICS, trace_bidirectional
-from .props import count, text
-from .exact_sum import ExactBins
+from .paths.bdpt_paths import HEURISTICS, trace_bidirectional
+from mitsonar.plugins.props import count, text
+from .paths.exact_sum import ExactBins
 from .sonar_tof import SonarTOFIntegrator
 
 # Subpath B vertices kept in one pass (~80 bytes each: 320 MiB).

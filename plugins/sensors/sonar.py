@@ -17,10 +17,10 @@ from mitsonar.geometry.frames import SIDES, check_rigid, check_rigid_stack
 
 from . import beam as patterns
 from .beam import BeamPattern, read_beam_table, resolve_path
-from .jit_arrays import upload
-from .props import count, number, text
-from .sidescan_heads import PRESETS
-from .water import check_pose, number_or_auto, read_water, resolve
+from mitsonar.plugins.jit_arrays import upload
+from mitsonar.plugins.props import count, number, text
+from mitsonar.plugins.sidescan_heads import PRESETS
+from mitsonar.plugins.water import check_pose, number_or_auto, read_water, resolve
 
 # The size bounds are `mitsonar._limits.LIMITS`, with the physics behind them.
 MAX_BINS, MAX_PINGS = int(LIMITS["n_bins"].hi), int(LIMITS["n_pings"].hi)
@@ -157,7 +157,7 @@ class SonarSensor(mi.Sensor):
         """The XML parameter names: the table above, with the electronics' fields by name."""
         from mitsonar.receiver.electronics import Electronics
 
-        from .props import table_parameters
+        from mitsonar.plugins.props import table_parameters
 
         return ([n for n in table_parameters(cls.__doc__) if n != "electronics"]
                 + [f.name for f in dataclasses.fields(Electronics)])
@@ -482,7 +482,7 @@ class SonarSensor(mi.Sensor):
 
     # ------------------------------------------------------------------ differentiable parameters
     def traverse(self, callback):
-        """Expose to ``mi.traverse``, all differentiable (``mitsonar.plugins.path_replay``):
+        """Expose to ``mi.traverse``, all differentiable (``mitsonar.plugins.integrators.paths.path_replay``):
         ``to_world`` (the head's beam frame, a ``mi.Transform4f``), ``absorption`` (dB/m) and, for a
         ``gaussian`` beam, ``beamwidth_h`` and ``beamwidth_v`` (deg)."""
         super().traverse(callback)
