@@ -241,9 +241,9 @@ def test_integrators_and_modes_without_refraction_refuse_a_profile_in_one_line(m
 
 
 def _integrator_plugins():
-    from mitsonar.plugins import PLUGINS
+    from mitsonar.sim.render import sonar_integrators
 
-    return [name for kind, name, _, _ in PLUGINS if kind == "integrator"]
+    return list(sonar_integrators())
 
 
 @pytest.mark.parametrize("name", _integrator_plugins())

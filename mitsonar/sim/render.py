@@ -11,7 +11,6 @@ import numpy as np
 from mitsonar._checks import is_whole
 from mitsonar._limits import LIMITS
 from mitsonar.geometry.frames import check_rigid
-from mitsonar.plugins import PLUGINS
 from mitsonar.scan import Scan
 from mitsonar.sim.scene import SceneError, mitsuba_error, scene_name, sonar_of
 from mitsonar.geometry.trajectory import Trajectory
@@ -98,7 +97,14 @@ def moving_head_poses(sonar, trajectory, start_time, mount=None):
     return trajectory.at(t) @ (sonar.to_world_np if mount is None else mount)
 
 
-SONAR_INTEGRATORS = tuple(name for kind, name, _, _ in PLUGINS if kind == "integrator")
+def sonar_integrators() -> tuple:
+    """The XML names of mitsonar's integrators (``sonar_bdpt``, ...), as registered for the variant, sorted."""
+    ensure_variant()
+    from mitsonar.plugins import registered
+
+    return tuple(sorted(name for name, (kind, _) in registered().items() if kind == "integrator"))
+
+
 SEED_MAX = 2 ** 32 - 1   # the path seed is a 32-bit integer: larger seeds would repeat smaller ones
 SPP_MAX = int(LIMITS["spp"].hi)    # paths per ping: a signed 32-bit count (`mitsonar._limits`)
 SPP_ALLOWED = LIMITS["spp"].allowed()
@@ -171,16 +177,16 @@ def _integrator(scene, integrator):
         integrator = {"type": integrator}
     if isinstance(integrator, dict):
         kind = integrator.get("type")
-        if kind not in SONAR_INTEGRATORS:
+        if kind not in sonar_integrators():
             raise SceneError(f"render_scan 'integrator': {kind!r} is not a sonar integrator "
-                             f"(one of {', '.join(SONAR_INTEGRATORS)})")
+                             f"(one of {', '.join(sonar_integrators())})")
         try:
             return mi.load_dict(integrator)
         except Exception as exc:
             raise SceneError(f"render_scan 'integrator': {mitsuba_error(exc)}") from None
     if not isinstance(integrator, base):
         raise SceneError(f"render_scan 'integrator': {type(integrator).__name__} is not a sonar integrator "
-                         f"(one of {', '.join(SONAR_INTEGRATORS)})")
+                         f"(one of {', '.join(sonar_integrators())})")
     return integrator
 
 

@@ -5,9 +5,10 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsonar._checks import not_allowed
+from mitsonar.plugins.props import number, text
+from mitsonar.plugins.registry import register_plugin
 
 from .materials import PRESETS
-from mitsonar.plugins.props import number, text
 
 # What each parameter takes, for the message on a wrong XML type (an <rgb>, a <texture>).
 _EXPECTED = {"diffuse": "a <float> in [0, 1]", "specular": "a <float> in [0, 1]", "shininess": "a <float> >= 0"}
@@ -191,3 +192,6 @@ def check_parameters(diffuse, specular, shininess):
     if diffuse + specular > 1.0 + 1e-6:
         raise ValueError(f"acoustic 'diffuse' + 'specular' = {diffuse + specular:g} > 1: "
                          "a surface cannot reflect more energy than it receives")
+
+
+register_plugin("BSDF", "acoustic", AcousticBSDF)

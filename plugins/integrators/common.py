@@ -28,15 +28,15 @@ import mitsuba as mi
 
 from mitsonar._checks import not_allowed, require
 from mitsonar._limits import LIMITS
+from mitsonar.plugins.props import count, text
+from mitsonar.plugins.sensors.sonar import PingFrames, SonarSensor
 
 from .paths import image_guide
 from .paths.emission import DB_TO_LOG2, start
 from .paths.denormals import flushed
 from .paths.exact_sum import ExactBins
-from mitsonar.plugins.props import count, text
 from .paths.range_bins import RangeBins
 from .paths.samples import DIMS_EMIT, DIMS_PER_BOUNCE
-from mitsonar.plugins.sensors.sonar import PingFrames, SonarSensor
 
 MAX_DEPTH = int(LIMITS["max_depth"].hi)   # the bound of `mitsonar._limits`
 # Lanes in one gradient pass: a replayed path carries ~40 floats of state, so passes of 2^20

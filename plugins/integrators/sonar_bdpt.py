@@ -6,9 +6,10 @@ import mitsuba as mi
 import numpy as np
 
 from mitsonar._checks import not_allowed, require
+from mitsonar.plugins.props import count, text
+from mitsonar.plugins.registry import register_plugin
 
 from .paths.bdpt_paths import HEURISTICS, trace_bidirectional
-from mitsonar.plugins.props import count, text
 from .paths.exact_sum import ExactBins
 from .sonar_tof import SonarTOFIntegrator
 
@@ -124,3 +125,6 @@ def _whole(value: str, max_depth: int, source: str) -> int:
         raise not_allowed(source, "strategy", value, "'all' or a whole number of surface vertices on the subpath "
                           f"from the row's beam, 0 to max_depth ({max_depth})")
     return int(value)
+
+
+register_plugin("integrator", "sonar_bdpt", SonarBDPTIntegrator)

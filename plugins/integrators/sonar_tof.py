@@ -6,12 +6,13 @@ import mitsuba as mi
 import numpy as np
 
 from mitsonar._checks import require
+from mitsonar.plugins.props import text
+from mitsonar.plugins.registry import register_plugin
 
 from .paths import frozen_pass, row_allocation
 from .common import SonarIntegrator
 from .paths.denormals import flushing
 from .paths.exact_sum import ExactBins
-from mitsonar.plugins.props import text
 from .paths.samples import HashSamples, SobolSamples, opaque_u32, row_lanes
 
 # Lanes in one kernel launch. Larger launches keep both cores busy; the cap bounds the adds a
@@ -291,3 +292,6 @@ def _emitting(setup, d, w):
     out = SimpleNamespace(**vars(setup))
     out.sensor = SimpleNamespace(beam=frozen_pass.Emitted(setup.sensor.beam, d, w))
     return out
+
+
+register_plugin("integrator", "sonar_tof", SonarTOFIntegrator)

@@ -35,7 +35,6 @@ import numpy as np
 
 from mitsonar._compat import trapezoid
 from mitsonar._registry import Registry
-
 from mitsonar.plugins.jit_arrays import upload
 
 # Solves sinc(t)^2 = 1/2: the -3 dB point of a piston's one-way pattern.

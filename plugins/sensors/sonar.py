@@ -14,13 +14,14 @@ from mitsonar._checks import not_allowed
 from mitsonar._limits import LIMITS, check
 import mitsonar.geometry.kinds as kinds
 from mitsonar.geometry.frames import SIDES, check_rigid, check_rigid_stack
+from mitsonar.plugins.jit_arrays import upload
+from mitsonar.plugins.props import count, number, text
+from mitsonar.plugins.registry import register_plugin
+from mitsonar.plugins.sidescan_heads import PRESETS
+from mitsonar.plugins.water import check_pose, number_or_auto, read_water, resolve
 
 from . import beam as patterns
 from .beam import BeamPattern, read_beam_table, resolve_path
-from mitsonar.plugins.jit_arrays import upload
-from mitsonar.plugins.props import count, number, text
-from mitsonar.plugins.sidescan_heads import PRESETS
-from mitsonar.plugins.water import check_pose, number_or_auto, read_water, resolve
 
 # The size bounds are `mitsonar._limits.LIMITS`, with the physics behind them.
 MAX_BINS, MAX_PINGS = int(LIMITS["n_bins"].hi), int(LIMITS["n_pings"].hi)
@@ -566,3 +567,6 @@ class PingFrames:
     def to_world(self, ping, d):
         x, y, z, _ = self.gather(ping)
         return x * d.x + y * d.y + z * d.z
+
+
+register_plugin("sensor", "sonar", SonarSensor)

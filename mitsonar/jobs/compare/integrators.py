@@ -12,14 +12,14 @@ def load_integrator(name, params=None):
     """
     import mitsuba as mi
 
-    from mitsonar.sim.render import SONAR_INTEGRATORS
+    from mitsonar.sim.render import sonar_integrators
     from mitsonar.sim.scene import mitsuba_error
     from mitsonar.sim.variant import ensure_variant
 
     ensure_variant()
     from mitsonar.plugins.integrators.common import SonarIntegrator
 
-    ours = ", ".join(SONAR_INTEGRATORS)
+    ours = ", ".join(sonar_integrators())
 
     try:
         obj = mi.load_dict({"type": name, **(params or {})})

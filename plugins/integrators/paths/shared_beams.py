@@ -40,10 +40,10 @@ import mitsuba as mi
 import numpy as np
 
 import mitsonar.geometry.kinds as kinds
-
 from mitsonar.plugins.jit_arrays import upload
-from .range_bins import RangeBins
 from mitsonar.plugins.sensors.sonar import PingFrames
+
+from .range_bins import RangeBins
 
 # Beams scored per echo at most: the window either side of the nearest (2 m + 1 beams), or every
 # row of a frame narrower than that.
