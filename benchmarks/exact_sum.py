@@ -1,4 +1,4 @@
-"""Cost of the order-independent histogram sums (``plugins/exact_sum.py``) against float64 atomics.
+"""Cost of the order-independent histogram sums (``plugins/integrators/paths/exact_sum.py``) against float64 atomics.
 
 Prints one JSON object. In this one run (shared machines are noisy), renders with the integer
 words of `exact_sum.ExactBins` (the default) and with a stand-in that adds float64 atomics, as the
@@ -73,18 +73,21 @@ def main(argv=None):
     import mitsuba as mi
 
     import mitsonar
-    from mitsonar.plugins import exact_sum, module
+
+    mitsonar.ensure_variant()
+    from mitsonar.plugins.integrators import sonar_bdpt, sonar_tof
+    from mitsonar.plugins.integrators.paths import exact_sum
 
     if args.threads:
         dr.set_thread_count(args.threads)
-    homes = [module(m) for m in ("sonar_tof", "sonar_bdpt")]
+    homes = [sonar_tof, sonar_bdpt]
     out = {"threads": dr.thread_count(), "repeats": args.repeats, "cases": {}}
     for name, (xml, props, spp) in CASES.items():
         spp = max(1, int(spp * args.spp_scale))
         scene = mitsonar.load_scene(os.path.join(ROOT, "scenes_xml", xml))
         integs = {}
         for kind in ("exact", "float64"):
-            # a setting of its own per kind: frozen passes (plugins/frozen_pass.py) are recorded
+            # a setting of its own per kind: frozen passes (plugins/integrators/paths/frozen_pass.py) are recorded
             # per integrator setting, so each kind replays its own recording
             integs[kind] = mi.load_dict(props)
             integs[kind].bench_sums = kind

@@ -4,7 +4,7 @@ Prints one JSON object:
 
   * ``quay_frame``: the 512-beam quay-wall frame (scenes_xml/quay_wall.xml) at 5 % relative L2
     error, ``max_depth`` 3 and 1, with each ``emission`` of the shared paths (``transmit``: the
-    fan's density, ``receive``: the receive-weighted density, plugins/receive_emission.py). Per
+    fan's density, ``receive``: the receive-weighted density, plugins/integrators/paths/receive_emission.py). Per
     depth one reference (``--ref-spp`` paths per beam, half with each emission, seeds apart from
     the runs'); per emission a sweep of spp (error and seconds of ``render_histogram``,
     benchmarks/render.py `sweep`), the spp fitted to 5 % and renders there (`render.time_to`:
@@ -122,13 +122,13 @@ def shared_segments(scene, integ, spp, seed=1):
     path function's own rule), counted by a `record` that adds nothing to a histogram."""
     import drjit as dr
 
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators import sonar_tof
+    from mitsonar.plugins.integrators.paths import samples, shared_beams
 
-    sonar_tof, shared_beams = module("sonar_tof"), module("shared_beams")
     sensor = scene.sensors()[0]
     setup = integ.setup(scene, sensor, None, None)
     shared = shared_beams.SharedFrame(setup)
-    seed_o, first_o = module("samples").opaque_u32(seed), module("samples").opaque_u32(0)
+    seed_o, first_o = samples.opaque_u32(seed), samples.opaque_u32(0)
     zero, _, samples = integ._shared_lanes(shared.n_rows * spp, seed_o, first_o)
     d, w = integ.shared_emitted(shared, samples)
     counts = dr.zeros(mi.UInt32, 2)

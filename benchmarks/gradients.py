@@ -101,9 +101,9 @@ def main(argv=None):
                     "forward_backward_rss_peak_mib": fb_rss, "forward_jit_peak_mib": f_jit,
                     "forward_rss_peak_mib": f_rss})
     # Memory is flat once a gradient pass is full (GRADIENT_LANES_PER_PASS lanes): compare those.
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators import common
 
-    full = module("common").GRADIENT_LANES_PER_PASS // 200
+    full = common.GRADIENT_LANES_PER_PASS // 200
     peaks = [m["forward_backward_jit_peak_mib"] for m in mem if m["spp"] >= full] or \
         [m["forward_backward_jit_peak_mib"] for m in mem]
     result = {"benchmark": "gradients", "scene": "scenes_xml/box.xml", "machine": platform.machine(),

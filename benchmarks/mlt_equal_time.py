@@ -87,7 +87,8 @@ def reference(scene, name, spp, folder):
 
 
 def timed(integ, scene, spp, seed):
-    from mitsonar.plugins import image_guide, row_allocation
+    from mitsonar.plugins.integrators.paths import image_guide
+    from mitsonar.plugins.integrators.paths import row_allocation
 
     # the image guide through curved mirrors, per integrator (`image_guide.CURVED_GUIDE` is read
     # when a render sets up; its kernels are recorded apart from the planar guide's)
@@ -175,13 +176,13 @@ def main(argv=None):
     ap.add_argument("--baseline-set", action="append", default=[], help="baseline parameter name=value")
     ap.add_argument("--curved", default="", choices=("", "baseline", "contender", "both"),
                     help="which integrator renders with the image guide through curved mirrors "
-                         "(plugins/image_guide.py CURVED_GUIDE, off by default)")
+                         "(plugins/integrators/paths/image_guide.py CURVED_GUIDE, off by default)")
     ap.add_argument("--strip", default="both", choices=("none", "baseline", "contender", "both"),
                     help="which integrator renders with the strip guide to curved mirrors "
-                         "(plugins/image_guide.py STRIP_GUIDE, on by default: both)")
+                         "(plugins/integrators/paths/image_guide.py STRIP_GUIDE, on by default: both)")
     ap.add_argument("--pilot-guide", default="both", choices=("none", "baseline", "contender", "both"),
                     help="which integrator's adaptive allocation guides the emitted elevation from its pilot "
-                         "(plugins/row_allocation.py GUIDE, on by default: both)")
+                         "(plugins/integrators/paths/row_allocation.py GUIDE, on by default: both)")
     ap.add_argument("--spp", type=int, default=4096, help="the baseline's spp (default 4096)")
     ap.add_argument("--repeats", type=int, default=7, help=f"renders each (at least {MIN_REPEATS}; default 7)")
     ap.add_argument("--reference-spp", type=int, default=1 << 18)

@@ -63,8 +63,8 @@ def analyse(name, paths, seed=7, guide="image", baseline_spp=(), baseline_repeat
     import mitsuba as mi
 
     import mitsonar
-    from mitsonar.plugins.samples import HashSamples
-    from mitsonar.plugins.sonar_mlt import _Context
+    from mitsonar.plugins.integrators.paths.samples import HashSamples
+    from mitsonar.plugins.integrators.sonar_mlt import _Context
 
     scene = mitsonar.load_scene(os.path.join(HERE, "..", "scenes_xml", f"{name}.xml"))
     integrator = mi.load_dict({"type": "sonar_tof", "guide": guide})
@@ -186,10 +186,10 @@ def main(argv=None):
     ap.add_argument("--guide", default="image", choices=("image", "none"),
                     help="the path function's guide (sonar_tof's default image, or none: BSDF sampling)")
     ap.add_argument("--curved-guide", action="store_true",
-                    help="turn on the image guide through curved mirrors (plugins/image_guide.py CURVED_GUIDE) for "
+                    help="turn on the image guide through curved mirrors (plugins/integrators/paths/image_guide.py CURVED_GUIDE) for "
                          "the path function and the baseline")
     ap.add_argument("--no-strip-guide", action="store_true",
-                    help="turn off the strip guide to curved mirrors (plugins/image_guide.py STRIP_GUIDE, on by "
+                    help="turn off the strip guide to curved mirrors (plugins/integrators/paths/image_guide.py STRIP_GUIDE, on by "
                          "default) for the path function and the baseline: the bound as measured before it")
     ap.add_argument("--baseline-spp", default="",
                     help="also render the default sonar_tof at these spp (comma separated) and compare the ideal "
@@ -212,12 +212,12 @@ def main(argv=None):
         ap.error("--resample-draws takes a number of paths per ping (0: off)")
     if args.curved_guide:
         import mitsonar  # noqa: F401  (registers the plugins)
-        from mitsonar.plugins import image_guide
+        from mitsonar.plugins.integrators.paths import image_guide
 
         image_guide.CURVED_GUIDE = True
     if args.no_strip_guide:
         import mitsonar  # noqa: F401  (registers the plugins)
-        from mitsonar.plugins import image_guide
+        from mitsonar.plugins.integrators.paths import image_guide
 
         image_guide.STRIP_GUIDE = False
     print(json.dumps([analyse(s, args.paths, guide=args.guide, baseline_spp=spps, baseline_repeats=args.baseline_repeats,

@@ -25,7 +25,7 @@ def main(argv=None):
     ap.add_argument("--paths", type=int, default=65536, help="paths per ping (default 65536)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--no-strip-guide", action="store_true",
-                    help="without the strip guide (plugins/image_guide.py STRIP_GUIDE)")
+                    help="without the strip guide (plugins/integrators/paths/image_guide.py STRIP_GUIDE)")
     args = ap.parse_args(argv)
     if args.paths < 16:
         ap.error("--paths: at least 16 per ping")
@@ -33,8 +33,8 @@ def main(argv=None):
     import mitsuba as mi
 
     import mitsonar
-    from mitsonar.plugins import image_guide
-    from mitsonar.plugins.samples import SobolSamples, row_lanes
+    from mitsonar.plugins.integrators.paths import image_guide
+    from mitsonar.plugins.integrators.paths.samples import SobolSamples, row_lanes
 
     image_guide.STRIP_GUIDE = not args.no_strip_guide
     scene = mitsonar.load_scene(os.path.join(HERE, "..", "scenes_xml", "pile_quay.xml"))

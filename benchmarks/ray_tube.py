@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 import mitsonar
-from mitsonar.plugins import module
+from mitsonar.plugins.integrators.paths import refraction
 from mitsonar.scenes import echosounders
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -48,7 +48,6 @@ def main(argv=None):
     ap.add_argument("--depth", type=float, default=40.0)
     ap.add_argument("--max-depth", type=int, default=2)
     args = ap.parse_args(argv)
-    refraction = module("refraction")
     head = echosounders.configure("r2sonic_2024", n_beams=256, range_max=100.0, bin_width=0.1)
     pose = np.array(head.mount, float)
     pose[2, 3] = -HEAD

@@ -27,7 +27,7 @@ Targets (issue 2): <= 5 % relative L2 error in under 1 s, at >= 0.5 of the ceili
     law while the median error is above 5 %; ``survey_speed_targets``: the fastest sampling per
     target scene against its bound;
   * ``frozen_vs_traced`` (``--freeze-ab``): each scene's fastest sampling at its time-to-5 % spp,
-    renders with frozen passes (``plugins/frozen_pass.py``, the default) and traced ones
+    renders with frozen passes (``plugins/integrators/paths/frozen_pass.py``, the default) and traced ones
     interleaved: medians, fastest, and traced / frozen.
 
 Usage: python benchmarks/render.py [--spp 256,512,1024,2048,4096] [--repeats 3] [--ref-factor 32]
@@ -61,7 +61,7 @@ def count_segments(scene, spp, seed=0, per_lane=False):
     the path skips the visibility ray of a bounce whose echo is zero, e.g. far outside the beam);
     with ``per_lane`` also, per path, its number of bounces and a bit mask of the bounces that
     cast a visibility ray (two UInt32 arrays)."""
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators.paths import samples
 
     integrator = scene.integrator()
     setup = integrator.setup(scene, 0)
@@ -80,7 +80,7 @@ def count_segments(scene, spp, seed=0, per_lane=False):
         dr.scatter_add(shadows, mi.UInt32(1) << depth, lane, energy > 0)
 
     with dr.suspend_grad():
-        integrator.sample(setup, ping, module("samples").HashSamples(mi.UInt32(seed), ping, lane - ping * spp), record)
+        integrator.sample(setup, ping, samples.HashSamples(mi.UInt32(seed), ping, lane - ping * spp), record)
         c = counts.numpy()
         dr.eval(bounces, shadows)
     if per_lane:
@@ -121,10 +121,10 @@ def ceiling(scene, spp, per_lane, repeats, between=None):
     """Segments/s of the bare loop: ray_intersect + ray_test per bounce, no BSDF, no bins.
     ``between(r)``, if given, runs after each timed bare loop (the renders it is compared with,
     interleaved, so that the machine's load hits both alike)."""
-    from mitsonar.plugins import module
+    from mitsonar.plugins.sensors.sonar import PingFrames
 
     sensor = scene.sensors()[0]
-    frames = module("sonar_sensor").PingFrames(sensor.ping_poses())
+    frames = PingFrames(sensor.ping_poses())
     times, segs = [], 0
     for r in range(repeats + 1):
         t = time.perf_counter()
@@ -275,9 +275,7 @@ def compare_sampling(name, samplings, repeats, ref_factor):
 def frozen_vs_traced(name, sampling, spp, repeats):
     """Seconds of one render with the passes frozen (`frozen_pass`, the default) and traced every
     time, interleaved (the machine's load hits both alike): medians and traced / frozen."""
-    from mitsonar.plugins import module
-
-    fp = module("frozen_pass")
+    from mitsonar.plugins.integrators.paths import frozen_pass as fp
     scene = mitsonar.load_scene(os.path.join(HERE, "..", "scenes_xml", f"{name}.xml"))
     sensor = scene.sensors()[0]
     integ = mi.load_dict(integrator_dict(scene.integrator().max_depth, sampling))

@@ -64,7 +64,8 @@ def main(argv=None):
     ap.add_argument("--spp", type=int, default=256)
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args(argv)
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators.paths import shared_beams
+    from mitsonar.plugins.integrators.paths.samples import SobolSamples
 
     scene = mitsonar.load_scene(os.path.join(HERE, "..", "scenes_xml", "quay_wall.xml"))
     sensor = scene.sensors()[0]
@@ -86,10 +87,10 @@ def main(argv=None):
                 dr.scatter_add(tally, mi.UInt32(1), mi.UInt32(0), valid & (energy > 0))
 
             if share:
-                shared = module("shared_beams").SharedFrame(setup)
+                shared = shared_beams.SharedFrame(setup)
                 n = sensor.n_pings * args.spp
                 zero = dr.zeros(mi.UInt32, n)
-                samples = module("samples").SobolSamples(dr.opaque(mi.UInt32, s), zero, dr.arange(mi.UInt32, n))
+                samples = SobolSamples(dr.opaque(mi.UInt32, s), zero, dr.arange(mi.UInt32, n))
                 integ.sample(shared.path_setup, zero, samples, record)
             else:
                 ping, samples = integ.lanes(sensor.n_pings, s, 0, args.spp)

@@ -6,7 +6,7 @@ Prints one JSON object:
     compiles) in uniform water at the head's nominal speed, and the per-beam range error of the
     echo peak against the straight-ray closed form ``(D - h) / cos(angle)`` (median and max of
     |error| in bins, beams whose seabed echo is inside the window);
-  * ``refracted``: per ``svp_chords`` (chords per range window, `plugins/refraction.py`), the same
+  * ``refracted``: per ``svp_chords`` (chords per range window, `plugins/integrators/paths/refraction.py`), the same
     two numbers through the profile, the error against the closed form
     ``c_sensor * SoundSpeedProfile.trace(h, 90 deg - angle, to_depth=D).time`` (an exact arc per
     layer), ``time_ratio`` (refracted / straight seconds, same spp, same run) and
@@ -173,9 +173,9 @@ def main(argv=None):
 def merged_samples(svp):
     """How many of the profile's samples the render keeps (`refraction.merge_layers`); None with
     a renderer that does not merge."""
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators.paths import refraction
 
-    merge = getattr(module("refraction"), "merge_layers", None)
+    merge = getattr(refraction, "merge_layers", None)
     return None if merge is None else len(merge([float(v) for v in svp.depths], [float(v) for v in svp.speeds])[0])
 
 

@@ -96,7 +96,7 @@ def audit(scene, paths, seeds, max_depth):
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators import sonar_tof
 
     # independent samples: the per-path weights audited are those of the beam and the BSDFs
     integrator = mi.load_dict({"type": "sonar_tof", "max_depth": max_depth, "sampling": "independent"})
@@ -104,7 +104,7 @@ def audit(scene, paths, seeds, max_depth):
     sensor = setup.sensor
     rows, n_bins = sensor.n_pings, sensor.n_bins
     spp = max(1, math.ceil(paths / seeds / rows))
-    per_pass = max(1, min(spp, module("sonar_tof").MAX_LANES_PER_PASS // rows))
+    per_pass = max(1, min(spp, sonar_tof.MAX_LANES_PER_PASS // rows))
     size = 2 * rows * n_bins
     total = np.zeros(size)
     count = np.zeros(size)

@@ -6,7 +6,7 @@ one. The true mount is ``T = T_nominal @ D(t, r)``, ``D`` a translation ``t`` af
 the rotation vector ``r`` (both in the head's beam frame). Starting from ``D = identity`` (the
 nominal mount), Adam (``mi.ad.Adam``) fits ``(t, r)`` so that the rendered noise-free scan matches
 the target scan, through the derivative of ``mi.render`` with respect to the sensor's ``to_world``
-(path replay, ``plugins/path_replay.py``). Loss: relative L2 between the two scans blurred along
+(path replay, ``plugins/integrators/paths/path_replay.py``). Loss: relative L2 between the two scans blurred along
 range by a Gaussian of ``blur`` bins (a pulse's spread), which turns sub-bin range errors into a
 smooth loss.
 

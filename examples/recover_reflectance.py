@@ -7,7 +7,7 @@ incidence (the floor straight below, the end walls straight ahead and behind), w
 lobe shows, and obliquely, where the diffuse term does: all six of ``diffuse``, ``specular``,
 ``shininess`` are observable. Starting from wrong values, Adam (``mi.ad.Adam``) fits them to the
 target scan through the derivative of ``mi.render`` with respect to the BSDF parameters (path
-replay, ``plugins/path_replay.py``).
+replay, ``plugins/integrators/paths/path_replay.py``).
 
 Parametrisation: each value is ``start * exp(u)``, ``u`` fitted (relative steps, positive values);
 ``diffuse + specular`` is kept <= 0.99 (energy conservation) by scaling both down after a step that

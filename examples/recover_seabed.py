@@ -5,7 +5,7 @@ runs along x at ``altitude`` over a small height-map mesh (``face_normals``: one
 and pings every ``spacing`` metres. Starting from a flat seabed at the nominal depth, Adam
 (``mi.ad.Adam``) fits the heights of the mesh's vertices so that the rendered pings match the
 target pings, through the derivative of ``mi.render`` with respect to ``<mesh>.vertex_positions``
-(the echoes' ranges and incidence angles; ``plugins/path_replay.py``). A side-scan ping constrains
+(the echoes' ranges and incidence angles; ``plugins/integrators/paths/path_replay.py``). A side-scan ping constrains
 the seabed's across-track slope through the echo intensity (shading) and its height through the
 range. One ping's strip (2 deg along track) crosses each cell row once, so it sees an average of
 the vertices on either side: the heights are parametrised as ``z = DEPTH + S u`` with ``S`` a

@@ -6,7 +6,7 @@ differed by 4e-6 between two identical runs). Here each float32 term is split in
 integers added with 64-bit integer atomics, exact and so order-independent, and the words become
 one float64 per entry afterwards in a fixed order: the same batch gives the same bytes with any
 thread count (a superaccumulator; Demmel and Nguyen, "Parallel reproducible summation", IEEE
-Trans. Computers 64(7), 2015). mitsonar's histograms do the same (``plugins/exact_sum.py``;
+Trans. Computers 64(7), 2015). mitsonar's histograms do the same (``plugins/integrators/paths/exact_sum.py``;
 this package does not import mitsonar).
 
 A finite float32 ``v = +-m 2^(e - 150)`` (biased exponent ``e`` 1..254, 24-bit significand ``m``)

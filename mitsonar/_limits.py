@@ -36,7 +36,7 @@ and the spreading of its leg, so no echo of 64 bounces is above a head's noise; 
 keep one record per bounce per path.
 
 ``svp_chords``: 1 to 1024 chords per range window (default 4; the echo ranges do not depend on
-them, the hit is timed on the exact arc: `plugins.refraction`).
+them, the hit is timed on the exact arc: `plugins.integrators.paths.refraction`).
 
 ``spp``, ``sample_count`` and ``sonar_mlt``'s ``chains``, ``mutations``, ``bootstrap`` (per ping):
 up to 2^31 - 1, the paths a 32-bit signed sample index counts (the integrators' lane and sample

@@ -65,7 +65,7 @@ class SonarKind:
     head_frame_mount   ``to_world`` is the head frame itself (x forward, y port, z up), so the
                        dataset jobs mount it with the identity
     share_beams        the receive beams lie in one fan about +y, so ``sonar_tof`` may score a
-                       frame's shared transmit paths into them (`plugins/shared_beams.py`)
+                       frame's shared transmit paths into them (`plugins/integrators/paths/shared_beams.py`)
     fan_frame          rows are one fan of receive beams fired at once: the frame a multibeam head
                        (the Oculus) serves and logs
     grid               rows are beams over an elevation x azimuth grid (the sensor reads

@@ -1,84 +1,16 @@
-"""mitsonar's Mitsuba plugins: sensor ``sonar``, BSDFs ``acoustic`` and ``acoustic_material``, integrators ``sonar_tof``, ``sonar_mlt``.
+"""mitsonar's Mitsuba plugins, by family: the sensor ``sonar`` (`sensors`), the BSDFs ``acoustic``
+and ``acoustic_material`` (`bsdfs`), the integrators ``sonar_tof``, ``sonar_mlt`` and
+``sonar_bdpt`` (`integrators`, their path machinery in `integrators.paths`). The helpers the
+families share and that need no variant (`props`, `water`, `jit_arrays`) stay here.
 
-The plugin classes derive from the classes of the active Mitsuba variant, so their modules are
-(re)loaded for each variant and the plugins registered again; `register()` does that and is
-called by ``mitsonar.set_variant`` and ``mitsonar.ensure_variant`` (the first ``load_scene``,
-``render_scan``, ...), and on every variant change after that (never by ``import mitsonar``).
+Each plugin module registers its plugin at its end through `registry.register_plugin`, as Mitsuba's own
+Python integrators call ``mi.register_integrator``. The families' classes derive from the classes
+of the active Mitsuba variant, so `registry.register` imports every module of the families for the
+variant (found by walking the packages), again when the variant changes: ``mitsonar.set_variant``
+and ``mitsonar.ensure_variant`` (the first ``load_scene``, ``render_scan``, ...) call it, and then
+every variant change does (never ``import mitsonar``). After that, import a plugin module directly
+(``from mitsonar.plugins.integrators import sonar_tof``).
 """
 from __future__ import annotations
 
-import importlib
-
-_MODULES = ("materials", "beam", "acoustic_bsdf", "acoustic_material", "sonar_sensor", "range_bins", "samples", "common", "sonar_tof",
-            "sonar_mlt", "bdpt_paths", "sonar_bdpt")
-_current = None
-
-# (kind, XML plugin name, module, class) of every plugin registered with Mitsuba
-PLUGINS = (("BSDF", "acoustic", "acoustic_bsdf", "AcousticBSDF"),
-           ("BSDF", "acoustic_material", "acoustic_material", "AcousticMaterialBSDF"),
-           ("sensor", "sonar", "sonar_sensor", "SonarSensor"),
-           ("integrator", "sonar_tof", "sonar_tof", "SonarTOFIntegrator"),
-           ("integrator", "sonar_mlt", "sonar_mlt", "SonarMLTIntegrator"),
-           ("integrator", "sonar_bdpt", "sonar_bdpt", "SonarBDPTIntegrator"))
-
-# The last exception raised by one of our plugins' constructors. Mitsuba turns it into a
-# RuntimeError holding its traceback as text; `take_failure` hands the original back to whoever
-# reports the error (mitsonar.sim.scene), so no message has to be recovered from that text.
-_failures: list = []
-
-
-def take_failure():
-    """The last exception a plugin constructor raised since the previous call (or None)."""
-    failure = _failures[-1] if _failures else None
-    _failures.clear()
-    return failure
-
-
-def parameters(cls) -> list:
-    """The XML parameter names of a plugin class (its ``parameters()``, or its docstring table)."""
-    from .props import table_parameters
-
-    return cls.parameters() if hasattr(cls, "parameters") else table_parameters(cls.__doc__)
-
-
-def _constructor(kind, name, mod, cls_name):
-    from .props import check_all_read
-
-    def construct(props):
-        try:
-            cls = getattr(mod, cls_name)
-            obj = cls(props)
-            check_all_read(props, kind, name, parameters(cls))
-            return obj
-        except Exception as exc:
-            _failures[:] = [exc]
-            raise
-    return construct
-
-
-def register(force: bool = False) -> None:
-    """Register the plugins for the active variant (no-op if already done for it)."""
-    import mitsuba as mi
-
-    variant = mi.variant()
-    if variant is None:
-        raise RuntimeError("mitsonar.plugins.register(): set a Mitsuba variant first")
-    global _current
-    if variant == _current and not force:
-        return
-    mods = {}
-    for name in _MODULES:
-        mod = importlib.import_module(f"{__name__}.{name}")
-        # Module-level classes were built against the variant active at import time.
-        mods[name] = importlib.reload(mod) if getattr(mod, "_variant", variant) != variant else mod
-        mods[name]._variant = variant
-    for kind, name, module_name, cls_name in PLUGINS:
-        register_kind = {"sensor": mi.register_sensor, "BSDF": mi.register_bsdf, "integrator": mi.register_integrator}
-        register_kind[kind](name, _constructor(kind, name, mods[module_name], cls_name))
-    _current = variant
-
-
-def module(name: str):
-    """The plugin module for the active variant (e.g. ``module('sonar_sensor').SonarSensor``)."""
-    register()
-    return importlib.import_module(f"{__name__}.{name}")
+from .registry import parameters, register, register_plugin, registered, take_failure  # noqa: F401

@@ -1,4 +1,4 @@
-"""sonar_tof's allocation="adaptive" and "auto" (plugins/row_allocation.py): the paths per row,
+"""sonar_tof's allocation="adaptive" and "auto" (plugins/integrators/paths/row_allocation.py): the paths per row,
 the same expectation as the uniform render, the uniform render's bytes where the split stays even,
 determinism per seed, refused settings."""
 import os
@@ -13,7 +13,7 @@ def test_allocate_is_the_square_root_rule_with_a_floor():
     """Closed forms: with no floor, the second stage's paths go in proportion to sqrt(v) after one
     each; with the floor ``mix`` every row keeps at least ``mix`` of its uniform share; no
     variance anywhere gives the uniform split; the total is exact."""
-    from mitsonar.plugins.row_allocation import allocate
+    from mitsonar.plugins.integrators.paths.row_allocation import allocate
 
     # 64 paths over 4 rows: one each, then 60 as sqrt(v) = 0, 1, 2, 3 (sixths)
     assert allocate([0.0, 1.0, 4.0, 9.0], 64, mix=0.0).tolist() == [1, 11, 21, 31]
@@ -32,7 +32,7 @@ def test_allocate_is_the_square_root_rule_with_a_floor():
 def test_predicted_gain_closed_form():
     """Rows of variance 1 and 9 with 1 and 3 paths (sqrt rule): uniform 2 each gives 5, these
     give 1 + 3 = 4, a gain of 1.25; equal variances with equal paths gain nothing."""
-    from mitsonar.plugins.row_allocation import predicted_gain
+    from mitsonar.plugins.integrators.paths.row_allocation import predicted_gain
 
     assert predicted_gain([1.0, 9.0], np.array([1, 3])) == pytest.approx(1.25)
     assert predicted_gain([2.0, 2.0, 2.0], np.array([5, 5, 5])) == pytest.approx(1.0)
@@ -48,7 +48,7 @@ def test_a_small_predicted_gain_keeps_the_uniform_split(mitsonar_mod):
     drawn there."""
     import mitsuba as mi
 
-    from mitsonar.plugins.row_allocation import GUIDE_MIN_GAIN, MIN_GAIN
+    from mitsonar.plugins.integrators.paths.row_allocation import GUIDE_MIN_GAIN, MIN_GAIN
 
     uniform = mi.load_dict({"type": "sonar_tof", "allocation": "uniform"})
     for name, guided in (("periscope.xml", False), ("hidden_target.xml", True)):
@@ -67,7 +67,7 @@ def test_guide_tables_are_the_square_root_rule_with_a_floor():
     1/3); the cumulative sums run from 0 to 1 and their differences are the probabilities; the
     second moment left is sum m2 / (n^2 p) over the even one's mean; a row without echoes is even
     and keeps its variance."""
-    from mitsonar.plugins.row_allocation import guide_tables
+    from mitsonar.plugins.integrators.paths.row_allocation import guide_tables
 
     prob, cdf, factor = guide_tables([[0.0, 4.0, 0.0, 1.0], [0.0, 0.0, 0.0, 0.0]], mix=0.2)
     want = 0.05 + 0.8 * np.array([0.0, 2.0 / 3.0, 0.0, 1.0 / 3.0])
@@ -86,7 +86,7 @@ def test_warp_draws_each_slice_with_its_probability(mitsonar_mod):
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.plugins.row_allocation import guide_tables, warp
+    from mitsonar.plugins.integrators.paths.row_allocation import guide_tables, warp
 
     rng = np.random.default_rng(5)
     prob, cdf, _ = guide_tables(rng.random((2, 8)) ** 4, mix=0.3)
@@ -111,8 +111,8 @@ def test_a_guided_even_split_draws_the_same_paths_as_the_lanes_passes(mitsonar_m
     with the same guide: the same samples of every row, the same weights."""
     import mitsuba as mi
 
-    from mitsonar.plugins import row_allocation
-    from mitsonar.plugins.sonar_tof import MAX_LANES_PER_PASS
+    from mitsonar.plugins.integrators.paths import row_allocation
+    from mitsonar.plugins.integrators.sonar_tof import MAX_LANES_PER_PASS
 
     scene = mitsonar_mod.load_scene(os.path.join(SCENES, "hidden_target.xml"))
     tof = mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"})
@@ -132,7 +132,7 @@ def test_progress_is_reported_after_each_pass(mitsonar_mod, name):
     the intake, kept even on the periscope): rising, ending at (spp, spp)."""
     import mitsuba as mi
 
-    from mitsonar.plugins import row_allocation
+    from mitsonar.plugins.integrators.paths import row_allocation
 
     scene = mitsonar_mod.load_scene(os.path.join(SCENES, name))
     tof = mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"})
@@ -156,7 +156,7 @@ def test_adaptive_is_deterministic_and_moves_paths_to_the_rows_with_echoes(intak
     gets many times the paths of the quietest, which keeps a quarter of its uniform share."""
     import mitsuba as mi
 
-    from mitsonar.plugins.row_allocation import UNIFORM_MIX
+    from mitsonar.plugins.integrators.paths.row_allocation import UNIFORM_MIX
 
     tof = mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"})
     a = tof.render_histogram(intake, seed=3, spp=256)
@@ -176,7 +176,7 @@ def test_small_spp_is_the_uniform_render(intake):
     one to the byte (the same samples of each row, summed exactly)."""
     import mitsuba as mi
 
-    from mitsonar.plugins.row_allocation import MIN_SPP
+    from mitsonar.plugins.integrators.paths.row_allocation import MIN_SPP
 
     spp = MIN_SPP // 2
     adaptive = mi.load_dict({"type": "sonar_tof", "allocation": "adaptive"})
@@ -193,7 +193,7 @@ def test_auto_allocates_large_renders_of_rows_that_share_no_paths(mitsonar_mod, 
     sonar_mlt's default path tracer follows sonar_tof's."""
     import mitsuba as mi
 
-    from mitsonar.plugins.row_allocation import AUTO_MIN_PATHS
+    from mitsonar.plugins.integrators.paths.row_allocation import AUTO_MIN_PATHS
 
     n_rows = intake.sensors()[0].n_pings
     auto = mi.load_dict({"type": "sonar_tof"})
@@ -229,7 +229,7 @@ def test_adaptive_has_the_expectation_of_the_uniform_render(mitsonar_mod, name, 
     import mitsuba as mi
     from scipy import stats
 
-    from mitsonar.plugins import row_allocation
+    from mitsonar.plugins.integrators.paths import row_allocation
     from test_mlt import grouped
 
     monkeypatch.setattr(row_allocation, "GUIDE_MIN_GAIN", 1.0)

@@ -145,37 +145,74 @@ def test_submodules_take_only_submodules_from_their_package():
     assert bad == []
 
 
+# What each room of the plugins may use of mitsonar: its helpers below them (value checks, frames,
+# the sonar kinds) and the electronics' settings (the sensor reads and checks its electronics
+# fields), nothing else (not the Scan, files, render or devices).
+PLUGIN_ROOMS = {
+    # the sonar sensor and its beam patterns
+    "mitsonar.plugins.sensors": {
+        "mitsonar._checks", "mitsonar.geometry.frames", "mitsonar.kinds", "mitsonar.receiver.electronics",
+        # the size bounds of every setting (one table; it imports only the checks)
+        "mitsonar._limits",
+        # what differs between the NumPy releases pyproject.toml allows (NumPy only)
+        "mitsonar._compat",
+        # the kinds' and beam patterns' registry (imports nothing)
+        "mitsonar._registry",
+        # the receive elements' layout: the sensor reads its XML elements CSV with it (numpy)
+        "mitsonar.geometry.elements",
+        # the nominal sound speed (the sensor's and the beam patterns' defaults)
+        "mitsonar.acoustics.water",
+        # the side-scan heads' published figures (the sensor's ``preset``; imports nothing)
+        "mitsonar.presets.sidescan"},
+    # the acoustic BSDFs: the seabed and material acoustics (NumPy, and scipy.special for the
+    # APL-UW model's erfc; nothing of mitsonar beyond each other): acoustic_material's reflection
+    # and backscatter tables
+    "mitsonar.plugins.bsdfs": {
+        "mitsonar._checks", "mitsonar._compat", "mitsonar.acoustics.interface", "mitsonar.acoustics.seabed",
+        "mitsonar.acoustics.materials"},
+    # the integrators and their paths
+    "mitsonar.plugins.integrators": {
+        "mitsonar._checks", "mitsonar._limits", "mitsonar.kinds",
+        # the sound-speed profile: the integrators read their XML sound_speed_profile with it
+        "mitsonar.acoustics.profile"},
+    # the helpers the families share: the sensor's water (absorption and sound speed 'auto')
+    # and the water as one value (the sensor's defaults)
+    "mitsonar.plugins": {"mitsonar._checks", "mitsonar.acoustics.seawater", "mitsonar.acoustics.water"},
+}
+# Which families a family's modules may import (besides the shared helpers at the package's
+# top): the integrators trace paths from the sensor over the BSDFs; the sensor and the BSDFs
+# know nothing of each other or of the integrators.
+PLUGIN_FAMILIES = {"mitsonar.plugins.sensors": set(), "mitsonar.plugins.bsdfs": set(),
+                   "mitsonar.plugins.integrators": {"mitsonar.plugins.sensors", "mitsonar.plugins.bsdfs"}}
+
+
+def plugin_room(name):
+    """The room of PLUGIN_ROOMS a plugin module belongs to (its family, or the package's top)."""
+    return next((room for room in PLUGIN_FAMILIES if name == room or name.startswith(room + ".")), "mitsonar.plugins")
+
+
 def test_the_plugins_use_only_the_lowest_mitsonar_modules():
-    """Data flows scene -> paths -> histogram -> electronics -> Scan -> files, maps, devices: the
-    plugins (paths and histograms) may use mitsonar's helpers below them (value checks, frames,
-    the sonar kinds) and the electronics' settings (the sensor reads and checks its electronics
-    fields), nothing else of mitsonar (not the Scan, files, render or devices)."""
+    """Data flows scene -> paths -> histogram -> electronics -> Scan -> files, maps, devices: each
+    room of the plugins (`PLUGIN_ROOMS`) uses only the helpers of mitsonar listed for it; the
+    families import only the families `PLUGIN_FAMILIES` allows, the shared helpers at the top no
+    family, and the integrators' path machinery (``integrators.paths``) none of the integrators
+    above it."""
     _, edges = import_graph()
-    allowed = {"mitsonar._checks", "mitsonar.geometry.frames", "mitsonar.kinds",
-               "mitsonar.receiver.electronics",
-               # the size bounds of every setting (one table; it imports only the checks)
-               "mitsonar._limits",
-               # what differs between the NumPy releases pyproject.toml allows (NumPy only)
-               "mitsonar._compat",
-               # the kinds' and beam patterns' registry (imports nothing)
-               "mitsonar._registry",
-               # the water and seabed acoustics (NumPy, and scipy.special for the APL-UW model's
-               # erfc; nothing of mitsonar beyond each other): the sensor's absorption and sound
-               # speed 'auto', the acoustic_material BSDF's reflection and backscatter tables
-               "mitsonar.acoustics.seawater", "mitsonar.acoustics.interface", "mitsonar.acoustics.seabed",
-               "mitsonar.acoustics.materials",
-               # the sound-speed profile: the integrators read their XML sound_speed_profile with it
-               "mitsonar.acoustics.profile",
-               # the receive elements' layout: the sensor reads its XML elements CSV with it (numpy)
-               "mitsonar.geometry.elements",
-               # the side-scan heads' published figures (the sensor's ``preset``; imports nothing)
-               "mitsonar.presets.sidescan",
-               # the water as one value and the nominal sound speed (the sensor's defaults)
-               "mitsonar.acoustics.water"}
+    families = [n for n in edges if n.startswith("mitsonar.plugins.") and n.count(".") == 2 and n in PLUGIN_FAMILIES]
+    assert sorted(families) == sorted(PLUGIN_FAMILIES)
     for name, out in edges.items():
-        if name.startswith("mitsonar.plugins"):
-            above = {t for t in out if t.startswith("mitsonar") and not t.startswith("mitsonar.plugins")}
-            assert above <= allowed, (name, above - allowed)
+        if not name.startswith("mitsonar.plugins"):
+            continue
+        room = plugin_room(name)
+        above = {t for t in out if t.startswith("mitsonar") and not t.startswith("mitsonar.plugins")}
+        assert above <= PLUGIN_ROOMS[room], (name, above - PLUGIN_ROOMS[room])
+        others = {plugin_room(t) for t in out if t.startswith("mitsonar.plugins.")} - {room, "mitsonar.plugins"}
+        assert others <= PLUGIN_FAMILIES.get(room, set()), (name, others)
+        if name.startswith("mitsonar.plugins.integrators.paths."):
+            up = {t for t in out if t.startswith("mitsonar.plugins.integrators.")
+                  and not t.startswith("mitsonar.plugins.integrators.paths")}
+            assert not up, (name, up)
+    allowed = set().union(*PLUGIN_ROOMS.values())
     # and those import nothing of mitsonar's above them (the electronics' scene speckle, its NumPy
     # and Dr.Jit chains and the sonar equation's levels are leaves beside them)
     leaves = {"mitsonar._checks", "mitsonar._limits", "mitsonar._compat", "mitsonar._registry", "mitsonar.receiver.speckle",
@@ -389,7 +426,7 @@ def test_a_new_kind_is_accepted_without_editing_other_modules(tmp_path):
 
 # ----------------------------------------------------------------------------- beam patterns
 PATTERN_NAMES = ("gaussian", "sinc", "uniform", "table")
-PATTERNS_MODULE = os.path.join(ROOT, "plugins", "beam.py")
+PATTERNS_MODULE = os.path.join(ROOT, "plugins", "sensors", "beam.py")
 # The dataset config's ``uniform`` is a way of drawing a parameter ("uniform", "randint",
 # "choice"), not a beam pattern.
 NOT_PATTERNS = {os.path.join(ROOT, "mitsonar", "jobs", "dataset", "config.py")}
@@ -436,7 +473,7 @@ def test_the_checker_finds_pattern_comparisons(tmp_path):
                                               if not n.startswith("hilbertmap")))
 def test_only_the_pattern_classes_compare_pattern_names(name, path):
     """Behaviour that differs between beam patterns lives on the pattern classes of
-    ``plugins/beam.py`` (`Pattern` and its registered subclasses): no other module compares a
+    ``plugins/sensors/beam.py`` (`Pattern` and its registered subclasses): no other module compares a
     pattern's name or keeps a table of pattern names; they ask the beam's ``shape``."""
     if path == PATTERNS_MODULE or path in NOT_PATTERNS:
         return

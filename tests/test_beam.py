@@ -9,9 +9,9 @@ import pytest
 
 @pytest.fixture(scope="module")
 def beam_mod(mitsonar_mod):
-    from mitsonar.plugins import module
+    from mitsonar.plugins.sensors import beam
 
-    return module("beam")
+    return beam
 
 
 def sample_weights(beam, n=1 << 18, seed=0):

@@ -318,7 +318,7 @@ def test_compare_names_every_sonar_integrator():
     from mitsonar.jobs.compare import CompareError
     from mitsonar.jobs.compare.integrators import load_integrator
 
-    with pytest.raises(CompareError, match="use one of sonar_tof, sonar_mlt, sonar_bdpt"):
+    with pytest.raises(CompareError, match="use one of sonar_bdpt, sonar_mlt, sonar_tof"):
         load_integrator("path")
 
 

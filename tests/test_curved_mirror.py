@@ -1,4 +1,4 @@
-"""The image guide through curved mirrors (`plugins/curved_mirror.py`): the reflection point on a
+"""The image guide through curved mirrors (`plugins/integrators/paths/curved_mirror.py`): the reflection point on a
 sphere and a cylinder against its defining condition, the mirror read from the surface, agreement
 with the unguided and the planar-guided path tracer on the curved-mirror scenes, the noise it
 removes behind a ship's bow, determinism.
@@ -18,7 +18,8 @@ from test_image_guide import window_variance
 @pytest.fixture
 def curved(monkeypatch):
     """The curved-mirror guide on (`image_guide.CURVED_GUIDE`, off by default), kernels traced anew."""
-    from mitsonar.plugins import frozen_pass, image_guide
+    from mitsonar.plugins.integrators.paths import frozen_pass
+    from mitsonar.plugins.integrators.paths import image_guide
 
     monkeypatch.setattr(image_guide, "CURVED_GUIDE", True)
     frozen_pass.clear()
@@ -41,7 +42,7 @@ def test_the_mirror_is_read_from_the_surface_and_reflects_at_its_specular_point(
     directions to the target and to the transducer (the law of reflection), with the angle of
     incidence it reports."""
     import mitsuba as mi
-    from mitsonar.plugins import curved_mirror as cm
+    from mitsonar.plugins.integrators.paths import curved_mirror as cm
 
     scene = load(mitsonar_mod, name)
     si = scene.ray_intersect(mi.Ray3f(mi.Point3f(0, 0, 0), mi.Vector3f(1, 0, 0)), cm.RAY_FLAGS, False, True)
@@ -66,7 +67,7 @@ def test_the_mirror_is_read_from_the_surface_and_reflects_at_its_specular_point(
 def test_flat_and_concave_mirrors_keep_the_tangent_plane(mitsonar_mod):
     """A plate has no curvature and the inside of a tank is concave: radius 0, the planar image."""
     import mitsuba as mi
-    from mitsonar.plugins import curved_mirror as cm
+    from mitsonar.plugins.integrators.paths import curved_mirror as cm
 
     plate = load(mitsonar_mod, "hidden_target")
     si = plate.ray_intersect(mi.Ray3f(mi.Point3f(0, 0, 0), mi.Vector3f(1, 0, 0)), cm.RAY_FLAGS, False, True)
@@ -82,7 +83,7 @@ def test_the_kernel_solves_only_where_a_curved_mirror_is(mitsonar_mod, monkeypat
     or cylinder asks for the curved one when the curved guide is on, a scene without mirrors for
     none. (With the strip guide, on by default, pile_quay's kernel is a `image_guide.Guide`:
     tests/test_strip_guide.py.)"""
-    from mitsonar.plugins import image_guide
+    from mitsonar.plugins.integrators.paths import image_guide
 
     names = ("hidden_target", "periscope", "tank_target", "hull_target", "pile_quay", "box")
     scenes = {name: load(mitsonar_mod, name) for name in names}

@@ -1,6 +1,6 @@
 """The same seed gives the same bytes whatever the threads (issue "Datasets are not byte-identical
 across thread counts"): histogram sums that do not depend on the order of atomic adds
-(plugins/exact_sum.py), one BVH per mesh (scenes load on one thread), the Hilbert map's SGD
+(plugins/integrators/paths/exact_sum.py), one BVH per mesh (scenes load on one thread), the Hilbert map's SGD
 scatter (hilbertmap/_exact.py), and a dataset written by 1 or 2 workers."""
 import math
 import os

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import mitsonar
 from mitsonar.receiver.electronics import Electronics
-from mitsonar.plugins import PLUGINS
+from mitsonar.plugins import registered
 from mitsonar.plugins.props import table_parameters
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
@@ -21,7 +21,7 @@ DOCS = Path(__file__).resolve().parent.parent / "docs"
 def test_every_plugin_has_a_generated_reference_section():
     page = (DOCS / "plugins.rst").read_text()
     documented = re.findall(r"^\.\. mitsonar-plugin:: (\S+)\s*$", page, flags=re.M)
-    assert sorted(documented) == sorted(entry[1] for entry in PLUGINS)
+    assert sorted(documented) == sorted(registered())
     assert re.search(r"^\.\. mitsonar-electronics::\s*$", page, flags=re.M)
 
 
@@ -106,7 +106,7 @@ def _simple_table_margin_errors(doc: str) -> list:
 def test_parameter_tables_are_well_formed_rst():
     from mitsonar import plugins
 
-    docs = {f"{entry[1]}": getattr(plugins.module(entry[2]), entry[3]).__doc__ for entry in PLUGINS}
+    docs = {name: cls.__doc__ for name, (kind, cls) in plugins.registered().items()}
     docs["Electronics"] = Electronics.__doc__
     bad = {name: rows for name, doc in docs.items() if (rows := _simple_table_margin_errors(doc))}
     assert not bad, f"table rows with text in a column margin: {bad}"

@@ -83,9 +83,7 @@ def test_key_walk_finds_what_it_found_before(mitsonar_mod, scene_file, share):
     per-row setups, guided scenes) and for members of every kind."""
     import mitsuba as mi
 
-    from mitsonar.plugins import module
-
-    fp, sb = module("frozen_pass"), module("shared_beams")
+    from mitsonar.plugins.integrators.paths import frozen_pass as fp, shared_beams as sb
     scene = mitsonar_mod.load_scene(os.path.join(SCENES, scene_file))
     integ, sensor = scene.integrator(), scene.sensors()[0]
     setup = integ.setup(scene, sensor)
@@ -114,13 +112,13 @@ def _render(mitsonar_mod, scene, seed=3):
 def _cold(mitsonar_mod, monkeypatch, scene):
     """The same render as a process's first would make it: every pass traced afresh (no recording
     replayed), no receive-weighted emitter nor speckle field kept from an earlier frame."""
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators.paths import frozen_pass, receive_emission
     from mitsonar.receiver import speckle
 
-    module("frozen_pass").clear()
-    module("receive_emission")._cache.clear()
+    frozen_pass.clear()
+    receive_emission._cache.clear()
     with monkeypatch.context() as m:
-        m.setattr(module("frozen_pass"), "FREEZE", False)
+        m.setattr(frozen_pass, "FREEZE", False)
         m.setattr(speckle, "CACHE_SIZE", 0)
         return _render(mitsonar_mod, scene)
 

@@ -87,9 +87,9 @@ def test_frames_replay_without_compiling(mitsonar_mod):
 def test_pass_sums_in_place_equal_the_straightforward_mean(mitsonar_mod):
     """`SonarTOFIntegrator.accumulate` sums its passes in place: the same bits as
     ``total = 0.0; total = total + pass ...; total / spp``, signed zeros included."""
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators import sonar_tof
 
-    acc = module("sonar_tof").SonarTOFIntegrator.accumulate
+    acc = sonar_tof.SonarTOFIntegrator.accumulate
     rng = np.random.default_rng(5)
     parts = {s: rng.exponential(1.0, 50) * (rng.random(50) < 0.5) for s in range(0, 10, 3)}
     for p in parts.values():
@@ -142,7 +142,7 @@ def test_exact_sums_are_stored_word_major_and_sum_as_the_reference(mitsonar_mod)
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.plugins import exact_sum
+    from mitsonar.plugins.integrators.paths import exact_sum
 
     rng = np.random.default_rng(46)
     n = 37
@@ -209,7 +209,7 @@ def _emission_runs(scene, emission, seeds, spp, depth=2):
 
 
 def test_receive_weighted_emission_agrees_with_the_transmit_fan_within_monte_carlo_error(mitsonar_mod):
-    """``emission`` ``receive`` (plugins/receive_emission.py) against ``transmit`` (the fan's own
+    """``emission`` ``receive`` (plugins/integrators/paths/receive_emission.py) against ``transmit`` (the fan's own
     density) on the small corner frame of tests/test_shared_beams.py (24 beams over 46 deg, the fan
     as wide: a quarter of its mass beyond the swath, two-bounce corner echoes): cells of 4 rows x
     5 bins holding > 1e-3 of the brightest, 16 seeds per side at spp 64, z = (mean_receive -
@@ -289,10 +289,11 @@ def test_receive_weighted_emission_weights_integrate_the_fan(mitsonar_mod, tx_ki
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.plugins import module
+    from mitsonar.plugins.sensors import beam
+    from mitsonar.plugins.integrators.paths import receive_emission
 
-    BeamPattern = module("beam").BeamPattern
-    remit = module("receive_emission")
+    BeamPattern = beam.BeamPattern
+    remit = receive_emission
     tx = BeamPattern(pattern=tx_kind, beamwidth_h=60.0, beamwidth_v=20.0, frequency=400e3)
     rx = BeamPattern(pattern="gaussian", beamwidth_h=3.0, beamwidth_v=20.0, frequency=400e3)
     bearings = np.radians(np.arange(-20.0, 21.0, 2.0))          # a 40 deg swath inside the fan

@@ -1,7 +1,7 @@
 """Gradients of a scan through mi.render (issue "Differentiable scans"), in both AD modes.
 
 Finite differences use the primal renderer with the seed the gradient pass used (``seed_grad``),
-so the two see the same paths and differ only by the estimators (plugins/path_replay.py).
+so the two see the same paths and differ only by the estimators (plugins/integrators/paths/path_replay.py).
 """
 import math
 import os
@@ -241,7 +241,7 @@ def test_replay_retraces_the_primal_paths(mitsonar_mod):
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators.paths import path_replay
 
     sc = scene(mitsonar_mod, [plane(-2.0, 60.0), ceiling(1.5, 60.0)], boresight=(1.0, 0.0, -0.8), depth=3,
                bsdf=acoustic_xml(0.5, 0.4, 20.0), n_bins=60, range_min=0.0, range_max=15.0, beamwidth_h=40.0,
@@ -252,7 +252,7 @@ def test_replay_retraces_the_primal_paths(mitsonar_mod):
     setup = integrator.setup(sc)
     with dr.resume_grad():
         setup.attach()
-    adjoint = module("path_replay").Adjoint(setup.bins, dr.ones(mi.Float, hist.size))
+    adjoint = path_replay.Adjoint(setup.bins, dr.ones(mi.Float, hist.size))
     ping, samples = integrator.lanes(2, SEED, 0, spp)
     with dr.suspend_grad():
         s = integrator.sample(setup, ping, samples, mode=dr.ADMode.Primal, δ=adjoint)
@@ -260,7 +260,7 @@ def test_replay_retraces_the_primal_paths(mitsonar_mod):
     assert float(dr.sum(total)[0]) / spp == pytest.approx(hist.sum(), rel=1e-5)
     # and the same sum by the replay itself (visibility rays traced again)
     with dr.suspend_grad():
-        again = module("path_replay").replay(setup, dr.ADMode.Primal, ping, samples, adjoint)
+        again = path_replay.replay(setup, dr.ADMode.Primal, ping, samples, adjoint)
     assert float(dr.sum(again)[0]) / spp == pytest.approx(hist.sum(), rel=1e-5)
     bits = np.asarray(seen)
     assert bits.max() < 8 and (bits & 1).any() and (bits & 4).any()

@@ -1,4 +1,4 @@
-"""Image guiding (`plugins/image_guide.py`, the integrators' ``guide="image"``): the image geometry,
+"""Image guiding (`plugins/integrators/paths/image_guide.py`, the integrators' ``guide="image"``): the image geometry,
 unbiasedness against the unguided path tracer, the variance it removes on echoes seen through
 mirror-like plates, inertness where there are none, determinism, refusals.
 
@@ -21,7 +21,7 @@ def test_image_of_the_transducer_in_a_chain_of_plates(mitsonar_mod):
     Phong exponent 400 read from the BSDF's density (less the diffuse share)."""
     import drjit as dr
     import mitsuba as mi
-    from mitsonar.plugins import image_guide
+    from mitsonar.plugins.integrators.paths import image_guide
 
     scene = load(mitsonar_mod, "periscope")
     origin = mi.Point3f(0, 0, 0)
@@ -50,7 +50,7 @@ def test_the_way_back_through_two_mirrors_aims_at_the_image_in_the_farther_one(m
     (and starts a chain of its own, the image in B); after one mirror there is no way-back target
     (hidden_target's single plate: the bounce at the target already aims home)."""
     import mitsuba as mi
-    from mitsonar.plugins import image_guide as ig
+    from mitsonar.plugins.integrators.paths import image_guide as ig
 
     scene = load(mitsonar_mod, "periscope")
     origin = mi.Point3f(0, 0, 0)
@@ -88,9 +88,10 @@ def window_variance(monkeypatch, scene, flag_name, flag, seed, lo, paths, n_bins
     summed over bins >= ``lo``, the window's energy, its standard error)."""
     import drjit as dr
     import mitsuba as mi
-    from mitsonar.plugins import frozen_pass, image_guide
-    from mitsonar.plugins.samples import HashSamples
-    from mitsonar.plugins.sonar_mlt import _Context
+    from mitsonar.plugins.integrators.paths import frozen_pass
+    from mitsonar.plugins.integrators.paths import image_guide
+    from mitsonar.plugins.integrators.paths.samples import HashSamples
+    from mitsonar.plugins.integrators.sonar_mlt import _Context
 
     monkeypatch.setattr(image_guide, flag_name, flag)
     frozen_pass.clear()
@@ -174,7 +175,7 @@ def test_guide_is_inert_without_mirrors(mitsonar_mod, monkeypatch):
     """A Lambertian plane has no narrow lobe, so no chain forms: the guided kernel (forced on here:
     `has_mirrors` would trace the unguided one) takes the very same directions (equal to float
     rounding) and matches the closed form (test_physics)."""
-    from mitsonar.plugins import image_guide
+    from mitsonar.plugins.integrators.paths import image_guide
 
     monkeypatch.setattr(image_guide, "has_mirrors", lambda scene: True)
     scene, ref = lambert_plane(mitsonar_mod)

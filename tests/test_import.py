@@ -63,14 +63,18 @@ def test_the_libllvm_is_chosen_when_mitsonar_first_chooses_the_variant():
 
 def test_the_receiver_chain_and_the_plugins_choose_the_variant_on_first_use():
     """Entry points that need no scene work first in a fresh interpreter: the electronics' chain
-    (Dr.Jit kernels) and mitsonar's reach to its plugin modules (a dataset config's check)."""
+    (Dr.Jit kernels) and a plugin module imported directly after `ensure_variant`, whose class is
+    the one Mitsuba builds."""
     got = run("import json, numpy as np\n"
               "from mitsonar.receiver.electronics import Electronics\n"
               "data = Electronics().apply(np.full((2, 5), 1e-3), np.linspace(1.0, 2.0, 5), seed=1)\n"
               "import mitsonar\n"
               "print(json.dumps([list(data.shape), mitsonar.variant()]))")
     assert got == [[2, 5], "llvm_ad_mono"]
-    got = run("import json\n"
-              "from mitsonar.sim.variant import plugin_module\n"
-              "print(json.dumps(plugin_module('common').MAX_DEPTH > 0))")
-    assert got is True
+    got = run("import json, mitsonar\n"
+              "mitsonar.ensure_variant()\n"
+              "import mitsuba as mi\n"
+              "from mitsonar.plugins.integrators import common, sonar_tof\n"
+              "print(json.dumps([common.MAX_DEPTH > 0,\n"
+              "                  type(mi.load_dict({'type': 'sonar_tof'})) is sonar_tof.SonarTOFIntegrator]))")
+    assert got == [True, True]

@@ -1,5 +1,5 @@
 """Geometry gradients (issue "Inverse problems", part 1): the scan's derivative with respect to a
-mesh's vertex positions, through the echoes' ranges and incidence angles (plugins/path_replay.py).
+mesh's vertex positions, through the echoes' ranges and incidence angles (plugins/integrators/paths/path_replay.py).
 
 Closed-form checks on a flat mesh (no facet edge changes its normal jump): lifting the mesh by s
 is the head sinking by s, and turning the mesh about an axis through the head is the head turning

@@ -136,7 +136,7 @@ def test_lambert_seabed_echo_level_matches_the_footprint_integral(mitsonar_mod):
 # ----------------------------------------------------------------------------- receiver side
 
 def test_directivity_index_closed_forms(mitsonar_mod):
-    from mitsonar.plugins.beam import BeamPattern
+    from mitsonar.plugins.sensors.beam import BeamPattern
 
     bh, bv = math.radians(3.0), math.radians(35.0)
     uni = BeamPattern("uniform", 3.0, 35.0)
@@ -289,7 +289,7 @@ def test_xml_and_set_source_level_below_150_db_give_one_line(mitsonar_mod, tmp_p
 
 def test_presets_carry_source_levels_and_keep_the_calibration(mitsonar_mod):
     from mitsonar.scenes import echosounders
-    from mitsonar.plugins.sidescan_heads import PRESETS
+    from mitsonar.presets.sidescan import PRESETS
 
     for p in PRESETS.values():
         assert 180 <= p["source_level"] <= 230

@@ -30,14 +30,15 @@ BOX_FLS = os.path.join(ROOT, "scenes_xml", "box_fls.xml")      # a 256-beam mult
 # ---------------------------------------------------------------- the budget
 
 def test_the_ladder_is_few_sizes_that_use_fewer_pass_sizes_than_frozen_recordings_kept():
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators import sonar_tof
+    from mitsonar.plugins.integrators.paths import frozen_pass
 
     assert SPP_LADDER[0] == 16 and SPP_LADDER[-1] == 2 ** 22
     assert [n for n in SPP_LADDER if 64 <= n <= 256] == [64, 96, 128, 192, 256]
     b = PathBudget(1.0)
     assert b.quantise(100) == 96 and b.quantise(96) == 96 and b.quantise(3) == 16 and b.quantise(1e12) == 2 ** 22
     # the pass sizes (a pass: at most MAX_SPP_PER_PASS paths, or a power of two fewer per beam)
-    tof, frozen = module("sonar_tof"), module("frozen_pass")
+    tof, frozen = sonar_tof, frozen_pass
     for most in (tof.MAX_SPP_PER_PASS, tof.MAX_LANES_PER_PASS // 256):
         sizes = {min(n, most) for n in SPP_LADDER} | {n % most for n in SPP_LADDER if n > most and n % most}
         assert len(sizes) <= 25 < frozen.MAX_RECORDINGS, (most, sorted(sizes))
@@ -82,9 +83,9 @@ def test_other_numbers_of_paths_launch_the_same_kernels(box_scene):
     from conftest import jit_kernels
     from mitsonar.live.heads import PingRenderer
 
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators.paths import frozen_pass
 
-    frozen = module("frozen_pass")
+    frozen = frozen_pass
     # start with no recordings: earlier tests' recordings could fill MAX_RECORDINGS mid-test,
     # and the clear it triggers would be counted as new recordings below
     frozen.clear()

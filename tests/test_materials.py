@@ -61,7 +61,7 @@ def furnace(mi, b, grazing, n=N_MC, seed=1):
 
 def expected_albedo(b, grazing):
     """What the construction says the albedo is: the specular weight plus the scattered fraction."""
-    from mitsonar.plugins.acoustic_material import lerp_table
+    from mitsonar.plugins.bsdfs.acoustic_material import lerp_table
 
     return float(lerp_table(b.medium.w, grazing) + lerp_table(b.medium.scattered, grazing))
 
@@ -87,7 +87,7 @@ def test_every_material_conserves_energy(mi, name):
     the specular lobe (2 % at 5 deg grazing with n = 1000; 1 % where |R|^2 turns at sand's
     critical angle, 31.9 deg, inside the lobe)."""
     from mitsonar.acoustics import reflection_coefficient
-    from mitsonar.plugins.acoustic_material import lerp_table
+    from mitsonar.plugins.bsdfs.acoustic_material import lerp_table
 
     b = bsdf(mi, **MATERIAL_CASES[name])
     for deg in ANGLES:
@@ -344,10 +344,12 @@ def test_auto_water_refuses_a_moving_head(mitsonar_mod):
 def test_the_parameter_tables_list_the_new_fields(mitsonar_mod):
     """The docstring tables are the documentation and the list of accepted names: a misspelling
     is refused with the nearest one."""
-    from mitsonar.plugins import module, parameters
+    from mitsonar.plugins import parameters
+    from mitsonar.plugins.sensors.sonar import SonarSensor
+    from mitsonar.plugins.bsdfs import acoustic_material
 
-    assert {"temperature", "salinity", "ph", "surface_z"} <= set(parameters(module("sonar_sensor").SonarSensor))
-    assert parameters(module("acoustic_material").AcousticMaterialBSDF) == [
+    assert {"temperature", "salinity", "ph", "surface_z"} <= set(parameters(SonarSensor))
+    assert parameters(acoustic_material.AcousticMaterialBSDF) == [
         "material", "density", "sound_speed", "attenuation", "water_density", "water_sound_speed", "backscatter",
         "mu", "sediment", "frequency", "extrapolate", "shininess"]
     bad = '<bsdf type="acoustic_material"><string name="material" value="sand"/><float name="densty" value="2"/></bsdf>'

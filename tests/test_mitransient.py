@@ -20,7 +20,7 @@ def test_single_bounce_lambertian_scene_agrees_with_mitransient(mitsonar_mod):
     import mitsuba as mi
 
     mitr = pytest.importorskip("mitransient")
-    from mitsonar.plugins import module
+    from mitsonar.plugins.sensors.beam import BeamPattern
 
     tilt = math.radians(40)
     frame = frame_matrix((math.sin(tilt), 0, -math.cos(tilt)), (0, 1, 0))
@@ -57,7 +57,7 @@ def test_single_bounce_lambertian_scene_agrees_with_mitransient(mitsonar_mod):
     PX, PY = np.meshgrid(px, py)
     norm = np.sqrt(PX ** 2 + PY ** 2 + 1)
     d_omega = (2 * tan_h / width) * (2 * tan_h / width) / norm ** 3
-    beam = module("beam").BeamPattern("gaussian", bw_h, bw_v)
+    beam = BeamPattern("gaussian", bw_h, bw_v)
     gain = beam.eval_np(np.arctan2(PX, np.ones_like(PX)), np.arcsin(PY / norm))
     weights = d_omega * gain ** 2
     assert weights[:, [0, -1]].max() < 1e-6 * weights.max(), "the camera must see the whole beam"

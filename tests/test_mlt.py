@@ -197,7 +197,7 @@ def test_split_partitions_the_echoes(mitsonar_mod):
     seed), and on the hidden target the hard ones are the boulder's, seen through the plate (from
     6.5 m on), the easy ones the plate's own (before 5.4 m)."""
     import mitsuba as mi
-    from mitsonar.plugins.mlt_split import traced
+    from mitsonar.plugins.integrators.mlt_split import traced
 
     scene = _scene(mitsonar_mod, "hidden_target")
     mlt = mi.load_dict({"type": "sonar_mlt", "max_depth": 5})

@@ -140,7 +140,7 @@ def sphere_echo_reference(beam, R, a, rho, bearings, n=1201, transmit=None):
 
 @pytest.mark.slow
 def test_small_target_follows_two_way_beam_pattern(mitsonar_mod):
-    from mitsonar.plugins import module
+    from mitsonar.plugins.sensors.beam import BeamPattern
 
     bw, R, a, rho = 6.0, 6.0, 0.1, 0.9
     to_world = frame_matrix((1, 0, 0), (0, 0, 1))
@@ -150,7 +150,7 @@ def test_small_target_follows_two_way_beam_pattern(mitsonar_mod):
                                               integrator='<integrator type="sonar_tof"><integer name="max_depth" value="1"/></integrator>'))
     mean, sem = render_mean_and_sem(mitsonar_mod, scene, range(10), 1 << 14)
     e, s = mean.sum(1), np.sqrt((sem ** 2).sum(1))
-    beam = module("beam").BeamPattern("gaussian", bw, bw)
+    beam = BeamPattern("gaussian", bw, bw)
     bearings = np.radians(-6.0 + 0.25 * np.arange(49))
     ref = sphere_echo_reference(beam, R, a, rho, -bearings)
     # Absolute energy per ping (units of DESIGN.md) within the Monte Carlo error; the error
@@ -181,7 +181,7 @@ def fan_rows_against_sphere(mitsonar, seeds, spp, integrator_extra=""):
     x ``spp``. Returns the scene, each row's echo energy ``e``, its z-score against the quadrature
     of B_tx B_rx over the sphere (error floor 1.5 % of the reference), the bearings (rad) and the
     receive pattern. ``integrator_extra``: XML added inside the sonar_tof integrator."""
-    from mitsonar.plugins import module
+    from mitsonar.plugins.sensors.beam import BeamPattern
 
     bw, tx_h, R, a, rho = FAN
     to_world = frame_matrix((1, 0, 0), (0, 0, 1))
@@ -193,8 +193,8 @@ def fan_rows_against_sphere(mitsonar, seeds, spp, integrator_extra=""):
     scene = mitsonar.load_scene(scene_xml(sensor, sphere_xml((R, 0, 0), a, acoustic_xml(rho)), integrator=integrator))
     mean, sem = render_mean_and_sem(mitsonar, scene, seeds, spp)
     e, s = mean.sum(1), np.sqrt((sem ** 2).sum(1))
-    rx = module("beam").BeamPattern("gaussian", bw, bw)
-    tx = module("beam").BeamPattern("gaussian", tx_h, bw)
+    rx = BeamPattern("gaussian", bw, bw)
+    tx = BeamPattern("gaussian", tx_h, bw)
     bearings = np.radians(-6.0 + 0.25 * np.arange(49))
     ref = sphere_echo_reference(rx, R, a, rho, -bearings, transmit=tx)
     return scene, e, (e - ref) / np.maximum(s, 0.015 * ref), bearings, rx
@@ -262,8 +262,8 @@ def test_water_surface_multipath_at_image_source_ranges(mitsonar_mod):
     # Energies, averaged over seeds (the glossy connections make single renders noisy).
     runs = [window_energy(mitsonar_mod.render_scan(scene(3), spp=1 << 20, seed=10 + s)) for s in range(12)]
     direct, mixed, twice = (np.mean([r[k] for r in runs]) for k in (1, 2, 3))
-    from mitsonar.plugins import module
-    beam = module("beam").BeamPattern("uniform", 8.0, 60.0)
+    from mitsonar.plugins.sensors.beam import BeamPattern
+    beam = BeamPattern("uniform", 8.0, 60.0)
     ref_direct = sphere_echo_reference(beam, D, a, rho, [0.0])[0]
     assert direct == pytest.approx(ref_direct, rel=0.04)
     # Image method: the surface acts as a mirror of albedo R; the target is lit from S' (1/|TS'|^2)

@@ -1,4 +1,4 @@
-"""Plane guiding (plugins/plane_guide.py): the specular point in closed form, which scenes get
+"""Plane guiding (plugins/integrators/paths/plane_guide.py): the specular point in closed form, which scenes get
 it, and on the quay wall's dihedral corner the same expectation with a lower error."""
 from __future__ import annotations
 
@@ -10,10 +10,8 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from mitsonar.plugins import module
+from mitsonar.plugins.integrators.paths import image_guide, plane_guide
 
-plane_guide = module("plane_guide")
-image_guide = module("image_guide")
 SCENES = os.path.join(os.path.dirname(__file__), "..", "scenes_xml")
 # the square [-2, 2]^2 at z = 0, normal +z
 FLOOR = ((0.0, 0.0, 0.0), (2.0, 0.0, 0.0), (0.0, 2.0, 0.0), (0.0, 0.0, 1.0), 30.0)

@@ -197,9 +197,9 @@ def test_invalid_max_depth_and_spp(mitsonar_mod):
 
 def test_presets_by_name(mitsonar_mod):
     import mitsuba as mi
-    from mitsonar.plugins import module
+    from mitsonar.plugins.bsdfs import materials
 
-    presets = module("materials").PRESETS
+    presets = materials.PRESETS
     for name in ("concrete_good", "water_calm", "sand", "rock"):
         scene = plane_scene(mitsonar_mod, f'<bsdf type="acoustic"><string name="preset" value="{name}"/></bsdf>')
         params = mi.traverse(scene)
@@ -265,11 +265,11 @@ def test_range_window_drops_echoes_outside_it(mitsonar_mod):
 @pytest.mark.parametrize("scene_file", ["box.xml", "box_fls.xml"])
 def test_second_render_with_new_pose_seed_spp_and_material_does_not_recompile(mitsonar_mod, scene_file):
     import mitsuba as mi
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators.paths import frozen_pass
 
     # start from no frozen-pass recording: past `MAX_RECORDINGS` (earlier tests' passes) all are
     # dropped, and a pass recorded anew between the two renders launches its traced kernels
-    module("frozen_pass").clear()
+    frozen_pass.clear()
     scene = mitsonar_mod.load_scene(os.path.join(SCENES, scene_file))
     mitsonar_mod.render_scan(scene, spp=64, seed=0)
     from mitsonar.receiver import speckle
@@ -331,3 +331,36 @@ print(mitsonar.render_scan(scene, spp=8).intensity.shape)
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "SonarSensor SonarTOFIntegrator" in proc.stdout and "(200, 500)" in proc.stdout
+
+
+def test_a_new_variant_imports_every_module_of_the_families_again():
+    """`register` for a new variant imports every module of the plugin families again (found by
+    walking the packages), the path machinery's included: each holds the classes of the new
+    variant, none of the old one's, and the way back renders. (The second variant is
+    ``llvm_ad_rgb``, registered by hand: mitsonar follows only ``cuda_ad_mono``, which needs a GPU.)"""
+    import json
+    import subprocess
+    import sys
+
+    code = """
+import json, mitsonar, mitsuba as mi
+mitsonar.set_variant()
+from mitsonar.plugins import register
+from mitsonar.plugins.integrators import mlt_split
+from mitsonar.plugins.integrators.paths import shared_beams
+mi.set_variant('llvm_ad_rgb')
+register()
+from mitsonar.plugins.integrators import mlt_split, sonar_tof
+from mitsonar.plugins.integrators.paths import shared_beams
+from mitsonar.plugins.sensors import sonar
+rgb = [issubclass(sonar.SonarSensor, mi.Sensor), issubclass(mlt_split.SonarTOFIntegrator, mi.SamplingIntegrator),
+       mlt_split.SonarTOFIntegrator is sonar_tof.SonarTOFIntegrator, shared_beams.PingFrames is sonar.PingFrames]
+mi.set_variant('llvm_ad_mono')
+from mitsonar.plugins.integrators import mlt_split
+mono = [issubclass(mlt_split.SonarTOFIntegrator, mi.SamplingIntegrator), type(mi.load_dict({'type': 'sonar_mlt'})).__name__,
+        mitsonar.render_scan(mitsonar.load_scene(mitsonar.example_scene('box')), spp=8).intensity.shape[0]]
+print(json.dumps([rgb, mono]))
+"""
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout.strip().splitlines()[-1]) == [[True] * 4, [True, "SonarMLTIntegrator", 200]]

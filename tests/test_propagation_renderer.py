@@ -14,12 +14,12 @@ LINEAR = SoundSpeedProfile([0.0, 200.0], [1450.0, 1650.0])     # c = 1450 + z: r
 
 def refraction_of(profile):
     import mitsonar  # noqa: F401  (the variant and the plugins)
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators.paths import refraction
 
     class Head:
         sound_speed, range_max, frequency = 1500.0, 2500.0, 700e3
 
-    return module("refraction").from_profile(profile, Head())
+    return refraction.from_profile(profile, Head())
 
 
 def tube_db(refr, zs, rows):

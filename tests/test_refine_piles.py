@@ -247,9 +247,7 @@ def test_renders_follow_the_vertices_a_fit_sets():
 def test_a_moving_scene_in_use_stays_traced_past_the_registry_limit():
     """The registry of moving scenes forgets only scenes nobody holds: clearing it whole past its
     limit would let a scene still being fitted be replayed from stale recordings again."""
-    from mitsonar.plugins import module
-
-    fp = module("frozen_pass")
+    from mitsonar.plugins.integrators.paths import frozen_pass as fp
     keep = _scene(PILE, SEABED)
     fp.trace_every_pass(keep)
     for _ in range(fp.MAX_RECORDINGS + 5):

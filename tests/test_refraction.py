@@ -1,5 +1,5 @@
 """Refracted transport (issue 40, item 2): echo paths through a sound-speed profile
-(``plugins/refraction.py``) against the closed forms of `SoundSpeedProfile` (exact circular arcs
+(``plugins/integrators/paths/refraction.py``) against the closed forms of `SoundSpeedProfile` (exact circular arcs
 per constant-gradient layer): echo ranges over a flat seabed per beam, the position where a
 refracted beam lands (a target there echoes, one on the straight beam's footprint does not), the
 straight-ray scan from a constant profile at the sensor's speed, every kind of head, a moving
@@ -241,9 +241,9 @@ def test_integrators_and_modes_without_refraction_refuse_a_profile_in_one_line(m
 
 
 def _integrator_plugins():
-    from mitsonar.plugins import PLUGINS
+    from mitsonar.sim.render import sonar_integrators
 
-    return [name for kind, name, _, _ in PLUGINS if kind == "integrator"]
+    return list(sonar_integrators())
 
 
 @pytest.mark.parametrize("name", _integrator_plugins())
@@ -300,12 +300,12 @@ LAYERED = SoundSpeedProfile([0.0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 23, 26, 29
 
 def refraction_of(profile):
     import mitsonar  # noqa: F401  (the variant and the plugins)
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators.paths import refraction
 
     class Head:
         sound_speed, range_max = C_SENSOR, 100.0
 
-    return module("refraction").from_profile(profile, Head())
+    return refraction.from_profile(profile, Head())
 
 
 @pytest.mark.parametrize("series", [False, True], ids=["goldberg", "series"])
@@ -317,7 +317,7 @@ def test_log1p_over_y_has_no_cancellation_either_way(series):
     import mitsuba as mi
 
     from conftest import on_cuda
-    from mitsonar.plugins.refraction import log1p_over
+    from mitsonar.plugins.integrators.paths.refraction import log1p_over
 
     if on_cuda() and not series:
         pytest.skip("Goldberg's quotient needs a correctly rounded log: cuda's float32 log is approximate")
@@ -443,9 +443,8 @@ def test_merged_layers_stay_within_the_tolerance_and_move_travel_times_by_at_mos
     """`merge_layers` drops samples within MERGE_TOL of the line between their kept neighbours:
     the merged profile is within the tolerance at every given depth, and a ray's travel time to
     the seabed moves by at most tol / c_min of itself (Fermat: the path's change is second order)."""
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators.paths import refraction
 
-    refraction = module("refraction")
     tol = refraction.MERGE_TOL
     rng = np.random.default_rng(5)
     depths = np.linspace(0.0, 80.0, 41)

@@ -33,18 +33,18 @@ def box(mitsonar_mod):
     ({"pose": np.eye(3)}, "'pose': expected a 4x4 matrix, got shape (3, 3)"),
     ({"pose": np.where(np.eye(4) > 0, np.nan, 0.0)}, "'pose': entry [0, 0] is nan (a pose must be finite)"),
     ({"pose": np.diag([2.0, 1, 1, 1])}, "'pose': must be a rigid transform"),
-    ({"integrator": "sonar_tofx"}, "'integrator': 'sonar_tofx' is not a sonar integrator (one of sonar_tof, sonar_mlt, sonar_bdpt)"),
+    ({"integrator": "sonar_tofx"}, "'integrator': 'sonar_tofx' is not a sonar integrator (one of sonar_bdpt, sonar_mlt, sonar_tof)"),
     ({"integrator": {"type": "sonar_mlt", "chainz": 4}},
      "the integrator \"sonar_mlt\" has no parameter \"chainz\" (did you mean \"chains\"?)"),
     ({"electronics": [("gain", 3)]}, "'electronics': expected a dict of electronics fields, got list"),
     ({"electronics": {"gian": 3}}, "'gian' is not an electronics setting"),
 ])
 def test_bad_arguments_fail_before_rendering(mitsonar_mod, box, monkeypatch, kwargs, message):
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators import sonar_mlt, sonar_tof
 
     def no_render(*a, **k):
         raise AssertionError("rendered before the arguments were checked")
-    for cls in (module("sonar_tof").SonarTOFIntegrator, module("sonar_mlt").SonarMLTIntegrator):
+    for cls in (sonar_tof.SonarTOFIntegrator, sonar_mlt.SonarMLTIntegrator):
         monkeypatch.setattr(cls, "render_histogram", no_render)
     with pytest.raises(mitsonar_mod.SceneError) as err:
         mitsonar_mod.render_scan(box, **kwargs)

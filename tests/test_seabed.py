@@ -1,5 +1,5 @@
 """Seabed physics: the Lambert seabed presets give back their published Lambert parameter mu
-(plugins/materials.py cites the values), and a pile standing on the seabed echoes its corner at
+(plugins/bsdfs/materials.py cites the values), and a pile standing on the seabed echoes its corner at
 the range of the image-source construction."""
 import math
 
@@ -47,9 +47,8 @@ def measured_strength(mitsonar, preset, grazing_deg):
 
 
 def test_seabed_presets_backscatter_follows_lambert_with_the_published_mu(mitsonar_mod):
-    from mitsonar.plugins import module
+    from mitsonar.plugins.bsdfs import materials
 
-    materials = module("materials")
     # The presets' mu: representative values from APL-UW TR 9407 and Jackson & Richardson (2007).
     assert materials.LAMBERT_MU == {"seabed_sand": -27.0, "seabed_mud": -32.0, "seabed_clay": -35.0,
                                     "seabed_gravel": -20.0, "seabed_rock": -15.0}
@@ -71,9 +70,9 @@ def test_seabed_preset_eval_is_the_lambert_cross_section(mitsonar_mod):
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.plugins import module
+    from mitsonar.plugins.bsdfs import materials
 
-    for name, mu in module("materials").LAMBERT_MU.items():
+    for name, mu in materials.LAMBERT_MU.items():
         bsdf = mi.load_dict({"type": "acoustic", "preset": name})
         for grazing in (10.0, 30.0, 70.0):
             g = math.radians(grazing)

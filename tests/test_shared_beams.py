@@ -1,5 +1,5 @@
 """``sonar_tof`` with ``share_beams``: a multibeam frame's paths traced from the transmit fan and
-scored into every receive beam that hears them (plugins/shared_beams.py). Same expectation as the
+scored into every receive beam that hears them (plugins/integrators/paths/shared_beams.py). Same expectation as the
 per-row estimator (checked here within Monte-Carlo error), same seed same scan, and the heads it
 cannot serve refused in one line."""
 import numpy as np
@@ -41,7 +41,7 @@ def test_shared_paths_agree_with_per_row_paths_within_monte_carlo_error(mitsonar
     factor n_rows moves whole cells by far more. The totals also agree within 3 % (their own
     standard error is about 1 %). Cells fainter than 1e-3 of the brightest (the far elevation tails
     of both beams, ~1e-5 of the peak) are left out: there both estimators sample the tails at the
-    float32 resolution of the beams' sampling tables (plugins/beam.py)."""
+    float32 resolution of the beams' sampling tables (plugins/sensors/beam.py)."""
     import mitsuba as mi
 
     scene = corner_scene(mitsonar_mod)
@@ -83,7 +83,7 @@ def test_shared_paths_cut_the_error_of_a_frame(mitsonar_mod):
 def test_same_seed_same_scan_whatever_the_passes(mitsonar_mod, monkeypatch, sampling):
     import mitsuba as mi
 
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators import sonar_tof
 
     scene = corner_scene(mitsonar_mod, share=True, sampling=sampling)
     a = mi.render(scene, seed=5, spp=48).numpy()
@@ -93,13 +93,13 @@ def test_same_seed_same_scan_whatever_the_passes(mitsonar_mod, monkeypatch, samp
     # the frame's path i is the same path whether the render takes one pass or three
     integ, sensor = scene.integrator(), scene.sensors()[0]
     one = integ.render_histogram(scene, sensor, seed=5, spp=48)
-    monkeypatch.setattr(module("sonar_tof"), "MAX_SPP_PER_PASS", 16)
+    monkeypatch.setattr(sonar_tof, "MAX_SPP_PER_PASS", 16)
     np.testing.assert_allclose(integ.render_histogram(scene, sensor, seed=5, spp=48), one, rtol=1e-6, atol=0)
     np.testing.assert_allclose(one, a[..., 0], rtol=1e-6)
 
 
 def test_heads_that_cannot_share_are_refused_in_one_line(mitsonar_mod, monkeypatch):
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators.paths import shared_beams
 
     def render(scene):
         return scene.integrator().render_histogram(scene, 0, spp=4)
@@ -108,7 +108,7 @@ def test_heads_that_cannot_share_are_refused_in_one_line(mitsonar_mod, monkeypat
         render(corner_scene(mitsonar_mod, share=True, kind="mechanical"))
     with pytest.raises(ValueError, match="'share_beams': a 'sinc' receive beam"):
         render(corner_scene(mitsonar_mod, share=True, pattern="sinc"))
-    monkeypatch.setattr(module("shared_beams"), "MAX_BEAMS", 6)   # 3 deg beams 2 deg apart: 7 per echo
+    monkeypatch.setattr(shared_beams, "MAX_BEAMS", 6)   # 3 deg beams 2 deg apart: 7 per echo
     with pytest.raises(ValueError, match="'share_beams': each echo would reach 7 receive beams"):
         render(corner_scene(mitsonar_mod, share=True))
     with pytest.raises(Exception, match="share_beams"):

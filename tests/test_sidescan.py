@@ -206,9 +206,9 @@ def test_render_survey_splits_a_long_track_into_consecutive_scans(mitsonar_mod, 
 
 
 def test_presets_and_the_wreck_survey_scene(mitsonar_mod):
-    from mitsonar.plugins import module
+    from mitsonar.presets import sidescan as sidescan_heads
 
-    presets = module("sidescan_heads").PRESETS
+    presets = sidescan_heads.PRESETS
     scene = mitsonar_mod.load_scene(scene_xml(sonar_xml(kind="sidescan", preset="klein3000_500k", n_pings=2),
                                               seabed(-5.0, 0.5)))
     s = scene.sensors()[0]

@@ -1,4 +1,4 @@
-"""Issue "Survey speed": frozen render passes (plugins/frozen_pass.py) give the traced passes'
+"""Issue "Survey speed": frozen render passes (plugins/integrators/paths/frozen_pass.py) give the traced passes'
 histogram bit for bit whatever changes between renders (seed, pose, pass start), replay one
 recording, and draw the emitted directions as the fused path kernel does; ``share_beams`` is the
 default for multibeam heads that can share, with a silent fallback and an explicit opt-out."""
@@ -26,9 +26,9 @@ def small_scene(mitsonar_mod, kind="mechanical", pattern="gaussian", share=None,
 
 
 def render(scene, freeze, monkeypatch, **kw):
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators.paths import frozen_pass
 
-    monkeypatch.setattr(module("frozen_pass"), "FREEZE", freeze)
+    monkeypatch.setattr(frozen_pass, "FREEZE", freeze)
     return scene.integrator().render_histogram(scene, 0, **kw)
 
 
@@ -37,9 +37,7 @@ def test_frozen_passes_equal_traced_passes(mitsonar_mod, monkeypatch, kind, shar
     """Record (first call), then replay with another seed and another pose: each equals the
     traced pass bit for bit in the float32 of the scan (the float64 bins take atomic adds in
     thread order, so their last bits may differ: within 1e-12); one recording serves them all."""
-    from mitsonar.plugins import module
-
-    fp = module("frozen_pass")
+    from mitsonar.plugins.integrators.paths import frozen_pass as fp
     scene = small_scene(mitsonar_mod, kind, share=share)
     head = scene.sensors()[0].head_pose()
     moved = head.copy()
@@ -60,11 +58,11 @@ def test_frozen_passes_equal_traced_passes(mitsonar_mod, monkeypatch, kind, shar
 def test_frozen_passes_split_into_passes_as_traced(mitsonar_mod, monkeypatch):
     """Several passes per render (pass start opaque, a last pass of another size): the frozen
     render equals the traced one and the one-pass render."""
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators import sonar_tof
 
     scene = small_scene(mitsonar_mod)
     one = render(scene, True, monkeypatch, seed=7, spp=40)
-    monkeypatch.setattr(module("sonar_tof"), "MAX_SPP_PER_PASS", 16)   # passes of 16, 16, 8
+    monkeypatch.setattr(sonar_tof, "MAX_SPP_PER_PASS", 16)   # passes of 16, 16, 8
     frozen = render(scene, True, monkeypatch, seed=7, spp=40)
     np.testing.assert_array_equal(frozen.astype(np.float32),
                                   render(scene, False, monkeypatch, seed=7, spp=40).astype(np.float32))
@@ -185,9 +183,7 @@ def test_textured_bsdf_follows_its_texels(mitsonar_mod, monkeypatch, tmp_path, n
 def test_integrators_with_the_same_settings_share_a_recording(mitsonar_mod, monkeypatch):
     """render_scan with an integrator dict makes a new integrator per call: equal settings replay
     the recording, other settings (sampling) record their own and render their own scan."""
-    from mitsonar.plugins import module
-
-    fp = module("frozen_pass")
+    from mitsonar.plugins.integrators.paths import frozen_pass as fp
     monkeypatch.setattr(fp, "FREEZE", True)
     scene = small_scene(mitsonar_mod)
     scans, counts = {}, []

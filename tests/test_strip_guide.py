@@ -1,4 +1,4 @@
-"""The strip guide (`plugins/curved_mirror.py` strip_lobe, `image_guide.STRIP_GUIDE`): at a
+"""The strip guide (`plugins/integrators/paths/curved_mirror.py` strip_lobe, `image_guide.STRIP_GUIDE`): at a
 mirror-like vertex the bounce may aim at a convex curved mirror's specular point towards the
 transducer's image after the vertex (``scenes_xml/pile_quay.xml``: the quay wall's bounce aimed at
 the strip of the pile that sends the echo home). The mirrors read from the scene, the specular
@@ -19,7 +19,8 @@ from test_image_guide import window_variance
 @pytest.fixture
 def strip(monkeypatch):
     """``set(flag)``: the strip guide on or off, kernels traced anew."""
-    from mitsonar.plugins import frozen_pass, image_guide
+    from mitsonar.plugins.integrators.paths import frozen_pass
+    from mitsonar.plugins.integrators.paths import image_guide
 
     def set_flag(flag):
         monkeypatch.setattr(image_guide, "STRIP_GUIDE", flag)
@@ -33,7 +34,8 @@ def test_the_curved_mirrors_are_read_from_the_scene(mitsonar_mod):
     """pile_quay's pile (a cylinder from p0/p1/radius, through Mitsuba's to_world) is the one
     curved mirror; a scene whose only mirror is the curved one (the tank, the bow) has none to aim
     at, and keeps the planar kernel; planar scenes and scenes without mirrors likewise."""
-    from mitsonar.plugins import curved_mirror, image_guide
+    from mitsonar.plugins.integrators.paths import curved_mirror
+    from mitsonar.plugins.integrators.paths import image_guide
 
     (centre, axis, radius, n), = curved_mirror.scene_mirrors(load(mitsonar_mod, "pile_quay"), image_guide.MIN_EXPONENT,
                                                              image_guide.lobe_exponent)
@@ -52,7 +54,7 @@ def test_the_lobe_aims_at_the_specular_strip_with_the_echo_widths(mitsonar_mod):
     the pile k1 = D / b + 2 a / R, along it k2 = D / b; sigma = STRIP_WIDEN / (k sqrt(n)). From a
     point inside the pile there is no strip."""
     import mitsuba as mi
-    from mitsonar.plugins import curved_mirror as cm
+    from mitsonar.plugins.integrators.paths import curved_mirror as cm
 
     mirror = ((4.0, 3.0, -3.0), (0.0, 0.0, 1.0), 0.3, 200.0)
     d, e1, e2, s1, s2, ok = cm.strip_lobe(mi.Point3f(4, 0, 0), mi.Point3f(4, -4, 0), mirror)
@@ -72,7 +74,7 @@ def test_the_lobe_density_integrates_to_one_and_matches_its_samples(mitsonar_mod
     cones about the axis is the density's integral over the cone (2e5 samples: within 0.006)."""
     import drjit as dr
     import mitsuba as mi
-    from mitsonar.plugins import curved_mirror as cm
+    from mitsonar.plugins.integrators.paths import curved_mirror as cm
 
     d = mi.Vector3f(0.36, 0.48, 0.8)
     fr = mi.Frame3f(d)
@@ -169,7 +171,8 @@ def test_the_variance_diagnostic_finds_the_pile(mitsonar_mod, capsys, monkeypatc
     import re
 
     from conftest import SCENES
-    from mitsonar.plugins import frozen_pass, image_guide
+    from mitsonar.plugins.integrators.paths import frozen_pass
+    from mitsonar.plugins.integrators.paths import image_guide
 
     monkeypatch.setattr(image_guide, "STRIP_GUIDE", image_guide.STRIP_GUIDE)
     spec = importlib.util.spec_from_file_location(

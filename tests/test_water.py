@@ -13,9 +13,9 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 def test_water_defaults_are_the_sensors_and_map_onto_its_parameters(mitsonar_mod):
     from mitsonar.acoustics import Water
-    from mitsonar.plugins import module
+    from mitsonar.plugins import water
 
-    assert module("water").WATER_DEFAULTS == Water().sensor_parameters() == \
+    assert water.WATER_DEFAULTS == Water().sensor_parameters() == \
         {"temperature": 10.0, "salinity": 35.0, "ph": 8.0, "surface_z": 0.0}
     w = Water(temperature=12.0, salinity=34.0, ph=7.9, surface_z=5.0)
     assert Water.from_sensor_parameters(w.sensor_parameters()) == w

@@ -32,9 +32,9 @@ BOUNDS = {"gaussian": 1.01, "uniform": 1.01, "sinc": 32.0}
 def test_emission_weight_is_bounded_in_the_far_tails(mitsonar_mod, kind, bw_h, bw_v):
     import mitsuba as mi
 
-    from mitsonar.plugins import module
+    from mitsonar.plugins.sensors.beam import BeamPattern
 
-    beam = module("beam").BeamPattern(kind, bw_h, bw_v)
+    beam = BeamPattern(kind, bw_h, bw_v)
     x, y = tail_grid()
     _, w = beam.sample(mi.Point2f(mi.Float(x), mi.Float(y)))
     w = np.asarray(w)
@@ -75,7 +75,7 @@ def path_energies(scene, ping, seed, n, max_depth=1):
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators.paths import samples
 
     integrator = mi.load_dict({"type": "sonar_tof", "max_depth": max_depth})
     setup = integrator.setup(scene, 0)
@@ -86,7 +86,7 @@ def path_energies(scene, ping, seed, n, max_depth=1):
     def record(k, rng, e, valid, hit):
         dr.scatter_add(energy, e, lane, valid)
 
-    integrator.sample(setup, ping, module("samples").HashSamples(mi.UInt32(seed), ping, lane), record)
+    integrator.sample(setup, ping, samples.HashSamples(mi.UInt32(seed), ping, lane), record)
     return np.asarray(energy, dtype=np.float64)
 
 
@@ -110,9 +110,8 @@ def test_sobol_emission_samples_are_a_scrambled_net_per_row(mitsonar_mod):
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.plugins import module
+    from mitsonar.plugins.integrators.paths import samples
 
-    samples = module("samples")
     m, n = 10, 1 << 10
     idx = dr.arange(mi.UInt32, n)
     grids = []

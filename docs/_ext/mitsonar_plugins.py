@@ -1,7 +1,7 @@
 """Sphinx directive ``.. mitsonar-plugin:: NAME``: a plugin's reference from its own class.
 
-For an entry of ``mitsonar.plugins.PLUGINS`` (the XML plugin name: ``sonar``, ``acoustic``,
-``sonar_tof``, ...) it loads the class for the active variant (``mitsonar.plugins.module``),
+For a plugin registered for the active variant (``mitsonar.plugins.registered()``: the XML
+plugin name ``sonar``, ``acoustic``, ``sonar_tof``, ... and its class),
 emits its docstring, which holds the RST parameter table the plugin validates its XML against
 (``plugins/props.py: table_parameters`` reads the same table), and then the list
 ``mitsonar.plugins.parameters(cls)``: every name the plugin accepts. The documentation and the
@@ -26,11 +26,11 @@ from sphinx.util.nodes import nested_parse_with_titles
 def _plugin_entry(name: str):
     from mitsonar import plugins
 
-    for kind, xml_name, module_name, cls_name in plugins.PLUGINS:
-        if xml_name == name:
-            return kind, getattr(plugins.module(module_name), cls_name)
-    known = ", ".join(entry[1] for entry in plugins.PLUGINS)
-    raise ValueError(f"mitsonar-plugin: no plugin {name!r} in mitsonar.plugins.PLUGINS ({known})")
+    found = plugins.registered()
+    if name in found:
+        return found[name]
+    known = ", ".join(found)
+    raise ValueError(f"mitsonar-plugin: no plugin {name!r} in mitsonar.plugins.registered() ({known})")
 
 
 class _RSTDirective(SphinxDirective):

@@ -78,9 +78,12 @@ def check_outputs(args, error=ValueError) -> None:
 
 
 def _max_depth():
-    from mitsonar.sim.variant import plugin_module as module
+    from mitsonar.sim.variant import ensure_variant
 
-    return module("common").MAX_DEPTH
+    ensure_variant()
+    from mitsonar.plugins.integrators.common import MAX_DEPTH
+
+    return MAX_DEPTH
 
 
 def check_counts(args, error) -> None:

@@ -3,7 +3,7 @@
 A seabed surface ``z(x, y)`` on a regular grid (a mesh with one normal a facet) is rendered with the
 survey's poses by the differentiable renderer (``mi.render(scene, params)``; the derivative with
 respect to ``<mesh>.vertex_positions`` follows the echoes' ranges and incidence angles,
-``plugins/path_replay.py``), compared with the recorded intensities, and its heights are moved by
+``plugins/integrators/paths/path_replay.py``), compared with the recorded intensities, and its heights are moved by
 Adam (``mi.ad.Adam``) down the loss
 
     L(z) = sum_pings  sum (B s_k(z) - B t_k)^2 / sum (B t_k)^2  +  lambda sum (laplacian z)^2

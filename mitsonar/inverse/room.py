@@ -5,7 +5,7 @@ the sonar inside) extruded vertically from a floor at ``z_f`` up to a fixed ``to
 head's range, with the floor itself as a fan of triangles: every wall is one planar quad whose
 normal points into the water (the acoustic BSDF is one-sided). The unknowns are the corners and
 the floor height. The room is rendered with the recorded scans' poses by the differentiable
-renderer (``mi.render(scene, params)`` with ``<mesh>.vertex_positions``, ``plugins/path_replay.py``)
+renderer (``mi.render(scene, params)`` with ``<mesh>.vertex_positions``, ``plugins/integrators/paths/path_replay.py``)
 and compared with the recorded intensities, as :func:`mitsonar.inverse.height_field.refine_height_field`
 does for a height field:
 

@@ -34,7 +34,7 @@ __all__ = ["SPP_LADDER", "PathBudget", "ErrorModel", "CALIBRATION_PATHS", "PingL
 
 #: the sizes (paths per ping) a budgeted ping may take: 16 .. 2**22, 2**k and 1.5 x 2**k. Few on
 #: purpose: no size compiles new kernels, but each pass size is a recording of the frozen pass
-#: (``plugins/frozen_pass.py``: tens of ms to record, at most ``MAX_RECORDINGS`` = 32 kept, all
+#: (``plugins/integrators/paths/frozen_pass.py``: tens of ms to record, at most ``MAX_RECORDINGS`` = 32 kept, all
 #: dropped past that). A pass holds at most 2**16 paths (fewer per beam for a wide multibeam, a
 #: power of two): a size past it is passes of the largest and one of 0 or half of it, so these
 #: sizes use 25 pass sizes in all.

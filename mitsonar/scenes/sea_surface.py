@@ -8,7 +8,7 @@
 frame, z up), ``SURFACE_HALF_SIZE`` m from the origin each way, facing down into the water (the
 ``acoustic`` BSDF is one-sided: its front is the water side), with the ``water_calm`` preset
 (``specular`` 0.99, ``shininess`` 2000: a mirror within about 2 deg, see
-``mitsonar.plugins.materials``). Paths that reach it reflect as off a mirror, so every kind of head
+``mitsonar.plugins.bsdfs.materials``). Paths that reach it reflect as off a mirror, so every kind of head
 sees shallow-water multipath where the image-source method puts it: a target at ``t`` seen from
 a head at ``h`` answers at the direct range ``|t - h|``, via the surface once at
 ``(|t - h| + |t' - h|) / 2`` and via the surface both ways at the image-source range ``|t' - h|``,

@@ -3,7 +3,7 @@ shapes: a material by name, the sonar (``--sensor``), and the scene file itself 
 
 Material names (``--material``, a sediment mapping's second column, a model pattern's material):
 
-* an ``acoustic`` BSDF preset (`mitsonar.plugins.materials.PRESETS`: ``seabed_sand``,
+* an ``acoustic`` BSDF preset (`mitsonar.plugins.bsdfs.materials.PRESETS`: ``seabed_sand``,
   ``seabed_rock``, ``seabed_mud``, ``seabed_clay``, ``seabed_gravel``, ``sand``, ``rock``,
   ``water_calm``, ``concrete_good``, ...), written as ``<bsdf type="acoustic">`` with that preset;
 * else a medium of the ``acoustic_material`` BSDF (`mitsonar.acoustics.materials.MATERIALS`:
@@ -29,7 +29,7 @@ DEFAULT_SEABED = "seabed_sand"
 
 def material_names():
     from mitsonar.acoustics.materials import MATERIALS
-    from mitsonar.plugins.materials import PRESETS
+    from mitsonar.plugins.bsdfs.materials import PRESETS
 
     return sorted(PRESETS), sorted(m for m in MATERIALS if m not in PRESETS)
 

@@ -1,6 +1,6 @@
 """`render_echoes`: the complex baseband pressure at each receive element of a sonar head.
 
-Estimator. The echo paths are the incoherent renderer's (`plugins/common.py`,
+Estimator. The echo paths are the incoherent renderer's (`plugins/integrators/common.py`,
 ``SonarIntegrator.sample``, consumed through its ``record`` callback): each path reports, per bounce,
 its echo energy, range and surface point. The received field is a sum over *scatterers* frozen to
 the scene, each with amplitude ``sqrt(sigma dA)`` (the square root of its echo energy), a phase of
@@ -17,7 +17,7 @@ its own and per element the delay of its path (`synthesis`):
   Monte-Carlo noise, which falls with ``spp``; a moving head sees their delays change, hence the
   physical decorrelation;
 * **mirror-like surfaces** (BSDF with a specular part larger than the diffuse one and a lobe
-  exponent of at least 100, `plugins.image_guide.MIN_EXPONENT`) are **coherent**: physical optics in
+  exponent of at least 100, `plugins.integrators.paths.image_guide.MIN_EXPONENT`) are **coherent**: physical optics in
   its stationary-phase limit (the Kirchhoff approximation; Jackson and Richardson
   2007): the echoes of one shape, bounce order and range-resolution cell merge into one glint at
   their energy centroid, of amplitude ``sqrt(sum E)`` and deterministic phase ``-2 pi f_c tau`` from
@@ -132,7 +132,7 @@ def _check_pulse(pulse):
 
 def head_band(sonar) -> tuple[float, float]:
     """(low, high) Hz: the head's band, the sensor's ``frequency`` +- half its ``bandwidth`` (the
-    XML's, else a preset's published band, else ``frequency / 2``: `plugins.sonar_sensor.DEFAULT_Q`)."""
+    XML's, else a preset's published band, else ``frequency / 2``: `plugins.sensors.sonar.DEFAULT_Q`)."""
     f = float(sonar.beam.frequency)
     bw = float(sonar.bandwidth)
     return f - 0.5 * bw, f + 0.5 * bw
@@ -311,10 +311,12 @@ def _shape_tables(scene):
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.sim.variant import plugin_module as module
+    from mitsonar.sim.variant import ensure_variant
 
-    guide = module("image_guide")
-    acoustic = module("acoustic_bsdf").AcousticBSDF
+    ensure_variant()
+    from mitsonar.plugins.bsdfs.acoustic import AcousticBSDF as acoustic
+    from mitsonar.plugins.integrators.paths import image_guide as guide
+
     shapes = scene.shapes()
     registry = dr.reinterpret_array(mi.UInt32, scene.shapes_dr()).numpy() if shapes else np.zeros(1, np.uint32)
     table = np.zeros(int(registry.max()) + 1, np.uint32)
@@ -365,15 +367,18 @@ def _trace(scene, sonar, row_poses, spp, seed, max_depth, spacing, resolution, s
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.sim.variant import plugin_module as module
+    from mitsonar.sim.variant import ensure_variant
 
-    samples_mod = module("samples")
+    ensure_variant()
+    from mitsonar.plugins.integrators.paths.samples import HashSamples, row_lanes
+    from mitsonar.plugins.sensors.sonar import PingFrames
+
     integ = scene.integrator()
     depth = int(max_depth) if max_depth is not None else int(getattr(integ, "max_depth", 5) or 5)
     integrator = mi.load_dict({"type": "sonar_tof", "max_depth": depth, "guide": "none"})
     setup = integrator.setup(scene, sonar)
     beam = sonar.transmit if sonar.sonar_kind.transmit_fan else sonar.beam
-    setup.frames = module("sonar_sensor").PingFrames(row_poses)
+    setup.frames = PingFrames(row_poses)
     setup.connect = None
     setup.sensor = types.SimpleNamespace(beam=beam)
     setup.guide = False
@@ -387,7 +392,7 @@ def _trace(scene, sonar, row_poses, spp, seed, max_depth, spacing, resolution, s
         while start < spp:
             count = min(count_max, spp - start)
             n = n_rows * count * depth
-            ping, samples = samples_mod.row_lanes(samples_mod.HashSamples, n_rows, seed, start, count)
+            ping, samples = row_lanes(HashSamples, n_rows, seed, start, count)
             lane = dr.arange(mi.UInt32, n_rows * count)
             store = [dr.zeros(mi.Float, n) for _ in range(8)]
             shape_of = dr.zeros(mi.UInt32, n)

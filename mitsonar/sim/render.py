@@ -11,12 +11,10 @@ import numpy as np
 from mitsonar._checks import is_whole
 from mitsonar._limits import LIMITS
 from mitsonar.geometry.frames import check_rigid
-from mitsonar.plugins import PLUGINS
 from mitsonar.scan import ElectronicsSettings, Scan, ScanMeta
 from mitsonar.sim.scene import SceneError, mitsuba_error, scene_name, sonar_of
 from mitsonar.geometry.trajectory import Trajectory
 from mitsonar.sim.variant import ensure_variant
-from mitsonar.sim.variant import plugin_module as module
 
 DEFAULT_SPP = 4096
 
@@ -99,7 +97,14 @@ def moving_head_poses(sonar, trajectory, start_time, mount=None):
     return trajectory.at(t) @ (sonar.to_world_np if mount is None else mount)
 
 
-SONAR_INTEGRATORS = tuple(name for kind, name, _, _ in PLUGINS if kind == "integrator")
+def sonar_integrators() -> tuple:
+    """The XML names of mitsonar's integrators (``sonar_bdpt``, ...), as registered for the variant, sorted."""
+    ensure_variant()
+    from mitsonar.plugins import registered
+
+    return tuple(sorted(name for name, (kind, _) in registered().items() if kind == "integrator"))
+
+
 SEED_MAX = 2 ** 32 - 1   # the path seed is a 32-bit integer: larger seeds would repeat smaller ones
 SPP_MAX = int(LIMITS["spp"].hi)    # paths per ping: a signed 32-bit count (`mitsonar._limits`)
 SPP_ALLOWED = LIMITS["spp"].allowed()
@@ -122,10 +127,12 @@ def pick_sensor(scene, sensor=None, option="--sensor"):
     warning naming it when the scene has several. Refused with one `SceneError` naming the
     scene, ``option`` and its sensors (index, id, kind). Returns the sensor object, which
     `render_scan` and `render_survey` take without warning again."""
-    common = module("common")
+    ensure_variant()
+    from mitsonar.plugins.sensors.sonar import SonarSensor
+
     name = scene_name(scene) or "the scene"
     sensors = list(scene.sensors())
-    sonars = [s for s in sensors if isinstance(s, common.SonarSensor)]
+    sonars = [s for s in sensors if isinstance(s, SonarSensor)]
     listing = sensor_list(scene)
     if sensor is None:
         if not sonars:
@@ -146,7 +153,7 @@ def pick_sensor(scene, sensor=None, option="--sensor"):
         if not found:
             raise SceneError(f"{name}: {option} {text!r}: no sensor of that id; its sensors: {listing}")
         chosen = found[0]
-    if not isinstance(chosen, common.SonarSensor):
+    if not isinstance(chosen, SonarSensor):
         raise SceneError(f"{name}: {option} {text}: not a sonar sensor; its sensors: {listing}")
     return chosen
 
@@ -154,7 +161,9 @@ def pick_sensor(scene, sensor=None, option="--sensor"):
 def _integrator(scene, integrator):
     import mitsuba as mi
 
-    base = module("common").SonarIntegrator
+    ensure_variant()
+    from mitsonar.plugins.integrators.common import SonarIntegrator as base
+
     if integrator is None:
         integrator = scene.integrator()
         if not isinstance(integrator, base):
@@ -168,16 +177,16 @@ def _integrator(scene, integrator):
         integrator = {"type": integrator}
     if isinstance(integrator, dict):
         kind = integrator.get("type")
-        if kind not in SONAR_INTEGRATORS:
+        if kind not in sonar_integrators():
             raise SceneError(f"render_scan 'integrator': {kind!r} is not a sonar integrator "
-                             f"(one of {', '.join(SONAR_INTEGRATORS)})")
+                             f"(one of {', '.join(sonar_integrators())})")
         try:
             return mi.load_dict(integrator)
         except Exception as exc:
             raise SceneError(f"render_scan 'integrator': {mitsuba_error(exc)}") from None
     if not isinstance(integrator, base):
         raise SceneError(f"render_scan 'integrator': {type(integrator).__name__} is not a sonar integrator "
-                         f"(one of {', '.join(SONAR_INTEGRATORS)})")
+                         f"(one of {', '.join(sonar_integrators())})")
     return integrator
 
 
@@ -250,7 +259,8 @@ def render_frame(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integr
         electronics_seed = _whole("electronics_seed", electronics_seed, 0, SEED_MAX,
                                   f"a whole number from 0 to {SEED_MAX}, or None for seed")
     if max_depth is not None:
-        top = module("common").MAX_DEPTH
+        ensure_variant()
+        from mitsonar.plugins.integrators.common import MAX_DEPTH as top
         max_depth = _whole("max_depth", max_depth, 1, top, f"a whole number of surface bounces from 1 to {top}")
     if pose is not None:
         pose = _check_pose(pose)
@@ -416,7 +426,9 @@ def scan_parameters(scene, keys=None):
         raise SceneError(f"scan_parameters: gradients need a Mitsuba variant with automatic differentiation "
                          f"(llvm_ad_mono, cuda_ad_mono); the active variant is {mi.variant()}")
     params = mi.traverse(scene)
-    allowed = module("path_replay").differentiable_keys(params)
+    from mitsonar.plugins.integrators.paths import frozen_pass, path_replay
+
+    allowed = path_replay.differentiable_keys(params)
     wanted = allowed if keys is None else [keys] if isinstance(keys, str) else list(keys)
     for k in wanted:
         if k not in allowed:
@@ -425,6 +437,6 @@ def scan_parameters(scene, keys=None):
     params.keep([re.escape(k) + "$" for k in wanted])
     if any(k.endswith(".vertex_positions") for k in wanted):
         # a frozen pass replays the ray casts of the geometry it recorded: a scene whose meshes
-        # move is traced every pass (plugins/frozen_pass.py, `trace_every_pass`)
-        module("frozen_pass").trace_every_pass(scene)
+        # move is traced every pass (plugins/integrators/paths/frozen_pass.py, `trace_every_pass`)
+        frozen_pass.trace_every_pass(scene)
     return params

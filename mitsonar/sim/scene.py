@@ -158,11 +158,14 @@ def scene_name(scene) -> str:
 def sonar_of(scene, sensor=0):
     """The sonar sensor ``sensor`` (an index or a sensor) of ``scene``, or a `SceneError` saying
     what the scene has instead; warns when an index picks one of several sonars."""
-    from mitsonar.sim.variant import plugin_module as module
+    from mitsonar.sim.variant import ensure_variant
 
-    common = module("common")
+    ensure_variant()
+    from mitsonar.plugins.integrators import common
+    from mitsonar.plugins.sensors.sonar import SonarSensor
+
     name = scene_name(scene) or "the scene"
-    sonars = [s for s in scene.sensors() if isinstance(s, common.SonarSensor)]
+    sonars = [s for s in scene.sensors() if isinstance(s, SonarSensor)]
     if not sonars:
         kinds = ", ".join(type(s).__name__ for s in scene.sensors()) or "none"
         raise SceneError(f'{name}: needs a <sensor type="sonar"> (sensors found: {kinds})')

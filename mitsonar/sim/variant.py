@@ -67,16 +67,6 @@ def ensure_variant() -> None:
     _follow_variant_changes()
 
 
-def plugin_module(name: str):
-    """The plugin module ``name`` for the active variant (``plugin_module("common").MAX_DEPTH``),
-    choosing the variant first (`ensure_variant`): mitsonar's way to reach its plugins, so that no
-    caller depends on a variant chosen earlier."""
-    ensure_variant()
-    from mitsonar.plugins import module
-
-    return module(name)
-
-
 def init_on_import() -> None:
     """Activate the default variant if none is set, register the plugins, follow variant changes
     (what ``import mitsonar`` did before version 0.3; `ensure_variant` does it now on first use).

@@ -50,7 +50,7 @@ def directivity_index(scan) -> float:
     from mitsonar.sim.variant import ensure_variant
 
     ensure_variant()
-    from mitsonar.plugins import beam as patterns
+    from mitsonar.plugins.sensors import beam as patterns
 
     shape = patterns.lookup(scan.beam_pattern)
     if shape is not None and shape.measured:

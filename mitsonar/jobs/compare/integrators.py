@@ -12,11 +12,14 @@ def load_integrator(name, params=None):
     """
     import mitsuba as mi
 
-    from mitsonar.sim.variant import plugin_module as module
-    from mitsonar.sim.render import SONAR_INTEGRATORS
+    from mitsonar.sim.render import sonar_integrators
     from mitsonar.sim.scene import mitsuba_error
+    from mitsonar.sim.variant import ensure_variant
 
-    ours = ", ".join(SONAR_INTEGRATORS)
+    ensure_variant()
+    from mitsonar.plugins.integrators.common import SonarIntegrator
+
+    ours = ", ".join(sonar_integrators())
 
     try:
         obj = mi.load_dict({"type": name, **(params or {})})
@@ -26,7 +29,7 @@ def load_integrator(name, params=None):
             raise CompareError(f"integrator {name!r} is not available (no Mitsuba plugin of that name is "
                                f"registered; mitsonar provides {ours})") from None
         raise CompareError(f"integrator {name!r}: {mitsuba_error(exc)}") from None
-    if not isinstance(obj, module("common").SonarIntegrator):
+    if not isinstance(obj, SonarIntegrator):
         raise CompareError(f"integrator {name!r} is not a sonar integrator; use one of {ours}")
     return obj
 

@@ -334,7 +334,7 @@ def _check_scenes(cfg, base):
                 if is_spec(v):
                     check_value(f"{where}.terrain.{k}", v, kind="any")
             _check_terrain(where, t)
-            from mitsonar.plugins.materials import PRESETS
+            from mitsonar.plugins.bsdfs.materials import PRESETS
 
             s.setdefault("material", "seabed_sand")
             check_value(f"{where}.material", s["material"], choices=sorted(PRESETS))
@@ -358,9 +358,12 @@ def _check_terrain(where, spec):
 
 
 def _sonar_parameters():
-    from mitsonar.sim.variant import plugin_module as module
+    from mitsonar.sim.variant import ensure_variant
 
-    return module("sonar_sensor").SonarSensor.parameters()
+    ensure_variant()
+    from mitsonar.plugins.sensors.sonar import SonarSensor
+
+    return SonarSensor.parameters()
 
 
 INTEGER_SONAR = {"n_bins", "n_pings", "bit_depth"}

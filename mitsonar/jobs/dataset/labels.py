@@ -1,7 +1,7 @@
 """Labels of a scan: which shape returned each bin's energy, and each row's first return.
 
 The labels come from the render itself, not from a second trace: `labelling_integrator` is a
-``sonar_tof`` integrator whose histogram pass (the pass of ``plugins/sonar_tof.py``, same lanes,
+``sonar_tof`` integrator whose histogram pass (the pass of ``plugins/integrators/sonar_tof.py``, same lanes,
 same path function `SonarIntegrator.sample`) puts each echo's energy into a bin of
 ``(row, range bin, shape)``; ``record(k, range, energy, valid, hit)`` gets the echo's surface
 interaction and ``hit.shape`` names the shape. The histogram `render_scan` sees is the sum over
@@ -33,9 +33,10 @@ def labelling_integrator(max_depth=5, sampling="sobol"):
     import drjit as dr
     import mitsuba as mi
 
-    from mitsonar.sim.variant import plugin_module as module
+    from mitsonar.sim.variant import ensure_variant
 
-    base = module("sonar_tof").SonarTOFIntegrator
+    ensure_variant()
+    from mitsonar.plugins.integrators.sonar_tof import SonarTOFIntegrator as base
 
     class LabellingIntegrator(base):
         name = "sonar_tof"

@@ -112,9 +112,12 @@ class SampleRenderer:
                 resolver.append(p)
             if "terrain" in draw:
                 os.remove(ply)
-        from mitsonar.sim.variant import plugin_module as module
+        from mitsonar.sim.variant import ensure_variant
 
-        sonars = [s for s in scene.sensors() if isinstance(s, module("common").SonarSensor)]
+        ensure_variant()
+        from mitsonar.plugins.sensors.sonar import SonarSensor
+
+        sonars = [s for s in scene.sensors() if isinstance(s, SonarSensor)]
         if not sonars:
             from mitsonar.jobs.dataset.config import DatasetError
 

@@ -32,8 +32,8 @@ import mitsuba as mi
 import numpy as np
 
 from .common import tagging_hard
-from .exact_sum import ExactBins
-from .samples import SobolSamples, row_lanes
+from .paths.exact_sum import ExactBins
+from .paths.samples import SobolSamples, row_lanes
 from .sonar_tof import MAX_LANES_PER_PASS, SonarTOFIntegrator
 
 #: Fraction of ``spp`` the pilot traces (at least `MIN_PILOT` paths per row).
@@ -99,8 +99,8 @@ def path_traced(integrator, setup, seed, start, count, pose=None, progress=None,
     if tof is None:
         tof = integrator._path_tracer = mi.load_dict(
             {"type": "sonar_tof", "max_depth": integrator.max_depth, "guide": integrator.guide})
-    from . import row_allocation
-    from .shared_beams import SharedFrame, can_share, same_pose
+    from .paths import row_allocation
+    from .paths.shared_beams import SharedFrame, can_share, same_pose
 
     n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
     sharing = can_share(setup.sensor) and same_pose(setup.sensor, pose)

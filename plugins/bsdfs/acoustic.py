@@ -5,9 +5,10 @@ import drjit as dr
 import mitsuba as mi
 
 from mitsonar._checks import not_allowed
+from mitsonar.plugins.props import number, text
+from mitsonar.plugins.registry import register_plugin
 
 from .materials import PRESETS
-from .props import number, text
 
 # What each parameter takes, for the message on a wrong XML type (an <rgb>, a <texture>).
 _EXPECTED = {"diffuse": "a <float> in [0, 1]", "specular": "a <float> in [0, 1]", "shininess": "a <float> >= 0"}
@@ -51,7 +52,7 @@ class AcousticBSDF(mi.BSDF):
     ============ ========= ==========================================================
     Parameter    Default   Meaning
     ============ ========= ==========================================================
-    preset       (none)    a material name from ``mitsonar.plugins.materials.PRESETS``
+    preset       (none)    a material name from ``mitsonar.plugins.bsdfs.materials.PRESETS``
                            (concrete qualities of thesis Table 2.2, ``water_calm``,
                            ``sand``, ``rock``, Lambert seabeds ``seabed_sand``, ``_mud``,
                            ``_gravel``, ``_rock``, ``_clay``); explicit values override it
@@ -191,3 +192,6 @@ def check_parameters(diffuse, specular, shininess):
     if diffuse + specular > 1.0 + 1e-6:
         raise ValueError(f"acoustic 'diffuse' + 'specular' = {diffuse + specular:g} > 1: "
                          "a surface cannot reflect more energy than it receives")
+
+
+register_plugin("BSDF", "acoustic", AcousticBSDF)

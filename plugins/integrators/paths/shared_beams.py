@@ -24,7 +24,7 @@ Row k's frame is the head frame turned by ``b_k`` about +y, so a head-frame dire
 ``(-pi, pi]``) and the same elevation in row k's frame. The beams scored are those with
 ``|az - b_k| <= W``, found from the nearest one: ``W`` is the receive pattern's azimuth support
 (``BeamPattern.support``) except for a gaussian, where it is 2 beam widths (``Gaussian.SHARE_WINDOW``
-in ``plugins/beam.py``) (beyond, ``B < 2^-16``
+in ``plugins/sensors/beam.py``) (beyond, ``B < 2^-16``
 and the pattern's mass is below 1e-5 of the beam's: the truncation is far below any Monte-Carlo
 error at reachable spp). A ``sinc`` receive pattern (side lobes over the whole half-space)
 would be scored into every row: it is refused with ``share_beams="true"``, as are echoes reaching
@@ -40,10 +40,10 @@ import mitsuba as mi
 import numpy as np
 
 import mitsonar.kinds as kinds
+from mitsonar.plugins.jit_arrays import upload
+from mitsonar.plugins.sensors.sonar import PingFrames
 
-from .jit_arrays import upload
 from .range_bins import RangeBins
-from .sonar_sensor import PingFrames
 
 # Beams scored per echo at most: the window either side of the nearest (2 m + 1 beams), or every
 # row of a frame narrower than that.
@@ -142,7 +142,7 @@ class SharedFrame:
         self.origin = _opaque(mi.Point3f, head[:3, 3])
         self.start = dr.opaque(mi.Float, bearings[0])
         self.step = float(math.radians(sensor.bearing_step))
-        # An uneven table of bearings (the head's own, `sonar_sensor` ``bearings``): the nearest
+        # An uneven table of bearings (the head's own, `sensors.sonar` ``bearings``): the nearest
         # row is found by a binary search and row k's bearing read from the table; an even one
         # scores as ``start + k step`` does.
         even = np.allclose(np.diff(bearings), self.step, rtol=0.0, atol=1e-12) if len(bearings) > 1 else True

@@ -94,9 +94,10 @@ from mitsonar.acoustics.interface import reflection_coefficient
 from mitsonar.acoustics.materials import MATERIALS, WATER_DENSITY, WATER_SOUND_SPEED
 from mitsonar.acoustics.seabed import APL_UW_FREQUENCY_RANGE, SEDIMENTS, apl_uw_backscatter
 from mitsonar.acoustics.seabed import sediment as find_sediment
+from mitsonar.plugins.props import number, text
+from mitsonar.plugins.registry import register_plugin
 
-from .acoustic_bsdf import lobe_direction, lobe_sample
-from .props import number, text
+from .acoustic import lobe_direction, lobe_sample
 
 NAME = "acoustic_material"
 BACKSCATTER = ("none", "lambert", "apl_uw")
@@ -353,3 +354,6 @@ class AcousticMaterialBSDF(mi.BSDF):
         return (f"AcousticMaterialBSDF[material={m.material!r}, density={m.density:g} kg/m^3, "
                 f"sound_speed={m.sound_speed:g} m/s, attenuation={m.attenuation:g} dB/wavelength, "
                 f"backscatter={what}{scale}, shininess={float(self.shininess[0]):g}]")
+
+
+register_plugin("BSDF", "acoustic_material", AcousticMaterialBSDF)

@@ -599,7 +599,7 @@ def read_profile(props, source, refracts):
         return None
     from mitsonar.acoustics.profile import SoundSpeedProfile
 
-    from .props import text
+    from mitsonar.plugins.props import text
 
     name = text(props, "sound_speed_profile", "", source)
     if not refracts:

@@ -15,13 +15,14 @@ from mitsonar._limits import LIMITS, check
 from mitsonar.acoustics.water import SOUND_SPEED
 import mitsonar.kinds as kinds
 from mitsonar.geometry.frames import SIDES, check_rigid, check_rigid_stack
+from mitsonar.plugins.jit_arrays import upload
+from mitsonar.plugins.props import count, number, text
+from mitsonar.plugins.registry import register_plugin
+from mitsonar.presets.sidescan import PRESETS
+from mitsonar.plugins.water import check_pose, number_or_auto, read_water, resolve
 
 from . import beam as patterns
 from .beam import BeamPattern, read_beam_table, resolve_path
-from .jit_arrays import upload
-from .props import count, number, text
-from .sidescan_heads import PRESETS
-from .water import check_pose, number_or_auto, read_water, resolve
 
 # The size bounds are `mitsonar._limits.LIMITS`, with the physics behind them.
 MAX_BINS, MAX_PINGS = int(LIMITS["n_bins"].hi), int(LIMITS["n_pings"].hi)
@@ -56,7 +57,7 @@ class SonarSensor(mi.Sensor):
     (``beamwidth_h`` along track, the beam frame's azimuth; ``beamwidth_v`` the across-track fan, its
     elevation). ``side`` picks the channels: with ``both`` the rows are the ``n_pings`` port pings then
     the ``n_pings`` starboard pings (2 n_pings rows, `channels` says which is which), with one side
-    row k is ping k. ``preset`` sets the defaults of a commercial head (`sidescan_heads.PRESETS`).
+    row k is ping k. ``preset`` sets the defaults of a commercial head (`mitsonar.presets.sidescan.PRESETS`).
     ``kind='volumetric'`` (3D imaging sonar): a multibeam head whose receive beams form an
     ``n_elevation x n_azimuth`` grid (`mitsonar.kinds.Volumetric`): row ``k = i n_azimuth + j``
     is turned by bearing ``bearing_start + j bearing_step`` about +y, then by elevation
@@ -106,7 +107,7 @@ class SonarSensor(mi.Sensor):
     side             both         sidescan: ``port``, ``starboard`` or ``both`` channels
     depression       15           sidescan: deg, each channel's boresight below the horizontal
     preset           (none)       sidescan: a commercial head's defaults (``klein3000_100k``,
-                                  ``klein3000_500k``, ``starfish450``; `sidescan_heads`)
+                                  ``klein3000_500k``, ``starfish450``; `mitsonar.presets.sidescan`)
     ping_period      physical     s between pings (multibeam: between frames); default
                                   ``2 range_max / sound_speed`` + 0.03 s (mechanical) or
                                   + 0.05 s (multibeam) or + 0 (sidescan); not less than the
@@ -158,7 +159,7 @@ class SonarSensor(mi.Sensor):
         """The XML parameter names: the table above, with the electronics' fields by name."""
         from mitsonar.receiver.electronics import Electronics
 
-        from .props import table_parameters
+        from mitsonar.plugins.props import table_parameters
 
         return ([n for n in table_parameters(cls.__doc__) if n != "electronics"]
                 + [f.name for f in dataclasses.fields(Electronics)])
@@ -483,7 +484,7 @@ class SonarSensor(mi.Sensor):
 
     # ------------------------------------------------------------------ differentiable parameters
     def traverse(self, callback):
-        """Expose to ``mi.traverse``, all differentiable (``mitsonar.plugins.path_replay``):
+        """Expose to ``mi.traverse``, all differentiable (``mitsonar.plugins.integrators.paths.path_replay``):
         ``to_world`` (the head's beam frame, a ``mi.Transform4f``), ``absorption`` (dB/m) and, for a
         ``gaussian`` beam, ``beamwidth_h`` and ``beamwidth_v`` (deg)."""
         super().traverse(callback)
@@ -567,3 +568,6 @@ class PingFrames:
     def to_world(self, ping, d):
         x, y, z, _ = self.gather(ping)
         return x * d.x + y * d.y + z * d.z
+
+
+register_plugin("sensor", "sonar", SonarSensor)

@@ -19,7 +19,7 @@ receive aperture 1 m^2) and multiplied by the BSDF sample weight at every bounce
 Gradients: `SonarIntegrator.sample` takes Mitsuba's AD arguments (``mode``, ``δ``, ``state_in``)
 and ``render_forward``/``render_backward`` follow Mitsuba's ``RBIntegrator``, so ``mi.render(scene,
 params)`` is differentiable on the AD variants; the replayed path and what its derivative means:
-``plugins/path_replay.py``.
+``plugins/integrators/paths/path_replay.py``.
 """
 from __future__ import annotations
 
@@ -28,15 +28,15 @@ import mitsuba as mi
 
 from mitsonar._checks import not_allowed, require
 from mitsonar._limits import LIMITS
+from mitsonar.plugins.props import count, text
+from mitsonar.plugins.sensors.sonar import PingFrames, SonarSensor
 
-from . import image_guide
-from .emission import DB_TO_LOG2, start
-from .denormals import flushed
-from .exact_sum import ExactBins
-from .props import count, text
-from .range_bins import RangeBins
-from .samples import DIMS_EMIT, DIMS_PER_BOUNCE
-from .sonar_sensor import PingFrames, SonarSensor
+from .paths import image_guide
+from .paths.emission import DB_TO_LOG2, start
+from .paths.denormals import flushed
+from .paths.exact_sum import ExactBins
+from .paths.range_bins import RangeBins
+from .paths.samples import DIMS_EMIT, DIMS_PER_BOUNCE
 
 MAX_DEPTH = int(LIMITS["max_depth"].hi)   # the bound of `mitsonar._limits`
 # Lanes in one gradient pass: a replayed path carries ~40 floats of state, so passes of 2^20
@@ -120,7 +120,7 @@ class AttachedSetup:
         self.beam = sensor.beam.attached(diff.get("beamwidth_h"), diff.get("beamwidth_v"))
         head = sensor.head_pose()
         self.frames = _AttachedFrames(setup.frames, diff["to_world"], head, sensor.ping_poses())
-        from .path_replay import acoustic_bsdfs, moving_meshes
+        from .paths.path_replay import acoustic_bsdfs, moving_meshes
 
         self.bsdfs, self.other_bsdfs = acoustic_bsdfs(setup.scene)
         self.geometry = moving_meshes(setup.scene)
@@ -190,7 +190,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
         self.max_depth = check_max_depth(count(props, "max_depth", 5, self.name), self.name)
         self.guide = text(props, "guide", self.GUIDES[0], self.name)
         require(self.guide in self.GUIDES, self.name, "guide", self.guide, "one of " + ", ".join(self.GUIDES))
-        from .refraction import DEFAULT_CHORDS, check_chords, read_profile
+        from .paths.refraction import DEFAULT_CHORDS, check_chords, read_profile
 
         self.sound_speed_profile = read_profile(props, self.name, self.REFRACTS)
         self.svp_chords = check_chords(count(props, "svp_chords", DEFAULT_CHORDS, self.name), self.name)
@@ -215,8 +215,8 @@ class SonarIntegrator(mi.SamplingIntegrator):
     def render_forward(self, scene, params=None, sensor=0, seed=0, spp=0):
         """Forward-mode derivative of the scan ``mi.render`` returns, along the tangents set on the
         traversed parameters: a tensor (n_rows, n_bins, 1). The estimator and what its range
-        derivative means: ``plugins/path_replay.py``."""
-        from .path_replay import edge_bins
+        derivative means: ``plugins/integrators/paths/path_replay.py``."""
+        from .paths.path_replay import edge_bins
 
         setup, seed, passes = self._gradient_setup(scene, params, sensor, seed, spp)
         n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
@@ -249,7 +249,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
     def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
         """Reverse-mode derivative: back-propagates ``grad_in`` (n_rows, n_bins, 1) into the traversed
         parameters with gradients enabled, by path replay (memory independent of ``spp``)."""
-        from .path_replay import Adjoint
+        from .paths.path_replay import Adjoint
 
         setup, seed, passes = self._gradient_setup(scene, params, sensor, seed, spp)
         n_rows, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
@@ -288,7 +288,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
                              f"variant is {variant}")
         if not hasattr(self, "lanes"):
             raise ValueError(f"{self.name}: gradients are rendered by the sonar_tof integrator only")
-        from .path_replay import check_attached
+        from .paths.path_replay import check_attached
 
         check_attached(params, self.name)
         sensor = resolve_sensor(scene, sensor)
@@ -320,7 +320,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
         setup.guide = self.guide == "image" and image_guide.guide_kind(scene)
         profile = getattr(self, "sound_speed_profile", None)
         if profile is not None:
-            from .refraction import from_profile
+            from .paths.refraction import from_profile
 
             if not self.REFRACTS:
                 raise ValueError(f"{self.name}: a sound_speed_profile (refracted paths) is traced by the "
@@ -343,11 +343,10 @@ class SonarIntegrator(mi.SamplingIntegrator):
             if not (mode is None or (mode == dr.ADMode.Primal and δ is None)):
                 raise ValueError("sonar_tof: gradients of a render through a sound_speed_profile are not "
                                  "implemented (refracted paths are primal only)")
-            from .refraction import sample_path
+            from .paths.refraction import sample_path
 
             return sample_path(setup, ping, samples, record, active)
         if mode is None or (mode == dr.ADMode.Primal and δ is None):
-            # Called unbound too (``echo_path.trace_echoes`` passes self=None).
             return SonarIntegrator._sample_primal(self, setup, ping, samples, record, active)
         if mode == dr.ADMode.Primal:
             # The reverse pass's primal replay is the primal path itself: per lane, the sum
@@ -363,7 +362,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
 
             SonarIntegrator._sample_primal(self, setup, ping, samples, weigh, active)
             return total, seen
-        from .path_replay import replay
+        from .paths.path_replay import replay
 
         return replay(setup, mode, ping, samples, δ, state_in, record, active)
 

@@ -1,7 +1,7 @@
 r"""Derivatives of a scan by path replay: the AD modes of `SonarIntegrator.sample`.
 
 The primal scan is the exact histogram ``I[row, b] = 1/N sum_paths sum_k E_k 1[r_k in bin b]``
-(``E_k``, ``r_k``: energy and range of bounce ``k``'s echo, ``plugins/common.py``). A hard bin has
+(``E_k``, ``r_k``: energy and range of bounce ``k``'s echo, ``plugins/integrators/common.py``). A hard bin has
 no derivative with respect to range, so the derivative is that of
 
     I~[row, b] = 1/N sum E_k  K_b(r_k),   K_b = (bin b's indicator) convolved with a one-bin box,
@@ -104,8 +104,8 @@ def differentiable_keys(params) -> list:
     ``vertex_positions`` (`_attached_hit`)."""
     import re
 
-    from .acoustic_bsdf import AcousticBSDF
-    from .sonar_sensor import SonarSensor
+    from mitsonar.plugins.bsdfs.acoustic import AcousticBSDF
+    from mitsonar.plugins.sensors.sonar import SonarSensor
 
     owner = {k: params.properties[k][2] for k in params.keys()}
     bsdfs = [k.rsplit(".", 1)[0] for k, node in owner.items() if isinstance(node, AcousticBSDF)]

@@ -6,10 +6,11 @@ import mitsuba as mi
 import numpy as np
 
 from mitsonar._checks import not_allowed, require
+from mitsonar.plugins.props import count, text
+from mitsonar.plugins.registry import register_plugin
 
-from .bdpt_paths import HEURISTICS, trace_bidirectional
-from .props import count, text
-from .exact_sum import ExactBins
+from .paths.bdpt_paths import HEURISTICS, trace_bidirectional
+from .paths.exact_sum import ExactBins
 from .sonar_tof import SonarTOFIntegrator
 
 # Subpath B vertices kept in one pass (~80 bytes each: 320 MiB).
@@ -124,3 +125,6 @@ def _whole(value: str, max_depth: int, source: str) -> int:
         raise not_allowed(source, "strategy", value, "'all' or a whole number of surface vertices on the subpath "
                           f"from the row's beam, 0 to max_depth ({max_depth})")
     return int(value)
+
+
+register_plugin("integrator", "sonar_bdpt", SonarBDPTIntegrator)

@@ -36,8 +36,7 @@ import numpy as np
 from mitsonar._compat import trapezoid
 from mitsonar._registry import Registry
 from mitsonar.acoustics.water import SOUND_SPEED
-
-from .jit_arrays import upload
+from mitsonar.plugins.jit_arrays import upload
 
 # Solves sinc(t)^2 = 1/2: the -3 dB point of a piston's one-way pattern.
 _SINC_HALF_POWER = 1.3915573
@@ -256,7 +255,7 @@ class Pattern:
 
     def share_window(self, beam) -> float:
         """Radians either side of a receive beam's bearing that hold its pattern, for the receive
-        beams sharing transmit paths (``plugins/shared_beams.py``); a ValueError where the pattern
+        beams sharing transmit paths (``plugins/integrators/paths/shared_beams.py``); a ValueError where the pattern
         has no such window."""
         lo, hi, _, _ = beam.support()
         return max(-lo, hi)
@@ -271,7 +270,7 @@ class Gaussian(Pattern):
     name = "gaussian"
     traversed_widths = True
     #: A receive beam sharing transmit paths is scored within this many beam widths of its axis
-    #: (beyond, B < 2^-16: ``plugins/shared_beams.py``).
+    #: (beyond, B < 2^-16: ``plugins/integrators/paths/shared_beams.py``).
     SHARE_WINDOW = 2.0
 
     def support(self, beam):
@@ -643,7 +642,7 @@ class BeamPattern:
         """A view of this pattern whose kernel widths carry the derivatives of ``beamwidth_h`` and
         ``beamwidth_v`` (mi.Float, degrees, e.g. the sensor's traversed parameters) while keeping
         this pattern's values bit for bit (``dr.replace_grad``), for the gradient passes of
-        ``mitsonar.plugins.path_replay``. The sampling table is shared and stays detached: emission
+        ``mitsonar.plugins.integrators.paths.path_replay``. The sampling table is shared and stays detached: emission
         weights ``B / pdf`` then differentiate as ``dB / pdf`` (detached sampling)."""
         view = copy.copy(self)
         deg = math.pi / 180.0

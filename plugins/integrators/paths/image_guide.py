@@ -98,7 +98,7 @@ def lobe_exponent(bsdf) -> float:
     normal incidence, where the acoustic BSDF's diffuse share of the density is largest, so its
     smallest reading is its largest here); infinity for a BSDF of unknown shape (it may be a
     mirror), 0 for one without a specular part."""
-    from .acoustic_bsdf import AcousticBSDF, lobe_pdf
+    from mitsonar.plugins.bsdfs.acoustic import AcousticBSDF, lobe_pdf
 
     if not isinstance(bsdf, AcousticBSDF):
         return math.inf

@@ -6,13 +6,14 @@ import mitsuba as mi
 import numpy as np
 
 from mitsonar._checks import require
+from mitsonar.plugins.props import text
+from mitsonar.plugins.registry import register_plugin
 
-from . import frozen_pass, row_allocation
+from .paths import frozen_pass, row_allocation
 from .common import SonarIntegrator
-from .denormals import flushing
-from .exact_sum import ExactBins
-from .props import text
-from .samples import HashSamples, SobolSamples, opaque_u32, row_lanes
+from .paths.denormals import flushing
+from .paths.exact_sum import ExactBins
+from .paths.samples import HashSamples, SobolSamples, opaque_u32, row_lanes
 
 # Lanes in one kernel launch. Larger launches keep both cores busy; the cap bounds the adds a
 # bin's integer words receive in one pass (`exact_sum.MAX_ADDS`: 2^22 lanes x 64 bounces < 2^30).
@@ -20,21 +21,6 @@ MAX_LANES_PER_PASS = 1 << 22
 MAX_SPP_PER_PASS = 1 << 16
 #: The default ``emission`` of shared multibeam paths (see the class docstring): ``receive``.
 EMISSION = "receive"
-
-# Names that moved to mitsonar.plugins.common; importable from here for one release.
-_MOVED = ("check_max_depth", "resolve_sensor")
-
-
-def __getattr__(name):
-    if name in _MOVED:
-        import warnings
-
-        from . import common
-
-        warnings.warn(f"mitsonar.plugins.sonar_tof.{name} is deprecated: import it from mitsonar.plugins.common",
-                      DeprecationWarning, stacklevel=2)
-        return getattr(common, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 class SonarTOFIntegrator(SonarIntegrator):
@@ -124,7 +110,7 @@ class SonarTOFIntegrator(SonarIntegrator):
     ``mi.render(scene)`` returns the range-intensity image as a tensor (n_pings, n_bins, 1);
     ``render_histogram`` returns it as a float64 numpy array and accepts a ``pose``.
     ``mi.render(scene, params)`` is differentiable in both modes (``render_forward``,
-    ``render_backward`` of `common.SonarIntegrator`, by path replay: ``plugins/path_replay.py``).
+    ``render_backward`` of `common.SonarIntegrator`, by path replay: ``plugins/integrators/paths/path_replay.py``).
     """
 
     name = "sonar_tof"
@@ -165,7 +151,7 @@ class SonarTOFIntegrator(SonarIntegrator):
         n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
         shared = None
         if self.share_beams is not False and self.allocation != "adaptive":
-            from .shared_beams import SharedFrame, can_share, same_pose, window
+            from .paths.shared_beams import SharedFrame, can_share, same_pose, window
 
             if self.share_beams:
                 window(setup.sensor)  # refuses a head that cannot share, before any work
@@ -263,7 +249,7 @@ class SonarTOFIntegrator(SonarIntegrator):
         drawn from the fan's density or the receive-weighted one (``emission``)."""
         beam = shared.path_setup.sensor.beam
         if self.emission == "receive":
-            from .receive_emission import for_frame
+            from .paths.receive_emission import for_frame
 
             beam = for_frame(shared)
         return frozen_pass.emitted(beam, samples)
@@ -306,3 +292,6 @@ def _emitting(setup, d, w):
     out = SimpleNamespace(**vars(setup))
     out.sensor = SimpleNamespace(beam=frozen_pass.Emitted(setup.sensor.beam, d, w))
     return out
+
+
+register_plugin("integrator", "sonar_tof", SonarTOFIntegrator)

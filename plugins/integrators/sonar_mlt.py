@@ -9,14 +9,15 @@ import numpy as np
 
 from mitsonar._checks import require
 from mitsonar._limits import check
+from mitsonar.plugins.jit_arrays import upload
+from mitsonar.plugins.props import count, number, text
+from mitsonar.plugins.registry import register_plugin
 
 from .common import PathSetup, SonarIntegrator, tagging_hard
-from .denormals import flushed
-from .exact_sum import ExactBins
-from .jit_arrays import upload
+from .paths.denormals import flushed
+from .paths.exact_sum import ExactBins
 from .mlt_split import MAX_SHARE, render_split
-from .props import count, number, text
-from .samples import HashSamples, n_dims
+from .paths.samples import HashSamples, n_dims
 from .sonar_tof import SonarTOFIntegrator
 
 # Salts that keep the random streams of the stages apart for one user seed.
@@ -455,3 +456,6 @@ class _Context:
         ok = (vals > 0) & dr.gather(mi.Bool, active, rec_lane)
         hist.reserve(dr.width(bins))
         hist.add(vals * w, self.bins.flat(p, bins), ok)
+
+
+register_plugin("integrator", "sonar_mlt", SonarMLTIntegrator)

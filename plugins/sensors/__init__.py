@@ -1,0 +1,1 @@
+"""The ``sonar`` sensor (`sonar`) and its beam patterns (`beam`)."""
