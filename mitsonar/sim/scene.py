@@ -14,6 +14,7 @@ import contextlib
 import os
 import re
 import warnings
+import xml.etree.ElementTree as ET
 
 from mitsonar._checks import first_line
 from mitsonar.sim.variant import ensure_variant
@@ -177,3 +178,61 @@ def sonar_of(scene, sensor=0):
         warnings.warn(f"{name} has {len(sonars)} sonar sensors; rendering sensor {sensor} "
                       "(choose with render_scan(sensor=...))", stacklevel=3)
     return chosen
+
+
+def live_scene(path: str, edit=None):
+    """The scene of ``path`` with every ``sonar`` sensor reduced to one ping at bearing 0
+    (`mitsonar.sim.scene.load_scene` of the edited XML, relative paths resolved from the file's
+    folder). ``edit``: a function given the XML's root element to change further before the load
+    (`mitsonar.devices.oculus.scenes`)."""
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as e:
+        raise SceneError(f"{path}: cannot read the scene XML ({e})") from None
+    for sensor in root.iter("sensor"):
+        if sensor.get("type") != "sonar" or not _xml_kind(sensor).scanlines:
+            continue       # a multibeam keeps its fan: its frames render whole
+        for name, tag, value in (("n_pings", "integer", "1"), ("bearing_start", "float", "0")):
+            el = next((c for c in sensor if c.get("name") == name), None)
+            if el is None:
+                el = ET.SubElement(sensor, tag, name=name)
+            el.set("value", value)
+    if edit is not None:
+        edit(root)
+    ensure_variant()
+    scene_folder(path)
+    # optimize=False: shapes keep their ids (no merging of those sharing a BSDF), so that an
+    # ``object`` datagram can move one
+    scene = load_scene(ET.tostring(root, encoding="unicode"), optimize=False)
+    scene.set_id(os.path.basename(path))
+    return scene
+
+
+def scene_folder(path: str) -> None:
+    """Put the folder of the scene file ``path`` first on Mitsuba's file resolver (relative paths
+    in its XML are found from there)."""
+    import mitsuba as mi
+
+    folder = os.path.dirname(os.path.abspath(path))
+    resolver = mi.file_resolver() if hasattr(mi, "file_resolver") else mi.Thread.thread().file_resolver()
+    if folder not in [str(p) for p in resolver]:
+        resolver.prepend(folder)
+
+
+def _xml_kind(sensor):
+    """The `mitsonar.kinds.SonarKind` a ``sonar`` sensor element names (the default kind
+    without a ``kind``; an unknown name: the default's, and the scene's load says what is wrong)."""
+    import mitsonar.kinds as kinds
+
+    el = next((c for c in sensor if c.get("name") == "kind"), None)
+    return kinds.lookup(kinds.DEFAULT if el is None else el.get("value")) or kinds.get(kinds.DEFAULT)
+
+
+def scene_kinds(path: str) -> list:
+    """The `mitsonar.kinds.SonarKind` of each ``sonar`` sensor of the scene file, in order
+    (SceneError naming the file if it cannot be read)."""
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as e:
+        raise SceneError(f"{path}: cannot read the scene XML ({e})") from None
+    return [_xml_kind(s) for s in root.iter("sensor") if s.get("type") == "sonar"]

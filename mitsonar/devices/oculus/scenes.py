@@ -74,7 +74,7 @@ class SceneFrames:
     def water(self) -> dict:
         """The rendered sensor's water (`mitsonar.devices.oculus.virtual.scene_water`: its
         ``temperature`` and ``surface_z``), from the scene as it loads."""
-        from mitsonar.live.heads import live_scene
+        from mitsonar.sim.scene import live_scene
         from mitsonar.devices.oculus.virtual import scene_water
 
         scene = live_scene(self.path, self._choose)
@@ -120,7 +120,7 @@ class SceneFrames:
     def _load_sensor(self, mode, n_beams: int, range_m: float):
         import mitsuba as mi
 
-        from mitsonar.live.heads import scene_folder
+        from mitsonar.sim.scene import scene_folder
         from mitsonar.sim.variant import ensure_variant
 
         try:
@@ -137,7 +137,7 @@ class SceneFrames:
         return mi.load_string(text, **defaults)
 
     def _render(self, mode, n_beams: int, range_m: float):
-        from mitsonar.live.heads import live_scene
+        from mitsonar.sim.scene import live_scene
         from mitsonar.sim.render import render_scan
 
         values = self._values(mode, n_beams, range_m)
