@@ -10,6 +10,7 @@ from mitsonar._checks import require
 from . import frozen_pass, row_allocation
 from .common import SonarIntegrator
 from .denormals import flushing
+from . import exact_sum
 from .exact_sum import ExactBins
 from .props import text
 from .samples import HashSamples, SobolSamples, opaque_u32, row_lanes
@@ -231,7 +232,7 @@ class SonarTOFIntegrator(SonarIntegrator):
         seed_o, start_o = opaque_u32(seed), opaque_u32(start)
         ping, samples = self.lanes(setup.sensor.n_pings, seed_o, start_o, count)
         d, w = row_allocation.emitted(setup.sensor.beam, samples, ping, guide)
-        return frozen_pass.run(self._pass_body, self, setup, seed_o, start_o, d, w, count).numpy()
+        return exact_sum.run_pass(self, lambda: frozen_pass.run(self._pass_body, self, setup, seed_o, start_o, d, w, count))
 
     def _pass_body(self, setup, seed_o, start_o, d, w, count):
         n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
@@ -239,8 +240,9 @@ class SonarTOFIntegrator(SonarIntegrator):
         # Integer words per bin (`exact_sum`): the sums do not depend on the order in which the
         # threads add the echoes, so the same seed gives the same bytes with 1 thread or 16.
         # Atomic adds straight to memory: the default (per-thread copies and a block reduction)
-        # needs Dr.Jit to dry-run a frozen pass before replaying it, and costs as much.
-        hist = ExactBins(n_pings * n_bins)
+        # needs Dr.Jit to dry-run a frozen pass before replaying it, and costs as much. Only the
+        # words this integrator's echoes reach (`exact_sum.run_pass`): the same sums.
+        hist = ExactBins(n_pings * n_bins, window=exact_sum.window_of(self))
         bins = setup.bins
 
         def record(depth_k, rng, energy, valid, hit):
@@ -248,7 +250,7 @@ class SonarTOFIntegrator(SonarIntegrator):
             hist.add(energy, bins.flat(ping, b), valid)
 
         self.sample(_emitting(setup, d, w), ping, samples, record)
-        return hist.total()
+        return exact_sum.pass_result(self, hist)
 
     def _shared_pass(self, shared, seed, start, count):
         """One pass of a frame's shared paths: paths ``start * n_rows .. (start + count) * n_rows``
@@ -256,7 +258,7 @@ class SonarTOFIntegrator(SonarIntegrator):
         seed_o, first_o = opaque_u32(seed), opaque_u32(start * shared.n_rows)
         _, _, samples = self._shared_lanes(shared.n_rows * count, seed_o, first_o)
         d, w = self.shared_emitted(shared, samples)
-        return frozen_pass.run(self._shared_body, self, shared, seed_o, first_o, d, w, count).numpy()
+        return exact_sum.run_pass(self, lambda: frozen_pass.run(self._shared_body, self, shared, seed_o, first_o, d, w, count))
 
     def shared_emitted(self, shared, samples):
         """The emitted directions and weights of a frame's shared paths (`frozen_pass.emitted`),
@@ -278,7 +280,7 @@ class SonarTOFIntegrator(SonarIntegrator):
     def _shared_body(self, shared, seed_o, first_o, d, w, count):
         n = shared.n_rows * count
         zero, index, samples = self._shared_lanes(n, seed_o, first_o)
-        hist = ExactBins(shared.n_rows * shared.sensor.n_bins)
+        hist = ExactBins(shared.n_rows * shared.sensor.n_bins, window=exact_sum.window_of(self))
 
         refraction = shared.path_setup.refraction
 
@@ -289,7 +291,7 @@ class SonarTOFIntegrator(SonarIntegrator):
             shared.score(hist, rng, energy, valid, hit, u, None if refraction is None else refraction.arrival)
 
         self.sample(_emitting(shared.path_setup, d, w), zero, samples, record)
-        return hist.total()
+        return exact_sum.pass_result(self, hist)
 
     def to_string(self):
         return (f"SonarTOFIntegrator[max_depth={self.max_depth}, sampling={self.sampling}, "
