@@ -131,7 +131,9 @@ class ExactBins:
         slot = mi.UInt32(dr.maximum(k - self._lo, 0)) * self.n + index
         dr.scatter_add(self.words, dr.select(miss, mi.Int64(1), lo), dr.select(miss, self._miss, slot),
                        active & (miss | (lo != 0)), mode=mode)
-        dr.scatter_add(self.words, hi, slot + self.n, active & ~miss & (hi != 0), mode=mode)
+        # word k + 1 (not slot + n: with k = lo - 1 the slot above is clamped to word lo)
+        slot = mi.UInt32(dr.maximum(k + 1 - self._lo, 0)) * self.n + index
+        dr.scatter_add(self.words, hi, slot, active & ~miss & (hi != 0), mode=mode)
 
     def missed(self) -> int:
         """The adds that fell outside the window (0: `total` holds the nine-word sums exactly);
