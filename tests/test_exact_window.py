@@ -194,10 +194,10 @@ def test_run_pass_learns_its_window_grows_it_on_a_miss_and_ends_it(mitsonar_mod)
     calls.clear()
     got = _pass_of(exact_sum, owner, high, 2, calls)
     assert calls == [(0, 5)] and got.tobytes() == nine(high, 2).tobytes()
-    # integers of both signs into words 7 and 8 of bin 1 that cancel: the window cannot grow,
-    # windows end
+    # integers of both signs into words 7 and 8 of bin 1 that cancel, the rest below word 5: the
+    # window cannot grow (nor shrink): windows end
     huge = np.float32(3e37)
-    cancel = high + [huge, 0.0, -huge]                     # positions 5 and 7: bin 1
+    cancel = low + [huge, 0.0, -huge]                      # positions 3 and 5: bin 1
     calls.clear()
     got = _pass_of(exact_sum, owner, cancel, 2, calls)
     assert calls == [(0, 5), exact_sum.ALL] and exact_sum.window_of(owner) is None
