@@ -81,7 +81,7 @@ class ExactBins:
             # words lo..hi, word-major, then the count of the adds outside them; the bounds and
             # the count's place opaque: the same kernels whatever the window
             self.words = dr.zeros(mi.Int64, self.n * count + 1)
-            self._lo, self._hi = dr.opaque(mi.Int32, lo), dr.opaque(mi.Int32, hi)
+            self._lo, self._span = dr.opaque(mi.Int32, lo), dr.opaque(mi.UInt32, hi - lo)
             self._miss = dr.opaque(mi.UInt32, self.n * count)
         self.partial = None   # float64 sums of the words folded so far (`reserve`)
         self.adds = 0         # adds reserved since the last fold
@@ -124,16 +124,16 @@ class ExactBins:
         """`add` into words ``lo..hi`` of the window: the integers `add` puts into nine words, into
         the same words; an add with a nonzero integer for a word outside, or not finite, adds 1 to
         the count instead (through the low word's scatter, as the non-finite count above)."""
-        k = mi.Int32(k)
-        outside = ((lo != 0) & ((k < self._lo) | (k > self._hi))) | ((hi != 0) & ((k + 1 < self._lo) | (k + 1 > self._hi)))
+        # the word of the low integer relative to the window, unsigned: below the window wraps
+        # past its span, so one comparison tells outside (and rel + 1 wraps back to 0 at k = lo - 1)
+        rel = mi.UInt32(mi.Int32(k) - self._lo)
+        outside = ((lo != 0) & (rel > self._span)) | ((hi != 0) & (rel + 1 > self._span))
         miss = (e == 255) | outside
         active = active & (e > 0)
-        slot = mi.UInt32(dr.maximum(k - self._lo, 0)) * self.n + index
+        slot = rel * self.n + index
         dr.scatter_add(self.words, dr.select(miss, mi.Int64(1), lo), dr.select(miss, self._miss, slot),
                        active & (miss | (lo != 0)), mode=mode)
-        # word k + 1 (not slot + n: with k = lo - 1 the slot above is clamped to word lo)
-        slot = mi.UInt32(dr.maximum(k + 1 - self._lo, 0)) * self.n + index
-        dr.scatter_add(self.words, hi, slot, active & ~miss & (hi != 0), mode=mode)
+        dr.scatter_add(self.words, hi, slot + self.n, active & ~miss & (hi != 0), mode=mode)
 
     def missed(self) -> int:
         """The adds that fell outside the window (0: `total` holds the nine-word sums exactly);
@@ -149,10 +149,9 @@ class ExactBins:
 
     def _sum_window(self):
         at = dr.arange(mi.UInt32, self.n)
-        count = self._hi - self._lo + 1
         out = dr.zeros(mi.Float64, self.n)
         for j in range(WORDS):   # the nine-word order; words past the window add +0.0
-            on = mi.Int32(j) < count
+            on = mi.UInt32(j) <= self._span
             w = dr.gather(mi.Int64, self.words, at + j * self.n, on)
             # 2^(32 k - 149), k = lo + j: a float64 built from its exponent bits, exact
             scale = dr.reinterpret_array(mi.Float64, mi.UInt64(32 * (self._lo + j) - 149 + 1023) << 52)
