@@ -76,7 +76,7 @@ def test_a_window_of_the_words_reached_gives_the_nine_word_bits_at_every_edge(mi
 
 def test_an_add_that_puts_a_nonzero_integer_outside_the_window_is_counted(mitsonar_mod):
     """Window (2, 4): counted are a value of bucket 1 (its low integer in word 1), a value of
-    bucket 4 shifted 9 or more (its high integer in word 5) and non-finite values; not counted,
+    bucket 4 shifted 9 or more (its high integer in word 5), one of bucket 5 and non-finite values; not counted,
     and summed exactly, a value of bucket 4 shifted 8 (its high integer is 0), one of bucket 1
     whose low 32 bits are 0 (all of it in word 2), zeros, subnormals and inactive lanes."""
     import drjit as dr
@@ -86,6 +86,7 @@ def test_an_add_that_puts_a_nonzero_integer_outside_the_window_is_counted(mitson
     out = [_f32((1 << 23) + 3, 32 * 1 + 5 + 1),          # bucket 1, low integer != 0: word 1
            -_f32((1 << 24) - 1, 32 * 4 + 9 + 1),         # bucket 4, shift 9: word 5
            _f32(1 << 23, 32 * 4 + 31 + 1),               # bucket 4, shift 31: word 5
+           _f32((1 << 23) + 1, 32 * 5 + 1),              # bucket 5, shift 0: word 5 alone
            np.float32(np.inf), np.float32(np.nan)]
     inside = [_f32((1 << 24) - 1, 32 * 4 + 8 + 1),        # bucket 4, shift 8: word 4 alone
               _f32(1 << 23, 32 * 1 + 9 + 1),             # bucket 1, 2^32 exactly: word 2 alone
