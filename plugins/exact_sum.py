@@ -29,9 +29,10 @@ on x86); memory 80 bytes per bin instead of 8 (`benchmarks/exact_sum.py` measure
 
 Fewer words (``window=(lo, hi)``): a render's echoes reach only some of the nine words (the
 shipped scenes: words 0-4 or 0-3; words 5-8 hold energies above 2^11), so a pass can keep words
-``lo..hi`` alone, ``8 (hi - lo + 1)`` bytes per bin (40 with words 0-4, instead of 80), and count
-in one more word the adds that would put a nonzero integer into a word outside them, or are not
-finite.
+``lo..hi`` alone, ``8 (hi - lo + 1)`` bytes per bin (40 with words 0-4, `DEFAULT`, instead of
+80), and count in one more word the adds that would put a nonzero integer into a word outside
+them, or are not finite.
+
 Why that cannot lose a bit: each add puts the same integers into the same words as with nine
 words, and integer addition is exact and associative, so when the count is 0 every nonzero
 integer of the pass went into a kept word: the kept words hold the nine-word integers exactly and
@@ -56,6 +57,9 @@ STRIDE = WORDS + 1   # and the count of non-finite values
 MAX_ADDS = 1 << 30
 #: The window of a pass that learns which words its echoes reach: all nine.
 ALL = (0, WORDS - 1)
+#: The window an owner's passes sum in until one misses (`run_pass`): 40 bytes per bin.
+DEFAULT = (0, 4)
+_LEARNING = -2
 
 
 class ExactBins:
@@ -189,12 +193,15 @@ class ExactBins:
 
 
 def window_of(owner):
-    """The window of words the next pass of ``owner`` (an integrator) sums in: `ALL` while it
-    learns, ``None`` (nine words and the non-finite count, no window) once its windows ended. Kept
-    as two integers on the owner (``_exact_lo``, ``_exact_hi``: None, None while it learns; -1, -1
-    when ended), so a frozen pass's key (`frozen_pass.Context`: the owner's scalars) has it."""
+    """The window of words the next pass of ``owner`` (an integrator) sums in: `DEFAULT` at
+    first, `ALL` while it learns (`run_pass`), ``None`` (nine words and the non-finite count, no
+    window) once its windows ended. Kept as two integers on the owner (``_exact_lo``,
+    ``_exact_hi``; -2 while it learns, -1 when ended), so that a frozen pass's key
+    (`frozen_pass.Context`: the owner's Python scalars) has it."""
     lo, hi = getattr(owner, "_exact_lo", None), getattr(owner, "_exact_hi", None)
     if lo is None:
+        return DEFAULT
+    if lo == _LEARNING:
         return ALL
     return None if lo < 0 else (lo, hi)
 
@@ -207,49 +214,45 @@ def _missed(words) -> int:
 def pass_result(owner, hist):
     """What a pass body returns to `run_pass`: (the sums, the words (their count is read after
     the pass: `ExactBins.missed`), `ExactBins.reached` while the owner learns, else zeros)."""
-    learning = getattr(owner, "_exact_lo", None) is None
+    learning = getattr(owner, "_exact_lo", None) == _LEARNING
     reached = hist.reached() if learning and hist.window is not None else dr.zeros(mi.Int64, WORDS)
     return hist.total(), hist.words, reached
 
 
 def run_pass(owner, call):
-    """Run one histogram pass ``call()`` -> `pass_result`, whose body sums in
+    """Run one histogram pass ``call(learning)`` -> `pass_result`, whose body sums in
     ``ExactBins(..., window=window_of(owner))``; return its sums as NumPy float64: the nine-word
-    sums' bits whatever the window.
+    sums' bits whatever the window. ``learning``: the pass learns the owner's window, in `ALL`,
+    after a pass that missed (the caller traces it rather than record a frozen pass that will not
+    be replayed).
 
-    An owner's first pass sums in all nine words (`ALL`) and keeps for its next passes words 0 up
-    to the highest its echoes reached (`ExactBins.reached`). A pass whose count is not 0 runs again
-    in all nine words, and the window grows to take in what that pass reached: a window only
-    grows, so an owner renders at most nine passes twice in its life. A window that did not grow
-    (integers of both signs that cancelled to a zero word) and a non-finite echo (its bin is NaN:
-    the pass runs again without a window, with the non-finite count per bin) end the windows for
-    this owner: all nine words from then on, as before windows.
+    An owner sums in `DEFAULT` until a pass's count is not 0; that pass runs again in all nine
+    words, which gives its sums and the words its echoes reached (`ExactBins.reached`), and the
+    owner keeps words 0 up to the highest reached, and at least its window before: a window only
+    grows, so an owner renders at most eight passes twice in its life. A window that could not
+    grow (integers of both signs that cancelled to a zero word) and a non-finite echo (its bin is
+    NaN: the pass runs a third time without a window, with the non-finite count per bin) end the
+    windows for this owner: all nine words from then on, as before windows.
 
-    Why from word 0: the shipped scenes rendered twice (`benchmarks/scene_hashes.py`, each render
-    after one of another seed) and the live head turning reach down to word 0 or 1 in most
-    renders (echoes below 1e-19 of the beam's far side lobes); a window from the lowest word
-    reached ran 2 of 28 second passes and one of three live pings twice, one from word 0 none,
-    for 8 bytes per bin more. A word of headroom above the highest reached ran none either, for 8
-    bytes per bin more still: left out."""
+    Why `DEFAULT` is words 0-4: the shipped scenes rendered twice (`benchmarks/scene_hashes.py`,
+    each render after one of another seed) and the live head turning reach words 0-4 or 0-3 in
+    every render, down to word 0 or 1 (echoes below 1e-19 of the beam's far side lobes) and up to
+    word 4 (words 5-8 take echoes above 2^11 = 2048). A window learned from an owner's first pass
+    instead (its lowest to highest word) ran 2 of 28 second passes and one of three live pings
+    twice, and a first pass in nine words costs a frozen recording of its own (one render of an
+    integrator made per call, as ``render_scan(..., integrator={...})`` does, would never replay)."""
     window = window_of(owner)
-    learning = getattr(owner, "_exact_lo", None) is None
-    total, words, reached = call()
-    dr.eval(total, reached)
-    if window is None or (not learning and _missed(words) == 0):
+    total, words, reached = call(False)
+    dr.eval(total)
+    if window is None or _missed(words) == 0:
         return total.numpy()
-    before = None if learning else window
-    if not learning:                       # words outside the window: all nine, and learn
-        owner._exact_lo = owner._exact_hi = None
-        total, words, reached = call()
-        dr.eval(total, reached)
+    owner._exact_lo = owner._exact_hi = _LEARNING      # words outside the window: all nine, and learn
+    total, words, reached = call(True)
+    dr.eval(total, reached)
     if _missed(words) != 0:                # nothing but a non-finite value misses nine words
         owner._exact_lo = owner._exact_hi = -1
-        return call()[0].numpy()
+        return call(False)[0].numpy()
     used = [k for k, m in enumerate(reached.numpy()) if m != 0]
-    if not used:                           # no echo yet: learn again on the next pass
-        return total.numpy()
-    lo, hi = 0, max(used)
-    if before is not None:
-        lo, hi = min(lo, before[0]), max(hi, before[1])
-    owner._exact_lo, owner._exact_hi = (lo, hi) if (lo, hi) != before else (-1, -1)
+    lo, hi = 0, max(used + [window[1]])
+    owner._exact_lo, owner._exact_hi = (lo, hi) if (lo, hi) != window else (-1, -1)
     return total.numpy()

@@ -232,7 +232,14 @@ class SonarTOFIntegrator(SonarIntegrator):
         seed_o, start_o = opaque_u32(seed), opaque_u32(start)
         ping, samples = self.lanes(setup.sensor.n_pings, seed_o, start_o, count)
         d, w = row_allocation.emitted(setup.sensor.beam, samples, ping, guide)
-        return exact_sum.run_pass(self, lambda: frozen_pass.run(self._pass_body, self, setup, seed_o, start_o, d, w, count))
+        return self._run(self._pass_body, setup, seed_o, start_o, d, w, count)
+
+    def _run(self, body, ctx, *args):
+        """``body(ctx, *args)``, a pass, through `exact_sum.run_pass` (the window of words it sums
+        in): frozen (`frozen_pass`), but traced when it learns its window, once per integrator (a
+        recording of it would not be replayed)."""
+        return exact_sum.run_pass(self, lambda learning: body(ctx, *args) if learning
+                                  else frozen_pass.run(body, self, ctx, *args))
 
     def _pass_body(self, setup, seed_o, start_o, d, w, count):
         n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
@@ -258,7 +265,7 @@ class SonarTOFIntegrator(SonarIntegrator):
         seed_o, first_o = opaque_u32(seed), opaque_u32(start * shared.n_rows)
         _, _, samples = self._shared_lanes(shared.n_rows * count, seed_o, first_o)
         d, w = self.shared_emitted(shared, samples)
-        return exact_sum.run_pass(self, lambda: frozen_pass.run(self._shared_body, self, shared, seed_o, first_o, d, w, count))
+        return self._run(self._shared_body, shared, seed_o, first_o, d, w, count)
 
     def shared_emitted(self, shared, samples):
         """The emitted directions and weights of a frame's shared paths (`frozen_pass.emitted`),

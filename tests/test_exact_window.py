@@ -155,7 +155,8 @@ def _pass_of(exact_sum, owner, values, n, calls):
 
     values = np.asarray(values, np.float32)
 
-    def call():
+    def call(learning):
+        assert learning == (exact_sum.window_of(owner) == exact_sum.ALL)
         calls.append(exact_sum.window_of(owner))
         hist = exact_sum.ExactBins(n, window=exact_sum.window_of(owner))
         hist.add(mi.Float(values), mi.UInt32(np.arange(values.size) % n))
@@ -164,10 +165,11 @@ def _pass_of(exact_sum, owner, values, n, calls):
     return exact_sum.run_pass(owner, call)
 
 
-def test_run_pass_learns_its_window_grows_it_on_a_miss_and_ends_it(mitsonar_mod):
-    """First pass: all nine words, then words 0 up to the highest reached; a pass reaching above
-    runs again in nine words (its bits) and the window grows; a window that could not grow
-    (integers that cancel) or a non-finite echo ends the windows (nine words and the NaN)."""
+def test_run_pass_grows_its_window_on_a_miss_and_ends_it(mitsonar_mod):
+    """Passes sum in `DEFAULT` (words 0-4); a pass reaching above runs again in nine words (its
+    bits; traced: ``learning``) and the window grows to the highest word reached; a window that
+    could not grow (integers that cancel) or a non-finite echo ends the windows (nine words and
+    the NaN, as before windows)."""
     import mitsuba as mi
 
     from mitsonar.plugins import exact_sum
@@ -177,24 +179,22 @@ def test_run_pass_learns_its_window_grows_it_on_a_miss_and_ends_it(mitsonar_mod)
         hist.add(mi.Float(np.asarray(values, np.float32)), mi.UInt32(np.arange(len(values)) % n))
         return hist.numpy()
 
+    assert exact_sum.DEFAULT == (0, 4)
     owner, calls = _Owner(), []
     # bucket 1 shift 2 (word 1), bucket 2 shift 19 (words 2, 3), bucket 3 shift 4 (word 3)
     low = [_f32((1 << 23) + 5, 32 * 1 + 3), _f32((1 << 24) - 3, 32 * 2 + 20), _f32((1 << 23) + 9, 32 * 3 + 5)]
     got = _pass_of(exact_sum, owner, low, 2, calls)
-    assert calls == [exact_sum.ALL] and got.tobytes() == nine(low, 2).tobytes()
-    assert exact_sum.window_of(owner) == (0, 3)
-    calls.clear()
-    got = _pass_of(exact_sum, owner, low[::-1], 2, calls)
-    assert calls == [(0, 3)] and got.tobytes() == nine(low[::-1], 2).tobytes()
+    assert calls == [exact_sum.DEFAULT] and got.tobytes() == nine(low, 2).tobytes()
+    assert exact_sum.window_of(owner) == exact_sum.DEFAULT
     # bucket 4 shift 29 (words 4, 5), bucket 5 shift 8 (word 5)
     high = low + [_f32((1 << 23) + 1, 32 * 4 + 30), _f32((1 << 24) - 1, 32 * 5 + 9)]
     calls.clear()
     got = _pass_of(exact_sum, owner, high, 2, calls)
-    assert calls == [(0, 3), exact_sum.ALL] and got.tobytes() == nine(high, 2).tobytes()
+    assert calls == [exact_sum.DEFAULT, exact_sum.ALL] and got.tobytes() == nine(high, 2).tobytes()
     assert exact_sum.window_of(owner) == (0, 5)
     calls.clear()
-    got = _pass_of(exact_sum, owner, high, 2, calls)
-    assert calls == [(0, 5)] and got.tobytes() == nine(high, 2).tobytes()
+    got = _pass_of(exact_sum, owner, high[::-1], 2, calls)
+    assert calls == [(0, 5)] and got.tobytes() == nine(high[::-1], 2).tobytes()
     # integers of both signs into words 7 and 8 of bin 1 that cancel, the rest below word 5: the
     # window cannot grow (nor shrink): windows end
     huge = np.float32(3e37)
@@ -206,19 +206,19 @@ def test_run_pass_learns_its_window_grows_it_on_a_miss_and_ends_it(mitsonar_mod)
     calls.clear()
     _pass_of(exact_sum, owner, low, 2, calls)
     assert calls == [None]
-    # a non-finite echo in a learning pass: its bin is NaN, as with nine words, and windows end
+    # a non-finite echo: its bin is NaN, as with nine words, and windows end
     owner, calls = _Owner(), []
     bad = low + [np.inf]
     got = _pass_of(exact_sum, owner, bad, 2, calls)
-    assert calls == [exact_sum.ALL, None] and exact_sum.window_of(owner) is None
+    assert calls == [exact_sum.DEFAULT, exact_sum.ALL, None] and exact_sum.window_of(owner) is None
     assert np.isnan(got[1]) and got.tobytes() == nine(bad, 2).tobytes()
 
 
 @pytest.mark.parametrize("xml, props", [("box.xml", {"max_depth": 3}),
                                         ("box_fls.xml", {"max_depth": 2, "share_beams": True})])
 def test_a_windowed_render_is_the_nine_word_render_bit_for_bit(mitsonar_mod, xml, props):
-    """sonar_tof's second render sums in a window of fewer words than nine; its histogram is the
-    bytes of the same render by an integrator whose windows ended (all nine words, as before)."""
+    """sonar_tof sums in a window of fewer words than nine; its histograms are the bytes of the
+    same renders by an integrator whose windows ended (all nine words, as before)."""
     import mitsuba as mi
 
     from mitsonar.plugins import exact_sum
@@ -227,10 +227,8 @@ def test_a_windowed_render_is_the_nine_word_render_bit_for_bit(mitsonar_mod, xml
     windowed = mi.load_dict({"type": "sonar_tof", **props})
     nine = mi.load_dict({"type": "sonar_tof", **props})
     nine._exact_lo = nine._exact_hi = -1
-    windowed.render_histogram(scene, 0, seed=1, spp=256)
-    window = exact_sum.window_of(windowed)
-    assert window is not None and window != exact_sum.ALL and window[1] - window[0] + 1 < exact_sum.WORDS
-    a = windowed.render_histogram(scene, 0, seed=2, spp=256)
-    b = nine.render_histogram(scene, 0, seed=2, spp=256)
-    assert exact_sum.window_of(windowed) == window and exact_sum.window_of(nine) is None
-    assert a.sum() > 0 and a.tobytes() == b.tobytes()
+    for seed in (1, 2):
+        a = windowed.render_histogram(scene, 0, seed=seed, spp=256)
+        b = nine.render_histogram(scene, 0, seed=seed, spp=256)
+        assert exact_sum.window_of(windowed) == exact_sum.DEFAULT and exact_sum.window_of(nine) is None
+        assert a.sum() > 0 and a.tobytes() == b.tobytes()
