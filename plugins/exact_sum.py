@@ -229,7 +229,7 @@ def run_pass(owner, call):
     An owner sums in `DEFAULT` until a pass's count is not 0; that pass runs again in all nine
     words, which gives its sums and the words its echoes reached (`ExactBins.reached`), and the
     owner keeps words 0 up to the highest reached, and at least its window before: a window only
-    grows, so an owner renders at most eight passes twice in its life. A window that could not
+    grows, so an owner runs at most five passes again in its life (four widenings and one end). A window that could not
     grow (integers of both signs that cancelled to a zero word) and a non-finite echo (its bin is
     NaN: the pass runs a third time without a window, with the non-finite count per bin) end the
     windows for this owner: all nine words from then on, as before windows.

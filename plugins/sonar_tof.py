@@ -7,10 +7,9 @@ import numpy as np
 
 from mitsonar._checks import require
 
-from . import frozen_pass, row_allocation
+from . import exact_sum, frozen_pass, row_allocation
 from .common import SonarIntegrator
 from .denormals import flushing
-from . import exact_sum
 from .exact_sum import ExactBins
 from .props import text
 from .samples import HashSamples, SobolSamples, opaque_u32, row_lanes
@@ -236,8 +235,8 @@ class SonarTOFIntegrator(SonarIntegrator):
 
     def _run(self, body, ctx, *args):
         """``body(ctx, *args)``, a pass, through `exact_sum.run_pass` (the window of words it sums
-        in): frozen (`frozen_pass`), but traced when it learns its window, once per integrator (a
-        recording of it would not be replayed)."""
+        in): frozen (`frozen_pass`), but traced when it runs again in nine words to widen the
+        window after a pass that missed (a recording of it would not be replayed)."""
         return exact_sum.run_pass(self, lambda learning: body(ctx, *args) if learning
                                   else frozen_pass.run(body, self, ctx, *args))
 
@@ -247,8 +246,8 @@ class SonarTOFIntegrator(SonarIntegrator):
         # Integer words per bin (`exact_sum`): the sums do not depend on the order in which the
         # threads add the echoes, so the same seed gives the same bytes with 1 thread or 16.
         # Atomic adds straight to memory: the default (per-thread copies and a block reduction)
-        # needs Dr.Jit to dry-run a frozen pass before replaying it, and costs as much. Only the
-        # words this integrator's echoes reach (`exact_sum.run_pass`): the same sums.
+        # needs Dr.Jit to dry-run a frozen pass before replaying it, and costs as much. In a window
+        # of the words (`exact_sum.run_pass`): the same sums, half the memory.
         hist = ExactBins(n_pings * n_bins, window=exact_sum.window_of(self))
         bins = setup.bins
 
