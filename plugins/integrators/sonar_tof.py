@@ -9,7 +9,7 @@ from mitsonar._checks import require
 from mitsonar.plugins.props import text
 from mitsonar.plugins.registry import register_plugin
 
-from .paths import frozen_pass, row_allocation
+from .paths import exact_sum, frozen_pass, row_allocation
 from .common import SonarIntegrator
 from .paths.denormals import flushing
 from .paths.exact_sum import ExactBins
@@ -217,7 +217,14 @@ class SonarTOFIntegrator(SonarIntegrator):
         seed_o, start_o = opaque_u32(seed), opaque_u32(start)
         ping, samples = self.lanes(setup.sensor.n_pings, seed_o, start_o, count)
         d, w = row_allocation.emitted(setup.sensor.beam, samples, ping, guide)
-        return frozen_pass.run(self._pass_body, self, setup, seed_o, start_o, d, w, count).numpy()
+        return self._run(self._pass_body, setup, seed_o, start_o, d, w, count)
+
+    def _run(self, body, ctx, *args):
+        """``body(ctx, *args)``, a pass, through `exact_sum.run_pass` (the window of words it sums
+        in): frozen (`frozen_pass`), but traced when it runs again in nine words to widen the
+        window after a pass that missed (a recording of it would not be replayed)."""
+        return exact_sum.run_pass(self, lambda learning: body(ctx, *args) if learning
+                                  else frozen_pass.run(body, self, ctx, *args))
 
     def _pass_body(self, setup, seed_o, start_o, d, w, count):
         n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
@@ -225,8 +232,9 @@ class SonarTOFIntegrator(SonarIntegrator):
         # Integer words per bin (`exact_sum`): the sums do not depend on the order in which the
         # threads add the echoes, so the same seed gives the same bytes with 1 thread or 16.
         # Atomic adds straight to memory: the default (per-thread copies and a block reduction)
-        # needs Dr.Jit to dry-run a frozen pass before replaying it, and costs as much.
-        hist = ExactBins(n_pings * n_bins)
+        # needs Dr.Jit to dry-run a frozen pass before replaying it, and costs as much. In a window
+        # of the words (`exact_sum.run_pass`): the same sums, half the memory.
+        hist = ExactBins(n_pings * n_bins, window=exact_sum.window_of(self))
         bins = setup.bins
 
         def record(depth_k, rng, energy, valid, hit):
@@ -234,7 +242,7 @@ class SonarTOFIntegrator(SonarIntegrator):
             hist.add(energy, bins.flat(ping, b), valid)
 
         self.sample(_emitting(setup, d, w), ping, samples, record)
-        return hist.total()
+        return exact_sum.pass_result(self, hist)
 
     def _shared_pass(self, shared, seed, start, count):
         """One pass of a frame's shared paths: paths ``start * n_rows .. (start + count) * n_rows``
@@ -242,7 +250,7 @@ class SonarTOFIntegrator(SonarIntegrator):
         seed_o, first_o = opaque_u32(seed), opaque_u32(start * shared.n_rows)
         _, _, samples = self._shared_lanes(shared.n_rows * count, seed_o, first_o)
         d, w = self.shared_emitted(shared, samples)
-        return frozen_pass.run(self._shared_body, self, shared, seed_o, first_o, d, w, count).numpy()
+        return self._run(self._shared_body, shared, seed_o, first_o, d, w, count)
 
     def shared_emitted(self, shared, samples):
         """The emitted directions and weights of a frame's shared paths (`frozen_pass.emitted`),
@@ -264,7 +272,7 @@ class SonarTOFIntegrator(SonarIntegrator):
     def _shared_body(self, shared, seed_o, first_o, d, w, count):
         n = shared.n_rows * count
         zero, index, samples = self._shared_lanes(n, seed_o, first_o)
-        hist = ExactBins(shared.n_rows * shared.sensor.n_bins)
+        hist = ExactBins(shared.n_rows * shared.sensor.n_bins, window=exact_sum.window_of(self))
 
         refraction = shared.path_setup.refraction
 
@@ -275,7 +283,7 @@ class SonarTOFIntegrator(SonarIntegrator):
             shared.score(hist, rng, energy, valid, hit, u, None if refraction is None else refraction.arrival)
 
         self.sample(_emitting(shared.path_setup, d, w), zero, samples, record)
-        return hist.total()
+        return exact_sum.pass_result(self, hist)
 
     def to_string(self):
         return (f"SonarTOFIntegrator[max_depth={self.max_depth}, sampling={self.sampling}, "

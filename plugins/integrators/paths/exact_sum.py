@@ -26,6 +26,25 @@ the calling thread may not, so they would differ with the thread count.
 
 Cost: one or two integer atomics per echo instead of one float64 atomic (a compare-and-swap loop
 on x86); memory 80 bytes per bin instead of 8 (`benchmarks/exact_sum.py` measures the time).
+
+Fewer words (``window=(lo, hi)``): a render's echoes reach only some of the nine words (the
+shipped scenes: words 0-4 or 0-3; words 5-8 hold energies above 2^11), so a pass can keep words
+``lo..hi`` alone, ``8 (hi - lo + 1)`` bytes per bin (40 with words 0-4, `DEFAULT`, instead of
+80), and count in one more word the adds that would put a nonzero integer into a word outside
+them, or are not finite.
+
+Why that cannot lose a bit: each add puts the same integers into the same words as with nine
+words, and integer addition is exact and associative, so when the count is 0 every nonzero
+integer of the pass went into a kept word: the kept words hold the nine-word integers exactly and
+the words left out would be 0. The conversion adds the same products in the same order k = lo..hi,
+leaving out only the zero words' ``+0.0`` terms, which change nothing: the running sum starts at
+``+0.0`` and is never ``-0.0`` (the product of a nonzero integer and a power of two is not zero,
+and round-to-nearest gives ``+0.0`` for ``x + (-x)``), and ``x + 0.0 == x`` for every other
+``x``. No word can overflow sooner than with nine: it receives the same integers (`MAX_ADDS`);
+the count receives at most 1 per add. When the count is not 0 the kept words are incomplete, and
+`run_pass` renders the pass again with all nine words: the same integers, so the same bits as if
+no window had been tried. The window's bounds are opaque (a kernel reads them), so a pass with
+any window runs the same kernels: a new window records its frozen pass anew but compiles nothing.
 """
 from __future__ import annotations
 
@@ -36,6 +55,11 @@ WORDS = 9            # significand words per bin
 STRIDE = WORDS + 1   # and the count of non-finite values
 #: Adds a word takes before it could overflow: each add is below 2^32 in magnitude.
 MAX_ADDS = 1 << 30
+#: The window of a pass that learns which words its echoes reach: all nine.
+ALL = (0, WORDS - 1)
+#: The window an owner's passes sum in until one misses (`run_pass`): 40 bytes per bin.
+DEFAULT = (0, 4)
+_LEARNING = -2
 
 
 class ExactBins:
@@ -43,18 +67,34 @@ class ExactBins:
 
     ``add(values, index, active)`` where ``dr.scatter_add(hist, values, index, active)`` would be;
     ``total()`` the sums, a ``mi.Float64`` of ``n`` values; ``numpy()`` the same as a float64 array.
+    ``window=(lo, hi)`` keeps words ``lo..hi`` alone and counts the adds outside (`missed`).
     """
 
-    def __init__(self, n: int, mode=dr.ReduceMode.Direct):
+    def __init__(self, n: int, mode=dr.ReduceMode.Direct, window=None):
         self.n = int(n)
         self.mode = mode
-        self.words = dr.zeros(mi.Int64, self.n * STRIDE)
+        self.window = None
+        if window is None:
+            self.words = dr.zeros(mi.Int64, self.n * STRIDE)
+        else:
+            lo, hi = (int(w) for w in window)
+            if not 0 <= lo <= hi < WORDS:
+                raise ValueError(f"ExactBins window: {window!r}; allowed: (lo, hi) with 0 <= lo <= hi <= {WORDS - 1}")
+            self.window = (lo, hi)
+            count = hi - lo + 1
+            # words lo..hi, word-major, then the count of the adds outside them; the bounds and
+            # the count's place opaque: the same kernels whatever the window
+            self.words = dr.zeros(mi.Int64, self.n * count + 1)
+            self._lo, self._span = dr.opaque(mi.Int32, lo), dr.opaque(mi.UInt32, hi - lo)
+            self._miss = dr.opaque(mi.UInt32, self.n * count)
         self.partial = None   # float64 sums of the words folded so far (`reserve`)
         self.adds = 0         # adds reserved since the last fold
 
     def reserve(self, adds: int):
         """Make room for ``adds`` more adds into any one bin (outside symbolic loops: a fold
         evaluates the words)."""
+        if self.window is not None:
+            raise ValueError("ExactBins.reserve: a sum in a window of words is one pass; use window=None")
         if self.adds + adds > MAX_ADDS:
             self._fold()
         self.adds += adds
@@ -72,6 +112,9 @@ class ExactBins:
         neg = (bits >> 31) != 0
         lo, hi = dr.select(neg, -lo, lo), dr.select(neg, -hi, hi)
         index = mi.UInt32(index)
+        if self.window is not None:
+            self._add_window(lo, hi, e, b >> 5, index, active, mode)
+            return
         slot = (b >> 5) * self.n + index          # word-major: word k of bin i at k n + i
         # A non-finite value counts 1 in the tenth word through the low word's add: one atomic
         # pass over the lanes instead of two (an LLVM scatter-add loops over the packet's lanes
@@ -81,7 +124,47 @@ class ExactBins:
                        active & (e > 0), mode=mode)
         dr.scatter_add(self.words, hi, slot + self.n, finite & (hi != 0), mode=mode)
 
+    def _add_window(self, lo, hi, e, k, index, active, mode):
+        """`add` into words ``lo..hi`` of the window: the integers `add` puts into nine words, into
+        the same words; an add with a nonzero integer for a word outside, or not finite, adds 1 to
+        the count instead (through the low word's scatter, as the non-finite count above)."""
+        # the word of the low integer relative to the window, unsigned: below the window wraps
+        # past its span, so one comparison tells outside (and rel + 1 wraps back to 0 at k = lo - 1)
+        rel = mi.UInt32(mi.Int32(k) - self._lo)
+        outside = ((lo != 0) & (rel > self._span)) | ((hi != 0) & (rel + 1 > self._span))
+        miss = (e == 255) | outside
+        active = active & (e > 0)
+        slot = rel * self.n + index
+        dr.scatter_add(self.words, dr.select(miss, mi.Int64(1), lo), dr.select(miss, self._miss, slot),
+                       active & (miss | (lo != 0)), mode=mode)
+        dr.scatter_add(self.words, hi, slot + self.n, active & ~miss & (hi != 0), mode=mode)
+
+    def missed(self) -> int:
+        """The adds that fell outside the window (0: `total` holds the nine-word sums exactly);
+        read from the host, without a kernel."""
+        return _missed(self.words)
+
+    def reached(self):
+        """The largest magnitude in each of the window's words, a ``mi.Int64`` of ``hi - lo + 1``
+        values (0: no add put anything there). One more pass over the words: for learning."""
+        count = self.window[1] - self.window[0] + 1
+        return dr.block_reduce(dr.ReduceOp.Max, dr.abs(dr.gather(mi.Int64, self.words,
+                                                                 dr.arange(mi.UInt32, count * self.n))), self.n)
+
+    def _sum_window(self):
+        at = dr.arange(mi.UInt32, self.n)
+        out = dr.zeros(mi.Float64, self.n)
+        for j in range(WORDS):   # the nine-word order; words past the window add +0.0
+            on = mi.UInt32(j) <= self._span
+            w = dr.gather(mi.Int64, self.words, at + j * self.n, on)
+            # 2^(32 k - 149), k = lo + j: a float64 built from its exponent bits, exact
+            scale = dr.reinterpret_array(mi.Float64, mi.UInt64(32 * (self._lo + j) - 149 + 1023) << 52)
+            out += mi.Float64(w) * scale
+        return out
+
     def _sum_words(self):
+        if self.window is not None:
+            return self._sum_window()
         at = dr.arange(mi.UInt32, self.n)
         out = dr.zeros(mi.Float64, self.n)
         for k in range(WORDS):   # a fixed order: the float64 rounding is the same every time
@@ -103,3 +186,73 @@ class ExactBins:
 
     def numpy(self):
         return self.total().numpy()
+
+    def bytes_per_bin(self) -> float:
+        """The memory of the sums per bin (80 with all nine words and the non-finite count)."""
+        return 8.0 * dr.width(self.words) / self.n
+
+
+def window_of(owner):
+    """The window of words the next pass of ``owner`` (an integrator) sums in: `DEFAULT` at
+    first, `ALL` while it learns (`run_pass`), ``None`` (nine words and the non-finite count, no
+    window) once its windows ended. Kept as two integers on the owner (``_exact_lo``,
+    ``_exact_hi``; -2 while it learns, -1 when ended), so that a frozen pass's key
+    (`frozen_pass.Context`: the owner's Python scalars) has it."""
+    lo, hi = getattr(owner, "_exact_lo", None), getattr(owner, "_exact_hi", None)
+    if lo is None:
+        return DEFAULT
+    if lo == _LEARNING:
+        return ALL
+    return None if lo < 0 else (lo, hi)
+
+
+def _missed(words) -> int:
+    """The count of a windowed sum's words (its last word), read without a kernel."""
+    return int(words[dr.width(words) - 1])
+
+
+def pass_result(owner, hist):
+    """What a pass body returns to `run_pass`: (the sums, the words (their count is read after
+    the pass: `ExactBins.missed`), `ExactBins.reached` while the owner learns, else zeros)."""
+    learning = getattr(owner, "_exact_lo", None) == _LEARNING
+    reached = hist.reached() if learning and hist.window is not None else dr.zeros(mi.Int64, WORDS)
+    return hist.total(), hist.words, reached
+
+
+def run_pass(owner, call):
+    """Run one histogram pass ``call(learning)`` -> `pass_result`, whose body sums in
+    ``ExactBins(..., window=window_of(owner))``; return its sums as NumPy float64: the nine-word
+    sums' bits whatever the window. ``learning``: the pass learns the owner's window, in `ALL`,
+    after a pass that missed (the caller traces it rather than record a frozen pass that will not
+    be replayed).
+
+    An owner sums in `DEFAULT` until a pass's count is not 0; that pass runs again in all nine
+    words, which gives its sums and the words its echoes reached (`ExactBins.reached`), and the
+    owner keeps words 0 up to the highest reached, and at least its window before: a window only
+    grows, so an owner runs at most five passes again in its life (four widenings and one end). A window that could not
+    grow (integers of both signs that cancelled to a zero word) and a non-finite echo (its bin is
+    NaN: the pass runs a third time without a window, with the non-finite count per bin) end the
+    windows for this owner: all nine words from then on, as before windows.
+
+    Why `DEFAULT` is words 0-4: the shipped scenes rendered twice (`benchmarks/scene_hashes.py`,
+    each render after one of another seed) and the live head turning reach words 0-4 or 0-3 in
+    every render, down to word 0 or 1 (echoes below 1e-19 of the beam's far side lobes) and up to
+    word 4 (words 5-8 take echoes above 2^11 = 2048). A window learned from an owner's first pass
+    instead (its lowest to highest word) ran 2 of 28 second passes and one of three live pings
+    twice, and a first pass in nine words costs a frozen recording of its own (one render of an
+    integrator made per call, as ``render_scan(..., integrator={...})`` does, would never replay)."""
+    window = window_of(owner)
+    total, words, reached = call(False)
+    dr.eval(total)
+    if window is None or _missed(words) == 0:
+        return total.numpy()
+    owner._exact_lo = owner._exact_hi = _LEARNING      # words outside the window: all nine, and learn
+    total, words, reached = call(True)
+    dr.eval(total, reached)
+    if _missed(words) != 0:                # nothing but a non-finite value misses nine words
+        owner._exact_lo = owner._exact_hi = -1
+        return call(False)[0].numpy()
+    used = [k for k, m in enumerate(reached.numpy()) if m != 0]
+    lo, hi = 0, max(used + [window[1]])
+    owner._exact_lo, owner._exact_hi = (lo, hi) if (lo, hi) != window else (-1, -1)
+    return total.numpy()
