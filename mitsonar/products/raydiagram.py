@@ -3,7 +3,7 @@ against depth) beside the rays of a multibeam fan traced through it (depth again
 distance), depth increasing downward on both.
 
     from mitsonar.acoustics import SoundSpeedProfile
-    from mitsonar.acoustics.raydiagram import ray_diagram
+    from mitsonar.products.raydiagram import ray_diagram
     svp = SoundSpeedProfile.from_csv("svp.csv")
     ray_diagram(svp, head_depth=2.0, seabed_depth=40.0, nominal_speed=1500.0, path="rays.png")
 
