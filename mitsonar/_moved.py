@@ -23,6 +23,7 @@ MOVED = {
     "mitsonar.jobs.refine_room": ("mitsonar.inverse.room", "0.4.0"),
     "mitsonar.jobs.refine_piles": ("mitsonar.inverse.piles", "0.4.0"),
     "mitsonar.devices.oculus.presets": ("mitsonar.presets.oculus", "0.4.0"),
+    "mitsonar.acoustics.raydiagram": ("mitsonar.products.raydiagram", "0.4.0"),
 }
 
 

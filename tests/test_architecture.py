@@ -216,7 +216,7 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     # and those import nothing of mitsonar's above them (the electronics' scene speckle, its NumPy
     # and Dr.Jit chains and the sonar equation's levels are leaves beside them)
     leaves = {"mitsonar._checks", "mitsonar._limits", "mitsonar._compat", "mitsonar._registry", "mitsonar.receiver.speckle",
-              "mitsonar.receiver.devicechain", "mitsonar.sim.backend",
+              "mitsonar.receiver.devicechain", "mitsonar.backend",
               # the sonar equation's formulas, and the Scan's typed settings and their migrations
               # (the electronics record what they applied: `ElectronicsSettings`)
               "mitsonar.acoustics.levels", "mitsonar.scan.electronics", "mitsonar.scan.meta",
@@ -234,9 +234,9 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     assert {t for t in edges["mitsonar.kinds"] if t.startswith("mitsonar")} == \
         {"mitsonar.geometry.frames", "mitsonar._registry"}
     assert {t for t in edges["mitsonar.receiver.speckle"] if t.startswith("mitsonar")} <= {"mitsonar.receiver.devicechain"}
-    # the chain asks for the variant mitsonar would choose (`mitsonar.sim.backend`: nothing of mitsonar)
-    assert {t for t in edges["mitsonar.receiver.devicechain"] if t.startswith("mitsonar")} <= {"mitsonar.sim.backend"}
-    assert not {t for t in edges["mitsonar.sim.backend"] if t.startswith("mitsonar")}
+    # the chain asks for the variant mitsonar would choose (`mitsonar.backend`: nothing of mitsonar)
+    assert {t for t in edges["mitsonar.receiver.devicechain"] if t.startswith("mitsonar")} <= {"mitsonar.backend"}
+    assert not {t for t in edges["mitsonar.backend"] if t.startswith("mitsonar")}
 
 
 def test_the_presets_are_a_leaf():

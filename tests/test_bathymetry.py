@@ -213,16 +213,17 @@ def test_products_round_trip(tmp_path):
 def test_geotiff_when_rasterio_is_present(tmp_path, monkeypatch):
     import sys
 
+    from mitsonar.export.geotiff import write_depth_geotiff
     from mitsonar.products.soundings import DepthGrid
 
     g = DepthGrid(np.array([[1.0, np.nan], [3.0, 4.0]]), np.array([[1, 0], [2, 1]]), (0.5, 0.0, 10.0, 0.0, -0.5, 20.0))
     with monkeypatch.context() as m:
         m.setitem(sys.modules, "rasterio", None)
         with pytest.raises(ImportError, match=r"pip install 'mitsonar\[geotiff\]'"):
-            g.write_geotiff(tmp_path / "none.tif")
+            write_depth_geotiff(tmp_path / "none.tif", g)
     assert not list(tmp_path.iterdir())
     rasterio = pytest.importorskip("rasterio")
-    g.write_geotiff(tmp_path / "d.tif")
+    write_depth_geotiff(tmp_path / "d.tif", g)
     with rasterio.open(tmp_path / "d.tif") as src:
         assert tuple(src.transform)[:6] == g.transform
         np.testing.assert_array_equal(src.read(1), g.depth.astype(np.float32))

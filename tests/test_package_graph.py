@@ -6,26 +6,22 @@ ImportFrom node, at module level, inside functions, inside ``if TYPE_CHECKING``)
 packages: ``mitsonar.<room>`` (a folder; its subfolders belong to it), ``mitsonar.plugins``,
 ``hilbertmap``, and each module of mitsonar's own folder (``mitsonar._checks``, ...) on its own.
 
-The loops that remain belong to other rooms: `KNOWN_LOOPS` names them, and may only shrink. A loop
-outside them fails the test; a room in them that has left its loop must be taken off the list.
+No loop is allowed: `test_no_loop_between_packages` names the imports that close one (issue 57:
+the ray diagram moved to the pictures, the Dr.Jit backend to a room below every other, the
+depth-grid and point-cloud writers to the formats' room, export, which imports products and
+signals, never the reverse).
 """
-import pytest
-
 from test_architecture import cycles, import_graph
 
-#: The package loops left to their rooms (issue 57 items 2 and 5), as strongly connected components.
-#: Imports that close them (November 2026): acoustics.raydiagram -> products.plots (pictures in
-#: the acoustics room), receiver.devicechain -> sim.backend, products.soundings -> export.geotiff
-#: while export.xtf -> products.sidescan, signals.volumetric -> export.las while
-#: export.ros.bag -> signals.volumetric, products.bathymetry -> sim.scene, signals.echoes ->
-#: sim.render and signals.focusing -> plugins.jit_arrays (with sim -> plugins -> receiver, acoustics).
-KNOWN_LOOPS = [
-    frozenset({"mitsonar.acoustics", "mitsonar.export", "mitsonar.plugins", "mitsonar.products",
-               "mitsonar.receiver", "mitsonar.signals", "mitsonar.sim"}),
-]
 
-#: Rooms that must never be in a loop: the Scan is data, the sonar equation sits above it.
-NEVER_IN_A_LOOP = ("mitsonar.scan", "mitsonar.sonar_equation")
+def module_edges() -> dict:
+    """{module: modules it imports}, without the old paths of moved modules
+    (`mitsonar._moved.MOVED`: three lines re-exporting the new home, with a warning, until their
+    removal release): they are forwarding addresses, not code."""
+    from mitsonar._moved import MOVED
+
+    _, edges = import_graph()
+    return {k: v for k, v in edges.items() if k not in MOVED}
 
 
 def package(module: str) -> str:
@@ -36,14 +32,10 @@ def package(module: str) -> str:
 
 
 def package_graph(edges=None) -> dict:
-    """{package: set of packages it imports} (imports within a package are not edges). The old
-    paths of moved modules (`mitsonar._moved.MOVED`: three lines re-exporting the new home, with a
-    warning, until their removal release) are not edges: they are forwarding addresses, not code."""
+    """{package: set of packages it imports} of `module_edges` (or of ``edges``); imports within a
+    package are not edges."""
     if edges is None:
-        from mitsonar._moved import MOVED
-
-        _, edges = import_graph()
-        edges = {k: v for k, v in edges.items() if k not in MOVED}
+        edges = module_edges()
     out: dict = {}
     for source, targets in edges.items():
         out.setdefault(package(source), set())
@@ -67,20 +59,24 @@ def test_folding_counts_imports_inside_functions():
     assert "mitsonar.sim" in package_graph()["mitsonar.sonar_equation"]
 
 
-def test_no_new_loop_between_packages():
-    loops = [frozenset(c) for c in cycles(package_graph())]
-    new = [sorted(c) for c in loops if not any(c <= known for known in KNOWN_LOOPS)]
-    assert new == [], f"a loop between packages that KNOWN_LOOPS does not allow: {new}"
+def loop_edges(loop, edges=None) -> list:
+    """The module imports ``"a -> b"`` between two packages of ``loop`` (a list of packages): the
+    imports to move to break it."""
+    if edges is None:
+        edges = module_edges()
+    return sorted(f"{s} -> {t}" for s, ts in edges.items() for t in ts
+                  if package(s) != package(t) and package(s) in loop and package(t) in loop)
 
 
-@pytest.mark.parametrize("room", NEVER_IN_A_LOOP)
-def test_scan_and_sonar_equation_are_in_no_loop(room):
-    assert not [c for c in cycles(package_graph()) if room in c]
+def test_the_report_names_the_imports_that_close_a_loop():
+    edges = {"mitsonar.scan.model": {"mitsonar.sim.render", "mitsonar.scan.meta"}, "mitsonar.scan.meta": set(),
+             "mitsonar.sim.render": {"mitsonar.scan", "mitsonar._checks"}, "mitsonar.scan": set(),
+             "mitsonar._checks": set()}
+    assert loop_edges(["mitsonar.scan", "mitsonar.sim"], edges) == \
+        ["mitsonar.scan.model -> mitsonar.sim.render", "mitsonar.sim.render -> mitsonar.scan"]
 
 
-def test_the_known_loops_are_still_loops():
-    """The allowance only shrinks: a room that left its loop comes off `KNOWN_LOOPS`."""
-    graph = package_graph()
-    looping = set().union(*map(set, cycles(graph)))
-    gone = sorted(set().union(*KNOWN_LOOPS) - looping)
-    assert gone == [], f"no longer in a loop: take {gone} off KNOWN_LOOPS"
+def test_no_loop_between_packages():
+    """Strict: any loop of packages fails, with the imports that close it."""
+    loops = cycles(package_graph())
+    assert loops == [], "loops between packages, closed by: " + "; ".join(", ".join(loop_edges(c)) for c in loops)

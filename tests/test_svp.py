@@ -302,7 +302,7 @@ def test_bad_arguments_are_one_line(call, message):
 
 
 def test_ray_diagram_draws_the_profile_and_the_fan_depth_down(tmp_path):
-    from mitsonar.acoustics.raydiagram import ray_diagram
+    from mitsonar.products.raydiagram import ray_diagram
 
     path = tmp_path / "rays.png"
     fig = ray_diagram(LAYERS, head_depth=2.0, seabed_depth=40.0, angles=[-60, 0, 30, 60], nominal_speed=1495.0,

@@ -121,7 +121,9 @@ def test_point_cloud_as_las_and_as_pointcloud2(tmp_path):
     import laspy
 
     from mitsonar.geometry.geodesy import GeoFrame
-    from mitsonar.signals.volumetric import POINT_DTYPE, point_cloud_message, write_point_cloud_las
+    from mitsonar.export.las import write_point_cloud_las
+    from mitsonar.export.ros.messages import point_cloud_message
+    from mitsonar.signals.volumetric import POINT_DTYPE
 
     rng = np.random.default_rng(0)
     pts = np.zeros(50, POINT_DTYPE)

@@ -10,7 +10,7 @@
   with the handbook's sediments in :data:`SEDIMENTS` and :func:`bistatic_mean_grazing`;
 * material presets (:data:`MATERIALS`, :func:`material`);
 * sound-speed profiles (:class:`SoundSpeedProfile`): refracted rays, travel times and their inverse
-  (`SoundSpeedProfile.trace`, `SoundSpeedProfile.locate`); `raydiagram.ray_diagram` draws them;
+  (`SoundSpeedProfile.trace`, `SoundSpeedProfile.locate`; `mitsonar.products.raydiagram` draws them);
 * eigenrays, arrivals and one-way transmission loss (:func:`eigenrays`, :func:`arrivals`,
   :func:`transmission_loss`, :func:`transmission_loss_field`; `mitsonar.acoustics.propagation`),
   and Bellhop's files to check them with (`mitsonar.acoustics.bellhop`).

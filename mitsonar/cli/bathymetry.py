@@ -216,8 +216,9 @@ def _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_pl
         with open(files.temporary(os.path.join(out, "errors.json")), "w") as f:
             json.dump(summary, f, indent=1)
         plot_bathymetry(run, grid, files.temporary(os.path.join(out, "bathymetry.png")), traj)
+        from mitsonar.export.geotiff import write_depth_geotiff
+
         if frame is not None:   # georeferenced: the grid in the CRS, the soundings as LAS and CSV
-            from mitsonar.export.geotiff import write_depth_geotiff
             from mitsonar.export.las import write_csv, write_las
 
             from mitsonar.export.bag import bag_available, write_bag
@@ -241,7 +242,7 @@ def _run(args, bathymetry, scene, traj, sensor, head, svp, grid_depths, write_pl
             except ImportError:
                 pass
             else:
-                grid.write_geotiff(files.temporary(os.path.join(out, "depth.tif")))
+                write_depth_geotiff(files.temporary(os.path.join(out, "depth.tif")), grid)
                 written.append("depth.tif")
     print(summary_line(summary, written, out))
     return 0

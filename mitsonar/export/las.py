@@ -16,6 +16,9 @@ sigma: the predicted depth error of the sounding, `mitsonar.products.bathymetry.
 
 CSV: a header line ``easting,northing,depth`` then one line per sounding, depth positive down
 from the origin's height (``-z``), millimetres.
+
+A 3D sonar's point cloud (`mitsonar.signals.volumetric.point_cloud`) goes to LAS 1.4 by
+`write_point_cloud_las`.
 """
 from __future__ import annotations
 
@@ -88,3 +91,43 @@ def write_csv(path, soundings, frame) -> int:
         for row in zip(e, n, d):
             f.write("%.3f,%.3f,%.3f\n" % row)
     return len(e)
+
+
+def write_point_cloud_las(path, points, frame=None) -> int:
+    """Write a 3D sonar's point cloud (`mitsonar.signals.volumetric.point_cloud`) as LAS 1.4 (laspy;
+    point format 6, 1 mm scale): X, Y, Z the world point (with a `GeoFrame`: its easting, northing
+    and height added, its CRS in the header),
+    ``intensity`` the point's intensity in dB scaled linearly to 0..65535 (the cloud's weakest 0,
+    strongest 65535), extra bytes ``elevation_index``, ``azimuth_index`` (int32), ``range`` and
+    ``intensity_linear`` (float32, the volume's units); ``.laz`` compressed. Returns the count."""
+    from mitsonar.signals.volumetric import POINT_DTYPE
+
+    pts = np.asarray(points)
+    if pts.dtype != POINT_DTYPE:
+        raise ValueError(f"write_point_cloud_las 'points': dtype {pts.dtype} is not allowed (point_cloud's POINT_DTYPE)")
+    laspy = _laspy("LAS output")
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.scales = np.array([0.001, 0.001, 0.001])
+    x, y, z = (pts[k].astype(np.float64) for k in ("x", "y", "z"))
+    if frame is not None:
+        x, y, z = x + frame.e0, y + frame.n0, z + frame.height
+        header.add_crs(frame.pyproj_crs)
+    header.offsets = np.array([np.floor(x.min()) if len(x) else 0.0, np.floor(y.min()) if len(y) else 0.0, 0.0])
+    header.add_extra_dims([laspy.ExtraBytesParams(name="elevation_index", type=np.int32, description="beam row"),
+                           laspy.ExtraBytesParams(name="azimuth_index", type=np.int32, description="beam column"),
+                           laspy.ExtraBytesParams(name="range", type=np.float32, description="range, m"),
+                           laspy.ExtraBytesParams(name="intensity_linear", type=np.float32,
+                                                  description="intensity, volume units")])
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = x, y, z
+    with np.errstate(divide="ignore"):
+        level = np.where(pts["intensity"] > 0, 10.0 * np.log10(np.maximum(pts["intensity"], 1e-300)), np.nan)
+    ok = np.isfinite(level)
+    lo, hi = (level[ok].min(), level[ok].max()) if ok.any() else (0.0, 0.0)
+    scaled = (level - lo) / (hi - lo) if hi > lo else np.ones(len(pts))
+    las.intensity = np.round(np.clip(np.nan_to_num(scaled, nan=0.0), 0, 1) * 65535).astype(np.uint16)
+    las.elevation_index, las.azimuth_index = pts["elevation_index"], pts["azimuth_index"]
+    las.range, las.intensity_linear = pts["range"], pts["intensity"]
+    with replacing(path) as tmp:
+        las.write(tmp, do_compress=os.path.splitext(os.fspath(path))[1].lower() == ".laz")
+    return len(pts)

@@ -1,11 +1,14 @@
 """Soundings as products: a point cloud (PLY, and ``sensor_msgs/PointCloud2``-ready arrays) and a
-gridded depth map (an array with its affine transform; GeoTIFF when ``rasterio`` is installed).
+gridded depth map (an array with its affine transform; as a GeoTIFF, when ``rasterio`` is installed,
+by the formats' room: `mitsonar.export.geotiff.write_depth_geotiff`).
 
     from mitsonar.products.soundings import write_ply, pointcloud2, grid_depths
     write_ply("soundings.ply", run.soundings)            # binary PLY: x y z intensity beam
     cloud, fields = pointcloud2(run.soundings)            # float32 x y z intensity, uint16 beam
     grid = grid_depths(run.soundings, cell=0.5)            # grid.depth (rows, cols), grid.transform
-    grid.save_npz("depth.npz"); grid.write_geotiff("depth.tif")   # the latter needs rasterio
+    grid.save_npz("depth.npz")
+    from mitsonar.export.geotiff import write_depth_geotiff
+    write_depth_geotiff("depth.tif", grid)                 # needs rasterio
 
 Depth is positive down from z = 0 (the sea surface of the survey scenes): ``depth = -z``. The
 grid is north-up like a GeoTIFF: row 0 is the cell row with the largest y, and a cell's centre is
@@ -99,19 +102,6 @@ class DepthGrid:
         """``depth``, ``count``, ``transform`` into an ``.npz`` (temporary name, then renamed)."""
         with replacing(path) as tmp, open(tmp, "wb") as f:
             np.savez(f, depth=self.depth, count=self.count, transform=np.asarray(self.transform, np.float64))
-
-    def write_geotiff(self, path, crs=None):
-        """One-band float32 GeoTIFF of the depth (NaN nodata) with the grid's transform; ``crs``
-        as rasterio takes it (None: a local frame). Needs ``rasterio`` (the ``geotiff`` extra).
-        Written by `mitsonar.export.geotiff.write_geotiff`, the one GeoTIFF writer."""
-        from mitsonar.export.geotiff import write_geotiff
-
-        try:
-            write_geotiff(path, self.depth, self.transform, crs=crs, descriptions=["depth"], units=["metre"],
-                          tags=[{"positive": "down"}])
-        except ImportError:
-            raise ImportError("GeoTIFF output needs rasterio: pip install 'mitsonar[geotiff]' "
-                              "(the depth grid is also saved as .npz)") from None
 
 
 def grid_depths(soundings, cell=0.5, bounds=None) -> DepthGrid:

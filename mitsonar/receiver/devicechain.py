@@ -62,9 +62,9 @@ def keep(key, value):
 
 def variant() -> str:
     """The active Mitsuba variant; on first use (none active yet) the one mitsonar chooses
-    (`mitsonar.sim.backend.ensure_active`: ``MITSONAR_VARIANT``, else ``llvm_ad_mono``), so the
+    (`mitsonar.backend.ensure_active`: ``MITSONAR_VARIANT``, else ``llvm_ad_mono``), so the
     chain runs without a scene loaded first."""
-    from mitsonar.sim.backend import ensure_active, prepare_llvm_environment
+    from mitsonar.backend import ensure_active, prepare_llvm_environment
 
     prepare_llvm_environment()
     import mitsuba as mi

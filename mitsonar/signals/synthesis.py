@@ -109,7 +109,7 @@ def _numpy_terms(pulse, fc, fs, t_start, n_p, n_samples, t0, beta, k0, mag, arg,
 
 def _drjit_kernel():
     """`_numpy_terms` as a Dr.Jit LLVM kernel (None when Dr.Jit's LLVM backend is missing)."""
-    from mitsonar.sim.backend import prepare_llvm_environment
+    from mitsonar.backend import prepare_llvm_environment
 
     prepare_llvm_environment()          # a working libLLVM, if Dr.Jit is not loaded yet
     try:

@@ -17,8 +17,9 @@ range x azimuth x elevation, not a fan image that collapses elevation:
   lambda`` is imaged sharp at its own range). The volume is (n_elevation, n_azimuth, n_bins);
 * `point_cloud` keeps the strongest (or the first) return per beam above a threshold: x, y, z
   (world), intensity (float32), the beam's elevation and azimuth indices and its range; written
-  as PLY (`write_point_cloud_ply`), LAS (`write_point_cloud_las`) and as a ROS 2
-  sensor_msgs/PointCloud2 message (`point_cloud_message`);
+  as PLY (`write_point_cloud_ply`); the formats' room writes it as LAS
+  (`mitsonar.export.las.write_point_cloud_las`) and as a ROS 2 sensor_msgs/PointCloud2 message
+  (`mitsonar.export.ros.messages.point_cloud_message`);
 * `render_volume` is the incoherent fast path: the echo paths scored into every beam by the
   array's pattern, the speckle-averaged mean of the focused beams without element data.
 
@@ -298,70 +299,6 @@ def write_point_cloud_ply(path, points, comment="mitsonar 3D sonar point cloud")
         raise ValueError(f"write_point_cloud_ply 'points': dtype {pts.dtype} is not allowed (point_cloud's POINT_DTYPE)")
     write_ply(path, pts, comment=comment)
     return len(pts)
-
-
-def write_point_cloud_las(path, points, frame=None) -> int:
-    """Write a `point_cloud` as LAS 1.4 (laspy; point format 6, 1 mm scale): X, Y, Z the world
-    point (with a `GeoFrame`: its easting, northing and height added, its CRS in the header),
-    ``intensity`` the point's intensity in dB scaled linearly to 0..65535 (the cloud's weakest 0,
-    strongest 65535), extra bytes ``elevation_index``, ``azimuth_index`` (int32), ``range`` and
-    ``intensity_linear`` (float32, the volume's units); ``.laz`` compressed. Returns the count."""
-    import os
-
-    from mitsonar._files import replacing
-    from mitsonar.export.las import _laspy
-
-    pts = np.asarray(points)
-    if pts.dtype != POINT_DTYPE:
-        raise ValueError(f"write_point_cloud_las 'points': dtype {pts.dtype} is not allowed (point_cloud's POINT_DTYPE)")
-    laspy = _laspy("LAS output")
-    header = laspy.LasHeader(point_format=6, version="1.4")
-    header.scales = np.array([0.001, 0.001, 0.001])
-    x, y, z = (pts[k].astype(np.float64) for k in ("x", "y", "z"))
-    if frame is not None:
-        x, y, z = x + frame.e0, y + frame.n0, z + frame.height
-        header.add_crs(frame.pyproj_crs)
-    header.offsets = np.array([np.floor(x.min()) if len(x) else 0.0, np.floor(y.min()) if len(y) else 0.0, 0.0])
-    header.add_extra_dims([laspy.ExtraBytesParams(name="elevation_index", type=np.int32, description="beam row"),
-                           laspy.ExtraBytesParams(name="azimuth_index", type=np.int32, description="beam column"),
-                           laspy.ExtraBytesParams(name="range", type=np.float32, description="range, m"),
-                           laspy.ExtraBytesParams(name="intensity_linear", type=np.float32,
-                                                  description="intensity, volume units")])
-    las = laspy.LasData(header)
-    las.x, las.y, las.z = x, y, z
-    with np.errstate(divide="ignore"):
-        level = np.where(pts["intensity"] > 0, 10.0 * np.log10(np.maximum(pts["intensity"], 1e-300)), np.nan)
-    ok = np.isfinite(level)
-    lo, hi = (level[ok].min(), level[ok].max()) if ok.any() else (0.0, 0.0)
-    scaled = (level - lo) / (hi - lo) if hi > lo else np.ones(len(pts))
-    las.intensity = np.round(np.clip(np.nan_to_num(scaled, nan=0.0), 0, 1) * 65535).astype(np.uint16)
-    las.elevation_index, las.azimuth_index = pts["elevation_index"], pts["azimuth_index"]
-    las.range, las.intensity_linear = pts["range"], pts["intensity"]
-    with replacing(path) as tmp:
-        las.write(tmp, do_compress=os.path.splitext(os.fspath(path))[1].lower() == ".laz")
-    return len(pts)
-
-
-#: PointCloud2 field types (sensor_msgs/PointField): FLOAT32 7, INT32 5.
-_FIELD_TYPES = {"<f4": 7, "<i4": 5}
-
-
-def point_cloud_message(points, stamp_ns=0, frame="map") -> dict:
-    """A ROS 2 ``sensor_msgs/msg/PointCloud2`` (the dict the bag writer serialises,
-    `mitsonar.export.ros.messages`) of a `point_cloud`: one unordered row of `POINT_DTYPE` records
-    (x, y, z, intensity float32; elevation_index, azimuth_index int32; range float32), 28 bytes a
-    point, little-endian."""
-    from mitsonar.export.ros.messages import header
-
-    pts = np.ascontiguousarray(np.asarray(points))
-    if pts.dtype != POINT_DTYPE:
-        raise ValueError(f"point_cloud_message 'points': dtype {pts.dtype} is not allowed (point_cloud's POINT_DTYPE)")
-    fields = [{"name": n, "offset": int(POINT_DTYPE.fields[n][1]), "count": 1,
-               "datatype": _FIELD_TYPES[POINT_DTYPE.fields[n][0].str]} for n in POINT_DTYPE.names]
-    step = POINT_DTYPE.itemsize
-    return {"header": header(int(stamp_ns), frame), "height": 1, "width": len(pts), "fields": fields,
-            "is_bigendian": False, "point_step": step, "row_step": step * len(pts), "data": pts.tobytes(),
-            "is_dense": True}
 
 
 def array_factor(head, directions, look) -> np.ndarray:

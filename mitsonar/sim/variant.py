@@ -1,18 +1,18 @@
 """Choosing and activating the Mitsuba variant and registering mitsonar's plugins for it.
 
-The variant and its libLLVM are chosen by `mitsonar.sim.backend` (`activate`, `ensure_active`;
+The variant and its libLLVM are chosen by `mitsonar.backend` (`activate`, `ensure_active`;
 its names are importable from here too); `set_variant` and `ensure_variant` add the plugins'
 registration, again on every later variant change. Neither runs at ``import mitsonar``: the first
 `load_scene`, `render_scan`, ... calls `ensure_variant`. A program that imported ``drjit`` (or
-``mitsuba``) before that keeps the libLLVM Dr.Jit found by itself (`mitsonar.sim.backend`).
+``mitsuba``) before that keeps the libLLVM Dr.Jit found by itself (`mitsonar.backend`).
 """
 from __future__ import annotations
 
 import os
 
-from mitsonar.sim.backend import (DEFAULT_VARIANT, FIX, MIN_LLVM, SUPPORTED, VariantError,  # noqa: F401
-                                  activate, check_backend, ensure_active, find_libllvm,
-                                  prepare_llvm_environment, requested_variant)
+from mitsonar.backend import (DEFAULT_VARIANT, FIX, MIN_LLVM, SUPPORTED, VariantError,  # noqa: F401
+                              activate, check_backend, ensure_active, find_libllvm,
+                              prepare_llvm_environment, requested_variant)
 
 
 # ---------------------------------------------------------------------------- activation

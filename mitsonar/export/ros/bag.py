@@ -230,12 +230,10 @@ class McapBag:
     def add_point_cloud(self, points, t=0.0) -> None:
         """Write a 3D sonar's point cloud (`mitsonar.signals.volumetric.point_cloud`: world x, y, z,
         intensity, beam indices, range) on ``/sonar/points`` at ``start + t`` s, frame ``map``."""
-        from mitsonar.signals.volumetric import point_cloud_message
-
         if not (isinstance(t, (int, float)) and math.isfinite(t) and t >= 0):
             raise ExportError(f"add_point_cloud t: {t!r} is not allowed (seconds, finite and 0 or more)")
         ns = M.stamp_ns(self.start + t)
-        self._write("/sonar/points", point_cloud_message(points, ns, M.WORLD_FRAME), ns)
+        self._write("/sonar/points", M.point_cloud_message(points, ns, M.WORLD_FRAME), ns)
 
     def close(self) -> dict:
         """Finish the file and rename it into place; returns the message count per topic written.

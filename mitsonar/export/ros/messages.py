@@ -1,5 +1,6 @@
 """ROS 2 messages (as the dicts `mcap_ros2` encodes) from a `Scan`: the sonar images, the fan and
-waterfall pictures, the detected returns and the frames. No file I/O here (see `bag`).
+waterfall pictures, the detected returns and the frames; and a 3D sonar's point cloud
+(`point_cloud_message`). No file I/O here (see `bag`).
 
 Frames (REP-103/105): ``map`` is the world of the scan's poses (z up); ``sonar`` is the head
 in the marine_acoustic_msgs convention, z forward (the boresight at bearing 0), x up, the beams
@@ -291,6 +292,29 @@ def point_cloud(points: np.ndarray, values: np.ndarray, ns: int, frame: str = WO
     return {"header": header(ns, frame), "height": 1, "width": len(points), "fields": fields,
             "is_bigendian": False, "point_step": 16, "row_step": 16 * len(points),
             "data": rec.tobytes(), "is_dense": True}
+
+
+#: PointCloud2 field types (sensor_msgs/PointField): FLOAT32 7, INT32 5.
+_FIELD_TYPES = {"<f4": 7, "<i4": 5}
+
+
+def point_cloud_message(points, stamp_ns=0, frame="map") -> dict:
+    """A ROS 2 ``sensor_msgs/msg/PointCloud2`` (the dict the bag writer serialises) of a 3D sonar's
+    point cloud (`mitsonar.signals.volumetric.point_cloud`): one unordered row of its
+    `~mitsonar.signals.volumetric.POINT_DTYPE` records
+    (x, y, z, intensity float32; elevation_index, azimuth_index int32; range float32), 28 bytes a
+    point, little-endian."""
+    from mitsonar.signals.volumetric import POINT_DTYPE
+
+    pts = np.ascontiguousarray(np.asarray(points))
+    if pts.dtype != POINT_DTYPE:
+        raise ValueError(f"point_cloud_message 'points': dtype {pts.dtype} is not allowed (point_cloud's POINT_DTYPE)")
+    fields = [{"name": n, "offset": int(POINT_DTYPE.fields[n][1]), "count": 1,
+               "datatype": _FIELD_TYPES[POINT_DTYPE.fields[n][0].str]} for n in POINT_DTYPE.names]
+    step = POINT_DTYPE.itemsize
+    return {"header": header(int(stamp_ns), frame), "height": 1, "width": len(pts), "fields": fields,
+            "is_bigendian": False, "point_step": step, "row_step": step * len(pts), "data": pts.tobytes(),
+            "is_dense": True}
 
 
 def transform(pose: np.ndarray, ns: int, parent: str, child: str) -> dict:

@@ -10,7 +10,7 @@ import struct
 
 import numpy as np
 
-from mitsonar.export.ros.messages import SONAR_AXES, SONAR_FRAME, VEHICLE_FRAME, WORLD_FRAME
+from mitsonar.export.ros.messages import SONAR_AXES, SONAR_FRAME, VEHICLE_FRAME, WORLD_FRAME, point_cloud_message
 from mitsonar.geometry.trajectory import matrix_to_quat
 from mitsonar.scan.model import data_bytes
 
@@ -86,7 +86,7 @@ def frame_points(t_ns: int, scan) -> dict | None:
     world x, y, z in ``map``), as the bags' ``/sonar/points``; None for the other kinds."""
     if not scan.sonar_kind.grid:
         return None
-    from mitsonar.signals.volumetric import point_cloud, point_cloud_message, scan_volume
+    from mitsonar.signals.volumetric import point_cloud, scan_volume
 
     return point_cloud_message(point_cloud(scan_volume(scan), POINTS_THRESHOLD_DB), t_ns, WORLD_FRAME)
 

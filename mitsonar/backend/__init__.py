@@ -1,6 +1,7 @@
-"""Choosing and activating the Mitsuba variant (without mitsonar's plugins), and making sure
-Dr.Jit finds a libLLVM that works. Imports nothing of mitsonar, so the receiver chain may use it;
-`mitsonar.sim.variant` adds the plugins' registration.
+"""The Dr.Jit backend: choosing and activating the Mitsuba variant (without mitsonar's plugins), and
+making sure Dr.Jit finds a libLLVM that works. A room below every other, importing nothing of
+mitsonar, so the receiver chain and the signals may use it; `mitsonar.sim.variant` adds the
+plugins' registration.
 
 Dr.Jit's ``llvm`` variants JIT-compile through a shared libLLVM found at run time. Debian 12's
 default LLVM 15 crashes (``Cannot select ... fminimum``); version 16 or newer works. When mitsonar
