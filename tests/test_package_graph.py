@@ -9,9 +9,13 @@ packages: ``mitsonar.<room>`` (a folder; its subfolders belong to it), ``mitsona
 The loops that remain belong to other rooms: `KNOWN_LOOPS` names them, and may only shrink. A loop
 outside them fails the test; a room in them that has left its loop must be taken off the list.
 """
+import os
+import sys
+
 import pytest
 
-from test_architecture import cycles, import_graph
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scripts"))
+from package_graph import cycles, package_graph  # noqa: E402  (the graph's one home: scripts/package_graph.py)
 
 #: The package loops left to their rooms (issue 57 items 2 and 5), as strongly connected components.
 #: Imports that close them (November 2026): acoustics.raydiagram -> products.plots (pictures in
@@ -26,33 +30,6 @@ KNOWN_LOOPS = [
 
 #: Rooms that must never be in a loop: the Scan is data, the sonar equation sits above it.
 NEVER_IN_A_LOOP = ("mitsonar.scan", "mitsonar.sonar_equation")
-
-
-def package(module: str) -> str:
-    parts = module.split(".")
-    if parts[0] != "mitsonar" or len(parts) == 1:
-        return parts[0]
-    return ".".join(parts[:2])
-
-
-def package_graph(edges=None) -> dict:
-    """{package: set of packages it imports} (imports within a package are not edges). The old
-    paths of moved modules (`mitsonar._moved.MOVED`: three lines re-exporting the new home, with a
-    warning, until their removal release) are not edges: they are forwarding addresses, not code."""
-    if edges is None:
-        from mitsonar._moved import MOVED
-
-        _, edges = import_graph()
-        edges = {k: v for k, v in edges.items() if k not in MOVED}
-    out: dict = {}
-    for source, targets in edges.items():
-        out.setdefault(package(source), set())
-        for target in targets:
-            a, b = package(source), package(target)
-            out.setdefault(b, set())
-            if a != b:
-                out[a].add(b)
-    return out
 
 
 def test_folding_counts_imports_inside_functions():
