@@ -57,7 +57,8 @@ def test_recipe_sonar_kind(mitsonar_mod):
         np.testing.assert_allclose(toy.times, 2 * np.arange(3) * (2 * 5.0 / C + 0.25), rtol=1e-12)
         np.testing.assert_allclose(ref.times, np.arange(3) * (2 * 5.0 / C + 0.030), rtol=1e-12)
         assert toy.intensity.sum() > 0
-        np.testing.assert_array_equal(toy.intensity, ref.intensity)
+        # the same paths: equal bit for bit on the CPU (a GPU may round two kernels differently)
+        np.testing.assert_allclose(toy.intensity, ref.intensity, rtol=1e-6, atol=0)
         np.testing.assert_array_equal(toy.bearings, ref.bearings)
     finally:
         kinds.unregister("toy_kind")
