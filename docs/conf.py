@@ -1,7 +1,8 @@
 """Sphinx configuration of mitsonar's documentation.
 
 Build: ``sphinx-build -W --keep-going -b html docs docs/_build/html`` (what ``.ci/run`` runs).
-Nothing is rendered at build time: autodoc and the plugin reference only import the package.
+Nothing is rendered at build time: autodoc and the plugin reference only import the package; the
+developer notes' import graph is drawn from the source (``docs/_ext/mitsonar_graph.py``).
 """
 from __future__ import annotations
 
@@ -31,6 +32,7 @@ extensions = [
     "sphinx.ext.mathjax",
     "numpydoc",
     "mitsonar_plugins",
+    "mitsonar_graph",
 ]
 
 exclude_patterns = ["_build"]

@@ -13,4 +13,4 @@ every variant change does (never ``import mitsonar``). After that, import a plug
 """
 from __future__ import annotations
 
-from .registry import parameters, register, register_plugin, registered, take_failure  # noqa: F401
+from .registry import parameters, register, register_plugin, registered, take_failure, unregister_plugin  # noqa: F401

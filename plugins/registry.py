@@ -1,5 +1,6 @@
 """Registering the plugins with Mitsuba: `register_plugin` (what each plugin module calls at its
-end), `register` (the families' modules imported for the active variant), `take_failure`."""
+end), `register` (the families' modules imported for the active variant), `unregister_plugin`,
+`take_failure`."""
 from __future__ import annotations
 
 import importlib
@@ -55,6 +56,13 @@ def register_plugin(kind: str, name: str, cls) -> None:
 
     {"sensor": mi.register_sensor, "BSDF": mi.register_bsdf, "integrator": mi.register_integrator}[kind](name, construct)
     _registered[name] = (kind, cls)
+
+
+def unregister_plugin(name: str) -> None:
+    """Forget a plugin `register_plugin` registered outside the families (a test's toy BSDF):
+    `registered` no longer lists it. Mitsuba has no call to drop a plugin, so its XML name stays
+    loadable in this process until a variant change (`register` then registers the families only)."""
+    _registered.pop(name, None)
 
 
 def family_modules() -> list:

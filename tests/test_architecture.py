@@ -1,5 +1,6 @@
 """The import graph of mitsonar, its plugins and hilbertmap, built from the source: acyclic, with
-hilbertmap independent of mitsonar, and no module over 700 lines (issue "Architecture").
+hilbertmap independent of mitsonar, and no module over 700 lines (issue "Architecture"). The graph
+is built by ``scripts/package_graph.py`` (`import_graph`), which the developer notes draw.
 
 Every import counts as an edge: at module level, inside functions, inside a module ``__getattr__``
 and under ``if TYPE_CHECKING``; ``from . import x`` and ``from .x import y`` inside a package's
@@ -8,90 +9,16 @@ to it. A package's ``__init__`` importing its own submodules is not an edge (it 
 """
 import ast
 import os
+import sys
 
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-# source folder -> the name it installs as (pyproject's package-dir)
-PACKAGES = {"mitsonar": "mitsonar", "plugins": "mitsonar.plugins", "hilbertmap": "hilbertmap"}
+sys.path.insert(0, os.path.join(ROOT, "scripts"))
+# the graph's one home, shared with tests/test_package_graph.py and the docs' drawing of it
+from package_graph import cycles, import_graph, modules, targets  # noqa: E402
+
 MAX_LINES = 700
-
-
-def modules():
-    """{module name: file path} for every .py file of the three packages."""
-    out = {}
-    for folder, name in PACKAGES.items():
-        for root, _, files in os.walk(os.path.join(ROOT, folder)):
-            for f in files:
-                if f.endswith(".py"):
-                    rel = os.path.relpath(os.path.join(root, f), os.path.join(ROOT, folder))[:-3]
-                    parts = [name] + [p for p in rel.split(os.sep) if p != "__init__"]
-                    out[".".join(parts)] = os.path.join(root, f)
-    return out
-
-
-def targets(module, is_package, node):
-    """The modules one import statement names (longest names first are resolved by the caller)."""
-    if isinstance(node, ast.Import):
-        return [a.name for a in node.names]
-    if node.level:
-        base = module.split(".") if is_package else module.split(".")[:-1]
-        base = base[: len(base) - (node.level - 1)]
-        stem = ".".join(base + ([node.module] if node.module else []))
-    else:
-        stem = node.module
-    return [f"{stem}.{a.name}" for a in node.names] + [stem]
-
-
-def import_graph():
-    mods = modules()
-    edges = {m: set() for m in mods}
-    for name, path in mods.items():
-        is_package = path.endswith("__init__.py")
-        with open(path, encoding="utf-8") as fh:
-            tree = ast.parse(fh.read(), path)
-        for node in ast.walk(tree):
-            if not isinstance(node, (ast.Import, ast.ImportFrom)):
-                continue
-            for target in targets(name, is_package, node):
-                # the nearest enclosing module we own (``from .x import y``: y may be a name in x)
-                while target and target not in mods:
-                    target = target.rpartition(".")[0]
-                if target and target != name and not (is_package and target.startswith(name + ".")):
-                    edges[name].add(target)
-    return mods, edges
-
-
-def cycles(edges):
-    """Strongly connected components with more than one module (Tarjan)."""
-    index, low, stack, on, out, counter = {}, {}, [], set(), [], [0]
-
-    def visit(v):
-        index[v] = low[v] = counter[0]
-        counter[0] += 1
-        stack.append(v)
-        on.add(v)
-        for w in edges[v]:
-            if w not in index:
-                visit(w)
-                low[v] = min(low[v], low[w])
-            elif w in on:
-                low[v] = min(low[v], index[w])
-        if low[v] == index[v]:
-            comp = []
-            while True:
-                w = stack.pop()
-                on.discard(w)
-                comp.append(w)
-                if w == v:
-                    break
-            if len(comp) > 1:
-                out.append(sorted(comp))
-
-    for v in sorted(edges):
-        if v not in index:
-            visit(v)
-    return out
 
 
 def test_the_graph_sees_lazy_imports():

@@ -61,6 +61,36 @@ def test_the_libllvm_is_chosen_when_mitsonar_first_chooses_the_variant():
     assert got is None
 
 
+def test_the_newest_libllvm_of_a_working_version_is_chosen(tmp_path, monkeypatch):
+    """With LLVM 15, 16 and 19 installed (Debian's names: ``libLLVM-N.so`` and the soname of LLVM 18
+    and later, ``libLLVM.so.19.1``), `find_libllvm` takes 19 and `prepare_llvm_environment` points
+    Dr.Jit at it; with 15 alone it finds 15, too old, and sets nothing (`check_backend` then refuses)."""
+    from mitsonar.sim import backend
+
+    lib, llvm16 = tmp_path / "lib", tmp_path / "llvm-16" / "lib"
+    lib.mkdir()
+    llvm16.mkdir(parents=True)
+    for name in ("libLLVM-15.so", "libLLVM-15.so.1", "libLLVM.so.19.1", "libLLVMX86CodeGen.a"):
+        (lib / name).write_bytes(b"")
+    (llvm16 / "libLLVM.so").write_bytes(b"")
+    patterns = [str(lib / "libLLVM*.so*"), str(tmp_path / "llvm-*" / "lib" / "libLLVM*.so*")]
+    assert backend.find_libllvm(patterns) == (str(lib / "libLLVM.so.19.1"), 19)
+    assert backend.find_libllvm(patterns[1:]) == (str(llvm16 / "libLLVM.so"), 16)
+    assert backend.find_libllvm([str(lib / "libLLVM-15*")]) == (str(lib / "libLLVM-15.so"), 15)
+    assert backend.find_libllvm([str(tmp_path / "none*")]) == (None, None)
+
+    # the environment, as a fresh process that has not imported drjit sees it
+    monkeypatch.delitem(sys.modules, "drjit", raising=False)
+    monkeypatch.delenv("DRJIT_LIBLLVM_PATH", raising=False)
+    monkeypatch.setattr(backend, "LIBLLVM_PATTERNS", tuple(patterns))
+    backend.prepare_llvm_environment()
+    assert os.environ["DRJIT_LIBLLVM_PATH"] == str(lib / "libLLVM.so.19.1")
+    monkeypatch.delenv("DRJIT_LIBLLVM_PATH")
+    monkeypatch.setattr(backend, "LIBLLVM_PATTERNS", (str(lib / "libLLVM-15*"),))
+    backend.prepare_llvm_environment()
+    assert "DRJIT_LIBLLVM_PATH" not in os.environ
+
+
 def test_the_receiver_chain_and_the_plugins_choose_the_variant_on_first_use():
     """Entry points that need no scene work first in a fresh interpreter: the electronics' chain
     (Dr.Jit kernels) and a plugin module imported directly after `ensure_variant`, whose class is

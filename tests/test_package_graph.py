@@ -1,7 +1,7 @@
 """The packages of mitsonar form a chain: no loop between them, counting every import, those inside
 functions too (issue 57: a `Scan` that imported the renderer tied eight rooms into one loop).
 
-The graph is `test_architecture.import_graph` (an ast walk of every module: each Import and
+The graph is `scripts/package_graph.py` `import_graph` (an ast walk of every module: each Import and
 ImportFrom node, at module level, inside functions, inside ``if TYPE_CHECKING``) folded onto the
 packages: ``mitsonar.<room>`` (a folder; its subfolders belong to it), ``mitsonar.plugins``,
 ``hilbertmap``, and each module of mitsonar's own folder (``mitsonar._checks``, ...) on its own.
@@ -11,7 +11,13 @@ the ray diagram moved to the pictures, the Dr.Jit backend to a room below every 
 depth-grid and point-cloud writers to the formats' room, export, which imports products and
 signals, never the reverse).
 """
-from test_architecture import cycles, import_graph
+import os
+import sys
+
+import pytest
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scripts"))
+from package_graph import cycles, import_graph, package, package_graph  # noqa: E402  (the graph's one home: scripts/package_graph.py)
 
 
 def module_edges() -> dict:
@@ -22,29 +28,6 @@ def module_edges() -> dict:
 
     _, edges = import_graph()
     return {k: v for k, v in edges.items() if k not in MOVED}
-
-
-def package(module: str) -> str:
-    parts = module.split(".")
-    if parts[0] != "mitsonar" or len(parts) == 1:
-        return parts[0]
-    return ".".join(parts[:2])
-
-
-def package_graph(edges=None) -> dict:
-    """{package: set of packages it imports} of `module_edges` (or of ``edges``); imports within a
-    package are not edges."""
-    if edges is None:
-        edges = module_edges()
-    out: dict = {}
-    for source, targets in edges.items():
-        out.setdefault(package(source), set())
-        for target in targets:
-            a, b = package(source), package(target)
-            out.setdefault(b, set())
-            if a != b:
-                out[a].add(b)
-    return out
 
 
 def test_folding_counts_imports_inside_functions():

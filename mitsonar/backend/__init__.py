@@ -29,20 +29,29 @@ class VariantError(RuntimeError):
     pass
 
 
+#: Where `find_libllvm` looks (glob patterns): Debian/Ubuntu's multiarch folder and ``llvm-N``
+#: folders, other distributions' library folders, Homebrew.
+LIBLLVM_PATTERNS = ("/usr/lib/*-linux-gnu/libLLVM*.so*", "/usr/lib/llvm-*/lib/libLLVM*.so*",
+                    "/usr/lib64/libLLVM*.so*", "/usr/local/lib/libLLVM*.so*",
+                    "/opt/homebrew/opt/llvm/lib/libLLVM.dylib")
+
+
 def _llvm_version(path: str):
-    m = re.search(r"LLVM[-.]?(\d+)", os.path.basename(path))
-    if m is None:
-        m = re.search(r"llvm-(\d+)", path)
+    """The major version of a libLLVM file: its name (``libLLVM-19.so``, ``libLLVM-16.so.1``), its
+    ``llvm-N`` folder, or the soname LLVM 18 and later use (``libLLVM.so.19.1``); None if none."""
+    name = os.path.basename(path)
+    m = re.search(r"LLVM[-.]?(\d+)", name) or re.search(r"llvm-(\d+)", path) or re.search(r"LLVM\.so\.(\d{2,})", name)
     return int(m.group(1)) if m else None
 
 
-def find_libllvm():
-    """Newest libLLVM shared library on the system as (path, major version), or (None, None)."""
-    pats = ["/usr/lib/*-linux-gnu/libLLVM*.so*", "/usr/lib/llvm-*/lib/libLLVM*.so*",
-            "/usr/lib64/libLLVM*.so*", "/usr/local/lib/libLLVM*.so*", "/opt/homebrew/opt/llvm/lib/libLLVM.dylib"]
+def find_libllvm(patterns=None):
+    """Newest libLLVM shared library on the system as (path, major version), or (None, None).
+
+    ``patterns``: the glob patterns searched (default `LIBLLVM_PATTERNS`); of equal versions the
+    first path in pattern order, then name order, is taken."""
     best = (None, None)
-    for pat in pats:
-        for path in glob.glob(pat):
+    for pat in LIBLLVM_PATTERNS if patterns is None else patterns:
+        for path in sorted(glob.glob(pat)):
             v = _llvm_version(path)
             if v is not None and (best[1] is None or v > best[1]):
                 best = (path, v)
