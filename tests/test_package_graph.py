@@ -14,8 +14,6 @@ signals, never the reverse).
 import os
 import sys
 
-import pytest
-
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scripts"))
 from package_graph import cycles, import_graph, package, package_graph  # noqa: E402  (the graph's one home: scripts/package_graph.py)
 
