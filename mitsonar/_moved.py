@@ -61,18 +61,21 @@ def warn_renamed(old: str, stacklevel: int = 3) -> None:
                   DeprecationWarning, stacklevel=stacklevel)
 
 
-def renamed_keyword(func, old: str, new: str, row: str) -> callable:
-    """``func`` accepting its keyword ``new`` under the old name ``old`` too, warning (`warn_renamed`
-    of ``row``); both at once is a TypeError."""
+def renamed_keyword(old: str, new: str, row: str):
+    """A decorator: the function accepts its keyword ``new`` under the old name ``old`` too,
+    warning (`warn_renamed` of ``row``); both at once is a TypeError."""
     import functools
 
-    @functools.wraps(func)
-    def wrapper(*args, **kwargs):
-        if old in kwargs:
-            if new in kwargs:
-                raise TypeError(f"{func.__qualname__}() got both '{new}' and its old name '{old}'")
-            warn_renamed(row)
-            kwargs[new] = kwargs.pop(old)
-        return func(*args, **kwargs)
+    def decorate(func):
+        @functools.wraps(func)
+        def wrapper(*args, **kwargs):
+            if old in kwargs:
+                if new in kwargs:
+                    raise TypeError(f"{func.__qualname__}() got both '{new}' and its old name '{old}'")
+                warn_renamed(row)
+                kwargs[new] = kwargs.pop(old)
+            return func(*args, **kwargs)
 
-    return wrapper
+        return wrapper
+
+    return decorate

@@ -128,7 +128,7 @@ class Pulse:
 
 
 # ``Pulse(kind="cw", ...)``: the old keyword, with a DeprecationWarning until 0.4.0
-Pulse.__init__ = renamed_keyword(Pulse.__init__, "kind", "waveform", "Pulse(kind=...)")
+Pulse.__init__ = renamed_keyword("kind", "waveform", "Pulse(kind=...)")(Pulse.__init__)
 
 
 def cw(frequency, duration, window=None) -> Pulse:
