@@ -54,7 +54,8 @@ class SonarKind:
     head_overhead      s per ping beyond the two-way flight to ``range_max`` (default period)
     default_beamwidths (beamwidth_h, beamwidth_v) in deg when the XML gives none
     max_swath          deg the rows' bearings may span (None: any)
-    plot_kinds         the pictures that make sense; the first is the default
+    pictures           the pictures that make sense; the first is the default (was ``plot_kinds``,
+                       which still works with a DeprecationWarning until 0.4.0)
     has_fan            the rows spread over bearings of one fan (the ROS fan image)
     bathymetry_method  the default bottom detection of `bathymetry` surveys
     max_sounding_fan   deg of bearings a bathymetric fan may span (None: not checked)
@@ -82,7 +83,7 @@ class SonarKind:
     head_overhead = 0.0
     default_beamwidths = (3.0, 35.0)
     max_swath = None
-    plot_kinds = ("polar", "cartesian", "ascan")
+    pictures = ("polar", "cartesian", "ascan")
     has_fan = True
     bathymetry_method = "leading_edge"
     max_sounding_fan = None
@@ -133,6 +134,24 @@ class SonarKind:
 
     def __repr__(self) -> str:
         return f"<sonar kind {self.name!r}>"
+
+    # ------------------------------------------------------------------ old names (until 0.4.0)
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if "plot_kinds" in cls.__dict__:      # a kind written for 0.2: its pictures, warned
+            from mitsonar._moved import warn_renamed
+
+            warn_renamed("SonarKind.plot_kinds")
+            cls.pictures = cls.__dict__["plot_kinds"]
+            delattr(cls, "plot_kinds")
+
+    @property
+    def plot_kinds(self) -> tuple:
+        """The pictures: `pictures` (the old name, removed in 0.4.0)."""
+        from mitsonar._moved import warn_renamed
+
+        warn_renamed("SonarKind.plot_kinds")
+        return self.pictures
 
 
 class Mechanical(SonarKind):
@@ -186,7 +205,7 @@ class Sidescan(SonarKind):
     steered = False
     sided = True
     default_beamwidths = (1.0, 50.0)   # narrow along track, a wide fan across it
-    plot_kinds = ("waterfall", "ascan")
+    pictures = ("waterfall", "ascan")
     has_fan = False
     mosaic = True
     head_frame_mount = True
@@ -230,7 +249,7 @@ class Volumetric(Multibeam):
     share_beams = False
     fan_frame = False
     has_fan = False
-    plot_kinds = ("ascan",)
+    pictures = ("ascan",)
     max_sounding_fan = None
 
     def bearings_deg(self, start, step, n_rows, n_azimuth=None):

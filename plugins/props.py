@@ -14,58 +14,58 @@ _TAGS = {"Bool": "<boolean>", "Integer": "<integer>", "Float": "<float>", "Strin
          "Color": "<rgb>", "Spectrum": "<spectrum>", "Vector": "<point>/<vector>", "Transform": "<transform>"}
 
 
-def _got(kind: str, value) -> str:
-    if kind == "String":
+def _got(prop_type: str, value) -> str:
+    if prop_type == "String":
         return f"<string> {value!r}"
-    if kind == "Bool":
+    if prop_type == "Bool":
         return f"<boolean> {str(value).lower()}"
-    if kind in ("Float", "Integer"):
-        return f"{_TAGS[kind]} {value!r}"
+    if prop_type in ("Float", "Integer"):
+        return f"{_TAGS[prop_type]} {value!r}"
     # Nested objects (a <texture>, a <bsdf>) are named by their class.
-    return _TAGS.get(kind) or f"<{type(value).__name__.lower()}>"
+    return _TAGS.get(prop_type) or f"<{type(value).__name__.lower()}>"
 
 
-def _wrong_type(name: str, kind: str, value, source: str, expected: str) -> ValueError:
+def _wrong_type(name: str, prop_type: str, value, source: str, expected: str) -> ValueError:
     """The error for a property written with another XML tag than ``expected``."""
-    if kind == "String":
+    if prop_type == "String":
         try:
             float(value)
         except ValueError:
             return ValueError(f"{source} '{name}': {value!r} is not a number (expected {expected})")
-    return ValueError(f"{source} '{name}': expected {expected}, got {_got(kind, value)}")
+    return ValueError(f"{source} '{name}': expected {expected}, got {_got(prop_type, value)}")
 
 
 def number(props, name: str, default, source: str, expected: str = "<float>"):
     """A ``<float>`` property (an ``<integer>`` counts as its value); ``default`` when absent."""
     if name not in props:
         return default
-    kind, value = props.type(name).name, props.get(name)
-    if kind in ("Float", "Integer"):
+    prop_type, value = props.type(name).name, props.get(name)
+    if prop_type in ("Float", "Integer"):
         return float(value)
-    raise _wrong_type(name, kind, value, source, expected)
+    raise _wrong_type(name, prop_type, value, source, expected)
 
 
 def count(props, name: str, default, source: str):
     """An ``<integer>`` property; a whole ``<float>`` (8.0) is taken, a fraction (8.7) refused."""
     if name not in props:
         return default
-    kind, value = props.type(name).name, props.get(name)
-    if kind == "Integer":
+    prop_type, value = props.type(name).name, props.get(name)
+    if prop_type == "Integer":
         return int(value)
-    if kind == "Float":
+    if prop_type == "Float":
         if not (math.isfinite(value) and float(value).is_integer()):
             raise ValueError(f"{source} '{name}': {value!r} is not a whole number (counts are <integer>)")
         return int(value)
-    raise _wrong_type(name, kind, value, source, "<integer>")
+    raise _wrong_type(name, prop_type, value, source, "<integer>")
 
 
 def text(props, name: str, default, source: str):
     """A ``<string>`` property; ``default`` when absent."""
     if name not in props:
         return default
-    kind, value = props.type(name).name, props.get(name)
-    if kind != "String":
-        raise ValueError(f"{source} '{name}': expected <string>, got {_got(kind, value)}")
+    prop_type, value = props.type(name).name, props.get(name)
+    if prop_type != "String":
+        raise ValueError(f"{source} '{name}': expected <string>, got {_got(prop_type, value)}")
     return value
 
 
@@ -87,7 +87,7 @@ def table_parameters(doc: str | None) -> list:
     return names
 
 
-def check_all_read(props, kind: str, plugin: str, known) -> None:
+def check_all_read(props, family: str, plugin: str, known) -> None:
     """Refuse the properties a plugin did not read (a misspelled parameter), naming the nearest
     known parameter and listing them all, before Mitsuba's own, less helpful, check does."""
     import difflib
@@ -99,5 +99,5 @@ def check_all_read(props, kind: str, plugin: str, known) -> None:
     for name in unread:
         hint = difflib.get_close_matches(name, known, n=1)
         parts.append(f'"{name}"' + (f' (did you mean "{hint[0]}"?)' if hint else ""))
-    raise ValueError(f'the {kind} "{plugin}" has no parameter {", ".join(parts)}; '
+    raise ValueError(f'the {family} "{plugin}" has no parameter {", ".join(parts)}; '
                      f'its parameters: {", ".join(known)}')

@@ -7,11 +7,13 @@ import importlib
 import pkgutil
 import sys
 
+from mitsonar._moved import renamed_keyword
+
 PACKAGE = "mitsonar.plugins"
 FAMILIES = ("sensors", "bsdfs", "integrators")
 _current = None
 
-# XML plugin name -> (kind, class), as `register_plugin` registered them for the active variant
+# XML plugin name -> (family, class), as `register_plugin` registered them for the active variant
 _registered: dict = {}
 
 # The last exception raised by one of our plugins' constructors. Mitsuba turns it into a
@@ -34,10 +36,18 @@ def parameters(cls) -> list:
     return cls.parameters() if hasattr(cls, "parameters") else table_parameters(cls.__doc__)
 
 
-def register_plugin(kind: str, name: str, cls) -> None:
-    """Register ``cls`` with Mitsuba as the ``kind`` (``"sensor"``, ``"BSDF"``, ``"integrator"``)
+#: What `register_plugin` registers as: a Mitsuba plugin type (the XML element) per family
+PLUGIN_TYPES = ("sensor", "BSDF", "integrator")
+
+
+@renamed_keyword("kind", "family", "register_plugin(kind=...)")
+def register_plugin(family: str, name: str, cls) -> None:
+    """Register ``cls`` with Mitsuba as the ``family`` (``"sensor"``, ``"BSDF"``, ``"integrator"``)
     ``name``: what a plugin module calls at its end. Its constructor refuses an XML parameter the
-    class does not read (`props.check_all_read`) and keeps whatever it raised for `take_failure`."""
+    class does not read (`props.check_all_read`) and keeps whatever it raised for `take_failure`.
+    The old name of ``family``, ``kind``, still works until 0.4.0 with a DeprecationWarning."""
+    if family not in PLUGIN_TYPES:
+        raise ValueError(f"register_plugin 'family': {family!r} is not allowed (one of {', '.join(PLUGIN_TYPES)})")
     import mitsuba as mi
 
     from .props import check_all_read
@@ -48,14 +58,15 @@ def register_plugin(kind: str, name: str, cls) -> None:
         try:
             plugin = getattr(module, cls_name)   # the module's class now (a test may replace it)
             obj = plugin(props)
-            check_all_read(props, kind, name, parameters(plugin))
+            check_all_read(props, family, name, parameters(plugin))
             return obj
         except Exception as exc:
             _failures[:] = [exc]
             raise
 
-    {"sensor": mi.register_sensor, "BSDF": mi.register_bsdf, "integrator": mi.register_integrator}[kind](name, construct)
-    _registered[name] = (kind, cls)
+    {"sensor": mi.register_sensor, "BSDF": mi.register_bsdf, "integrator": mi.register_integrator}[family](name, construct)
+    _registered[name] = (family, cls)
+
 
 
 def unregister_plugin(name: str) -> None:
@@ -97,6 +108,6 @@ def register(force: bool = False) -> None:
 
 
 def registered() -> dict:
-    """``{XML name: (kind, class)}`` of the plugins registered for the active variant (after `register`)."""
+    """``{XML name: (family, class)}`` of the plugins registered for the active variant (after `register`)."""
     register()
     return dict(_registered)

@@ -104,7 +104,9 @@ PLUGIN_ROOMS = {
         "mitsonar.acoustics.profile"},
     # the helpers the families share: the sensor's water (absorption and sound speed 'auto')
     # and the water as one value (the sensor's defaults)
-    "mitsonar.plugins": {"mitsonar._checks", "mitsonar.acoustics.seawater", "mitsonar.acoustics.water"},
+    "mitsonar.plugins": {"mitsonar._checks", "mitsonar.acoustics.seawater", "mitsonar.acoustics.water",
+                         # the table of renamed public names (register_plugin's old keyword)
+                         "mitsonar._moved"},
 }
 # Which families a family's modules may import (besides the shared helpers at the package's
 # top): the integrators trace paths from the sensor over the BSDFs; the sensor and the BSDFs
@@ -142,7 +144,8 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     allowed = set().union(*PLUGIN_ROOMS.values())
     # and those import nothing of mitsonar's above them (the electronics' scene speckle, its NumPy
     # and Dr.Jit chains and the sonar equation's levels are leaves beside them)
-    leaves = {"mitsonar._checks", "mitsonar._limits", "mitsonar._compat", "mitsonar._registry", "mitsonar.receiver.speckle",
+    leaves = {"mitsonar._checks", "mitsonar._limits", "mitsonar._compat", "mitsonar._registry", "mitsonar._moved",
+              "mitsonar.receiver.speckle",
               "mitsonar.receiver.devicechain", "mitsonar.backend",
               # the sonar equation's formulas, and the Scan's typed settings and their migrations
               # (the electronics record what they applied: `ElectronicsSettings`)
@@ -157,9 +160,9 @@ def test_the_plugins_use_only_the_lowest_mitsonar_modules():
     for low in (allowed | leaves) - {"mitsonar._checks", "mitsonar.kinds"}:
         assert not {t for t in edges[low] if t.startswith("mitsonar")} - leaves, low
     # the kinds (numpy only) rotate rows with the frames' rotations, and keep their registry in the
-    # one shared with the beam patterns
+    # one shared with the beam patterns (and warn of an old name through the table of renamed ones)
     assert {t for t in edges["mitsonar.kinds"] if t.startswith("mitsonar")} == \
-        {"mitsonar.geometry.frames", "mitsonar._registry"}
+        {"mitsonar.geometry.frames", "mitsonar._registry", "mitsonar._moved"}
     assert {t for t in edges["mitsonar.receiver.speckle"] if t.startswith("mitsonar")} <= {"mitsonar.receiver.devicechain"}
     # the chain asks for the variant mitsonar would choose (`mitsonar.backend`: nothing of mitsonar)
     assert {t for t in edges["mitsonar.receiver.devicechain"] if t.startswith("mitsonar")} <= {"mitsonar.backend"}
@@ -308,14 +311,14 @@ def test_a_new_kind_is_accepted_without_editing_other_modules(tmp_path):
     import numpy as np
 
     import mitsonar
-    from mitsonar.cli.main import PLOT_KINDS, plot_kind
+    from mitsonar.cli.main import PICTURES, picture_for
     import mitsonar.kinds as kinds
 
     class Toy(kinds.SonarKind):
         name = "toy"
         row_name = "staves"
         head_overhead = 0.25
-        plot_kinds = ("ascan",)
+        pictures = ("ascan",)
 
         def ping_times(self, ping_period, pings, n_rows):
             return np.arange(n_rows) * ping_period * 2.0
@@ -334,7 +337,7 @@ def test_a_new_kind_is_accepted_without_editing_other_modules(tmp_path):
         assert s.sonar_kind.name == "toy" and s.row_name == "staves" and s.channel is None
         s.save(str(tmp_path / "toy.npz"))
         assert mitsonar.load_scan(str(tmp_path / "toy.npz")).kind == "toy"
-        assert plot_kind("toy") == "ascan" and PLOT_KINDS["toy"] == ("ascan",)
+        assert picture_for("toy") == "ascan" and PICTURES["toy"] == ("ascan",)
         assert "toy" in kinds.names()
         from mitsonar.sim.variant import ensure_variant
 

@@ -59,7 +59,7 @@ def test_render_plot_info_round_trip(tmp_path, mitsonar_mod):
     assert w > 300 and h > 300
     for kind in ("polar", "cartesian", "ascan"):
         out = tmp_path / f"{kind}.png"
-        proc = run("plot", str(exr), "-o", str(out), "--kind", kind, "--scene", BOX, "--db")
+        proc = run("plot", str(exr), "-o", str(out), "--picture", kind, "--scene", BOX, "--db")
         assert proc.returncode == 0, proc.stderr
         png_size(out)
     proc = run("info", str(exr))
@@ -77,7 +77,7 @@ def test_render_plot_info_round_trip(tmp_path, mitsonar_mod):
     (["--variant", "scalar_rgb", "render", BOX, "-o", "{tmp}/a.exr"], "variant 'scalar_rgb' is not supported"),
     (["info", "{tmp}/missing.exr"], "missing.exr"),
     (["plot", "{tmp}/garbage.exr", "-o", "{tmp}/a.png"], "garbage.exr"),
-    (["plot", "{tmp}/scan.npz", "-o", "{tmp}/a.png", "--kind", "ascan", "--ping", "999"], "--ping 999"),
+    (["plot", "{tmp}/scan.npz", "-o", "{tmp}/a.png", "--picture", "ascan", "--ping", "999"], "--ping 999"),
     # Checked before the render: outputs, options, seeds.
     (["render", BOX, "-o", "{tmp}/dir.exr"], "output '{tmp}/dir.exr' is a directory"),
     (["render", BOX, "-o", "{tmp}/a.exr", "--seed", "4294967296"], "--seed 4294967296: not allowed (a whole number from 0 to 4294967295)"),
@@ -178,20 +178,20 @@ def sidescan_npz(tmp_path_factory):
 
 
 def test_plot_of_a_sidescan_scan_is_a_waterfall_and_refuses_fans(tmp_path, sidescan_npz, capsys):
-    from mitsonar.cli.main import PLOT_KINDS, main, plot_kind
+    from mitsonar.cli.main import PICTURES, main, picture_for
 
-    assert plot_kind("sidescan") == "waterfall" and plot_kind("mechanical") == "polar"
+    assert picture_for("sidescan") == "waterfall" and picture_for("mechanical") == "polar"
     assert main(["plot", sidescan_npz, "-o", str(tmp_path / "w.png")]) == 0
     png_size(tmp_path / "w.png")
-    assert main(["plot", sidescan_npz, "-o", str(tmp_path / "a.png"), "--kind", "ascan", "--ping", "300"]) == 0
+    assert main(["plot", sidescan_npz, "-o", str(tmp_path / "a.png"), "--picture", "ascan", "--ping", "300"]) == 0
     capsys.readouterr()
     for kind in ("polar", "cartesian"):   # every row on bearing 0, or a bow-tie: refused in one line
-        assert main(["plot", sidescan_npz, "-o", str(tmp_path / f"{kind}.png"), "--kind", kind]) == 1
+        assert main(["plot", sidescan_npz, "-o", str(tmp_path / f"{kind}.png"), "--picture", kind]) == 1
         err = capsys.readouterr().err.strip()
-        assert err == (f"mitsonar: error: --kind {kind}: not for a sidescan scan "
+        assert err == (f"mitsonar: error: --picture {kind}: not for a sidescan scan "
                        f"(allowed for sidescan: waterfall, ascan)")
         assert not (tmp_path / f"{kind}.png").exists()
-    assert PLOT_KINDS["mechanical"] == ("polar", "cartesian", "ascan")
+    assert PICTURES["mechanical"] == ("polar", "cartesian", "ascan")
 
 
 def test_sidescan_titles_count_pings_per_side(sidescan_npz):
@@ -281,7 +281,7 @@ def test_an_existing_output_is_refused_and_force_overwrites_it(tmp_path, mitsona
 
 @pytest.mark.parametrize("args, code", [
     (["render", BOX], 2),                                    # argparse: -o missing
-    (["plot", "x.npz", "-o", "x.png", "--kind", "fan"], 2),  # argparse: not a choice
+    (["plot", "x.npz", "-o", "x.png", "--picture", "fan"], 2),  # argparse: not a choice
     (["render", BOX, "-o", "{tmp}/a.npz", "--spp", "0"], 1),  # validation
     (["map", BOX, "-o", "{tmp}/m.npz", "--inducing", "0"], 1),
     (["map", BOX, "-o", "{tmp}/m.txt"], 1),

@@ -79,7 +79,7 @@ def test_flat_and_concave_mirrors_keep_the_tangent_plane(mitsonar_mod):
 
 
 def test_the_kernel_solves_only_where_a_curved_mirror_is(mitsonar_mod, monkeypatch):
-    """`guide_kind`: the planar scenes keep the planar kernel (no extra cost), a mirror-like sphere
+    """`scene_guide`: the planar scenes keep the planar kernel (no extra cost), a mirror-like sphere
     or cylinder asks for the curved one when the curved guide is on, a scene without mirrors for
     none. (With the strip guide, on by default, pile_quay's kernel is a `image_guide.Guide`:
     tests/test_strip_guide.py.)"""
@@ -89,18 +89,18 @@ def test_the_kernel_solves_only_where_a_curved_mirror_is(mitsonar_mod, monkeypat
     scenes = {name: load(mitsonar_mod, name) for name in names}
     monkeypatch.setattr(image_guide, "STRIP_GUIDE", False)
     monkeypatch.setattr(image_guide, "CURVED_GUIDE", True)
-    assert {n: image_guide.guide_kind(s) for n, s in scenes.items()} == {
+    assert {n: image_guide.scene_guide(s) for n, s in scenes.items()} == {
         "hidden_target": True, "periscope": True, "tank_target": "curved", "hull_target": "curved",
         "pile_quay": "curved", "box": False}
     monkeypatch.setattr(image_guide, "CURVED_GUIDE", False)
-    assert {n: image_guide.guide_kind(s) for n, s in scenes.items()} == {
+    assert {n: image_guide.scene_guide(s) for n, s in scenes.items()} == {
         "hidden_target": True, "periscope": True, "tank_target": True, "hull_target": True, "pile_quay": True,
         "box": False}
     monkeypatch.setattr(image_guide, "STRIP_GUIDE", True)
-    assert image_guide.guide_kind(scenes["pile_quay"]) == image_guide.Guide(False, image_guide.guide_kind(
+    assert image_guide.scene_guide(scenes["pile_quay"]) == image_guide.Guide(False, image_guide.scene_guide(
         scenes["pile_quay"]).mirrors)
     monkeypatch.setattr(image_guide, "CURVED_GUIDE", True)
-    assert image_guide.is_curved(image_guide.guide_kind(scenes["pile_quay"]))
+    assert image_guide.is_curved(image_guide.scene_guide(scenes["pile_quay"]))
 
 
 @pytest.mark.parametrize("name, spp", [("tank_target", 2048), ("hull_target", 2048), ("pile_quay", 1024)])

@@ -65,3 +65,100 @@ def test_an_unknown_attribute_is_still_an_error():
 
     with pytest.raises(AttributeError, match="no attribute 'nothing_here'"):
         mitsonar.nothing_here
+
+
+# ---- renamed names (issue 57 item 4: ``kind`` is the sonar kind only) ---------------------------
+# Each row of mitsonar._moved.RENAMED keeps working under its old name, warning with the new one.
+
+def test_every_renamed_name_is_tested_here():
+    from mitsonar._moved import RENAMED
+
+    assert set(RENAMED) == set(RENAMED_TESTS)
+
+
+def _pulse_kind():
+    from mitsonar.signals import cw
+
+    with pytest.warns(DeprecationWarning, match=r"Pulse\.kind is now Pulse\.waveform; .* 0\.4\.0"):
+        assert cw(1e5, 1e-4).kind == "cw"
+
+
+def _pulse_kind_keyword():
+    from mitsonar.signals import Pulse, lfm
+
+    with pytest.warns(DeprecationWarning, match=r"Pulse\(kind=\.\.\.\) is now Pulse\(waveform=\.\.\.\)"):
+        old = Pulse(kind="lfm", f_start=1e5, f_stop=1.2e5, duration=1e-3)
+    assert old == lfm(1e5, 1.2e5, 1e-3) and old.waveform == "lfm"
+    with pytest.raises(TypeError, match="both 'waveform' and its old name 'kind'"):
+        Pulse(kind="cw", waveform="cw", f_start=1e5, f_stop=1e5, duration=1e-3)
+
+
+def _plot_kinds():
+    import mitsonar.kinds as kinds
+
+    with pytest.warns(DeprecationWarning, match=r"SonarKind\.plot_kinds is now SonarKind\.pictures"):
+        assert kinds.SIDESCAN.plot_kinds == ("waterfall", "ascan")
+    with pytest.warns(DeprecationWarning, match=r"SonarKind\.plot_kinds is now SonarKind\.pictures"):
+        class Old(kinds.Mechanical):      # a kind written with the old name
+            name = "old_toy"
+            plot_kinds = ("ascan",)
+    assert Old().pictures == ("ascan",) and "plot_kinds" not in Old.__dict__
+
+
+def _register_plugin_kind():
+    import inspect
+
+    from mitsonar.plugins.registry import register_plugin
+
+    target = inspect.unwrap(register_plugin)
+    assert list(inspect.signature(target).parameters)[0] == "family"
+    with pytest.warns(DeprecationWarning, match=r"register_plugin\(kind=\.\.\.\) is now register_plugin\(family=\.\.\.\)"):
+        with pytest.raises(ValueError, match="register_plugin 'family': 'nothing' is not allowed"):
+            register_plugin(kind="nothing", name="toy", cls=object)   # reached the body as the family
+
+
+def _rawlog_write_kind():
+    import tempfile
+
+    from mitsonar.devices.rawlog import RX, RawLogWriter, read_log
+
+    with tempfile.TemporaryDirectory() as d:
+        path = f"{d}/x.log"
+        with RawLogWriter(path) as w:
+            with pytest.warns(DeprecationWarning, match=r"RawLogWriter\.write\(kind=\.\.\.\) is now "
+                                                        r"RawLogWriter\.write\(record_type=\.\.\.\)"):
+                w.write(kind=RX, data=b"\x40abc")
+            w.write(record_type=RX, data=b"\x40def")
+        assert [(k, d) for _, k, d in read_log(path)[1]] == [(RX, b"\x40abc"), (RX, b"\x40def")]
+
+
+def _cli_kind_flag():
+    import contextlib
+    import io
+
+    from mitsonar.cli.main import build_parser, old_picture_flag
+
+    args = build_parser().parse_args(["plot", "x.npz", "-o", "x.png", "--kind", "ascan"])
+    err = io.StringIO()
+    with pytest.warns(DeprecationWarning, match=r"--kind is now --picture; the old name is removed in mitsonar 0\.4\.0"):
+        with contextlib.redirect_stderr(err):
+            old_picture_flag(args)
+    assert args.picture == "ascan"
+    args = build_parser().parse_args(["plot", "x.npz", "-o", "x.png", "--kind", "ascan", "--picture", "polar"])
+    with pytest.warns(DeprecationWarning), pytest.raises(Exception, match="--kind ascan: the old name of --picture"):
+        old_picture_flag(args)
+
+
+RENAMED_TESTS = {
+    "Pulse.kind": _pulse_kind,
+    "Pulse(kind=...)": _pulse_kind_keyword,
+    "SonarKind.plot_kinds": _plot_kinds,
+    "register_plugin(kind=...)": _register_plugin_kind,
+    "RawLogWriter.write(kind=...)": _rawlog_write_kind,
+    "mitsonar render/plot --kind": _cli_kind_flag,
+}
+
+
+@pytest.mark.parametrize("old", sorted(RENAMED_TESTS))
+def test_an_old_name_still_works_with_a_warning_naming_the_new_one(old):
+    RENAMED_TESTS[old]()

@@ -548,7 +548,7 @@ def test_read_log_header_only_and_empty_files(tmp_path):
 def test_raw_log_writer_only_writes_kinds_the_reader_knows(tmp_path):
     from mitsonar.devices.rawlog import RawLogWriter
     with RawLogWriter(tmp_path / "x.bin") as w:
-        with pytest.raises(ValueError, match=r"kind must be RX \(0\), TX \(1\) or POSE \(2\), got 7"):
+        with pytest.raises(ValueError, match=r"record_type must be RX \(0\), TX \(1\) or POSE \(2\), got 7"):
             w.write(7, b"abc")
 
 

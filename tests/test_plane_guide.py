@@ -62,16 +62,16 @@ def test_which_scenes_get_planes():
     np.testing.assert_allclose(centre, (10.0, 0.0, -0.5), atol=1e-5)
     np.testing.assert_allclose(normal, (-1.0, 0.0, 0.0), atol=1e-6)   # facing the head
     assert 20.0 < n < 30.0
-    assert image_guide.guide_kind(quay).planes == planes
+    assert image_guide.scene_guide(quay).planes == planes
     # a box of glossy concrete rectangles only: nothing to gain (the wall's own lobe finds the way)
     box = mi.load_dict({"type": "scene", "wall": {"type": "rectangle", "bsdf": {"type": "acoustic", "preset": "concrete_good"}},
                         "floor": {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate([0, 0, -3]),
                                   "bsdf": {"type": "acoustic", "preset": "concrete_good"}}})
     assert plane_guide.scene_planes(box, image_guide.lobe_exponent) == ()
     # the bundled box's rectangles are merged into one mesh: the unguided kernel, as before
-    assert image_guide.guide_kind(mitsonar.load_scene(os.path.join(SCENES, "box.xml"))) is False
+    assert image_guide.scene_guide(mitsonar.load_scene(os.path.join(SCENES, "box.xml"))) is False
     # a scene with mirrors keeps its chain guide, without planes
-    hidden = image_guide.guide_kind(mitsonar.load_scene(os.path.join(SCENES, "hidden_target.xml")))
+    hidden = image_guide.scene_guide(mitsonar.load_scene(os.path.join(SCENES, "hidden_target.xml")))
     assert not getattr(hidden, "planes", ())
 
 

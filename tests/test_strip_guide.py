@@ -41,7 +41,7 @@ def test_the_curved_mirrors_are_read_from_the_scene(mitsonar_mod):
                                                              image_guide.lobe_exponent)
     assert np.allclose(centre, (4, 3, -3)) and np.allclose(axis, (0, 0, 1)) and math.isclose(radius, 0.3, rel_tol=1e-6)
     assert math.isclose(n, image_guide.lobe_exponent(load(mitsonar_mod, "pile_quay").shapes()[0].bsdf()))
-    kinds = {name: image_guide.guide_kind(load(mitsonar_mod, name))
+    kinds = {name: image_guide.scene_guide(load(mitsonar_mod, name))
              for name in ("pile_quay", "tank_target", "hull_target", "hidden_target", "box")}
     assert isinstance(kinds.pop("pile_quay"), image_guide.Guide)
     assert kinds == {"tank_target": True, "hull_target": True, "hidden_target": True, "box": False}

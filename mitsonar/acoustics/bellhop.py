@@ -158,9 +158,9 @@ def read_shd(path):
         data = f.read()
     recl = struct.unpack_from("<i", data, 0)[0]
     rec = 4 * recl
-    kind = data[rec:rec + 10].decode("ascii", "replace").strip()
-    if kind != "rectilin":
-        raise ProfileError(f"{path}: not a Bellhop shade file of a rectilinear grid ({kind!r})")
+    grid_type = data[rec:rec + 10].decode("ascii", "replace").strip()
+    if grid_type != "rectilin":
+        raise ProfileError(f"{path}: not a Bellhop shade file of a rectilinear grid ({grid_type!r})")
     nfreq, ntheta, nsx, nsy, nsd, nrd, nrr, _ = struct.unpack_from("<7if", data, 2 * rec)
     if nfreq != 1 or ntheta != 1 or nsd != 1:
         raise ProfileError(f"{path}: {nsd} sources, {nfreq} frequencies; read_shd reads one of each")

@@ -95,37 +95,38 @@ def _render(scene_path, spp, seed, max_depth=None, electronics=None, quiet=False
 
 
 #: The pictures that make sense for each sonar kind; the first is the default (a live view of the
-#: kinds' ``plot_kinds``, `mitsonar.kinds`).
-PLOT_KINDS = kinds.by_name("plot_kinds")
-ALL_PLOT_KINDS = ("polar", "cartesian", "ascan", "waterfall")
+#: kinds' ``pictures``, `mitsonar.kinds`).
+PICTURES = kinds.by_name("pictures")
+ALL_PICTURES = ("polar", "cartesian", "ascan", "waterfall")
 
 
-def plot_kind(sonar_kind, kind=None):
-    """The picture kind for a scan of ``sonar_kind``: ``kind``, or the kind's default (polar, or
-    waterfall for a side-scan); one line naming the allowed kinds for a kind that means nothing for
+def picture_for(sonar_kind, picture=None):
+    """The picture for a scan of ``sonar_kind``: ``picture``, or the kind's default (polar, or
+    waterfall for a side-scan); one line naming the allowed pictures for one that means nothing for
     it (a side-scan's rows are not bearings: no polar or cartesian fan)."""
     known = kinds.lookup(sonar_kind)
-    allowed = ALL_PLOT_KINDS[:3] if known is None else known.plot_kinds
-    if kind is None:
+    allowed = ALL_PICTURES[:3] if known is None else known.pictures
+    if picture is None:
         return allowed[0]
-    if kind not in allowed:
-        raise CLIError(f"--kind {kind}: not for a {sonar_kind} scan (allowed for {sonar_kind}: {', '.join(allowed)})")
-    return kind
+    if picture not in allowed:
+        raise CLIError(f"--picture {picture}: not for a {sonar_kind} scan (allowed for {sonar_kind}: "
+                       f"{', '.join(allowed)})")
+    return picture
 
 
-def _plot(scan, path, kind=None, ping=0, db=False, use="data", mesh=None):
+def _plot(scan, path, picture=None, ping=0, db=False, use="data", mesh=None):
     from mitsonar.products import plots
 
-    kind = plot_kind(scan.kind, kind)
-    if kind == "polar":
+    picture = picture_for(scan.kind, picture)
+    if picture == "polar":
         plots.plot_polar(scan, path, db=db, use=use)
-    elif kind == "cartesian":
+    elif picture == "cartesian":
         plots.plot_cartesian(scan, mesh=mesh, path=path, db=db, use=use)
-    elif kind == "waterfall":
+    elif picture == "waterfall":
         from mitsonar.products.sidescan_plots import plot_waterfall
 
         plot_waterfall(scan, path, use="intensity" if db else use)
-    elif kind == "ascan":
+    elif picture == "ascan":
         if not 0 <= ping < scan.n_pings:
             raise CLIError(f"--ping {ping} is outside 0..{scan.n_pings - 1}")
         plots.plot_ascan(scan, ping, path, db=db)
@@ -152,6 +153,7 @@ def make_output_folder(path, option="-o"):
 def cmd_render(args):
     from mitsonar.cli.common import check_counts
 
+    old_picture_flag(args)
     _check_output(args.output, (".exr", ".npz"))
     if args.plot:
         _check_output(args.plot, (".png", ".pdf", ".svg"))
@@ -165,13 +167,13 @@ def cmd_render(args):
             Electronics.from_dict(settings, source="--set")
         except ValueError as exc:
             raise CLIError(str(exc)) from None
-    kind = args.kind
+    picture = args.picture
 
-    def before_render(sonar):       # the picture's kind, checked against the head's
-        nonlocal kind
+    def before_render(sonar):       # the picture, checked against the head's kind
+        nonlocal picture
         if args.plot:
-            kind = plot_kind(sonar.kind, kind)
-        return bool(args.plot) and kind == "cartesian"
+            picture = picture_for(sonar.kind, picture)
+        return bool(args.plot) and picture == "cartesian"
 
     _, scan, mesh = _render(args.scene, args.spp, args.seed, args.max_depth, settings, args.quiet,
                             mesh=before_render, sensor=args.sensor)
@@ -180,7 +182,7 @@ def cmd_render(args):
 
     print(f"wrote {args.output} ({rows_text(scan)} x {scan.n_bins} bins)")
     if args.plot:
-        _plot(scan, args.plot, kind, db=args.db, mesh=mesh)
+        _plot(scan, args.plot, picture, db=args.db, mesh=mesh)
         print(f"wrote {args.plot}")
     return 0
 
@@ -188,13 +190,14 @@ def cmd_render(args):
 def cmd_plot(args):
     import mitsonar
 
+    old_picture_flag(args)
     _check_output(args.output, (".png", ".pdf", ".svg"))
     scan = mitsonar.load_scan(args.scan)
-    plot_kind(scan.kind, args.kind)      # before the scene's mesh is made
+    picture_for(scan.kind, args.picture)      # before the scene's mesh is made
     mesh = None
     if args.scene:
         mesh = mitsonar.scene_mesh(mitsonar.load_scene(args.scene))
-    _plot(scan, args.output, args.kind, args.ping, args.db, args.use, mesh)
+    _plot(scan, args.output, args.picture, args.ping, args.db, args.use, mesh)
     print(f"wrote {args.output}")
     return 0
 
@@ -285,8 +288,30 @@ def cmd_demo(args):
 
 
 # ----------------------------------------------------------------------------- parser
-KIND_HELP = ("picture kind: polar (default), cartesian or ascan for a mechanical or multibeam scan; "
-             "waterfall (default) or ascan for a side-scan scan")
+PICTURE_HELP = ("the picture: polar (default), cartesian or ascan for a mechanical or multibeam scan; "
+                "waterfall (default) or ascan for a side-scan scan")
+
+
+def add_picture(parser):
+    """``--picture``, and its old name ``--kind`` (hidden; `old_picture_flag` warns until 0.4.0)."""
+    parser.add_argument("--picture", choices=ALL_PICTURES, help=PICTURE_HELP)
+    parser.add_argument("--kind", dest="old_picture", choices=ALL_PICTURES, help=argparse.SUPPRESS)
+
+
+def old_picture_flag(args):
+    """``--kind`` (the old name of ``--picture``): a warning naming the new flag, its value taken."""
+    if getattr(args, "old_picture", None) is None:
+        return
+    import warnings
+
+    from mitsonar._moved import warn_renamed
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", DeprecationWarning)   # the user sees it (a console script)
+        warn_renamed("mitsonar render/plot --kind")
+    if args.picture is not None and args.picture != args.old_picture:
+        raise CLIError(f"--kind {args.old_picture}: the old name of --picture, which says {args.picture}")
+    args.picture = args.old_picture
 
 
 def build_parser():
@@ -312,7 +337,7 @@ def build_parser():
     r.add_argument("--set", action="append", metavar="NAME=VALUE",
                    help="override an electronics setting, e.g. --set gain=30 (repeatable)")
     add_output(r, "--plot", help="also write a picture (.png/.pdf/.svg)")
-    r.add_argument("--kind", choices=ALL_PLOT_KINDS, help=KIND_HELP)
+    add_picture(r)
     r.add_argument("--db", action="store_true", help="plot in dB")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     add_force(r)
@@ -321,7 +346,7 @@ def build_parser():
     pl = sub.add_parser("plot", help="draw a scan file", description="Draw a scan as a sonar display.")
     pl.add_argument("scan", help="scan file (.exr or .npz)")
     add_output(pl, "-o", "--output", required=True, help="picture to write (.png/.pdf/.svg)")
-    pl.add_argument("--kind", choices=ALL_PLOT_KINDS, help=KIND_HELP)
+    add_picture(pl)
     pl.add_argument("--ping", type=int, default=0, help="ping of the A-scan")
     pl.add_argument("--use", default="data", choices=("data", "intensity"))
     pl.add_argument("--db", action="store_true", help="dB scale")

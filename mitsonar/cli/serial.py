@@ -47,14 +47,14 @@ def _guard(name: str, fn, args) -> int:
         return 1
 
 
-def _positive(kind):
+def _positive(number_type):
     def conv(text):
         try:
-            v = kind(text)
+            v = number_type(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a positive {kind.__name__}, got {text!r}") from None
+            raise argparse.ArgumentTypeError(f"expected a positive {number_type.__name__}, got {text!r}") from None
         if v <= 0:
-            raise argparse.ArgumentTypeError(f"expected a positive {kind.__name__}, got {text!r}")
+            raise argparse.ArgumentTypeError(f"expected a positive {number_type.__name__}, got {text!r}")
         return v
     return conv
 

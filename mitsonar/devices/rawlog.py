@@ -12,7 +12,7 @@ Format (little-endian)::
                       head: "ping360" for a Blue Robotics Ping360 (then settings holds
                       Ping360Settings fields), absent for a SeaNet head
     records       d   time since the start, s
-                  B   kind: 0 bytes received from the head, 1 bytes sent to it,
+                  B   record type: 0 bytes received from the head, 1 bytes sent to it,
                       2 head pose (16 float64, row-major 4x4)
                   I   m, payload length
                   m   payload
@@ -34,6 +34,8 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+
+from mitsonar._moved import renamed_keyword
 
 __all__ = ["RawLogWriter", "read_log", "part_name", "LOG_MAGIC", "LogDamageWarning", "RX", "TX", "POSE"]
 
@@ -84,17 +86,21 @@ class RawLogWriter:
         self.bytes_rx = 0
         self.bytes_tx = 0
 
-    def write(self, kind: int, data: bytes) -> None:
-        if kind not in (RX, TX, POSE):
+    @renamed_keyword("kind", "record_type", "RawLogWriter.write(kind=...)")
+    def write(self, record_type: int, data: bytes) -> None:
+        """Append one record of ``record_type`` (`RX`, `TX` or `POSE`; the old keyword ``kind``
+        works until 0.4.0 with a DeprecationWarning) holding ``data``."""
+        if record_type not in (RX, TX, POSE):
             # read_log finds its way through damage by what the writer can write.
-            raise ValueError(f"RawLogWriter.write: kind must be RX (0), TX (1) or POSE (2), got {kind!r}")
+            raise ValueError(f"RawLogWriter.write: record_type must be RX (0), TX (1) or POSE (2), "
+                             f"got {record_type!r}")
         if self._f is None or not data:
             return
         t = time.monotonic() - self._m0
-        self._f.write(_LOG_RECORD.pack(t, kind, len(data)) + bytes(data))
-        if kind == RX:
+        self._f.write(_LOG_RECORD.pack(t, record_type, len(data)) + bytes(data))
+        if record_type == RX:
             self.bytes_rx += len(data)
-        elif kind == TX:
+        elif record_type == TX:
             self.bytes_tx += len(data)
 
     def rx(self, data: bytes) -> None:
@@ -132,22 +138,22 @@ class RawLogWriter:
 
 
 def _record_at(raw: bytes, pos: int, t_prev: float, strict: bool = False):
-    """``(t, kind, m)`` if a record header that `RawLogWriter` could have written starts at
+    """``(t, record_type, m)`` if a record header that `RawLogWriter` could have written starts at
     ``pos`` (``m`` may run past the end of the file), else None. ``strict`` for offsets not
     known to start a record (after damage), where bytes of the serial stream can look like a
     header: a time stamp within an hour of the last good record's."""
     if pos + _LOG_RECORD.size > len(raw):
         return None
-    t, kind, m = _LOG_RECORD.unpack_from(raw, pos)
+    t, record_type, m = _LOG_RECORD.unpack_from(raw, pos)
     # The writer stamps records with a monotonic clock, never writes an empty record, and a
     # pose is 16 float64. A little slack on the time: the pose may be set from another thread.
-    if kind not in (RX, TX, POSE) or m == 0 or (kind == POSE and m != 128):
+    if record_type not in (RX, TX, POSE) or m == 0 or (record_type == POSE and m != 128):
         return None
     if not (math.isfinite(t) and t >= 0.0 and t >= t_prev - 1.0):
         return None
     if strict and not 1e-9 <= t <= t_prev + 3600.0:
         return None
-    return t, kind, m
+    return t, record_type, m
 
 
 def _chain_at(raw: bytes, pos: int, t_prev: float, depth: int, strict: bool = False) -> bool:
@@ -176,7 +182,7 @@ def _resync(raw: bytes, pos: int, t_prev: float) -> int | None:
     block = 1 << 16
     for lo in range(pos, last + 1, block):
         hi = min(lo + block, last + 1)
-        # A kind byte and a nonzero length rule out most offsets before the slower checks.
+        # A record-type byte and a nonzero length rule out most offsets before the slower checks.
         ok = (b[lo + 8:hi + 8] <= POSE) & ((b[lo + 9:hi + 9] | b[lo + 10:hi + 10]
                                             | b[lo + 11:hi + 11] | b[lo + 12:hi + 12]) != 0)
         for q in np.flatnonzero(ok) + lo:

@@ -164,14 +164,14 @@ def assemble_log(path, meta: dict, records: list, asm, rx, tx, is_command, usabl
                     s.meta.log = str(path)
                     scans.append(s)
 
-    for t, kind, data in records:
-        if kind == TX:
+    for t, record_type, data in records:
+        if record_type == TX:
             for m in tx.feed(data):
                 if is_command(m):
                     command = m
-        elif kind == POSE and not fixed_pose and len(data) == 128:
+        elif record_type == POSE and not fixed_pose and len(data) == 128:
             T = np.frombuffer(data, dtype="<f8").reshape(4, 4).copy()
-        elif kind == RX:
+        elif record_type == RX:
             take(rx.feed(data), t)
     take(rx.flush(), records[-1][0] if records else 0.0)
     tx.flush()

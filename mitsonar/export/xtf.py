@@ -260,8 +260,8 @@ def _frequency_khz(scan):
 
 def _file_header(scan, filename, sonar_name, frame) -> bytes:
     chans = b""
-    for i, (kind, name) in enumerate(((PORT_TYPE, b"port"), (STARBOARD_TYPE, b"starboard"))):
-        chans += _pack(CHANINFO, TypeOfChannel=kind, SubChannelNumber=i, CorrectionFlags=1, UniPolar=1,
+    for i, (channel_type, name) in enumerate(((PORT_TYPE, b"port"), (STARBOARD_TYPE, b"starboard"))):
+        chans += _pack(CHANINFO, TypeOfChannel=channel_type, SubChannelNumber=i, CorrectionFlags=1, UniPolar=1,
                        BytesPerSample=scan.data.dtype.itemsize, Reserved=scan.n_bins, ChannelName=name,
                        Frequency=_frequency_khz(scan), HorizBeamAngle=float(scan.beamwidth_v),
                        TiltAngle=float(scan.meta.depression or 0.0), BeamWidth=float(scan.beamwidth_h),

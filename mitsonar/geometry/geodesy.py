@@ -134,8 +134,8 @@ def check_crs(crs, where="--crs", origin=None):
     except pyproj.exceptions.CRSError:
         raise GeoError(f"{where} {crs}: unknown EPSG code ({CRS_ALLOWED})") from None
     if not obj.is_projected:
-        kind = "geographic" if obj.is_geographic else "not projected"
-        raise GeoError(f"{where} {crs}: {obj.name} is {kind}, without a projection to a grid in metres "
+        crs_type = "geographic" if obj.is_geographic else "not projected"
+        raise GeoError(f"{where} {crs}: {obj.name} is {crs_type}, without a projection to a grid in metres "
                        f"({CRS_ALLOWED})")
     units = sorted({a.unit_name for a in obj.axis_info if a.unit_name != "metre"})
     if units:

@@ -128,8 +128,8 @@ def _read_nmea(path, height):
                 if check[:2].upper() != f"{total:02X}":
                     raise GeoError(f"{path}: line {i}: checksum {check[:2]!r} is wrong (the sentence's is {total:02X})")
             fields = body.split(",")
-            kind = fields[0][2:]
-            if kind == "GGA" and len(fields) > 9 and fields[2] and fields[4]:
+            sentence = fields[0][2:]
+            if sentence == "GGA" and len(fields) > 9 and fields[2] and fields[4]:
                 hh, mm, ss = int(fields[1][0:2]), int(fields[1][2:4]), float(fields[1][4:])
                 tod = 3600 * hh + 60 * mm + ss
                 if t and tod + day < t[-1]:
@@ -140,6 +140,6 @@ def _read_nmea(path, height):
                 check_origin((lat[-1], lon[-1]), f"{path}: line {i}: lat lon")
                 z.append((float(fields[9]) if fields[9] else height) - height)
                 heading.append(math.nan)
-            elif kind == "VTG" and len(fields) > 1 and fields[1] and heading:
+            elif sentence == "VTG" and len(fields) > 1 and fields[1] and heading:
                 heading[-1] = float(fields[1])
     return np.array(t), np.array(lat), np.array(lon), np.array(z), np.array(heading, np.float64)

@@ -96,12 +96,12 @@ class MavlinkReceiver(PoseSource):
 
     def handle(self, m, arrival: float) -> bool:
         """Take one decoded message; True when it added a pose."""
-        kind = m.get_type()
+        msg_type = m.get_type()
         try:        # each message's numbers checked as a pose's (`check_pose`), the other part neutral
-            if kind == "LOCAL_POSITION_NED":
+            if msg_type == "LOCAL_POSITION_NED":
                 self._position, _, _ = check_pose([m.x, m.y, m.z], [0, 0, 0, 1], bounds=None,
                                                   names=("LOCAL_POSITION_NED x, y, z", "", ""))
-            elif kind == "ATTITUDE_QUATERNION":
+            elif msg_type == "ATTITUDE_QUATERNION":
                 self._attitude = check_pose([0, 0, 0], [m.q1, m.q2, m.q3, m.q4], bounds=None,
                                             names=("", "ATTITUDE_QUATERNION q1..q4", ""))[1]
             else:
@@ -109,7 +109,7 @@ class MavlinkReceiver(PoseSource):
         except DatagramError as e:
             self.drop(e, arrival)
             return False
-        self.stats[kind] += 1
+        self.stats[msg_type] += 1
         if self._position is None or self._attitude is None:
             return False
         p, q = ned_to_enu(self._position, self._attitude)

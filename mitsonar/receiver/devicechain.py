@@ -170,9 +170,9 @@ def _spread(x_all, kernel, base, col, n_bins):
     import mitsuba as mi
 
     kernel = np.asarray(kernel, dtype=np.float64)
-    kind = type(x_all)   # read as stored (a cast of mapped host memory would compile for its alignment)
+    array_type = type(x_all)   # read as stored (a cast of mapped host memory would compile for its alignment)
     if kernel.size == 1:
-        return mi.Float64(dr.gather(kind, x_all, base + mi.UInt32(col))) * float(kernel[0])
+        return mi.Float64(dr.gather(array_type, x_all, base + mi.UInt32(col))) * float(kernel[0])
     m = (kernel.size - 1) // 2
     x = mi.Float64(0.0)
     for j, w in enumerate(kernel):
@@ -181,7 +181,7 @@ def _spread(x_all, kernel, base, col, n_bins):
             continue
         src = col - shift
         ok = (src >= 0) & (src < n_bins)
-        v = mi.Float64(dr.gather(kind, x_all, base + mi.UInt32(dr.maximum(src, 0)), ok))
+        v = mi.Float64(dr.gather(array_type, x_all, base + mi.UInt32(dr.maximum(src, 0)), ok))
         x = dr.select(ok, x + float(w) * v, x)
     return x
 

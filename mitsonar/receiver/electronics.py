@@ -190,15 +190,15 @@ class Electronics:
         types = {"float": float, "int": int, "str": str}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            kind = types[f.type if isinstance(f.type, str) else f.type.__name__]
-            if kind is str:
+            field_type = types[f.type if isinstance(f.type, str) else f.type.__name__]
+            if field_type is str:
                 if not isinstance(value, str):
                     bad(f.name, value, "a string")
                 continue
             # XML and JSON hand over ints for floats and floats for ints; accept lossless ones.
             if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
                 bad(f.name, value, "a number")
-            if kind is int:
+            if field_type is int:
                 if not (math.isfinite(value) and float(value).is_integer()):
                     bad(f.name, value, "an integer")
                 value = int(value)

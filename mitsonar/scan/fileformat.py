@@ -287,13 +287,13 @@ def _build(path: str, head: dict[str, Any], intensity, data, arrays: dict[str, A
                             f"{n_pings} pings x {n_bins} bins")
     if intensity.dtype != np.float32:
         raise ScanFileError(f"{path}: channel 'intensity' is {intensity.dtype}, expected float32")
-    kind = head.get("data_type", "uint8")
-    if kind not in DATA_TYPES:
-        raise ScanFileError(f"{path}: header 'data_type': {kind!r} is not allowed (one of {', '.join(DATA_TYPES)})")
-    top = np.iinfo(kind).max
+    data_type = head.get("data_type", "uint8")
+    if data_type not in DATA_TYPES:
+        raise ScanFileError(f"{path}: header 'data_type': {data_type!r} is not allowed (one of {', '.join(DATA_TYPES)})")
+    top = np.iinfo(data_type).max
     if data.dtype.kind not in "ui" or (data.size and (data.min() < 0 or data.max() > top)):
-        raise ScanFileError(f"{path}: channel 'data' does not hold {kind} values 0..{top}")
-    data = data.astype(kind)
+        raise ScanFileError(f"{path}: channel 'data' does not hold {data_type} values 0..{top}")
+    data = data.astype(data_type)
     if _checksums(intensity, data) != checks:
         raise ScanFileError(f"{path}: pixel data do not match their checksums (corrupt file)")
     return dict(intensity=intensity, data=data, electronics=electronics, meta=meta, **arrays, **scalars), stored_as

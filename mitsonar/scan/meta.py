@@ -33,8 +33,8 @@ import numpy as np
 #: Old names still read (with a DeprecationWarning) and renamed when a file or dict is loaded.
 RENAMED = {"time_start": "start_time", "time_end": "end_time"}
 
-# What each kind of field allows, as said in the refusal.
-_KINDS = {
+# What each type of field allows, as said in the refusal.
+_FIELD_TYPES = {
     "number": "a finite number",
     "real": "a number, not NaN",
     "int": "a whole number",
@@ -57,28 +57,28 @@ class ScanFieldError(ValueError):
         return type(self), (self.field, self.reason)
 
 
-def _f(kind: str, doc: str, *, positive: bool = False):
-    """A field of `ScanMeta`: absent (None) by default; ``kind`` one of `_KINDS`; ``doc`` its
-    meaning and unit (shown in a refusal)."""
-    return field(default=None, metadata={"kind": kind, "doc": doc, "positive": positive})
+def _f(field_type: str, doc: str, *, positive: bool = False):
+    """A field of `ScanMeta`: absent (None) by default; ``field_type`` one of `_FIELD_TYPES`; ``doc``
+    its meaning and unit (shown in a refusal)."""
+    return field(default=None, metadata={"field_type": field_type, "doc": doc, "positive": positive})
 
 
-def _ok(kind: str, value, positive: bool) -> bool:
-    if kind in ("real", "whole"):
+def _ok(field_type: str, value, positive: bool) -> bool:
+    if field_type in ("real", "whole"):
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.integer, np.floating)):
             return False
-        return not math.isnan(value) and (kind == "real" or (math.isfinite(value) and float(value).is_integer()))
-    if kind in ("number", "int"):
+        return not math.isnan(value) and (field_type == "real" or (math.isfinite(value) and float(value).is_integer()))
+    if field_type in ("number", "int"):
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.integer, np.floating)):
             return False
-        if kind == "int" and not isinstance(value, (numbers.Integral, np.integer)):
+        if field_type == "int" and not isinstance(value, (numbers.Integral, np.integer)):
             return False
         return math.isfinite(value) and (not positive or value > 0)
-    if kind == "str":
+    if field_type == "str":
         return isinstance(value, str)
-    if kind == "bool":
+    if field_type == "bool":
         return isinstance(value, (bool, np.bool_))
-    if kind == "list":
+    if field_type == "list":
         return isinstance(value, (list, tuple, np.ndarray))
     return isinstance(value, dict)
 
@@ -98,7 +98,7 @@ class TypedRecord(MutableMapping):
     def _spec(cls) -> dict:
         spec = cls.__dict__.get("_SPEC_CACHE")
         if spec is None:
-            spec = {f.name: (f.metadata["kind"], f.metadata["doc"], f.metadata["positive"])
+            spec = {f.name: (f.metadata["field_type"], f.metadata["doc"], f.metadata["positive"])
                     for f in fields(cls) if f.name != "extra"}
             cls._SPEC_CACHE = spec
         return spec
@@ -110,10 +110,10 @@ class TypedRecord(MutableMapping):
     def _check(self, name: str, value) -> None:
         if value is None:
             return
-        kind, doc, positive = self._spec()[name]
-        if not _ok(kind, value, positive):
+        field_type, doc, positive = self._spec()[name]
+        if not _ok(field_type, value, positive):
             shown = value.item() if isinstance(value, np.generic) else value
-            raise ScanFieldError(self.WHERE, f"'{name}': {shown!r} is not allowed ({_KINDS[kind]}"
+            raise ScanFieldError(self.WHERE, f"'{name}': {shown!r} is not allowed ({_FIELD_TYPES[field_type]}"
                                  + (" > 0" if positive else "") + f", {doc})")
 
     def __setattr__(self, name, value):

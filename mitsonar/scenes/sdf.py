@@ -308,10 +308,10 @@ class _World:
             self.skip(f"light {s.get('name', '')!r} of {where}", "")
 
     def geometry(self, geom, T, base, where, mat):
-        kinds = [g for g in geom]
-        if not kinds:
+        geometries = [g for g in geom]
+        if not geometries:
             return
-        g = kinds[0]
+        g = geometries[0]
         bsdf = self.bsdf_id(mat)
         if g.tag == "box":
             sx, sy, sz = _floats(_text(g, "size", "1 1 1"), 3, f"{self.path}: {where}: <box><size>")
@@ -397,12 +397,12 @@ class _World:
 
         return f"mat_{safe_id(mat)}"
 
-    def add(self, kind, to_world, bsdf, extra=""):
+    def add(self, shape_type, to_world, bsdf, extra=""):
         """A Mitsuba shape (rigid ``to_world`` for the sphere and the cylinder, which take no
         non-uniform scale: their sizes are their own properties)."""
         m = " ".join(f"{v:.17g}" for v in to_world.ravel())
         self.bsdfs.add(bsdf)
-        self.shapes.append(f'<shape type="{kind}">{extra}<transform name="to_world"><matrix value="{m}"/></transform>'
+        self.shapes.append(f'<shape type="{shape_type}">{extra}<transform name="to_world"><matrix value="{m}"/></transform>'
                            f'<ref id="{bsdf}"/></shape>')
 
     def add_mesh(self, v, f, to_world, bsdf):

@@ -67,17 +67,17 @@ def bsdf_xml(name, bsdf_id) -> str:
 
     presets, media = material_names()
     if name in presets:
-        body, kind = f'<string name="preset" value="{name}"/>', "acoustic"
+        body, bsdf_type = f'<string name="preset" value="{name}"/>', "acoustic"
     elif name in media:
-        body, kind = f'<string name="material" value="{name}"/>', "acoustic_material"
+        body, bsdf_type = f'<string name="material" value="{name}"/>', "acoustic_material"
     else:
         sediment, _, khz = name.partition("@")
         assert sediment.strip() in SEDIMENTS, name
         body = (f'<string name="sediment" value="{sediment.strip()}"/>'
                 f'<float name="frequency" value="{float(khz) * 1e3:.17g}"/>'
                 '<boolean name="extrapolate" value="true"/>')
-        kind = "acoustic_material"
-    return f'<bsdf type="{kind}" id={quoteattr(bsdf_id)}>{body}</bsdf>'
+        bsdf_type = "acoustic_material"
+    return f'<bsdf type="{bsdf_type}" id={quoteattr(bsdf_id)}>{body}</bsdf>'
 
 
 def safe_id(text) -> str:

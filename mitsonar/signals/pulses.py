@@ -23,6 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mitsonar._moved import renamed_keyword, warn_renamed
+
 WINDOWS = ("hann", "hamming")
 
 
@@ -44,15 +46,22 @@ def _window(window):
 class Pulse:
     """A transmit pulse (build it with `cw` or `lfm`).
 
-    ``kind`` ``cw`` or ``lfm``; ``f_start``, ``f_stop`` (Hz, equal for a CW); ``duration`` (s);
+    ``waveform`` ``cw`` or ``lfm`` (was ``kind``, which still works with a DeprecationWarning until
+    0.4.0); ``f_start``, ``f_stop`` (Hz, equal for a CW); ``duration`` (s);
     ``window`` (None, ``hann`` or ``hamming``).
     """
 
-    kind: str
+    waveform: str
     f_start: float
     f_stop: float
     duration: float
     window: str | None = None
+
+    @property
+    def kind(self) -> str:
+        """The waveform's name: `waveform` (the old name, removed in 0.4.0)."""
+        warn_renamed("Pulse.kind")
+        return self.waveform
 
     @property
     def carrier(self) -> float:
@@ -62,7 +71,7 @@ class Pulse:
     @property
     def bandwidth(self) -> float:
         """Hz: the LFM's swept band ``|f_stop - f_start|``; a CW's nominal ``1 / duration``."""
-        if self.kind == "cw":
+        if self.waveform == "cw":
             return 1.0 / self.duration
         return abs(self.f_stop - self.f_start)
 
@@ -77,7 +86,7 @@ class Pulse:
 
     def default_sample_rate(self) -> float:
         """Hz: twice the bandwidth for an LFM, ``4 / duration`` for a CW (the contract's defaults)."""
-        return 4.0 / self.duration if self.kind == "cw" else 2.0 * self.bandwidth
+        return 4.0 / self.duration if self.waveform == "cw" else 2.0 * self.bandwidth
 
     def envelope(self, t) -> np.ndarray:
         """The window ``w(t / T)`` at times ``t`` (s), zero outside ``[0, T)``."""
@@ -116,6 +125,10 @@ class Pulse:
         s = self.baseband(t)
         norm = np.sum(np.abs(s) ** 2)
         return np.array([np.sum(self.baseband(t + x) * np.conj(s)) for x in lag]) / norm
+
+
+# ``Pulse(kind="cw", ...)``: the old keyword, with a DeprecationWarning until 0.4.0
+Pulse.__init__ = renamed_keyword("kind", "waveform", "Pulse(kind=...)")(Pulse.__init__)
 
 
 def cw(frequency, duration, window=None) -> Pulse:

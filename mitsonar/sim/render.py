@@ -102,7 +102,7 @@ def sonar_integrators() -> tuple:
     ensure_variant()
     from mitsonar.plugins import registered
 
-    return tuple(sorted(name for name, (kind, _) in registered().items() if kind == "integrator"))
+    return tuple(sorted(name for name, (family, _) in registered().items() if family == "integrator"))
 
 
 SEED_MAX = 2 ** 32 - 1   # the path seed is a 32-bit integer: larger seeds would repeat smaller ones
@@ -176,9 +176,9 @@ def _integrator(scene, integrator):
     if isinstance(integrator, str):
         integrator = {"type": integrator}
     if isinstance(integrator, dict):
-        kind = integrator.get("type")
-        if kind not in sonar_integrators():
-            raise SceneError(f"render_scan 'integrator': {kind!r} is not a sonar integrator "
+        integrator_type = integrator.get("type")
+        if integrator_type not in sonar_integrators():
+            raise SceneError(f"render_scan 'integrator': {integrator_type!r} is not a sonar integrator "
                              f"(one of {', '.join(sonar_integrators())})")
         try:
             return mi.load_dict(integrator)

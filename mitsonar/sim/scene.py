@@ -168,8 +168,8 @@ def sonar_of(scene, sensor=0):
     name = scene_name(scene) or "the scene"
     sonars = [s for s in scene.sensors() if isinstance(s, SonarSensor)]
     if not sonars:
-        kinds = ", ".join(type(s).__name__ for s in scene.sensors()) or "none"
-        raise SceneError(f'{name}: needs a <sensor type="sonar"> (sensors found: {kinds})')
+        found = ", ".join(type(s).__name__ for s in scene.sensors()) or "none"
+        raise SceneError(f'{name}: needs a <sensor type="sonar"> (sensors found: {found})')
     try:
         chosen = common.resolve_sensor(scene, sensor)
     except ValueError as exc:

@@ -124,9 +124,9 @@ def lerp_table(table: np.ndarray, g) -> np.ndarray:
 def _boolean(props, name: str, default: bool) -> bool:
     if name not in props:
         return default
-    kind = props.type(name).name
-    if kind != "Bool":
-        raise ValueError(f"{NAME} '{name}': expected <boolean>, got <{kind.lower()}> {props.get(name)!r}")
+    prop_type = props.type(name).name
+    if prop_type != "Bool":
+        raise ValueError(f"{NAME} '{name}': expected <boolean>, got <{prop_type.lower()}> {props.get(name)!r}")
     return bool(props.get(name))
 
 

@@ -317,7 +317,7 @@ class SonarIntegrator(mi.SamplingIntegrator):
         """The `PathSetup` of one render (sensor resolved, ``max_depth`` checked)."""
         depth = check_max_depth(self.max_depth if max_depth is None else int(max_depth), self.name)
         setup = PathSetup(scene, resolve_sensor(scene, sensor), depth, pose)
-        setup.guide = self.guide == "image" and image_guide.guide_kind(scene)
+        setup.guide = self.guide == "image" and image_guide.scene_guide(scene)
         profile = getattr(self, "sound_speed_profile", None)
         if profile is not None:
             from .paths.refraction import from_profile

@@ -131,8 +131,8 @@ class SonarTOFIntegrator(SonarIntegrator):
                 "one of " + ", ".join(self.EMISSIONS))
         self.share_beams = None   # auto: share when the head can (see the table)
         if "share_beams" in props:
-            kind = props.type("share_beams").name
-            require(kind == "Bool", self.name, "share_beams", props.get("share_beams"), "<boolean> true or false")
+            prop_type = props.type("share_beams").name
+            require(prop_type == "Bool", self.name, "share_beams", props.get("share_beams"), "<boolean> true or false")
             self.share_beams = bool(props.get("share_beams"))
         self.allocation = text(props, "allocation", self.ALLOCATIONS[0], self.name)
         require(self.allocation in self.ALLOCATIONS, self.name, "allocation", self.allocation,

@@ -237,8 +237,8 @@ class SonarSensor(mi.Sensor):
         elec = {}
         for f in dataclasses.fields(Electronics):
             if f.name in props:
-                kind = f.type if isinstance(f.type, str) else f.type.__name__
-                elec[f.name] = read[kind](props, f.name, None, "sonar")
+                field_type = f.type if isinstance(f.type, str) else f.type.__name__
+                elec[f.name] = read[field_type](props, f.name, None, "sonar")
             elif f.name in preset:   # a side-scan preset's source level, sensitivity, noise
                 elec[f.name] = preset[f.name]
         self.electronics = elec

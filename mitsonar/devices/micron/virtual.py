@@ -231,12 +231,12 @@ class VirtualMicron(ServedHead):
     def _do_actions(self, now: float) -> None:
         while True:
             try:
-                kind, arg = self._actions.get_nowait()
+                action, arg = self._actions.get_nowait()
             except queue.Empty:
                 return
-            if kind == "reboot":
+            if action == "reboot":
                 self._boot(now)
-            elif kind == "stall":
+            elif action == "stall":
                 self._start_stall(now, arg)
 
     def _due(self, now: float) -> None:

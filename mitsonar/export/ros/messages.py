@@ -169,7 +169,7 @@ def projected_image(scan, rows, ns: int, frame: str = SONAR_FRAME) -> dict:
     rot = world[:3, :3].T
     dirs = (rot @ scan.poses[rows][:, :3, 2].T).T
     data = np.asarray(scan.data)[rows].T
-    kind = SONAR_IMAGE_DTYPES[data.dtype]
+    image_dtype = SONAR_IMAGE_DTYPES[data.dtype]
     data = np.ascontiguousarray(data, dtype=data.dtype.newbyteorder("<"))
     n = len(rows)
     return {
@@ -179,7 +179,7 @@ def projected_image(scan, rows, ns: int, frame: str = SONAR_FRAME) -> dict:
                       "rx_beamwidths": [math.radians(scan.beamwidth_h)] * n},
         "beam_directions": [{"x": float(d[0]), "y": float(d[1]), "z": float(d[2])} for d in dirs],
         "ranges": np.asarray(scan.ranges, dtype=np.float32).tolist(),
-        "image": {"is_bigendian": False, "dtype": kind, "beam_count": n, "data": data.tobytes()},
+        "image": {"is_bigendian": False, "dtype": image_dtype, "beam_count": n, "data": data.tobytes()},
     }
 
 

@@ -80,8 +80,8 @@ def is_spec(value) -> bool:
     return isinstance(value, dict) and len(value) == 1 and next(iter(value)) in SPECS
 
 
-def check_value(key, value, kind="number", lo=-math.inf, hi=math.inf, choices=None):
-    """Check a fixed or drawn value of ``key``: every value it can take is a ``kind`` (``number``,
+def check_value(key, value, value_type="number", lo=-math.inf, hi=math.inf, choices=None):
+    """Check a fixed or drawn value of ``key``: every value it can take is a ``value_type`` (``number``,
     ``whole``, ``text`` or ``any``) in ``[lo, hi]`` (or one of ``choices``); ranges are ordered.
     Returns the values to check further (the ends of a range, every choice)."""
     if isinstance(value, dict) and not is_spec(value) and any(k in SPECS for k in value):
@@ -99,8 +99,8 @@ def check_value(key, value, kind="number", lo=-math.inf, hi=math.inf, choices=No
                 _fail(f"{key}.{how}", arg, f"two {'whole numbers' if whole else 'numbers'} [lo, hi]")
             if arg[0] > arg[1]:
                 _fail(f"{key}.{how}", arg, "an ordered range [lo, hi] with lo <= hi")
-            if how == "randint" and kind == "number":
-                kind = "whole"
+            if how == "randint" and value_type == "number":
+                value_type = "whole"
             ends = arg
     else:
         ends = [value]
@@ -108,13 +108,13 @@ def check_value(key, value, kind="number", lo=-math.inf, hi=math.inf, choices=No
         if choices is not None:
             if v not in choices:
                 _fail(key, v, "one of " + ", ".join(map(str, choices)))
-        elif kind == "text":
+        elif value_type == "text":
             if not isinstance(v, str):
                 _fail(key, v, "a text value")
-        elif kind in ("number", "whole"):
-            good = (is_whole if kind == "whole" else is_number)(v) and lo <= v <= hi
+        elif value_type in ("number", "whole"):
+            good = (is_whole if value_type == "whole" else is_number)(v) and lo <= v <= hi
             if not good:
-                what = "a whole number" if kind == "whole" else "a number"
+                what = "a whole number" if value_type == "whole" else "a number"
                 bounds = [f">= {lo:g}" if lo > -math.inf else "", f"<= {hi:g}" if hi < math.inf else ""]
                 _fail(key, v, " ".join([what] + [b for b in bounds if b]))
     return ends
@@ -332,7 +332,7 @@ def _check_scenes(cfg, base):
             _unknown(f"{where}.terrain", t, terrain_keys)
             for k, v in t.items():
                 if is_spec(v):
-                    check_value(f"{where}.terrain.{k}", v, kind="any")
+                    check_value(f"{where}.terrain.{k}", v, value_type="any")
             _check_terrain(where, t)
             from mitsonar.plugins.bsdfs.materials import PRESETS
 
@@ -385,7 +385,7 @@ def _check_sonar(sonar):
             except ValueError as exc:
                 raise DatasetError(str(exc)) from None
             continue
-        check_value(f"sonar.{k}", v, kind="any")
+        check_value(f"sonar.{k}", v, value_type="any")
     # Every end of every range, through the sensor's own checks: a bad value costs a sentence now.
     for trial in _corners(sonar):
         from mitsonar.sim.scene import SceneError, load_scene
@@ -435,9 +435,9 @@ def _check_electronics(elec):
         if is_spec(v) and "uniform" in v:
             _fail("electronics.speckle_seed", v, f"a whole number from 0 to {SEED_MAX}, {{randint: [lo, hi]}} or "
                   "{choice: [...]}: the scene's speckle seed")
-        check_value("electronics.speckle_seed", v, kind="whole", lo=0, hi=SEED_MAX)
+        check_value("electronics.speckle_seed", v, value_type="whole", lo=0, hi=SEED_MAX)
     for k, v in elec.items():
-        for end in check_value(f"electronics.{k}", v, kind="any"):
+        for end in check_value(f"electronics.{k}", v, value_type="any"):
             try:
                 check_head_settings({k: end}, "dataset config 'electronics'")
                 Electronics.from_dict({k: end}, source="dataset config 'electronics'")

@@ -196,8 +196,8 @@ class _Store:
                ("thr", mi.Float), ("length", mi.Float), ("a", mi.Float), ("e", mi.Float))
 
     def __init__(self, size):
-        self.data = {name: dr.zeros(mi.Float, size * dr.size_v(kind) if dr.size_v(kind) > 0 else size)
-                     for name, kind in self._FIELDS}
+        self.data = {name: dr.zeros(mi.Float, size * dr.size_v(array_type) if dr.size_v(array_type) > 0 else size)
+                     for name, array_type in self._FIELDS}
         self.bsdf = dr.zeros(mi.BSDFPtr, size)
 
     def put(self, index, si, bsdf, thr, length, a, e, active):
@@ -209,7 +209,7 @@ class _Store:
 
     def get(self, index, active):
         """(interaction, BSDF, throughput, length, a, E) of slot ``index``."""
-        v = {name: dr.gather(kind, self.data[name], index, active) for name, kind in self._FIELDS}
+        v = {name: dr.gather(array_type, self.data[name], index, active) for name, array_type in self._FIELDS}
         si = dr.zeros(mi.SurfaceInteraction3f, dr.width(index))
         si.p, si.n, si.uv = v["p"], v["n"], v["uv"]
         si.sh_frame = mi.Frame3f(v["sh_n"])

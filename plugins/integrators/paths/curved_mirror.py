@@ -192,10 +192,10 @@ def scene_mirrors(scene, min_exponent, lobe_exponent):
     shapes = list(scene.shapes())
     exps = [lobe_exponent(shape.bsdf()) for shape in shapes]
     for i, shape in enumerate(shapes):
-        kind = shape.class_name()
+        shape_class = shape.class_name()
         if not any(e >= min_exponent for j, e in enumerate(exps) if j != i):
             continue
-        if kind not in ("Sphere", "Cylinder"):
+        if shape_class not in ("Sphere", "Cylinder"):
             continue
         n = exps[i]
         if not n >= min_exponent or not np.isfinite(n):
@@ -205,7 +205,7 @@ def scene_mirrors(scene, min_exponent, lobe_exponent):
         radius = float(np.linalg.norm(ex))
         if not np.isclose(radius, np.linalg.norm(ey), rtol=1e-4) or radius <= 0:
             continue        # an ellipse or ellipsoid: no closed-form specular point here
-        if kind == "Sphere":
+        if shape_class == "Sphere":
             if not np.isclose(radius, np.linalg.norm(ez), rtol=1e-4):
                 continue
             axis = (0.0, 0.0, 0.0)

@@ -126,7 +126,7 @@ CURVED_SHAPES = ("Sphere", "Cylinder")
 
 class Guide:
     """A guide that knows the scene's convex curved mirrors (`STRIP_GUIDE`): ``curved`` as
-    `guide_kind`'s ``"curved"``, ``mirrors`` from `curved_mirror.scene_mirrors` (Python numbers:
+    `scene_guide`'s ``"curved"``, ``mirrors`` from `curved_mirror.scene_mirrors` (Python numbers:
     part of a frozen pass's key, `frozen_pass`)."""
 
     def __init__(self, curved, mirrors, planes=()):
@@ -144,11 +144,11 @@ class Guide:
 
 
 def is_curved(guide):
-    """Whether the kernel of ``guide`` (`guide_kind`) reads the mirrors' curvature."""
+    """Whether the kernel of ``guide`` (`scene_guide`) reads the mirrors' curvature."""
     return guide == "curved" or (isinstance(guide, Guide) and guide.curved)
 
 
-def guide_kind(scene):
+def scene_guide(scene):
     """The guide a scene needs: False (no mirror-like BSDF, `has_mirrors`), ``"curved"`` where a
     mirror-like sphere or cylinder is among its shapes and `CURVED_GUIDE` is on (the kernel then
     reads the normal's derivatives and solves for the reflection points, `curved_mirror`), a
@@ -285,7 +285,7 @@ def start_chain(origin):
 
 
 def ray_flags(guide):
-    """The path kernel's intersection flags: with the curved guide (`guide_kind`) the normal's
+    """The path kernel's intersection flags: with the curved guide (`scene_guide`) the normal's
     derivatives too, which give a curved mirror's shape (`curved_mirror.local_mirror`)."""
     if is_curved(guide):
         from .curved_mirror import RAY_FLAGS
@@ -324,7 +324,7 @@ def bounce(bsdf, ctx, si, chain, origin, segment, u1, u2, active, curved=False, 
     reached ``si``, `sample_bounce`), except on the way back from a target seen through two
     mirrors: at the nearer mirror the bounce aims at the image in the farther one (``ret_image``,
     `advance_chain`), unnarrowed, since that mirror lies ahead, not behind (`RETURN_GUIDE`). With
-    ``curved`` (a Python bool, `guide_kind`) the bounce after a curved mirror aims at its specular
+    ``curved`` (a Python bool, `scene_guide`) the bounce after a curved mirror aims at its specular
     point (`curved_mirror.aim`). ``mirrors``: the scene's convex curved mirrors
     (`curved_mirror.scene_mirrors`, `STRIP_GUIDE`): at a mirror-like ``si`` the bounce may aim at
     the specular strip of each, towards the transducer's image after ``si``

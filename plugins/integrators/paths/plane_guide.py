@@ -55,7 +55,7 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-#: Plane guiding on (read when a render sets up, `image_guide.guide_kind`).
+#: Plane guiding on (read when a render sets up, `image_guide.scene_guide`).
 PLANE_GUIDE = True
 #: A glossy plane: a lobe of at least this Phong exponent (concrete 25.6, sand 1.7).
 PLANE_EXPONENT = 10.0
