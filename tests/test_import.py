@@ -65,7 +65,7 @@ def test_the_newest_libllvm_of_a_working_version_is_chosen(tmp_path, monkeypatch
     """With LLVM 15, 16 and 19 installed (Debian's names: ``libLLVM-N.so`` and the soname of LLVM 18
     and later, ``libLLVM.so.19.1``), `find_libllvm` takes 19 and `prepare_llvm_environment` points
     Dr.Jit at it; with 15 alone it finds 15, too old, and sets nothing (`check_backend` then refuses)."""
-    from mitsonar.sim import backend
+    from mitsonar import backend
 
     lib, llvm16 = tmp_path / "lib", tmp_path / "llvm-16" / "lib"
     lib.mkdir()
