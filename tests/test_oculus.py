@@ -445,6 +445,42 @@ def test_driver_discovers_records_a_raw_log_that_replays(tmp_path):
         np.testing.assert_allclose(s.ranges, scan.ranges)
 
 
+@pytest.fixture(scope="module")
+def head_frame(wall):
+    """The wall scene rendered at the head's own geometry (M1200d low frequency, 256 beams at its
+    bearing table, 0..10 m in 0.1 m bins): beam k is row k, range line i is bin i."""
+    from mitsonar.devices.oculus.scenes import SceneFrames
+    path, rendered = wall
+    return SceneFrames(path, bin_width=rendered.bin_width, spp=4, seed=0)(presets.model("M1200d").mode(1), 256, 10.0)
+
+
+@pytest.mark.parametrize("bits", [8, 16, 32])
+def test_the_drivers_scans_keep_the_rendered_codes_of_each_data_size(head_frame, bits, tmp_path):
+    # the virtual head fires 8-, 16- and 32-bit samples of the rendered scan's receiver chain; the
+    # driver's scans, a raw log's replay and a .oculus log's carry those codes, bit for bit, in
+    # uint8/16/32 with electronics bit_depth 8/16/32 (it kept the top eight bits of each)
+    from mitsonar.devices.oculus.driver import OculusSonar, fire_message, record, record_oculus
+    from mitsonar.devices.oculus.logfile import read_scans
+    from mitsonar.devices.oculus.virtual import VirtualOculus
+    from mitsonar.devices.recording import replay
+    from mitsonar.receiver.electronics import apply_to_scan
+    frame = head_frame
+    codes = frame.data if bits == 8 else apply_to_scan(frame, frame.electronics.replace(bit_depth=bits)).data
+    dtype = {8: np.uint8, 16: np.uint16, 32: np.uint32}[bits]
+    assert codes.dtype == dtype and codes.shape == (256, 100) and codes.any()
+    fire = fire_message(rate=40, range=10.0, gain=100, speed_of_sound=frame.sound_speed, data_bits=bits)
+    with VirtualOculus(frame, tcp_port=0, udp_port=None) as h:
+        with OculusSonar("127.0.0.1", h.tcp_port, fire) as sonar:
+            scans = [sonar.scan()]
+        record("127.0.0.1", tmp_path / "o.bin", pings=2, tcp_port=h.tcp_port, fire=fire)
+        record_oculus("127.0.0.1", tmp_path / "o.oculus", pings=2, tcp_port=h.tcp_port, fire=fire)
+    scans += replay(tmp_path / "o.bin") + read_scans(tmp_path / "o.oculus")
+    assert len(scans) >= 5
+    for s in scans:
+        assert s.data.dtype == dtype and s.electronics.bit_depth == bits
+        np.testing.assert_array_equal(s.data, codes)
+
+
 def test_driver_reconnects_after_a_dropped_connection(head):
     from mitsonar.devices.oculus.driver import OculusSonar, fire_message
     out = io.StringIO()
@@ -511,23 +547,28 @@ def test_a_log_written_by_mitsonar_opens_in_bps_oculus_with_every_ping(tmp_path,
 
 def _foreign_log(path, pings):
     """A .oculus log built from the layout alone: file header, one item of another record type,
-    then the pings (hand-packed version 1 and 2 simple ping results)."""
+    then the pings (hand-packed version 1 and 2 simple ping results; ``(version, image, bearings,
+    res[, bytes per sample])``: 1, 2, 3 or 4, dataSize 0..3, little-endian samples)."""
     out = struct.pack("<2I16s2H4xqd", 0x11223344, 48, b"Oculus", 1, 0, 0, 1.7e9)
     out += struct.pack("<2I2H4xdH2x2I4x", 0xAABBCCDD, 40, 2, 1, 1.7e9, 0, 3, 3) + b"abc"   # rt_serialPort
-    for k, (version, image, bearings, res) in enumerate(pings):
+    for k, (version, image, bearings, res, *nb) in enumerate(pings):
+        nb = nb[0] if nb else 1
         n_r, n_b = image.shape
-        fire = struct.pack(FIRE2 if version == 2 else FIRE1, 1, 0, 255, 255, 0x09, n_r * res, 100.0, 1500.0, 35.0,
-                           *(([0] * 9) if version == 2 else []))
+        samples = np.asarray(image, "<u4").view(np.uint8).reshape(n_r, n_b, 4)[..., :nb].tobytes()
+        flags, ext = 0x09 | (0x02 if nb == 2 else 0), 0x200 if nb == 4 else 0
+        fire = struct.pack(FIRE2 if version == 2 else FIRE1, 1, 0, 255, 255, flags, n_r * res, 100.0, 1500.0, 35.0,
+                           *(([ext] + [0] * 8) if version == 2 else []))
         head_size = (202 if version == 2 else 122)
         off = head_size + 2 * n_b
-        total = off + image.size
+        total = off + len(samples)
         if version == 2:
-            tail = struct.pack(PING2, k, 0, 1.2e6, 10.0, 0.0, 0, 0, 0, 1500.0, 0.0, 0, res, n_r, n_b, 0, 0, 0, 0,
-                               off, image.size, total)
+            tail = struct.pack(PING2, k, 0, 1.2e6, 10.0, 0.0, 0, 0, 0, 1500.0, 0.0, nb - 1, res, n_r, n_b, 0, 0, 0, 0,
+                               off, len(samples), total)
         else:
-            tail = struct.pack(PING1, k, 0, 1.2e6, 10.0, 0.0, 1500.0, 0, 0, res, n_r, n_b, off, image.size, total)
+            tail = struct.pack(PING1, k, 0, 1.2e6, 10.0, 0.0, 1500.0, 0, nb - 1, res, n_r, n_b, off, len(samples),
+                               total)
         msg = (struct.pack(HEADER, 0x4F53, 1, 0, 0x23, version, total - 16, 0) + fire + tail
-               + np.asarray(bearings, "<i2").tobytes() + image.astype(np.uint8).tobytes())
+               + np.asarray(bearings, "<i2").tobytes() + samples)
         out += struct.pack("<2I2H4xdH2x2I4x", 0xAABBCCDD, 40, 10, 1, 1.7e9 + k, 0, len(msg), len(msg)) + msg
     path.write_bytes(out)
 
@@ -544,6 +585,26 @@ def test_a_log_mitsonar_did_not_write_replays(tmp_path):
         np.testing.assert_array_equal(s.data, image.T)
         np.testing.assert_allclose(np.degrees(s.bearings), bearings / 100.0)
         np.testing.assert_allclose(s.ranges, (np.arange(20) + 0.5) * res)
+
+
+def test_a_foreign_log_of_wide_samples_replays_with_its_codes(tmp_path):
+    # 16- and 32-bit samples keep their codes (uint16, uint32; bit_depth 16, 32); 24-bit ones, which
+    # no fire message asks for, go on the 32-bit scale: round(code (2^32 - 1) / (2^24 - 1))
+    rng = np.random.default_rng(4)
+    tops = {2: 65535, 3: (1 << 24) - 1, 4: (1 << 32) - 1}
+    images = {nb: rng.integers(0, top, (12, 6), dtype=np.uint64, endpoint=True) for nb, top in tops.items()}
+    images[3][0, :3] = [0, 1, (1 << 24) - 1]
+    log = tmp_path / "wide.oculus"
+    _foreign_log(log, [(2, images[nb], np.arange(-3, 3) * 700, 0.05, nb) for nb in (2, 3, 4)] +
+                 [(1, images[2], np.arange(-3, 3) * 700, 0.05, 2)])
+    assert main(["replay", str(log), "-o", str(tmp_path / "w.npz"), "--all"]) == 0
+    got = [load_scan(tmp_path / f"w_{k:03d}.npz") for k in range(4)]
+    expected = [images[2].astype(np.uint16), (images[3] * (2 ** 32 - 1) + (2 ** 24 - 1) // 2) // (2 ** 24 - 1),
+                images[4].astype(np.uint32), images[2].astype(np.uint16)]
+    for s, e, bits in zip(got, expected, (16, 32, 32, 16)):
+        assert s.data.dtype == np.dtype(f"uint{bits}") and s.electronics.bit_depth == bits
+        np.testing.assert_array_equal(s.data, e.T)
+    assert list(got[1].data[:3, 0]) == [0, 256, 2 ** 32 - 1]
 
 
 def test_a_cut_or_foreign_file_is_refused_naming_the_field(tmp_path):

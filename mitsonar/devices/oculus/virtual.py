@@ -45,8 +45,9 @@ bytes moved on its A/D scale); ``gammaCorrection`` G applies ``T (x/T)^(G/255)``
 255: none) to the codes x of full scale T. 8-bit samples are the scan's bytes; 16- and 32-bit
 ones the same levels through a wider A/D: a rendered scan's receiver chain again at ``bit_depth``
 16 or 32 (`mitsonar.receiver.electronics.Electronics`: ``round((2^bits - 1) x)`` of the A/D
-window's fraction x, so the 8-bit byte is the 16-bit code / 257 up to rounding); a log's bytes
-times 257 and 16843009 (it has no finer levels). The per-row gain sent (flag bit 2)
+window's fraction x, so the 8-bit byte is the 16-bit code / 257 up to rounding); a log's codes
+on the width asked (its bytes times 257 and 16843009: it has no finer levels; its 16- or 32-bit
+codes as they are, or on the other width's scale). The per-row gain sent (flag bit 2)
 is g/100 (the amplitude gain) as a float32. So at gain 100 and gamma 255 the 8-bit image is the
 scan's bytes.
 
