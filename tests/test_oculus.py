@@ -340,6 +340,36 @@ def test_slots_of_a_client_behind_are_skipped_on_the_heads_schedule(monkeypatch)
     assert c.due == pytest.approx(2.0)
 
 
+def test_the_heads_summary_and_the_live_summary_say_its_skipped_slots(monkeypatch):
+    # a head that cannot keep its rate (250 ms a ping at 10 Hz), and one whose client reads nothing:
+    # virtual-sonar's last line and `mitsonar live`'s summary say how many slots each skipped
+    import mitsonar.devices.oculus.virtual as virtual
+    from mitsonar.cli.live import _summary
+
+    class Renderer:
+        def summary(self):
+            return "9 pings rendered"
+
+    slow, clock, _ = _scheduled_head(0.25)
+    while clock.t < 1.95:
+        slow._tick()
+    monkeypatch.setattr(virtual, "MAX_BACKLOG", 1)
+    behind, clock, _ = _scheduled_head(0.0, full=True)
+    while clock.t < 1.95:
+        behind._tick()
+    for h, late, slow_client in ((slow, slow.stats["pings skipped (late)"], 0), (behind, 0, 19)):
+        assert h.stats["pings skipped (late)"] == late and h.stats["pings skipped (client behind)"] == slow_client
+        said = (f"{h.stats['pings']} pings to 0 client(s), 0 message(s) refused, {late} pings skipped (late), "
+                f"{slow_client} pings skipped (client behind)")
+        assert h.summary() == said
+        assert _summary(Renderer(), None, None, None, h) == f"9 pings rendered; head: {said}"
+    assert slow.stats["pings skipped (late)"] > 0
+    out = io.StringIO()
+    monkeypatch.setattr("mitsonar.devices.transports.serve_in_foreground", lambda *a: None)
+    slow.serve(0, out)
+    assert out.getvalue() == f"virtual Oculus: {slow.summary()}\n"
+
+
 def test_a_ping_is_delivered_when_its_last_byte_is_written():
     # the live head's latency runs to the ping result's last byte (LiveOculus.delivered): a client
     # taking 1000 bytes a write has the ping only after several writes, not when it was made
@@ -705,6 +735,9 @@ def test_virtual_sonar_serves_a_log(tmp_path):
         proc.wait(10)
     for p in got:
         np.testing.assert_array_equal(p["image"], scans[p["id"] % 2].data.T)
+    last = proc.stdout.read().splitlines()[-1]          # what it served, and the slots it skipped
+    assert last.startswith("virtual Oculus: ") and "pings to 1 client(s), 0 message(s) refused" in last
+    assert "pings skipped (late)" in last and "pings skipped (client behind)" in last
 
 
 def test_virtual_sonar_refusals_name_the_flag(tmp_path, capsys, wall):
@@ -760,6 +793,11 @@ def test_live_oculus_renders_each_ping_from_the_pose_then(wall):
         proc.terminate()
         out, err = proc.communicate(timeout=60)
     assert "Traceback" not in err and "1 poses applied" in out, (out, err)
+    # the summary says what the head served and the ping slots it skipped (it could not keep its rate)
+    import re
+    served = re.search(r"; head: (\d+) pings to 1 client\(s\), 0 message\(s\) refused, (\d+) pings skipped "
+                       r"\(late\), (\d+) pings skipped \(client behind\)", out)
+    assert served and int(served[1]) >= len(got) + 1, out
 
 
 def test_live_oculus_renders_each_fire_messages_geometry(wall):

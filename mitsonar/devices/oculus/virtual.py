@@ -618,9 +618,18 @@ class VirtualOculus:
             return f"{label} {self.model.name} on {self.port}{status}"
 
         serve_in_foreground(self, seconds, banner, out)
-        print(f"{label}: {self.stats['pings']} pings to {self.stats['clients']} client(s), "
-              f"{self.stats['refused']} message(s) refused", file=out, flush=True)
+        print(f"{label}: {self.summary()}", file=out, flush=True)
         return 0
+
+    def summary(self) -> str:
+        """``N pings to M client(s), K message(s) refused, L pings skipped (late), B pings skipped
+        (client behind)``: what the head served, and the ping slots it skipped (`_slot`): late ones
+        when it could not make its pings at the rate asked, the others when a client read too
+        slowly (what ``virtual-sonar`` and ``mitsonar live`` print at the end)."""
+        st = self.stats
+        return (f"{st['pings']} pings to {st['clients']} client(s), {st['refused']} message(s) refused, "
+                f"{st['pings skipped (late)']} pings skipped (late), "
+                f"{st['pings skipped (client behind)']} pings skipped (client behind)")
 
 
 def serve(scan: Scan, seconds: float | None = None, *, out=None, **kwargs) -> int:
