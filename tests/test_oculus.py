@@ -283,8 +283,8 @@ class _FakeSock:
         pass
 
 
-def _scheduled_head(render_s, full=False, chunk=None):
-    """A virtual head on a fake clock with one client fired at 10 Hz (a 2 m range: 20 lines),
+def _scheduled_head(render_s, full=False, chunk=None, rate=10):
+    """A virtual head on a fake clock with one client fired at ``rate`` Hz (a 2 m range: 20 lines),
     each ping taking ``render_s`` s of that clock to make."""
     from mitsonar.devices.oculus.driver import fire_message
     from mitsonar.devices.oculus.virtual import VirtualOculus, _Client
@@ -300,8 +300,27 @@ def _scheduled_head(render_s, full=False, chunk=None):
     h.ping = slow_ping
     c = _Client(_FakeSock(full, chunk), ("127.0.0.1", 1))
     h._clients[99] = c
-    h._on_message(c, fire_message(rate=10, range=2.0, gain=100, beams=256))
+    h._on_message(c, fire_message(rate=rate, range=2.0, gain=100, beams=256))
     return h, clock, c
+
+
+@pytest.mark.parametrize("hz, code", [(10, 0), (15, 1), (40, 2), (5, 3), (2, 4), (0, 5)])
+def test_each_ping_rate_streams_at_its_rate_from_one_fire_message(hz, code):
+    # pingRate (Oculus.h PingRateType): 0 10 Hz, 1 15 Hz, 2 40 Hz, 3 5 Hz, 4 2 Hz, 5 standby. One fire
+    # message, then a ping every 1/rate s of the head's clock (2 s: 2 x rate pings); standby: none
+    from mitsonar.devices.oculus.driver import fire_message
+    fire = fire_message(rate=hz, range=2.0)
+    assert fire.ping_rate == code and fire.encode()[17] == code          # pingRate at byte 17
+    h, clock, _ = _scheduled_head(0.0, rate=hz)
+    sent = []
+    send = h._send_ping
+    h._send_ping = lambda c, now: (sent.append(now), send(c, now))
+    while clock.t < (2.0 - 0.5 / hz if hz else 2.0):     # half a period after the last slot before 2 s
+        h._tick()
+    assert h.stats["fire messages"] == 1 and h.stats["pings"] == len(sent) == 2 * hz
+    if hz:
+        np.testing.assert_allclose(sent, np.arange(2 * hz) / hz, atol=1e-6)
+    assert h.stats["pings skipped (late)"] == 0 and h.last_error is None
 
 
 def test_the_head_keeps_its_rate_when_each_ping_takes_most_of_the_period():

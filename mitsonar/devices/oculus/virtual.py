@@ -550,7 +550,8 @@ class VirtualOculus:
             self.last_problem = problem
             return
         c.fire = m
-        c.due = self._clock()             # the first ping at once, then at the rate
+        # the first ping at once, then at the rate; standby (pingRate 5): none, until the next fire message
+        c.due = self._clock() if PING_RATE_HZ[m.ping_rate] else math.inf
 
     def _slot(self, c: _Client, now: float) -> None:
         """Client ``c``'s ping slot ``c.due`` has come (at ``now``): ping, and the next slot one
