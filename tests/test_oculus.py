@@ -130,7 +130,8 @@ def parse_ping(m: bytes) -> dict:
     img = np.ascontiguousarray(rows[:, 4:] if gain else rows).view({1: "<u1", 2: "<u2", 4: "<u4"}[nb])
     return {"version": v, "id": pid, "frequency": freq, "c": c, "res": res, "n_r": n_r, "n_b": n_b,
             "bearings": bearings, "image": img, "gains": gains, "range": fire[5], "temperature": temp, "pressure": pres,
-            "heading": heading if v == 2 else None, "raw": m}
+            "heading": heading if v == 2 else None, "pitch": pitch if v == 2 else None,
+            "roll": roll if v == 2 else None, "raw": m}
 
 
 def free_udp_port() -> int:
@@ -141,12 +142,14 @@ def free_udp_port() -> int:
     return port
 
 
-def fan_scan(aperture=130.0, n_b=256, n_r=100, bin_width=0.1, seed=0):
-    """A multibeam scan whose rows lie at the head's own bearing table (so beam k is row k)."""
+def fan_scan(aperture=130.0, n_b=256, n_r=100, bin_width=0.1, seed=0, pose=None):
+    """A multibeam scan whose rows lie at the head's own bearing table (so beam k is row k), of a
+    head at ``pose`` (default identity)."""
     b = np.radians(presets.bearing_table(aperture, n_b) / 100.0)
     data = np.random.default_rng(seed).integers(0, 256, (n_b, n_r), dtype=np.uint8)
+    pose = np.eye(4) if pose is None else pose
     return Scan(intensity=np.zeros((n_b, n_r), np.float32), data=data, ranges=(np.arange(n_r) + 0.5) * bin_width,
-                bearings=b, poses=np.eye(4) @ bearing_rotation(b), range_min=0.0, range_max=n_r * bin_width,
+                bearings=b, poses=pose @ bearing_rotation(b), range_min=0.0, range_max=n_r * bin_width,
                 kind="multibeam", sound_speed=1500.0)
 
 
@@ -434,6 +437,68 @@ def test_status_broadcast_carries_the_head_and_its_address():
     _dev, dtype, part, status = struct.unpack_from("<IHHI", data, 16)
     assert (dtype, part, status & 7) == (1, 2203, 3)
     assert data[52:56] == socket.inet_aton("127.0.0.1")
+
+
+@pytest.mark.parametrize("name", ["M750d", "M1200d", "M3000d"])
+def test_each_models_frequency_mode_selects_its_frequency_aperture_beams_and_range(name):
+    # masterMode 1 (low) / 2 (high frequency): the model's frequency, aperture (the bearing table
+    # spans it), beam widths (the driver's scan) and largest range; 256 or 512 beams by flag bit 6
+    from mitsonar.devices.oculus.driver import fire_message
+    from mitsonar.devices.oculus.head import ping_to_scan
+    from mitsonar.devices.oculus.virtual import VirtualOculus, check_fire
+    model = presets.model(name)
+    h = VirtualOculus(fan_scan(n_r=50), model=name, tcp_port=0, udp_port=None)
+    assert h.status().part_number == model.part_number
+    for number, mode in model.modes.items():
+        for beams in (256, 512):
+            p = h.ping(fire_message(mode=number, range=5.0, beams=beams, speed_of_sound=1500.0))
+            assert (p.frequency, p.n_beams) == (mode.frequency, beams)
+            np.testing.assert_array_equal(p.bearings, presets.bearing_table(mode.aperture, beams))
+            assert -p.bearings[0] / 100 == p.bearings[-1] / 100 == pytest.approx(mode.aperture / 2, abs=0.6)
+            s = ping_to_scan(p)
+            assert (s.beamwidth_h, s.beamwidth_v, s.meta.frequency) == (mode.beamwidth_h, mode.beamwidth_v,
+                                                                        mode.frequency)
+        assert check_fire(fire_message(mode=number, range=mode.max_range), model) is None
+        assert (f"'range': {mode.max_range + 1!r} m is not allowed (0.1..{mode.max_range:g} m for the {name} in "
+                f"mode {number})") in check_fire(fire_message(mode=number, range=mode.max_range + 1), model)
+
+
+def test_heading_pitch_roll_depth_and_temperature_come_from_the_heads_pose_and_water():
+    # a head looking east (x), its vehicle yawed 30 deg left, pitched 10 deg nose down, rolled 5 deg
+    # to starboard, 3 m below the surface: heading 60, pitch -10, roll 5, pressure of 3 m of sea water
+    from scipy.spatial.transform import Rotation
+    from mitsonar.devices.oculus.driver import fire_message
+    from mitsonar.devices.oculus.virtual import VirtualOculus
+    mount = np.eye(4)
+    mount[:3, :3] = np.array([[0, 1, 0], [0, 0, 1], [1, 0, 0]]).T      # lookat +x, up +z: z boresight, y up
+    vehicle = np.eye(4)
+    vehicle[:3, :3] = Rotation.from_euler("ZYX", [30, 10, 5], degrees=True).as_matrix()
+    vehicle[:3, 3] = [4.0, -2.0, -1.0]
+    h = VirtualOculus(fan_scan(n_r=20, pose=vehicle @ mount), tcp_port=0, udp_port=None, water={"temperature": 14.0, "surface_z": 2.0})
+    p = h.ping(fire_message(range=2.0, speed_of_sound=1500.0))
+    assert (p.heading, p.pitch, p.roll) == (pytest.approx(60.0), pytest.approx(-10.0), pytest.approx(5.0))
+    assert p.temperature == 14.0 and p.pressure == pytest.approx(3.0 * 1025.0 * 9.80665 / 1e5)
+
+
+def test_the_ports_default_to_what_the_open_clients_hard_wire_and_are_configurable(tmp_path, monkeypatch):
+    # liboculus: StatusRx binds UDP 52102, DataRx connects to TCP 52100 of the status's address
+    from mitsonar.devices.oculus.driver import OculusSonar
+    from mitsonar.devices.oculus.logfile import write_log
+    from mitsonar.devices.oculus.registration import OculusHead
+    from mitsonar.devices.oculus.virtual import VirtualOculus
+    h = VirtualOculus(fan_scan(n_r=10))                       # not started: nothing bound
+    assert (h.host, h.tcp_port, h.udp_port, h.status().ip) == ("127.0.0.1", 52100, 52102, "127.0.0.1")
+    sonar = OculusSonar(start=False)
+    assert (sonar.host, sonar.tcp_port, sonar.udp_port) == (None, 52100, 52102)     # None: discovered
+    served = []
+    monkeypatch.setattr(OculusHead, "check_serve", lambda self, args: None)          # binds nothing here
+    monkeypatch.setattr(VirtualOculus, "serve", lambda self, *a: served.append((self.host, self.tcp_port,
+                                                                              self.udp_port)) or 0)
+    log = write_log(tmp_path / "p.oculus", [fan_scan(n_r=10)])
+    assert main(["virtual-sonar", "--log", str(log), "--head", "oculus"]) == 0
+    assert main(["virtual-sonar", "--log", str(log), "--head", "oculus", "--port-url", "tcp://127.0.0.1:5100",
+                 "--status-port", "5102"]) == 0
+    assert served == [("127.0.0.1", 52100, 52102), ("127.0.0.1", 5100, 5102)]
 
 
 def test_malformed_oversized_and_refused_messages_are_counted_and_the_head_stays_up(head):
@@ -817,6 +882,46 @@ def test_live_oculus_renders_each_ping_from_the_pose_then(wall):
     served = re.search(r"; head: (\d+) pings to 1 client\(s\), 0 message\(s\) refused, (\d+) pings skipped "
                        r"\(late\), (\d+) pings skipped \(client behind\)", out)
     assert served and int(served[1]) >= len(got) + 1, out
+
+
+def test_live_oculus_fills_heading_pitch_roll_and_depth_from_the_pose_then(wall):
+    import json
+    from scipy.spatial.transform import Rotation
+    path, _ = wall
+    proc = subprocess.Popen([sys.executable, "-m", "mitsonar", "live", str(path), "--head", "oculus", "--spp", "4",
+                             "--port-url", "tcp://127.0.0.1:0", "--status-port", str(free_udp_port()),
+                             "--pose-url", "udp://127.0.0.1:0", "--seconds", "60"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines = []
+    for line in proc.stdout:
+        lines.append(line)
+        if line.startswith("live "):
+            break
+    text = "".join(lines)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        assert "live Oculus on tcp://127.0.0.1:" in text, text
+        pose_port = int(text.split("poses on udp://127.0.0.1:")[1].split()[0])
+        c = LayoutClient(int(text.split("tcp://127.0.0.1:")[1].split()[0]))
+        c.fire(version=2, rate=2, flags=0x0D, rng=10.0, gain=100.0, c=1500.0)
+        p = c.ping()
+        assert (p["heading"], p["pitch"], p["roll"], p["pressure"]) == (pytest.approx(90.0), 0.0, 0.0, 0.0)
+        # the vehicle (x forward, y port, z up) yawed 30 deg left, pitched 10 deg nose down, rolled 5 deg
+        # to starboard, 3 m below the scene's surface (z = 0)
+        q = Rotation.from_euler("ZYX", [30, 10, 5], degrees=True).as_quat()          # x, y, z, w
+        tx.sendto(json.dumps({"t": 50.0, "position": [0, 0, -3], "orientation": list(q)}).encode(),
+                  ("127.0.0.1", pose_port))
+        for _ in range(50):                 # the pose is applied by another thread: ping until it shows
+            p = c.ping()
+            if abs(p["heading"] - 90.0) > 1e-6:
+                break
+        c.close()
+    finally:
+        tx.close()
+        proc.terminate()
+        proc.communicate(timeout=60)
+    assert (p["heading"], p["pitch"], p["roll"]) == (pytest.approx(60.0), pytest.approx(-10.0), pytest.approx(5.0))
+    assert p["pressure"] == pytest.approx(3.0 * 1025.0 * 9.80665 / 1e5) and p["temperature"] == 10.0
 
 
 def test_live_oculus_renders_each_fire_messages_geometry(wall):
