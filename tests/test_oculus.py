@@ -781,6 +781,51 @@ def test_virtual_sonar_serves_a_scene_with_the_wall_at_its_range(wall):
     assert (line + 0.5) * got[0]["res"] == pytest.approx(WALL_RANGE, abs=2 * got[0]["res"])
 
 
+def test_a_client_fired_once_receives_200_pings_of_the_rendered_bytes(wall):
+    # the target: as liboculus does, find the head by its status broadcast (the address it carries),
+    # connect over TCP, fire once with a ping rate; the head streams: 200 ping results, each decoded
+    # (the layout client, and bps_oculus where installed) equal to mitsonar's rendered bytes, the
+    # wall at its range
+    from mitsonar.devices.oculus.protocol import FireMessage
+    from mitsonar.devices.oculus.scenes import SceneFrames
+    from mitsonar.devices.oculus.virtual import VirtualOculus
+    try:
+        import bps_oculus.core as core
+    except ImportError:
+        core = None
+    path, rendered = wall
+    status_port = free_udp_port()
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", status_port))
+    rx.settimeout(30)
+    proc, port = _serve([str(path), "--head", "oculus", "--spp", "16", "--port-url", "tcp://127.0.0.1:0",
+                         "--status-port", str(status_port), "--seconds", "120"])
+    try:
+        status = rx.recv(4096)
+        assert len(status) == 142
+        c = LayoutClient(port, host=socket.inet_ntoa(status[52:56]))
+        c.fire(version=2, rate=2, flags=0x0D, rng=10.0, gain=100.0, c=1500.0)      # once, 40 Hz
+        got = [c.ping() for _ in range(200)]
+        c.close()
+    finally:
+        rx.close()
+        proc.terminate()
+        proc.wait(10)
+    frames = SceneFrames(path, bin_width=rendered.bin_width, spp=16, seed=0)
+    expected = VirtualOculus(rendered, tcp_port=0, frames=frames).ping(
+        FireMessage(flags=0x0D, range=10.0, gain=100.0, speed_of_sound=1500.0))
+    assert [p["id"] for p in got] == list(range(200))
+    for p in got:
+        np.testing.assert_array_equal(p["image"], expected.image)
+        np.testing.assert_array_equal(p["bearings"], expected.bearings)
+        if core is not None:
+            img = core.parse_polar_image(p["raw"], core.process_raw(p["raw"]))
+            np.testing.assert_array_equal(img.polar_image, expected.image)
+    profile = got[-1]["image"][:, np.abs(got[-1]["bearings"] / 100.0) < 15].mean(axis=1)
+    line = 10 + int(np.argmax(profile[10:]))                            # past the ring-down
+    assert (line + 0.5) * got[-1]["res"] == pytest.approx(WALL_RANGE, abs=2 * got[-1]["res"])
+
+
 def test_virtual_sonar_takes_the_scenes_water_temperature_and_surface(tmp_path):
     from mitsonar.acoustics.seawater import sound_speed
     path = tmp_path / "warm.xml"
