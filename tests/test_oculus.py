@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import math
+import os
 import socket
 import struct
 import subprocess
@@ -18,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from mitsonar.cli.main import main
 import mitsonar.presets.oculus as presets
@@ -390,6 +392,31 @@ def test_the_heads_summary_and_the_live_summary_say_its_skipped_slots(monkeypatc
     monkeypatch.setattr("mitsonar.devices.transports.serve_in_foreground", lambda *a: None)
     slow.serve(0, out)
     assert out.getvalue() == f"virtual Oculus: {slow.summary()}\n"
+
+
+_NUMBERS = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([0.0, 5.0, 40.0, 100.0]))
+
+
+@settings(max_examples=int(os.environ.get("MITSONAR_FUZZ_EXAMPLES", 60)), deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 255), st.integers(0, 255), st.integers(0, 255), st.integers(0, 255), _NUMBERS, _NUMBERS,
+       _NUMBERS, _NUMBERS, st.integers(0, 2 ** 32 - 1), st.sampled_from([1, 2]))
+def test_any_fire_message_is_answered_or_refused_and_the_head_stays_up(mode, rate, gamma, flags, rng, gain, c,
+                                                                        salinity, ext, version):
+    # every field of a fire message that decodes, at any value: the head pings with it, or refuses it
+    # naming the field (counted); it never fails inside
+    from mitsonar.devices.oculus.protocol import FireMessage, decode
+    fire = decode(FireMessage(mode, rate, 0, gamma, flags, rng, gain, c, salinity, ext_flags=ext,
+                              version=version).encode())
+    h, clock, client = _scheduled_head(0.0)
+    h._on_message(client, fire)
+    for _ in range(3):
+        h._tick()
+    assert h.last_error is None and h.stats["internal errors"] == 0
+    if h.stats["refused"] == 1:
+        assert h.last_problem.startswith("simple fire '") and "is not allowed" in h.last_problem
+    else:
+        assert h.stats["refused"] == 0 and client.fire is fire
+        assert h.stats["pings"] >= 1 or math.isinf(h.period(fire))
 
 
 def test_a_ping_is_delivered_when_its_last_byte_is_written():
