@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import math
+import os
 import socket
 import struct
 import subprocess
@@ -18,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from mitsonar.cli.main import main
 import mitsonar.presets.oculus as presets
@@ -130,7 +132,8 @@ def parse_ping(m: bytes) -> dict:
     img = np.ascontiguousarray(rows[:, 4:] if gain else rows).view({1: "<u1", 2: "<u2", 4: "<u4"}[nb])
     return {"version": v, "id": pid, "frequency": freq, "c": c, "res": res, "n_r": n_r, "n_b": n_b,
             "bearings": bearings, "image": img, "gains": gains, "range": fire[5], "temperature": temp, "pressure": pres,
-            "heading": heading if v == 2 else None, "raw": m}
+            "heading": heading if v == 2 else None, "pitch": pitch if v == 2 else None,
+            "roll": roll if v == 2 else None, "raw": m}
 
 
 def free_udp_port() -> int:
@@ -141,12 +144,14 @@ def free_udp_port() -> int:
     return port
 
 
-def fan_scan(aperture=130.0, n_b=256, n_r=100, bin_width=0.1, seed=0):
-    """A multibeam scan whose rows lie at the head's own bearing table (so beam k is row k)."""
+def fan_scan(aperture=130.0, n_b=256, n_r=100, bin_width=0.1, seed=0, pose=None):
+    """A multibeam scan whose rows lie at the head's own bearing table (so beam k is row k), of a
+    head at ``pose`` (default identity)."""
     b = np.radians(presets.bearing_table(aperture, n_b) / 100.0)
     data = np.random.default_rng(seed).integers(0, 256, (n_b, n_r), dtype=np.uint8)
+    pose = np.eye(4) if pose is None else pose
     return Scan(intensity=np.zeros((n_b, n_r), np.float32), data=data, ranges=(np.arange(n_r) + 0.5) * bin_width,
-                bearings=b, poses=np.eye(4) @ bearing_rotation(b), range_min=0.0, range_max=n_r * bin_width,
+                bearings=b, poses=pose @ bearing_rotation(b), range_min=0.0, range_max=n_r * bin_width,
                 kind="multibeam", sound_speed=1500.0)
 
 
@@ -283,8 +288,8 @@ class _FakeSock:
         pass
 
 
-def _scheduled_head(render_s, full=False, chunk=None):
-    """A virtual head on a fake clock with one client fired at 10 Hz (a 2 m range: 20 lines),
+def _scheduled_head(render_s, full=False, chunk=None, rate=10):
+    """A virtual head on a fake clock with one client fired at ``rate`` Hz (a 2 m range: 20 lines),
     each ping taking ``render_s`` s of that clock to make."""
     from mitsonar.devices.oculus.driver import fire_message
     from mitsonar.devices.oculus.virtual import VirtualOculus, _Client
@@ -300,8 +305,27 @@ def _scheduled_head(render_s, full=False, chunk=None):
     h.ping = slow_ping
     c = _Client(_FakeSock(full, chunk), ("127.0.0.1", 1))
     h._clients[99] = c
-    h._on_message(c, fire_message(rate=10, range=2.0, gain=100, beams=256))
+    h._on_message(c, fire_message(rate=rate, range=2.0, gain=100, beams=256))
     return h, clock, c
+
+
+@pytest.mark.parametrize("hz, code", [(10, 0), (15, 1), (40, 2), (5, 3), (2, 4), (0, 5)])
+def test_each_ping_rate_streams_at_its_rate_from_one_fire_message(hz, code):
+    # pingRate (Oculus.h PingRateType): 0 10 Hz, 1 15 Hz, 2 40 Hz, 3 5 Hz, 4 2 Hz, 5 standby. One fire
+    # message, then a ping every 1/rate s of the head's clock (2 s: 2 x rate pings); standby: none
+    from mitsonar.devices.oculus.driver import fire_message
+    fire = fire_message(rate=hz, range=2.0)
+    assert fire.ping_rate == code and fire.encode()[17] == code          # pingRate at byte 17
+    h, clock, _ = _scheduled_head(0.0, rate=hz)
+    sent = []
+    send = h._send_ping
+    h._send_ping = lambda c, now: (sent.append(now), send(c, now))
+    while clock.t < (2.0 - 0.5 / hz if hz else 2.0):     # half a period after the last slot before 2 s
+        h._tick()
+    assert h.stats["fire messages"] == 1 and h.stats["pings"] == len(sent) == 2 * hz
+    if hz:
+        np.testing.assert_allclose(sent, np.arange(2 * hz) / hz, atol=1e-6)
+    assert h.stats["pings skipped (late)"] == 0 and h.last_error is None
 
 
 def test_the_head_keeps_its_rate_when_each_ping_takes_most_of_the_period():
@@ -338,6 +362,61 @@ def test_slots_of_a_client_behind_are_skipped_on_the_heads_schedule(monkeypatch)
         h._tick()
     assert h.stats["pings"] == 1 and h.stats["pings skipped (client behind)"] == 19
     assert c.due == pytest.approx(2.0)
+
+
+def test_the_heads_summary_and_the_live_summary_say_its_skipped_slots(monkeypatch):
+    # a head that cannot keep its rate (250 ms a ping at 10 Hz), and one whose client reads nothing:
+    # virtual-sonar's last line and `mitsonar live`'s summary say how many slots each skipped
+    import mitsonar.devices.oculus.virtual as virtual
+    from mitsonar.cli.live import _summary
+
+    class Renderer:
+        def summary(self):
+            return "9 pings rendered"
+
+    slow, clock, _ = _scheduled_head(0.25)
+    while clock.t < 1.95:
+        slow._tick()
+    monkeypatch.setattr(virtual, "MAX_BACKLOG", 1)
+    behind, clock, _ = _scheduled_head(0.0, full=True)
+    while clock.t < 1.95:
+        behind._tick()
+    for h, late, slow_client in ((slow, slow.stats["pings skipped (late)"], 0), (behind, 0, 19)):
+        assert h.stats["pings skipped (late)"] == late and h.stats["pings skipped (client behind)"] == slow_client
+        said = (f"{h.stats['pings']} pings to 0 client(s), 0 message(s) refused, {late} pings skipped (late), "
+                f"{slow_client} pings skipped (client behind)")
+        assert h.summary() == said
+        assert _summary(Renderer(), None, None, None, h) == f"9 pings rendered; head: {said}"
+    assert slow.stats["pings skipped (late)"] > 0
+    out = io.StringIO()
+    monkeypatch.setattr("mitsonar.devices.transports.serve_in_foreground", lambda *a: None)
+    slow.serve(0, out)
+    assert out.getvalue() == f"virtual Oculus: {slow.summary()}\n"
+
+
+_NUMBERS = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([0.0, 5.0, 40.0, 100.0]))
+
+
+@settings(max_examples=int(os.environ.get("MITSONAR_FUZZ_EXAMPLES", 60)), deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 255), st.integers(0, 255), st.integers(0, 255), st.integers(0, 255), _NUMBERS, _NUMBERS,
+       _NUMBERS, _NUMBERS, st.integers(0, 2 ** 32 - 1), st.sampled_from([1, 2]))
+def test_any_fire_message_is_answered_or_refused_and_the_head_stays_up(mode, rate, gamma, flags, rng, gain, c,
+                                                                        salinity, ext, version):
+    # every field of a fire message that decodes, at any value: the head pings with it, or refuses it
+    # naming the field (counted); it never fails inside
+    from mitsonar.devices.oculus.protocol import FireMessage, decode
+    fire = decode(FireMessage(mode, rate, 0, gamma, flags, rng, gain, c, salinity, ext_flags=ext,
+                              version=version).encode())
+    h, clock, client = _scheduled_head(0.0)
+    h._on_message(client, fire)
+    for _ in range(3):
+        h._tick()
+    assert h.last_error is None and h.stats["internal errors"] == 0
+    if h.stats["refused"] == 1:
+        assert h.last_problem.startswith("simple fire '") and "is not allowed" in h.last_problem
+    else:
+        assert h.stats["refused"] == 0 and client.fire is fire
+        assert h.stats["pings"] >= 1 or math.isinf(h.period(fire))
 
 
 def test_a_ping_is_delivered_when_its_last_byte_is_written():
@@ -385,6 +464,68 @@ def test_status_broadcast_carries_the_head_and_its_address():
     _dev, dtype, part, status = struct.unpack_from("<IHHI", data, 16)
     assert (dtype, part, status & 7) == (1, 2203, 3)
     assert data[52:56] == socket.inet_aton("127.0.0.1")
+
+
+@pytest.mark.parametrize("name", ["M750d", "M1200d", "M3000d"])
+def test_each_models_frequency_mode_selects_its_frequency_aperture_beams_and_range(name):
+    # masterMode 1 (low) / 2 (high frequency): the model's frequency, aperture (the bearing table
+    # spans it), beam widths (the driver's scan) and largest range; 256 or 512 beams by flag bit 6
+    from mitsonar.devices.oculus.driver import fire_message
+    from mitsonar.devices.oculus.head import ping_to_scan
+    from mitsonar.devices.oculus.virtual import VirtualOculus, check_fire
+    model = presets.model(name)
+    h = VirtualOculus(fan_scan(n_r=50), model=name, tcp_port=0, udp_port=None)
+    assert h.status().part_number == model.part_number
+    for number, mode in model.modes.items():
+        for beams in (256, 512):
+            p = h.ping(fire_message(mode=number, range=5.0, beams=beams, speed_of_sound=1500.0))
+            assert (p.frequency, p.n_beams) == (mode.frequency, beams)
+            np.testing.assert_array_equal(p.bearings, presets.bearing_table(mode.aperture, beams))
+            assert -p.bearings[0] / 100 == p.bearings[-1] / 100 == pytest.approx(mode.aperture / 2, abs=0.6)
+            s = ping_to_scan(p)
+            assert (s.beamwidth_h, s.beamwidth_v, s.meta.frequency) == (mode.beamwidth_h, mode.beamwidth_v,
+                                                                        mode.frequency)
+        assert check_fire(fire_message(mode=number, range=mode.max_range), model) is None
+        assert (f"'range': {mode.max_range + 1!r} m is not allowed (0.1..{mode.max_range:g} m for the {name} in "
+                f"mode {number})") in check_fire(fire_message(mode=number, range=mode.max_range + 1), model)
+
+
+def test_heading_pitch_roll_depth_and_temperature_come_from_the_heads_pose_and_water():
+    # a head looking east (x), its vehicle yawed 30 deg left, pitched 10 deg nose down, rolled 5 deg
+    # to starboard, 3 m below the surface: heading 60, pitch -10, roll 5, pressure of 3 m of sea water
+    from scipy.spatial.transform import Rotation
+    from mitsonar.devices.oculus.driver import fire_message
+    from mitsonar.devices.oculus.virtual import VirtualOculus
+    mount = np.eye(4)
+    mount[:3, :3] = np.array([[0, 1, 0], [0, 0, 1], [1, 0, 0]]).T      # lookat +x, up +z: z boresight, y up
+    vehicle = np.eye(4)
+    vehicle[:3, :3] = Rotation.from_euler("ZYX", [30, 10, 5], degrees=True).as_matrix()
+    vehicle[:3, 3] = [4.0, -2.0, -1.0]
+    h = VirtualOculus(fan_scan(n_r=20, pose=vehicle @ mount), tcp_port=0, udp_port=None, water={"temperature": 14.0, "surface_z": 2.0})
+    p = h.ping(fire_message(range=2.0, speed_of_sound=1500.0))
+    assert (p.heading, p.pitch, p.roll) == (pytest.approx(60.0), pytest.approx(-10.0), pytest.approx(5.0))
+    assert p.temperature == 14.0 and p.pressure == pytest.approx(3.0 * 1025.0 * 9.80665 / 1e5)
+
+
+def test_the_ports_default_to_what_the_open_clients_hard_wire_and_are_configurable(tmp_path, monkeypatch):
+    # liboculus: StatusRx binds UDP 52102, DataRx connects to TCP 52100 of the status's address
+    from mitsonar.devices.oculus.driver import OculusSonar
+    from mitsonar.devices.oculus.logfile import write_log
+    from mitsonar.devices.oculus.registration import OculusHead
+    from mitsonar.devices.oculus.virtual import VirtualOculus
+    h = VirtualOculus(fan_scan(n_r=10))                       # not started: nothing bound
+    assert (h.host, h.tcp_port, h.udp_port, h.status().ip) == ("127.0.0.1", 52100, 52102, "127.0.0.1")
+    sonar = OculusSonar(start=False)
+    assert (sonar.host, sonar.tcp_port, sonar.udp_port) == (None, 52100, 52102)     # None: discovered
+    served = []
+    monkeypatch.setattr(OculusHead, "check_serve", lambda self, args: None)          # binds nothing here
+    monkeypatch.setattr(VirtualOculus, "serve", lambda self, *a: served.append((self.host, self.tcp_port,
+                                                                              self.udp_port)) or 0)
+    log = write_log(tmp_path / "p.oculus", [fan_scan(n_r=10)])
+    assert main(["virtual-sonar", "--log", str(log), "--head", "oculus"]) == 0
+    assert main(["virtual-sonar", "--log", str(log), "--head", "oculus", "--port-url", "tcp://127.0.0.1:5100",
+                 "--status-port", "5102"]) == 0
+    assert served == [("127.0.0.1", 52100, 52102), ("127.0.0.1", 5100, 5102)]
 
 
 def test_malformed_oversized_and_refused_messages_are_counted_and_the_head_stays_up(head):
@@ -443,6 +584,42 @@ def test_driver_discovers_records_a_raw_log_that_replays(tmp_path):
         np.testing.assert_array_equal(s.data, scan.data)
         np.testing.assert_allclose(s.bearings, scan.bearings, atol=1e-9)
         np.testing.assert_allclose(s.ranges, scan.ranges)
+
+
+@pytest.fixture(scope="module")
+def head_frame(wall):
+    """The wall scene rendered at the head's own geometry (M1200d low frequency, 256 beams at its
+    bearing table, 0..10 m in 0.1 m bins): beam k is row k, range line i is bin i."""
+    from mitsonar.devices.oculus.scenes import SceneFrames
+    path, rendered = wall
+    return SceneFrames(path, bin_width=rendered.bin_width, spp=4, seed=0)(presets.model("M1200d").mode(1), 256, 10.0)
+
+
+@pytest.mark.parametrize("bits", [8, 16, 32])
+def test_the_drivers_scans_keep_the_rendered_codes_of_each_data_size(head_frame, bits, tmp_path):
+    # the virtual head fires 8-, 16- and 32-bit samples of the rendered scan's receiver chain; the
+    # driver's scans, a raw log's replay and a .oculus log's carry those codes, bit for bit, in
+    # uint8/16/32 with electronics bit_depth 8/16/32 (it kept the top eight bits of each)
+    from mitsonar.devices.oculus.driver import OculusSonar, fire_message, record, record_oculus
+    from mitsonar.devices.oculus.logfile import read_scans
+    from mitsonar.devices.oculus.virtual import VirtualOculus
+    from mitsonar.devices.recording import replay
+    from mitsonar.receiver.electronics import apply_to_scan
+    frame = head_frame
+    codes = frame.data if bits == 8 else apply_to_scan(frame, frame.electronics.replace(bit_depth=bits)).data
+    dtype = {8: np.uint8, 16: np.uint16, 32: np.uint32}[bits]
+    assert codes.dtype == dtype and codes.shape == (256, 100) and codes.any()
+    fire = fire_message(rate=40, range=10.0, gain=100, speed_of_sound=frame.sound_speed, data_bits=bits)
+    with VirtualOculus(frame, tcp_port=0, udp_port=None) as h:
+        with OculusSonar("127.0.0.1", h.tcp_port, fire) as sonar:
+            scans = [sonar.scan()]
+        record("127.0.0.1", tmp_path / "o.bin", pings=2, tcp_port=h.tcp_port, fire=fire)
+        record_oculus("127.0.0.1", tmp_path / "o.oculus", pings=2, tcp_port=h.tcp_port, fire=fire)
+    scans += replay(tmp_path / "o.bin") + read_scans(tmp_path / "o.oculus")
+    assert len(scans) >= 5
+    for s in scans:
+        assert s.data.dtype == dtype and s.electronics.bit_depth == bits
+        np.testing.assert_array_equal(s.data, codes)
 
 
 def test_driver_reconnects_after_a_dropped_connection(head):
@@ -511,23 +688,28 @@ def test_a_log_written_by_mitsonar_opens_in_bps_oculus_with_every_ping(tmp_path,
 
 def _foreign_log(path, pings):
     """A .oculus log built from the layout alone: file header, one item of another record type,
-    then the pings (hand-packed version 1 and 2 simple ping results)."""
+    then the pings (hand-packed version 1 and 2 simple ping results; ``(version, image, bearings,
+    res[, bytes per sample])``: 1, 2, 3 or 4, dataSize 0..3, little-endian samples)."""
     out = struct.pack("<2I16s2H4xqd", 0x11223344, 48, b"Oculus", 1, 0, 0, 1.7e9)
     out += struct.pack("<2I2H4xdH2x2I4x", 0xAABBCCDD, 40, 2, 1, 1.7e9, 0, 3, 3) + b"abc"   # rt_serialPort
-    for k, (version, image, bearings, res) in enumerate(pings):
+    for k, (version, image, bearings, res, *nb) in enumerate(pings):
+        nb = nb[0] if nb else 1
         n_r, n_b = image.shape
-        fire = struct.pack(FIRE2 if version == 2 else FIRE1, 1, 0, 255, 255, 0x09, n_r * res, 100.0, 1500.0, 35.0,
-                           *(([0] * 9) if version == 2 else []))
+        samples = np.asarray(image, "<u4").view(np.uint8).reshape(n_r, n_b, 4)[..., :nb].tobytes()
+        flags, ext = 0x09 | (0x02 if nb == 2 else 0), 0x200 if nb == 4 else 0
+        fire = struct.pack(FIRE2 if version == 2 else FIRE1, 1, 0, 255, 255, flags, n_r * res, 100.0, 1500.0, 35.0,
+                           *(([ext] + [0] * 8) if version == 2 else []))
         head_size = (202 if version == 2 else 122)
         off = head_size + 2 * n_b
-        total = off + image.size
+        total = off + len(samples)
         if version == 2:
-            tail = struct.pack(PING2, k, 0, 1.2e6, 10.0, 0.0, 0, 0, 0, 1500.0, 0.0, 0, res, n_r, n_b, 0, 0, 0, 0,
-                               off, image.size, total)
+            tail = struct.pack(PING2, k, 0, 1.2e6, 10.0, 0.0, 0, 0, 0, 1500.0, 0.0, nb - 1, res, n_r, n_b, 0, 0, 0, 0,
+                               off, len(samples), total)
         else:
-            tail = struct.pack(PING1, k, 0, 1.2e6, 10.0, 0.0, 1500.0, 0, 0, res, n_r, n_b, off, image.size, total)
+            tail = struct.pack(PING1, k, 0, 1.2e6, 10.0, 0.0, 1500.0, 0, nb - 1, res, n_r, n_b, off, len(samples),
+                               total)
         msg = (struct.pack(HEADER, 0x4F53, 1, 0, 0x23, version, total - 16, 0) + fire + tail
-               + np.asarray(bearings, "<i2").tobytes() + image.astype(np.uint8).tobytes())
+               + np.asarray(bearings, "<i2").tobytes() + samples)
         out += struct.pack("<2I2H4xdH2x2I4x", 0xAABBCCDD, 40, 10, 1, 1.7e9 + k, 0, len(msg), len(msg)) + msg
     path.write_bytes(out)
 
@@ -544,6 +726,26 @@ def test_a_log_mitsonar_did_not_write_replays(tmp_path):
         np.testing.assert_array_equal(s.data, image.T)
         np.testing.assert_allclose(np.degrees(s.bearings), bearings / 100.0)
         np.testing.assert_allclose(s.ranges, (np.arange(20) + 0.5) * res)
+
+
+def test_a_foreign_log_of_wide_samples_replays_with_its_codes(tmp_path):
+    # 16- and 32-bit samples keep their codes (uint16, uint32; bit_depth 16, 32); 24-bit ones, which
+    # no fire message asks for, go on the 32-bit scale: round(code (2^32 - 1) / (2^24 - 1))
+    rng = np.random.default_rng(4)
+    tops = {2: 65535, 3: (1 << 24) - 1, 4: (1 << 32) - 1}
+    images = {nb: rng.integers(0, top, (12, 6), dtype=np.uint64, endpoint=True) for nb, top in tops.items()}
+    images[3][0, :3] = [0, 1, (1 << 24) - 1]
+    log = tmp_path / "wide.oculus"
+    _foreign_log(log, [(2, images[nb], np.arange(-3, 3) * 700, 0.05, nb) for nb in (2, 3, 4)] +
+                 [(1, images[2], np.arange(-3, 3) * 700, 0.05, 2)])
+    assert main(["replay", str(log), "-o", str(tmp_path / "w.npz"), "--all"]) == 0
+    got = [load_scan(tmp_path / f"w_{k:03d}.npz") for k in range(4)]
+    expected = [images[2].astype(np.uint16), (images[3] * (2 ** 32 - 1) + (2 ** 24 - 1) // 2) // (2 ** 24 - 1),
+                images[4].astype(np.uint32), images[2].astype(np.uint16)]
+    for s, e, bits in zip(got, expected, (16, 32, 32, 16)):
+        assert s.data.dtype == np.dtype(f"uint{bits}") and s.electronics.bit_depth == bits
+        np.testing.assert_array_equal(s.data, e.T)
+    assert list(got[1].data[:3, 0]) == [0, 256, 2 ** 32 - 1]
 
 
 def test_a_cut_or_foreign_file_is_refused_naming_the_field(tmp_path):
@@ -606,6 +808,51 @@ def test_virtual_sonar_serves_a_scene_with_the_wall_at_its_range(wall):
     assert (line + 0.5) * got[0]["res"] == pytest.approx(WALL_RANGE, abs=2 * got[0]["res"])
 
 
+def test_a_client_fired_once_receives_200_pings_of_the_rendered_bytes(wall):
+    # the target: as liboculus does, find the head by its status broadcast (the address it carries),
+    # connect over TCP, fire once with a ping rate; the head streams: 200 ping results, each decoded
+    # (the layout client, and bps_oculus where installed) equal to mitsonar's rendered bytes, the
+    # wall at its range
+    from mitsonar.devices.oculus.protocol import FireMessage
+    from mitsonar.devices.oculus.scenes import SceneFrames
+    from mitsonar.devices.oculus.virtual import VirtualOculus
+    try:
+        import bps_oculus.core as core
+    except ImportError:
+        core = None
+    path, rendered = wall
+    status_port = free_udp_port()
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", status_port))
+    rx.settimeout(30)
+    proc, port = _serve([str(path), "--head", "oculus", "--spp", "16", "--port-url", "tcp://127.0.0.1:0",
+                         "--status-port", str(status_port), "--seconds", "120"])
+    try:
+        status = rx.recv(4096)
+        assert len(status) == 142
+        c = LayoutClient(port, host=socket.inet_ntoa(status[52:56]))
+        c.fire(version=2, rate=2, flags=0x0D, rng=10.0, gain=100.0, c=1500.0)      # once, 40 Hz
+        got = [c.ping() for _ in range(200)]
+        c.close()
+    finally:
+        rx.close()
+        proc.terminate()
+        proc.wait(10)
+    frames = SceneFrames(path, bin_width=rendered.bin_width, spp=16, seed=0)
+    expected = VirtualOculus(rendered, tcp_port=0, frames=frames).ping(
+        FireMessage(flags=0x0D, range=10.0, gain=100.0, speed_of_sound=1500.0))
+    assert [p["id"] for p in got] == list(range(200))
+    for p in got:
+        np.testing.assert_array_equal(p["image"], expected.image)
+        np.testing.assert_array_equal(p["bearings"], expected.bearings)
+        if core is not None:
+            img = core.parse_polar_image(p["raw"], core.process_raw(p["raw"]))
+            np.testing.assert_array_equal(img.polar_image, expected.image)
+    profile = got[-1]["image"][:, np.abs(got[-1]["bearings"] / 100.0) < 15].mean(axis=1)
+    line = 10 + int(np.argmax(profile[10:]))                            # past the ring-down
+    assert (line + 0.5) * got[-1]["res"] == pytest.approx(WALL_RANGE, abs=2 * got[-1]["res"])
+
+
 def test_virtual_sonar_takes_the_scenes_water_temperature_and_surface(tmp_path):
     from mitsonar.acoustics.seawater import sound_speed
     path = tmp_path / "warm.xml"
@@ -644,6 +891,9 @@ def test_virtual_sonar_serves_a_log(tmp_path):
         proc.wait(10)
     for p in got:
         np.testing.assert_array_equal(p["image"], scans[p["id"] % 2].data.T)
+    last = proc.stdout.read().splitlines()[-1]          # what it served, and the slots it skipped
+    assert last.startswith("virtual Oculus: ") and "pings to 1 client(s), 0 message(s) refused" in last
+    assert "pings skipped (late)" in last and "pings skipped (client behind)" in last
 
 
 def test_virtual_sonar_refusals_name_the_flag(tmp_path, capsys, wall):
@@ -699,6 +949,51 @@ def test_live_oculus_renders_each_ping_from_the_pose_then(wall):
         proc.terminate()
         out, err = proc.communicate(timeout=60)
     assert "Traceback" not in err and "1 poses applied" in out, (out, err)
+    # the summary says what the head served and the ping slots it skipped (it could not keep its rate)
+    import re
+    served = re.search(r"; head: (\d+) pings to 1 client\(s\), 0 message\(s\) refused, (\d+) pings skipped "
+                       r"\(late\), (\d+) pings skipped \(client behind\)", out)
+    assert served and int(served[1]) >= len(got) + 1, out
+
+
+def test_live_oculus_fills_heading_pitch_roll_and_depth_from_the_pose_then(wall):
+    import json
+    from scipy.spatial.transform import Rotation
+    path, _ = wall
+    proc = subprocess.Popen([sys.executable, "-m", "mitsonar", "live", str(path), "--head", "oculus", "--spp", "4",
+                             "--port-url", "tcp://127.0.0.1:0", "--status-port", str(free_udp_port()),
+                             "--pose-url", "udp://127.0.0.1:0", "--seconds", "60"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines = []
+    for line in proc.stdout:
+        lines.append(line)
+        if line.startswith("live "):
+            break
+    text = "".join(lines)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        assert "live Oculus on tcp://127.0.0.1:" in text, text
+        pose_port = int(text.split("poses on udp://127.0.0.1:")[1].split()[0])
+        c = LayoutClient(int(text.split("tcp://127.0.0.1:")[1].split()[0]))
+        c.fire(version=2, rate=2, flags=0x0D, rng=10.0, gain=100.0, c=1500.0)
+        p = c.ping()
+        assert (p["heading"], p["pitch"], p["roll"], p["pressure"]) == (pytest.approx(90.0), 0.0, 0.0, 0.0)
+        # the vehicle (x forward, y port, z up) yawed 30 deg left, pitched 10 deg nose down, rolled 5 deg
+        # to starboard, 3 m below the scene's surface (z = 0)
+        q = Rotation.from_euler("ZYX", [30, 10, 5], degrees=True).as_quat()          # x, y, z, w
+        tx.sendto(json.dumps({"t": 50.0, "position": [0, 0, -3], "orientation": list(q)}).encode(),
+                  ("127.0.0.1", pose_port))
+        for _ in range(50):                 # the pose is applied by another thread: ping until it shows
+            p = c.ping()
+            if abs(p["heading"] - 90.0) > 1e-6:
+                break
+        c.close()
+    finally:
+        tx.close()
+        proc.terminate()
+        proc.communicate(timeout=60)
+    assert (p["heading"], p["pitch"], p["roll"]) == (pytest.approx(60.0), pytest.approx(-10.0), pytest.approx(5.0))
+    assert p["pressure"] == pytest.approx(3.0 * 1025.0 * 9.80665 / 1e5) and p["temperature"] == 10.0
 
 
 def test_live_oculus_renders_each_fire_messages_geometry(wall):

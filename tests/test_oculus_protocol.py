@@ -10,7 +10,7 @@ import struct
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 import mitsonar.presets.oculus as presets
 from mitsonar.devices.oculus import protocol as op
@@ -189,3 +189,21 @@ def test_stream_parser_refuses_oversized_and_malformed_and_goes_on():
     got = p.feed(big + bytes(bad) + good)
     assert got == [FireMessage(range=3.0)]
     assert p.refused == 2 and "payloadSize 5000" in next(iter(p.drop_reasons))
+
+
+@FUZZ
+@given(st.integers(0, 10 ** 6), st.binary(min_size=1, max_size=8), st.integers(0, 400))
+@example(pos=48 + 40 + 98, junk=b"\0" * 8, cut=0)        # the first ping's rangeResolution 0: no scan
+def test_damaged_oculus_logs_are_refused_naming_the_file_not_crashing(tmp_path_factory, pos, junk, cut):
+    # a .oculus log with bytes overwritten and cut short: read into scans, or one ValueError naming it
+    from mitsonar.devices.oculus.logfile import read_scans, write_log
+    path = tmp_path_factory.mktemp("fuzz") / "d.oculus"
+    write_log(path, [ping(version=1 + k % 2, nbytes=(1, 2, 4)[k % 3], seed=k) for k in range(3)])
+    b = bytearray(path.read_bytes())
+    k = pos % len(b)
+    b[k:k + len(junk)] = junk
+    path.write_bytes(bytes(b[:len(b) - cut]))
+    try:
+        read_scans(path)
+    except ValueError as e:
+        assert str(e).startswith(f"{path}: "), e

@@ -155,7 +155,7 @@ def _live(args) -> int:
     previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     if hasattr(signal, "SIGUSR1"):        # the summary so far, on demand (kill -USR1 PID)
         previous[signal.SIGUSR1] = signal.signal(
-            signal.SIGUSR1, lambda *_: print(_summary(renderer, receiver, mav, loop), flush=True))
+            signal.SIGUSR1, lambda *_: print(_summary(renderer, receiver, mav, loop, live), flush=True))
     try:
         with (loop_running(loop) if loop is not None else live):
             if receiver is not None:
@@ -182,7 +182,7 @@ def _live(args) -> int:
         log.close()
         if outputs is not None:
             outputs.close()
-    print(_summary(renderer, receiver, mav, loop) + (f"; {outputs.summary()}" if outputs is not None else ""),
+    print(_summary(renderer, receiver, mav, loop, live) + (f"; {outputs.summary()}" if outputs is not None else ""),
           flush=True)
     return 0
 
@@ -267,12 +267,17 @@ def _frame_sensor(scene, args):
     raise ValueError(f"{args.scene}: no multibeam sensor to publish frames of")
 
 
-def _summary(renderer, receiver, mav, loop=None) -> str:
+def _summary(renderer, receiver, mav, loop=None, head=None) -> str:
     """One line: pings rendered, render time percentiles, latency, paths and error percentiles,
-    frames published and skipped, poses applied and dropped by reason."""
+    frames published and skipped, what the head served (``head.summary()``: an Oculus's pings
+    and the ping slots it skipped, late or for a client behind), poses applied and dropped by
+    reason."""
     line = renderer.summary()
     if loop is not None:
         line += f"; {loop.stats['frames']} frames published of {loop.due} due"
+    served = head.summary() if head is not None else ""
+    if served:
+        line += f"; head: {served}"
     if receiver is not None:
         st = receiver.stats
         moved = f", {st['objects']} object moves" if st["objects"] else ""
@@ -313,7 +318,8 @@ def add_subcommands(subparsers) -> None:
                     "recorded (--records). Prints 'poses on URL' and 'live HEAD on PORT' (or 'live "
                     "multibeam ID at RATE Hz', the sensor's id left out when it only repeats the kind), "
                     "serves until --seconds or SIGINT/SIGTERM, then a "
-                    "summary line (also on SIGUSR1): latency, paths and error p50/p95/p99. --foxglove, "
+                    "summary line (also on SIGUSR1): latency, paths and error p50/p95/p99 (an Oculus head adds "
+                    "its pings and the ping slots it skipped, late or for a client behind). --foxglove, "
                     "--mcap and --dds send each ping (or frame) also to Foxglove, an MCAP file and ROS 2 "
                     "over DDS.")
     p.add_argument("scene", metavar="SCENE.xml", help="Mitsuba scene with a mechanical or multibeam `sonar` sensor")

@@ -332,6 +332,12 @@ class ServedHead:
     def port(self) -> str | None:
         return None if self._transport is None else self._transport.port
 
+    def summary(self) -> str:
+        """What the head served, for ``mitsonar live``'s summary line: nothing more here (a serial
+        head answers each request as it comes; `mitsonar.devices.oculus.virtual.VirtualOculus`
+        says its pings and the ping slots it skipped)."""
+        return ""
+
     def start(self) -> str:
         """Open the port, power the head on; returns the port a driver should open."""
         if self._thread is None:

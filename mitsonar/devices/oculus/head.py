@@ -4,10 +4,12 @@ One simple ping result is one multibeam frame: a Scan of kind ``multibeam`` whos
 head's beams, at the head's own bearings (the result's bearing table, 0.01 degree), and whose
 bins are its range lines: bin i is centred at ``(i + 1/2) x rangeResolution`` (window
 ``0 .. nRanges x rangeResolution``; bps_oculus's range table puts line i at
-``(i + 1) x rangeResolution``, the line's far edge). ``data`` is the image transposed, in bytes:
-8-bit samples as they are, 16-bit ones ``>> 8``, 24-bit ``>> 16``, 32-bit ``>> 24`` (the top eight
-bits: `mitsonar.devices.oculus.virtual` widens a level by 257 and 16843009, so a level
-round-trips). Row k's pose is the head's pose turned by bearing k about the fan's axis
+``(i + 1) x rangeResolution``, the line's far edge). ``data`` is the image transposed, its codes
+kept: 8-bit samples as uint8, 16-bit as uint16, 32-bit as uint32, and the electronics'
+``bit_depth`` says which (8, 16, 32); 24-bit samples (``dataSize`` 2, which no fire message asks
+for) become uint32 on the 32-bit scale, ``round(code x (2^32 - 1) / (2^24 - 1))``
+(`mitsonar.scan.model.data_as`'s rule: the same levels), ``bit_depth`` 32. Row k's pose is the
+head's pose turned by bearing k about the fan's axis
 (`mitsonar.geometry.frames.bearing_rotation`); the beam widths are the model's in the
 result's frequency mode (`mitsonar.presets.oculus`), else 1 x 20 degrees.
 """
@@ -17,11 +19,23 @@ import numpy as np
 
 from mitsonar.acoustics.water import SOUND_SPEED
 import mitsonar.presets.oculus as presets
-from mitsonar.devices.oculus.protocol import PingResult
+from mitsonar.devices.oculus.protocol import DATA_SIZE_BYTES, PingResult
 
 __all__ = ["ping_to_scan", "OculusAssembler", "mode_of"]
 
-_SHIFT = {1: 0, 2: 8, 3: 16, 4: 24}
+#: bytes per sample -> the Scan's data type (24-bit samples go on the 32-bit scale)
+_DTYPE = {1: np.uint8, 2: np.uint16, 3: np.uint32, 4: np.uint32}
+_TOP24 = (1 << 24) - 1
+
+
+def _codes(image, nbytes: int) -> np.ndarray:
+    """A ping result's ``image`` of ``nbytes``-byte samples as the codes a `Scan` carries
+    (uint8, uint16, uint32; 24-bit samples on the 32-bit scale)."""
+    image = np.asarray(image)
+    if nbytes == 3:
+        top = int(np.iinfo(np.uint32).max)
+        return ((image.astype(np.uint64) * top + _TOP24 // 2) // _TOP24).astype(np.uint32)
+    return image.astype(_DTYPE[nbytes], copy=False)
 
 
 def mode_of(frequency: float, master_mode: int | None = None):
@@ -46,9 +60,8 @@ def ping_to_scan(ping: PingResult, pose=None, t: float = 0.0, meta: dict | None 
 
     pose = np.eye(4) if pose is None else np.asarray(pose, np.float64)
     image = np.asarray(ping.image)
-    nbytes = {0: 1, 1: 2, 2: 3, 3: 4}.get(ping.data_size, image.dtype.itemsize) if ping.data_size is not None \
-        else image.dtype.itemsize
-    data = (image.astype(np.uint64) >> _SHIFT[nbytes]).astype(np.uint8).T.copy()
+    nbytes = DATA_SIZE_BYTES.get(ping.data_size, image.dtype.itemsize)
+    data = _codes(image, nbytes).T.copy()
     n_b, n_r = data.shape
     res = float(ping.range_resolution)
     if not (np.isfinite(res) and res > 0):
@@ -66,7 +79,7 @@ def ping_to_scan(ping: PingResult, pose=None, t: float = 0.0, meta: dict | None 
                 bearings=bearings, poses=pose @ bearing_rotation(bearings), range_min=0.0, range_max=n_r * res,
                 beamwidth_h=mode.beamwidth_h if mode else 1.0, beamwidth_v=mode.beamwidth_v if mode else 20.0,
                 kind=kinds.MULTIBEAM.name, sound_speed=c, times=np.zeros(n_b),
-                electronics=ElectronicsSettings(bit_depth=8 * nbytes),
+                electronics=ElectronicsSettings(bit_depth=8 * data.dtype.itemsize),
                 meta=ScanMeta.from_dict({k: v for k, v in info.items() if v is not None}))
 
 

@@ -223,7 +223,14 @@ def read_log(path) -> tuple[dict, list[tuple[float, PingResult]]]:
 
 def read_scans(path, pose=None) -> list:
     """The multibeam `mitsonar.scan.Scan` of every ping of a ``.oculus`` log
-    (`mitsonar.devices.oculus.head.ping_to_scan`, ``meta['log']`` the path)."""
+    (`mitsonar.devices.oculus.head.ping_to_scan`, ``meta['log']`` the path). A ping that makes
+    no scan (a ``rangeResolution`` of 0, say) raises ValueError naming the file and the ping."""
     from mitsonar.devices.oculus.head import ping_to_scan
     _info, pings = read_log(path)
-    return [ping_to_scan(p, pose, t, {"log": str(path)}) for t, p in pings]
+    scans = []
+    for k, (t, p) in enumerate(pings):
+        try:
+            scans.append(ping_to_scan(p, pose, t, {"log": str(path)}))
+        except ValueError as e:
+            raise ValueError(f"{path}: ping {k} of the log: {e}") from None
+    return scans

@@ -45,8 +45,9 @@ bytes moved on its A/D scale); ``gammaCorrection`` G applies ``T (x/T)^(G/255)``
 255: none) to the codes x of full scale T. 8-bit samples are the scan's bytes; 16- and 32-bit
 ones the same levels through a wider A/D: a rendered scan's receiver chain again at ``bit_depth``
 16 or 32 (`mitsonar.receiver.electronics.Electronics`: ``round((2^bits - 1) x)`` of the A/D
-window's fraction x, so the 8-bit byte is the 16-bit code / 257 up to rounding); a log's bytes
-times 257 and 16843009 (it has no finer levels). The per-row gain sent (flag bit 2)
+window's fraction x, so the 8-bit byte is the 16-bit code / 257 up to rounding); a log's codes
+on the width asked (its bytes times 257 and 16843009: it has no finer levels; its 16- or 32-bit
+codes as they are, or on the other width's scale). The per-row gain sent (flag bit 2)
 is g/100 (the amplitude gain) as a float32. So at gain 100 and gamma 255 the 8-bit image is the
 scan's bytes.
 
@@ -549,7 +550,8 @@ class VirtualOculus:
             self.last_problem = problem
             return
         c.fire = m
-        c.due = self._clock()             # the first ping at once, then at the rate
+        # the first ping at once, then at the rate; standby (pingRate 5): none, until the next fire message
+        c.due = self._clock() if PING_RATE_HZ[m.ping_rate] else math.inf
 
     def _slot(self, c: _Client, now: float) -> None:
         """Client ``c``'s ping slot ``c.due`` has come (at ``now``): ping, and the next slot one
@@ -617,9 +619,18 @@ class VirtualOculus:
             return f"{label} {self.model.name} on {self.port}{status}"
 
         serve_in_foreground(self, seconds, banner, out)
-        print(f"{label}: {self.stats['pings']} pings to {self.stats['clients']} client(s), "
-              f"{self.stats['refused']} message(s) refused", file=out, flush=True)
+        print(f"{label}: {self.summary()}", file=out, flush=True)
         return 0
+
+    def summary(self) -> str:
+        """``N pings to M client(s), K message(s) refused, L pings skipped (late), B pings skipped
+        (client behind)``: what the head served, and the ping slots it skipped (`_slot`): late ones
+        when it could not make its pings at the rate asked, the others when a client read too
+        slowly (what ``virtual-sonar`` and ``mitsonar live`` print at the end)."""
+        st = self.stats
+        return (f"{st['pings']} pings to {st['clients']} client(s), {st['refused']} message(s) refused, "
+                f"{st['pings skipped (late)']} pings skipped (late), "
+                f"{st['pings skipped (client behind)']} pings skipped (client behind)")
 
 
 def serve(scan: Scan, seconds: float | None = None, *, out=None, **kwargs) -> int:
