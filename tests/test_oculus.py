@@ -908,9 +908,9 @@ def test_virtual_sonar_refusals_name_the_flag(tmp_path, capsys, wall):
     assert "a 'mechanical' sonar (kind must be 'multibeam') has no Oculus pings to serve" in capsys.readouterr().err
 
 
-def test_live_oculus_renders_each_ping_from_the_pose_then(wall):
-    import json
-    path, _ = wall
+def start_live_oculus(path):
+    """``mitsonar live SCENE --head oculus`` on loopback ports of its own (4 spp, 60 s at most):
+    the process and what it printed up to its ``live`` banner (the ports it serves)."""
     proc = subprocess.Popen([sys.executable, "-m", "mitsonar", "live", str(path), "--head", "oculus", "--spp", "4",
                              "--port-url", "tcp://127.0.0.1:0", "--status-port", str(free_udp_port()),
                              "--pose-url", "udp://127.0.0.1:0", "--seconds", "60"],
@@ -920,7 +920,13 @@ def test_live_oculus_renders_each_ping_from_the_pose_then(wall):
         lines.append(line)
         if line.startswith("live "):
             break
-    text = "".join(lines)
+    return proc, "".join(lines)
+
+
+def test_live_oculus_renders_each_ping_from_the_pose_then(wall):
+    import json
+    path, _ = wall
+    proc, text = start_live_oculus(path)
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
         assert "live Oculus on tcp://127.0.0.1:" in text, text
@@ -960,16 +966,7 @@ def test_live_oculus_fills_heading_pitch_roll_and_depth_from_the_pose_then(wall)
     import json
     from scipy.spatial.transform import Rotation
     path, _ = wall
-    proc = subprocess.Popen([sys.executable, "-m", "mitsonar", "live", str(path), "--head", "oculus", "--spp", "4",
-                             "--port-url", "tcp://127.0.0.1:0", "--status-port", str(free_udp_port()),
-                             "--pose-url", "udp://127.0.0.1:0", "--seconds", "60"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    lines = []
-    for line in proc.stdout:
-        lines.append(line)
-        if line.startswith("live "):
-            break
-    text = "".join(lines)
+    proc, text = start_live_oculus(path)
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
         assert "live Oculus on tcp://127.0.0.1:" in text, text

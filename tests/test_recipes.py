@@ -12,22 +12,15 @@ import textwrap
 import numpy as np
 import pytest
 
-from conftest import frame_matrix, rectangle_xml, scene_xml, sonar_xml
+from test_plugins import plane_scene
 
 C = 1500.0   # the sensor's default sound speed, m/s
 
 
 def floor_scene(mitsonar, bsdf, **sonar):
-    """A sonar 2 m above a 40 m floor, looking 40 deg down; one bounce (``max_depth`` 1)."""
-    t = math.radians(40)
-    params = dict(beam_pattern="uniform", beamwidth_h=20.0, beamwidth_v=30.0, range_min=1.0,
-                  range_max=5.0, n_bins=100, n_pings=1, bearing_step=0.0)
-    params.update(sonar)
-    floor = np.diag([20.0, 20.0, 1.0, 1.0])
-    floor[2, 3] = -2.0
-    return mitsonar.load_scene(scene_xml(
-        sonar_xml(frame_matrix((math.sin(t), 0, -math.cos(t)), (0, 1, 0)), **params), rectangle_xml(floor, bsdf),
-        integrator='<integrator type="sonar_tof"><integer name="max_depth" value="1"/></integrator>'))
+    """A sonar 2 m above a 40 m floor, looking 40 deg down; one bounce (``max_depth`` 1): the plugin
+    tests' floor (`test_plugins.plane_scene`) with the BSDF given."""
+    return plane_scene(mitsonar, bsdf, **sonar)
 
 
 LAMBERT = '<bsdf type="acoustic"><float name="diffuse" value="0.5"/><float name="specular" value="0"/></bsdf>'
