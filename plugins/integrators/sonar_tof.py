@@ -267,7 +267,7 @@ class SonarTOFIntegrator(SonarIntegrator):
         # threads add the echoes, so the same seed gives the same bytes with 1 thread or 16.
         # Atomic adds straight to memory: the default (per-thread copies and a block reduction)
         # needs Dr.Jit to dry-run a frozen pass before replaying it, and costs as much. In a window
-        # of the words (`exact_sum.run_pass`): the same sums, half the memory.
+        # of the words (`exact_sum.pass_sums`): the same sums, half the memory.
         hist = ExactBins(n_pings * n_bins, window=exact_sum.window_of(self))
         bins = setup.bins
 

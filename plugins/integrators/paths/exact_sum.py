@@ -42,7 +42,7 @@ leaving out only the zero words' ``+0.0`` terms, which change nothing: the runni
 and round-to-nearest gives ``+0.0`` for ``x + (-x)``), and ``x + 0.0 == x`` for every other
 ``x``. No word can overflow sooner than with nine: it receives the same integers (`MAX_ADDS`);
 the count receives at most 1 per add. When the count is not 0 the kept words are incomplete, and
-`run_pass` renders the pass again with all nine words: the same integers, so the same bits as if
+`pass_sums` renders the pass again with all nine words: the same integers, so the same bits as if
 no window had been tried. The window's bounds are opaque (a kernel reads them), so a pass with
 any window runs the same kernels: a new window records its frozen pass anew but compiles nothing.
 """
@@ -57,7 +57,7 @@ STRIDE = WORDS + 1   # and the count of non-finite values
 MAX_ADDS = 1 << 30
 #: The window of a pass that learns which words its echoes reach: all nine.
 ALL = (0, WORDS - 1)
-#: The window an owner's passes sum in until one misses (`run_pass`): 40 bytes per bin.
+#: The window an owner's passes sum in until one misses (`pass_sums`): 40 bytes per bin.
 DEFAULT = (0, 4)
 _LEARNING = -2
 
@@ -203,7 +203,7 @@ class ExactBins:
 
 def window_of(owner):
     """The window of words the next pass of ``owner`` (an integrator) sums in: `DEFAULT` at
-    first, `ALL` while it learns (`run_pass`), ``None`` (nine words and the non-finite count, no
+    first, `ALL` while it learns (`pass_sums`), ``None`` (nine words and the non-finite count, no
     window) once its windows ended. Kept as two integers on the owner (``_exact_lo``,
     ``_exact_hi``; -2 while it learns, -1 when ended), so that a frozen pass's key
     (`frozen_pass.Context`: the owner's Python scalars) has it."""
