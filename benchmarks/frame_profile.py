@@ -6,12 +6,11 @@ ping of the live harbour head turning 1.8 deg a ping, a side-scan ping pair) and
 are rendered interleaved (spp 1, spp N, spp 1, ...; the machine is shared) and each stage timed
 after the previous one's kernels finished:
 
-  render      `render_histogram`: the integrator's set-up, frozen passes, kernels and its
-              host-side sums (the histogram comes back as NumPy)
-  upload      the histogram as a ``mi.Float32`` (the frame's one upload)
+  render      `render_histogram_device`: the integrator's set-up, frozen passes, kernels and
+              the passes' mean with its float32 (the frame's intensity), left on the device
   speckle     `Electronics.scene_speckle_field` (a still head's field comes from the cache)
   chain       `Electronics.device_bytes`: the noise draws and the chain's kernel
-  copy_out    the bytes' ``.numpy()``
+  copy_out    the intensity's and the bytes' ``.numpy()`` (`render_scan`'s one transfer)
   frame       the whole `render_scan` (argument checks, metadata and `Scan` included), timed
               separately; ``other`` is frame minus the stages above
 
@@ -39,12 +38,15 @@ import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 
 from mitsonar.receiver.electronics import Electronics  # noqa: E402
+from mitsonar.sim.variant import ensure_variant  # noqa: E402
+
+ensure_variant()
 from mitsonar.sim import render as render_mod  # noqa: E402
 from mitsonar.sim.scene import load_scene  # noqa: E402
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENES = os.path.join(HERE, "..", "scenes_xml")
-STAGES = ("render", "upload", "speckle", "chain", "copy_out")
+STAGES = ("render", "speckle", "chain", "copy_out")
 
 
 def _scene(path, edits=None):
@@ -74,25 +76,23 @@ def staged_frame(scene, sonar, spp, seed, pose):
     model = Electronics.from_dict(dict(sonar.electronics))
     ranges = sonar.bin_centres()
     t = {}
+    shape = (int(sonar.n_pings), int(sonar.n_bins))
     t0 = time.perf_counter()
-    hist = integ.render_histogram(scene, sonar, seed=seed, spp=spp, pose=pose)
-    t1 = time.perf_counter()
-    t["render"] = t1 - t0
-    inten = mi.Float32(hist.astype(np.float32).reshape(-1))
-    dr.eval(inten)
+    _, inten = integ.render_histogram_device(scene, sonar, seed=seed, spp=spp, pose=pose)
     dr.sync_thread()
     t2 = time.perf_counter()
-    t["upload"] = t2 - t1
+    t["render"] = t2 - t0
     poses = sonar.ping_poses(pose)
     field = model.scene_speckle_field(poses, ranges, **render_mod.speckle_geometry(sonar))
     dr.sync_thread()
     t3 = time.perf_counter()
     t["speckle"] = t3 - t2
-    data = model.device_bytes(inten, hist.shape, ranges, absorption=sonar.absorption,
+    data = model.device_bytes(inten, shape, ranges, absorption=sonar.absorption,
                               sound_speed=sonar.sound_speed, seed=seed, speckle=field)
     dr.sync_thread()
     t4 = time.perf_counter()
     t["chain"] = t4 - t3
+    inten.numpy()
     data.numpy()
     t["copy_out"] = time.perf_counter() - t4
     return t

@@ -198,9 +198,11 @@ def render_frame(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integr
     (``mi.UInt8``) are Dr.Jit arrays of the active variant (on the GPU for ``cuda``), row-major
     ``shape = (n_rows, n_bins)``. `render_scan` is this frame brought to the host as a `Scan`;
     a caller that feeds the frame to more Dr.Jit work (a learning pipeline, a display) skips
-    that transfer. The receiver chain runs as Dr.Jit kernels from the render's histogram to the
-    bytes (`mitsonar.receiver.devicechain`); the histogram itself is summed over the render's
-    passes on the host by the integrators and uploaded once.
+    that transfer. From the render's exact sums to the bytes the frame stays on the device:
+    ``sonar_tof`` sums and averages its passes there (`render_histogram_device`), and the receiver
+    chain runs as Dr.Jit kernels (`mitsonar.receiver.devicechain`); no NumPy array on the way
+    (integrators that sum on the host, ``sonar_bdpt`` and ``sonar_mlt``, upload their histogram
+    once).
 
     Parameters
     ----------
@@ -250,7 +252,6 @@ def render_frame(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integr
         same arrays, bit for bit (``intensity`` is `render_scan`'s, ``data`` its bytes).
     """
     ensure_variant()
-    import mitsuba as mi
 
     # Every argument is checked before the render: a mistake costs a sentence, not a render.
     spp = _whole("spp", spp, 1, SPP_MAX, SPP_ALLOWED)
@@ -304,20 +305,18 @@ def render_frame(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integr
     try:
         sonar.head_pose(pose)
         with _profile_of(integrator, sound_speed_profile):
-            hist = integrator.render_histogram(scene, sonar, seed=seed, spp=spp, pose=pose, max_depth=max_depth,
-                                               progress=progress)
+            # the mean and its float32 (as NumPy rounds it, subnormals kept), on the device
+            _, intensity = integrator.render_histogram_device(scene, sonar, seed=seed, spp=spp, pose=pose,
+                                                              max_depth=max_depth, progress=progress)
     except ValueError as exc:
         raise SceneError(str(exc)) from None
-
-    intensity = hist.astype(np.float32)
     poses = sonar.ping_poses(pose)
     speckle = None if model.speckle == "off" else model.scene_speckle_field(poses, ranges, **speckle_geometry(sonar))
     shape = (int(sonar.n_pings), int(sonar.n_bins))
-    on_device = mi.Float32(intensity.reshape(-1))    # the one upload: the integrators sum on the host
-    data = model.device_bytes(on_device, shape, ranges, absorption=sonar.absorption, sound_speed=sonar.sound_speed,
+    data = model.device_bytes(intensity, shape, ranges, absorption=sonar.absorption, sound_speed=sonar.sound_speed,
                               seed=eseed, speckle=speckle)
-    frame = Frame(intensity=on_device, data=data, shape=shape)
-    frame._scan = (scene, sonar, integrator, model, intensity, ranges, poses, seed, spp, max_depth, eseed,
+    frame = Frame(intensity=intensity, data=data, shape=shape)
+    frame._scan = (scene, sonar, integrator, model, ranges, poses, seed, spp, max_depth, eseed,
                    trajectory, start_time)
     return frame
 
@@ -355,9 +354,12 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
                          max_depth=max_depth, electronics=electronics, electronics_seed=electronics_seed,
                          progress=progress, trajectory=trajectory, start_time=start_time,
                          speckle_seed=speckle_seed, sound_speed_profile=sound_speed_profile)
-    (scene, sonar, integrator, model, intensity, ranges, poses, seed, spp, max_depth, eseed, trajectory,
+    (scene, sonar, integrator, model, ranges, poses, seed, spp, max_depth, eseed, trajectory,
      start_time) = frame._scan
     from mitsonar.receiver import devicechain
+
+    # the frame's one transfer to the host: its intensity and bytes
+    intensity = frame.intensity.numpy().reshape(frame.shape)
     data = devicechain.host_codes(frame.data, frame.shape, model.bit_depth)
     from mitsonar._version import __version__
 

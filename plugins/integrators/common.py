@@ -210,6 +210,20 @@ class SonarIntegrator(mi.SamplingIntegrator):
         each pass. ``pose`` replaces the sensor's ``to_world``, ``max_depth`` the integrator's."""
         raise NotImplementedError(f"{type(self).__name__} must implement render_histogram")
 
+    def render_histogram_device(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None,
+                                progress=None):
+        """`render_histogram`'s mean on the device, ``(mean, intensity)``: a ``mi.Float64`` of
+        ``n_pings * n_bins`` values, row-major, and the same as float32 (`exact_sum.to_float32`:
+        `mitsonar.sim.render.render_frame`'s intensity). This default uploads `render_histogram`'s
+        NumPy array (integrators that sum their passes on the host); ``sonar_tof`` keeps its sums
+        on the device."""
+        import numpy as np
+
+        from .paths.exact_sum import with_float32
+
+        return with_float32(np.ravel(self.render_histogram(scene, sensor, seed=seed, spp=spp, pose=pose,
+                                                           max_depth=max_depth, progress=progress)))
+
     # ------------------------------------------------------------------ gradients (path replay)
     @flushed   # the calling thread computes like the pool's threads (`denormals`)
     def render_forward(self, scene, params=None, sensor=0, seed=0, spp=0):

@@ -107,7 +107,7 @@ def path_traced(integrator, setup, seed, start, count, pose=None, progress=None,
     if start == 0 and not sharing and row_allocation.adaptive(allocation, n_rows, count):
         out = row_allocation.render(tof, setup, seed, count, MAX_LANES_PER_PASS, progress)
         integrator.last_plan = dict(tof.last_plan)
-        return out
+        return out.numpy().reshape(n_rows, n_bins)
     if sharing:
         shared = SharedFrame(setup, pose)
 
@@ -117,7 +117,7 @@ def path_traced(integrator, setup, seed, start, count, pose=None, progress=None,
         def one_pass(first, n):
             return tof._pass(setup, seed, start + first, n)
     return SonarTOFIntegrator.accumulate(count, MAX_LANES_PER_PASS // n_rows, one_pass,
-                                         progress).reshape(n_rows, n_bins)
+                                         progress).numpy().reshape(n_rows, n_bins)
 
 
 def render_split(integrator, setup, seed, spp, progress=None, pose=None):

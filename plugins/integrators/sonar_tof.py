@@ -10,7 +10,7 @@ from mitsonar.plugins.props import text
 from mitsonar.plugins.registry import register_plugin
 
 from .paths import exact_sum, frozen_pass, row_allocation
-from .common import SonarIntegrator
+from .common import SonarIntegrator, resolve_sensor
 from .paths.denormals import flushing
 from .paths.exact_sum import ExactBins
 from .paths.samples import HashSamples, SobolSamples, opaque_u32, row_lanes
@@ -108,7 +108,8 @@ class SonarTOFIntegrator(SonarIntegrator):
     inputs (the same histogram as tracing every pass; ``frozen_pass.FREEZE = False`` traces).
 
     ``mi.render(scene)`` returns the range-intensity image as a tensor (n_pings, n_bins, 1);
-    ``render_histogram`` returns it as a float64 numpy array and accepts a ``pose``.
+    ``render_histogram`` returns it as a float64 numpy array and accepts a ``pose``;
+    ``render_histogram_device`` as a ``mi.Float64`` kept on the device (`render_frame` uses it).
     ``mi.render(scene, params)`` is differentiable in both modes (``render_forward``,
     ``render_backward`` of `common.SonarIntegrator`, by path replay: ``plugins/integrators/paths/path_replay.py``).
     """
@@ -141,14 +142,26 @@ class SonarTOFIntegrator(SonarIntegrator):
                 self.allocation, "uniform when share_beams is true (adaptive allocates per-row paths)")
 
     def render_histogram(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None, progress=None):
-        """Mean echo energy per bin, float64 ``(n_pings, n_bins)``.
+        """Mean echo energy per bin, float64 ``(n_pings, n_bins)``: `render_histogram_device`'s
+        mean brought to the host.
 
         ``progress(done_spp, spp)`` is called after each pass (long renders run several).
         ``last_plan`` says how the paths were allocated (``extra_paths_per_row``: those traced
         per row beyond ``spp``, the adaptive allocation's pilot).
         """
+        sensor = resolve_sensor(scene, sensor)
+        mean, _ = self.render_histogram_device(scene, sensor, seed, spp, pose, max_depth, progress)
+        return mean.numpy().reshape(sensor.n_pings, sensor.n_bins)
+
+    def render_histogram_device(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None,
+                                progress=None):
+        """`render_histogram`'s mean on the device, ``(mean, intensity)``: a ``mi.Float64`` of
+        ``n_pings * n_bins`` values, row-major, and the same as float32 (`exact_sum.to_float32`,
+        the frame's intensity), evaluated together. The passes' exact sums are summed and averaged
+        there (the same bits as summing them on the host): nothing of the histogram comes to the
+        host."""
         setup = self.setup(scene, sensor, pose, max_depth)
-        n_pings, n_bins = setup.sensor.n_pings, setup.sensor.n_bins
+        n_pings = setup.sensor.n_pings
         shared = None
         if self.share_beams is not False and self.allocation != "adaptive":
             from .paths.shared_beams import SharedFrame, can_share, same_pose, window
@@ -158,7 +171,8 @@ class SonarTOFIntegrator(SonarIntegrator):
             if (self.share_beams or can_share(setup.sensor)) and same_pose(setup.sensor, pose):
                 shared = SharedFrame(setup, pose)
         if shared is None and row_allocation.adaptive(self.allocation, n_pings, spp):
-            return row_allocation.render(self, setup, seed, spp, MAX_LANES_PER_PASS, progress)
+            return exact_sum.with_float32(row_allocation.render(self, setup, seed, spp, MAX_LANES_PER_PASS,
+                                                                progress))
         # what this render did (`row_allocation.render` says so for its own): spp paths per row
         self.last_plan = {"allocation": "uniform", "extra_paths_per_row": 0}
         self.last_counts = np.full(n_pings, int(spp), dtype=np.int64)
@@ -168,16 +182,25 @@ class SonarTOFIntegrator(SonarIntegrator):
         else:
             def one_pass(start, count):
                 return self._shared_pass(shared, seed, start, count)
-        total = self.accumulate(spp, MAX_LANES_PER_PASS // n_pings, one_pass, progress)
-        return total.reshape(n_pings, n_bins)
+        return self.accumulate(spp, MAX_LANES_PER_PASS // n_pings, one_pass, progress, float32=True)
 
     @staticmethod
-    def accumulate(spp, max_per_row, one_pass, progress=None):
-        """The mean over ``spp`` samples per row of ``one_pass(start, count)`` (a float64 array:
-        the summed energy of samples ``start .. start + count`` of every row), run in passes of at
-        most ``max_per_row`` (and `MAX_SPP_PER_PASS`) samples per row with gradients off;
-        ``progress(done_spp, spp)`` after each pass. The pass loop of every histogram integrator.
-        Subnormals flush to zero on the calling thread as on Dr.Jit's pool threads (`denormals`)."""
+    def accumulate(spp, max_per_row, one_pass, progress=None, float32=False):
+        """The mean over ``spp`` samples per row of ``one_pass(start, count)`` (a float64 array,
+        NumPy or ``mi.Float64``: the summed energy of samples ``start .. start + count`` of every
+        row; the mean is of the same kind, so a histogram of ``mi.Float64`` passes stays on the
+        device), run in passes of at most ``max_per_row`` (and `MAX_SPP_PER_PASS`) samples per row
+        with gradients off; ``progress(done_spp, spp)`` after each pass. The pass loop of every
+        histogram integrator. ``float32``: ``(mean, the mean as float32)`` (`exact_sum.to_float32`
+        on the device, NumPy's ``astype`` on the host).
+
+        Both kinds give the same bits: ``0.0 + x``, the passes added in order, ``/ spp``. On the
+        device the zero and ``spp`` are opaque (Dr.Jit would fold ``x + 0.0`` away, -0.0 kept, and
+        turn ``/ spp`` into a product by ``1 / spp``), and every pass evaluates the running sum
+        with the mean (and its float32) in one kernel, the same kernel whatever the number of
+        passes (a live head's budget may pick any), whose conversion of the pass's words it joins
+        (`exact_sum.pass_sums`). Subnormals flush to zero on the calling thread as on Dr.Jit's
+        pool threads (`denormals`)."""
         spp = int(spp)
         if spp < 1:
             raise ValueError(f"spp must be a positive number of paths per ping, got {spp}")
@@ -188,17 +211,27 @@ class SonarTOFIntegrator(SonarIntegrator):
             while start < spp:
                 count = min(spp_pass, spp - start)
                 part = one_pass(start, count)
-                # 0.0 + x as before (x + 0.0: the same bits), then sums in place: no new array
-                # per pass nor for the mean
-                if total is None:
-                    total = np.add(part, 0.0)
+                if isinstance(part, np.ndarray):
+                    # 0.0 + x as before (x + 0.0: the same bits), then sums in place: no new
+                    # array per pass nor for the mean
+                    if total is None:
+                        total = np.add(part, 0.0)
+                    else:
+                        total += part
                 else:
-                    total += part
+                    if total is None:
+                        total = dr.opaque(mi.Float64, 0.0, dr.width(part))
+                    total = total + part
+                    mean = total / dr.opaque(mi.Float64, spp)
+                    out = (total, mean, exact_sum.to_float32(mean)) if float32 else (total, mean)
+                    dr.eval(*out)
                 start += count
                 if progress is not None:
                     progress(start, spp)
-        total /= spp
-        return total
+            if not isinstance(total, np.ndarray):
+                return out[1:] if float32 else mean
+            total /= spp
+        return (total, total.astype(np.float32)) if float32 else total
 
     @staticmethod
     def emitting(setup, d, w):
@@ -210,7 +243,7 @@ class SonarTOFIntegrator(SonarIntegrator):
         return row_lanes(self.SAMPLERS[self.sampling], n_rows, seed, start, count)
 
     def _pass(self, setup, seed, start, count, guide=None):
-        """One pass of per-row paths: the summed echo energy per bin, float64 numpy. The emitted
+        """One pass of per-row paths: the summed echo energy per bin, ``mi.Float64``. The emitted
         directions are drawn first (with ``guide``, the adaptive allocation's density over the
         emitted elevation: `row_allocation`), then the paths run as a frozen function
         (`frozen_pass`)."""
@@ -220,10 +253,11 @@ class SonarTOFIntegrator(SonarIntegrator):
         return self._run(self._pass_body, setup, seed_o, start_o, d, w, count)
 
     def _run(self, body, ctx, *args):
-        """``body(ctx, *args)``, a pass, through `exact_sum.run_pass` (the window of words it sums
-        in): frozen (`frozen_pass`), but traced when it runs again in nine words to widen the
-        window after a pass that missed (a recording of it would not be replayed)."""
-        return exact_sum.run_pass(self, lambda learning: body(ctx, *args) if learning
+        """``body(ctx, *args)``, a pass, through `exact_sum.pass_sums` (the window of words it sums
+        in; the sums a ``mi.Float64``): frozen (`frozen_pass`), but traced when it runs again in
+        nine words to widen the window after a pass that missed (a recording of it would not be
+        replayed)."""
+        return exact_sum.pass_sums(self, lambda learning: body(ctx, *args) if learning
                                   else frozen_pass.run(body, self, ctx, *args))
 
     def _pass_body(self, setup, seed_o, start_o, d, w, count):
@@ -233,7 +267,7 @@ class SonarTOFIntegrator(SonarIntegrator):
         # threads add the echoes, so the same seed gives the same bytes with 1 thread or 16.
         # Atomic adds straight to memory: the default (per-thread copies and a block reduction)
         # needs Dr.Jit to dry-run a frozen pass before replaying it, and costs as much. In a window
-        # of the words (`exact_sum.run_pass`): the same sums, half the memory.
+        # of the words (`exact_sum.pass_sums`): the same sums, half the memory.
         hist = ExactBins(n_pings * n_bins, window=exact_sum.window_of(self))
         bins = setup.bins
 

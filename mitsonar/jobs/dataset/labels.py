@@ -28,7 +28,7 @@ def shape_names(scene) -> list:
 
 def labelling_integrator(max_depth=5, sampling="sobol"):
     """A ``sonar_tof`` integrator (of the active variant) that also keeps, after each
-    ``render_histogram``, ``last_energy``: float64 ``(n_rows, n_bins, n_shapes)``, the mean echo
+    ``render_histogram`` (or ``render_histogram_device``), ``last_energy``: float64 ``(n_rows, n_bins, n_shapes)``, the mean echo
     energy per bin from each shape (its sum over shapes is the histogram it returns)."""
     import drjit as dr
     import mitsuba as mi
@@ -41,7 +41,10 @@ def labelling_integrator(max_depth=5, sampling="sobol"):
     class LabellingIntegrator(base):
         name = "sonar_tof"
 
-        def render_histogram(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None, progress=None):
+        def render_histogram_device(self, scene, sensor=0, seed=0, spp=4096, pose=None, max_depth=None,
+                                    progress=None):
+            # the sums per shape are NumPy's (`_label_pass`): their sum over shapes is uploaded
+            # (``render_histogram`` brings it back, `render_frame` keeps it)
             setup = self.setup(scene, sensor, pose, max_depth)
             shapes = scene.shapes_dr()
             n_shapes = max(1, len(scene.shapes()))
@@ -55,7 +58,9 @@ def labelling_integrator(max_depth=5, sampling="sobol"):
                                     progress)
             energy = total.reshape(n_rows, n_bins, n_shapes)
             self.last_energy = energy
-            return energy.sum(axis=2)
+            from mitsonar.plugins.integrators.paths.exact_sum import with_float32
+
+            return with_float32(energy.sum(axis=2).ravel())
 
         def _label_pass(self, setup, seed, start, count, table, n_shapes):
             # No atomics: every echo goes to its own slot (lane, bounce), and the slots are summed

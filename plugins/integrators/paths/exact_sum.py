@@ -42,7 +42,7 @@ leaving out only the zero words' ``+0.0`` terms, which change nothing: the runni
 and round-to-nearest gives ``+0.0`` for ``x + (-x)``), and ``x + 0.0 == x`` for every other
 ``x``. No word can overflow sooner than with nine: it receives the same integers (`MAX_ADDS`);
 the count receives at most 1 per add. When the count is not 0 the kept words are incomplete, and
-`run_pass` renders the pass again with all nine words: the same integers, so the same bits as if
+`pass_sums` renders the pass again with all nine words: the same integers, so the same bits as if
 no window had been tried. The window's bounds are opaque (a kernel reads them), so a pass with
 any window runs the same kernels: a new window records its frozen pass anew but compiles nothing.
 """
@@ -57,7 +57,7 @@ STRIDE = WORDS + 1   # and the count of non-finite values
 MAX_ADDS = 1 << 30
 #: The window of a pass that learns which words its echoes reach: all nine.
 ALL = (0, WORDS - 1)
-#: The window an owner's passes sum in until one misses (`run_pass`): 40 bytes per bin.
+#: The window an owner's passes sum in until one misses (`pass_sums`): 40 bytes per bin.
 DEFAULT = (0, 4)
 _LEARNING = -2
 
@@ -70,12 +70,12 @@ class ExactBins:
     ``window=(lo, hi)`` keeps words ``lo..hi`` alone and counts the adds outside (`missed`).
     """
 
-    def __init__(self, n: int, mode=dr.ReduceMode.Direct, window=None):
+    def __init__(self, n: int, mode=dr.ReduceMode.Direct, window=None, words=None):
         self.n = int(n)
         self.mode = mode
         self.window = None
         if window is None:
-            self.words = dr.zeros(mi.Int64, self.n * STRIDE)
+            self.words = dr.zeros(mi.Int64, self.n * STRIDE) if words is None else words
         else:
             lo, hi = (int(w) for w in window)
             if not 0 <= lo <= hi < WORDS:
@@ -84,11 +84,20 @@ class ExactBins:
             count = hi - lo + 1
             # words lo..hi, word-major, then the count of the adds outside them; the bounds and
             # the count's place opaque: the same kernels whatever the window
-            self.words = dr.zeros(mi.Int64, self.n * count + 1)
+            self.words = dr.zeros(mi.Int64, self.n * count + 1) if words is None else words
             self._lo, self._span = dr.opaque(mi.Int32, lo), dr.opaque(mi.UInt32, hi - lo)
             self._miss = dr.opaque(mi.UInt32, self.n * count)
         self.partial = None   # float64 sums of the words folded so far (`reserve`)
         self.adds = 0         # adds reserved since the last fold
+
+    @classmethod
+    def holding(cls, words, window=None):
+        """The sums of ``words``, another `ExactBins`'s (summed in ``window``, None for nine
+        words): `total` converts them (a pass's words come out of its frozen kernel, and their
+        conversion joins the kernel of what follows: `pass_sums`)."""
+        width = dr.width(words)
+        n = width // STRIDE if window is None else (width - 1) // (int(window[1]) - int(window[0]) + 1)
+        return cls(n, window=window, words=words)
 
     def reserve(self, adds: int):
         """Make room for ``adds`` more adds into any one bin (outside symbolic loops: a fold
@@ -194,7 +203,7 @@ class ExactBins:
 
 def window_of(owner):
     """The window of words the next pass of ``owner`` (an integrator) sums in: `DEFAULT` at
-    first, `ALL` while it learns (`run_pass`), ``None`` (nine words and the non-finite count, no
+    first, `ALL` while it learns (`pass_sums`), ``None`` (nine words and the non-finite count, no
     window) once its windows ended. Kept as two integers on the owner (``_exact_lo``,
     ``_exact_hi``; -2 while it learns, -1 when ended), so that a frozen pass's key
     (`frozen_pass.Context`: the owner's Python scalars) has it."""
@@ -212,19 +221,27 @@ def _missed(words) -> int:
 
 
 def pass_result(owner, hist):
-    """What a pass body returns to `run_pass`: (the sums, the words (their count is read after
-    the pass: `ExactBins.missed`), `ExactBins.reached` while the owner learns, else zeros)."""
+    """What a pass body returns to `pass_sums`: (the words (their count is read after the pass:
+    `ExactBins.missed`; their sums converted after it too, `ExactBins.holding`),
+    `ExactBins.reached` while the owner learns, else zeros)."""
     learning = getattr(owner, "_exact_lo", None) == _LEARNING
     reached = hist.reached() if learning and hist.window is not None else dr.zeros(mi.Int64, WORDS)
-    return hist.total(), hist.words, reached
+    return hist.words, reached
 
 
 def run_pass(owner, call):
+    """`pass_sums` as NumPy float64 (for callers that sum their passes on the host)."""
+    return pass_sums(owner, call).numpy()
+
+
+def pass_sums(owner, call):
     """Run one histogram pass ``call(learning)`` -> `pass_result`, whose body sums in
-    ``ExactBins(..., window=window_of(owner))``; return its sums as NumPy float64: the nine-word
-    sums' bits whatever the window. ``learning``: the pass learns the owner's window, in `ALL`,
-    after a pass that missed (the caller traces it rather than record a frozen pass that will not
-    be replayed).
+    ``ExactBins(..., window=window_of(owner))``; return its sums, a ``mi.Float64`` left on the
+    device and not yet evaluated (the conversion of the words joins the kernel of what follows:
+    the mean over the passes, the frame's float32 intensity): the nine-word sums' bits whatever
+    the window. The host reads one word of the pass (the count of adds outside the window),
+    nothing else. ``learning``: the pass learns the owner's window, in `ALL`, after a pass that
+    missed (the caller traces it rather than record a frozen pass that will not be replayed).
 
     An owner sums in `DEFAULT` until a pass's count is not 0; that pass runs again in all nine
     words, which gives its sums and the words its echoes reached (`ExactBins.reached`), and the
@@ -242,17 +259,41 @@ def run_pass(owner, call):
     twice, and a first pass in nine words costs a frozen recording of its own (one render of an
     integrator made per call, as ``render_scan(..., integrator={...})`` does, would never replay)."""
     window = window_of(owner)
-    total, words, reached = call(False)
-    dr.eval(total)
+    words, reached = call(False)
     if window is None or _missed(words) == 0:
-        return total.numpy()
+        return ExactBins.holding(words, window).total()
     owner._exact_lo = owner._exact_hi = _LEARNING      # words outside the window: all nine, and learn
-    total, words, reached = call(True)
-    dr.eval(total, reached)
+    words, reached = call(True)
+    dr.eval(words, reached)
     if _missed(words) != 0:                # nothing but a non-finite value misses nine words
         owner._exact_lo = owner._exact_hi = -1
-        return call(False)[0].numpy()
+        return ExactBins.holding(call(False)[0]).total()
     used = [k for k, m in enumerate(reached.numpy()) if m != 0]
     lo, hi = 0, max(used + [window[1]])
     owner._exact_lo, owner._exact_hi = (lo, hi) if (lo, hi) != window else (-1, -1)
-    return total.numpy()
+    return ExactBins.holding(words, ALL).total()
+
+
+#: The least normal float32, 2^-126: below it `to_float32` rounds by hand.
+_TINY = 2.0 ** -126
+
+
+def to_float32(x):
+    """``x`` (``mi.Float64``) as ``mi.Float32``, rounded as NumPy's ``astype(np.float32)`` rounds
+    (to nearest, ties to even), float32 subnormals included. Dr.Jit's pool threads run with FTZ
+    set (`denormals`), so a plain conversion turns a mean below 2^-126 into 0 (an echo of word 0,
+    under 2^-117, over a few thousand paths is one); such values are rounded here on their
+    integer multiple of 2^-149 instead, exact in float64, and their bits assembled."""
+    x = mi.Float64(x)
+    sign = mi.UInt32(dr.reinterpret_array(mi.UInt64, x) >> 32) & 0x80000000
+    ulps = mi.UInt32(dr.round(dr.abs(x) * 2.0 ** 149))   # < 2^23 + 1: the subnormal's bits
+    small = dr.reinterpret_array(mi.Float32, sign | ulps)
+    return dr.select(dr.abs(x) < _TINY, small, mi.Float32(x))
+
+
+def with_float32(mean):
+    """``(mean, to_float32(mean))`` of a ``mi.Float64`` mean, evaluated together."""
+    mean = mi.Float64(mean)
+    out = to_float32(mean)
+    dr.eval(mean, out)
+    return mean, out

@@ -224,8 +224,9 @@ def warp(u, row, cdf, prob, n):
 
 
 def render(integrator, setup, seed, spp, lanes, progress=None):
-    """The adaptive render (module docstring) in passes of at most ``lanes`` paths: float64
-    ``(n_rows, n_bins)``, the mean per row over its own paths; the paths of each row in
+    """The adaptive render (module docstring) in passes of at most ``lanes`` paths: a
+    ``mi.Float64`` of ``n_rows * n_bins`` values (row-major) left on the device, the mean per row
+    over its own paths; the paths of each row in
     ``integrator.last_counts``, a summary (pilot paths per row, also as ``extra_paths_per_row``:
     the paths traced beyond ``spp``; predicted gain; the least, median and most paths of a row) in
     ``integrator.last_plan``. ``spp`` under `MIN_SPP`: every row gets
@@ -247,8 +248,10 @@ def render(integrator, setup, seed, spp, lanes, progress=None):
                                      progress)
     else:
         done = None if progress is None else (lambda paths: progress(int(spp * paths / counts.sum()), spp))
-        (total,) = _sums(integrator, setup, seed, counts, lanes, guide=guide, done=done)
-        mean = total.reshape(n_rows, n_bins) / counts[:, None]
+        (total,) = _device_sums(integrator, setup, seed, counts, lanes, guide=guide, done=done)
+        # each bin over its row's count (float64, as NumPy's total / counts[:, None] divides)
+        per_row = mi.Float64(counts.astype(np.float64))
+        mean = total / dr.gather(mi.Float64, per_row, dr.arange(mi.UInt32, n_rows * n_bins) // dr.opaque(mi.UInt32, n_bins))
     integrator.last_counts = counts
     integrator.last_plan = {"allocation": "adaptive" if pilot else "uniform", "pilot": pilot,
                             "extra_paths_per_row": pilot,
@@ -256,7 +259,7 @@ def render(integrator, setup, seed, spp, lanes, progress=None):
                             "guide_gain": None if guide is None else guide["gain"],
                             "paths_per_row_min": int(counts.min()),
                             "paths_per_row_median": float(np.median(counts)), "paths_per_row_max": int(counts.max())}
-    return mean.reshape(n_rows, n_bins)
+    return mean
 
 
 def choose(integrator, setup, seed, spp, lanes):
@@ -284,11 +287,16 @@ def choose(integrator, setup, seed, spp, lanes):
 
 
 def _sums(integrator, setup, seed, counts, lanes, squares=False, guide=None, done=None):
+    """`_device_sums` as float64 NumPy arrays (the pilot's, read on the host to choose)."""
+    return [p.numpy() for p in _device_sums(integrator, setup, seed, counts, lanes, squares, guide, done)]
+
+
+def _device_sums(integrator, setup, seed, counts, lanes, squares=False, guide=None, done=None):
     """Paths ``0 .. counts[r]`` of every row ``r`` (the integrator's ``sampling``, seed ``seed``),
     in passes of at most ``lanes`` lanes: the summed energy per bin (and with ``squares`` the
     summed squared echo energies, and those over the `GUIDE_BINS` slices of ``u.y`` per row and
     parity of the path's number),
-    float64 ``n_rows * n_bins`` arrays; ``guide`` (`choose`'s) draws the emission's ``u.y`` from
+    ``mi.Float64`` arrays of ``n_rows * n_bins`` values, summed over the passes on the device; ``guide`` (`choose`'s) draws the emission's ``u.y`` from
     each row's slice density (`warp`); ``done(paths)`` after each pass, with the paths traced so
     far."""
     from .denormals import flushing
@@ -310,8 +318,9 @@ def _sums(integrator, setup, seed, counts, lanes, squares=False, guide=None, don
             ping, idx = mi.UInt32(row[a:a + lanes]), mi.UInt32(index[a:a + lanes])
             d, w = emitted(setup.sensor.beam, sampler(seed_o, ping, idx), ping, guide)
             parts = frozen_pass.run(body, integrator, setup, seed_o, ping, idx, d, w)
-            parts = [p.numpy().astype(np.float64) for p in (parts if squares else (parts,))]
+            parts = list(parts if squares else (parts,))
             out = parts if out is None else [o + p for o, p in zip(out, parts)]
+            dr.eval(out)
             if done is not None:
                 done(min(a + lanes, row.size))
     return out
