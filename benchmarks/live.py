@@ -31,7 +31,7 @@ PATH (B), alternating case by case (A, B, A, B, ... ``--rounds`` times), with th
 What each side's ``mitsonar live`` accepts (its ``--head`` choices and flags) is read once from its
 ``--help`` (`probe`); a case that needs what a side lacks runs on the other side only (e.g.
 ``oculus512`` needs ``--head oculus``). The JSON gives each side's figures pooled over the rounds
-(pings/s, latency p50/p95, paths p50, error p50/p95) and the ratios A over B (`ab_summary`).
+(pings/s, latency p50/p95, paths p50 and mean, error p50/p95) and the ratios A over B (`ab_summary`).
 
 Usage::
 
@@ -190,7 +190,8 @@ def _p(stats, q):
 
 def side_figures(runs):
     """One side's figures over its runs of a case, the records pooled: pings (frames) per second,
-    latency p50/p95, paths p50, relative error p50/p95, budget p50; None without runs."""
+    latency p50/p95, paths p50 and mean (a ping's paths are ``2^k`` or ``1.5 x 2^k``: the p50 moves
+    in steps, the mean does not), relative error p50/p95, budget p50; None without runs."""
     if not runs:
         return None
     rows = [r for run in runs for r in run.rows]
@@ -200,6 +201,7 @@ def side_figures(runs):
     return {"runs": len(runs), "pings": len(rows), "seconds": round(seconds, 2),
             "pings_per_s": round(len(rows) / seconds, 2) if seconds else None,
             "latency_ms": {"p50": _p(lat, 50), "p95": _p(lat, 95)}, "paths_p50": _p(paths, 50),
+            "paths_mean": round(float(np.mean([float(r["paths"]) for r in rows])), 1) if rows else None,
             "relative_error": {"p50": _p(err, 50), "p95": _p(err, 95)}, "budget_ms_p50": _p(budget, 50),
             "summaries": [run.summary for run in runs]}
 
@@ -219,6 +221,7 @@ def ab_summary(case, a_runs, b_runs, skipped=None):
     if a and b:
         out["ratios_a_over_b"] = {
             "paths_p50": _ratio(a["paths_p50"], b["paths_p50"]),
+            "paths_mean": _ratio(a["paths_mean"], b["paths_mean"]),
             "latency_ms_p50": _ratio(a["latency_ms"]["p50"], b["latency_ms"]["p50"]),
             "latency_ms_p95": _ratio(a["latency_ms"]["p95"], b["latency_ms"]["p95"]),
             "pings_per_s": _ratio(a["pings_per_s"], b["pings_per_s"]),

@@ -48,9 +48,9 @@ def test_ratios_are_a_over_b_of_the_pooled_records(live):
     b = [live.Run("micron", rows([2000, 2000, 2000, 2000], [100, 100, 100, 100], [0.02] * 4), 2.0, "b0", {})]
     out = live.ab_summary("micron", a, b)
     assert out["A"]["pings"] == 4 and out["A"]["seconds"] == 4.0 and out["A"]["pings_per_s"] == 1.0
-    assert out["A"]["paths_p50"] == 6000.0 and out["B"]["paths_p50"] == 2000.0
+    assert out["A"]["paths_p50"] == 6000.0 and out["B"]["paths_p50"] == 2000.0 and out["A"]["paths_mean"] == 5500.0
     assert out["A"]["latency_ms"]["p50"] == 105.0 and out["A"]["summaries"] == ["a0", "a1"]
-    assert out["ratios_a_over_b"] == {"paths_p50": 3.0, "latency_ms_p50": 1.05,
+    assert out["ratios_a_over_b"] == {"paths_p50": 3.0, "paths_mean": 2.75, "latency_ms_p50": 1.05,
                                       "latency_ms_p95": pytest.approx(118.5 / 100, abs=1e-3),
                                       "pings_per_s": 0.5, "budget_ms_p50": 1.0}
 
