@@ -24,9 +24,19 @@ poses at 50 Hz over UDP and brping pinging continuously, and prints the server's
 (RSS, /proc) at the start (serving), after a warm-up (``--warmup``, 60 s), at the end, and its
 slope (MB/min, least squares over the samples after the warm-up).
 
+``--baseline-python PATH`` (A/B in one run): PATH is the interpreter of another mitsonar installation
+(e.g. an old commit's venv). Each case's ``mitsonar live`` runs under this interpreter (A) and under
+PATH (B), alternating case by case (A, B, A, B, ... ``--rounds`` times), with the same client code
+(this checkout's); each server starts in the temporary folder, so it imports its own installation.
+What each side's ``mitsonar live`` accepts (its ``--head`` choices and flags) is read once from its
+``--help`` (`probe`); a case that needs what a side lacks runs on the other side only (e.g.
+``oculus512`` needs ``--head oculus``). The JSON gives each side's figures pooled over the rounds
+(pings/s, latency p50/p95, paths p50 and mean, error p50/p95) and the ratios A over B (`ab_summary`).
+
 Usage::
 
     python benchmarks/live.py --seconds 30 [--out live.json]
+    python benchmarks/live.py --baseline-python ../old/.venv/bin/python --rounds 2 --seconds 20
     python benchmarks/live.py --cases oculus512 --seconds 30
     python benchmarks/live.py --soak [600]
 """
@@ -39,6 +49,7 @@ import io
 import json
 import math
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -47,6 +58,7 @@ import tempfile
 import threading
 import time
 import xml.etree.ElementTree as ET
+from typing import NamedTuple
 
 import numpy as np
 
@@ -56,12 +68,71 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 HARBOUR = os.path.join(ROOT, "scenes_xml", "harbour.xml")
 
 
-def start(*args):
-    """``mitsonar live`` in a process; returns (process, its first lines up to the serving one)."""
+class Side:
+    """One mitsonar installation serving ``mitsonar live``: its interpreter, and what its ``live``
+    command accepts (``--head`` choices, flags), read once from its ``--help`` by `probe`. The one
+    place where the two sides of an A/B run differ."""
+
+    def __init__(self, label, python, heads=(), flags=(), version=None):
+        self.label, self.python, self.version = label, python, version
+        self.heads, self.flags = frozenset(heads), frozenset(flags)
+
+    def lacks(self, needs):
+        """What of ``needs`` (``--head`` names and flags) this side's ``mitsonar live`` does not accept."""
+        return sorted(n if n.startswith("--") else f"--head {n}"
+                      for n in needs if n not in (self.flags if n.startswith("--") else self.heads))
+
+    def describe(self):
+        return {"python": self.python, "mitsonar": self.version, "heads": sorted(self.heads)}
+
+
+def _server_env(python):
+    """The environment of a ``mitsonar live`` under ``python``: no debug mode; for another
+    interpreter, no PYTHONPATH either (it would import this installation's modules)."""
     env = dict(os.environ)
     env.pop("MITSONAR_DEBUG", None)
-    proc = subprocess.Popen([sys.executable, "-m", "mitsonar", "live", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=env)
+    if python != sys.executable:
+        env.pop("PYTHONPATH", None)
+    return env
+
+
+def _live_help(python, cwd):
+    code = ("import sys, mitsonar; print(getattr(mitsonar, '__version__', '?')); sys.argv = ['mitsonar', 'live', '--help']; "
+            "import runpy; runpy.run_module('mitsonar', run_name='__main__')")
+    return subprocess.run([python, "-c", code], capture_output=True, text=True, cwd=cwd, env=_server_env(python),
+                          timeout=300)
+
+
+def parse_live_help(label, python, text):
+    """A `Side` from ``mitsonar live --help``'s text (its first line: the installation's version)."""
+    version, _, text = text.partition("\n")
+    m = re.search(r"--head \{([^}]*)\}", text)
+    heads = m.group(1).split(",") if m else ()
+    return Side(label, python, heads, set(re.findall(r"(?<![\w-])--[a-z][a-z0-9-]*", text)), version.strip())
+
+
+def probe(label, python, cwd, what="--baseline-python"):
+    """The `Side` of interpreter ``python`` (``what`` names it in messages); raises ValueError (one
+    line) if it cannot run ``mitsonar live``."""
+    python = os.path.abspath(python)     # the servers start in another folder; a venv's link kept
+    try:
+        r = _live_help(python, cwd)
+    except OSError as e:
+        raise ValueError(f"{what} {python}: cannot run it ({e.strerror})") from None
+    if r.returncode != 0 or "--records" not in r.stdout:
+        last = (r.stderr.strip().splitlines() or ["no output"])[-1]
+        raise ValueError(f"{what} {python}: its `mitsonar live --help` failed or has no --records "
+                         f"(need an interpreter with mitsonar installed): {last}")
+    return parse_live_help(label, python, r.stdout)
+
+
+def start(*args, side=None, cwd=None):
+    """``mitsonar live`` in a process (under ``side``'s interpreter, this one by default, started in
+    ``cwd`` so that ``-m`` imports the installation rather than a checkout in the current folder);
+    returns (process, its first lines up to the serving one)."""
+    python = sys.executable if side is None else side.python
+    proc = subprocess.Popen([python, "-m", "mitsonar", "live", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=_server_env(python), cwd=cwd)
     lines = []
     for line in proc.stdout:
         lines.append(line)
@@ -94,12 +165,68 @@ def read_records(path):
         return list(csv.DictReader(f))
 
 
-def summarise(name, rows, seconds, summary, **extra):
+class Run(NamedTuple):
+    """One case served once: its records (one dict per ping), the seconds the client ran, the
+    server's summary line and the client's own counts."""
+    case: str
+    rows: list
+    seconds: float
+    summary: str
+    extra: dict
+
+
+def summarise(run):
+    name, rows, seconds, summary, extra = run
     return {"case": name, "pings": len(rows), "seconds": round(seconds, 2),
             "pings_per_s": round(len(rows) / seconds, 2) if seconds else None,
             "latency_ms": percentiles(rows, "latency_ms"), "render_ms": percentiles(rows, "render_ms"),
             "budget_ms": percentiles(rows, "budget_ms"), "paths": percentiles(rows, "paths"),
             "relative_error": percentiles(rows, "error"), "summary": summary, **extra}
+
+
+def _p(stats, q):
+    return None if stats is None else stats[f"p{q}"]
+
+
+def side_figures(runs):
+    """One side's figures over its runs of a case, the records pooled: pings (frames) per second,
+    latency p50/p95, paths p50 and mean (a ping's paths are ``2^k`` or ``1.5 x 2^k``: the p50 moves
+    in steps, the mean does not), relative error p50/p95, budget p50; None without runs."""
+    if not runs:
+        return None
+    rows = [r for run in runs for r in run.rows]
+    seconds = sum(run.seconds for run in runs)
+    lat, paths, err, budget = (percentiles(rows, f) if rows else None
+                               for f in ("latency_ms", "paths", "error", "budget_ms"))
+    return {"runs": len(runs), "pings": len(rows), "seconds": round(seconds, 2),
+            "pings_per_s": round(len(rows) / seconds, 2) if seconds else None,
+            "latency_ms": {"p50": _p(lat, 50), "p95": _p(lat, 95)}, "paths_p50": _p(paths, 50),
+            "paths_mean": round(float(np.mean([float(r["paths"]) for r in rows])), 1) if rows else None,
+            "relative_error": {"p50": _p(err, 50), "p95": _p(err, 95)}, "budget_ms_p50": _p(budget, 50),
+            "summaries": [run.summary for run in runs]}
+
+
+def _ratio(a, b):
+    return round(a / b, 3) if a is not None and b not in (None, 0) else None
+
+
+def ab_summary(case, a_runs, b_runs, skipped=None):
+    """A case's A/B comparison: each side's `side_figures` and the ratios A over B: ``paths_p50``
+    (how many times B's paths A renders; at equal budget when ``budget_ms_p50`` is 1), latency p50
+    and p95 (below 1: A answers sooner), pings per second. ``skipped``: {side label: why}."""
+    a, b = side_figures(a_runs), side_figures(b_runs)
+    out = {"case": case, "A": a, "B": b}
+    if skipped:
+        out["skipped"] = skipped
+    if a and b:
+        out["ratios_a_over_b"] = {
+            "paths_p50": _ratio(a["paths_p50"], b["paths_p50"]),
+            "paths_mean": _ratio(a["paths_mean"], b["paths_mean"]),
+            "latency_ms_p50": _ratio(a["latency_ms"]["p50"], b["latency_ms"]["p50"]),
+            "latency_ms_p95": _ratio(a["latency_ms"]["p95"], b["latency_ms"]["p95"]),
+            "pings_per_s": _ratio(a["pings_per_s"], b["pings_per_s"]),
+            "budget_ms_p50": _ratio(a["budget_ms_p50"], b["budget_ms_p50"])}
+    return out
 
 
 def scene_range():
@@ -110,12 +237,12 @@ def scene_range():
     return float(val["range_max"]), int(val["n_bins"])
 
 
-def micron(seconds, tmp):
+def micron(seconds, tmp, side=None):
     from mitsonar.devices.micron.driver import MicronSonar
     from mitsonar.devices.micron.seanet import HeadSettings
 
     records = os.path.join(tmp, "micron.csv")
-    proc, text = start(HARBOUR, "--head", "micron", "--sensor", "sonar", "--records", records)
+    proc, text = start(HARBOUR, "--head", "micron", "--sensor", "sonar", "--records", records, side=side, cwd=tmp)
     try:
         port = text.split("live ")[-1].split(" on ")[1].strip()
         rng, bins = scene_range()
@@ -128,7 +255,7 @@ def micron(seconds, tmp):
             dt = time.monotonic() - t0
     finally:
         summary = stop(proc)
-    return summarise("micron", read_records(records), dt, summary, scanlines_read=n)
+    return Run("micron", read_records(records), dt, summary, {"scanlines_read": n})
 
 
 def brping_client(head):
@@ -150,11 +277,11 @@ def brping_client(head):
     return p
 
 
-def ping360(seconds, tmp, pose_rate=None, rss=None):
+def ping360(seconds, tmp, side=None, pose_rate=None, rss=None):
     records = os.path.join(tmp, "ping360.csv")
     extra = ["--pose-url", "udp://127.0.0.1:0"] if pose_rate else []
     proc, text = start(HARBOUR, "--head", "ping360", "--sensor", "sonar", "--port-url", "udp://127.0.0.1:0",
-                       "--records", records, *extra)
+                       "--records", records, *extra, side=side, cwd=tmp)
     stop_poses = threading.Event()
     poses = None
     try:
@@ -182,10 +309,10 @@ def ping360(seconds, tmp, pose_rate=None, rss=None):
     finally:
         stop_poses.set()
         summary = stop(proc)
-    return summarise("ping360", read_records(records), dt, summary, replies=n)
+    return Run("ping360", read_records(records), dt, summary, {"replies": n})
 
 
-def multibeam(seconds, tmp, beams=256, rate=10.0):
+def multibeam(seconds, tmp, side=None, beams=256, rate=10.0):
     root = ET.parse(HARBOUR).getroot()
     mb = next(e for e in root.iter("sensor") if e.get("id") == "multibeam")
     el = {c.get("name"): c for c in mb}
@@ -195,17 +322,17 @@ def multibeam(seconds, tmp, beams=256, rate=10.0):
     scene = os.path.join(tmp, "harbour_mb256.xml")
     ET.ElementTree(root).write(scene)
     records = os.path.join(tmp, "multibeam.csv")
-    proc, _ = start(scene, "--ping-rate", str(rate), "--records", records)
+    proc, _ = start(scene, "--ping-rate", str(rate), "--records", records, side=side, cwd=tmp)
     t0 = time.monotonic()
     time.sleep(seconds)
     dt = time.monotonic() - t0
     summary = stop(proc)
     rows = read_records(records)
     skipped = int(summary.split(" late frames skipped")[0].rsplit(" ", 1)[1]) if "late frames skipped" in summary else 0
-    return summarise(f"multibeam{beams}", rows, dt, summary, rate_hz=rate, frames_skipped=skipped)
+    return Run(f"multibeam{beams}", rows, dt, summary, {"rate_hz": rate, "frames_skipped": skipped})
 
 
-def oculus(seconds, tmp, beams=512, rate=10.0, range_m=10.0, pose_rate=20.0):
+def oculus(seconds, tmp, side=None, beams=512, rate=10.0, range_m=10.0, pose_rate=20.0):
     """``mitsonar live --head oculus``: the harbour's multibeam at an M1200d's low-frequency mode (its
     own sine-spaced table of ``beams`` bearings, 0..``range_m``), fired at ``rate`` Hz by the
     project's driver while poses arrive over UDP at ``pose_rate`` Hz; each ping's budget is its
@@ -233,7 +360,8 @@ def oculus(seconds, tmp, beams=512, rate=10.0, range_m=10.0, pose_rate=20.0):
     status_port = udp.getsockname()[1]
     udp.close()
     proc, text = start(scene, "--head", "oculus", "--sensor", "multibeam", "--port-url", "tcp://127.0.0.1:0",
-                       "--status-port", str(status_port), "--pose-url", "udp://127.0.0.1:0", "--records", records)
+                       "--status-port", str(status_port), "--pose-url", "udp://127.0.0.1:0", "--records", records,
+                       side=side, cwd=tmp)
     stop_poses = threading.Event()
     frames = 0
     try:
@@ -251,8 +379,8 @@ def oculus(seconds, tmp, beams=512, rate=10.0, range_m=10.0, pose_rate=20.0):
     finally:
         stop_poses.set()
         summary = stop(proc)
-    return summarise(f"oculus{beams}", read_records(records), dt, summary, rate_hz=rate, range_m=range_m,
-                     pose_rate_hz=pose_rate, frames_read=frames)
+    return Run(f"oculus{beams}", read_records(records), dt, summary,
+               {"rate_hz": rate, "range_m": range_m, "pose_rate_hz": pose_rate, "frames_read": frames})
 
 
 def send_poses(port, rate, stop_event):
@@ -283,7 +411,7 @@ def vm_rss(pid) -> float:
 
 def soak(seconds, warmup, tmp):
     rss = []
-    result = ping360(seconds, tmp, pose_rate=50.0, rss=rss)
+    result = summarise(ping360(seconds, tmp, pose_rate=50.0, rss=rss))
     t = np.array([r[0] for r in rss]) - rss[0][0]
     m = np.array([r[1] for r in rss])
     after = t >= warmup
@@ -295,22 +423,90 @@ def soak(seconds, warmup, tmp):
     return result
 
 
-def main(argv=None) -> int:
+# each case: its function and what it needs of a side's `mitsonar live` (--head names, flags)
+CASES = {"micron": (micron, ("micron", "--head", "--sensor", "--records")),
+         "ping360": (ping360, ("ping360", "--head", "--sensor", "--port-url", "--records")),
+         "multibeam256": (multibeam, ("--ping-rate", "--records")),
+         "oculus512": (oculus, ("oculus", "--head", "--sensor", "--port-url", "--status-port", "--pose-url", "--records"))}
+
+
+def parse_args(argv=None):
+    """The arguments, checked before any work (one line naming the flag and what it allows)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=30.0, help="seconds per case (default 30)")
     ap.add_argument("--soak", type=float, nargs="?", const=600.0, default=None, metavar="SECONDS",
                     help="soak instead: poses at 50 Hz and brping pinging for SECONDS (default 600)")
     ap.add_argument("--warmup", type=float, default=60.0, help="soak: seconds before the RSS slope (default 60)")
-    ap.add_argument("--cases", default="micron,ping360,multibeam256", help="comma-separated cases")
+    ap.add_argument("--cases", default="micron,ping360,multibeam256",
+                    help=f"comma-separated cases of {', '.join(CASES)} (default micron,ping360,multibeam256)")
+    ap.add_argument("--baseline-python", default=None, metavar="PATH",
+                    help="A/B: also serve each case with this interpreter's mitsonar (B), alternating with this one (A)")
+    ap.add_argument("--rounds", type=int, default=1, help="runs of each case (per side with --baseline-python; default 1)")
     ap.add_argument("--out", default=None, help="also write the JSON here")
     args = ap.parse_args(argv)
-    with tempfile.TemporaryDirectory() as tmp:
+    args.cases = [c.strip() for c in args.cases.split(",") if c.strip()]
+    bad = [c for c in args.cases if c not in CASES]
+    if bad or not args.cases:
+        ap.error(f"--cases: unknown case(s) {', '.join(bad) or '(none given)'}; allowed: {', '.join(CASES)}")
+    if args.rounds < 1:
+        ap.error(f"--rounds: {args.rounds}; allowed: an integer >= 1")
+    if not args.seconds > 0:
+        ap.error(f"--seconds: {args.seconds}; allowed: a number > 0")
+    if args.baseline_python is not None:
         if args.soak is not None:
-            result = {"benchmark": "live soak", "cpus": os.cpu_count(), **soak(args.soak, args.warmup, tmp)}
-        else:
-            cases = {"micron": micron, "ping360": ping360, "multibeam256": multibeam, "oculus512": oculus}
-            result = {"benchmark": "live", "cpus": os.cpu_count(), "scene": "scenes_xml/harbour.xml",
-                      "cases": [cases[c](args.seconds, tmp) for c in args.cases.split(",")]}
+            ap.error("--baseline-python: not with --soak (the soak runs this installation only)")
+        if not (os.path.isfile(args.baseline_python) and os.access(args.baseline_python, os.X_OK)):
+            ap.error(f"--baseline-python: {args.baseline_python} is not an executable file; allowed: a Python "
+                     "interpreter with mitsonar installed")
+    return args
+
+
+def ab_plan(cases, rounds, sides):
+    """The order of an A/B run: case by case, each round A then B (A, B, A, B, ...); a side that
+    lacks what a case needs is left out of that case. Returns (plan of (case, side), {case: {label: why}})."""
+    plan, skipped = [], {}
+    for case in cases:
+        needs = CASES[case][1]
+        runnable = []
+        for side in sides:
+            lacks = side.lacks(needs)
+            if lacks:
+                skipped.setdefault(case, {})[side.label] = f"its mitsonar live has no {', '.join(lacks)}"
+            else:
+                runnable.append(side)
+        plan += [(case, side) for _ in range(rounds) for side in runnable]
+    return plan, skipped
+
+
+def run_ab(args, tmp):
+    a = probe("A", sys.executable, tmp, what="this interpreter")
+    b = probe("B", args.baseline_python, tmp)
+    plan, skipped = ab_plan(args.cases, args.rounds, (a, b))
+    runs = {(case, side.label): [] for case in args.cases for side in (a, b)}
+    for k, (case, side) in enumerate(plan):
+        print(f"[{k + 1}/{len(plan)}] {case} {side.label}", file=sys.stderr, flush=True)
+        runs[case, side.label].append(CASES[case][0](args.seconds, tempfile.mkdtemp(dir=tmp), side=side))
+    return {"benchmark": "live A/B", "cpus": os.cpu_count(), "scene": "scenes_xml/harbour.xml",
+            "seconds_per_run": args.seconds, "rounds": args.rounds, "order": "case by case, A then B each round",
+            "A": a.describe(), "B": b.describe(),
+            "cases": [ab_summary(c, runs[c, "A"], runs[c, "B"], skipped.get(c)) for c in args.cases]}
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        try:
+            if args.soak is not None:
+                result = {"benchmark": "live soak", "cpus": os.cpu_count(), **soak(args.soak, args.warmup, tmp)}
+            elif args.baseline_python is not None:
+                result = run_ab(args, tmp)
+            else:
+                result = {"benchmark": "live", "cpus": os.cpu_count(), "scene": "scenes_xml/harbour.xml",
+                          "cases": [summarise(CASES[c][0](args.seconds, tempfile.mkdtemp(dir=tmp)))
+                                    for c in args.cases for _ in range(args.rounds)]}
+        except ValueError as e:
+            print(f"live.py: error: {e}", file=sys.stderr)
+            return 2
     text = json.dumps(result, indent=1)
     print(text)
     if args.out:
