@@ -118,11 +118,15 @@ def test_the_command_on_a_loopback_head_writes_what_the_local_engine_writes(ray_
     assert not (out / ".lock").exists()
 
 
+# Samples of the runs these tests kill (never rendered in full): a sample renders in about 0.03 s,
+# so with 12 the two actors once finished them all before the test saw the first shard and both
+# actors (CI, 2026-11-29: "the command ended before it was killed"); 400 leave seconds of work.
+KILLED_SAMPLES = 400
 def test_the_actors_of_a_killed_command_end(ray_head, tmp_path):
     """SIGKILL the command (the Ray driver) once a shard is written: the head's actors rendering
     for it end (a job's actors end with its driver); the head itself keeps running."""
-    cfg_path = tmp_path / "twelve.yaml"
-    cfg_path.write_text(yaml.safe_dump(small_config(samples=12)))
+    cfg_path = tmp_path / "killed.yaml"
+    cfg_path.write_text(yaml.safe_dump(small_config(samples=KILLED_SAMPLES)))
     out = tmp_path / "killed"
     proc = subprocess.Popen(dataset_command(cfg_path, out, ray_head["address"]), cwd=ROOT, env=ray_head["env"],
                             start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -152,8 +156,8 @@ def test_the_actors_of_a_killed_command_on_its_own_ray_end(ray_env, tmp_path):
     """Without --address, ``--engine ray`` starts Ray for itself: SIGKILL the command once a shard is written, and its actors end with it. (Ray's
     own dashboard and runtime-env agents outlive it by about a minute, their GCS timeout, before
     they exit: Ray's, not this command's; the test ends them.)"""
-    cfg_path = tmp_path / "twelve.yaml"
-    cfg_path.write_text(yaml.safe_dump(small_config(samples=12)))
+    cfg_path = tmp_path / "killed.yaml"
+    cfg_path.write_text(yaml.safe_dump(small_config(samples=KILLED_SAMPLES)))
     out = tmp_path / "killed"
     cmd = [sys.executable, "-m", "mitsonar", "dataset", str(cfg_path), "-o", str(out), "--engine", "ray",
            "--workers", "2", "--threads", "1", "-q"]
