@@ -124,12 +124,16 @@ def test_interrupted_run_resumes_to_the_same_dataset(reference, tmp_path, monkey
     assert generate_dataset(small_config(), str(out), workers=0, progress=False)["rendered"] == 0
 
 
-def test_killed_command_resumes_to_the_same_dataset(reference, tmp_path):
-    """SIGKILL the whole command (coordinator and workers) once a shard is written, run it again."""
+def test_killed_command_resumes_to_the_same_dataset(tmp_path):
+    """SIGKILL the whole command (coordinator and workers) once a shard is written, run it again.
+    60 samples (a sample renders in about 0.03 s): seconds of work are left when the first shard
+    appears, so the kill lands mid-run even on a loaded machine (with 6, four samples were left)."""
     cfg_path = tmp_path / "small.json.yaml"
     import yaml
 
-    cfg_path.write_text(yaml.safe_dump(small_config()))
+    cfg_path.write_text(yaml.safe_dump(small_config(samples=60)))
+    reference = tmp_path / "reference"
+    generate_dataset(small_config(samples=60), str(reference), workers=0, progress=False)
     out = tmp_path / "killed"
     cmd = [sys.executable, "-m", "mitsonar", "dataset", str(cfg_path), "-o", str(out), "--workers", "1", "--engine", "local", "-q"]
     proc = subprocess.Popen(cmd, cwd=ROOT, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -142,9 +146,9 @@ def test_killed_command_resumes_to_the_same_dataset(reference, tmp_path):
     proc.wait()
     assert proc.returncode == -signal.SIGKILL
     shards = json.loads((out / "manifest.json").read_text())["shards"]
-    assert len(shards) < 3                                   # killed with the dataset incomplete
+    assert len(shards) < 30                                  # killed with the dataset incomplete
     result = generate_dataset(str(cfg_path), str(out), workers=1, engine="local", progress=False)
-    assert result["rendered"] == 6 - 2 * len(shards) > 0    # the resumed run rendered what was missing
+    assert result["rendered"] == 60 - 2 * len(shards) > 0   # the resumed run rendered what was missing
     _same_as(reference, out)
     assert main(["dataset", str(cfg_path), "-o", str(out), "--workers", "1", "--engine", "local", "-q"]) == 0
 
