@@ -88,16 +88,22 @@ def acoustic_xml(diffuse=0.0, specular=0.0, shininess=30.0):
             f'<float name="specular" value="{specular}"/><float name="shininess" value="{shininess}"/></bsdf>')
 
 
-def example(name):
-    """The module ``examples/<name>.py``, loaded from its file (examples/ is not a package)."""
+def script(path):
+    """The module of the script at ``path`` (relative to the checkout: ``benchmarks/live.py``),
+    loaded from its file (benchmarks/, scripts/ and examples/ are not packages)."""
     import importlib.util
 
-    path = os.path.join(ROOT, "examples", name + ".py")
-    sys.path.insert(0, os.path.dirname(path))
-    spec = importlib.util.spec_from_file_location(name, path)
+    name = os.path.splitext(os.path.basename(path))[0]
+    spec = importlib.util.spec_from_file_location(name, os.path.join(ROOT, path))
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
+
+
+def example(name):
+    """The module ``examples/<name>.py`` (its folder on ``sys.path``, for its own imports)."""
+    sys.path.insert(0, os.path.join(ROOT, "examples"))
+    return script(os.path.join("examples", name + ".py"))
 
 
 def jit_kernels(fn, *args, **kwargs):

@@ -1,21 +1,16 @@
 """benchmarks/live.py's A/B mode without serving anything: the arguments, the sides' capabilities
 read from ``mitsonar live --help``, the A/B order and the figures and ratios from given records
 (no timing)."""
-import importlib.util
-import os
 import sys
 
 import pytest
+from conftest import script
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 @pytest.fixture(scope="module")
 def live():
-    spec = importlib.util.spec_from_file_location("live_benchmark", os.path.join(ROOT, "benchmarks", "live.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return script("benchmarks/live.py")
 
 
 OLD_HELP = """0.2.0

@@ -8,22 +8,17 @@ before any render.
 """
 from __future__ import annotations
 
-import importlib.util
 import os
 
 import numpy as np
 import pytest
+from conftest import script
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("mlt_equal_time",
-                                                  os.path.join(ROOT, "benchmarks", "mlt_equal_time.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return script("benchmarks/mlt_equal_time.py")
 
 
 def test_ratio_spread_and_errors_are_what_was_measured(bench, tmp_path, monkeypatch):

@@ -10,20 +10,15 @@ paths. With its default Sobol emission the same renders are several times less n
 """
 from __future__ import annotations
 
-import importlib.util
-import os
 
 import pytest
+from conftest import script
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 @pytest.fixture(scope="module")
 def oracle():
-    spec = importlib.util.spec_from_file_location("mlt_oracle", os.path.join(ROOT, "benchmarks", "mlt_oracle.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return script("benchmarks/mlt_oracle.py")
 
 
 def test_independent_renders_have_the_error_the_oracle_predicts(oracle):

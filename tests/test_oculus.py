@@ -909,8 +909,8 @@ def test_virtual_sonar_refusals_name_the_flag(tmp_path, capsys, wall):
 
 
 def start_live_oculus(path):
-    """``mitsonar live SCENE --head oculus`` on loopback ports of its own (4 spp, 60 s at most):
-    the process and what it printed up to its ``live`` banner (the ports it serves)."""
+    """``mitsonar live SCENE --head oculus`` on loopback ports of its own (4 spp, 60 s at most),
+    fired at 2 Hz (10 m) by a layout client: the process, its pose port and the client."""
     proc = subprocess.Popen([sys.executable, "-m", "mitsonar", "live", str(path), "--head", "oculus", "--spp", "4",
                              "--port-url", "tcp://127.0.0.1:0", "--status-port", str(free_udp_port()),
                              "--pose-url", "udp://127.0.0.1:0", "--seconds", "60"],
@@ -920,19 +920,25 @@ def start_live_oculus(path):
         lines.append(line)
         if line.startswith("live "):
             break
-    return proc, "".join(lines)
-
-
-def test_live_oculus_renders_each_ping_from_the_pose_then(wall):
-    import json
-    path, _ = wall
-    proc, text = start_live_oculus(path)
-    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    text = "".join(lines)
     try:
         assert "live Oculus on tcp://127.0.0.1:" in text, text
         pose_port = int(text.split("poses on udp://127.0.0.1:")[1].split()[0])
         c = LayoutClient(int(text.split("tcp://127.0.0.1:")[1].split()[0]))
         c.fire(version=2, rate=2, flags=0x0D, rng=10.0, gain=100.0, c=1500.0)
+    except BaseException:
+        proc.kill()
+        proc.communicate(timeout=60)
+        raise
+    return proc, pose_port, c
+
+
+def test_live_oculus_renders_each_ping_from_the_pose_then(wall):
+    import json
+    path, _ = wall
+    proc, pose_port, c = start_live_oculus(path)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
 
         def wall_range():
             p = c.ping()
@@ -966,13 +972,9 @@ def test_live_oculus_fills_heading_pitch_roll_and_depth_from_the_pose_then(wall)
     import json
     from scipy.spatial.transform import Rotation
     path, _ = wall
-    proc, text = start_live_oculus(path)
+    proc, pose_port, c = start_live_oculus(path)
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
-        assert "live Oculus on tcp://127.0.0.1:" in text, text
-        pose_port = int(text.split("poses on udp://127.0.0.1:")[1].split()[0])
-        c = LayoutClient(int(text.split("tcp://127.0.0.1:")[1].split()[0]))
-        c.fire(version=2, rate=2, flags=0x0D, rng=10.0, gain=100.0, c=1500.0)
         p = c.ping()
         assert (p["heading"], p["pitch"], p["roll"], p["pressure"]) == (pytest.approx(90.0), 0.0, 0.0, 0.0)
         # the vehicle (x forward, y port, z up) yawed 30 deg left, pitched 10 deg nose down, rolled 5 deg

@@ -166,19 +166,14 @@ def test_the_variance_diagnostic_finds_the_pile(mitsonar_mod, capsys, monkeypatc
     """benchmarks/pile_variance.py: the pile's window holds nearly all of the variance, the bounce-2
     echoes nearly all of the second moment, and the guide puts more paths on the strip (256 paths a
     ping: 0.7 % and 12 % with 65536)."""
-    import importlib.util
-    import os
     import re
 
-    from conftest import SCENES
+    from conftest import script
     from mitsonar.plugins.integrators.paths import frozen_pass
     from mitsonar.plugins.integrators.paths import image_guide
 
     monkeypatch.setattr(image_guide, "STRIP_GUIDE", image_guide.STRIP_GUIDE)
-    spec = importlib.util.spec_from_file_location(
-        "pile_variance", os.path.join(SCENES, "..", "benchmarks", "pile_variance.py"))
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = script("benchmarks/pile_variance.py")
     strip_share = []
     for extra in ([], ["--no-strip-guide"]):
         frozen_pass.clear()

@@ -1,13 +1,12 @@
 """The survey scenes (harbour, wreck, rocky slope): they load, their ground-truth meshes are what
 their comment blocks say, the committed seabeds are what the generator makes, their example
 trajectories stay above the seabed, and the wreck casts its shadow."""
-import importlib.util
 import os
 
 import numpy as np
 import pytest
 
-from conftest import ROOT, SCENES
+from conftest import ROOT, SCENES, script
 
 # scene: (trajectory file, ground-truth extent (min, max) from its comment block)
 SURVEYS = {
@@ -18,10 +17,7 @@ SURVEYS = {
 
 
 def maker():
-    spec = importlib.util.spec_from_file_location("make_survey_scenes", os.path.join(ROOT, "scripts", "make_survey_scenes.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return script("scripts/make_survey_scenes.py")
 
 
 @pytest.mark.parametrize("name", sorted(SURVEYS))
