@@ -908,12 +908,13 @@ def test_virtual_sonar_refusals_name_the_flag(tmp_path, capsys, wall):
     assert "a 'mechanical' sonar (kind must be 'multibeam') has no Oculus pings to serve" in capsys.readouterr().err
 
 
-def start_live_oculus(path):
-    """``mitsonar live SCENE --head oculus`` on loopback ports of its own (4 spp, 60 s at most),
-    fired at 2 Hz (10 m) by a layout client: the process, its pose port and the client."""
-    proc = subprocess.Popen([sys.executable, "-m", "mitsonar", "live", str(path), "--head", "oculus", "--spp", "4",
-                             "--port-url", "tcp://127.0.0.1:0", "--status-port", str(free_udp_port()),
-                             "--pose-url", "udp://127.0.0.1:0", "--seconds", "60"],
+def start_live_oculus(path, spp=4, poses=True, fire=True):
+    """``mitsonar live SCENE --head oculus`` on loopback ports of its own (``spp``, 60 s at most;
+    poses over UDP if ``poses``) and a layout client connected to it, which fires at 2 Hz (10 m) if
+    ``fire``: the process, its pose port (None without poses) and the client."""
+    cmd = [sys.executable, "-m", "mitsonar", "live", str(path), "--head", "oculus", "--spp", str(spp),
+           "--port-url", "tcp://127.0.0.1:0", "--status-port", str(free_udp_port()), "--seconds", "60"]
+    proc = subprocess.Popen(cmd + (["--pose-url", "udp://127.0.0.1:0"] if poses else []),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     lines = []
     for line in proc.stdout:
@@ -923,9 +924,10 @@ def start_live_oculus(path):
     text = "".join(lines)
     try:
         assert "live Oculus on tcp://127.0.0.1:" in text, text
-        pose_port = int(text.split("poses on udp://127.0.0.1:")[1].split()[0])
+        pose_port = int(text.split("poses on udp://127.0.0.1:")[1].split()[0]) if poses else None
         c = LayoutClient(int(text.split("tcp://127.0.0.1:")[1].split()[0]))
-        c.fire(version=2, rate=2, flags=0x0D, rng=10.0, gain=100.0, c=1500.0)
+        if fire:
+            c.fire(version=2, rate=2, flags=0x0D, rng=10.0, gain=100.0, c=1500.0)
     except BaseException:
         proc.kill()
         proc.communicate(timeout=60)
@@ -997,18 +999,8 @@ def test_live_oculus_fills_heading_pitch_roll_and_depth_from_the_pose_then(wall)
 
 def test_live_oculus_renders_each_fire_messages_geometry(wall):
     path, _ = wall
-    proc = subprocess.Popen([sys.executable, "-m", "mitsonar", "live", str(path), "--head", "oculus", "--spp", "16",
-                             "--port-url", "tcp://127.0.0.1:0", "--status-port", str(free_udp_port()),
-                             "--seconds", "60"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    lines = []
-    for line in proc.stdout:
-        lines.append(line)
-        if line.startswith("live "):
-            break
-    text = "".join(lines)
+    proc, _, c = start_live_oculus(path, spp=16, poses=False, fire=False)
     try:
-        assert "live Oculus on tcp://127.0.0.1:" in text, text
-        c = LayoutClient(int(text.split("tcp://127.0.0.1:")[1].split()[0]))
         got = {}
         for mode, flags, rng in ((1, 0x4D, 8.0), (2, 0x0D, 7.0)):     # 512 beams over 130 deg; 256 over 60 deg
             c.fire(version=2, mode=mode, rate=2, flags=flags, rng=rng, gain=100.0, c=1500.0)

@@ -32,13 +32,18 @@ def sas_run(mitsonar_mod):
     """36 pings of an 8-element, 100 kHz, 30 kHz-band SAS (D = 6 cm, 0.2 m per ping, DPCA kept)
     past three unit targets at slant ranges 4, 8 and 16 m (4x); a flat transmit beam over twice
     lambda / D so the processed beam sees a flat aperture."""
-    cfg = strip_map()
-    scene = mitsonar_mod.load_scene(scene_xml(cfg.sensor_xml(flat=True, n_pings=36, depression=30.0,
-                                                             beamwidth_v=80.0)))
+    return three_targets(mitsonar_mod, strip_map())
+
+
+def three_targets(mitsonar, cfg):
+    """``cfg``'s 36 pings past the unit targets at slant ranges 4, 8 and 16 m (the flat transmit
+    beam, 30 deg down): ``(cfg, scene, targets, track, echoes)``."""
+    scene = mitsonar.load_scene(scene_xml(cfg.sensor_xml(flat=True, n_pings=36, depression=30.0,
+                                                         beamwidth_v=80.0)))
     targets = [target_at(r) for r in (4.0, 8.0, 16.0)]
     track = cfg.track(1.9, start=(0.0, 0.0, H))
-    echoes = mitsonar_mod.render_echoes(scene, cfg.pulse(), elements=cfg.elements(), spp=1, trajectory=track,
-                                        start_time=0.0, targets=targets)
+    echoes = mitsonar.render_echoes(scene, cfg.pulse(), elements=cfg.elements(), spp=1, trajectory=track,
+                                    start_time=0.0, targets=targets)
     return cfg, scene, targets, track, echoes
 
 
@@ -307,13 +312,7 @@ def test_omega_k_matches_backprojection_and_the_closed_forms(mitsonar_mod):
     advance that leaves the phase centres off a uniform grid are refused."""
     from mitsonar import sas
 
-    cfg = strip_map(speed=3.6)
-    scene = mitsonar_mod.load_scene(scene_xml(cfg.sensor_xml(flat=True, n_pings=36, depression=30.0,
-                                                             beamwidth_v=80.0)))
-    targets = [target_at(r) for r in (4.0, 8.0, 16.0)]
-    track = cfg.track(1.9, start=(0.0, 0.0, H))
-    echoes = mitsonar_mod.render_echoes(scene, cfg.pulse(), elements=cfg.elements(), spp=1, trajectory=track,
-                                        start_time=0.0, targets=targets)
+    cfg, scene, targets, track, echoes = three_targets(mitsonar_mod, strip_map(speed=3.6))
     for t in targets:
         slant = float(np.linalg.norm(np.array(t.position) - (XT, 0.0, H)))
         grid = sas.Grid.around(t.position, 0.1, 0.1, 0.002)
