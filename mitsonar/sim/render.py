@@ -364,7 +364,9 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
     from mitsonar._version import __version__
 
     transmit = getattr(sonar, "transmit", None)   # multibeam: the transmit fan beside the receive beams
-    meta = ScanMeta(
+    # the fields of every scan, then what the kind records beyond them (a side-scan's channels and
+    # their tilt, a volumetric grid): one record, built once
+    meta = ScanMeta.from_dict(dict(
         scene=scene_name(scene), seed=int(seed), spp=int(spp), integrator=type(integrator).__name__,
         max_depth=int(max_depth if max_depth is not None else getattr(integrator, "max_depth", 0)),
         mitsonar_version=__version__, variant=mi.variant(),
@@ -376,7 +378,7 @@ def render_scan(scene, spp: int = DEFAULT_SPP, seed: int = 0, pose=None, integra
         tx_pattern=None if transmit is None else transmit.pattern,
         tx_beamwidth_h=None if transmit is None else transmit.beamwidth_h,
         tx_beamwidth_v=None if transmit is None else transmit.beamwidth_v,
-    ).replace(**sonar.sonar_kind.render_meta(sonar))   # a side-scan's channels and their tilt, ...
+        **sonar.sonar_kind.render_meta(sonar)))
     return Scan(intensity=intensity, data=data, ranges=ranges,
                 bearings=np.radians(sonar.bearings_deg()), poses=poses, times=sonar.ping_times(),
                 range_min=sonar.range_min, range_max=sonar.range_max,
