@@ -45,12 +45,17 @@ class SceneFrames:
         self._lock = threading.Lock()
 
     def __call__(self, mode, n_beams: int, range_m: float):
-        key = (mode, int(n_beams), round(float(range_m), 9))
+        return self._cached("frame", self._render, mode, n_beams, range_m)
+
+    def _cached(self, what, make, mode, n_beams: int, range_m: float):
+        """``make(mode, n_beams, range_m)``, made once per setting and ``what`` (the oldest of
+        `max_cached` dropped first)."""
+        key = (what, mode, int(n_beams), round(float(range_m), 9))
         with self._lock:
             if key not in self._cache:
                 if len(self._cache) >= self.max_cached:
                     self._cache.pop(next(iter(self._cache)))
-                self._cache[key] = self._render(mode, int(n_beams), float(range_m))
+                self._cache[key] = make(mode, int(n_beams), float(range_m))
             return self._cache[key]
 
     def _choose(self, root):
@@ -109,13 +114,7 @@ class SceneFrames:
         """The scene's sonar sensor alone at that geometry (a new sensor object, cached per
         setting), for rendering the scene as loaded (`mitsonar.live.heads.LiveOculus`: the shapes
         it moves stay moved)."""
-        key = ("sensor", mode, int(n_beams), round(float(range_m), 9))
-        with self._lock:
-            if key not in self._cache:
-                if len(self._cache) >= self.max_cached:
-                    self._cache.pop(next(iter(self._cache)))
-                self._cache[key] = self._load_sensor(mode, int(n_beams), float(range_m))
-            return self._cache[key]
+        return self._cached("sensor", self._load_sensor, mode, n_beams, range_m)
 
     def _load_sensor(self, mode, n_beams: int, range_m: float):
         import mitsuba as mi
