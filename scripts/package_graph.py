@@ -114,15 +114,21 @@ def package(module: str) -> str:
     return ".".join(parts[:2])
 
 
-def package_graph(edges=None) -> dict:
-    """{package: set of packages it imports} (imports within a package are not edges). The old
-    paths of moved modules (`mitsonar._moved.MOVED`: three lines re-exporting the new home, with a
-    warning, until their removal release) are not edges: they are forwarding addresses, not code."""
-    if edges is None:
-        from mitsonar._moved import MOVED
+def module_edges() -> dict:
+    """{module: modules it imports} of `import_graph`, without the old paths of moved modules
+    (`mitsonar._moved.MOVED`: three lines re-exporting the new home, with a warning, until their
+    removal release): they are forwarding addresses, not code."""
+    from mitsonar._moved import MOVED
 
-        _, edges = import_graph()
-        edges = {k: v for k, v in edges.items() if k not in MOVED}
+    _, edges = import_graph()
+    return {k: v for k, v in edges.items() if k not in MOVED}
+
+
+def package_graph(edges=None) -> dict:
+    """{package: set of packages it imports} of `module_edges` (or of ``edges``); imports within a
+    package are not edges."""
+    if edges is None:
+        edges = module_edges()
     out: dict = {}
     for source, targets_ in edges.items():
         out.setdefault(package(source), set())

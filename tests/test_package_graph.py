@@ -15,17 +15,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scripts"))
-from package_graph import cycles, import_graph, package, package_graph  # noqa: E402  (the graph's one home: scripts/package_graph.py)
-
-
-def module_edges() -> dict:
-    """{module: modules it imports}, without the old paths of moved modules
-    (`mitsonar._moved.MOVED`: three lines re-exporting the new home, with a warning, until their
-    removal release): they are forwarding addresses, not code."""
-    from mitsonar._moved import MOVED
-
-    _, edges = import_graph()
-    return {k: v for k, v in edges.items() if k not in MOVED}
+from package_graph import cycles, module_edges, package, package_graph  # noqa: E402  (the graph's one home: scripts/package_graph.py)
 
 
 def test_folding_counts_imports_inside_functions():
