@@ -26,6 +26,7 @@ import numpy as np
 
 import mitsonar.kinds as kinds
 from mitsonar.geometry.frames import PORT, SIDES, STARBOARD
+from mitsonar.scan.model import data_levels
 
 USES = ("data", "intensity")
 
@@ -40,10 +41,9 @@ def _check_sidescan(scan, where):
 def _values(scan, use, where):
     if use not in USES:
         raise ValueError(f"{where} 'use': {use!r} is not allowed (one of {', '.join(USES)})")
-    v = np.asarray(getattr(scan, use), dtype=np.float64)
-    if use == "data" and scan.data.dtype != np.uint8:      # a 16- or 32-bit A/D's codes: on the bytes' scale
-        v *= 255.0 / scan.data_full_scale
-    return v
+    if use == "data":               # a 16- or 32-bit A/D's codes: on the bytes' scale
+        return data_levels(scan.data)
+    return np.asarray(getattr(scan, use), dtype=np.float64)
 
 
 def channel_rows(scan, side) -> np.ndarray:

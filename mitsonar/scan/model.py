@@ -108,6 +108,15 @@ def data_bytes(data) -> np.ndarray:
     return data_as(data, np.uint8)
 
 
+def data_levels(data) -> np.ndarray:
+    """Device data ``data`` (uint8, uint16 or uint32) as float64 levels on the bytes' 0..255 scale:
+    the bytes themselves, a wider A/D's codes as ``code x 255 / full scale`` (not rounded), so that
+    products of any width agree."""
+    a = np.asarray(data)
+    levels = a.astype(np.float64)
+    return levels if a.dtype == np.uint8 else levels * (255.0 / data_full_scale(a))
+
+
 def require_bytes(scan, who: str, sends: str) -> None:
     """Refuse, in one line, a scan whose ``data`` is not bytes (uint8) for ``who``, a head that
     ``sends`` only 8-bit (or 4-bit) samples: a wider A/D's codes are not what it sends."""

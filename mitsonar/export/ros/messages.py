@@ -269,11 +269,11 @@ def detections(scan, threshold: int) -> tuple:
     """Detected returns: each row's strongest bin when its level is ``threshold`` or more, as
     world points ``(n, 3)`` and their levels ``(n,)``: levels 0..255, a 16- or 32-bit A/D's codes
     on that scale (``255 code / full scale``, not rounded)."""
+    from mitsonar.scan.model import data_levels
+
     data = np.asarray(scan.data)
     k = np.argmax(data, axis=1)
-    level = data[np.arange(len(k)), k]
-    if data.dtype != np.uint8:
-        level = level * (255.0 / np.iinfo(data.dtype).max)
+    level = data_levels(data[np.arange(len(k)), k])
     keep = level >= threshold
     r = np.asarray(scan.ranges, dtype=np.float64)[k[keep]]
     poses = np.asarray(scan.poses)[keep]
