@@ -90,15 +90,16 @@ def data_full_scale(data) -> int:
     return int(np.iinfo(np.asarray(data).dtype).max)
 
 
-def data_as(data, dtype) -> np.ndarray:
+def data_as(data, dtype, top=None) -> np.ndarray:
     """Device data ``data`` (uint8, uint16 or uint32) on the codes of ``dtype`` (one of those):
     ``round(code x top' / top)`` (halves up), the same levels on the other A/D's scale; ``data``
-    itself when the types agree."""
+    itself when the types agree. ``top``: the codes' full scale when it is not their type's (an
+    Oculus's 24-bit samples held in uint32: 2^24 - 1)."""
     a = np.asarray(data)
     dtype = np.dtype(dtype)
-    if a.dtype == dtype:
+    if a.dtype == dtype and top is None:
         return a
-    top, to = data_full_scale(a), int(np.iinfo(dtype).max)
+    top, to = data_full_scale(a) if top is None else int(top), int(np.iinfo(dtype).max)
     return ((a.astype(np.uint64) * to + top // 2) // top).astype(dtype)
 
 

@@ -20,6 +20,7 @@ import numpy as np
 from mitsonar.acoustics.water import SOUND_SPEED
 import mitsonar.presets.oculus as presets
 from mitsonar.devices.oculus.protocol import DATA_SIZE_BYTES, PingResult
+from mitsonar.scan.model import data_as
 
 __all__ = ["ping_to_scan", "OculusAssembler", "mode_of"]
 
@@ -33,8 +34,7 @@ def _codes(image, nbytes: int) -> np.ndarray:
     (uint8, uint16, uint32; 24-bit samples on the 32-bit scale)."""
     image = np.asarray(image)
     if nbytes == 3:
-        top = int(np.iinfo(np.uint32).max)
-        return ((image.astype(np.uint64) * top + _TOP24 // 2) // _TOP24).astype(np.uint32)
+        return data_as(image, np.uint32, top=_TOP24)
     return image.astype(_DTYPE[nbytes], copy=False)
 
 
