@@ -189,7 +189,7 @@ class SharedFrame:
                 use &= ~faint | (u * self.roulette < gain)
                 gain = dr.select(faint, self.roulette, gain)
             row = mi.UInt32(dr.maximum(k, 0.0))
-            hist.add(energy * gain, self.bins.flat(row, b), use, mode=getattr(dr.ReduceMode, self.scatter_mode))
+            _add_where(hist, energy * gain, self.bins.flat(row, b), use, getattr(dr.ReduceMode, self.scatter_mode))
 
 
     def _bearing(self, k):
@@ -205,6 +205,23 @@ class SharedFrame:
         lo = mi.UInt32(dr.maximum(mi.Int32(hi) - 1, 0))
         below = dr.abs(az - dr.gather(mi.Float, self.table, lo)) < dr.abs(dr.gather(mi.Float, self.table, hi) - az)
         return mi.Float(dr.select(below, lo, hi))
+
+
+def _add_where(hist, values, index, use, mode):
+    """``hist.add(values, index, use)`` inside a symbolic ``if use``: the same adds, but a SIMD
+    packet in which no lane hears this beam skips the add's scatters. An LLVM scatter-add visits
+    every lane of its packet, active or not, and most echoes reach only the beams next to the
+    nearest: with the 9 beams of the 512-beam quay frame, scatters with no active lane were 3 of
+    its 23 ms at spp 256, and this ``if`` took the frame from 22.9-25.6 ms to 21.8-22.5 ms (three
+    runs each, alternating). The sums are order-independent (`exact_sum`): the same bits."""
+
+    def add(use, values, index):
+        hist.add(values, index, use, mode=mode)
+
+    def skip(use, values, index):
+        pass
+
+    dr.if_stmt((use, values, index), use, add, skip, mode="symbolic")
 
 
 def _opaque(cls, values):
