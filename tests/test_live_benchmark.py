@@ -68,3 +68,30 @@ def test_bad_arguments_are_refused_in_one_line_before_any_work(live, argv, messa
     assert e.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert message in err
+
+
+def test_live_bound_puts_each_target_against_the_paths_its_rays_allow(tmp_path, capsys):
+    """benchmarks/live_bound.py on a given A/B JSON: per case the bound is the budget's p50 times
+    the live headroom times the bare loop's paths per second (per row), the target the case's
+    factor times B's paths p50; its ratio above 1 means rays faster than the bare loop. Measured
+    here are only the rays (a few seconds); the arithmetic is checked, not the speed."""
+    import json
+
+    bound = script("benchmarks/live_bound.py")
+    ab = {"cases": [{"case": c, "A": {"budget_ms_p50": 40.0, "paths_p50": 4096},
+                     "B": {"paths_p50": 1024}} for c in ("micron", "multibeam256")]}
+    path = tmp_path / "ab.json"
+    path.write_text(json.dumps(ab))
+    bound.main(["--ab", str(path), "--repeats", "1"])
+    out = json.loads(capsys.readouterr().out)
+    for case, rows in (("micron", 1), ("multibeam256", 256)):
+        c = out["cases"][case]
+        assert c["rows"] == rows and 1.0 <= c["segments_per_path"] <= 2 * 3 + 1   # max_depth 3: a hit and a test each
+        assert c["bound_paths_per_s"] == pytest.approx(c["bare_loop_segments_per_s"] / c["segments_per_path"], rel=1e-3)
+        assert c["bound_paths_per_ping"] == pytest.approx(0.8 * 0.040 * c["bound_paths_per_s"] / rows, rel=1e-3)
+        assert c["target_paths"] == bound.TARGETS[case] * 1024
+        assert c["target_over_bound"] == pytest.approx(c["target_paths"] / c["bound_paths_per_ping"], rel=1e-2)
+    assert "budget_ms_p50" not in out["cases"]["ping360"]     # not in the A/B: the rays alone
+    with pytest.raises(SystemExit):
+        bound.main(["--ab", str(tmp_path / "missing.json")])
+    assert "--ab:" in capsys.readouterr().err
