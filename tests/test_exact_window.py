@@ -4,6 +4,7 @@ worst case of a word at its bound, and `run_pass` learning, growing and ending i
 from __future__ import annotations
 
 import os
+import time
 
 import numpy as np
 import pytest
@@ -213,6 +214,59 @@ def test_run_pass_grows_its_window_on_a_miss_and_ends_it(mitsonar_mod):
     got = _pass_of(exact_sum, owner, bad, 2, calls)
     assert calls == [exact_sum.DEFAULT, exact_sum.ALL, None] and exact_sum.window_of(owner) is None
     assert np.isnan(got[1]) and got.tobytes() == nine(bad, 2).tobytes()
+
+
+def test_two_threads_passes_of_one_owner_run_one_after_the_other(mitsonar_mod):
+    """The window is the owner's state: while one thread's pass misses and learns (its window
+    ALL, then widened), another thread's pass of the same owner must not start, or it would read
+    one window in its body and convert its words in another. Thread A's pass reaches word 5 and
+    waits inside its call until B has been started; B's pass (words 0-4) enters its call only after
+    A's pass has ended, in the widened window, and both sums are the nine-word sums."""
+    import threading
+
+    import mitsuba as mi
+
+    from mitsonar.plugins.integrators.paths import exact_sum
+
+    def nine(values, n):
+        hist = exact_sum.ExactBins(n)
+        hist.add(mi.Float(np.asarray(values, np.float32)), mi.UInt32(np.arange(len(values)) % n))
+        return hist.numpy()
+
+    owner, events = _Owner(), []
+    low = [_f32((1 << 23) + 5, 32 * 1 + 3), _f32((1 << 24) - 3, 32 * 2 + 20)]
+    high = low + [_f32((1 << 23) + 1, 32 * 4 + 30)]              # words 4 and 5
+    b_started, results = threading.Event(), {}
+
+    def run(name, values):
+        values = np.asarray(values, np.float32)
+
+        def call(learning):
+            events.append((name, "enter", exact_sum.window_of(owner)))
+            if name == "A" and not learning:
+                assert b_started.wait(10)
+                time.sleep(0.2)          # B, unlocked, would enter its call now
+            hist = exact_sum.ExactBins(2, window=exact_sum.window_of(owner))
+            hist.add(mi.Float(values), mi.UInt32(np.arange(values.size) % 2))
+            out = exact_sum.pass_result(owner, hist)
+            events.append((name, "leave"))
+            return out
+
+        results[name] = exact_sum.run_pass(owner, call)
+
+    a = threading.Thread(target=run, args=("A", high))
+    a.start()
+    while not events:
+        time.sleep(0.01)
+    b = threading.Thread(target=run, args=("B", low))
+    b.start()
+    b_started.set()
+    a.join(20)
+    b.join(20)
+    assert events == [("A", "enter", exact_sum.DEFAULT), ("A", "leave"), ("A", "enter", exact_sum.ALL),
+                      ("A", "leave"), ("B", "enter", (0, 5)), ("B", "leave")]
+    assert results["A"].tobytes() == nine(high, 2).tobytes()
+    assert results["B"].tobytes() == nine(low, 2).tobytes()
 
 
 @pytest.mark.parametrize("xml, props", [("box.xml", {"max_depth": 3}),

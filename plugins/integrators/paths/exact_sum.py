@@ -49,6 +49,8 @@ no pass; the conversion reads the window's words alone and compiles once per win
 """
 from __future__ import annotations
 
+import threading
+
 import drjit as dr
 import mitsuba as mi
 
@@ -262,6 +264,14 @@ def pass_sums(owner, call):
     instead (its lowest to highest word) ran 2 of 28 second passes and one of three live pings
     twice, and a first pass in nine words costs a frozen recording of its own (one render of an
     integrator made per call, as ``render_scan(..., integrator={...})`` does, would never replay)."""
+    # One pass of an owner at a time: the window is the owner's state, read here and by the
+    # pass's body (and its frozen recording's key) and widened here; a pass of another thread
+    # in between could read one window and sum in another, and convert its words wrongly.
+    with owner.__dict__.setdefault("_exact_lock", threading.Lock()):
+        return _pass_sums(owner, call)
+
+
+def _pass_sums(owner, call):
     window = window_of(owner)
     words, reached = call(False)
     if window is None or _missed(words) == 0:
