@@ -167,36 +167,40 @@ def _pass_of(exact_sum, owner, values, n, calls):
     return exact_sum.run_pass(owner, call)
 
 
+def _nine(values, n):
+    """The sums of ``values`` (bin i gets ``values[i::n]``) in all nine words, no window."""
+    import mitsuba as mi
+
+    from mitsonar.plugins.integrators.paths import exact_sum
+
+    hist = exact_sum.ExactBins(n)
+    hist.add(mi.Float(np.asarray(values, np.float32)), mi.UInt32(np.arange(len(values)) % n))
+    return hist.numpy()
+
+
 def test_run_pass_grows_its_window_on_a_miss_and_ends_it(mitsonar_mod):
     """Passes sum in `DEFAULT` (words 0-4); a pass reaching above runs again in nine words (its
     bits; traced: ``learning``) and the window grows to the highest word reached; a window that
     could not grow (integers that cancel) or a non-finite echo ends the windows (nine words and
     the NaN, as before windows)."""
-    import mitsuba as mi
-
     from mitsonar.plugins.integrators.paths import exact_sum
-
-    def nine(values, n):
-        hist = exact_sum.ExactBins(n)
-        hist.add(mi.Float(np.asarray(values, np.float32)), mi.UInt32(np.arange(len(values)) % n))
-        return hist.numpy()
 
     assert exact_sum.DEFAULT == (0, 4)
     owner, calls = _Owner(), []
     # bucket 1 shift 2 (word 1), bucket 2 shift 19 (words 2, 3), bucket 3 shift 4 (word 3)
     low = [_f32((1 << 23) + 5, 32 * 1 + 3), _f32((1 << 24) - 3, 32 * 2 + 20), _f32((1 << 23) + 9, 32 * 3 + 5)]
     got = _pass_of(exact_sum, owner, low, 2, calls)
-    assert calls == [exact_sum.DEFAULT] and got.tobytes() == nine(low, 2).tobytes()
+    assert calls == [exact_sum.DEFAULT] and got.tobytes() == _nine(low, 2).tobytes()
     assert exact_sum.window_of(owner) == exact_sum.DEFAULT
     # bucket 4 shift 29 (words 4, 5), bucket 5 shift 8 (word 5)
     high = low + [_f32((1 << 23) + 1, 32 * 4 + 30), _f32((1 << 24) - 1, 32 * 5 + 9)]
     calls.clear()
     got = _pass_of(exact_sum, owner, high, 2, calls)
-    assert calls == [exact_sum.DEFAULT, exact_sum.ALL] and got.tobytes() == nine(high, 2).tobytes()
+    assert calls == [exact_sum.DEFAULT, exact_sum.ALL] and got.tobytes() == _nine(high, 2).tobytes()
     assert exact_sum.window_of(owner) == (0, 5)
     calls.clear()
     got = _pass_of(exact_sum, owner, high[::-1], 2, calls)
-    assert calls == [(0, 5)] and got.tobytes() == nine(high[::-1], 2).tobytes()
+    assert calls == [(0, 5)] and got.tobytes() == _nine(high[::-1], 2).tobytes()
     # integers of both signs into words 7 and 8 of bin 1 that cancel, the rest below word 5: the
     # window cannot grow (nor shrink): windows end
     huge = np.float32(3e37)
@@ -204,7 +208,7 @@ def test_run_pass_grows_its_window_on_a_miss_and_ends_it(mitsonar_mod):
     calls.clear()
     got = _pass_of(exact_sum, owner, cancel, 2, calls)
     assert calls == [(0, 5), exact_sum.ALL] and exact_sum.window_of(owner) is None
-    assert got.tobytes() == nine(cancel, 2).tobytes()
+    assert got.tobytes() == _nine(cancel, 2).tobytes()
     calls.clear()
     _pass_of(exact_sum, owner, low, 2, calls)
     assert calls == [None]
@@ -213,7 +217,7 @@ def test_run_pass_grows_its_window_on_a_miss_and_ends_it(mitsonar_mod):
     bad = low + [np.inf]
     got = _pass_of(exact_sum, owner, bad, 2, calls)
     assert calls == [exact_sum.DEFAULT, exact_sum.ALL, None] and exact_sum.window_of(owner) is None
-    assert np.isnan(got[1]) and got.tobytes() == nine(bad, 2).tobytes()
+    assert np.isnan(got[1]) and got.tobytes() == _nine(bad, 2).tobytes()
 
 
 def test_two_threads_passes_of_one_owner_run_one_after_the_other(mitsonar_mod):
@@ -227,11 +231,6 @@ def test_two_threads_passes_of_one_owner_run_one_after_the_other(mitsonar_mod):
     import mitsuba as mi
 
     from mitsonar.plugins.integrators.paths import exact_sum
-
-    def nine(values, n):
-        hist = exact_sum.ExactBins(n)
-        hist.add(mi.Float(np.asarray(values, np.float32)), mi.UInt32(np.arange(len(values)) % n))
-        return hist.numpy()
 
     owner, events = _Owner(), []
     low = [_f32((1 << 23) + 5, 32 * 1 + 3), _f32((1 << 24) - 3, 32 * 2 + 20)]
@@ -265,8 +264,8 @@ def test_two_threads_passes_of_one_owner_run_one_after_the_other(mitsonar_mod):
     b.join(20)
     assert events == [("A", "enter", exact_sum.DEFAULT), ("A", "leave"), ("A", "enter", exact_sum.ALL),
                       ("A", "leave"), ("B", "enter", (0, 5)), ("B", "leave")]
-    assert results["A"].tobytes() == nine(high, 2).tobytes()
-    assert results["B"].tobytes() == nine(low, 2).tobytes()
+    assert results["A"].tobytes() == _nine(high, 2).tobytes()
+    assert results["B"].tobytes() == _nine(low, 2).tobytes()
 
 
 @pytest.mark.parametrize("xml, props", [("box.xml", {"max_depth": 3}),
