@@ -63,11 +63,6 @@ def _scrambled(r, seed):
     return _reverse_bits(r)
 
 
-def _owen_scramble(x, seed):
-    """`_scrambled` of ``x`` given in its bits' order."""
-    return _scrambled(_reverse_bits(x), seed)
-
-
 #: Bit positions whose bit ``b`` is clear (b = 0..4): the masks of `_sobol_dim2_reversed`.
 _CLEAR = (0x55555555, 0x33333333, 0x0F0F0F0F, 0x00FF00FF, 0x0000FFFF)
 
