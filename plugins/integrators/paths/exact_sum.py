@@ -163,27 +163,22 @@ class ExactBins:
         return dr.block_reduce(dr.ReduceOp.Max, dr.abs(dr.gather(mi.Int64, self.words,
                                                                  dr.arange(mi.UInt32, count * self.n))), self.n)
 
-    def _sum_window(self):
-        # The window's words alone, k = lo..hi in the nine-word order: the words left out would
-        # add +0.0 (module docstring). The bounds are Python numbers here, not opaque as in the
-        # pass: the conversion kernel compiles once per window (at most five in an owner's life,
-        # `pass_sums`) and reads hi - lo + 1 words instead of nine masked ones (the 512-beam quay
-        # frame's conversion, 256 000 bins: 1.17 ms -> 0.80 ms).
+    def _sum_words(self):
+        """The float64 sums of the words: ``word_k 2^(32 k - 149)`` added in a fixed order, k = lo
+        upwards (the float64 rounding is the same every time). In a window, its words alone: the
+        words left out would add +0.0 (module docstring); the bounds are Python numbers here, not
+        opaque as in the pass, so the conversion compiles once per window (at most five in an
+        owner's life, `pass_sums`) and reads hi - lo + 1 words instead of nine masked ones (the
+        512-beam quay frame's conversion, 256 000 bins: 1.17 ms -> 0.80 ms). Nine words: a bin
+        whose count of non-finite values is not 0 is NaN."""
+        lo, hi = (0, WORDS - 1) if self.window is None else self.window
         at = dr.arange(mi.UInt32, self.n)
         out = dr.zeros(mi.Float64, self.n)
-        lo, hi = self.window
         for k in range(lo, hi + 1):
             w = dr.gather(mi.Int64, self.words, at + (k - lo) * self.n)
             out += mi.Float64(w) * float(2.0 ** (32 * k - 149))   # exact in float64
-        return out
-
-    def _sum_words(self):
         if self.window is not None:
-            return self._sum_window()
-        at = dr.arange(mi.UInt32, self.n)
-        out = dr.zeros(mi.Float64, self.n)
-        for k in range(WORDS):   # a fixed order: the float64 rounding is the same every time
-            out += mi.Float64(dr.gather(mi.Int64, self.words, at + k * self.n)) * float(2.0 ** (32 * k - 149))
+            return out
         bad = dr.gather(mi.Int64, self.words, at + WORDS * self.n) != 0
         return dr.select(bad, dr.nan, out)
 
