@@ -85,12 +85,6 @@ def _sobol_dim2_reversed(i):
     return y
 
 
-def _sobol_dim2(i):
-    """The second dimension of the Sobol sequence at index ``i`` (UInt32): the XOR of the
-    direction numbers ``v_k`` (``v_0 = 2^31``, ``v_{k+1} = v_k ^ (v_k >> 1)``) of the bits of i."""
-    return _reverse_bits(_sobol_dim2_reversed(i))
-
-
 def _unit(x):
     """A float in [0, 1) from the top 24 bits of ``x``."""
     return mi.Float(x >> 8) * (1.0 / 16777216.0)
