@@ -312,13 +312,20 @@ def ping360(seconds, tmp, side=None, pose_rate=None, rss=None):
     return Run("ping360", read_records(records), dt, summary, {"replies": n})
 
 
-def multibeam(seconds, tmp, side=None, beams=256, rate=10.0):
+def widened_multibeam(beams):
+    """The XML root of scenes_xml/harbour.xml with its multibeam widened to ``beams`` beams
+    across the same swath (the bearing step scaled), as the ``multibeam256`` case serves it."""
     root = ET.parse(HARBOUR).getroot()
     mb = next(e for e in root.iter("sensor") if e.get("id") == "multibeam")
     el = {c.get("name"): c for c in mb}
     step = float(el["bearing_step"].get("value")) * int(el["n_pings"].get("value")) / beams
     el["n_pings"].set("value", str(beams))
     el["bearing_step"].set("value", repr(step))
+    return root
+
+
+def multibeam(seconds, tmp, side=None, beams=256, rate=10.0):
+    root = widened_multibeam(beams)
     scene = os.path.join(tmp, "harbour_mb256.xml")
     ET.ElementTree(root).write(scene)
     records = os.path.join(tmp, "multibeam.csv")

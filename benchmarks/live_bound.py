@@ -34,11 +34,12 @@ import xml.etree.ElementTree as ET
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
+import live  # noqa: E402  (benchmarks/live.py)
 import render as bench  # noqa: E402  (benchmarks/render.py)
 
 import mitsonar  # noqa: E402,F401
 
-HARBOUR = os.path.join(HERE, "..", "scenes_xml", "harbour.xml")
+HARBOUR = live.HARBOUR
 #: the issue's factors: paths per budget at least 3x (Micron, Ping360) and 4x (256-beam multibeam)
 TARGETS = {"micron": 3.0, "ping360": 3.0, "multibeam256": 4.0}
 #: paths per row at which the rays are counted and the bare loop timed (a live ping's size)
@@ -47,17 +48,12 @@ SPP = {"micron": 16384, "ping360": 16384, "multibeam256": 1536}
 
 def harbour(sensor_id, beams=None):
     """The harbour scene with only ``sensor_id``'s sensor (the multibeam widened to ``beams``
-    beams at the same swath, as `live.multibeam` does)."""
+    beams at the same swath, as `live.multibeam` serves it: `live.widened_multibeam`)."""
     from mitsonar.sim.scene import load_scene
 
-    root = ET.parse(HARBOUR).getroot()
+    root = ET.parse(HARBOUR).getroot() if beams is None else live.widened_multibeam(beams)
     for s in [e for e in root.findall("sensor") if e.get("id") != sensor_id]:
         root.remove(s)
-    if beams is not None:
-        el = {c.get("name"): c for c in root.find("sensor")}
-        step = float(el["bearing_step"].get("value")) * int(el["n_pings"].get("value")) / beams
-        el["n_pings"].set("value", str(beams))
-        el["bearing_step"].set("value", repr(step))
     with tempfile.NamedTemporaryFile("w", suffix=".xml", dir=os.path.dirname(HARBOUR), delete=False) as f:
         ET.ElementTree(root).write(f, encoding="unicode")
     try:
@@ -70,15 +66,12 @@ def bound(scene, spp, shared, repeats):
     """(segments per path, bare-loop segments/s, paths/s at that rate) of ``scene``'s head."""
     from frame_targets import shared_segments
 
+    # the per-row head's lanes, bounces and visibility rays: what the bare loop repeats (for the
+    # multibeam: its receive beams' rows); a shared frame's own segments counted as it traces them
+    hits, shadows, per_lane = bench.count_segments(scene, spp, seed=1, per_lane=True)
     if shared:
         hits, shadows = shared_segments(scene, scene.integrator(), spp)
-        paths = spp * scene.sensors()[0].n_pings
-    else:
-        hits, shadows = bench.count_segments(scene, spp, seed=1)
-        paths = spp * scene.sensors()[0].n_pings
-    per_path = (hits + shadows) / paths
-    # the bare loop with the per-row head's lanes (for the multibeam: its receive beams' rows)
-    _, _, per_lane = bench.count_segments(scene, spp, seed=1, per_lane=True)
+    per_path = (hits + shadows) / (spp * scene.sensors()[0].n_pings)
     rate, _, _ = bench.ceiling(scene, spp, per_lane, repeats)
     return per_path, rate, rate / per_path
 
